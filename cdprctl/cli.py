@@ -1,0 +1,58 @@
+"""The ``cdprctl`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from cdprctl import __version__
+
+
+def _cmd_check_config(args: argparse.Namespace) -> int:
+    from cdprctl.commands.check_config import run
+
+    return run(args.file)
+
+
+def _add_check_config(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "check-config",
+        help="validate a robot description and print its summary",
+        description="Validate a robot description (TOML). Prints a summary (cables, limits, "
+        "mass, cable lengths at the home pose) or every error found; exit code 1 on error.",
+    )
+    p.add_argument("file", help="robot description, e.g. config/seed000.toml")
+    p.set_defaults(func=_cmd_check_config)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from cdprctl.commands.demo import run
+
+    return run()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="cdprctl",
+        description="Controller and tools for cable-driven parallel robots (SI units throughout).",
+    )
+    parser.add_argument("--version", action="version", version=f"cdprctl {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    _add_check_config(sub)
+    p = sub.add_parser("demo", help="the main job of `make run` on the bundled robots")
+    p.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,52 @@
+"""``cdprctl check-config FILE``: validate a robot description and summarise it."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import ConfigError, RobotModel, load_robot
+
+
+def summary(model: RobotModel) -> str:
+    home = model.home
+    data = KinematicsData(model)
+    inverse_kinematics(model, data, home.position, home.rotation)
+    k = model.cable_stiffness(data.length)
+    pf = model.platform
+    rpy_deg = ", ".join(f"{math.degrees(a):.2f}" for a in home.rpy)
+    lines = [
+        f"{model.source_file}: OK",
+        f"robot       {model.name}  ({model.source})",
+        f"cables      {model.n_cables} (redundancy r = {model.redundancy})"
+        + (", swivel pulleys" if model.has_pulleys else ""),
+        f"platform    mass {pf.mass:g} kg, COM {np.round(pf.com, 4).tolist()} m, "
+        f"inertia diag {np.round(np.diag(pf.inertia), 4).tolist()} kg·m²",
+        f"gravity     {model.gravity.tolist()} m/s²",
+        f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
+        "",
+        f"{'cable':>6} {'t_min N':>9} {'t_max N':>9} {'length m':>9} {'k N/m':>10} "
+        f"{'winch max N':>11}",
+    ]
+    for i, c in enumerate(model.cables):
+        lines.append(
+            f"{c.name:>6} {c.tension_min:9.1f} {c.tension_max:9.1f} {data.length[i]:9.4f} "
+            f"{k[i]:10.4g} {c.winch.max_cable_force:11.1f}"
+        )
+    return "\n".join(lines)
+
+
+def run(file: str) -> int:
+    try:
+        model = load_robot(file)
+    except ConfigError as exc:
+        n = len(exc.errors)
+        print(f"{file}: {n} error{'s' if n != 1 else ''}:", file=sys.stderr)
+        for e in exc.errors:
+            print(f"  {e}", file=sys.stderr)
+        return 1
+    print(summary(model))
+    return 0

@@ -1,0 +1,195 @@
+"""Typed access to a parsed TOML table that collects errors instead of raising.
+
+Every accessor returns ``None`` when the value is unusable and records one message naming the
+file, the key path, the value with its unit and the rule; the loader builds the model only when
+no message was recorded, so a half-built model never escapes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from cdprctl.rotation import FloatArray
+
+_MISSING = object()
+
+
+def format_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(format_value(v) for v in value) + "]"
+    if isinstance(value, np.ndarray):
+        return format_value(value.tolist())
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, dict):
+        return "{...}"
+    return str(value)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class TableReader:
+    """Reads values from nested TOML tables, appending errors to ``errors``."""
+
+    def __init__(self, file: str):
+        self.file = file
+        self.errors: list[str] = []
+
+    # -- reporting --------------------------------------------------------------------------
+    def error(self, path: str, value: Any, unit: str, rule: str) -> None:
+        shown = format_value(value)
+        unit_part = f" {unit}" if unit and _is_number(value) else ""
+        self.errors.append(f"{self.file}: {path} = {shown}{unit_part} {rule}")
+
+    def error_missing(self, path: str, unit: str, what: str) -> None:
+        unit_part = f" (unit: {unit})" if unit else ""
+        self.errors.append(f"{self.file}: {path} is missing: required, {what}{unit_part}")
+
+    def check_keys(self, table: dict[str, Any], allowed: Iterable[str], path: str) -> None:
+        allowed = list(allowed)
+        for key in table:
+            if key not in allowed:
+                where = f"{path}.{key}" if path else key
+                self.errors.append(
+                    f"{self.file}: {where} is not a known key (allowed here: "
+                    f"{', '.join(sorted(allowed))})"
+                )
+
+    # -- accessors --------------------------------------------------------------------------
+    def table(
+        self, parent: dict[str, Any], key: str, path: str, *, required: bool = True
+    ) -> dict[str, Any] | None:
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING:
+            if required:
+                self.error_missing(full, "", "a table")
+            return None
+        if not isinstance(value, dict):
+            self.error(full, value, "", "must be a table")
+            return None
+        return value
+
+    def string(
+        self,
+        parent: dict[str, Any],
+        key: str,
+        path: str,
+        *,
+        required: bool = True,
+        default: str | None = None,
+    ) -> str | None:
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING:
+            if required:
+                self.error_missing(full, "", "a string")
+            return default
+        if not isinstance(value, str) or not value.strip():
+            self.error(full, value, "", "must be a non-empty string")
+            return None
+        return value
+
+    def number(
+        self,
+        parent: dict[str, Any],
+        key: str,
+        path: str,
+        unit: str,
+        *,
+        required: bool = True,
+        default: float | None = None,
+        minimum: float | None = None,
+        positive: bool = False,
+        maximum: float | None = None,
+        integer: bool = False,
+    ) -> float | None:
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING:
+            if required:
+                self.error_missing(full, unit, "an integer" if integer else "a number")
+            return default
+        if not _is_number(value):
+            self.error(full, value, unit, "must be a number" + (f" in {unit}" if unit else ""))
+            return None
+        if integer and not isinstance(value, int):
+            self.error(full, value, unit, "must be an integer")
+            return None
+        x = float(value)
+        if not math.isfinite(x):
+            self.error(full, value, unit, "must be finite")
+            return None
+        if positive and x <= 0.0:
+            self.error(full, value, unit, "must be > 0")
+            return None
+        if minimum is not None and x < minimum:
+            self.error(full, value, unit, f"must be >= {minimum:g}")
+            return None
+        if maximum is not None and x > maximum:
+            self.error(full, value, unit, f"must be <= {maximum:g}")
+            return None
+        return x
+
+    def vector(
+        self,
+        parent: dict[str, Any],
+        key: str,
+        path: str,
+        unit: str,
+        *,
+        length: int = 3,
+        required: bool = True,
+        default: FloatArray | None = None,
+    ) -> FloatArray | None:
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING:
+            if required:
+                self.error_missing(full, unit, f"a list of {length} numbers")
+            return default
+        if not isinstance(value, list) or len(value) != length:
+            self.error(full, value, unit, f"must be a list of {length} numbers ({unit})")
+            return None
+        if not all(_is_number(v) for v in value):
+            self.error(full, value, unit, f"must contain only numbers ({unit})")
+            return None
+        arr = np.array(value, dtype=np.float64)
+        if not np.all(np.isfinite(arr)):
+            self.error(full, value, unit, "must contain only finite numbers")
+            return None
+        return arr
+
+    def matrix3(self, parent: dict[str, Any], key: str, path: str, unit: str) -> FloatArray | None:
+        """A 3×3 matrix given as 3 rows, or its diagonal as 3 numbers."""
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING:
+            self.error_missing(full, unit, "3 numbers (diagonal) or 3 rows of 3 numbers")
+            return None
+        if isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value):
+            arr = np.diag(np.array(value, dtype=np.float64))
+        elif (
+            isinstance(value, list)
+            and len(value) == 3
+            and all(isinstance(r, list) and len(r) == 3 for r in value)
+            and all(_is_number(v) for r in value for v in r)
+        ):
+            arr = np.array(value, dtype=np.float64)
+        else:
+            self.error(full, value, unit, "must be 3 numbers (diagonal) or 3 rows of 3 numbers")
+            return None
+        if not np.all(np.isfinite(arr)):
+            self.error(full, value, unit, "must contain only finite numbers")
+            return None
+        return arr

@@ -1,0 +1,176 @@
+"""The robot description: frozen dataclasses built once by :mod:`cdprctl.model.loader`.
+
+All quantities are SI. Frames: ``base`` is the fixed world frame of the robot (z up);
+``platform`` is the moving-platform frame, whose origin ``P`` is the platform's reference point
+(the point the pose, the wrench and the moments refer to).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdprctl.rotation import FloatArray, rpy_to_matrix
+
+
+def _frozen(a: FloatArray) -> FloatArray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Pulley:
+    """A swivel pulley at a cable's exit.
+
+    The cable arrives from the winch along the swivel axis, through the cable's ``anchor`` point,
+    travelling in the direction ``axis`` (unit vector, base frame); the pulley turns about that
+    axis to face the platform, the cable wraps over the wheel of radius ``radius`` (m) and leaves
+    it tangentially towards the platform.
+    """
+
+    radius: float
+    axis: FloatArray
+
+
+@dataclass(frozen=True)
+class Winch:
+    """Winch and drive parameters, motor side unless stated."""
+
+    drum_radius: float  # m
+    gear_ratio: float  # motor revolutions per drum revolution
+    rotor_inertia: float  # kg·m², motor + gearbox + drum reflected to the motor shaft
+    viscous_friction: float  # N·m·s/rad at the motor shaft
+    coulomb_friction: float  # N·m at the motor shaft
+    torque_limit: float  # N·m, motor
+    encoder_counts_per_rev: int  # counts per motor revolution
+
+    @property
+    def max_cable_force(self) -> float:
+        """Largest cable tension (N) the motor torque limit can hold, friction neglected."""
+        return self.torque_limit * self.gear_ratio / self.drum_radius
+
+
+@dataclass(frozen=True)
+class Cable:
+    """One cable: exit point on the frame, attachment on the platform, limits, elasticity."""
+
+    name: str
+    anchor: FloatArray  # m, base frame: exit point (or swivel-axis point when ``pulley`` is set)
+    attachment: FloatArray  # m, platform frame
+    tension_min: float  # N
+    tension_max: float  # N
+    stiffness: float | None  # N/m, fixed axial stiffness (exclusive with E·S)
+    youngs_modulus: float | None  # Pa
+    cross_section: float | None  # m²
+    spring_stiffness: float | None  # N/m, optional spring in series with the cable
+    damping: float  # N·s/m, axial
+    length_to_winch: float  # m, cable between drum and exit point, counted in k = E·S/l
+    pulley: Pulley | None
+    winch: Winch
+
+    def axial_stiffness(self, length: float) -> float:
+        """Axial stiffness (N/m) of cable + series spring at geometric length ``length`` (m)."""
+        if self.stiffness is not None:
+            k = self.stiffness
+        else:
+            # The loader guarantees E and S are set whenever ``stiffness`` is not.
+            es = (self.youngs_modulus or 0.0) * (self.cross_section or 0.0)
+            k = es / (length + self.length_to_winch)
+        if self.spring_stiffness is not None:
+            k = 1.0 / (1.0 / k + 1.0 / self.spring_stiffness)
+        return k
+
+
+@dataclass(frozen=True)
+class Platform:
+    mass: float  # kg
+    com: FloatArray  # m, platform frame
+    inertia: FloatArray  # kg·m², 3×3 about the COM, platform frame
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Platform pose: position of ``P`` (m, base frame) and roll-pitch-yaw (rad)."""
+
+    position: FloatArray
+    rpy: FloatArray
+
+    @property
+    def rotation(self) -> FloatArray:
+        return rpy_to_matrix(float(self.rpy[0]), float(self.rpy[1]), float(self.rpy[2]))
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Box the controller keeps the platform's reference point in, and the largest tilt."""
+
+    position_min: FloatArray  # m, base frame
+    position_max: FloatArray  # m, base frame
+    max_angle: float  # rad, largest rotation angle away from the home orientation
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """The frozen robot description, plus arrays stacked once for the numerical core."""
+
+    name: str
+    source: str
+    source_file: str
+    gravity: FloatArray  # m/s², base frame
+    platform: Platform
+    cables: tuple[Cable, ...]
+    home: Pose
+    workspace: Workspace
+    # Stacked per-cable arrays (derived in __post_init__; read-only).
+    anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
+    attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame
+    tension_min: FloatArray = field(init=False, repr=False)  # (m,) N
+    tension_max: FloatArray = field(init=False, repr=False)  # (m,) N
+    pulley_radius: FloatArray = field(init=False, repr=False)  # (m,) m, 0 without pulley
+    pulley_axis: FloatArray = field(init=False, repr=False)  # (m, 3) unit, zeros without pulley
+
+    def __post_init__(self) -> None:
+        cables = self.cables
+        set_ = object.__setattr__  # frozen dataclass: derived fields are set once, here
+        set_(self, "anchors", _frozen(np.array([c.anchor for c in cables])))
+        set_(self, "attachments", _frozen(np.array([c.attachment for c in cables])))
+        set_(self, "tension_min", _frozen(np.array([c.tension_min for c in cables])))
+        set_(self, "tension_max", _frozen(np.array([c.tension_max for c in cables])))
+        set_(
+            self,
+            "pulley_radius",
+            _frozen(np.array([c.pulley.radius if c.pulley else 0.0 for c in cables])),
+        )
+        set_(
+            self,
+            "pulley_axis",
+            _frozen(np.array([c.pulley.axis if c.pulley else np.zeros(3) for c in cables])),
+        )
+
+    @property
+    def n_cables(self) -> int:
+        return len(self.cables)
+
+    @property
+    def redundancy(self) -> int:
+        """Degree of actuation redundancy r = m − 6."""
+        return len(self.cables) - 6
+
+    @property
+    def has_pulleys(self) -> bool:
+        return any(c.pulley is not None for c in self.cables)
+
+    def cable_stiffness(self, lengths: FloatArray) -> FloatArray:
+        """Axial stiffness k_i (N/m) of every cable at geometric lengths ``lengths`` (m)."""
+        return np.array([c.axial_stiffness(float(lengths[i])) for i, c in enumerate(self.cables)])
+
+    def gravity_wrench(self, R: FloatArray) -> FloatArray:
+        """Wrench of gravity on the platform (N, N·m), base frame, moments about ``P``.
+
+        ``R`` is the platform orientation (platform → base).
+        """
+        f = self.platform.mass * self.gravity
+        r = R @ self.platform.com
+        return np.concatenate([f, np.cross(r, f)])

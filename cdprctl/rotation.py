@@ -1,0 +1,116 @@
+"""Rotation helpers.
+
+Convention (used everywhere in cdprctl):
+
+* Inside the code an orientation is a rotation matrix ``R`` (3×3) that maps vectors from the
+  platform frame to the base frame: ``x_base = R @ x_platform``.
+* At the boundaries (config files, CLI, commands) orientations are roll-pitch-yaw angles in
+  radians, ``(roll, pitch, yaw)``, with ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``: rotations about the
+  fixed base axes x, then y, then z (equivalently intrinsic z-y'-x''). This is the ROS/URDF
+  convention and MATLAB's ``eul2rotm([yaw pitch roll])``.
+* A small rotation is a rotation vector ``δφ`` (rad, base frame) applied on the left:
+  ``R' = exp([δφ]×) @ R``. The stiffness matrix and the forward-kinematics Jacobian use it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def rot_x(angle: float) -> FloatArray:
+    """Rotation matrix about x by ``angle`` (rad)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle: float) -> FloatArray:
+    """Rotation matrix about y by ``angle`` (rad)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle: float) -> FloatArray:
+    """Rotation matrix about z by ``angle`` (rad)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> FloatArray:
+    """``R = Rz(yaw) Ry(pitch) Rx(roll)`` (angles in rad), platform → base."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def matrix_to_rpy(R: FloatArray) -> tuple[float, float, float]:
+    """Inverse of :func:`rpy_to_matrix`; pitch in [-π/2, π/2], roll and yaw in (-π, π]."""
+    pitch = math.asin(max(-1.0, min(1.0, -float(R[2, 0]))))
+    if abs(math.cos(pitch)) > 1e-9:
+        roll = math.atan2(float(R[2, 1]), float(R[2, 2]))
+        yaw = math.atan2(float(R[1, 0]), float(R[0, 0]))
+    else:  # gimbal lock: only roll ± yaw is defined; put it all in yaw
+        roll = 0.0
+        yaw = math.atan2(-float(R[0, 1]), float(R[1, 1]))
+    return roll, pitch, yaw
+
+
+def skew(v: FloatArray) -> FloatArray:
+    """Cross-product matrix: ``skew(a) @ b == np.cross(a, b)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def exp_so3(phi: FloatArray) -> FloatArray:
+    """Rotation matrix of the rotation vector ``phi`` (rad), by Rodrigues' formula.
+
+    Plain floats: this sits in the forward-kinematics iteration, where numpy's per-call
+    overhead on 3×3 arrays would dominate.
+    """
+    x, y, z = float(phi[0]), float(phi[1]), float(phi[2])
+    angle2 = x * x + y * y + z * z
+    if angle2 < 1e-16:  # Taylor expansion avoids 0/0: a = 1 − θ²/6, b = 1/2 − θ²/24
+        a, b = 1.0 - angle2 / 6.0, 0.5 - angle2 / 24.0
+    else:
+        angle = math.sqrt(angle2)
+        a = math.sin(angle) / angle
+        b = (1.0 - math.cos(angle)) / angle2
+    # R = I + a K + b K², K = [phi]×, K² = phi phiᵀ − θ² I
+    return np.array(
+        [
+            [1.0 + b * (x * x - angle2), -a * z + b * x * y, a * y + b * x * z],
+            [a * z + b * x * y, 1.0 + b * (y * y - angle2), -a * x + b * y * z],
+            [-a * y + b * x * z, a * x + b * y * z, 1.0 + b * (z * z - angle2)],
+        ]
+    )
+
+
+def orthonormalize(R: FloatArray) -> FloatArray:
+    """The nearest rotation to an almost-orthonormal ``R`` (one Newton step of the polar
+    decomposition, ``R (3 I − RᵀR)/2``): removes the drift of repeated products."""
+    return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
+
+
+def log_so3(R: FloatArray) -> FloatArray:
+    """Rotation vector (rad) of the rotation matrix ``R`` (inverse of :func:`exp_so3`)."""
+    cos_angle = max(-1.0, min(1.0, (float(np.trace(R)) - 1.0) / 2.0))
+    angle = math.acos(cos_angle)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-8:
+        return 0.5 * w
+    if math.pi - angle < 1e-6:  # near π: take the axis from the symmetric part
+        M = (R + np.eye(3)) / 2.0
+        k = int(np.argmax(np.diag(M)))
+        axis = M[:, k] / math.sqrt(max(float(M[k, k]), 1e-300))
+        return angle * axis
+    return angle / (2.0 * math.sin(angle)) * w

@@ -1,0 +1,86 @@
+"""Stiffness matrix of the platform, K = Kp + Ka (Picard et al. 2020, eq. (3)-(4)).
+
+Sign convention: ``K = δw_e/δX``. A small change ``δw_e`` of the external wrench applied to the
+platform (N, N·m; base frame; moments about ``P``) displaces it, the winches being locked, by the
+screw ``δX = [δp, δφ] = K⁻¹ δw_e`` (m, rad; base frame; rotation vector applied on the left).
+Equivalently ``K = −∂(W t)/∂X`` with ``δt_i = k_i δl_i``: ``K`` is positive definite for a stable
+equilibrium.
+
+* ``Kp = W diag(k) Wᵀ`` (passive part, eq. (4) top): cable elasticity ``k_i`` (N/m).
+* ``Ka`` (active or geometric part, eq. (4) bottom): the change of the cable directions at
+  constant tensions ``t_i``, with ``l_i`` the free length.
+
+With swivel pulleys, ``u_i`` and ``l_i`` refer to the moving tangent point; the motion of that
+point along the wheel is neglected in ``Ka`` (as the paper neglects pulleys).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cdprctl.kinematics import KinematicsData
+from cdprctl.rotation import FloatArray
+
+if TYPE_CHECKING:
+    from cdprctl.model.robot import RobotModel
+
+
+def cable_stiffnesses(model: RobotModel, data: KinematicsData) -> FloatArray:
+    """Axial stiffness ``k_i`` (N/m) of each cable at the pose of ``data`` (``k = E·S/l``)."""
+    return model.cable_stiffness(data.length)
+
+
+def passive_stiffness(data: KinematicsData, k: FloatArray) -> FloatArray:
+    """``Kp = W diag(k) Wᵀ`` (Picard et al. 2020, eq. (4)), 6×6."""
+    return (data.W * k) @ data.WT
+
+
+def active_stiffness(data: KinematicsData, t: FloatArray) -> FloatArray:
+    """``Ka`` (Picard et al. 2020, eq. (4)), 6×6, for cable tensions ``t`` (N).
+
+    Blocks, summed over cables with ``P_i = (I − u_i u_iᵀ)/l_i`` and ``B̂_i = [R b_i]×``::
+
+        Ka = −Σ t_i [ −P_i        P_i B̂_i
+                      −B̂_i P_i   (Û_i + B̂_i P_i) B̂_i ]
+    """
+    u = data.u
+    rb = data.rb
+    inv_l = 1.0 / data.free_length
+    # P_i for all cables: (m, 3, 3)
+    P = np.eye(3)[None, :, :] - u[:, :, None] * u[:, None, :]
+    P *= inv_l[:, None, None]
+    Bh = _skew_stack(rb)
+    Uh = _skew_stack(u)
+    BP = Bh @ P
+    tw = t[:, None, None]
+    K = np.empty((6, 6))
+    K[:3, :3] = np.sum(tw * P, axis=0)
+    K[:3, 3:] = -np.sum(tw * (P @ Bh), axis=0)
+    K[3:, :3] = np.sum(tw * BP, axis=0)
+    K[3:, 3:] = -np.sum(tw * ((Uh + BP) @ Bh), axis=0)
+    return K
+
+
+def stiffness_matrix(
+    model: RobotModel, data: KinematicsData, t: FloatArray, k: FloatArray | None = None
+) -> FloatArray:
+    """``K = Kp + Ka`` (Picard et al. 2020, eq. (3)-(4)) at the pose of ``data`` for tensions
+    ``t`` (N); ``k`` (N/m) defaults to the model's cable stiffness at the current lengths."""
+    if k is None:
+        k = cable_stiffnesses(model, data)
+    return passive_stiffness(data, k) + active_stiffness(data, t)
+
+
+def _skew_stack(v: FloatArray) -> FloatArray:
+    """(m, 3) vectors → (m, 3, 3) cross-product matrices."""
+    m = v.shape[0]
+    S = np.zeros((m, 3, 3))
+    S[:, 0, 1] = -v[:, 2]
+    S[:, 0, 2] = v[:, 1]
+    S[:, 1, 0] = v[:, 2]
+    S[:, 1, 2] = -v[:, 0]
+    S[:, 2, 0] = -v[:, 1]
+    S[:, 2, 1] = v[:, 0]
+    return S

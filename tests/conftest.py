@@ -1,0 +1,55 @@
+"""Shared fixtures: the shipped robots and the paper data of ../shared/robots/."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdprctl.model import RobotModel, load_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "config"
+ROBOT_FILES = sorted(p.name for p in CONFIG.glob("*.toml"))
+SHARED_ROBOTS = ROOT.parent / "shared" / "robots"
+
+
+@pytest.fixture(scope="session", params=ROBOT_FILES)
+def robot(request: pytest.FixtureRequest) -> RobotModel:
+    return load_robot(CONFIG / request.param)
+
+
+@pytest.fixture(scope="session")
+def seed000() -> RobotModel:
+    return load_robot(CONFIG / "seed000.toml")
+
+
+@pytest.fixture(scope="session")
+def rowc() -> RobotModel:
+    return load_robot(CONFIG / "rowc.toml")
+
+
+@pytest.fixture(scope="session")
+def seed000_expected() -> dict:
+    """Expected numbers of Sensors 2019 §3 (reconstructed, see the file's notes).
+
+    Copied into tests/data so the suite runs without ../shared; the copy is checked against
+    the shared file when that is present."""
+    local = ROOT / "tests" / "data" / "seed000_expected.json"
+    return json.loads(local.read_text())
+
+
+def random_poses(model: RobotModel, n: int, rng: np.random.Generator, tilt: float = 0.15):
+    """Seeded random poses inside the model's workspace box, tilted up to ``tilt`` rad."""
+    from cdprctl.rotation import exp_so3
+
+    ws = model.workspace
+    R0 = model.home.rotation
+    for _ in range(n):
+        p = rng.uniform(ws.position_min, ws.position_max)
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = exp_so3(axis * rng.uniform(0.0, tilt)) @ R0
+        yield p, R

@@ -1,0 +1,226 @@
+"""Every rule of the robot description with a broken file: the error names the file, the key,
+the value, the unit and the rule; all errors of a file are reported; no model escapes."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from conftest import CONFIG
+
+from cdprctl.cli import main
+from cdprctl.model import ConfigError, load_robot
+
+BASE = (CONFIG / "rowc.toml").read_text()
+
+
+def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def sub(pattern: str, repl: str, text: str = BASE, count: int = 1) -> str:
+    new, n = re.subn(pattern, repl, text, count=count, flags=re.M)
+    assert n >= 1, f"pattern {pattern!r} not in the base file"
+    return new
+
+
+def errors_of(tmp_path: Path, text: str) -> list[str]:
+    p = write(tmp_path, text)
+    with pytest.raises(ConfigError) as exc:
+        load_robot(p)
+    for e in exc.value.errors:
+        assert e.startswith(str(p) + ": "), e
+    return exc.value.errors
+
+
+CASES = [
+    # (id, broken text, substrings expected in one error message)
+    (
+        "tmin>tmax",
+        sub(r"^tension_min = 10.0", "tension_min = 250.0"),
+        ["cables[0].tension_min = 250 N exceeds tension_max = 200 N"],
+    ),
+    (
+        "negative tmin",
+        sub(r"^tension_min = 10.0", "tension_min = -1.0"),
+        ["cables[0].tension_min = -1 N must be >= 0"],
+    ),
+    (
+        "negative modulus",
+        sub(r"^youngs_modulus = 80.0e9", "youngs_modulus = -80.0e9"),
+        ["cables[0].youngs_modulus = -8e+10 Pa must be > 0"],
+    ),
+    (
+        "nan stiffness",
+        sub(r"^youngs_modulus = 80.0e9  # Pa\ncross_section = 0.75e-6", "stiffness = nan"),
+        ["cables[0].stiffness = nan N/m must be finite"],
+    ),
+    ("inf mass", sub(r"^mass = 8.0", "mass = inf"), ["platform.mass = inf kg must be finite"]),
+    ("zero mass", sub(r"^mass = 8.0", "mass = 0.0"), ["platform.mass = 0 kg must be > 0"]),
+    (
+        "missing mass",
+        sub(r"^mass = 8.0.*\n", ""),
+        ["platform.mass is missing: required, a number (unit: kg)"],
+    ),
+    (
+        "mass as string",
+        sub(r"^mass = 8.0", 'mass = "8"'),
+        ["platform.mass = '8' must be a number in kg"],
+    ),
+    (
+        "anchor wrong shape",
+        sub(r"^anchor = \[0.000, 0.250, 0.000\]", "anchor = [0.0, 0.25]"),
+        ["cables[0].anchor = [0, 0.25] must be a list of 3 numbers (m)"],
+    ),
+    (
+        "anchor missing",
+        sub(r"^anchor = \[0.000, 0.250, 0.000\].*\n", ""),
+        ["cables[0].anchor is missing"],
+    ),
+    (
+        "both elasticities",
+        sub(r"^cross_section = 0.75e-6", "cross_section = 0.75e-6\nstiffness = 1e4"),
+        ["cables[0] gives both stiffness and youngs_modulus/cross_section"],
+    ),
+    (
+        "no elasticity",
+        sub(r"^youngs_modulus = 80.0e9  # Pa\ncross_section = 0.75e-6.*\n", ""),
+        ["cables[0].stiffness is missing"],
+    ),
+    (
+        "modulus without section",
+        sub(r"^cross_section = 0.75e-6.*\n", ""),
+        ["cables[0].cross_section is missing"],
+    ),
+    (
+        "duplicate names",
+        sub(r'^name = "2"', 'name = "1"'),
+        ["cables[1].name = '1' duplicates the name of cables[0]"],
+    ),
+    (
+        "unknown key",
+        sub(r"^tension_min = 10.0", "tension_min = 10.0\ntensoin_max = 3"),
+        ["cables[0].tensoin_max is not a known key"],
+    ),
+    ("unknown top", BASE + "\nfoo = 1\n", ["foo is not a known key"]),
+    (
+        "winch too weak",
+        sub(r"^torque_limit = 2.6", "torque_limit = 1.0"),
+        ["cables[0].tension_max = 200 N exceeds what the winch can hold"],
+    ),
+    (
+        "bad encoder",
+        sub(r"^encoder_counts_per_rev = 65536", "encoder_counts_per_rev = 12.5"),
+        ["winch.encoder_counts_per_rev = 12.5 counts must be an integer"],
+    ),
+    (
+        "negative drum",
+        sub(r"^drum_radius = 0.045", "drum_radius = -0.045"),
+        ["winch.drum_radius = -0.045 m must be > 0"],
+    ),
+    (
+        "inertia not PD",
+        sub(r"^inertia = \[0.05, 0.05, 0.06\]", "inertia = [0.05, -0.05, 0.06]"),
+        ["platform.inertia", "must be positive definite"],
+    ),
+    (
+        "inertia not physical",
+        sub(r"^inertia = \[0.05, 0.05, 0.06\]", "inertia = [0.01, 0.01, 0.06]"),
+        ["platform.inertia", "triangle inequality"],
+    ),
+    (
+        "inertia asymmetric",
+        sub(
+            r"^inertia = \[0.05, 0.05, 0.06\]",
+            "inertia = [[0.05, 0.01, 0], [0, 0.05, 0], [0, 0, 0.06]]",
+        ),
+        ["platform.inertia", "must be symmetric"],
+    ),
+    (
+        "home outside workspace",
+        sub(r"^position = \[1.5, 0.35, 0.59\]", "position = [2.9, 0.35, 0.59]"),
+        ["home.position[0] = 2.9 m is outside the workspace [0.4, 2.6] m (x)"],
+    ),
+    (
+        "workspace inverted",
+        sub(r"^position_min = \[0.4,", "position_min = [2.7,"),
+        ["workspace.position_min[0] = 2.7 m must be < position_max[0] = 2.6 m (x)"],
+    ),
+    (
+        "home not feasible",
+        sub(r"^mass = 8.0", "mass = 80.0"),
+        ["home pose: no tensions within [tension_min, tension_max] hold the platform's weight"],
+    ),
+    (
+        "too few cables",
+        "[[cables]]".join(BASE.split("[[cables]]")[:5]),
+        ["cables has 4 entries: a 6-DOF platform needs at least 6 cables"],
+    ),
+    (
+        "pulley zero axis",
+        sub(
+            r"^cross_section = 0.75e-6.*$",
+            "cross_section = 0.75e-6\n[cables.pulley]\nradius = 0.02\naxis = [0.0, 0.0, 0.0]",
+        ),
+        ["cables[0].pulley.axis = [0, 0, 0] must not be the zero vector"],
+    ),
+    (
+        "gravity not vector",
+        sub(r"^gravity = .*$", "gravity = -9.81"),
+        ["gravity = -9.81 m/s² must be a list of 3 numbers (m/s²)"],
+    ),
+    ("not toml", "name = \n", ["not valid TOML"]),
+]
+
+
+@pytest.mark.parametrize("text,expected", [(c[1], c[2]) for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_file_gets_a_clear_error(tmp_path, text, expected):
+    errors = errors_of(tmp_path, text)
+    joined = "\n".join(errors)
+    assert any(all(s in e for s in expected) for e in errors), joined
+
+
+def test_all_errors_of_a_file_are_collected(tmp_path):
+    text = sub(r"^mass = 8.0", "mass = -3.0")
+    text = sub(r"^tension_min = 10.0", "tension_min = 300.0", text)
+    text = sub(r"^drum_radius = 0.045", "drum_radius = nan", text)
+    text = sub(r'^name = "3"', 'name = "1"', text)
+    errors = errors_of(tmp_path, text)
+    assert len(errors) >= 4, errors
+    for needle in ("platform.mass", "cables[0].tension_min", "winch.drum_radius", "cables[2].name"):
+        assert any(needle in e for e in errors), (needle, errors)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read the file"):
+        load_robot(tmp_path / "nope.toml")
+
+
+def test_model_is_frozen(rowc):
+    import dataclasses
+
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        rowc.name = "x"  # type: ignore[misc]
+    with pytest.raises(ValueError):
+        rowc.anchors[0, 0] = 1.0
+
+
+def test_check_config_cli_summary_and_errors(tmp_path, capsys):
+    assert main(["check-config", str(CONFIG / "seed000.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "cables      8 (redundancy r = 2)" in out
+    assert "mass 150 kg" in out
+    # the 8 cable lengths at home are printed, cable 1 is 6.4 m long or so
+    assert re.search(r"^\s+1\s+50\.0\s+800\.0\s+\d\.\d{4}", out, flags=re.M)
+    bad = write(tmp_path, sub(r"^mass = 8.0", "mass = -1.0"))
+    assert main(["check-config", str(bad)]) == 1
+    err = capsys.readouterr().err
+    assert "platform.mass = -1 kg must be > 0" in err
+
+
+def test_every_shipped_config_loads():
+    for p in sorted(CONFIG.glob("*.toml")):
+        load_robot(p)
