@@ -37,30 +37,32 @@ def passive_stiffness(data: KinematicsData, k: FloatArray) -> FloatArray:
     return (data.W * k) @ data.WT
 
 
-def active_stiffness(data: KinematicsData, t: FloatArray) -> FloatArray:
-    """``Ka`` (Picard et al. 2020, eq. (4)), 6×6, for cable tensions ``t`` (N).
+def active_stiffness_per_cable(data: KinematicsData) -> FloatArray:
+    """(m, 6, 6): the active stiffness of each cable per newton of its tension, so that
+    ``Ka(t) = Σ t_i Ka_i`` (Picard et al. 2020, eq. (4)). With ``P_i = (I − u_i u_iᵀ)/l_i`` and
+    ``B̂_i = [R b_i]×``::
 
-    Blocks, summed over cables with ``P_i = (I − u_i u_iᵀ)/l_i`` and ``B̂_i = [R b_i]×``::
-
-        Ka = −Σ t_i [ −P_i        P_i B̂_i
-                      −B̂_i P_i   (Û_i + B̂_i P_i) B̂_i ]
+        Ka_i = −[ −P_i        P_i B̂_i
+                  −B̂_i P_i   (Û_i + B̂_i P_i) B̂_i ]
     """
     u = data.u
-    rb = data.rb
     inv_l = 1.0 / data.free_length
-    # P_i for all cables: (m, 3, 3)
     P = np.eye(3)[None, :, :] - u[:, :, None] * u[:, None, :]
     P *= inv_l[:, None, None]
-    Bh = _skew_stack(rb)
+    Bh = _skew_stack(data.rb)
     Uh = _skew_stack(u)
     BP = Bh @ P
-    tw = t[:, None, None]
-    K = np.empty((6, 6))
-    K[:3, :3] = np.sum(tw * P, axis=0)
-    K[:3, 3:] = -np.sum(tw * (P @ Bh), axis=0)
-    K[3:, :3] = np.sum(tw * BP, axis=0)
-    K[3:, 3:] = -np.sum(tw * ((Uh + BP) @ Bh), axis=0)
-    return K
+    out = np.empty((data.n_cables, 6, 6))
+    out[:, :3, :3] = P
+    out[:, :3, 3:] = -(P @ Bh)
+    out[:, 3:, :3] = BP
+    out[:, 3:, 3:] = -((Uh + BP) @ Bh)
+    return out
+
+
+def active_stiffness(data: KinematicsData, t: FloatArray) -> FloatArray:
+    """``Ka`` (Picard et al. 2020, eq. (4)), 6×6, for cable tensions ``t`` (N)."""
+    return np.tensordot(t, active_stiffness_per_cable(data), axes=1)
 
 
 def stiffness_matrix(

@@ -142,12 +142,12 @@ CASES = [
     (
         "home outside workspace",
         sub(r"^position = \[1.5, 0.35, 0.59\]", "position = [2.9, 0.35, 0.59]"),
-        ["home.position[0] = 2.9 m is outside the workspace [0.4, 2.6] m (x)"],
+        ["home.position[0] = 2.9 m is outside the workspace [0.5, 2.5] m (x)"],
     ),
     (
         "workspace inverted",
-        sub(r"^position_min = \[0.4,", "position_min = [2.7,"),
-        ["workspace.position_min[0] = 2.7 m must be < position_max[0] = 2.6 m (x)"],
+        sub(r"^position_min = \[0.5,", "position_min = [2.7,"),
+        ["workspace.position_min[0] = 2.7 m must be < position_max[0] = 2.5 m (x)"],
     ),
     (
         "home not feasible",

@@ -1,0 +1,340 @@
+"""One interface for every tension distribution method.
+
+``TensionDistributor(model, options)`` validates the options once (raising ``ValueError``
+outside the loop); :meth:`TensionDistributor.solve` is the in-loop call: it never raises, and
+a status other than ``OK`` comes with finite tensions that must not be applied as a solution
+(least-violating ones for ``INFEASIBLE``; the previous tensions or ``t_min`` otherwise).
+
+The cables must exert ``W t = w`` (``w``: the wrench the cables must apply to the platform,
+N and N·m, base frame, moments about ``P``; in statics ``w = −(w_e + w_g)``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cdprctl.kinematics import KinematicsData
+from cdprctl.rotation import FloatArray
+from cdprctl.tda import polygon as pg
+from cdprctl.tda.energy import cable_energies, impose, minimum_energy
+from cdprctl.tda.nullspace import NullSpace
+from cdprctl.tda.sotda import SotdaModel, grid_candidates, sotda_point
+from cdprctl.tda.types import TDAMethod, TDAOptions, TDAOutput, TDAStatus
+
+if TYPE_CHECKING:
+    from cdprctl.model.robot import RobotModel
+
+BOUND_TOLERANCE = 1e-6  # N: round-off accepted on a bound, then clipped onto it
+
+
+class TensionDistributor:
+    """Tension distribution for one robot and one set of options."""
+
+    def __init__(self, model: RobotModel, options: TDAOptions | None = None):
+        self.model = model
+        self.m = model.n_cables
+        self.r = model.redundancy
+        self.options = options or TDAOptions()
+        errors = self.options.validate(model)
+        if errors:
+            raise ValueError("invalid TDA options: " + "; ".join(errors))
+        self.ns = NullSpace(self.m)
+        self.out = TDAOutput(self.m, self.r)
+        d = np.asarray(self.options.direction, dtype=float)
+        self._direction = d / np.linalg.norm(d)
+        self._delta_wrench = (
+            np.asarray(self.options.delta_wrench, dtype=float)
+            if self.options.delta_wrench is not None
+            else np.concatenate([self._direction, np.zeros(3)])
+        )
+
+    # -- the in-loop call ---------------------------------------------------------------------
+    def solve(
+        self,
+        W: FloatArray,
+        wrench: FloatArray,
+        t_min: FloatArray | None = None,
+        t_max: FloatArray | None = None,
+        k: FloatArray | None = None,
+        kin: KinematicsData | None = None,
+        t_prev: FloatArray | None = None,
+    ) -> TDAOutput:
+        """Tensions (N) with ``W t = wrench`` inside ``[t_min, t_max]`` (defaults: the model's).
+
+        ``k`` (N/m, cable stiffness) is needed by ``energy`` and ``sotda``, ``kin`` (the
+        kinematics at the pose of ``W``) by ``sotda``; ``t_prev`` (N) enables the rate limit.
+        """
+        out = self.out
+        lo = self.model.tension_min if t_min is None else t_min
+        hi = self.model.tension_max if t_max is None else t_max
+        out.rate_limited = False
+        out.max_violation = 0.0
+        out.message = ""
+        out.polygon = []
+        out.area = 0.0
+        out.barycenter = (math.nan, math.nan)
+        out.sotda_displacement = math.nan
+        out.energy_total = math.nan
+        out.energies[:] = math.nan
+        out.energy_range[:] = math.nan
+        out.segment_ends[:] = math.nan
+        try:
+            status = self._solve(W, wrench, lo, hi, k, kin, t_prev)
+        except Exception as exc:
+            status = TDAStatus.INTERNAL_ERROR
+            out.message = f"{type(exc).__name__}: {exc}"
+        return self._finish(status, W, wrench, lo, hi, k, t_prev)
+
+    # -- dispatch -----------------------------------------------------------------------------
+    def _solve(
+        self,
+        W: FloatArray,
+        w: FloatArray,
+        lo: FloatArray,
+        hi: FloatArray,
+        k: FloatArray | None,
+        kin: KinematicsData | None,
+        t_prev: FloatArray | None,
+    ) -> TDAStatus:
+        out, ns, method = self.out, self.ns, self.options.method
+        if not ns.update(W, w) or not math.isfinite(float(w.sum())):
+            out.message = "wrench matrix rank-deficient or non-finite input"
+            return TDAStatus.DEGENERATE
+        if method is TDAMethod.PINV:
+            out.tensions[:] = ns.t0
+            out.lam[:] = 0.0
+            return TDAStatus.OK
+        if method is TDAMethod.CLOSED_FORM:
+            return self._closed_form(W, w, lo, hi)
+        if method is TDAMethod.ENERGY:
+            return self._energy(lo, hi, k, t_prev)
+        if method is TDAMethod.QP or (method is TDAMethod.MIN_2NORM and self.r != 2):
+            return self._qp(lo, hi, np.zeros(self.r))
+        return self._polygon_method(lo, hi, k, kin, t_prev)
+
+    def _polygon_method(
+        self,
+        lo: FloatArray,
+        hi: FloatArray,
+        k: FloatArray | None,
+        kin: KinematicsData | None,
+        t_prev: FloatArray | None,
+    ) -> TDAStatus:
+        out, ns, opt = self.out, self.ns, self.options
+        N, t0 = ns.N, ns.t0
+        poly = pg.feasible_polygon(N, t0, lo, hi)
+        out.polygon = poly
+        if not poly:
+            return self._least_violating(lo, hi)
+        area, (bx, by) = pg.area_centroid(poly)
+        out.area, out.barycenter = area, (bx, by)
+        method = opt.method
+        if method is TDAMethod.BARYCENTER:
+            x, y = bx, by
+        elif method is TDAMethod.MIN_2NORM:
+            # ‖t‖² = ‖t0‖² + ‖λ‖² (orthonormal N, t0 ⊥ null(W)): the point nearest λ = 0
+            x, y = pg.closest_point(poly, 0.0, 0.0)
+        elif method is TDAMethod.MIN_1NORM:
+            c = N.sum(axis=0)  # Σ t_i = Σ t0_i + (1ᵀN) λ, tensions being positive
+            x, y = pg.min_linear(poly, float(c[0]), float(c[1]))
+        else:  # SOTDA
+            if k is None or kin is None:
+                out.message = "sotda needs the cable stiffness k and the kinematics"
+                return TDAStatus.DEGENERATE
+            sm = SotdaModel(kin, k, t0, N)
+            if opt.sotda_variant == "grid":
+                cand = grid_candidates(poly, opt.grid_points)
+            else:
+                cand = np.array(poly)
+            best, _ = sotda_point(sm, cand, self._delta_wrench, self._direction)
+            sx, sy = float(cand[best, 0]), float(cand[best, 1])
+            nu = opt.nu
+            x, y = bx + nu * (sx - bx), by + nu * (sy - by)  # intermediate solution (Fig. 2)
+            dX = sm.displacements(np.array([[x, y]]), self._delta_wrench)[0]
+            out.sotda_displacement = float(dX[:3] @ self._direction)
+        if t_prev is not None and opt.max_tension_rate is not None:
+            x, y = self._rate_limit_2d(x, y, lo, hi, t_prev)
+        out.lam[0], out.lam[1] = x, y
+        np.dot(N, out.lam, out=out.tensions)
+        out.tensions += t0
+        return TDAStatus.OK
+
+    def _rate_limit_2d(
+        self, x: float, y: float, lo: FloatArray, hi: FloatArray, t_prev: FloatArray
+    ) -> tuple[float, float]:
+        """Nearest point to ``(x, y)`` whose tensions stay within ``max_tension_rate·period``
+        of ``t_prev``: the polygon with bounds tightened around ``t_prev``. Unchanged when the
+        wrench cannot be met within the rate (equilibrium first)."""
+        step = (self.options.max_tension_rate or 0.0) * self.options.period
+        lo2 = np.maximum(lo, t_prev - step)
+        hi2 = np.minimum(hi, t_prev + step)
+        N, t0 = self.ns.N, self.ns.t0
+        tx = t0 + N @ np.array([x, y])
+        if np.all(tx >= lo2 - 1e-9) and np.all(tx <= hi2 + 1e-9):
+            return x, y
+        poly = pg.feasible_polygon(N, t0, lo2, hi2) if np.all(lo2 <= hi2) else []
+        if not poly:
+            self.out.message = "tension rate limit cannot hold the wrench: not applied"
+            return x, y
+        self.out.rate_limited = True
+        return pg.closest_point(poly, x, y)
+
+    def _least_violating(self, lo: FloatArray, hi: FloatArray) -> TDAStatus:
+        out, ns = self.out, self.ns
+        if self.r == 2:
+            lam, s = pg.least_violating(ns.N, ns.t0, lo, hi)
+            out.lam[:] = lam
+            out.tensions[:] = ns.t0 + ns.N @ lam
+        else:
+            lam_opt = _qp_least_violating(ns.N, ns.t0, lo, hi)
+            out.lam[:] = lam_opt
+            out.tensions[:] = ns.t0 + ns.N @ lam_opt
+            s = float(np.max(np.maximum(lo - out.tensions, out.tensions - hi)))
+        out.max_violation = max(0.0, s)
+        out.message = f"wrench infeasible: least-violating tensions, {s:.3g} N beyond a bound"
+        return TDAStatus.INFEASIBLE
+
+    def _qp(self, lo: FloatArray, hi: FloatArray, lam_target: FloatArray) -> TDAStatus:
+        """Nearest tensions to ``t0 + N lam_target`` within the bounds (a QP in λ: with
+        orthonormal N, ``‖t − t_target‖ = ‖λ − lam_target‖``)."""
+        import quadprog
+
+        ns, out = self.ns, self.out
+        N, t0 = ns.N, ns.t0
+        C = np.hstack([N.T, -N.T])
+        b = np.concatenate([lo - t0, t0 - hi])
+        try:
+            lam = np.asarray(quadprog.solve_qp(np.eye(self.r), lam_target, C, b, 0)[0])
+        except ValueError:
+            return self._least_violating(lo, hi)
+        out.lam[:] = lam
+        out.tensions[:] = t0 + N @ lam
+        return TDAStatus.OK
+
+    def _closed_form(
+        self, W: FloatArray, w: FloatArray, lo: FloatArray, hi: FloatArray
+    ) -> TDAStatus:
+        """Pott's improved closed form (Pott 2014, Computational Kinematics, pp. 139-146):
+        ``t = t_m + W⁺ (w − W t_m)`` with ``t_m`` the mid-range tensions; while a tension
+        violates its bound, the most violating cable is fixed at that bound and removed, as
+        long as at least 6 cables remain."""
+        out = self.out
+        t = 0.5 * (lo + hi)
+        active = list(range(self.m))
+        fixed = np.zeros(self.m, dtype=bool)
+        while True:
+            Wa = W[:, active]
+            rest = w - W[:, fixed] @ t[fixed]
+            tm = 0.5 * (lo[active] + hi[active])
+            ta = tm + np.linalg.lstsq(Wa, rest - Wa @ tm, rcond=None)[0]
+            t[active] = ta
+            viol = np.maximum(lo[active] - ta, ta - hi[active])
+            worst = int(np.argmax(viol))
+            if viol[worst] <= BOUND_TOLERANCE:
+                out.tensions[:] = t
+                out.lam[:] = self.ns.N.T @ (t - self.ns.t0)
+                return TDAStatus.OK
+            if len(active) <= 6:
+                out.tensions[:] = t
+                out.max_violation = float(viol[worst])
+                out.message = "closed form: no feasible tensions found"
+                return TDAStatus.INFEASIBLE
+            i = active.pop(worst)
+            fixed[i] = True
+            t[i] = lo[i] if ta[worst] < lo[i] else hi[i]
+
+    def _energy(
+        self, lo: FloatArray, hi: FloatArray, k: FloatArray | None, t_prev: FloatArray | None
+    ) -> TDAStatus:
+        out, ns, opt = self.out, self.ns, self.options
+        if k is None:
+            out.message = "energy needs the cable stiffness k"
+            return TDAStatus.DEGENERATE
+        cables = [imp.cable for imp in opt.impositions]
+        targets = [imp.tension(float(k[imp.cable])) for imp in opt.impositions]
+        free = impose(ns.N, ns.t0, cables, targets)
+        sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free) if free.ok else None
+        status = TDAStatus.OK
+        if sol is None or not sol.feasible:
+            # Keep the platform's wrench: drop the impositions, report why.
+            unconstrained = impose(ns.N, ns.t0, [], [])
+            sol = minimum_energy(ns.N, ns.t0, k, lo, hi, unconstrained)
+            out.message = "impositions unreachable within the tension limits: dropped"
+            if not sol.feasible:
+                return self._least_violating(lo, hi)
+            status = TDAStatus.IMPOSITION_INFEASIBLE
+            out.free_directions = ns.N.copy()
+        else:
+            out.free_directions = ns.N @ free.F
+            out.polygon = sol.polygon
+        out.lam[:] = sol.lam
+        out.tensions[:] = ns.t0 + ns.N @ sol.lam
+        if sol.ends is not None:
+            out.segment_ends[:] = sol.ends
+        ranges = sol.t_range
+        e = cable_energies(ranges, k[:, None])
+        e[cables] = math.nan  # imposed cables have no range
+        out.energy_range[:] = e
+        return status
+
+    # -- the guarantee ------------------------------------------------------------------------
+    def _finish(
+        self,
+        status: TDAStatus,
+        W: FloatArray,
+        w: FloatArray,
+        lo: FloatArray,
+        hi: FloatArray,
+        k: FloatArray | None,
+        t_prev: FloatArray | None,
+    ) -> TDAOutput:
+        out = self.out
+        t = out.tensions
+        finite = bool(np.all(np.isfinite(t)))
+        if status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR) or not finite:
+            if status not in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR):
+                status = TDAStatus.INTERNAL_ERROR
+                out.message = out.message or "non-finite tensions"
+            fallback = t_prev if t_prev is not None and np.all(np.isfinite(t_prev)) else lo
+            t[:] = np.clip(fallback, lo, hi)
+            out.residual = math.inf
+            out.status = status
+            return out
+        if status in (TDAStatus.OK, TDAStatus.IMPOSITION_INFEASIBLE):
+            viol = float(np.max(np.maximum(lo - t, t - hi)))
+            if viol > BOUND_TOLERANCE:
+                status = (
+                    TDAStatus.OUT_OF_LIMITS
+                    if self.options.method is TDAMethod.PINV
+                    else TDAStatus.INFEASIBLE
+                )
+                out.max_violation = viol
+            else:
+                np.clip(t, lo, hi, out=t)  # round-off onto the bound
+        res = W @ t - w
+        out.residual = float(np.sqrt(res @ res)) / max(1.0, float(np.sqrt(w @ w)))
+        if k is not None:
+            out.energies[:] = cable_energies(t, k)
+            out.energy_total = float(out.energies.sum())
+        out.status = status
+        return out
+
+
+def _qp_least_violating(
+    N: FloatArray, t0: FloatArray, lo: FloatArray, hi: FloatArray
+) -> FloatArray:
+    """min s subject to lo − s <= t0 + N λ <= hi + s (a tiny regularisation makes it a QP)."""
+    import quadprog
+
+    r = N.shape[1]
+    G = np.eye(r + 1) * 1e-9
+    a = np.zeros(r + 1)
+    a[-1] = -1.0
+    ones = np.ones((N.shape[0], 1))
+    C = np.vstack([np.hstack([N, ones]), np.hstack([-N, ones])]).T
+    b = np.concatenate([lo - t0, t0 - hi])
+    x = np.asarray(quadprog.solve_qp(G, a, C, b, 0)[0])
+    return x[:r]

@@ -1,0 +1,73 @@
+"""Stiffness Oriented TDA (Picard et al. 2020, §3, Algorithm 1 and eq. (7)).
+
+For tensions ``t(λ) = t0 + N λ`` the stiffness is ``K(λ) = Kp + Ka(t(λ))`` (eq. (3)-(4)), and
+``Ka`` is linear in the tensions: ``K(λ) = K0 + λ1 A1 + λ2 A2`` with ``K0 = Kp + Ka(t0)`` and
+``A_j = Ka(N_j)``. The candidate minimising ``|d · δp|`` with ``δX = K⁻¹ δw_e`` (eq. (7)) is
+selected among the polygon's vertices (the paper's real-time variant: at least one cable at
+``t_max`` and a second at a bound) or over a grid covering the polygon (the paper's meshgrid).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from cdprctl.kinematics import KinematicsData
+from cdprctl.rotation import FloatArray
+from cdprctl.stiffness import active_stiffness_per_cable
+from cdprctl.tda.polygon import Point
+
+
+class SotdaModel:
+    """``K(λ) = K0 + λ1 A1 + λ2 A2`` at one pose (Picard et al. 2020, eq. (3)-(4))."""
+
+    def __init__(self, data: KinematicsData, k: FloatArray, t0: FloatArray, N: FloatArray):
+        Ka_i = active_stiffness_per_cable(data).reshape(data.n_cables, 36)  # (m, 36)
+        T = np.empty((3, data.n_cables))
+        T[0] = t0
+        T[1:] = N.T
+        S = (T @ Ka_i).reshape(3, 6, 6)
+        Kp = (data.W * k) @ data.WT
+        self.K0 = Kp + S[0]
+        self.A1 = S[1]
+        self.A2 = S[2]
+
+    def displacements(self, lam: FloatArray, delta_wrench: FloatArray) -> FloatArray:
+        """Displacement screws ``δX = K(λ)⁻¹ δw`` (m, rad) for candidates ``lam`` (n, 2)."""
+        K = self.K0[None] + lam[:, 0, None, None] * self.A1 + lam[:, 1, None, None] * self.A2
+        rhs = np.broadcast_to(delta_wrench, (lam.shape[0], 6))[:, :, None]
+        return np.linalg.solve(K, rhs)[:, :, 0]
+
+
+def sotda_point(
+    model: SotdaModel,
+    candidates: FloatArray,
+    delta_wrench: FloatArray,
+    direction: FloatArray,
+) -> tuple[int, FloatArray]:
+    """Index of the candidate with the smallest ``|direction · δp|`` and all those values (m).
+
+    Candidates whose stiffness matrix is singular or not positive (an unstable equilibrium,
+    signalled by a non-finite or NaN displacement) are never selected.
+    """
+    dX = model.displacements(candidates, delta_wrench)
+    dp = np.abs(dX[:, :3] @ direction)
+    dp = np.where(np.isfinite(dp), dp, np.inf)
+    return int(np.argmin(dp)), dp
+
+
+def grid_candidates(poly: Sequence[Point], n: int) -> FloatArray:
+    """Points of an ``n × n`` grid over the polygon's bounding box that lie inside it, plus its
+    vertices (the paper's meshgrid search of the feasible polygon)."""
+    P = np.array(poly)
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n), np.linspace(lo[1], hi[1], n))
+    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    inside = np.ones(len(pts), dtype=bool)
+    Q = np.roll(P, -1, axis=0)
+    for (px, py), (qx, qy) in zip(P, Q, strict=True):  # CCW: inside is left of each edge
+        ex, ey = qx - px, qy - py
+        scale = max(abs(ex) + abs(ey), 1e-300)
+        inside &= (ex * (pts[:, 1] - py) - ey * (pts[:, 0] - px)) / scale >= -1e-12
+    return np.concatenate([pts[inside], P], axis=0)
