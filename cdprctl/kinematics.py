@@ -67,6 +67,7 @@ class KinematicsData:
         self.W = np.zeros((6, m))  # wrench matrix, C order
         self.WT = self.W.T  # (m, 6) view
         self.uT = self.W[:3]  # (3, m) unit vectors, base frame: B_i → exit point
+        self._x9 = np.zeros((9, m))  # scratch of the stiffness computations
         self._pulley_idx = [int(i) for i in np.flatnonzero(model.pulley_radius > 0.0)]
         self._pulley_radius = [float(r) for r in model.pulley_radius]
         self._pulley_axis = [tuple(float(x) for x in a) for a in model.pulley_axis]

@@ -60,6 +60,50 @@ def active_stiffness_per_cable(data: KinematicsData) -> FloatArray:
     return out
 
 
+def active_stiffness_weighted(data: KinematicsData, T: FloatArray) -> FloatArray:
+    """``Ka`` for several tension vectors at once: ``T`` (n, m) → (n, 6, 6).
+
+    The same matrix as :func:`active_stiffness_per_cable` summed with weights ``t``, from
+    sums over cables instead of m 6×6 products (the SOTDA needs three per cycle). With
+    ``w_i = t_i/l_i``, ``m_i = b_i × u_i`` (the moment rows of W) and the identities
+    ``uᵀ B̂ = −mᵀ``, ``Û B̂ = b uᵀ − (u·b) I``, ``B̂ B̂ = b bᵀ − |b|² I``::
+
+        K11 = Σw I − Σ w u uᵀ          K12 = −[Σ w b]× − Σ w u mᵀ
+        K21 = [Σ w b]× − Σ w m uᵀ      K22 = −Σ t b uᵀ + (Σ t u·b) I
+                                               − Σ w (b bᵀ − |b|² I + m mᵀ)
+    """
+    n = T.shape[0]
+    X = data._x9  # rows [u; m; b]: (9, m)
+    X[:3] = data.uT
+    X[3:6] = data.W[3:]
+    X[6:] = data.rbT
+    Wt = T / data.free_length  # (n, m): w = t/l
+    G = (Wt[:, None, :] * X[None]) @ X.T  # (n, 9, 9): Σ w x yᵀ for every pair of u, m, b
+    BU = (T[:, None, :] * X[None, 6:]) @ X[:3].T  # (n, 3, 3): Σ t b uᵀ
+    uu, um, mm, bb = G[:, :3, :3], G[:, :3, 3:6], G[:, 3:6, 3:6], G[:, 6:, 6:]
+    sw = Wt.sum(axis=1)
+    wb = Wt @ X[6:].T  # (n, 3): Σ w b
+    skew = (wb @ _SKEW_GEN).reshape(n, 3, 3)  # [Σ w b]×
+    t_ub = np.trace(BU, axis1=1, axis2=2)  # Σ t u·b
+    w_bb = np.trace(bb, axis1=1, axis2=2)  # Σ w |b|²
+    K = np.empty((n, 6, 6))
+    K[:, :3, :3] = -uu
+    K[:, :3, 3:] = -skew - um
+    K[:, 3:, :3] = skew - np.transpose(um, (0, 2, 1))
+    K[:, 3:, 3:] = -BU - bb - mm
+    diag = np.arange(3)
+    K[:, diag, diag] += sw[:, None]
+    K[:, 3 + diag, 3 + diag] += (t_ub + w_bb)[:, None]
+    return K
+
+
+# [v]× = (v @ _SKEW_GEN).reshape(3, 3)
+_SKEW_GEN = np.zeros((3, 9))
+_SKEW_GEN[2, 1], _SKEW_GEN[1, 2] = -1.0, 1.0  # row 0: (0, −z, y)
+_SKEW_GEN[2, 3], _SKEW_GEN[0, 5] = 1.0, -1.0  # row 1: (z, 0, −x)
+_SKEW_GEN[1, 6], _SKEW_GEN[0, 7] = -1.0, 1.0  # row 2: (−y, x, 0)
+
+
 def active_stiffness(data: KinematicsData, t: FloatArray) -> FloatArray:
     """``Ka`` (Picard et al. 2020, eq. (4)), 6×6, for cable tensions ``t`` (N)."""
     return np.tensordot(t, active_stiffness_per_cable(data), axes=1)

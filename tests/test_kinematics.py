@@ -178,3 +178,19 @@ def test_stretched_lengths_round_trip(rowc):
 
 def test_rpy_pose_of_rowc_home():
     np.testing.assert_allclose(rpy_to_matrix(0, 0, 0), np.eye(3))
+
+
+def test_weighted_active_stiffness_equals_per_cable_sum(robot):
+    """The summed closed form used by SOTDA equals Σ t_i Ka_i from eq. (4) cable by cable."""
+    from cdprctl.stiffness import active_stiffness_per_cable, active_stiffness_weighted
+
+    rng = np.random.default_rng(21)
+    data = KinematicsData(robot)
+    for p, R in random_poses(robot, 4, rng):
+        inverse_kinematics(robot, data, p, R)
+        T = rng.uniform(0, 500, size=(3, robot.n_cables))
+        per = active_stiffness_per_cable(data)
+        ref = np.einsum("nm,mij->nij", T, per)
+        np.testing.assert_allclose(
+            active_stiffness_weighted(data, T), ref, atol=1e-9 * np.abs(ref).max()
+        )

@@ -155,7 +155,7 @@ def test_barycenter_independent_of_null_space_basis(robot_file):
         T = rng.normal(size=(2, 2)) + 2 * np.eye(2)
         N2 = ns.N @ T
         t0b = ns.t0 + ns.N @ rng.normal(scale=50.0, size=2)
-        poly2 = feasible_polygon(N2, t0b, lo, hi, orthonormal=False)
+        poly2 = feasible_polygon(N2, t0b, lo, hi)
         _, (x2, y2) = area_centroid(poly2)
         np.testing.assert_allclose(t0b + N2 @ [x2, y2], t_ref, atol=1e-6)
 

@@ -56,6 +56,6 @@ class NullSpace:
             self.rank_ok = False
             return False
         np.dot(q[:, :d], y, out=self.t0)
-        self.N[:] = q[:, d:]
+        self.N = q[:, d:]  # a view of this call's Q: no copy
         self.rank_ok = True
         return True

@@ -20,25 +20,53 @@ from cdprctl.rotation import FloatArray
 Point = tuple[float, float]
 
 
-def _clip(poly: list[Point], ax: float, ay: float, b: float) -> list[Point]:
-    """Part of the convex polygon ``poly`` where ``ax·x + ay·y >= b``."""
-    s = [ax * x + ay * y - b for x, y in poly]
-    if min(s) >= 0.0:
+def _clip_strip(poly: list[Point], ax: float, ay: float, lo: float, hi: float) -> list[Point]:
+    """Part of the convex polygon ``poly`` where ``lo <= ax·x + ay·y <= hi`` (one
+    Sutherland-Hodgman pass for both sides of the strip)."""
+    s = [ax * x + ay * y for x, y in poly]
+    if min(s) >= lo and max(s) <= hi:
         return poly
     out: list[Point] = []
     px, py = poly[-1]
-    ps = s[-1]
-    for (qx, qy), qs in zip(poly, s, strict=True):
-        if qs >= 0.0:
-            if ps < 0.0:
-                f = ps / (ps - qs)
-                out.append((px + f * (qx - px), py + f * (qy - py)))
-            out.append((qx, qy))
-        elif ps >= 0.0:
-            f = ps / (ps - qs)
-            out.append((px + f * (qx - px), py + f * (qy - py)))
-        px, py, ps = qx, qy, qs
+    sp = s[-1]
+    for (qx, qy), sq in zip(poly, s, strict=True):
+        # the part u in [u0, u1] of the edge P + u (Q − P) inside the strip
+        ds = sq - sp
+        if ds == 0.0:
+            if lo <= sp <= hi:
+                out.append((qx, qy))
+        else:
+            ua, ub = (lo - sp) / ds, (hi - sp) / ds
+            if ua > ub:
+                ua, ub = ub, ua
+            u0 = ua if ua > 0.0 else 0.0
+            u1 = ub if ub < 1.0 else 1.0
+            if u0 <= u1:
+                if u0 > 0.0:  # entering: the crossing point
+                    out.append((px + u0 * (qx - px), py + u0 * (qy - py)))
+                if u1 < 1.0:  # leaving before Q
+                    out.append((px + u1 * (qx - px), py + u1 * (qy - py)))
+                else:
+                    out.append((qx, qy))
+        px, py, sp = qx, qy, sq
     return out
+
+
+def _parallelogram(
+    a: tuple[float, float],
+    lo_a: float,
+    hi_a: float,
+    b: tuple[float, float],
+    lo_b: float,
+    hi_b: float,
+) -> list[Point]:
+    """The intersection of two non-parallel strips, counter-clockwise."""
+    det = a[0] * b[1] - a[1] * b[0]
+    pts = [
+        ((sa * b[1] - sb * a[1]) / det, (a[0] * sb - b[0] * sa) / det)
+        for sa, sb in ((lo_a, lo_b), (hi_a, lo_b), (hi_a, hi_b), (lo_a, hi_b))
+    ]
+    return pts if det > 0.0 else pts[::-1]
 
 
 def feasible_polygon(
@@ -47,33 +75,41 @@ def feasible_polygon(
     t_lo: FloatArray,
     t_hi: FloatArray,
     eps: float = 1e-9,
-    orthonormal: bool = True,
 ) -> list[Point]:
     """Vertices (counter-clockwise) of ``{λ | t_lo <= t0 + N λ <= t_hi}``; ``[]`` when empty.
 
-    ``N`` (m×2) must have independent columns. ``orthonormal`` says ``NᵀN = I`` (the basis of
-    :class:`~cdprctl.tda.nullspace.NullSpace`); for any other basis the bounding square is
-    widened by its smallest singular value. ``eps`` (N) tolerates round-off on the bounds.
+    ``N`` (m×2) must have independent columns (any basis: orthonormality is not assumed).
+    ``eps`` (N) tolerates round-off on the bounds. The clipping starts from the parallelogram
+    of the two most nearly perpendicular strips and clips it with the others.
     """
     n0 = N[:, 0].tolist()
     n1 = N[:, 1].tolist()
     c = t0.tolist()
-    lo = t_lo.tolist()
-    hi = t_hi.tolist()
-    # ‖λ‖ <= ‖N λ‖/σ_min(N) = ‖t − t0‖/σ_min, and each |t_i − t0_i| <= max(|lo−c|, |hi−c|)
-    bound2 = 0.0
-    for ci, li, hi_ in zip(c, lo, hi, strict=True):
-        e = max(abs(li - ci), abs(hi_ - ci))
-        bound2 += e * e
-    sigma_min = 1.0 if orthonormal else float(np.sqrt(max(np.linalg.eigvalsh(N.T @ N)[0], 1e-300)))
-    B = 1.01 * math.sqrt(bound2) / sigma_min + 1.0
-    poly: list[Point] = [(-B, -B), (B, -B), (B, B), (-B, B)]
-    for ax, ay, ci, li, hi_ in zip(n0, n1, c, lo, hi, strict=True):
-        #  ax·x + ay·y >= lo − c  and  −ax·x − ay·y >= c − hi
-        poly = _clip(poly, ax, ay, li - ci - eps)
-        if not poly:
-            return poly
-        poly = _clip(poly, -ax, -ay, ci - hi_ - eps)
+    lo = [li - ci - eps for li, ci in zip(t_lo.tolist(), c, strict=True)]
+    hi = [hi_ - ci + eps for hi_, ci in zip(t_hi.tolist(), c, strict=True)]
+    m = len(c)
+    # first strip: the longest normal; second: the most perpendicular to it
+    norms = [math.hypot(n0[i], n1[i]) for i in range(m)]
+    i0 = max(range(m), key=norms.__getitem__)
+    best, i1 = -1.0, -1
+    for j in range(m):
+        if j != i0 and norms[j] > 0.0:
+            sin = abs(n0[i0] * n1[j] - n1[i0] * n0[j]) / (norms[i0] * norms[j])
+            if sin > best:
+                best, i1 = sin, j
+    if best < 1e-12:  # every strip parallel: N is not of rank 2
+        return []
+    if lo[i0] > hi[i0] or lo[i1] > hi[i1]:
+        return []
+    poly = _parallelogram((n0[i0], n1[i0]), lo[i0], hi[i0], (n0[i1], n1[i1]), lo[i1], hi[i1])
+    for i in range(m):
+        if i in (i0, i1):
+            continue
+        if norms[i] == 0.0:  # a cable the redundancy cannot change: in bounds or not at all
+            if not lo[i] <= 0.0 <= hi[i]:
+                return []
+            continue
+        poly = _clip_strip(poly, n0[i], n1[i], lo[i], hi[i])
         if not poly:
             return poly
     return _dedupe(poly)

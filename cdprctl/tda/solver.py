@@ -43,6 +43,11 @@ class TensionDistributor:
             raise ValueError("invalid TDA options: " + "; ".join(errors))
         self.ns = NullSpace(self.m)
         self.out = TDAOutput(self.m, self.r)
+        self._buf1 = np.zeros(self.m)
+        self._buf2 = np.zeros(self.m)
+        self._r6 = np.zeros(6)
+        self._lam_p = np.zeros(2)
+        self._f = np.zeros(2)
         d = np.asarray(self.options.direction, dtype=float)
         self._direction = d / np.linalg.norm(d)
         self._delta_wrench = (
@@ -78,9 +83,11 @@ class TensionDistributor:
         out.barycenter = (math.nan, math.nan)
         out.sotda_displacement = math.nan
         out.energy_total = math.nan
-        out.energies[:] = math.nan
-        out.energy_range[:] = math.nan
-        out.segment_ends[:] = math.nan
+        if self.options.method is TDAMethod.ENERGY:
+            out.energy_range[:] = math.nan
+            out.segment_ends[:] = math.nan
+        if k is None:
+            out.energies[:] = math.nan
         try:
             status = self._solve(W, wrench, lo, hi, k, kin, t_prev)
         except Exception as exc:
@@ -100,7 +107,7 @@ class TensionDistributor:
         t_prev: FloatArray | None,
     ) -> TDAStatus:
         out, ns, method = self.out, self.ns, self.options.method
-        if not ns.update(W, w) or not math.isfinite(float(w.sum())):
+        if not ns.update(W, w) or not math.isfinite(sum(w.tolist())):
             out.message = "wrench matrix rank-deficient or non-finite input"
             return TDAStatus.DEGENERATE
         if method is TDAMethod.PINV:
@@ -255,6 +262,10 @@ class TensionDistributor:
             return TDAStatus.DEGENERATE
         cables = [imp.cable for imp in opt.impositions]
         targets = [imp.tension(float(k[imp.cable])) for imp in opt.impositions]
+        if self.r == 2 and len(cables) == 1:
+            fast = self._energy_line_r2(cables[0], targets[0], lo, hi, k)
+            if fast is not None:
+                return fast
         free = impose(ns.N, ns.t0, cables, targets)
         sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free) if free.ok else None
         status = TDAStatus.OK
@@ -280,6 +291,57 @@ class TensionDistributor:
         out.energy_range[:] = e
         return status
 
+    def _energy_line_r2(
+        self, c: int, target: float, lo: FloatArray, hi: FloatArray, k: FloatArray
+    ) -> TDAStatus | None:
+        """Sensors 2019 eq. (24) for r = 2 and one imposition, in closed form: the line
+        ``N_c·λ = target − t0_c``, ``λ = λ_p + μ f``; each cable bounds μ to an interval,
+        the total energy (eq. (14)) is a parabola in μ. ``None`` when infeasible (the general
+        path then reports it)."""
+        out, ns = self.out, self.ns
+        N, t0 = ns.N, ns.t0
+        a0, a1 = float(N[c, 0]), float(N[c, 1])
+        a2 = a0 * a0 + a1 * a1
+        if a2 < 1e-20:
+            return None
+        s = (target - float(t0[c])) / a2
+        lam_p = self._lam_p
+        lam_p[0], lam_p[1] = a0 * s, a1 * s
+        na = math.sqrt(a2)
+        f = self._f
+        f[0], f[1] = -a1 / na, a0 / na
+        alpha = np.dot(N, lam_p)
+        alpha += t0
+        beta = np.dot(N, f)
+        beta[c] = 1e-300  # exactly on the line: no bound from the imposed cable's own range
+        e1 = (lo - alpha) / beta
+        e2 = (hi - alpha) / beta
+        mu_lo = max(np.minimum(e1, e2).tolist())
+        mu_hi = min(np.maximum(e1, e2).tolist())
+        if not mu_lo <= mu_hi or not lo[c] - 1e-9 <= target <= hi[c] + 1e-9:
+            return None
+        beta[c] = 0.0
+        bk = beta / k
+        mu = -float(np.dot(alpha, bk)) / float(np.dot(beta, bk))
+        mu = min(mu_hi, max(mu_lo, mu))
+        out.lam[0] = lam_p[0] + mu * f[0]
+        out.lam[1] = lam_p[1] + mu * f[1]
+        np.multiply(beta, mu, out=out.tensions)
+        out.tensions += alpha
+        ends = out.segment_ends
+        np.multiply(beta, mu_lo, out=ends[0])
+        ends[0] += alpha
+        np.multiply(beta, mu_hi, out=ends[1])
+        ends[1] += alpha
+        er = out.energy_range
+        np.minimum(ends[0], ends[1], out=er[:, 0])
+        np.maximum(ends[0], ends[1], out=er[:, 1])
+        er *= er
+        er /= 2.0 * k[:, None]  # U = t²/(2k), Sensors 2019 eq. (4)
+        er[c] = math.nan
+        out.free_directions = N @ f[:, None]
+        return TDAStatus.OK
+
     # -- the guarantee ------------------------------------------------------------------------
     def _finish(
         self,
@@ -293,7 +355,7 @@ class TensionDistributor:
     ) -> TDAOutput:
         out = self.out
         t = out.tensions
-        finite = bool(np.all(np.isfinite(t)))
+        finite = math.isfinite(sum(t.tolist()))  # NaN and inf survive a sum
         if status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR) or not finite:
             if status not in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR):
                 status = TDAStatus.INTERNAL_ERROR
@@ -304,7 +366,10 @@ class TensionDistributor:
             out.status = status
             return out
         if status in (TDAStatus.OK, TDAStatus.IMPOSITION_INFEASIBLE):
-            viol = float(np.max(np.maximum(lo - t, t - hi)))
+            b1, b2 = self._buf1, self._buf2
+            np.subtract(lo, t, out=b1)
+            np.subtract(t, hi, out=b2)
+            viol = max(max(b1.tolist()), max(b2.tolist()))  # lists: faster reductions at m = 8
             if viol > BOUND_TOLERANCE:
                 status = (
                     TDAStatus.OUT_OF_LIMITS
@@ -312,13 +377,18 @@ class TensionDistributor:
                     else TDAStatus.INFEASIBLE
                 )
                 out.max_violation = viol
-            else:
-                np.clip(t, lo, hi, out=t)  # round-off onto the bound
-        res = W @ t - w
-        out.residual = float(np.sqrt(res @ res)) / max(1.0, float(np.sqrt(w @ w)))
+            elif viol > 0.0:  # round-off: onto the bound
+                np.maximum(t, lo, out=t)
+                np.minimum(t, hi, out=t)
+        r6 = self._r6
+        np.dot(W, t, out=r6)
+        r6 -= w
+        out.residual = math.sqrt(float(np.dot(r6, r6))) / max(1.0, math.sqrt(float(np.dot(w, w))))
         if k is not None:
-            out.energies[:] = cable_energies(t, k)
-            out.energy_total = float(out.energies.sum())
+            np.multiply(t, t, out=out.energies)
+            out.energies /= k
+            out.energies *= 0.5  # U_i = t_i²/(2 k_i), Sensors 2019 eq. (4)
+            out.energy_total = sum(out.energies.tolist())
         out.status = status
         return out
 
