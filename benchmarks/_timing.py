@@ -55,11 +55,20 @@ def row(name: str, rounds: list[np.ndarray], goal: float | None = None) -> str:
     return f"{name:<40} median {med:8.2f} µs  p99 {p99:8.2f} µs  best round {best:8.2f}{goal_s}"
 
 
+def ufunc_overhead() -> float:
+    """Median µs of one tiny numpy ufunc call (np.add on 8×3, out=): the per-call overhead that
+    dominates 8-cable maths. It swings 2-4x on these shared VMs; quote it with every figure."""
+    a, b, o = np.zeros((8, 3)), np.ones((8, 3)), np.zeros((8, 3))
+    rounds = time_calls(lambda: np.add(a, b, out=o), n=20000, rounds=5)
+    return float(np.median(np.concatenate(rounds)))
+
+
 def machine_line() -> str:
     import platform
 
     load = os.getloadavg()
     return (
         f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}, "
-        f"{os.cpu_count()} cores, load average {load[0]:.2f}"
+        f"{os.cpu_count()} cores, load average {load[0]:.2f}; numpy ufunc call "
+        f"{ufunc_overhead():.2f} µs (0.6-0.7 µs when the VM is quiet)"
     )

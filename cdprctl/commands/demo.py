@@ -1,30 +1,57 @@
-"""``cdprctl demo``: the main job of ``make run`` — the offline tools on the bundled robots."""
+"""``cdprctl demo``: the main job of ``make run`` — the offline tools on the bundled robots.
+
+(Until the daemon exists; then ``make run`` starts it on the simulated robot.)
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
+from cdprctl.cli import main as cli_main
 from cdprctl.commands.check_config import summary
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
-from cdprctl.stiffness import stiffness_matrix
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 
 
-def run(config_dir: Path = CONFIG_DIR) -> int:
+def run(config_dir: Path = CONFIG_DIR, out_dir: Path = Path("out")) -> int:
+    out_dir.mkdir(parents=True, exist_ok=True)
     seed = load_robot(config_dir / "seed000.toml")
     print(summary(seed))
-    print()
-    rowc = load_robot(config_dir / "rowc.toml")
-    data = KinematicsData(rowc)
-    inverse_kinematics(rowc, data, rowc.home.position, rowc.home.rotation)
-    K = stiffness_matrix(rowc, data, np.full(rowc.n_cables, 80.0))
-    dX = np.linalg.solve(K, np.array([0.0, 50.0, 0.0, 0.0, 0.0, 0.0]))
-    print(
-        f"{rowc.name}: at home, all cables at 80 N, a 50 N force along y moves the platform by "
-        f"δp = {np.round(dX[:3] * 1000, 3).tolist()} mm (K = Kp + Ka, Picard et al. 2020 eq. 3-4)"
+    print("\n== Sensors 2019 §3: cable 8 held at 100 J, minimum total energy")
+    code = cli_main(
+        [
+            "tda",
+            "--config",
+            str(config_dir / "seed000.toml"),
+            "--pose",
+            "7,4,1.5,0.5235987755982988,0,0",
+            "--wrench",
+            "200,0,0,-0.5,0,0",
+            "--method",
+            "energy",
+            "--impose",
+            "8:energy=100",
+            "--plot",
+            str(out_dir / "energy.png"),
+        ]
     )
-    return 0
+    print("\n== ARK 2020: window-cleaning robot at X0, 50 N water-jet force, SOTDA ν = 0.9")
+    code |= cli_main(
+        [
+            "tda",
+            "--config",
+            str(config_dir / "rowc.toml"),
+            "--pose",
+            "1.5,0.35,0.59,0,0,0",
+            "--wrench",
+            "0,50,0,0,0,0",
+            "--method",
+            "sotda",
+            "--nu",
+            "0.9",
+            "--plot",
+            str(out_dir / "sotda_polygon.png"),
+        ]
+    )
+    return code
