@@ -1,8 +1,9 @@
 """Forward kinematics: the platform pose from measured cable lengths.
 
 Levenberg-Marquardt on the inverse kinematics (:mod:`cdprctl.kinematics`), warm-started from the
-previous pose. The length Jacobian is ``∂l/∂X = −Wᵀ`` for a displacement screw
-``δX = [δp, δφ]`` (rotation vector applied on the left), so each step solves
+previous pose, compiled with numba (a few µs per solve). The length Jacobian is
+``∂l/∂X = −Wᵀ`` for a displacement screw ``δX = [δp, δφ]`` (rotation vector applied on the
+left), so each step solves
 ``(W Wᵀ + μ I) δX = W (l(X) − l_meas)``. The call never raises: failures are a status.
 """
 
@@ -14,10 +15,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.linalg.lapack import dposv as _dposv
+from numba import njit
 
-from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
-from cdprctl.rotation import FloatArray, exp_so3, orthonormalize
+from cdprctl.kinematics import KinematicsData, ik_kernel
+from cdprctl.rotation import FloatArray
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
@@ -54,8 +55,6 @@ class ForwardKinematics:
     max_iterations : int
     """
 
-    REORTHONORMALIZE_EVERY = 64  # calls; products of exp(δφ) drift off SO(3) by ~1e-16 each
-
     def __init__(
         self,
         model: RobotModel,
@@ -68,10 +67,12 @@ class ForwardKinematics:
         self.tolerance = tolerance
         self.step_tolerance = step_tolerance
         self.max_iterations = max_iterations
-        self._lhs = np.zeros((6, 6))
-        self._rhs = np.zeros(6)
-        self._res = np.zeros(model.n_cables)
-        self._calls = 0
+        m = model.n_cables
+        self._p = np.zeros(3)
+        self._R = np.eye(3)
+        self._info = np.zeros(3)  # residual, iterations, status
+        self._res = np.zeros(m)
+        self._work = np.zeros((3, 3, 3))
 
     def solve(
         self,
@@ -83,61 +84,207 @@ class ForwardKinematics:
 
         ``position0``/``rotation0`` is the warm start (the last pose, in the loop).
         """
-        model, data = self.model, self.data
-        p = np.array(position0, dtype=np.float64)
-        R = np.array(rotation0, dtype=np.float64)
-        # One reduction each: NaN and inf propagate through a sum.
-        if not (math.isfinite(float(lengths.sum())) and math.isfinite(float(p.sum() + R.sum()))):
-            return FKResult(p, R, math.inf, 0, FKStatus.BAD_INPUT)
-        self._calls += 1
-        if self._calls % self.REORTHONORMALIZE_EVERY == 0:
-            R = orthonormalize(R)
-        m = model.n_cables
-        mu = 1e-9  # Levenberg damping (m²); raised when a step does not reduce the residual
-        inverse_kinematics(model, data, p, R)
-        if not kinematics_ok(data):
-            return FKResult(p, R, math.inf, 0, FKStatus.DEGENERATE)
-        res = np.subtract(data.length, lengths, out=self._res)
-        cost = float(res @ res)
-        iterations = 0
-        lhs, rhs = self._lhs, self._rhs
-        while iterations < self.max_iterations:
-            if cost < self.tolerance * self.tolerance * m:
-                return FKResult(p, R, math.sqrt(cost / m), iterations, FKStatus.CONVERGED)
-            iterations += 1
-            W = data.W
-            np.dot(W, data.WT, out=lhs)
-            lhs.flat[::7] += mu
-            np.dot(W, res, out=rhs)
-            # Cholesky through LAPACK directly: ~2 µs against ~10 µs for np.linalg.solve.
-            _, step, info = _dposv(lhs, rhs)
-            if info != 0:
-                return FKResult(p, R, math.sqrt(cost / m), iterations, FKStatus.DEGENERATE)
-            p_new = p + step[:3]
-            R_new = exp_so3(step[3:]) @ R
-            if float(np.abs(step).max()) < self.step_tolerance:
-                lin = res - data.WT @ step  # l(X + δX) − l_meas to first order (δl = −Wᵀ δX)
-                rms = math.sqrt(float(lin @ lin) / m)
-                return FKResult(p_new, R_new, rms, iterations, FKStatus.CONVERGED)
-            inverse_kinematics(model, data, p_new, R_new)
-            if not kinematics_ok(data):
-                mu = mu * 100.0 + 1e-6
-                inverse_kinematics(model, data, p, R)
-                continue
-            res_new = data.length - lengths
-            cost_new = float(res_new @ res_new)
-            if cost_new < cost:
-                p, R, cost = p_new, R_new, cost_new
-                res[:] = res_new
-                mu = max(mu * 0.1, 1e-12)
-            else:
-                mu = mu * 10.0 + 1e-9
-                inverse_kinematics(model, data, p, R)
-                if mu > 1e6:
-                    break
-        rms = math.sqrt(cost / m)
-        status = FKStatus.CONVERGED if rms < self.tolerance else FKStatus.MAX_ITERATIONS
-        return FKResult(p, R, rms, iterations, status)
+        d = self.data
+        p, R, info = self._p, self._R, self._info
+        p[:] = position0
+        R[:] = rotation0
+        fk_kernel(
+            d.anchors,
+            d.attachments,
+            d.pulley_radius,
+            d.pulley_axis,
+            lengths,
+            p,
+            R,
+            self.tolerance,
+            self.step_tolerance,
+            self.max_iterations,
+            d.rbT,
+            d.exitT,
+            d.cable_vectorsT,
+            d.free_length,
+            d.wrap_angle,
+            d.length,
+            d.W,
+            self._res,
+            info,
+        )
+        d.position[:] = p
+        d.rotation[:] = R
+        return FKResult(p.copy(), R.copy(), float(info[0]), int(info[1]), FKStatus(int(info[2])))
+
+
+@njit(cache=True)
+def _exp_left(phi0, phi1, phi2, R):  # pragma: no cover - compiled
+    """``exp([φ]×) @ R`` (Rodrigues), as a new array."""
+    x, y, z = phi0, phi1, phi2
+    angle2 = x * x + y * y + z * z
+    if angle2 < 1e-16:
+        a, b = 1.0 - angle2 / 6.0, 0.5 - angle2 / 24.0
+    else:
+        angle = math.sqrt(angle2)
+        a = math.sin(angle) / angle
+        b = (1.0 - math.cos(angle)) / angle2
+    E = np.empty((3, 3))
+    E[0, 0], E[0, 1], E[0, 2] = 1.0 + b * (x * x - angle2), -a * z + b * x * y, a * y + b * x * z
+    E[1, 0], E[1, 1], E[1, 2] = a * z + b * x * y, 1.0 + b * (y * y - angle2), -a * x + b * y * z
+    E[2, 0], E[2, 1], E[2, 2] = -a * y + b * x * z, a * x + b * y * z, 1.0 + b * (z * z - angle2)
+    return E @ R
+
+
+@njit(cache=True)
+def _cholesky_solve6(A, b):  # pragma: no cover - compiled
+    """Solve the SPD 6×6 system ``A x = b`` by Cholesky; returns (x, ok)."""
+    n = 6
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return np.zeros(n), False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.zeros(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x, True
+
+
+@njit(cache=True)
+def fk_kernel(
+    anchors,
+    attach,
+    pr,
+    pa,
+    lengths,
+    p,
+    R,
+    tol,
+    step_tol,
+    max_iter,
+    rbT,
+    exitT,
+    vT,
+    free_len,
+    wrap,
+    length,
+    W,
+    res,
+    info,
+):  # pragma: no cover
+    """Levenberg-Marquardt FK; ``p``/``R`` hold the warm start in and the pose out;
+    ``info`` receives [RMS residual (m), iterations, FKStatus]."""
+    m = anchors.shape[0]
+    s = 0.0
+    for i in range(m):
+        s += lengths[i]
+    s += p[0] + p[1] + p[2]
+    for i in range(3):
+        for j in range(3):
+            s += R[i, j]
+    if not math.isfinite(s):
+        info[0], info[1], info[2] = math.inf, 0.0, 3.0  # BAD_INPUT
+        return
+    # one Newton step of the polar decomposition: warm starts chain products off SO(3)
+    Rn = 0.5 * (R @ (3.0 * np.eye(3) - R.T @ R))
+    R[:, :] = Rn
+    ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+    if not _lengths_ok(free_len):
+        info[0], info[1], info[2] = math.inf, 0.0, 2.0  # DEGENERATE
+        return
+    cost = 0.0
+    for i in range(m):
+        res[i] = length[i] - lengths[i]
+        cost += res[i] * res[i]
+    mu = 1e-9  # Levenberg damping (m²); raised when a step does not reduce the residual
+    it = 0
+    lhs = np.empty((6, 6))
+    rhs = np.empty(6)
+    p_new = np.empty(3)
+    while it < max_iter:
+        if cost < tol * tol * m:
+            info[0], info[1], info[2] = math.sqrt(cost / m), it, 0.0
+            return
+        it += 1
+        for a in range(6):
+            acc = 0.0
+            for i in range(m):
+                acc += W[a, i] * res[i]
+            rhs[a] = acc
+            for b in range(a, 6):
+                acc = 0.0
+                for i in range(m):
+                    acc += W[a, i] * W[b, i]
+                lhs[a, b] = acc
+                lhs[b, a] = acc
+            lhs[a, a] += mu
+        step, ok = _cholesky_solve6(lhs, rhs)
+        if not ok:
+            info[0], info[1], info[2] = math.sqrt(cost / m), it, 2.0
+            return
+        p_new[0], p_new[1], p_new[2] = p[0] + step[0], p[1] + step[1], p[2] + step[2]
+        R_new = _exp_left(step[3], step[4], step[5], R)
+        big = 0.0
+        for a in range(6):
+            big = max(big, abs(step[a]))
+        if big < step_tol:
+            # residual after the step to first order: δl = −Wᵀ δX
+            lin = 0.0
+            for i in range(m):
+                r_i = res[i]
+                for a in range(6):
+                    r_i -= W[a, i] * step[a]
+                lin += r_i * r_i
+            p[:] = p_new
+            R[:, :] = R_new
+            info[0], info[1], info[2] = math.sqrt(lin / m), it, 0.0
+            return
+        ik_kernel(anchors, attach, pr, pa, p_new, R_new, rbT, exitT, vT, free_len, wrap, length, W)
+        if not _lengths_ok(free_len):
+            mu = mu * 100.0 + 1e-6
+            ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+            continue
+        cost_new = 0.0
+        for i in range(m):
+            e = length[i] - lengths[i]
+            cost_new += e * e
+        if cost_new < cost:
+            p[:] = p_new
+            R[:, :] = R_new
+            cost = cost_new
+            for i in range(m):
+                res[i] = length[i] - lengths[i]
+            mu = max(mu * 0.1, 1e-12)
+        else:
+            mu = mu * 10.0 + 1e-9
+            ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+            if mu > 1e6:
+                break
+    rms = math.sqrt(cost / m)
+    info[0], info[1] = rms, it
+    info[2] = 0.0 if rms < tol else 1.0
+
+
+@njit(cache=True)
+def _lengths_ok(free_len):  # pragma: no cover - compiled
+    for x in free_len:  # noqa: SIM110 - numba compiles loops, not generators
+        if not x > 1e-6:  # also False for NaN
+            return False
+    return True
 
 
 def stretched_lengths(

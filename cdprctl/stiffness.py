@@ -19,6 +19,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from cdprctl.kinematics import KinematicsData
 from cdprctl.rotation import FloatArray
@@ -72,36 +73,58 @@ def active_stiffness_weighted(data: KinematicsData, T: FloatArray) -> FloatArray
         K21 = [Σ w b]× − Σ w m uᵀ      K22 = −Σ t b uᵀ + (Σ t u·b) I
                                                − Σ w (b bᵀ − |b|² I + m mᵀ)
     """
-    n = T.shape[0]
-    X = data._x9  # rows [u; m; b]: (9, m)
-    X[:3] = data.uT
-    X[3:6] = data.W[3:]
-    X[6:] = data.rbT
-    Wt = T / data.free_length  # (n, m): w = t/l
-    G = (Wt[:, None, :] * X[None]) @ X.T  # (n, 9, 9): Σ w x yᵀ for every pair of u, m, b
-    BU = (T[:, None, :] * X[None, 6:]) @ X[:3].T  # (n, 3, 3): Σ t b uᵀ
-    uu, um, mm, bb = G[:, :3, :3], G[:, :3, 3:6], G[:, 3:6, 3:6], G[:, 6:, 6:]
-    sw = Wt.sum(axis=1)
-    wb = Wt @ X[6:].T  # (n, 3): Σ w b
-    skew = (wb @ _SKEW_GEN).reshape(n, 3, 3)  # [Σ w b]×
-    t_ub = np.trace(BU, axis1=1, axis2=2)  # Σ t u·b
-    w_bb = np.trace(bb, axis1=1, axis2=2)  # Σ w |b|²
-    K = np.empty((n, 6, 6))
-    K[:, :3, :3] = -uu
-    K[:, :3, 3:] = -skew - um
-    K[:, 3:, :3] = skew - np.transpose(um, (0, 2, 1))
-    K[:, 3:, 3:] = -BU - bb - mm
-    diag = np.arange(3)
-    K[:, diag, diag] += sw[:, None]
-    K[:, 3 + diag, 3 + diag] += (t_ub + w_bb)[:, None]
-    return K
+    out = np.empty((T.shape[0], 6, 6))
+    _ka_weighted(data.uT, data.W, data.rbT, data.free_length, np.ascontiguousarray(T), out)
+    return out
 
 
-# [v]× = (v @ _SKEW_GEN).reshape(3, 3)
-_SKEW_GEN = np.zeros((3, 9))
-_SKEW_GEN[2, 1], _SKEW_GEN[1, 2] = -1.0, 1.0  # row 0: (0, −z, y)
-_SKEW_GEN[2, 3], _SKEW_GEN[0, 5] = 1.0, -1.0  # row 1: (z, 0, −x)
-_SKEW_GEN[1, 6], _SKEW_GEN[0, 7] = -1.0, 1.0  # row 2: (−y, x, 0)
+@njit(cache=True)
+def _ka_weighted(uT, W, rbT, free_len, T, out):  # pragma: no cover - compiled
+    n, m = T.shape
+    for a in range(n):
+        K = out[a]
+        K[:, :] = 0.0
+        sw = 0.0
+        s_tub = 0.0
+        s_wbb = 0.0
+        wbx = wby = wbz = 0.0
+        for i in range(m):
+            t = T[a, i]
+            w = t / free_len[i]
+            u0, u1, u2 = uT[0, i], uT[1, i], uT[2, i]
+            m0, m1, m2 = W[3, i], W[4, i], W[5, i]
+            b0, b1, b2 = rbT[0, i], rbT[1, i], rbT[2, i]
+            sw += w
+            s_tub += t * (u0 * b0 + u1 * b1 + u2 * b2)
+            s_wbb += w * (b0 * b0 + b1 * b1 + b2 * b2)
+            wbx += w * b0
+            wby += w * b1
+            wbz += w * b2
+            u = (u0, u1, u2)
+            mm = (m0, m1, m2)
+            b = (b0, b1, b2)
+            for r in range(3):
+                for c in range(3):
+                    K[r, c] -= w * u[r] * u[c]  # −Σ w u uᵀ
+                    K[r, 3 + c] -= w * u[r] * mm[c]  # −Σ w u mᵀ
+                    K[3 + r, c] -= w * mm[r] * u[c]  # −Σ w m uᵀ
+                    K[3 + r, 3 + c] -= t * b[r] * u[c] + w * (b[r] * b[c] + mm[r] * mm[c])
+        for r in range(3):
+            K[r, r] += sw
+            K[3 + r, 3 + r] += s_tub + s_wbb
+        # −[Σ w b]× in the upper right block, +[Σ w b]× in the lower left one
+        K[0, 4] += wbz
+        K[0, 5] -= wby
+        K[1, 3] -= wbz
+        K[1, 5] += wbx
+        K[2, 3] += wby
+        K[2, 4] -= wbx
+        K[3, 1] -= wbz
+        K[3, 2] += wby
+        K[4, 0] += wbz
+        K[4, 2] -= wbx
+        K[5, 0] -= wby
+        K[5, 1] += wbx
 
 
 def active_stiffness(data: KinematicsData, t: FloatArray) -> FloatArray:

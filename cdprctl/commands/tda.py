@@ -233,8 +233,8 @@ def to_json(
         "stiffness": k.tolist(),
         "lambda": out.lam.tolist(),
     }
-    if out.polygon:
-        result["polygon"] = [list(p) for p in out.polygon]
+    if len(out.polygon):
+        result["polygon"] = out.polygon.tolist()
         result["polygon_area"] = out.area
         result["barycenter"] = list(out.barycenter)
     if options.method is TDAMethod.SOTDA:

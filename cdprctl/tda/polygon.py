@@ -1,9 +1,10 @@
 """The feasible polygon of a redundancy-2 robot and 2-D optimisation over it.
 
 Picard et al. 2020, eq. (6): ``{λ ∈ R² | t_min <= t0 + N λ <= t_max}``, a convex polygon, the
-intersection of m strips (one per cable). It is built by clipping a bounding square with the
-2m half-planes (Sutherland-Hodgman), in plain Python floats: at this size (8 strips, polygons of
-4-8 vertices) numpy's per-call overhead would cost more than the arithmetic.
+intersection of m strips (one per cable). It is built by clipping the parallelogram of two
+strips with the others (Sutherland-Hodgman, both sides of a strip in one pass), in compiled
+kernels: at this size (8 strips, polygons of 4-8 vertices) numpy's per-call overhead would cost
+more than the arithmetic, and plain Python floats ~40 µs.
 
 Vertices are ``(x, y)`` tuples in counter-clockwise order.
 """
@@ -14,59 +15,11 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from cdprctl.rotation import FloatArray
 
 Point = tuple[float, float]
-
-
-def _clip_strip(poly: list[Point], ax: float, ay: float, lo: float, hi: float) -> list[Point]:
-    """Part of the convex polygon ``poly`` where ``lo <= ax·x + ay·y <= hi`` (one
-    Sutherland-Hodgman pass for both sides of the strip)."""
-    s = [ax * x + ay * y for x, y in poly]
-    if min(s) >= lo and max(s) <= hi:
-        return poly
-    out: list[Point] = []
-    px, py = poly[-1]
-    sp = s[-1]
-    for (qx, qy), sq in zip(poly, s, strict=True):
-        # the part u in [u0, u1] of the edge P + u (Q − P) inside the strip
-        ds = sq - sp
-        if ds == 0.0:
-            if lo <= sp <= hi:
-                out.append((qx, qy))
-        else:
-            ua, ub = (lo - sp) / ds, (hi - sp) / ds
-            if ua > ub:
-                ua, ub = ub, ua
-            u0 = ua if ua > 0.0 else 0.0
-            u1 = ub if ub < 1.0 else 1.0
-            if u0 <= u1:
-                if u0 > 0.0:  # entering: the crossing point
-                    out.append((px + u0 * (qx - px), py + u0 * (qy - py)))
-                if u1 < 1.0:  # leaving before Q
-                    out.append((px + u1 * (qx - px), py + u1 * (qy - py)))
-                else:
-                    out.append((qx, qy))
-        px, py, sp = qx, qy, sq
-    return out
-
-
-def _parallelogram(
-    a: tuple[float, float],
-    lo_a: float,
-    hi_a: float,
-    b: tuple[float, float],
-    lo_b: float,
-    hi_b: float,
-) -> list[Point]:
-    """The intersection of two non-parallel strips, counter-clockwise."""
-    det = a[0] * b[1] - a[1] * b[0]
-    pts = [
-        ((sa * b[1] - sb * a[1]) / det, (a[0] * sb - b[0] * sa) / det)
-        for sa, sb in ((lo_a, lo_b), (hi_a, lo_b), (hi_a, hi_b), (lo_a, hi_b))
-    ]
-    return pts if det > 0.0 else pts[::-1]
 
 
 def feasible_polygon(
@@ -82,142 +35,250 @@ def feasible_polygon(
     ``eps`` (N) tolerates round-off on the bounds. The clipping starts from the parallelogram
     of the two most nearly perpendicular strips and clips it with the others.
     """
-    n0 = N[:, 0].tolist()
-    n1 = N[:, 1].tolist()
-    c = t0.tolist()
-    lo = [li - ci - eps for li, ci in zip(t_lo.tolist(), c, strict=True)]
-    hi = [hi_ - ci + eps for hi_, ci in zip(t_hi.tolist(), c, strict=True)]
-    m = len(c)
-    # first strip: the longest normal; second: the most perpendicular to it
-    norms = [math.hypot(n0[i], n1[i]) for i in range(m)]
-    i0 = max(range(m), key=norms.__getitem__)
-    best, i1 = -1.0, -1
-    for j in range(m):
-        if j != i0 and norms[j] > 0.0:
-            sin = abs(n0[i0] * n1[j] - n1[i0] * n0[j]) / (norms[i0] * norms[j])
-            if sin > best:
-                best, i1 = sin, j
-    if best < 1e-12:  # every strip parallel: N is not of rank 2
-        return []
-    if lo[i0] > hi[i0] or lo[i1] > hi[i1]:
-        return []
-    poly = _parallelogram((n0[i0], n1[i0]), lo[i0], hi[i0], (n0[i1], n1[i1]), lo[i1], hi[i1])
-    for i in range(m):
-        if i in (i0, i1):
-            continue
-        if norms[i] == 0.0:  # a cable the redundancy cannot change: in bounds or not at all
-            if not lo[i] <= 0.0 <= hi[i]:
-                return []
-            continue
-        poly = _clip_strip(poly, n0[i], n1[i], lo[i], hi[i])
-        if not poly:
-            return poly
-    return _dedupe(poly)
+    m = N.shape[0]
+    verts = np.empty((2 * m + 8, 2))
+    nv = polygon_kernel(np.ascontiguousarray(N), t0, t_lo, t_hi, eps, verts, np.empty_like(verts))
+    return [(float(x), float(y)) for x, y in verts[:nv]]
 
 
-def _dedupe(poly: list[Point], tol: float = 1e-12) -> list[Point]:
-    """Drop vertices that repeat the previous one (clipping through a vertex makes them)."""
-    if len(poly) < 2:
-        return poly
-    scale = max(1.0, max(abs(v) for p in poly for v in p))
-    tol *= scale
-    out = [poly[0]]
-    for p in poly[1:]:
-        q = out[-1]
-        if abs(p[0] - q[0]) > tol or abs(p[1] - q[1]) > tol:
-            out.append(p)
-    if len(out) > 1:
-        p, q = out[-1], out[0]
-        if abs(p[0] - q[0]) <= tol and abs(p[1] - q[1]) <= tol:
-            out.pop()
-    return out
+def _as_array(poly: Sequence[Point] | FloatArray) -> FloatArray:
+    return np.ascontiguousarray(np.asarray(poly, dtype=np.float64).reshape(-1, 2))
 
 
-def area_centroid(poly: Sequence[Point]) -> tuple[float, Point]:
+def area_centroid(poly: Sequence[Point] | FloatArray) -> tuple[float, Point]:
     """Area and area centroid of a polygon, closing edge included (shoelace formula).
 
     A degenerate polygon (a segment or a point, area ~ 0) returns the mean of its vertices.
     """
-    n = len(poly)
-    if n == 0:
+    P = _as_array(poly)
+    if len(P) == 0:
         return 0.0, (math.nan, math.nan)
+    a, cx, cy = area_centroid_kernel(P, len(P))
+    return float(a), (float(cx), float(cy))
+
+
+def contains(poly: Sequence[Point] | FloatArray, x: float, y: float, tol: float = 1e-9) -> bool:
+    """True when ``(x, y)`` is inside the counter-clockwise convex polygon (within ``tol``)."""
+    P = _as_array(poly)
+    return bool(contains_kernel(P, len(P), x, y, tol))
+
+
+def closest_point(poly: Sequence[Point] | FloatArray, x: float, y: float) -> Point:
+    """Point of the convex polygon closest to ``(x, y)`` (Euclidean)."""
+    return min_quadratic(poly, 1.0, 0.0, 1.0, -x, -y)
+
+
+def min_quadratic(
+    poly: Sequence[Point] | FloatArray, h11: float, h12: float, h22: float, g1: float, g2: float
+) -> Point:
+    """Minimiser over the convex polygon of ``½ λᵀ H λ + gᵀ λ`` (``H`` symmetric positive
+    definite). Interior minimum if inside, else the best point of the edges (the function is
+    convex, so its constrained minimum lies on the boundary)."""
+    P = _as_array(poly)
+    x, y = min_quadratic_kernel(P, len(P), h11, h12, h22, g1, g2)
+    return float(x), float(y)
+
+
+def min_linear(poly: Sequence[Point] | FloatArray, c1: float, c2: float) -> Point:
+    """Vertex minimising ``c1 x + c2 y`` (a linear objective's optimum is at a vertex)."""
+    P = _as_array(poly)
+    k = int(np.argmin(P @ np.array([c1, c2])))
+    return float(P[k, 0]), float(P[k, 1])
+
+
+# -- compiled kernels (arrays in, arrays out; ``nv`` = the number of valid vertices) ------------
+
+
+@njit(cache=True)
+def polygon_kernel(N, t0, t_lo, t_hi, eps, verts, tmp):  # pragma: no cover - compiled
+    """Clip the parallelogram of two strips with the other strips; vertices into ``verts``
+    (counter-clockwise); returns their number (0: empty)."""
+    m = N.shape[0]
+    lo = np.empty(m)
+    hi = np.empty(m)
+    norms = np.empty(m)
+    for i in range(m):
+        lo[i] = t_lo[i] - t0[i] - eps
+        hi[i] = t_hi[i] - t0[i] + eps
+        norms[i] = math.sqrt(N[i, 0] * N[i, 0] + N[i, 1] * N[i, 1])
+    i0 = 0
+    for i in range(m):
+        if norms[i] > norms[i0]:
+            i0 = i
+    best = -1.0
+    i1 = -1
+    for j in range(m):
+        if j != i0 and norms[j] > 0.0:
+            sn = abs(N[i0, 0] * N[j, 1] - N[i0, 1] * N[j, 0]) / (norms[i0] * norms[j])
+            if sn > best:
+                best = sn
+                i1 = j
+    if best < 1e-12 or lo[i0] > hi[i0] or lo[i1] > hi[i1]:
+        return 0
+    # parallelogram: corners (s_a, s_b) in (lo, lo), (hi, lo), (hi, hi), (lo, hi)
+    ax, ay, bx, by = N[i0, 0], N[i0, 1], N[i1, 0], N[i1, 1]
+    det = ax * by - ay * bx
+    sa = (lo[i0], hi[i0], hi[i0], lo[i0])
+    sb = (lo[i1], lo[i1], hi[i1], hi[i1])
+    for k in range(4):
+        kk = k if det > 0.0 else 3 - k  # counter-clockwise either way
+        verts[k, 0] = (sa[kk] * by - sb[kk] * ay) / det
+        verts[k, 1] = (ax * sb[kk] - bx * sa[kk]) / det
+    nv = 4
+    for i in range(m):
+        if i == i0 or i == i1:  # noqa: SIM109 - plain comparisons in the kernel
+            continue
+        if norms[i] == 0.0:  # a cable the redundancy cannot change: in bounds or not at all
+            if not (lo[i] <= 0.0 <= hi[i]):
+                return 0
+            continue
+        nv = _clip_strip(verts, nv, N[i, 0], N[i, 1], lo[i], hi[i], tmp)
+        if nv == 0:
+            return 0
+        for k in range(nv):
+            verts[k, 0] = tmp[k, 0]
+            verts[k, 1] = tmp[k, 1]
+    return _dedupe(verts, nv)
+
+
+@njit(cache=True)
+def _clip_strip(verts, nv, ax, ay, lo, hi, out):  # pragma: no cover - compiled
+    """Sutherland-Hodgman with both sides of ``lo <= ax·x + ay·y <= hi`` in one pass; the
+    result goes to ``out`` (always, even when nothing is cut); returns its vertex count."""
+    smin = math.inf
+    smax = -math.inf
+    for k in range(nv):
+        s = ax * verts[k, 0] + ay * verts[k, 1]
+        smin = min(smin, s)
+        smax = max(smax, s)
+    if smin >= lo and smax <= hi:
+        for k in range(nv):
+            out[k, 0] = verts[k, 0]
+            out[k, 1] = verts[k, 1]
+        return nv
+    n_out = 0
+    px, py = verts[nv - 1, 0], verts[nv - 1, 1]
+    sp = ax * px + ay * py
+    for k in range(nv):
+        qx, qy = verts[k, 0], verts[k, 1]
+        sq = ax * qx + ay * qy
+        ds = sq - sp
+        if ds == 0.0:
+            if lo <= sp <= hi:
+                out[n_out, 0], out[n_out, 1] = qx, qy
+                n_out += 1
+        else:
+            ua, ub = (lo - sp) / ds, (hi - sp) / ds
+            if ua > ub:
+                ua, ub = ub, ua
+            u0 = ua if ua > 0.0 else 0.0
+            u1 = ub if ub < 1.0 else 1.0
+            if u0 <= u1:
+                if u0 > 0.0:  # entering: the crossing point
+                    out[n_out, 0] = px + u0 * (qx - px)
+                    out[n_out, 1] = py + u0 * (qy - py)
+                    n_out += 1
+                if u1 < 1.0:  # leaving before Q
+                    out[n_out, 0] = px + u1 * (qx - px)
+                    out[n_out, 1] = py + u1 * (qy - py)
+                else:
+                    out[n_out, 0], out[n_out, 1] = qx, qy
+                n_out += 1
+        px, py, sp = qx, qy, sq
+    return n_out
+
+
+@njit(cache=True)
+def _dedupe(verts, nv):  # pragma: no cover - compiled
+    """Drop vertices repeating the previous one (clipping through a vertex makes them)."""
+    if nv < 2:
+        return nv
+    scale = 1.0
+    for k in range(nv):
+        scale = max(scale, abs(verts[k, 0]), abs(verts[k, 1]))
+    tol = 1e-12 * scale
+    n = 1
+    for k in range(1, nv):
+        if abs(verts[k, 0] - verts[n - 1, 0]) > tol or abs(verts[k, 1] - verts[n - 1, 1]) > tol:
+            verts[n, 0], verts[n, 1] = verts[k, 0], verts[k, 1]
+            n += 1
+    if (
+        n > 1
+        and abs(verts[n - 1, 0] - verts[0, 0]) <= tol
+        and abs(verts[n - 1, 1] - verts[0, 1]) <= tol
+    ):
+        n -= 1
+    return n
+
+
+@njit(cache=True)
+def area_centroid_kernel(verts, nv):  # pragma: no cover - compiled
+    """(area, cx, cy): shoelace formula, closing edge included, shifted to the first vertex
+    for less cancellation; the vertex mean for a degenerate polygon."""
+    x0, y0 = verts[0, 0], verts[0, 1]
     a2 = cx = cy = 0.0
-    x0, y0 = poly[0]  # shift to the first vertex: less cancellation for far polygons
     px, py = 0.0, 0.0
-    for i in range(1, n + 1):
-        qx, qy = poly[i % n]
-        qx -= x0
-        qy -= y0
+    scale = 1e-300
+    for k in range(1, nv + 1):
+        j = k % nv
+        qx, qy = verts[j, 0] - x0, verts[j, 1] - y0
         cross = px * qy - qx * py
         a2 += cross
         cx += (px + qx) * cross
         cy += (py + qy) * cross
         px, py = qx, qy
-    scale = max(1e-300, max(abs(x - x0) + abs(y - y0) for x, y in poly))
+        scale = max(scale, abs(qx) + abs(qy))
     if abs(a2) <= 1e-12 * scale * scale:
-        mx = sum(p[0] for p in poly) / n
-        my = sum(p[1] for p in poly) / n
-        return 0.0, (mx, my)
-    return 0.5 * abs(a2), (x0 + cx / (3.0 * a2), y0 + cy / (3.0 * a2))
+        mx = my = 0.0
+        for k in range(nv):
+            mx += verts[k, 0]
+            my += verts[k, 1]
+        return 0.0, mx / nv, my / nv
+    return 0.5 * abs(a2), x0 + cx / (3.0 * a2), y0 + cy / (3.0 * a2)
 
 
-def contains(poly: Sequence[Point], x: float, y: float, tol: float = 1e-9) -> bool:
-    """True when ``(x, y)`` is inside the counter-clockwise convex polygon (within ``tol``)."""
-    n = len(poly)
-    if n == 0:
+@njit(cache=True)
+def contains_kernel(verts, nv, x, y, tol):  # pragma: no cover - compiled
+    if nv == 0:
         return False
-    if n == 1:
-        return abs(poly[0][0] - x) <= tol and abs(poly[0][1] - y) <= tol
-    px, py = poly[-1]
-    for qx, qy in poly:
+    if nv == 1:
+        return abs(verts[0, 0] - x) <= tol and abs(verts[0, 1] - y) <= tol
+    px, py = verts[nv - 1, 0], verts[nv - 1, 1]
+    for k in range(nv):
+        qx, qy = verts[k, 0], verts[k, 1]
         ex, ey = qx - px, qy - py
-        norm = math.hypot(ex, ey)
+        norm = math.sqrt(ex * ex + ey * ey)
         if norm > 0.0 and (ex * (y - py) - ey * (x - px)) / norm < -tol:
             return False
         px, py = qx, qy
     return True
 
 
-def closest_point(poly: Sequence[Point], x: float, y: float) -> Point:
-    """Point of the convex polygon closest to ``(x, y)`` (Euclidean)."""
-    return min_quadratic(poly, 1.0, 0.0, 1.0, -x, -y)
-
-
-def min_quadratic(
-    poly: Sequence[Point], h11: float, h12: float, h22: float, g1: float, g2: float
-) -> Point:
-    """Minimiser over the convex polygon of ``½ λᵀ H λ + gᵀ λ`` (``H`` symmetric positive
-    definite). Interior minimum if inside, else the best point of the edges (the function is
-    convex, so its constrained minimum lies on the boundary)."""
+@njit(cache=True)
+def min_quadratic_kernel(verts, nv, h11, h12, h22, g1, g2):  # pragma: no cover - compiled
     det = h11 * h22 - h12 * h12
     ux = -(h22 * g1 - h12 * g2) / det
     uy = -(-h12 * g1 + h11 * g2) / det
-    if contains(poly, ux, uy, tol=0.0):
+    if contains_kernel(verts, nv, ux, uy, 0.0):
         return ux, uy
-    n = len(poly)
-    if n == 1:
-        return poly[0]
-    best = poly[0]
-    best_f = math.inf
-    px, py = poly[-1]
-    for qx, qy in poly:
+    if nv == 1:
+        return verts[0, 0], verts[0, 1]
+    bx, by = verts[0, 0], verts[0, 1]
+    best = math.inf
+    px, py = verts[nv - 1, 0], verts[nv - 1, 1]
+    for k in range(nv):
+        qx, qy = verts[k, 0], verts[k, 1]
         dx, dy = qx - px, qy - py
-        hdx, hdy = h11 * dx + h12 * dy, h12 * dx + h22 * dy
-        curv = dx * hdx + dy * hdy
+        curv = dx * (h11 * dx + h12 * dy) + dy * (h12 * dx + h22 * dy)
         # gradient at P along d: dᵀ(H P + g)
         slope = dx * (h11 * px + h12 * py + g1) + dy * (h12 * px + h22 * py + g2)
         s = 0.0 if curv <= 0.0 else min(1.0, max(0.0, -slope / curv))
         x, y = px + s * dx, py + s * dy
         f = 0.5 * (h11 * x * x + 2.0 * h12 * x * y + h22 * y * y) + g1 * x + g2 * y
-        if f < best_f:
-            best_f, best = f, (x, y)
+        if f < best:
+            best, bx, by = f, x, y
         px, py = qx, qy
-    return best
-
-
-def min_linear(poly: Sequence[Point], c1: float, c2: float) -> Point:
-    """Vertex minimising ``c1 x + c2 y`` (a linear objective's optimum is at a vertex)."""
-    return min(poly, key=lambda p: c1 * p[0] + c2 * p[1])
+    return bx, by
 
 
 def least_violating(

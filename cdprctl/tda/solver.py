@@ -15,6 +15,7 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from cdprctl.kinematics import KinematicsData
 from cdprctl.rotation import FloatArray
@@ -43,11 +44,13 @@ class TensionDistributor:
             raise ValueError("invalid TDA options: " + "; ".join(errors))
         self.ns = NullSpace(self.m)
         self.out = TDAOutput(self.m, self.r)
-        self._buf1 = np.zeros(self.m)
-        self._buf2 = np.zeros(self.m)
-        self._r6 = np.zeros(6)
-        self._lam_p = np.zeros(2)
         self._f = np.zeros(2)
+        self._lam1 = np.zeros((1, 2))
+        self._lam2 = np.zeros(2)
+        self._verts = np.zeros((2 * self.m + 8, 2))
+        self._no_polygon = np.zeros((0, 2))
+        self._verts_rate = np.zeros((2 * self.m + 8, 2))
+        self._verts_tmp = np.zeros((2 * self.m + 8, 2))
         d = np.asarray(self.options.direction, dtype=float)
         self._direction = d / np.linalg.norm(d)
         self._delta_wrench = (
@@ -78,7 +81,7 @@ class TensionDistributor:
         out.rate_limited = False
         out.max_violation = 0.0
         out.message = ""
-        out.polygon = []
+        out.polygon = self._no_polygon
         out.area = 0.0
         out.barycenter = (math.nan, math.nan)
         out.sotda_displacement = math.nan
@@ -132,35 +135,38 @@ class TensionDistributor:
     ) -> TDAStatus:
         out, ns, opt = self.out, self.ns, self.options
         N, t0 = ns.N, ns.t0
-        poly = pg.feasible_polygon(N, t0, lo, hi)
-        out.polygon = poly
-        if not poly:
+        verts = self._verts
+        nv = pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, self._verts_tmp)
+        if nv == 0:
             return self._least_violating(lo, hi)
-        area, (bx, by) = pg.area_centroid(poly)
+        out.polygon = verts[:nv]
+        area, bx, by = pg.area_centroid_kernel(verts, nv)
         out.area, out.barycenter = area, (bx, by)
         method = opt.method
         if method is TDAMethod.BARYCENTER:
             x, y = bx, by
         elif method is TDAMethod.MIN_2NORM:
             # ‖t‖² = ‖t0‖² + ‖λ‖² (orthonormal N, t0 ⊥ null(W)): the point nearest λ = 0
-            x, y = pg.closest_point(poly, 0.0, 0.0)
+            x, y = pg.min_quadratic_kernel(verts, nv, 1.0, 0.0, 1.0, 0.0, 0.0)
         elif method is TDAMethod.MIN_1NORM:
             c = N.sum(axis=0)  # Σ t_i = Σ t0_i + (1ᵀN) λ, tensions being positive
-            x, y = pg.min_linear(poly, float(c[0]), float(c[1]))
+            j = int(np.argmin(verts[:nv] @ c))
+            x, y = float(verts[j, 0]), float(verts[j, 1])
         else:  # SOTDA
             if k is None or kin is None:
                 out.message = "sotda needs the cable stiffness k and the kinematics"
                 return TDAStatus.DEGENERATE
             sm = SotdaModel(kin, k, t0, N)
             if opt.sotda_variant == "grid":
-                cand = grid_candidates(poly, opt.grid_points)
+                cand = grid_candidates(verts[:nv], opt.grid_points)
             else:
-                cand = np.array(poly)
+                cand = verts[:nv]
             best, _ = sotda_point(sm, cand, self._delta_wrench, self._direction)
             sx, sy = float(cand[best, 0]), float(cand[best, 1])
             nu = opt.nu
             x, y = bx + nu * (sx - bx), by + nu * (sy - by)  # intermediate solution (Fig. 2)
-            dX = sm.displacements(np.array([[x, y]]), self._delta_wrench)[0]
+            self._lam1[0, 0], self._lam1[0, 1] = x, y
+            dX = sm.displacements(self._lam1, self._delta_wrench)[0]
             out.sotda_displacement = float(dX[:3] @ self._direction)
         if t_prev is not None and opt.max_tension_rate is not None:
             x, y = self._rate_limit_2d(x, y, lo, hi, t_prev)
@@ -179,15 +185,21 @@ class TensionDistributor:
         lo2 = np.maximum(lo, t_prev - step)
         hi2 = np.minimum(hi, t_prev + step)
         N, t0 = self.ns.N, self.ns.t0
-        tx = t0 + N @ np.array([x, y])
+        self._lam2[0], self._lam2[1] = x, y
+        tx = t0 + N @ self._lam2
         if np.all(tx >= lo2 - 1e-9) and np.all(tx <= hi2 + 1e-9):
             return x, y
-        poly = pg.feasible_polygon(N, t0, lo2, hi2) if np.all(lo2 <= hi2) else []
-        if not poly:
+        verts = self._verts_rate
+        nv = (
+            pg.polygon_kernel(N, t0, lo2, hi2, 1e-9, verts, self._verts_tmp)
+            if np.all(lo2 <= hi2)
+            else 0
+        )
+        if nv == 0:
             self.out.message = "tension rate limit cannot hold the wrench: not applied"
             return x, y
         self.out.rate_limited = True
-        return pg.closest_point(poly, x, y)
+        return pg.min_quadratic_kernel(verts, nv, 1.0, 0.0, 1.0, -x, -y)
 
     def _least_violating(self, lo: FloatArray, hi: FloatArray) -> TDAStatus:
         out, ns = self.out, self.ns
@@ -280,7 +292,7 @@ class TensionDistributor:
             out.free_directions = ns.N.copy()
         else:
             out.free_directions = ns.N @ free.F
-            out.polygon = sol.polygon
+            out.polygon = np.array(sol.polygon).reshape(-1, 2)
         out.lam[:] = sol.lam
         out.tensions[:] = ns.t0 + ns.N @ sol.lam
         if sol.ends is not None:
@@ -294,52 +306,26 @@ class TensionDistributor:
     def _energy_line_r2(
         self, c: int, target: float, lo: FloatArray, hi: FloatArray, k: FloatArray
     ) -> TDAStatus | None:
-        """Sensors 2019 eq. (24) for r = 2 and one imposition, in closed form: the line
-        ``N_c·λ = target − t0_c``, ``λ = λ_p + μ f``; each cable bounds μ to an interval,
-        the total energy (eq. (14)) is a parabola in μ. ``None`` when infeasible (the general
-        path then reports it)."""
+        """Sensors 2019 eq. (24) for r = 2 and one imposition, in closed form (see
+        :func:`energy_line_kernel`). ``None`` when infeasible (the general path reports it)."""
         out, ns = self.out, self.ns
-        N, t0 = ns.N, ns.t0
-        a0, a1 = float(N[c, 0]), float(N[c, 1])
-        a2 = a0 * a0 + a1 * a1
-        if a2 < 1e-20:
+        ok = energy_line_kernel(
+            ns.N,
+            ns.t0,
+            c,
+            target,
+            lo,
+            hi,
+            k,
+            out.lam,
+            out.tensions,
+            out.segment_ends,
+            out.energy_range,
+            self._f,
+        )
+        if not ok:
             return None
-        s = (target - float(t0[c])) / a2
-        lam_p = self._lam_p
-        lam_p[0], lam_p[1] = a0 * s, a1 * s
-        na = math.sqrt(a2)
-        f = self._f
-        f[0], f[1] = -a1 / na, a0 / na
-        alpha = np.dot(N, lam_p)
-        alpha += t0
-        beta = np.dot(N, f)
-        beta[c] = 1e-300  # exactly on the line: no bound from the imposed cable's own range
-        e1 = (lo - alpha) / beta
-        e2 = (hi - alpha) / beta
-        mu_lo = max(np.minimum(e1, e2).tolist())
-        mu_hi = min(np.maximum(e1, e2).tolist())
-        if not mu_lo <= mu_hi or not lo[c] - 1e-9 <= target <= hi[c] + 1e-9:
-            return None
-        beta[c] = 0.0
-        bk = beta / k
-        mu = -float(np.dot(alpha, bk)) / float(np.dot(beta, bk))
-        mu = min(mu_hi, max(mu_lo, mu))
-        out.lam[0] = lam_p[0] + mu * f[0]
-        out.lam[1] = lam_p[1] + mu * f[1]
-        np.multiply(beta, mu, out=out.tensions)
-        out.tensions += alpha
-        ends = out.segment_ends
-        np.multiply(beta, mu_lo, out=ends[0])
-        ends[0] += alpha
-        np.multiply(beta, mu_hi, out=ends[1])
-        ends[1] += alpha
-        er = out.energy_range
-        np.minimum(ends[0], ends[1], out=er[:, 0])
-        np.maximum(ends[0], ends[1], out=er[:, 1])
-        er *= er
-        er /= 2.0 * k[:, None]  # U = t²/(2k), Sensors 2019 eq. (4)
-        er[c] = math.nan
-        out.free_directions = N @ f[:, None]
+        out.free_directions = ns.N @ self._f[:, None]
         return TDAStatus.OK
 
     # -- the guarantee ------------------------------------------------------------------------
@@ -365,11 +351,8 @@ class TensionDistributor:
             out.residual = math.inf
             out.status = status
             return out
+        viol, residual = check_kernel(W, w, t, lo, hi)
         if status in (TDAStatus.OK, TDAStatus.IMPOSITION_INFEASIBLE):
-            b1, b2 = self._buf1, self._buf2
-            np.subtract(lo, t, out=b1)
-            np.subtract(t, hi, out=b2)
-            viol = max(max(b1.tolist()), max(b2.tolist()))  # lists: faster reductions at m = 8
             if viol > BOUND_TOLERANCE:
                 status = (
                     TDAStatus.OUT_OF_LIMITS
@@ -380,10 +363,7 @@ class TensionDistributor:
             elif viol > 0.0:  # round-off: onto the bound
                 np.maximum(t, lo, out=t)
                 np.minimum(t, hi, out=t)
-        r6 = self._r6
-        np.dot(W, t, out=r6)
-        r6 -= w
-        out.residual = math.sqrt(float(np.dot(r6, r6))) / max(1.0, math.sqrt(float(np.dot(w, w))))
+        out.residual = residual
         if k is not None:
             np.multiply(t, t, out=out.energies)
             out.energies /= k
@@ -408,3 +388,71 @@ def _qp_least_violating(
     b = np.concatenate([lo - t0, t0 - hi])
     x = np.asarray(quadprog.solve_qp(G, a, C, b, 0)[0])
     return x[:r]
+
+
+@njit(cache=True)
+def check_kernel(W, w, t, lo, hi):  # pragma: no cover - compiled
+    """(largest bound violation in N, ‖W t − w‖ / max(1, ‖w‖))."""
+    viol = -math.inf
+    for i in range(t.shape[0]):
+        viol = max(viol, lo[i] - t[i], t[i] - hi[i])
+    r2 = w2 = 0.0
+    for a in range(W.shape[0]):
+        s = -w[a]
+        for i in range(t.shape[0]):
+            s += W[a, i] * t[i]
+        r2 += s * s
+        w2 += w[a] * w[a]
+    return viol, math.sqrt(r2) / max(1.0, math.sqrt(w2))
+
+
+@njit(cache=True)
+def energy_line_kernel(
+    N, t0, c, target, lo, hi, k, lam, t, ends, erange, f
+):  # pragma: no cover - compiled
+    """Sensors 2019 eq. (24), r = 2, one imposed cable ``c`` at tension ``target`` (N): the
+    line ``N_c·λ = target − t0_c`` is ``λ = λ_p + μ f``; each cable bounds μ to an interval,
+    the total energy (eq. (14)) is a parabola in μ, minimised on it. Fills ``lam``, ``t``,
+    the segment ``ends`` (2, m) and each cable's energy range ``erange`` (m, 2) (NaN for
+    ``c``); returns False when the line misses the feasible set."""
+    m = N.shape[0]
+    a0, a1 = N[c, 0], N[c, 1]
+    a2 = a0 * a0 + a1 * a1
+    if a2 < 1e-20 or not (lo[c] - 1e-9 <= target <= hi[c] + 1e-9):
+        return False
+    s = (target - t0[c]) / a2
+    lp0, lp1 = a0 * s, a1 * s
+    na = math.sqrt(a2)
+    f[0], f[1] = -a1 / na, a0 / na
+    mu_lo, mu_hi = -math.inf, math.inf
+    num = den = 0.0
+    for i in range(m):
+        alpha = t0[i] + N[i, 0] * lp0 + N[i, 1] * lp1
+        beta = N[i, 0] * f[0] + N[i, 1] * f[1]
+        if i == c:
+            beta = 0.0
+        ends[0, i], ends[1, i] = alpha, beta  # stash α, β
+        num += alpha * beta / k[i]
+        den += beta * beta / k[i]
+        if i == c or abs(beta) < 1e-15:
+            if not (lo[i] - 1e-9 <= alpha <= hi[i] + 1e-9):
+                return False
+            continue
+        e1, e2 = (lo[i] - alpha) / beta, (hi[i] - alpha) / beta
+        mu_lo = max(mu_lo, min(e1, e2))
+        mu_hi = min(mu_hi, max(e1, e2))
+    if not mu_lo <= mu_hi:
+        return False
+    mu = -num / den if den > 0.0 else 0.5 * (mu_lo + mu_hi)
+    mu = min(mu_hi, max(mu_lo, mu))
+    lam[0], lam[1] = lp0 + mu * f[0], lp1 + mu * f[1]
+    for i in range(m):
+        alpha, beta = ends[0, i], ends[1, i]
+        t[i] = alpha + beta * mu
+        e_lo, e_hi = alpha + beta * mu_lo, alpha + beta * mu_hi
+        ends[0, i], ends[1, i] = e_lo, e_hi
+        u1 = e_lo * e_lo / (2.0 * k[i])  # U = t²/(2k), Sensors 2019 eq. (4)
+        u2 = e_hi * e_hi / (2.0 * k[i])
+        erange[i, 0], erange[i, 1] = min(u1, u2), max(u1, u2)
+    erange[c, 0] = erange[c, 1] = math.nan
+    return True

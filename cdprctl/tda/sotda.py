@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.linalg.lapack import dgesv as _dgesv
+from numba import njit
 
 from cdprctl.kinematics import KinematicsData
 from cdprctl.rotation import FloatArray
@@ -36,18 +36,10 @@ class SotdaModel:
     def displacements(self, lam: FloatArray, delta_wrench: FloatArray) -> FloatArray:
         """Displacement screws ``δX = K(λ)⁻¹ δw`` (m, rad) for candidates ``lam`` (n, 2);
         NaN rows where ``K(λ)`` is singular."""
-        K = self.K0[None] + lam[:, 0, None, None] * self.A1 + lam[:, 1, None, None] * self.A2
-        if len(lam) > 16:  # the grid search: numpy's batched solve
-            rhs = np.broadcast_to(delta_wrench, (lam.shape[0], 6))[:, :, None]
-            try:
-                return np.linalg.solve(K, rhs)[:, :, 0]
-            except np.linalg.LinAlgError:
-                pass
-        # a few candidates: LAPACK dgesv per matrix costs ~2 µs, numpy's wrapper ~15 µs
         out = np.empty((len(lam), 6))
-        for i in range(len(lam)):
-            _, _, x, info = _dgesv(K[i], delta_wrench)
-            out[i] = x if info == 0 else np.nan
+        displacements_kernel(
+            self.K0, self.A1, self.A2, np.ascontiguousarray(lam), len(lam), delta_wrench, out
+        )
         return out
 
 
@@ -59,8 +51,8 @@ def sotda_point(
 ) -> tuple[int, FloatArray]:
     """Index of the candidate with the smallest ``|direction · δp|`` and all those values (m).
 
-    Candidates whose stiffness matrix is singular or not positive (an unstable equilibrium,
-    signalled by a non-finite or NaN displacement) are never selected.
+    Candidates whose stiffness matrix is singular (an unstable equilibrium, signalled by a
+    non-finite displacement) are never selected.
     """
     dX = model.displacements(candidates, delta_wrench)
     dp = np.abs(dX[:, :3] @ direction)
@@ -68,7 +60,44 @@ def sotda_point(
     return int(np.argmin(dp)), dp
 
 
-def grid_candidates(poly: Sequence[Point], n: int) -> FloatArray:
+@njit(cache=True)
+def displacements_kernel(K0, A1, A2, lam, n, dw, out):  # pragma: no cover - compiled
+    """``out[j] = (K0 + λ_j1 A1 + λ_j2 A2)⁻¹ dw`` by Gaussian elimination with partial
+    pivoting; NaN where singular."""
+    K = np.empty((6, 7))
+    for j in range(n):
+        l1, l2 = lam[j, 0], lam[j, 1]
+        for r in range(6):
+            for c in range(6):
+                K[r, c] = K0[r, c] + l1 * A1[r, c] + l2 * A2[r, c]
+            K[r, 6] = dw[r]
+        singular = False
+        for c in range(6):
+            piv = c
+            for r in range(c + 1, 6):
+                if abs(K[r, c]) > abs(K[piv, c]):
+                    piv = r
+            if not abs(K[piv, c]) > 1e-300:
+                singular = True
+                break
+            if piv != c:
+                for k in range(c, 7):
+                    K[c, k], K[piv, k] = K[piv, k], K[c, k]
+            for r in range(c + 1, 6):
+                f = K[r, c] / K[c, c]
+                for k in range(c, 7):
+                    K[r, k] -= f * K[c, k]
+        if singular:
+            out[j, :] = np.nan
+            continue
+        for r in range(5, -1, -1):
+            s = K[r, 6]
+            for k in range(r + 1, 6):
+                s -= K[r, k] * out[j, k]
+            out[j, r] = s / K[r, r]
+
+
+def grid_candidates(poly: Sequence[Point] | FloatArray, n: int) -> FloatArray:
     """Points of an ``n × n`` grid over the polygon's bounding box that lie inside it, plus its
     vertices (the paper's meshgrid search of the feasible polygon)."""
     P = np.array(poly)

@@ -165,7 +165,7 @@ class TDAOutput:
     residual: float = math.inf  # ‖W t − w‖ / max(1, ‖w‖)
     max_violation: float = 0.0  # N, largest bound violation (> 0 only when not OK)
     rate_limited: bool = False  # the tension-rate limit moved the solution
-    polygon: list[tuple[float, float]] = field(default_factory=list)  # λ vertices (r = 2)
+    polygon: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))  # λ vertices (r = 2)
     area: float = 0.0
     barycenter: tuple[float, float] = (math.nan, math.nan)
     energies: FloatArray = field(init=False)  # J, per cable, t²/(2k) (when k is given)
