@@ -13,11 +13,22 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Cable, Platform, Pose, Pulley, RobotModel, Winch, Workspace
 
-TOP_KEYS = ("name", "source", "gravity", "platform", "home", "workspace", "winch", "cables")
+TOP_KEYS = (
+    "name",
+    "source",
+    "gravity",
+    "platform",
+    "home",
+    "workspace",
+    "winch",
+    "cables",
+    "drives",
+)
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
 WORKSPACE_KEYS = ("position_min", "position_max", "max_angle")
@@ -93,6 +104,10 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     cables = _read_cables(rd, data, winch_table is not None, default_winch)
     home = _read_home(rd, data)
     workspace = _read_workspace(rd, data)
+    drives = None
+    if cables is not None:
+        rated = max(c.winch.torque_limit for c in cables)
+        drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
 
     if (
         rd.errors
@@ -102,6 +117,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or cables is None
         or home is None
         or workspace is None
+        or drives is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
 
@@ -114,6 +130,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         cables=tuple(cables),
         home=home,
         workspace=workspace,
+        drives=drives,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.model.drives import DrivesConfig
 from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 
@@ -123,6 +124,7 @@ class RobotModel:
     cables: tuple[Cable, ...]
     home: Pose
     workspace: Workspace
+    drives: DrivesConfig
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

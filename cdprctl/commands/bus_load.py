@@ -1,0 +1,43 @@
+"""``cdprctl bus-load --config FILE [--rate HZ]``: the CAN load of each bus per control cycle."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from cdprctl.model import ConfigError, load_robot
+from drivers.busload import MAX_LOAD, WARN_LOAD, bus_loads
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "bus-load",
+        help="CAN bus load per bus at a control rate",
+        description="Bits per control cycle on each CAN bus (worst-case bit stuffing), the load "
+        "at the control rate, and the verdict the daemon applies at start-up: warn above "
+        f"{WARN_LOAD:.0%}, refuse above {MAX_LOAD:.0%}. Exit code 1 when a bus would be refused.",
+    )
+    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p.add_argument("--rate", type=float, default=500.0, help="control rate in Hz (default 500)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        model = load_robot(args.config)
+    except ConfigError as exc:
+        for e in exc.errors:
+            print(e, file=sys.stderr)
+        return 1
+    if not (args.rate > 0):
+        print(f"cdprctl bus-load: error: --rate = {args.rate} Hz must be > 0", file=sys.stderr)
+        return 2
+    refused = False
+    print(f"{model.name}: driver {model.drives.driver}, control rate {args.rate:g} Hz")
+    for bl in bus_loads(model.drives, args.rate):
+        print(f"bus {bl.bus}: {bl.interface} {bl.channel}, {bl.bitrate} bit/s, {bl.drives} drives")
+        print(f"  per cycle: {bl.frames}")
+        print(f"  {bl.bits_per_cycle} bits per cycle, load {bl.load * 100:.1f} %  {bl.verdict}")
+        refused |= bl.load > MAX_LOAD
+    return 1 if refused else 0

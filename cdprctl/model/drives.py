@@ -1,0 +1,233 @@
+"""The ``[drives]`` section of a robot description: which driver, which CAN buses, which node
+drives which cable, and the drive-side timing and scaling.
+
+Absent, every robot gets one simulated bus: CiA 402 drives with node ids 1..m on python-can's
+``virtual`` interface, channel ``cdpr-<name>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from cdprctl.model.reader import TableReader
+
+DRIVES_KEYS = (
+    "driver",
+    "rated_torque",
+    "missed_feedback_limit",
+    "heartbeat_timeout",
+    "heartbeat_period",
+    "controller_node_id",
+    "comm_timeout",
+    "velocity_source",
+    "log_file",
+    "buses",
+)
+BUS_KEYS = ("interface", "channel", "bitrate", "cables", "node_ids", "options")
+DRIVERS = ("cia402", "odrive")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    interface: str  # python-can interface: socketcan, virtual, udp_multicast, pcan, ...
+    channel: str
+    bitrate: int  # bit/s
+    cables: tuple[int, ...]  # 0-based cable indices on this bus
+    node_ids: tuple[int, ...]  # drive node id of each of those cables
+    options: dict[str, Any] = field(default_factory=dict)  # any other python-can argument
+
+
+@dataclass(frozen=True)
+class DrivesConfig:
+    driver: str = "cia402"
+    rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
+    missed_feedback_limit: int = 5  # consecutive cycles without feedback before a fault
+    heartbeat_timeout: float = 0.5  # s without a drive's heartbeat: drive lost
+    heartbeat_period: float = 0.1  # s, the controller's own heartbeat
+    controller_node_id: int = 127
+    comm_timeout: float = 0.1  # s without RPDO/SYNC: the drive quick-stops (drive side)
+    velocity_source: str = "derived"  # "derived" from positions, or "pdo" (TPDO2, 0x606C)
+    log_file: str | None = None  # python-can logger file (.log, .asc, .blf, .csv)
+    buses: tuple[BusConfig, ...] = ()
+
+    def node_of(self, cable: int) -> tuple[int, int]:
+        """(bus index, node id) of a cable."""
+        for b, bus in enumerate(self.buses):
+            if cable in bus.cables:
+                return b, bus.node_ids[bus.cables.index(cable)]
+        raise KeyError(cable)
+
+
+def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
+    return DrivesConfig(
+        rated_torque=rated_torque,
+        buses=(
+            BusConfig(
+                interface="virtual",
+                channel=f"cdpr-{name}",
+                bitrate=1_000_000,
+                cables=tuple(range(n_cables)),
+                node_ids=tuple(range(1, n_cables + 1)),
+            ),
+        ),
+    )
+
+
+def read_drives(
+    rd: TableReader, data: dict[str, Any], cable_names: list[str], name: str, rated_default: float
+) -> DrivesConfig | None:
+    t = rd.table(data, "drives", "", required=False)
+    if t is None:
+        return default_drives(name, len(cable_names), rated_default)
+    n0 = len(rd.errors)
+    rd.check_keys(t, DRIVES_KEYS, "drives")
+    driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
+    if driver not in DRIVERS:
+        rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
+    rated = rd.number(
+        t, "rated_torque", "drives", "N·m", required=False, default=rated_default, positive=True
+    )
+    missed = rd.number(
+        t,
+        "missed_feedback_limit",
+        "drives",
+        "cycles",
+        required=False,
+        default=5,
+        positive=True,
+        integer=True,
+    )
+    hb_to = rd.number(
+        t, "heartbeat_timeout", "drives", "s", required=False, default=0.5, positive=True
+    )
+    hb_p = rd.number(
+        t, "heartbeat_period", "drives", "s", required=False, default=0.1, positive=True
+    )
+    ctrl_id = rd.number(
+        t,
+        "controller_node_id",
+        "drives",
+        "",
+        required=False,
+        default=127,
+        minimum=1,
+        maximum=127,
+        integer=True,
+    )
+    comm = rd.number(t, "comm_timeout", "drives", "s", required=False, default=0.1, positive=True)
+    vsrc = rd.string(t, "velocity_source", "drives", required=False, default="derived")
+    if vsrc not in ("derived", "pdo"):
+        rd.error("drives.velocity_source", vsrc, "", "must be 'derived' or 'pdo'")
+    log_file = rd.string(t, "log_file", "drives", required=False, default=None)
+    buses: list[BusConfig] = []
+    raw = t.get("buses")
+    if not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
+        rd.errors.append(
+            f"{rd.file}: drives.buses must be an array of tables [[drives.buses]], at least one"
+        )
+        raw = []
+    seen_cable: dict[int, str] = {}
+    for bi, bt in enumerate(raw):
+        path = f"drives.buses[{bi}]"
+        rd.check_keys(bt, BUS_KEYS, path)
+        iface = rd.string(bt, "interface", path)
+        channel = bt.get("channel")
+        if not isinstance(channel, str | int) or isinstance(channel, bool):
+            rd.error(f"{path}.channel", channel, "", "must be a string (or an integer)")
+            channel = None
+        bitrate = rd.number(
+            bt,
+            "bitrate",
+            path,
+            "bit/s",
+            required=False,
+            default=1_000_000,
+            positive=True,
+            integer=True,
+        )
+        cables = bt.get("cables")
+        nodes = bt.get("node_ids")
+        idx: list[int] = []
+        if not isinstance(cables, list) or not all(isinstance(c, str) for c in cables):
+            rd.error(f"{path}.cables", cables, "", "must be a list of cable names")
+        else:
+            for c in cables:
+                if c not in cable_names:
+                    rd.error(f"{path}.cables", c, "", f"is not a cable ({', '.join(cable_names)})")
+                elif cable_names.index(c) in seen_cable:
+                    rd.error(
+                        f"{path}.cables",
+                        c,
+                        "",
+                        f"is already on {seen_cable[cable_names.index(c)]}: one bus per cable",
+                    )
+                else:
+                    seen_cable[cable_names.index(c)] = path
+                    idx.append(cable_names.index(c))
+        if (
+            not isinstance(nodes, list)
+            or not all(isinstance(n, int) and not isinstance(n, bool) for n in nodes)
+            or (isinstance(cables, list) and len(nodes) != len(cables))
+        ):
+            rd.error(
+                f"{path}.node_ids",
+                nodes,
+                "",
+                "must be a list of integers, one per cable of the bus",
+            )
+            nodes = []
+        else:
+            for n in nodes:
+                if not 1 <= n <= 127:
+                    rd.error(f"{path}.node_ids", n, "", "must be a CANopen node id in [1, 127]")
+            dups = sorted({n for n in nodes if nodes.count(n) > 1})
+            if dups:
+                rd.error(
+                    f"{path}.node_ids",
+                    nodes,
+                    "",
+                    f"repeats node id {dups[0]}: node ids on a bus must be unique",
+                )
+            if ctrl_id is not None and int(ctrl_id) in nodes:
+                rd.error(
+                    f"{path}.node_ids",
+                    nodes,
+                    "",
+                    f"contains the controller's node id {int(ctrl_id)}",
+                )
+        options = bt.get("options", {})
+        if not isinstance(options, dict):
+            rd.error(f"{path}.options", options, "", "must be a table of python-can arguments")
+            options = {}
+        if iface and channel is not None and bitrate is not None:
+            buses.append(
+                BusConfig(
+                    iface,
+                    str(channel),
+                    int(bitrate),
+                    tuple(idx),
+                    tuple(int(n) for n in nodes),
+                    dict(options),
+                )
+            )
+    missing = [cable_names[i] for i in range(len(cable_names)) if i not in seen_cable]
+    if raw and missing:
+        rd.errors.append(
+            f"{rd.file}: drives.buses: cables {', '.join(missing)} are on no bus: every cable "
+            "needs a drive"
+        )
+    if len(rd.errors) > n0:
+        return None
+    return DrivesConfig(
+        driver=driver,
+        rated_torque=float(rated if rated is not None else rated_default),
+        missed_feedback_limit=int(missed or 5),
+        heartbeat_timeout=float(hb_to or 0.5),
+        heartbeat_period=float(hb_p or 0.1),
+        controller_node_id=int(ctrl_id or 127),
+        comm_timeout=float(comm or 0.1),
+        velocity_source=vsrc or "derived",
+        log_file=log_file,
+        buses=tuple(buses),
+    )

@@ -1,0 +1,328 @@
+"""The hardware abstraction for a set of winch drives.
+
+Modelled on python-can's ``BusABC`` (the public methods live here, subclasses override only the
+``_``-prefixed hooks) and ros2_control's hardware-interface lifecycle:
+
+``UNCONFIGURED --configure()--> INACTIVE --activate()--> ACTIVE --deactivate()--> INACTIVE``;
+``shutdown()`` from any state ends in ``FINALIZED`` (safe twice). A fault seen in ``read`` or
+``write`` moves to ``ERROR``; ``recover()`` (fault reset, drives disabled) returns to ``INACTIVE``
+when the cause is gone.
+
+State per winch is SI at the motor shaft: position (rad), velocity (rad/s), torque (N·m), a
+:class:`DriveState` and the age of the last feedback (s). Commands are N·m. Drive units (counts,
+per-mille) are converted once, at this edge, by the protocol subclass.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
+
+if TYPE_CHECKING:
+    from cdprctl.model.drives import DrivesConfig
+    from cdprctl.model.robot import RobotModel
+
+
+class Lifecycle(enum.Enum):
+    UNCONFIGURED = "unconfigured"
+    INACTIVE = "inactive"  # buses open, feedback readable, drives not enabled
+    ACTIVE = "active"  # drives enabled, torque commands applied
+    ERROR = "error"
+    FINALIZED = "finalized"
+
+
+class DriveState(enum.IntEnum):
+    """Protocol-independent drive state."""
+
+    UNKNOWN = 0  # no feedback yet
+    DISABLED = 1  # power stage off (brake holds)
+    READY = 2  # ready / switched on, not enabled
+    ENABLED = 3  # torque applied
+    QUICK_STOP = 4
+    FAULT = 5
+
+
+class WinchStates:
+    """Feedback of every winch (SI, motor side), preallocated and overwritten by ``read``."""
+
+    def __init__(self, m: int):
+        self.position = np.zeros(m)  # rad
+        self.velocity = np.zeros(m)  # rad/s
+        self.torque = np.zeros(m)  # N·m
+        self.state = np.zeros(m, dtype=np.int64)  # DriveState
+        self.feedback_age = np.full(m, math.inf)  # s since the last feedback
+        self.fault_code = np.zeros(m, dtype=np.int64)  # drive error code, 0 when none
+        self.stamp = 0.0  # s, the time given to read()
+
+
+class DriverStats:
+    def __init__(self) -> None:
+        self.cycles = 0
+        self.frames_sent = 0
+        self.frames_received = 0
+        self.frames_ignored = 0  # foreign ids, wrong lengths
+        self.missed_feedback = 0  # cable-cycles without feedback
+        self.clamped_commands = 0  # torques beyond the limit, clamped
+        self.rejected_commands = 0  # non-finite torques, replaced by the last valid one
+        self.send_errors = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return dict(vars(self))
+
+
+class WinchDriver(ABC):
+    """A set of winch drives; one per robot. See the module docstring for the lifecycle."""
+
+    #: registry name (config ``[drives] driver = ...``)
+    name: str = ""
+
+    def __init__(
+        self,
+        model: RobotModel,
+        drives: DrivesConfig | None = None,
+        *,
+        period: float = 0.002,
+        clock: Callable[[], float] = time.monotonic,
+        wait: Callable[[float], None] | None = None,
+        bus_overrides: dict[str, Any] | None = None,
+    ):
+        """``period`` (s): the control period; ``clock``: the time base of ``read``/``write``
+        calls made without a time; ``wait(dt)``: how blocking set-up calls let time pass (a
+        real sleep, or a lock-step simulator advancing its clock); ``bus_overrides``:
+        ``interface``/``channel`` replacing the config's (CLI ``--can-interface``...)."""
+        self.model = model
+        self.config = drives if drives is not None else model.drives
+        self.m = model.n_cables
+        self.period = period
+        self.clock = clock
+        self.wait = wait if wait is not None else time.sleep
+        self.bus_overrides = dict(bus_overrides or {})
+        self.lifecycle = Lifecycle.UNCONFIGURED
+        self.error: DriverError | None = None
+        self.states = WinchStates(self.m)
+        self.stats = DriverStats()
+        self.torque_limit = np.array([c.winch.torque_limit for c in model.cables])
+        self.encoder_cpr = np.array([c.winch.encoder_counts_per_rev for c in model.cables])
+        self._last_command = np.zeros(self.m)
+        self._command = np.zeros(self.m)
+
+    # -- lifecycle (outside the loop: may block, may raise) -----------------------------------
+    def configure(self, timeout: float = 2.0) -> None:
+        """Open the buses and wait for live feedback from every drive → ``INACTIVE``."""
+        self._require(Lifecycle.UNCONFIGURED)
+        try:
+            self._open()
+            self._configure_drives(timeout)
+        except DriverError:
+            self._close()
+            raise
+        self.lifecycle = Lifecycle.INACTIVE
+
+    def activate(self, timeout: float = 2.0) -> None:
+        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``."""
+        self._require(Lifecycle.INACTIVE)
+        self._command[:] = 0.0
+        self._last_command[:] = 0.0
+        self._request_enable(True)
+        deadline = self.clock() + timeout
+        while True:
+            now = self.clock()
+            self.read(now)
+            self.write(now, self._command)
+            if self.lifecycle is Lifecycle.ERROR:
+                raise self.error or DriverOperationError("activation failed")
+            if np.all(self.states.state == DriveState.ENABLED):
+                break
+            if now > deadline:
+                not_on = [i for i in range(self.m) if self.states.state[i] != DriveState.ENABLED]
+                self._request_enable(False)
+                raise DriverTimeoutError(
+                    f"drives of cable indices {not_on} not enabled after {timeout:g} s",
+                    not_on[0],
+                )
+            self.wait(self.period)
+        self.lifecycle = Lifecycle.ACTIVE
+
+    def deactivate(self, timeout: float = 1.0) -> None:
+        """Disable the drives (brakes hold) → ``INACTIVE``."""
+        if self.lifecycle not in (Lifecycle.ACTIVE, Lifecycle.ERROR):
+            return
+        self._request_enable(False)
+        deadline = self.clock() + timeout
+        while self.clock() <= deadline:
+            now = self.clock()
+            self.read(now)
+            self.write(now, np.zeros(self.m), force=True)
+            if np.all(self.states.state != DriveState.ENABLED):
+                break
+            self.wait(self.period)
+        if self.lifecycle is Lifecycle.ACTIVE:
+            self.lifecycle = Lifecycle.INACTIVE
+
+    def recover(self, timeout: float = 1.0) -> None:
+        """From ``ERROR``: reset drive faults, keep the drives disabled, and return to
+        ``INACTIVE`` once every drive answers again without a fault."""
+        if self.lifecycle is not Lifecycle.ERROR:
+            return
+        self.error = None
+        self._request_enable(False)
+        self._fault_reset()
+        deadline = self.clock() + timeout
+        while True:
+            now = self.clock()
+            self.lifecycle = Lifecycle.INACTIVE
+            self.error = None  # a fault still latched this cycle sets it again
+            self.read(now)
+            self.write(now, np.zeros(self.m), force=True)
+            if self.lifecycle is Lifecycle.INACTIVE and np.all(
+                (self.states.state != DriveState.FAULT)
+                & (self.states.state != DriveState.UNKNOWN)
+                & (self.states.feedback_age < 10 * self.period + 1e-9)
+            ):
+                return
+            if now > deadline:
+                self.lifecycle = Lifecycle.ERROR
+                raise self.error or DriverTimeoutError("drives did not recover", None)
+            self.wait(self.period)
+
+    def shutdown(self) -> None:
+        """Disable the drives if possible and close the buses; safe to call twice."""
+        if self.lifecycle is Lifecycle.FINALIZED:
+            return
+        if self.lifecycle in (Lifecycle.ACTIVE, Lifecycle.ERROR):
+            with contextlib.suppress(Exception):
+                self.deactivate(timeout=0.2)
+        self._close()
+        self.lifecycle = Lifecycle.FINALIZED
+
+    def __enter__(self) -> WinchDriver:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()
+
+    # -- the cyclic path (never raises) ------------------------------------------------------
+    def read(self, t: float | None = None) -> WinchStates:
+        """Drain the feedback received so far; SI states, ages, faults. Never raises."""
+        if self.lifecycle in (Lifecycle.UNCONFIGURED, Lifecycle.FINALIZED):
+            return self.states
+        now = self.clock() if t is None else t
+        self.states.stamp = now
+        try:
+            err = self._read_internal(now)
+        except Exception as exc:
+            err = DriverOperationError(f"read failed: {type(exc).__name__}: {exc}")
+        if err is not None:
+            self._fail(err)
+        return self.states
+
+    def write(self, t: float | None, torques: np.ndarray, force: bool = False) -> None:
+        """Send motor torques (N·m), clamped to each winch's limit; non-finite values are
+        replaced by the last valid command. Only applied while ``ACTIVE`` (zero otherwise,
+        the drives being disabled). Never raises."""
+        if self.lifecycle in (Lifecycle.UNCONFIGURED, Lifecycle.FINALIZED):
+            return
+        now = self.clock() if t is None else t
+        cmd = self._command
+        for i in range(self.m):
+            v = float(torques[i])
+            if not math.isfinite(v):
+                self.stats.rejected_commands += 1
+                v = float(self._last_command[i])
+            lim = float(self.torque_limit[i])
+            if v > lim:
+                v = lim
+                self.stats.clamped_commands += 1
+            elif v < -lim:
+                v = -lim
+                self.stats.clamped_commands += 1
+            cmd[i] = v
+        if self.lifecycle is not Lifecycle.ACTIVE and not force:
+            cmd[:] = 0.0
+        self._last_command[:] = cmd
+        try:
+            err = self._write_internal(now, cmd)
+        except Exception as exc:
+            err = DriverOperationError(f"write failed: {type(exc).__name__}: {exc}")
+        self.stats.cycles += 1
+        if err is not None:
+            self._fail(err)
+
+    # -- helpers ------------------------------------------------------------------------------
+    def _fail(self, err: DriverError) -> None:
+        if self.error is None:
+            self.error = err
+        if self.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ACTIVE):
+            self.lifecycle = Lifecycle.ERROR
+            self._request_enable(False)
+
+    def _require(self, state: Lifecycle) -> None:
+        if self.lifecycle is not state:
+            raise DriverOperationError(
+                f"{self.name}: this call needs the {state.value} state, the driver is "
+                f"{self.lifecycle.value}"
+            )
+
+    # -- hooks --------------------------------------------------------------------------------
+    @abstractmethod
+    def _open(self) -> None:
+        """Open the buses (raise DriverInitializationError)."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Close the buses; idempotent."""
+
+    @abstractmethod
+    def _configure_drives(self, timeout: float) -> None:
+        """Start the drives' communication and wait for their first feedback (may block via
+        ``self.wait``)."""
+
+    @abstractmethod
+    def _request_enable(self, enable: bool) -> None:
+        """Ask the cyclic path to bring every drive to enabled (True) or disabled (False)."""
+
+    @abstractmethod
+    def _fault_reset(self) -> None:
+        """Ask the cyclic path to reset drive faults."""
+
+    @abstractmethod
+    def _read_internal(self, t: float) -> DriverError | None:
+        """Drain and decode feedback into ``self.states``; return an error, never raise."""
+
+    @abstractmethod
+    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
+        """Encode and send the torques (N·m); return an error, never raise."""
+
+
+_REGISTRY: dict[str, type[WinchDriver]] = {}
+
+
+def register_driver(cls: type[WinchDriver]) -> type[WinchDriver]:
+    """Class decorator: make a driver available by its ``name``."""
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def driver_names() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def create_driver(model: RobotModel, name: str | None = None, **kwargs: Any) -> WinchDriver:
+    """The driver named ``name`` (default: the config's ``[drives] driver``)."""
+    from drivers.errors import DriverConfigurationError
+
+    key = name or model.drives.driver
+    if key not in _REGISTRY:
+        raise DriverConfigurationError(
+            f"drives.driver = {key!r}: no such driver (registered: {', '.join(driver_names())})"
+        )
+    return _REGISTRY[key](model, **kwargs)

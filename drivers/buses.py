@@ -1,0 +1,59 @@
+"""Opening python-can buses from the config, and the optional traffic log."""
+
+from __future__ import annotations
+
+import queue
+import threading
+from typing import Any
+
+import can
+
+from cdprctl.model.drives import BusConfig
+from drivers.errors import DriverInitializationError
+
+
+def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0) -> can.BusABC:
+    """A python-can bus for ``cfg`` (any interface: socketcan, virtual, udp_multicast, ...).
+
+    ``overrides`` may replace ``interface``, and ``channel`` (every bus on that one channel:
+    their node ids must then differ) or ``channels`` (one per bus, by ``index``)."""
+    o = overrides or {}
+    interface = o.get("interface") or cfg.interface
+    channels = o.get("channels")
+    channel = channels[index] if channels else (o.get("channel") or cfg.channel)
+    kwargs: dict[str, Any] = dict(cfg.options)
+    if interface not in ("virtual", "udp_multicast", "inprocess"):
+        kwargs.setdefault("bitrate", cfg.bitrate)
+    try:
+        return can.Bus(interface=interface, channel=channel, **kwargs)
+    except Exception as exc:  # python-can raises CanError, OSError, ImportError, ValueError...
+        raise DriverInitializationError(
+            f"cannot open CAN bus interface={interface!r} channel={channel!r}: "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
+
+
+class TrafficLog:
+    """Writes every frame sent and received to a python-can logger (``.log`` candump, ``.asc``,
+    ``.blf``, ``.csv``, ...) from a background thread: the loop only enqueues."""
+
+    def __init__(self, path: str):
+        self._logger = can.Logger(path)
+        self._q: queue.SimpleQueue[can.Message | None] = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="can-log", daemon=True)
+        self._thread.start()
+
+    def __call__(self, msg: can.Message) -> None:
+        self._q.put(msg)
+
+    def _run(self) -> None:
+        while True:
+            msg = self._q.get()
+            if msg is None:
+                break
+            self._logger.on_message_received(msg)
+
+    def close(self) -> None:
+        self._q.put(None)
+        self._thread.join(timeout=2.0)
+        self._logger.stop()

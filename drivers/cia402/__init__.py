@@ -1,0 +1,1 @@
+"""CANopen CiA 402 winch drives in cyclic synchronous torque mode."""

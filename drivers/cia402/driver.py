@@ -1,0 +1,342 @@
+"""CiA 402 drives in cyclic synchronous torque mode over one or several python-can buses.
+
+Per cycle, ``read`` drains every bus with ``recv(0)`` and decodes TPDOs, EMCYs and heartbeats;
+``write`` sends each drive's RPDO (controlword from the power-state table + target torque) and
+then SYNC on each bus, and the controller's heartbeat when due. Set-up (NMT start, SDO: mode of
+operation 10, heartbeat producer time, abort-connection option quick stop) happens in
+``configure``, outside the loop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from typing import Any
+
+import can
+import numpy as np
+
+from drivers.base import DriveState, WinchDriver, register_driver
+from drivers.buses import TrafficLog, open_bus
+from drivers.cia402 import protocol as p
+from drivers.errors import (
+    DriveFaultError,
+    DriverError,
+    DriverInitializationError,
+    DriverOperationError,
+    DriverTimeoutError,
+)
+
+_GENERIC_STATE = {
+    p.PowerState.NOT_READY_TO_SWITCH_ON: DriveState.DISABLED,
+    p.PowerState.SWITCH_ON_DISABLED: DriveState.DISABLED,
+    p.PowerState.READY_TO_SWITCH_ON: DriveState.READY,
+    p.PowerState.SWITCHED_ON: DriveState.READY,
+    p.PowerState.OPERATION_ENABLED: DriveState.ENABLED,
+    p.PowerState.QUICK_STOP_ACTIVE: DriveState.QUICK_STOP,
+    p.PowerState.FAULT_REACTION_ACTIVE: DriveState.FAULT,
+    p.PowerState.FAULT: DriveState.FAULT,
+}
+
+
+@register_driver
+class Cia402Driver(WinchDriver):
+    name = "cia402"
+
+    def __init__(self, model: Any, **kwargs: Any):
+        super().__init__(model, **kwargs)
+        cfg = self.config
+        m = self.m
+        self.buses: list[can.BusABC] = []
+        self.log: TrafficLog | None = None
+        self.node = np.zeros(m, dtype=np.int64)
+        self.bus_of = np.zeros(m, dtype=np.int64)
+        for b, bus in enumerate(cfg.buses):
+            for c, n in zip(bus.cables, bus.node_ids, strict=True):
+                self.node[c] = n
+                self.bus_of[c] = b
+        # (bus, arbitration id) → (kind, cable)
+        self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
+        for c in range(m):
+            b, n = int(self.bus_of[c]), int(self.node[c])
+            self._dispatch[(b, p.TPDO1 + n)] = (1, c)
+            self._dispatch[(b, p.TPDO2 + n)] = (2, c)
+            self._dispatch[(b, p.EMCY + n)] = (3, c)
+            self._dispatch[(b, p.HEARTBEAT + n)] = (4, c)
+            self._dispatch[(b, p.SDO_TX + n)] = (5, c)
+        self._rpdo = [
+            can.Message(
+                arbitration_id=p.RPDO1 + int(self.node[c]), data=bytearray(4), is_extended_id=False
+            )
+            for c in range(m)
+        ]
+        self._sync = can.Message(arbitration_id=p.SYNC, data=b"", is_extended_id=False)
+        self._hb = can.Message(
+            arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
+            data=bytes([p.HB_OPERATIONAL]),
+            is_extended_id=False,
+        )
+        self.rated_torque = cfg.rated_torque  # N·m per 1000 per-mille
+        self.rad_per_count = 2.0 * math.pi / self.encoder_cpr
+        # raw feedback
+        self.power_state = [p.PowerState.NOT_READY_TO_SWITCH_ON] * m
+        self._counts = np.zeros(m, dtype=np.int64)  # unwrapped multi-turn counts
+        self._raw_last = [None] * m  # last 32-bit position, for unwrapping
+        self._fresh = np.zeros(m, dtype=bool)
+        self._fb_stamp = np.full(m, -math.inf)  # SYNC time the last TPDO1 was sampled at
+        self._prev_pos = np.zeros(m)
+        self._prev_stamp = np.full(m, -math.inf)
+        self._missed = np.zeros(m, dtype=np.int64)
+        self._last_hb = np.full(m, -math.inf)
+        self._nmt_state = np.full(m, -1, dtype=np.int64)
+        self._emcy = np.zeros(m, dtype=np.int64)
+        self._sdo_reply: dict[int, bytes] = {}
+        self._enable = False
+        self._reset_request = 0  # cycles left sending the fault-reset edge
+        self._last_sync = -math.inf
+        self._last_hb_sent = -math.inf
+        self._send_fail_streak = 0
+        self._started = False
+        self._last_read = -math.inf
+
+    # -- hooks: set-up ------------------------------------------------------------------------
+    def _open(self) -> None:
+        overrides = self.bus_overrides
+        for b, bus_cfg in enumerate(self.config.buses):
+            self.buses.append(open_bus(bus_cfg, overrides, b))
+        if self.config.log_file:
+            self.log = TrafficLog(self.config.log_file)
+
+    def _close(self) -> None:
+        for bus in self.buses:
+            with contextlib.suppress(Exception):
+                bus.shutdown()
+        self.buses = []
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+
+    def _send(self, b: int, msg: can.Message) -> bool:
+        try:
+            self.buses[b].send(msg, timeout=0)
+        except can.CanError:
+            self.stats.send_errors += 1
+            self._send_fail_streak += 1
+            return False
+        self._send_fail_streak = 0
+        self.stats.frames_sent += 1
+        if self.log is not None:
+            self.log(msg)
+        return True
+
+    def _configure_drives(self, timeout: float) -> None:
+        for b in range(len(self.buses)):
+            self._send(
+                b,
+                can.Message(
+                    arbitration_id=p.NMT, data=bytes([p.NMT_START, 0]), is_extended_id=False
+                ),
+            )
+        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 3))
+        for c in range(self.m):
+            self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, p.MODE_CST, 1, timeout)
+            self._sdo_write(c, p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2, timeout)
+            self._sdo_write(c, p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2, timeout)
+            mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
+            if mode != p.MODE_CST:
+                raise DriverInitializationError(
+                    f"drive of cable index {c} (node {int(self.node[c])}) reports mode "
+                    f"{mode} in 0x6061, expected {p.MODE_CST} (cyclic synchronous torque)"
+                )
+        self._started = True
+        # cycle (zero torque, drives disabled) until every drive has sent feedback
+        deadline = self.clock() + timeout
+        while True:
+            now = self.clock()
+            self._read_internal(now)
+            self._write_internal(now, np.zeros(self.m))
+            if np.all(np.isfinite(self._fb_stamp)):
+                return
+            if now > deadline:
+                silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
+                raise DriverTimeoutError(
+                    f"no feedback (TPDO1) from the drives of cable indices {silent} within "
+                    f"{timeout:g} s",
+                    silent[0],
+                )
+            self.wait(self.period)
+
+    def _sdo_exchange(self, c: int, request: bytes, timeout: float) -> bytes:
+        b, n = int(self.bus_of[c]), int(self.node[c])
+        self._sdo_reply.pop(c, None)
+        self._send(b, can.Message(arbitration_id=p.SDO_RX + n, data=request, is_extended_id=False))
+        deadline = self.clock() + timeout
+        while c not in self._sdo_reply:
+            if self.clock() > deadline:
+                raise DriverTimeoutError(
+                    f"no SDO answer from node {n} (cable index {c}) within {timeout:g} s", c
+                )
+            self.wait(self.period / 4)
+            self._drain(self.clock())
+        reply = self._sdo_reply.pop(c)
+        if reply[0] == 0x80:
+            code = int.from_bytes(reply[4:8], "little")
+            raise DriverInitializationError(
+                f"node {n} aborted SDO to 0x{request[2]:02X}{request[1]:02X}: code 0x{code:08X}"
+            )
+        return reply
+
+    def _sdo_write(
+        self, c: int, index: int, sub: int, value: int, size: int, timeout: float
+    ) -> None:
+        reply = self._sdo_exchange(c, p.sdo_download(index, sub, value, size), timeout)
+        if reply[0] != 0x60:
+            raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
+
+    def _sdo_read(self, c: int, index: int, sub: int, timeout: float) -> int:
+        reply = self._sdo_exchange(c, p.sdo_upload(index, sub), timeout)
+        if reply[0] & 0xE0 != 0x40:
+            raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
+        size = 4 - ((reply[0] >> 2) & 0x3) if reply[0] & 0x1 else 4
+        return int.from_bytes(reply[4 : 4 + size], "little", signed=True)
+
+    def _request_enable(self, enable: bool) -> None:
+        self._enable = enable
+
+    def _fault_reset(self) -> None:
+        self._reset_request = 4  # a few cycles of 0x00 then 0x80: a clean rising edge
+
+    # -- hooks: the cyclic path ---------------------------------------------------------------
+    def _drain(self, t: float) -> None:
+        """Decode every frame waiting on every bus (``recv(0)``: never blocks)."""
+        tp1, tp2 = p.TPDO1_STRUCT, p.TPDO2_STRUCT
+        for b, bus in enumerate(self.buses):
+            while True:
+                msg = bus.recv(0)
+                if msg is None:
+                    break
+                self.stats.frames_received += 1
+                if self.log is not None:
+                    self.log(msg)
+                key = self._dispatch.get((b, msg.arbitration_id))
+                if key is None or msg.is_extended_id or msg.is_remote_frame:
+                    self.stats.frames_ignored += 1
+                    continue
+                kind, c = key
+                data = msg.data
+                if kind == 1 and len(data) == 8:
+                    sw, tq, pos = tp1.unpack(data)
+                    self.power_state[c] = p.decode_statusword(sw)
+                    self.states.torque[c] = tq * self.rated_torque / 1000.0
+                    last = self._raw_last[c]
+                    if last is None:
+                        self._counts[c] = pos
+                    else:  # 32-bit wrap-around: the signed difference
+                        self._counts[c] += ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+                    self._raw_last[c] = pos
+                    self._fresh[c] = True
+                    self._fb_stamp[c] = self._last_sync if math.isfinite(self._last_sync) else t
+                elif kind == 2 and len(data) == 4:
+                    (vel,) = tp2.unpack(data)
+                    if self.config.velocity_source == "pdo":
+                        self.states.velocity[c] = vel * self.rad_per_count[c]
+                elif kind == 3 and len(data) == 8:
+                    code = p.EMCY_STRUCT.unpack(data)[0]
+                    self._emcy[c] = code
+                elif kind == 4 and len(data) >= 1:
+                    self._last_hb[c] = t
+                    self._nmt_state[c] = data[0]
+                elif kind == 5 and len(data) == 8:
+                    self._sdo_reply[c] = bytes(data)
+                else:
+                    self.stats.frames_ignored += 1
+
+    def _read_internal(self, t: float) -> DriverError | None:
+        self._fresh[:] = False
+        self._drain(t)
+        elapsed = t > self._last_read  # a second read at the same instant misses nothing
+        self._last_read = t
+        st = self.states
+        err: DriverError | None = None
+        for c in range(self.m):
+            if self._fresh[c]:
+                pos = self._counts[c] * self.rad_per_count[c]
+                stamp = self._fb_stamp[c]
+                if self.config.velocity_source == "derived" and math.isfinite(self._prev_stamp[c]):
+                    dt = stamp - self._prev_stamp[c]
+                    if dt > 0:
+                        st.velocity[c] = (pos - self._prev_pos[c]) / dt
+                self._prev_pos[c], self._prev_stamp[c] = pos, stamp
+                st.position[c] = pos
+                self._missed[c] = 0
+            elif elapsed and self._started and math.isfinite(self._fb_stamp[c]):
+                self._missed[c] += 1
+                self.stats.missed_feedback += 1
+            st.feedback_age[c] = t - self._fb_stamp[c]
+            ps = self.power_state[c]
+            st.state[c] = _GENERIC_STATE[ps]
+            code = int(self._emcy[c])
+            st.fault_code[c] = code
+            if (
+                err is None
+                and (ps in (p.PowerState.FAULT, p.PowerState.FAULT_REACTION_ACTIVE) or code != 0)
+                and (code != 0 or ps is p.PowerState.FAULT)
+            ):
+                err = DriveFaultError(
+                    c,
+                    int(self.node[c]),
+                    code,
+                    p.describe_emcy(code) if code else "fault (statusword)",
+                )
+            if err is None and self._missed[c] > self.config.missed_feedback_limit:
+                err = DriverTimeoutError(
+                    f"drive of cable index {c} (node {int(self.node[c])}): no feedback for "
+                    f"{int(self._missed[c])} cycles (limit {self.config.missed_feedback_limit})",
+                    c,
+                )
+            if (
+                err is None
+                and self._started
+                and math.isfinite(self._last_hb[c])
+                and t - self._last_hb[c] > self.config.heartbeat_timeout
+            ):
+                err = DriverTimeoutError(
+                    f"drive of cable index {c} (node {int(self.node[c])}) lost: no heartbeat "
+                    f"for {t - self._last_hb[c]:.3f} s (timeout "
+                    f"{self.config.heartbeat_timeout:g} s)",
+                    c,
+                )
+        return err
+
+    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
+        pack = p.RPDO1_STRUCT.pack_into
+        reset = self._reset_request
+        if reset:
+            self._reset_request -= 1
+        for c in range(self.m):
+            ps = self.power_state[c]
+            if reset and ps in (p.PowerState.FAULT, p.PowerState.FAULT_REACTION_ACTIVE):
+                cw = p.Command.FAULT_RESET if reset <= 2 else p.Command.DISABLE_VOLTAGE
+                if reset <= 2:
+                    self._emcy[c] = 0
+            elif self._enable:
+                cw = p.TOWARDS_ENABLED[ps]
+            else:
+                cw = p.Command.DISABLE_VOLTAGE
+            pm = round(float(torques[c]) * 1000.0 / self.rated_torque)
+            pm = max(-32767, min(32767, pm))
+            msg = self._rpdo[c]
+            pack(msg.data, 0, int(cw), pm)
+            self._send(int(self.bus_of[c]), msg)
+        for b in range(len(self.buses)):
+            self._send(b, self._sync)
+        self._last_sync = t
+        if t - self._last_hb_sent >= self.config.heartbeat_period:
+            for b in range(len(self.buses)):
+                self._send(b, self._hb)
+            self._last_hb_sent = t
+        if self._send_fail_streak > 10:
+            return DriverOperationError(
+                f"CAN send failed {self._send_fail_streak} times in a row (bus off or TX full)"
+            )
+        return None

@@ -1,0 +1,228 @@
+"""CANopen (CiA 301) and drive profile (CiA 402) constants, frames and the power state machine.
+
+Static PDO mapping used by cdprctl (documented in docs/drivers.md; a real drive is configured to
+it with its own tool or by SDO):
+
+* RPDO1 (0x200 + node), 4 bytes: controlword 0x6040 (u16), target torque 0x6071 (i16, per-mille
+  of the rated torque 0x6076).
+* TPDO1 (0x180 + node), 8 bytes, on every SYNC: statusword 0x6041 (u16), torque actual 0x6077
+  (i16, per-mille), position actual 0x6064 (i32, encoder counts).
+* TPDO2 (0x280 + node), 4 bytes, on every SYNC when enabled: velocity actual 0x606C (i32,
+  counts/s).
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+
+# -- COB-IDs (CiA 301 pre-defined connection set) ----------------------------------------------
+NMT = 0x000
+SYNC = 0x080
+EMCY = 0x080  # + node
+TPDO1 = 0x180  # + node
+RPDO1 = 0x200  # + node
+TPDO2 = 0x280  # + node
+SDO_TX = 0x580  # + node: server → client
+SDO_RX = 0x600  # + node: client → server
+HEARTBEAT = 0x700  # + node
+
+# NMT commands (CiA 301 §7.2.8.3.1)
+NMT_START = 0x01
+NMT_STOP = 0x02
+NMT_PRE_OPERATIONAL = 0x80
+NMT_RESET_NODE = 0x81
+NMT_RESET_COMMUNICATION = 0x82
+# NMT states in heartbeats
+HB_BOOTUP = 0x00
+HB_STOPPED = 0x04
+HB_OPERATIONAL = 0x05
+HB_PRE_OPERATIONAL = 0x7F
+
+# Objects
+OD_CONTROLWORD = 0x6040
+OD_STATUSWORD = 0x6041
+OD_MODES_OF_OPERATION = 0x6060
+OD_MODES_DISPLAY = 0x6061
+OD_POSITION_ACTUAL = 0x6064
+OD_VELOCITY_ACTUAL = 0x606C
+OD_TARGET_TORQUE = 0x6071
+OD_RATED_TORQUE = 0x6076  # mN·m
+OD_TORQUE_ACTUAL = 0x6077
+OD_ABORT_CONNECTION = 0x6007  # what the drive does when the communication is lost
+OD_PRODUCER_HEARTBEAT = 0x1017  # ms
+MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
+ABORT_CONNECTION_QUICK_STOP = 3
+
+# -- precompiled encoders/decoders of the cyclic path ------------------------------------------
+RPDO1_STRUCT = struct.Struct("<Hh")  # controlword, target torque (per-mille)
+TPDO1_STRUCT = struct.Struct("<Hhi")  # statusword, torque actual (per-mille), position (counts)
+TPDO2_STRUCT = struct.Struct("<i")  # velocity actual (counts/s)
+EMCY_STRUCT = struct.Struct("<HB5s")  # error code, error register, manufacturer data
+SDO_STRUCT = struct.Struct("<BHB4s")  # command, index, subindex, data
+
+
+class PowerState(enum.IntEnum):
+    """CiA 402 §6.2 power states, decoded from the statusword."""
+
+    NOT_READY_TO_SWITCH_ON = 0
+    SWITCH_ON_DISABLED = 1
+    READY_TO_SWITCH_ON = 2
+    SWITCHED_ON = 3
+    OPERATION_ENABLED = 4
+    QUICK_STOP_ACTIVE = 5
+    FAULT_REACTION_ACTIVE = 6
+    FAULT = 7
+
+
+def decode_statusword(sw: int) -> PowerState:
+    """CiA 402 Table 30 (statusword bits 0-3, 5, 6)."""
+    if sw & 0x4F == 0x00:
+        return PowerState.NOT_READY_TO_SWITCH_ON
+    if sw & 0x4F == 0x40:
+        return PowerState.SWITCH_ON_DISABLED
+    if sw & 0x6F == 0x21:
+        return PowerState.READY_TO_SWITCH_ON
+    if sw & 0x6F == 0x23:
+        return PowerState.SWITCHED_ON
+    if sw & 0x6F == 0x27:
+        return PowerState.OPERATION_ENABLED
+    if sw & 0x6F == 0x07:
+        return PowerState.QUICK_STOP_ACTIVE
+    if sw & 0x4F == 0x0F:
+        return PowerState.FAULT_REACTION_ACTIVE
+    if sw & 0x4F == 0x08:
+        return PowerState.FAULT
+    return PowerState.NOT_READY_TO_SWITCH_ON
+
+
+STATUSWORD_OF = {  # what a drive reports in each state (bit 4 voltage enabled when powered)
+    PowerState.NOT_READY_TO_SWITCH_ON: 0x0000,
+    PowerState.SWITCH_ON_DISABLED: 0x0040,
+    PowerState.READY_TO_SWITCH_ON: 0x0021,
+    PowerState.SWITCHED_ON: 0x0033,
+    PowerState.OPERATION_ENABLED: 0x0037,
+    PowerState.QUICK_STOP_ACTIVE: 0x0017,
+    PowerState.FAULT_REACTION_ACTIVE: 0x001F,
+    PowerState.FAULT: 0x0008,
+}
+
+
+class Command(enum.IntEnum):
+    """Controlword commands (CiA 402 Table 28) and the transitions they trigger."""
+
+    SHUTDOWN = 0x0006  # transitions 2, 6, 8
+    SWITCH_ON = 0x0007  # transition 3 (and 5: disable operation)
+    ENABLE_OPERATION = 0x000F  # transitions 4, 16 (3+4 from READY_TO_SWITCH_ON)
+    DISABLE_VOLTAGE = 0x0000  # transitions 7, 9, 10, 12
+    QUICK_STOP = 0x0002  # transitions 7, 10, 11
+    FAULT_RESET = 0x0080  # transition 15, on the rising edge of bit 7
+
+
+# The controller's side of the state machine: the controlword to send, per state, to move
+# towards ENABLED (transitions 2 → 3 → 4) or DISABLED (7, 9, 10, 12).
+TOWARDS_ENABLED: dict[PowerState, Command] = {
+    PowerState.NOT_READY_TO_SWITCH_ON: Command.DISABLE_VOLTAGE,  # transition 1 is automatic
+    PowerState.SWITCH_ON_DISABLED: Command.SHUTDOWN,  # 2
+    PowerState.READY_TO_SWITCH_ON: Command.SWITCH_ON,  # 3
+    PowerState.SWITCHED_ON: Command.ENABLE_OPERATION,  # 4
+    PowerState.OPERATION_ENABLED: Command.ENABLE_OPERATION,  # stay
+    PowerState.QUICK_STOP_ACTIVE: Command.DISABLE_VOLTAGE,  # 12, then 2 → 3 → 4
+    PowerState.FAULT_REACTION_ACTIVE: Command.DISABLE_VOLTAGE,  # 14 is automatic
+    PowerState.FAULT: Command.DISABLE_VOLTAGE,  # 15 only on a fault-reset request
+}
+
+# Drive side (the simulator's drives): (state, command) → next state, with the transition
+# number of CiA 402 Figure 14.
+TRANSITIONS: dict[tuple[PowerState, Command], tuple[PowerState, int]] = {
+    (PowerState.SWITCH_ON_DISABLED, Command.SHUTDOWN): (PowerState.READY_TO_SWITCH_ON, 2),
+    (PowerState.READY_TO_SWITCH_ON, Command.SWITCH_ON): (PowerState.SWITCHED_ON, 3),
+    (PowerState.READY_TO_SWITCH_ON, Command.ENABLE_OPERATION): (PowerState.SWITCHED_ON, 3),
+    (PowerState.SWITCHED_ON, Command.ENABLE_OPERATION): (PowerState.OPERATION_ENABLED, 4),
+    (PowerState.OPERATION_ENABLED, Command.SWITCH_ON): (PowerState.SWITCHED_ON, 5),
+    (PowerState.SWITCHED_ON, Command.SHUTDOWN): (PowerState.READY_TO_SWITCH_ON, 6),
+    (PowerState.READY_TO_SWITCH_ON, Command.DISABLE_VOLTAGE): (PowerState.SWITCH_ON_DISABLED, 7),
+    (PowerState.READY_TO_SWITCH_ON, Command.QUICK_STOP): (PowerState.SWITCH_ON_DISABLED, 7),
+    (PowerState.OPERATION_ENABLED, Command.SHUTDOWN): (PowerState.READY_TO_SWITCH_ON, 8),
+    (PowerState.OPERATION_ENABLED, Command.DISABLE_VOLTAGE): (PowerState.SWITCH_ON_DISABLED, 9),
+    (PowerState.SWITCHED_ON, Command.DISABLE_VOLTAGE): (PowerState.SWITCH_ON_DISABLED, 10),
+    (PowerState.SWITCHED_ON, Command.QUICK_STOP): (PowerState.SWITCH_ON_DISABLED, 10),
+    (PowerState.OPERATION_ENABLED, Command.QUICK_STOP): (PowerState.QUICK_STOP_ACTIVE, 11),
+    (PowerState.QUICK_STOP_ACTIVE, Command.DISABLE_VOLTAGE): (PowerState.SWITCH_ON_DISABLED, 12),
+    (PowerState.QUICK_STOP_ACTIVE, Command.ENABLE_OPERATION): (PowerState.OPERATION_ENABLED, 16),
+    (PowerState.FAULT, Command.FAULT_RESET): (PowerState.SWITCH_ON_DISABLED, 15),
+}
+
+
+def command_of(controlword: int) -> Command | None:
+    """The command a controlword encodes (CiA 402 Table 28), fault reset first."""
+    if controlword & 0x80:
+        return Command.FAULT_RESET
+    cw = controlword & 0x0F
+    if cw & 0x02 == 0:
+        return Command.DISABLE_VOLTAGE
+    if cw & 0x06 == 0x02:
+        return Command.QUICK_STOP
+    if cw == 0x06 or cw == 0x0E:
+        return Command.SHUTDOWN
+    if cw == 0x07:
+        return Command.SWITCH_ON
+    if cw == 0x0F:
+        return Command.ENABLE_OPERATION
+    return None
+
+
+# -- EMCY error codes (CiA 301 Table 21, CiA 402 Table 2) --------------------------------------
+EMCY_CODES = {
+    0x0000: "error reset or no error",
+    0x1000: "generic error",
+    0x2310: "continuous over-current",
+    0x2320: "short circuit at the outputs",
+    0x3210: "DC link over-voltage",
+    0x3220: "DC link under-voltage",
+    0x4210: "excess temperature, device",
+    0x4310: "excess temperature, drive",
+    0x5530: "EEPROM / data storage",
+    0x6100: "internal software",
+    0x7121: "motor blocked",
+    0x7300: "sensor (encoder) fault",
+    0x7305: "incremental sensor 1 fault",
+    0x8110: "CAN overrun (objects lost)",
+    0x8120: "CAN in error passive mode",
+    0x8130: "life guard or heartbeat error",
+    0x8140: "recovered from bus off",
+    0x8611: "following error",
+    0x8612: "reference limit",
+    0x9000: "external error",
+    0xFF00: "device specific",
+}
+EMCY_CLASSES = {
+    0x1: "generic",
+    0x2: "current",
+    0x3: "voltage",
+    0x4: "temperature",
+    0x5: "device hardware",
+    0x6: "device software",
+    0x7: "additional modules",
+    0x8: "monitoring / communication",
+    0x9: "external",
+    0xF: "device specific",
+}
+
+
+def describe_emcy(code: int) -> str:
+    if code in EMCY_CODES:
+        return EMCY_CODES[code]
+    cls = EMCY_CLASSES.get(code >> 12, "unknown class")
+    return f"{cls} error (code 0x{code:04X})"
+
+
+def sdo_download(index: int, subindex: int, value: int, size: int) -> bytes:
+    """Expedited SDO download request (CiA 301 §7.2.4.3.3): ``size`` bytes of ``value``."""
+    cmd = {1: 0x2F, 2: 0x2B, 3: 0x27, 4: 0x23}[size]
+    data = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little").ljust(4, b"\0")
+    return SDO_STRUCT.pack(cmd, index, subindex, data)
+
+
+def sdo_upload(index: int, subindex: int) -> bytes:
+    return SDO_STRUCT.pack(0x40, index, subindex, b"\0\0\0\0")

@@ -1,0 +1,44 @@
+"""Typed errors of the drivers (in the spirit of python-can's CanError hierarchy).
+
+The cyclic ``read``/``write`` never raise: they record one of these in ``driver.error`` and move
+the lifecycle to ``ERROR``. The set-up calls (``configure``, ``activate``, ...) raise them.
+"""
+
+from __future__ import annotations
+
+
+class DriverError(Exception):
+    """Base of every driver error."""
+
+
+class DriverConfigurationError(DriverError):
+    """The drive configuration is invalid (a config file, a bus option, a bus-load budget)."""
+
+
+class DriverInitializationError(DriverError):
+    """A bus could not be opened, or a drive did not answer during set-up."""
+
+
+class DriverOperationError(DriverError):
+    """An operation failed: a send error, a lifecycle call in the wrong state."""
+
+
+class DriverTimeoutError(DriverError):
+    """A drive stayed silent: no feedback, no heartbeat, no SDO answer in time."""
+
+    def __init__(self, message: str, cable: int | None = None):
+        super().__init__(message)
+        self.cable = cable
+
+
+class DriveFaultError(DriverError):
+    """A drive reported a fault; ``code`` is the drive's error code, ``description`` decodes it."""
+
+    def __init__(self, cable: int, node_id: int, code: int, description: str):
+        super().__init__(
+            f"drive of cable index {cable} (node {node_id}) fault 0x{code:04X}: {description}"
+        )
+        self.cable = cable
+        self.node_id = node_id
+        self.code = code
+        self.description = description

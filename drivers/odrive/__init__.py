@@ -1,0 +1,1 @@
+"""ODrive motor controllers over the CAN Simple protocol."""

@@ -1,0 +1,231 @@
+"""ODrive axes in torque control over CAN Simple, sharing everything above the protocol.
+
+Set-up sends Set_Controller_Mode (torque, passthrough); enabling is Set_Axis_State
+CLOSED_LOOP_CONTROL, disabling IDLE, fault reset Clear_Errors. The axes stream their
+heartbeat, encoder estimates and torques cyclically (configured on the ODrive); the cyclic
+``write`` sends Set_Input_Torque to each axis.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from typing import Any
+
+import can
+import numpy as np
+
+from drivers.base import DriveState, WinchDriver, register_driver
+from drivers.buses import TrafficLog, open_bus
+from drivers.errors import DriveFaultError, DriverError, DriverOperationError, DriverTimeoutError
+from drivers.odrive import protocol as p
+
+TWO_PI = 2.0 * math.pi
+
+
+@register_driver
+class ODriveDriver(WinchDriver):
+    name = "odrive"
+
+    def __init__(self, model: Any, **kwargs: Any):
+        super().__init__(model, **kwargs)
+        m = self.m
+        self.buses: list[can.BusABC] = []
+        self.log: TrafficLog | None = None
+        self.node = np.zeros(m, dtype=np.int64)
+        self.bus_of = np.zeros(m, dtype=np.int64)
+        for b, bus in enumerate(self.config.buses):
+            for c, n in zip(bus.cables, bus.node_ids, strict=True):
+                self.node[c], self.bus_of[c] = n, b
+        self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
+        for c in range(m):
+            b, n = int(self.bus_of[c]), int(self.node[c])
+            for cmd in (p.HEARTBEAT, p.GET_ENCODER_ESTIMATES, p.GET_TORQUES):
+                self._dispatch[(b, p.arbitration_id(n, cmd))] = (cmd, c)
+        self._torque_msg = [
+            can.Message(
+                arbitration_id=p.arbitration_id(int(self.node[c]), p.SET_INPUT_TORQUE),
+                data=bytearray(4),
+                is_extended_id=False,
+            )
+            for c in range(m)
+        ]
+        self.axis_state = [p.AxisState.UNDEFINED] * m
+        self.axis_error = np.zeros(m, dtype=np.int64)
+        self._fresh = np.zeros(m, dtype=bool)
+        self._fb_time = np.full(m, -math.inf)
+        self._last_hb = np.full(m, -math.inf)
+        self._missed = np.zeros(m, dtype=np.int64)
+        self._enable: bool | None = None
+        self._enable_sent: bool | None = None
+        self._clear = False
+        self._started = False
+        self._last_read = -math.inf
+        self._fail_streak = 0
+
+    def _open(self) -> None:
+        for b, cfg in enumerate(self.config.buses):
+            self.buses.append(open_bus(cfg, self.bus_overrides, b))
+        if self.config.log_file:
+            self.log = TrafficLog(self.config.log_file)
+
+    def _close(self) -> None:
+        for bus in self.buses:
+            with contextlib.suppress(Exception):
+                bus.shutdown()
+        self.buses = []
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+
+    def _send_cmd(self, c: int, cmd: int, data: bytes) -> None:
+        self._send(
+            int(self.bus_of[c]),
+            can.Message(
+                arbitration_id=p.arbitration_id(int(self.node[c]), cmd),
+                data=data,
+                is_extended_id=False,
+            ),
+        )
+
+    def _send(self, b: int, msg: can.Message) -> None:
+        try:
+            self.buses[b].send(msg, timeout=0)
+        except can.CanError:
+            self.stats.send_errors += 1
+            self._fail_streak += 1
+            return
+        self._fail_streak = 0
+        self.stats.frames_sent += 1
+        if self.log is not None:
+            self.log(msg)
+
+    def _configure_drives(self, timeout: float) -> None:
+        for c in range(self.m):
+            self._send_cmd(
+                c,
+                p.SET_CONTROLLER_MODE,
+                p.MODE_STRUCT.pack(p.CONTROL_MODE_TORQUE, p.INPUT_MODE_PASSTHROUGH),
+            )
+            self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(p.AxisState.IDLE))
+        self._started = True
+        deadline = self.clock() + timeout
+        while True:
+            now = self.clock()
+            self._read_internal(now)
+            self._write_internal(now, np.zeros(self.m))
+            if np.all(np.isfinite(self._fb_time)) and np.all(np.isfinite(self._last_hb)):
+                return
+            if now > deadline:
+                silent = [c for c in range(self.m) if not np.isfinite(self._fb_time[c])]
+                raise DriverTimeoutError(
+                    f"no encoder estimates from the ODrive axes of cable indices {silent} "
+                    f"within {timeout:g} s",
+                    silent[0] if silent else None,
+                )
+            self.wait(self.period)
+
+    def _request_enable(self, enable: bool) -> None:
+        self._enable = enable
+
+    def _fault_reset(self) -> None:
+        self._clear = True
+
+    def _drain(self, t: float) -> None:
+        for b, bus in enumerate(self.buses):
+            while True:
+                msg = bus.recv(0)
+                if msg is None:
+                    break
+                self.stats.frames_received += 1
+                if self.log is not None:
+                    self.log(msg)
+                key = self._dispatch.get((b, msg.arbitration_id))
+                if key is None or msg.is_extended_id or msg.is_remote_frame:
+                    self.stats.frames_ignored += 1
+                    continue
+                cmd, c = key
+                data = msg.data
+                if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
+                    pos, vel = p.ENCODER_STRUCT.unpack(data)
+                    self.states.position[c] = pos * TWO_PI
+                    self.states.velocity[c] = vel * TWO_PI
+                    self._fresh[c] = True
+                    self._fb_time[c] = t
+                elif cmd == p.GET_TORQUES and len(data) == 8:
+                    self.states.torque[c] = p.TORQUES_STRUCT.unpack(data)[1]
+                elif cmd == p.HEARTBEAT and len(data) >= 7:
+                    err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
+                    self.axis_error[c] = err
+                    try:
+                        self.axis_state[c] = p.AxisState(state)
+                    except ValueError:
+                        self.axis_state[c] = p.AxisState.UNDEFINED
+                    self._last_hb[c] = t
+                else:
+                    self.stats.frames_ignored += 1
+
+    def _read_internal(self, t: float) -> DriverError | None:
+        self._fresh[:] = False
+        self._drain(t)
+        elapsed = t > self._last_read  # a second read at the same instant misses nothing
+        self._last_read = t
+        st = self.states
+        err: DriverError | None = None
+        for c in range(self.m):
+            if self._fresh[c]:
+                self._missed[c] = 0
+            elif elapsed and self._started and math.isfinite(self._fb_time[c]):
+                self._missed[c] += 1
+                self.stats.missed_feedback += 1
+            st.feedback_age[c] = t - self._fb_time[c]
+            code = int(self.axis_error[c])
+            st.fault_code[c] = code
+            if code:
+                st.state[c] = DriveState.FAULT
+            elif self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL:
+                st.state[c] = DriveState.ENABLED
+            elif self.axis_state[c] is p.AxisState.IDLE:
+                st.state[c] = DriveState.DISABLED
+            else:
+                st.state[c] = DriveState.UNKNOWN
+            if err is None and code:
+                err = DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
+            if err is None and self._missed[c] > self.config.missed_feedback_limit:
+                err = DriverTimeoutError(
+                    f"ODrive axis of cable index {c} (node {int(self.node[c])}): no encoder "
+                    f"estimate for {int(self._missed[c])} cycles",
+                    c,
+                )
+            if (
+                err is None
+                and self._started
+                and math.isfinite(self._last_hb[c])
+                and t - self._last_hb[c] > self.config.heartbeat_timeout
+            ):
+                err = DriverTimeoutError(
+                    f"ODrive axis of cable index {c} (node {int(self.node[c])}) lost: no "
+                    f"heartbeat for {t - self._last_hb[c]:.3f} s",
+                    c,
+                )
+        return err
+
+    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
+        if self._clear:
+            for c in range(self.m):
+                self._send_cmd(c, p.CLEAR_ERRORS, b"")
+                self.axis_error[c] = 0
+            self._clear = False
+        if self._enable is not None and self._enable != self._enable_sent:
+            state = p.AxisState.CLOSED_LOOP_CONTROL if self._enable else p.AxisState.IDLE
+            for c in range(self.m):
+                self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(state))
+            self._enable_sent = self._enable
+        pack = p.TORQUE_STRUCT.pack_into
+        for c in range(self.m):
+            msg = self._torque_msg[c]
+            pack(msg.data, 0, float(torques[c]))
+            self._send(int(self.bus_of[c]), msg)
+        if self._fail_streak > 10:
+            return DriverOperationError(f"CAN send failed {self._fail_streak} times in a row")
+        return None

@@ -1,0 +1,1 @@
+"""Drive emulators: CAN nodes that answer the frames real drives answer."""

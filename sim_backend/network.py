@@ -1,0 +1,199 @@
+"""The simulated robot behind the CAN boundary: drive emulators on python-can buses + physics.
+
+``advance(dt)`` is one step of simulated time: frames waiting on the buses are handled at the
+current time (a SYNC latches the RPDOs and samples the TPDOs), heartbeats and timeouts are
+checked, then the physics integrates ``dt``. In lock-step (tests) the controller calls it after
+each of its cycles; in real time (``cdprctl sim``) a loop calls it against the wall clock.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import can
+
+from cdprctl.model.robot import RobotModel
+from drivers.buses import open_bus
+from drivers.cia402 import protocol as p402
+from sim_backend.drives.cia402 import Cia402Drive
+from sim_backend.plant import CdprPlant
+
+
+class SimNetwork:
+    def __init__(
+        self,
+        model: RobotModel,
+        plant: CdprPlant,
+        bus_overrides: dict[str, Any] | None = None,
+        start_time: float = 0.0,
+    ):
+        self.model = model
+        self.plant = plant
+        self.cfg = model.drives
+        self.time = start_time
+        self.buses: list[can.BusABC] = [
+            open_bus(b, bus_overrides, i) for i, b in enumerate(self.cfg.buses)
+        ]
+        self.protocol = self.cfg.driver
+        self.nodes: list[dict[int, Any]] = []
+        self.drives: list[Any] = [None] * model.n_cables
+        for bcfg in self.cfg.buses:
+            table: dict[int, Any] = {}
+            for c, n in zip(bcfg.cables, bcfg.node_ids, strict=True):
+                w = model.cables[c].winch
+                if self.protocol == "odrive":
+                    from sim_backend.drives.odrive import ODriveAxis
+
+                    drive: Any = ODriveAxis(n, c, plant, w.torque_limit, self.cfg.comm_timeout)
+                else:
+                    drive = Cia402Drive(
+                        n,
+                        c,
+                        plant,
+                        self.cfg.rated_torque,
+                        w.encoder_counts_per_rev,
+                        w.torque_limit,
+                        self.cfg.comm_timeout,
+                        self.cfg.velocity_source == "pdo",
+                    )
+                table[n] = drive
+                self.drives[c] = drive
+            self.nodes.append(table)
+        self.frames_in = 0
+        self.frames_out = 0
+        self.tx_filter: Any = None  # fault injection hook: msg -> list of msgs to really send
+
+    def close(self) -> None:
+        for bus in self.buses:
+            bus.shutdown()
+        self.buses = []
+
+    def __enter__(self) -> SimNetwork:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _send(self, b: int, msgs: list[can.Message]) -> None:
+        for msg in msgs:
+            out = [msg] if self.tx_filter is None else self.tx_filter(msg, self.time)
+            for m in out:
+                m.timestamp = self.time
+                self.buses[b].send(m)
+                self.frames_out += 1
+
+    def process(self) -> None:
+        """Handle every frame waiting on every bus, at the current time."""
+        t = self.time
+        for b, bus in enumerate(self.buses):
+            table = self.nodes[b]
+            while True:
+                msg = bus.recv(0)
+                if msg is None:
+                    break
+                self.frames_in += 1
+                if self.protocol == "odrive":
+                    self._send(b, self._odrive_frame(table, msg, t))
+                else:
+                    self._send(b, self._cia402_frame(table, msg, t))
+
+    def _cia402_frame(self, table: dict[int, Any], msg: can.Message, t: float) -> list[can.Message]:
+        if msg.is_extended_id or msg.is_remote_frame:
+            return []
+        arb, data = msg.arbitration_id, bytes(msg.data)
+        if arb == p402.NMT and len(data) == 2:
+            for n, d in table.items():
+                if data[1] in (0, n):
+                    d.on_nmt(data[0])
+            return []
+        if arb == p402.SYNC:
+            out: list[can.Message] = []
+            for d in table.values():
+                out += d.on_sync(t)
+            return out
+        if p402.RPDO1 < arb <= p402.RPDO1 + 127 and (arb - p402.RPDO1) in table:
+            table[arb - p402.RPDO1].on_rpdo(data, t)
+            return []
+        if p402.SDO_RX < arb <= p402.SDO_RX + 127 and (arb - p402.SDO_RX) in table:
+            reply = table[arb - p402.SDO_RX].on_sdo(data)
+            return [reply] if reply is not None else []
+        return []  # heartbeats of the controller, foreign ids: ignored, as a drive would
+
+    def _odrive_frame(self, table: dict[int, Any], msg: can.Message, t: float) -> list[can.Message]:
+        if msg.is_extended_id:
+            return []
+        node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
+        d = table.get(node)
+        if d is None:
+            return []
+        return d.on_frame(cmd, bytes(msg.data), msg.is_remote_frame, t)
+
+    def tick(self) -> None:
+        for b, table in enumerate(self.nodes):
+            out: list[can.Message] = []
+            for d in table.values():
+                out += d.tick(self.time)
+            self._send(b, out)
+
+    def advance(self, dt: float) -> None:
+        """Frames at the current time, then ``dt`` seconds of physics."""
+        self.process()
+        self.tick()
+        self.plant.step(dt)
+        self.time += dt
+
+
+class LockStep:
+    """In-process, deterministic: a driver and the simulated robot sharing a simulated clock.
+
+    The driver's ``wait`` advances the simulation, so blocking set-up calls work unchanged;
+    ``cycle(torques)`` is one control period: read, write, advance.
+    """
+
+    _counter = 0
+
+    def __init__(
+        self,
+        model: RobotModel,
+        period: float = 0.002,
+        driver: str | None = None,
+        plant: CdprPlant | None = None,
+    ):
+        from drivers import create_driver
+
+        LockStep._counter += 1
+        channels = [
+            f"lockstep-{id(self)}-{LockStep._counter}-{b}" for b in range(len(model.drives.buses))
+        ]
+        overrides = {"interface": "inprocess", "channels": channels}
+        self.model = model
+        self.period = period
+        self.plant = plant or CdprPlant(model)
+        self.net = SimNetwork(model, self.plant, overrides)
+        self.driver = create_driver(
+            model,
+            driver,
+            period=period,
+            clock=self.clock,
+            wait=self.net.advance,
+            bus_overrides=overrides,
+        )
+
+    def clock(self) -> float:
+        return self.net.time
+
+    def cycle(self, torques: Any) -> None:
+        t = self.net.time
+        self.driver.read(t)
+        self.driver.write(t, torques)
+        self.net.advance(self.period)
+
+    def close(self) -> None:
+        self.driver.shutdown()
+        self.net.close()
+
+    def __enter__(self) -> LockStep:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,373 @@
+"""The physics of the simulated robot: winches, elastic cables over swivel pulleys, platform.
+
+Conventions (docs/simulator.md):
+
+* Motor angle ``θ`` (rad, motor shaft) positive winds the cable in; a positive motor torque pulls
+  the cable. The unstretched (paid-out) length of cable i is ``l0 = l_home − (r_d/G) θ``: the
+  encoders are calibrated so that ``θ = 0`` is the unstretched length equal to the geometric
+  length at the home pose.
+* Cable: tension only, ``t = k_eff (l − l0) + c (dl/dt − dl0/dt)`` when taut, else 0, with
+  ``k = E·S/(l0 + l_w)`` (or a fixed stiffness) in series with the optional spring; ``l`` the
+  geometric length (free part + arc on the pulley). Pulley friction as a capstan factor
+  ``exp(±μ β)`` on the winch side, by the direction the cable moves.
+* Winch: ``J θ̈ = τ_m − (r_d/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)``; a closed brake holds ``θ``
+  (a slipping brake, a fault, lets the drum pay out at a set rate).
+* Platform: a rigid body (mass, COM, inertia about the COM), Newton-Euler at the COM, gravity,
+  an external wrench at ``P`` (force and moment, base frame).
+
+Integrator: semi-implicit (symplectic) Euler at a fixed physics step (default 0.2 ms = 5 kHz),
+compiled with numba. Symplectic: for a conservative system the energy error stays bounded
+instead of drifting (tested); the rotation is advanced with the exponential map.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray
+
+
+@dataclass
+class PlantOptions:
+    physics_dt: float = 0.0002  # s
+    pulley_friction: float = 0.0  # μ of the capstan factor
+    damping_ratio: float = (
+        0.02  # cable damping as a fraction of critical (when the config has none)
+    )
+    coulomb_velocity: float = 0.05  # rad/s, smoothing of the Coulomb friction sign
+
+
+class CdprPlant:
+    """State and parameters of the simulated robot; ``step(dt)`` integrates."""
+
+    def __init__(self, model: RobotModel, options: PlantOptions | None = None):
+        self.model = model
+        self.opt = options or PlantOptions()
+        m = model.n_cables
+        self.m = m
+        c = model.cables
+        self.drum_ratio = np.array([w.winch.drum_radius / w.winch.gear_ratio for w in c])  # m/rad
+        self.rotor_inertia = np.array([w.winch.rotor_inertia for w in c])
+        self.viscous = np.array([w.winch.viscous_friction for w in c])
+        self.coulomb = np.array([w.winch.coulomb_friction for w in c])
+        self.k_fixed = np.array([x.stiffness if x.stiffness is not None else 0.0 for x in c])
+        self.es = np.array([(x.youngs_modulus or 0.0) * (x.cross_section or 0.0) for x in c])
+        self.k_spring = np.array([x.spring_stiffness or 0.0 for x in c])
+        self.l_winch = np.array([x.length_to_winch for x in c])
+        self.kin = KinematicsData(model)
+        inverse_kinematics(model, self.kin, model.home.position, model.home.rotation)
+        self.l_home = self.kin.length.copy()
+        k_home = model.cable_stiffness(self.l_home)
+        # cable damping: the config's, else a fraction of the critical damping of the platform
+        # mass spread over the cables
+        crit = 2.0 * np.sqrt(k_home * model.platform.mass / m)
+        self.damping = np.array(
+            [
+                x.damping if x.damping > 0 else self.opt.damping_ratio * crit[i]
+                for i, x in enumerate(c)
+            ]
+        )
+        self.mass = model.platform.mass
+        self.com = np.array(model.platform.com)
+        self.inertia = np.array(model.platform.inertia)
+        self.gravity = np.array(model.gravity)
+        # state
+        self.com_pos = np.zeros(3)
+        self.R = np.eye(3)
+        self.v = np.zeros(3)
+        self.w = np.zeros(3)
+        self.theta = np.zeros(m)
+        self.theta_dot = np.zeros(m)
+        self.time = 0.0
+        # inputs
+        self.motor_torque = np.zeros(m)  # N·m, what the drives apply
+        self.brake = np.ones(m, dtype=np.bool_)  # True: the drum is held
+        self.brake_slip = np.zeros(m)  # rad/s at which a held drum slips (fault injection)
+        self.cable_cut = np.zeros(m, dtype=np.bool_)
+        self.ext_force = np.zeros(3)  # N at P, base frame
+        self.ext_moment = np.zeros(3)  # N·m, base frame
+        # outputs of the last step
+        self.tension = np.zeros(m)
+        self._scratch = (
+            np.zeros((3, m)),
+            np.zeros((3, m)),
+            np.zeros((3, m)),
+            np.zeros(m),
+            np.zeros(m),
+            np.zeros(m),
+            np.zeros((6, m)),
+        )
+        self.set_pose(model.home.position, model.home.rotation, None)
+
+    # -- set-up -------------------------------------------------------------------------------
+    def set_pose(self, position: FloatArray, R: FloatArray, tensions: FloatArray | None) -> None:
+        """Platform at rest at ``(position, R)``; cables pre-tensioned to ``tensions`` (N) by
+        choosing the motor angles; brakes closed. Default tensions: the equilibrium the
+        controller will find (the barycenter TDA under gravity), so a start is not a fall."""
+        model = self.model
+        inverse_kinematics(model, self.kin, position, R)
+        if tensions is None:
+            tensions = equilibrium_tensions(model, self.kin)
+        t = np.asarray(tensions, float)
+        length = self.kin.length
+        # unstretched length l0 giving tension t at geometric length l:
+        # l − l0 = t/k_s + t (l0 + l_w)/(E S)   or   t/k_s + t/k
+        l0 = np.empty(self.m)
+        for i in range(self.m):
+            extra = t[i] / self.k_spring[i] if self.k_spring[i] > 0 else 0.0
+            if self.k_fixed[i] > 0:
+                l0[i] = length[i] - extra - t[i] / self.k_fixed[i]
+            else:
+                es = self.es[i]
+                l0[i] = (length[i] - extra - t[i] * self.l_winch[i] / es) / (1.0 + t[i] / es)
+        self.theta[:] = (self.l_home - l0) / self.drum_ratio
+        self.theta_dot[:] = 0.0
+        self.R[:] = R
+        self.com_pos[:] = position + R @ self.com
+        self.v[:] = 0.0
+        self.w[:] = 0.0
+        self.brake[:] = True
+        self.tension[:] = t
+
+    @property
+    def position(self) -> FloatArray:
+        """Platform reference point P (m, base frame)."""
+        return self.com_pos - self.R @ self.com
+
+    def unstretched_length(self) -> FloatArray:
+        return self.l_home - self.drum_ratio * self.theta
+
+    # -- integration --------------------------------------------------------------------------
+    def step(self, duration: float) -> None:
+        """Advance ``duration`` seconds in physics steps of ``options.physics_dt``."""
+        n = max(1, round(duration / self.opt.physics_dt))
+        dt = duration / n
+        k = self.kin
+        physics_kernel(
+            n,
+            dt,
+            k.anchors,
+            k.attachments,
+            k.pulley_radius,
+            k.pulley_axis,
+            self.com,
+            self.mass,
+            self.inertia,
+            self.gravity,
+            self.l_home,
+            self.drum_ratio,
+            self.rotor_inertia,
+            self.viscous,
+            self.coulomb,
+            self.opt.coulomb_velocity,
+            self.k_fixed,
+            self.es,
+            self.k_spring,
+            self.l_winch,
+            self.damping,
+            self.opt.pulley_friction,
+            self.com_pos,
+            self.R,
+            self.v,
+            self.w,
+            self.theta,
+            self.theta_dot,
+            self.motor_torque,
+            self.brake,
+            self.brake_slip,
+            self.cable_cut,
+            self.ext_force,
+            self.ext_moment,
+            self.tension,
+            *self._scratch,
+        )
+        self.time += duration
+
+    def energy(self) -> float:
+        """Kinetic + cable elastic + gravity potential energy (J), winches included; for the
+        drift test (cable damping and friction make it decrease)."""
+        inverse_kinematics(self.model, self.kin, self.position, self.R)
+        e = 0.5 * self.mass * float(self.v @ self.v)
+        Iw = self.R @ self.inertia @ self.R.T
+        e += 0.5 * float(self.w @ Iw @ self.w)
+        e += 0.5 * float(np.sum(self.rotor_inertia * self.theta_dot**2))
+        e -= self.mass * float(self.gravity @ self.com_pos)
+        l0 = self.unstretched_length()
+        stretch = self.kin.length - l0
+        for i in range(self.m):
+            if stretch[i] > 0 and not self.cable_cut[i]:
+                k = _k_eff(self.k_fixed[i], self.es[i], self.k_spring[i], l0[i] + self.l_winch[i])
+                e += 0.5 * k * stretch[i] ** 2
+        return e
+
+
+def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
+    """Tensions (N) holding the platform's weight at the pose of ``kin``: the barycenter (or
+    QP for r != 2); the minimum tensions when the pose cannot be held."""
+    from cdprctl.tda import TDAMethod, TDAOptions, TensionDistributor
+
+    method = TDAMethod.BARYCENTER if model.redundancy == 2 else TDAMethod.QP
+    out = TensionDistributor(model, TDAOptions(method=method)).solve(
+        kin.W, -model.gravity_wrench(kin.rotation)
+    )
+    return out.tensions.copy() if out.ok else model.tension_min.copy()
+
+
+@njit(cache=True)
+def _k_eff(k_fixed, es, k_spring, l_total):  # pragma: no cover - compiled
+    k = k_fixed if k_fixed > 0.0 else es / l_total
+    if k_spring > 0.0:
+        k = 1.0 / (1.0 / k + 1.0 / k_spring)
+    return k
+
+
+@njit(cache=True)
+def physics_kernel(
+    n,
+    dt,
+    anchors,
+    attach,
+    pr,
+    pa,
+    com,
+    mass,
+    inertia,
+    g,
+    l_home,
+    drum_ratio,
+    J,
+    visc,
+    coul,
+    coul_v,
+    k_fixed,
+    es,
+    k_spring,
+    l_w,
+    damping,
+    mu_p,
+    com_pos,
+    R,
+    v,
+    w,
+    theta,
+    theta_dot,
+    tau_m,
+    brake,
+    slip,
+    cut,
+    f_ext,
+    m_ext,
+    tension,
+    rbT,
+    exitT,
+    vT,
+    free_len,
+    wrap,
+    length,
+    W,
+):  # pragma: no cover - compiled
+    m = anchors.shape[0]
+    P = np.empty(3)
+    twist = np.empty(6)
+    for _ in range(n):
+        Rc = R @ com
+        for a in range(3):
+            P[a] = com_pos[a] - Rc[a]
+        ik_kernel(anchors, attach, pr, pa, P, R, rbT, exitT, vT, free_len, wrap, length, W)
+        # twist at P: v_P = v_com + ω × (P − COM) = v_com − ω × Rc
+        twist[0] = v[0] - (w[1] * Rc[2] - w[2] * Rc[1])
+        twist[1] = v[1] - (w[2] * Rc[0] - w[0] * Rc[2])
+        twist[2] = v[2] - (w[0] * Rc[1] - w[1] * Rc[0])
+        twist[3], twist[4], twist[5] = w[0], w[1], w[2]
+        F = np.zeros(3)
+        M = np.zeros(3)  # about the COM
+        for i in range(m):
+            l0 = l_home[i] - drum_ratio[i] * theta[i]
+            e = length[i] - l0
+            t = 0.0
+            if e > 0.0 and not cut[i]:
+                k = _k_eff(k_fixed[i], es[i], k_spring[i], l0 + l_w[i])
+                ldot = 0.0
+                for a in range(6):
+                    ldot -= W[a, i] * twist[a]  # dl/dt = −Wᵀ twist
+                edot = ldot + drum_ratio[i] * theta_dot[i]
+                t = k * e + damping[i] * edot
+                if t < 0.0:
+                    t = 0.0
+            tension[i] = t
+            if t > 0.0:
+                fx, fy, fz = t * W[0, i], t * W[1, i], t * W[2, i]
+                F[0] += fx
+                F[1] += fy
+                F[2] += fz
+                # moment about the COM: (R b_i − R c) × f
+                rx, ry, rz = rbT[0, i] - Rc[0], rbT[1, i] - Rc[1], rbT[2, i] - Rc[2]
+                M[0] += ry * fz - rz * fy
+                M[1] += rz * fx - rx * fz
+                M[2] += rx * fy - ry * fx
+            # winch: J θ̈ = τ_m − (r/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)
+            if brake[i]:
+                theta_dot[i] = -slip[i]  # a slipping brake pays cable out
+                theta[i] += theta_dot[i] * dt
+            else:
+                cap = 1.0
+                if mu_p > 0.0 and wrap[i] > 0.0:
+                    cap = math.exp(mu_p * wrap[i] * math.tanh(theta_dot[i] / coul_v))
+                acc = (
+                    tau_m[i]
+                    - drum_ratio[i] * t * cap
+                    - visc[i] * theta_dot[i]
+                    - coul[i] * math.tanh(theta_dot[i] / coul_v)
+                ) / J[i]
+                theta_dot[i] += acc * dt
+                theta[i] += theta_dot[i] * dt
+        # external wrench at P: moment about the COM adds (P − COM) × f = −Rc × f
+        for a in range(3):
+            F[a] += mass * g[a] + f_ext[a]
+            M[a] += m_ext[a]
+        M[0] += -(Rc[1] * f_ext[2] - Rc[2] * f_ext[1])
+        M[1] += -(Rc[2] * f_ext[0] - Rc[0] * f_ext[2])
+        M[2] += -(Rc[0] * f_ext[1] - Rc[1] * f_ext[0])
+        # Newton-Euler at the COM, world frame: I_w ω̇ = M − ω × I_w ω
+        Iw = R @ inertia @ R.T
+        Iww = Iw @ w
+        rhs = np.empty(3)
+        rhs[0] = M[0] - (w[1] * Iww[2] - w[2] * Iww[1])
+        rhs[1] = M[1] - (w[2] * Iww[0] - w[0] * Iww[2])
+        rhs[2] = M[2] - (w[0] * Iww[1] - w[1] * Iww[0])
+        wdot = np.linalg.solve(Iw, rhs)
+        for a in range(3):
+            v[a] += F[a] / mass * dt
+            w[a] += wdot[a] * dt
+            com_pos[a] += v[a] * dt
+        # R ← exp([ω dt]×) R
+        x, y, z = w[0] * dt, w[1] * dt, w[2] * dt
+        th2 = x * x + y * y + z * z
+        if th2 < 1e-16:
+            sa, sb = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+        else:
+            th = math.sqrt(th2)
+            sa, sb = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+        E = np.empty((3, 3))
+        E[0, 0], E[0, 1], E[0, 2] = (
+            1 + sb * (x * x - th2),
+            -sa * z + sb * x * y,
+            sa * y + sb * x * z,
+        )
+        E[1, 0], E[1, 1], E[1, 2] = (
+            sa * z + sb * x * y,
+            1 + sb * (y * y - th2),
+            -sa * x + sb * y * z,
+        )
+        E[2, 0], E[2, 1], E[2, 2] = (
+            -sa * y + sb * x * z,
+            sa * x + sb * y * z,
+            1 + sb * (z * z - th2),
+        )
+        R[:, :] = E @ R

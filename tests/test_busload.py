@@ -1,0 +1,56 @@
+"""Bus-load budget: frame sizes with worst-case stuffing, per-bus loads, the CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from conftest import CONFIG
+
+from cdprctl.cli import main
+from cdprctl.model import load_robot
+from cdprctl.model.drives import BusConfig
+from drivers.busload import bus_loads, check_bus_load, frame_bits
+
+
+def test_frame_bits_worst_case_stuffing():
+    # Davis et al. 2007: 8n + 47 + floor((34 + 8n - 1)/4)
+    assert frame_bits(0) == 55
+    assert frame_bits(4) == 95
+    assert frame_bits(8) == 135
+
+
+def test_design_figure_eight_drives(seed000):
+    """DESIGN.md: SYNC + 8 × 4-byte RPDO + 8 × 8-byte TPDO = 1,895 bit-times per cycle,
+    528 Hz at 100 % of 1 Mbit/s."""
+    (bl,) = bus_loads(seed000.drives, 500.0, heartbeat_rate=0.0)
+    assert bl.bits_per_cycle == 1895
+    assert 1e6 / bl.bits_per_cycle == pytest.approx(527.7, abs=0.1)
+    assert bl.load == pytest.approx(0.9475)
+
+
+def test_two_buses_halve_the_load(seed000):
+    buses = (
+        BusConfig("virtual", "a", 1_000_000, (0, 1, 2, 3), (1, 2, 3, 4)),
+        BusConfig("virtual", "b", 1_000_000, (4, 5, 6, 7), (1, 2, 3, 4)),
+    )
+    drives = dataclasses.replace(seed000.drives, buses=buses)
+    loads = bus_loads(drives, 1000.0, heartbeat_rate=0.0)
+    assert [b.bits_per_cycle for b in loads] == [55 + 4 * 95 + 4 * 135] * 2
+    warnings, errors = check_bus_load(drives, 1000.0)
+    assert errors == [] and len(warnings) == 2  # 98.5 %: warned, not refused
+    warnings, errors = check_bus_load(drives, 1100.0)
+    assert len(errors) == 2 and "more than the bus can carry" in errors[0]
+
+
+def test_bus_load_cli(capsys):
+    assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "250"]) == 0
+    out = capsys.readouterr().out
+    assert "1895 bits per cycle" in out and "ok" in out
+    assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "1000"]) == 1
+    assert "REFUSED" in capsys.readouterr().out
+
+
+@pytest.fixture
+def seed000():
+    return load_robot(CONFIG / "seed000.toml")

@@ -1,0 +1,292 @@
+"""Frame-level tests of each protocol on python-can's ``virtual`` bus, against a scripted peer
+that records what the driver sends and answers from a table, in simulated time."""
+
+from __future__ import annotations
+
+import math
+import struct
+import uuid
+
+import can
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.model import load_robot
+from drivers import (
+    DriveFaultError,
+    DriverTimeoutError,
+    Lifecycle,
+    create_driver,
+)
+from drivers.cia402 import protocol as p
+from drivers.odrive import protocol as po
+
+
+class ScriptedPeer:
+    """Answers on a virtual bus; ``answer(msg, t)`` returns frames to send back."""
+
+    def __init__(self, channel: str, answer):
+        self.bus = can.Bus(interface="virtual", channel=channel)
+        self.answer = answer
+        self.rx: list[tuple[float, int, bytes]] = []
+        self.t = 0.0
+
+    def wait(self, dt: float) -> None:  # the driver's wait hook: time passes, the peer works
+        self.pump()
+        self.t += dt
+
+    def pump(self) -> None:
+        while True:
+            msg = self.bus.recv(0)
+            if msg is None:
+                break
+            self.rx.append((self.t, msg.arbitration_id, bytes(msg.data)))
+            for out in self.answer(msg, self.t) or []:
+                self.bus.send(out)
+
+    def sent(self, arb: int) -> list[bytes]:
+        return [d for _, a, d in self.rx if a == arb]
+
+
+def frame(arb: int, data: bytes) -> can.Message:
+    return can.Message(arbitration_id=arb, data=data, is_extended_id=False)
+
+
+class Cia402Script:
+    """A table-driven CiA 402 peer: SDO answers, statusword per controlword, heartbeats."""
+
+    def __init__(self, nodes, cpr=65536):
+        self.state = {n: p.PowerState.SWITCH_ON_DISABLED for n in nodes}
+        self.position = {n: 0 for n in nodes}
+        self.torque = {n: 0 for n in nodes}
+        self.silent: set[int] = set()
+        self.drop_tpdo: set[int] = set()
+        self.emcy: dict[int, int] = {}
+        self.modes = {n: 0 for n in nodes}
+
+    def __call__(self, msg, t):
+        arb, data = msg.arbitration_id, bytes(msg.data)
+        out = []
+        if p.SDO_RX < arb <= p.SDO_RX + 127:
+            n = arb - p.SDO_RX
+            cmd, index, sub, raw = p.SDO_STRUCT.unpack(data)
+            if cmd & 0xE0 == 0x20:
+                if index == p.OD_MODES_OF_OPERATION:
+                    self.modes[n] = raw[0]
+                out.append(frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x60, index, sub, b"\0" * 4)))
+            else:
+                val = self.modes[n] if index == p.OD_MODES_DISPLAY else 0
+                out.append(frame(p.SDO_TX + n,
+                                 p.SDO_STRUCT.pack(0x4F, index, sub, bytes([val, 0, 0, 0]))))
+        elif p.RPDO1 < arb <= p.RPDO1 + 127:
+            n = arb - p.RPDO1
+            cw, tq = p.RPDO1_STRUCT.unpack(data)
+            self.torque[n] = tq
+            nxt = p.TRANSITIONS.get((self.state[n], p.command_of(cw)))
+            if nxt:
+                self.state[n] = nxt[0]
+        elif arb == p.SYNC:
+            for n, st in self.state.items():
+                if n in self.silent or n in self.drop_tpdo:
+                    continue
+                out.append(frame(p.TPDO1 + n, p.TPDO1_STRUCT.pack(
+                    p.STATUSWORD_OF[st], self.torque[n], self.position[n])))
+                out.append(frame(p.HEARTBEAT + n, bytes([p.HB_OPERATIONAL])))
+            for n, code in list(self.emcy.items()):
+                out.append(frame(p.EMCY + n, p.EMCY_STRUCT.pack(code, 1, b"\0" * 5)))
+                self.state[n] = p.PowerState.FAULT
+                del self.emcy[n]
+        return out
+
+
+@pytest.fixture
+def seed():
+    return load_robot(CONFIG / "seed000.toml")
+
+
+def make(model, script, name="cia402"):
+    channel = f"frames-{uuid.uuid4()}"
+    peer = ScriptedPeer(channel, script)
+    drv = create_driver(model, name, period=0.002, clock=lambda: peer.t, wait=peer.wait,
+                        bus_overrides={"interface": "virtual", "channel": channel})
+    return drv, peer
+
+
+def test_cia402_configure_frames(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        assert peer.sent(p.NMT)[0] == bytes([0x01, 0x00])  # NMT start, all nodes
+        sdo = peer.sent(p.SDO_RX + 1)
+        assert sdo[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
+        assert sdo[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0xA7, 0x00, 0, 0])  # 0x1017 := 167 ms
+        assert sdo[2] == bytes([0x2B, 0x07, 0x60, 0x00, 0x03, 0x00, 0, 0])  # 0x6007 := quick stop
+        assert sdo[3] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
+        # cyclic: 8 RPDOs then SYNC, disabled drives get "disable voltage" and zero torque
+        assert peer.sent(p.RPDO1 + 3)[-1] == bytes([0x00, 0x00, 0x00, 0x00])
+        order = [a for _, a, _ in peer.rx if a in (p.SYNC, p.RPDO1 + 8)]
+        assert order[:2] == [p.RPDO1 + 8, p.SYNC]
+
+
+def test_cia402_enable_sequence_follows_transition_table(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.activate()
+        assert drv.lifecycle is Lifecycle.ACTIVE
+        cws = [struct.unpack("<H", d[:2])[0] for d in peer.sent(p.RPDO1 + 5)]
+        # disable voltage while configuring, then transitions 2 (0x06), 3 (0x07), 4 (0x0F)
+        steps = [cw for i, cw in enumerate(cws) if i == 0 or cw != cws[i - 1]]
+        assert steps == [0x0000, 0x0006, 0x0007, 0x000F]
+        # torque: 1.3 N·m with rated torque 5 N·m (seed000 drives) is 260 per-mille
+        drv.write(peer.t, np.full(8, 1.3))
+        peer.pump()
+        assert peer.sent(p.RPDO1 + 1)[-1] == struct.pack("<Hh", 0x000F, 260)
+
+
+def test_cia402_position_units_and_wrap(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    cpr = seed.cables[0].winch.encoder_counts_per_rev
+    with drv:
+        drv.configure()
+        script.position[1] = 2**31 - 100
+        for _ in range(2):
+            drv.read(peer.t)
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+        before = drv.states.position[0]
+        script.position[1] = -(2**31) + 100  # +200 counts through the 32-bit wrap
+        drv.read(peer.t)
+        drv.write(peer.t, np.zeros(8))
+        peer.wait(0.002)
+        drv.read(peer.t)
+        assert drv.states.position[0] - before == pytest.approx(200 * 2 * math.pi / cpr)
+        # velocity derived between the two SYNCs (0.002 s apart)
+        assert drv.states.velocity[0] == pytest.approx(200 * 2 * math.pi / cpr / 0.002)
+
+
+def test_cia402_emcy_is_a_typed_fault_and_reset_recovers(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.activate()
+        script.emcy[4] = 0x2310
+        for _ in range(3):
+            drv.read(peer.t)
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+        assert drv.lifecycle is Lifecycle.ERROR
+        assert isinstance(drv.error, DriveFaultError)
+        assert drv.error.code == 0x2310 and drv.error.cable == 3
+        assert "over-current" in str(drv.error)
+        drv.recover()
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        cws = [struct.unpack("<H", d[:2])[0] for d in peer.sent(p.RPDO1 + 4)]
+        i = cws.index(0x0080)  # fault reset, transition 15, after a 0x0000: a rising edge
+        assert cws[i - 1] == 0x0000
+
+
+def test_cia402_missing_feedback_tolerated_then_fault(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        script.drop_tpdo.add(2)
+        for k in range(seed.drives.missed_feedback_limit + 2):
+            drv.read(peer.t)
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+            if k == 1:
+                assert drv.lifecycle is Lifecycle.INACTIVE
+                assert drv.states.feedback_age[1] > 0.002  # one TPDO missed: reported
+        assert drv.lifecycle is Lifecycle.ERROR
+        assert isinstance(drv.error, DriverTimeoutError) and drv.error.cable == 1
+
+
+def test_cia402_lost_heartbeat(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        script.silent.add(6)
+        t_end = peer.t + seed.drives.heartbeat_timeout + 0.05
+        while peer.t < t_end and drv.lifecycle is Lifecycle.INACTIVE:
+            drv.read(peer.t)
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+        assert isinstance(drv.error, DriverTimeoutError)
+        assert drv.error.cable == 5
+
+
+def test_cia402_ignores_foreign_and_malformed_frames(seed):
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        junk = [frame(0x123, b"\1\2"), frame(p.TPDO1 + 1, b"\0\0"),
+                can.Message(arbitration_id=0x181, data=b"\0" * 8, is_extended_id=True)]
+        for m in junk:
+            peer.bus.send(m)
+        drv.read(peer.t + 0.001)
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        assert drv.stats.frames_ignored >= 3
+
+
+class ODriveScript:
+    def __init__(self, nodes):
+        self.state = {n: po.AxisState.IDLE for n in nodes}
+        self.error = {n: 0 for n in nodes}
+        self.mode = {n: 0 for n in nodes}
+        self.torque = {n: 0.0 for n in nodes}
+
+    def __call__(self, msg, t):
+        node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
+        data = bytes(msg.data)
+        if cmd == po.SET_CONTROLLER_MODE:
+            self.mode[node] = po.MODE_STRUCT.unpack(data)[0]
+        elif cmd == po.SET_AXIS_STATE:
+            self.state[node] = po.AxisState(po.U32_STRUCT.unpack(data)[0])
+        elif cmd == po.SET_INPUT_TORQUE:
+            self.torque[node] = po.TORQUE_STRUCT.unpack(data)[0]
+            if node == 8:  # the last axis of the cycle: stream everyone's feedback
+                out = []
+                for n in self.state:
+                    out.append(frame(po.arbitration_id(n, po.GET_ENCODER_ESTIMATES),
+                                     po.ENCODER_STRUCT.pack(0.25 * n, 0.0)))
+                    out.append(frame(po.arbitration_id(n, po.HEARTBEAT), po.HEARTBEAT_STRUCT.pack(
+                        self.error[n], int(self.state[n]), 0, 0)))
+                return out
+        elif cmd == po.CLEAR_ERRORS:
+            self.error[node] = 0
+        return []
+
+
+def test_odrive_frames(seed):
+    script = ODriveScript(range(1, 9))
+    drv, peer = make(seed, script, "odrive")
+    with drv:
+        drv.configure()
+        assert peer.sent(po.arbitration_id(3, po.SET_CONTROLLER_MODE))[0] == struct.pack(
+            "<II", 1, 1)  # torque control, passthrough
+        drv.activate()
+        assert peer.sent(po.arbitration_id(3, po.SET_AXIS_STATE))[-1] == struct.pack("<I", 8)
+        assert drv.states.position[2] == pytest.approx(0.75 * 2 * math.pi)  # turns → rad
+        drv.write(peer.t, np.full(8, 0.5))
+        peer.pump()
+        assert peer.sent(po.arbitration_id(2, po.SET_INPUT_TORQUE))[-1] == struct.pack("<f", 0.5)
+        script.error[7] = 0x00002000  # motor over-temperature
+        for _ in range(2):
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+            drv.read(peer.t)
+        assert isinstance(drv.error, DriveFaultError)
+        assert "motor over-temperature" in str(drv.error)
+        drv.recover()
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        assert peer.sent(po.arbitration_id(7, po.CLEAR_ERRORS))
