@@ -42,11 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_check_config(sub)
     p = sub.add_parser("demo", help="the main job of `make run` on the bundled robots")
     p.set_defaults(func=_cmd_demo)
-    from cdprctl.commands import bus_load
+    from cdprctl.commands import bus_load, sim
     from cdprctl.commands import tda as tda_cmd
 
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
+    sim.add_parser(sub)
     return parser
 
 

@@ -16,12 +16,14 @@ def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int
     """A python-can bus for ``cfg`` (any interface: socketcan, virtual, udp_multicast, ...).
 
     ``overrides`` may replace ``interface``, and ``channel`` (every bus on that one channel:
-    their node ids must then differ) or ``channels`` (one per bus, by ``index``)."""
+    their node ids must then differ) or ``channels`` (one per bus, by ``index``), and add
+    python-can ``options``."""
     o = overrides or {}
     interface = o.get("interface") or cfg.interface
     channels = o.get("channels")
     channel = channels[index] if channels else (o.get("channel") or cfg.channel)
     kwargs: dict[str, Any] = dict(cfg.options)
+    kwargs.update(o.get("options") or {})
     if interface not in ("virtual", "udp_multicast", "inprocess"):
         kwargs.setdefault("bitrate", cfg.bitrate)
     try:

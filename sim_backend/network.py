@@ -61,7 +61,14 @@ class SimNetwork:
             self.nodes.append(table)
         self.frames_in = 0
         self.frames_out = 0
-        self.tx_filter: Any = None  # fault injection hook: msg -> list of msgs to really send
+        # fault injection hooks (sim_backend.faults.FaultInjector.attach)
+        self.tx_filter: Any = None  # (msg, t) -> the frames really sent
+        self.rx_filter: Any = None  # (msg, t) -> False: the frame is lost
+        self.faults: Any = None
+        self._bus_of = {c: b for b, bc in enumerate(self.cfg.buses) for c in bc.cables}
+
+    def bus_index_of(self, cable: int) -> int:
+        return self._bus_of[cable]
 
     def close(self) -> None:
         for bus in self.buses:
@@ -82,16 +89,23 @@ class SimNetwork:
                 self.buses[b].send(m)
                 self.frames_out += 1
 
-    def process(self) -> None:
-        """Handle every frame waiting on every bus, at the current time."""
+    def process(self, first: can.Message | None = None) -> None:
+        """Handle every frame waiting on every bus, at the current time (``first``: a frame
+        already taken from bus 0)."""
         t = self.time
         for b, bus in enumerate(self.buses):
             table = self.nodes[b]
             while True:
-                msg = bus.recv(0)
+                msg: can.Message | None
+                if first is not None and b == 0:
+                    msg, first = first, None
+                else:
+                    msg = bus.recv(0)
                 if msg is None:
                     break
                 self.frames_in += 1
+                if self.rx_filter is not None and not self.rx_filter(msg, t):
+                    continue
                 if self.protocol == "odrive":
                     self._send(b, self._odrive_frame(table, msg, t))
                 else:
@@ -135,12 +149,18 @@ class SimNetwork:
                 out += d.tick(self.time)
             self._send(b, out)
 
-    def advance(self, dt: float) -> None:
+    def advance(self, dt: float, first: can.Message | None = None) -> None:
         """Frames at the current time, then ``dt`` seconds of physics."""
-        self.process()
+        if self.faults is not None:
+            self.faults.apply(self, self.time, dt)
+            for b in range(len(self.buses)):
+                for msg in self.faults.release(self.time):
+                    self.buses[b].send(msg)
+        self.process(first)
         self.tick()
-        self.plant.step(dt)
-        self.time += dt
+        if dt > 0:
+            self.plant.step(dt)
+            self.time += dt
 
 
 class LockStep:

@@ -90,6 +90,7 @@ class CdprPlant:
         self.brake = np.ones(m, dtype=np.bool_)  # True: the drum is held
         self.brake_slip = np.zeros(m)  # rad/s at which a held drum slips (fault injection)
         self.cable_cut = np.zeros(m, dtype=np.bool_)
+        self.drum_slip = np.zeros(m)  # m of cable slipped off the drum, unseen by the encoder
         self.ext_force = np.zeros(3)  # N at P, base frame
         self.ext_moment = np.zeros(3)  # N·m, base frame
         # outputs of the last step
@@ -141,7 +142,7 @@ class CdprPlant:
         return self.com_pos - self.R @ self.com
 
     def unstretched_length(self) -> FloatArray:
-        return self.l_home - self.drum_ratio * self.theta
+        return self.l_home - self.drum_ratio * self.theta + self.drum_slip
 
     # -- integration --------------------------------------------------------------------------
     def step(self, duration: float) -> None:
@@ -182,6 +183,7 @@ class CdprPlant:
             self.brake,
             self.brake_slip,
             self.cable_cut,
+            self.drum_slip,
             self.ext_force,
             self.ext_moment,
             self.tension,
@@ -261,6 +263,7 @@ def physics_kernel(
     brake,
     slip,
     cut,
+    drum_slip,
     f_ext,
     m_ext,
     tension,
@@ -288,7 +291,7 @@ def physics_kernel(
         F = np.zeros(3)
         M = np.zeros(3)  # about the COM
         for i in range(m):
-            l0 = l_home[i] - drum_ratio[i] * theta[i]
+            l0 = l_home[i] - drum_ratio[i] * theta[i] + drum_slip[i]
             e = length[i] - l0
             t = 0.0
             if e > 0.0 and not cut[i]:

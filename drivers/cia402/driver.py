@@ -129,7 +129,7 @@ class Cia402Driver(WinchDriver):
             self.log(msg)
         return True
 
-    def _configure_drives(self, timeout: float) -> None:
+    def _nmt_start_all(self) -> None:
         for b in range(len(self.buses)):
             self._send(
                 b,
@@ -137,6 +137,9 @@ class Cia402Driver(WinchDriver):
                     arbitration_id=p.NMT, data=bytes([p.NMT_START, 0]), is_extended_id=False
                 ),
             )
+
+    def _configure_drives(self, timeout: float) -> None:
+        self._nmt_start_all()
         hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 3))
         for c in range(self.m):
             self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, p.MODE_CST, 1, timeout)
@@ -157,6 +160,8 @@ class Cia402Driver(WinchDriver):
             self._write_internal(now, np.zeros(self.m))
             if np.all(np.isfinite(self._fb_stamp)):
                 return
+            if int(now / 0.5) != int((now - self.period) / 0.5):
+                self._nmt_start_all()  # a lost NMT start (lossy buses) is sent again
             if now > deadline:
                 silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
                 raise DriverTimeoutError(

@@ -58,6 +58,7 @@ class ODriveDriver(WinchDriver):
         self._missed = np.zeros(m, dtype=np.int64)
         self._enable: bool | None = None
         self._enable_sent: bool | None = None
+        self._enable_sent_at = -math.inf
         self._clear = False
         self._started = False
         self._last_read = -math.inf
@@ -216,11 +217,15 @@ class ODriveDriver(WinchDriver):
                 self._send_cmd(c, p.CLEAR_ERRORS, b"")
                 self.axis_error[c] = 0
             self._clear = False
-        if self._enable is not None and self._enable != self._enable_sent:
-            state = p.AxisState.CLOSED_LOOP_CONTROL if self._enable else p.AxisState.IDLE
-            for c in range(self.m):
-                self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(state))
-            self._enable_sent = self._enable
+        if self._enable is not None:
+            want = p.AxisState.CLOSED_LOOP_CONTROL if self._enable else p.AxisState.IDLE
+            resend = t - self._enable_sent_at > 0.5  # lost on a lossy bus: sent again
+            if self._enable != self._enable_sent or resend:
+                for c in range(self.m):
+                    if self._enable != self._enable_sent or self.axis_state[c] is not want:
+                        self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(want))
+                self._enable_sent = self._enable
+                self._enable_sent_at = t
         pack = p.TORQUE_STRUCT.pack_into
         for c in range(self.m):
             msg = self._torque_msg[c]

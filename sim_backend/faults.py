@@ -1,0 +1,192 @@
+"""Fault injection for the reliability tests: scheduled or random (seeded) events.
+
+Kinds (``FaultEvent.kind``) and their ``value``:
+
+* ``frame_loss`` — probability (0-1) that a frame is lost, both directions;
+* ``frame_delay`` — extra latency (s) of the drives' frames;
+* ``frame_corruption`` — probability that a drive frame arrives with a wrong length or byte;
+* ``drive_fault`` — the drive of ``cable`` faults with error ``value`` (CiA 402 EMCY code, or
+  ODrive error bits);
+* ``silent_drive`` — the drive of ``cable`` stops talking (no TPDO, no heartbeat);
+* ``encoder_jump`` — the encoder of ``cable`` jumps by ``value`` rad;
+* ``cable_snap`` — ``cable`` breaks;
+* ``winch_slip`` — ``cable`` slips on its drum at ``value`` m/s (unseen by the encoder);
+* ``external_wrench`` — ``value`` = (fx, fy, fz, mx, my, mz) N, N·m at P, base frame,
+  ramped in over ``ramp`` s (0: a step).
+
+Each event starts at ``time`` (s, simulated) and lasts ``duration`` (s; inf: for good).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass, field
+from typing import Any
+
+import can
+
+KINDS = (
+    "frame_loss",
+    "frame_delay",
+    "frame_corruption",
+    "drive_fault",
+    "silent_drive",
+    "encoder_jump",
+    "cable_snap",
+    "winch_slip",
+    "external_wrench",
+)
+
+
+@dataclass
+class FaultEvent:
+    time: float
+    kind: str
+    cable: int | None = None
+    value: Any = 0.0
+    duration: float = math.inf
+    ramp: float = 0.0
+    started: bool = field(default=False, compare=False)
+    ended: bool = field(default=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"fault kind {self.kind!r}: one of {', '.join(KINDS)}")
+
+
+class FaultInjector:
+    """Applies :class:`FaultEvent` s to a :class:`~sim_backend.network.SimNetwork`."""
+
+    def __init__(self, events: list[FaultEvent] | None = None, seed: int = 0):
+        self.events = sorted(events or [], key=lambda e: e.time)
+        self.rng = random.Random(seed)
+        self.loss = 0.0
+        self.delay = 0.0
+        self.corruption = 0.0
+        self._delayed: list[tuple[float, can.Message]] = []
+        self.counts: dict[str, int] = {"lost": 0, "delayed": 0, "corrupted": 0}
+
+    @classmethod
+    def random_faults(
+        cls,
+        duration: float,
+        n_cables: int,
+        rate: float,
+        seed: int,
+        kinds: tuple[str, ...] = ("frame_loss", "encoder_jump", "drive_fault", "external_wrench"),
+    ) -> FaultInjector:
+        """``rate`` events per second on average, drawn with ``seed``."""
+        rng = random.Random(seed)
+        events: list[FaultEvent] = []
+        t = rng.expovariate(rate)
+        while t < duration:
+            kind = rng.choice(kinds)
+            cable = rng.randrange(n_cables)
+            value: Any = {
+                "frame_loss": rng.uniform(0.01, 0.2),
+                "encoder_jump": rng.uniform(-0.5, 0.5),
+                "drive_fault": 0x2310,
+                "external_wrench": (*tuple(rng.uniform(-20, 20) for _ in range(3)), 0, 0, 0),
+            }.get(kind, 0.0)
+            events.append(FaultEvent(t, kind, cable, value, duration=rng.uniform(0.05, 0.5)))
+            t += rng.expovariate(rate)
+        return cls(events, seed)
+
+    def attach(self, net: Any) -> None:
+        net.tx_filter = self.tx_filter
+        net.rx_filter = self.rx_filter
+        net.faults = self
+
+    # -- frames ---------------------------------------------------------------------------------
+    def rx_filter(self, msg: can.Message, t: float) -> bool:
+        """False: the controller's frame is lost before reaching the drives."""
+        if self.loss and self.rng.random() < self.loss:
+            self.counts["lost"] += 1
+            return False
+        return True
+
+    def tx_filter(self, msg: can.Message, t: float) -> list[can.Message]:
+        if self.loss and self.rng.random() < self.loss:
+            self.counts["lost"] += 1
+            return []
+        if self.corruption and self.rng.random() < self.corruption:
+            self.counts["corrupted"] += 1
+            data = bytearray(msg.data)
+            if data and self.rng.random() < 0.5:
+                data[self.rng.randrange(len(data))] ^= 1 << self.rng.randrange(8)
+            else:
+                data = data[:-1]
+            msg = can.Message(
+                arbitration_id=msg.arbitration_id,
+                data=bytes(data),
+                is_extended_id=msg.is_extended_id,
+            )
+        if self.delay > 0:
+            self.counts["delayed"] += 1
+            self._delayed.append((t + self.delay, msg))
+            return []
+        return [msg]
+
+    def release(self, t: float) -> list[can.Message]:
+        """Delayed frames whose time has come."""
+        due = [m for when, m in self._delayed if when <= t]
+        self._delayed = [(when, m) for when, m in self._delayed if when > t]
+        return due
+
+    # -- events ---------------------------------------------------------------------------------
+    def apply(self, net: Any, t: float, dt: float) -> None:
+        plant = net.plant
+        for ev in self.events:
+            if ev.ended or t < ev.time:
+                continue
+            active = t < ev.time + ev.duration
+            if not ev.started:
+                ev.started = True
+                self._start(net, ev)
+            if not active:
+                ev.ended = True
+                self._end(net, ev)
+                continue
+            if ev.kind == "winch_slip":
+                plant.drum_slip[ev.cable] += float(ev.value) * dt
+            elif ev.kind == "external_wrench":
+                s = 1.0 if ev.ramp <= 0 else min(1.0, (t - ev.time) / ev.ramp)
+                plant.ext_force[:] = [s * x for x in ev.value[:3]]
+                plant.ext_moment[:] = [s * x for x in ev.value[3:]]
+
+    def _start(self, net: Any, ev: FaultEvent) -> None:
+        c = ev.cable
+        if ev.kind == "frame_loss":
+            self.loss = float(ev.value)
+        elif ev.kind == "frame_delay":
+            self.delay = float(ev.value)
+        elif ev.kind == "frame_corruption":
+            self.corruption = float(ev.value)
+        elif ev.kind == "drive_fault":
+            b = net.bus_index_of(c)
+            net._send(b, [net.drives[c].inject_fault(int(ev.value))])
+        elif ev.kind == "silent_drive":
+            net.drives[c].silent = True
+        elif ev.kind == "encoder_jump":
+            d = net.drives[c]
+            if hasattr(d, "cpr"):  # CiA 402: counts
+                d.encoder_offset += round(float(ev.value) * d.cpr / (2 * math.pi))
+            else:  # ODrive: rad
+                d.encoder_offset += float(ev.value)
+        elif ev.kind == "cable_snap":
+            net.plant.cable_cut[c] = True
+
+    def _end(self, net: Any, ev: FaultEvent) -> None:
+        c = ev.cable
+        if ev.kind == "frame_loss":
+            self.loss = 0.0
+        elif ev.kind == "frame_delay":
+            self.delay = 0.0
+        elif ev.kind == "frame_corruption":
+            self.corruption = 0.0
+        elif ev.kind == "silent_drive":
+            net.drives[c].silent = False
+        elif ev.kind == "external_wrench":
+            net.plant.ext_force[:] = 0.0
+            net.plant.ext_moment[:] = 0.0

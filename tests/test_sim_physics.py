@@ -1,0 +1,107 @@
+"""The simulated robot's physics against analytic results and the foundation's stiffness."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import load_robot
+from cdprctl.rotation import log_so3
+from cdprctl.stiffness import stiffness_matrix
+from sim_backend.plant import CdprPlant, PlantOptions, equilibrium_tensions
+
+
+@pytest.fixture(scope="module", params=["rowc.toml", "seed000.toml"])
+def model(request):
+    return load_robot(CONFIG / request.param)
+
+
+def test_gravity_equilibrium_with_tda_tensions(model):
+    plant = CdprPlant(model)
+    t0 = plant.tension.copy()
+    plant.step(1.0)  # brakes closed, no external force
+    np.testing.assert_allclose(plant.position, model.home.position, atol=1e-9)
+    np.testing.assert_allclose(plant.tension, t0, rtol=1e-9, atol=1e-9)
+    # and those tensions are the TDA's (the controller's start point)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    np.testing.assert_allclose(t0, equilibrium_tensions(model, kin))
+
+
+def test_static_deflection_equals_K_inverse_dw(model):
+    """Brakes closed: a small external wrench displaces the platform by K⁻¹ δw
+    (Picard et al. 2020, eq. (3)-(4); K from cdprctl.stiffness)."""
+    plant = CdprPlant(model, PlantOptions(damping_ratio=0.3))
+    dw = np.array([0.0, 2.0, -1.0, 0.05, 0.0, 0.02])  # N, N·m: small
+    # a slow ramp (quasi-static: the transverse modes, barely damped by the cables, stay
+    # unexcited), then a hold
+    for s in np.linspace(0.0, 1.0, 401)[1:]:
+        plant.ext_force[:] = s * dw[:3]
+        plant.ext_moment[:] = s * dw[3:]
+        plant.step(0.01)
+    plant.step(2.0)
+    # the suspended robot's pendulum modes (periods of seconds) are barely damped by the
+    # cables: average the pose over 16 s
+    samples = []
+    for _ in range(320):
+        plant.step(0.05)
+        samples.append(np.concatenate([plant.position - model.home.position,
+                                       log_so3(plant.R @ model.home.rotation.T)]))
+    got = np.mean(samples, axis=0)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    l0 = plant.unstretched_length()
+    k = np.array([1.0 / (1.0 / (x.stiffness or x.youngs_modulus * x.cross_section / l0[i]))
+                  for i, x in enumerate(model.cables)])
+    K = stiffness_matrix(model, kin, equilibrium_tensions(model, kin), k)
+    expected = np.linalg.solve(K, dw)
+    np.testing.assert_allclose(got, expected, rtol=0.02, atol=2e-3 * np.abs(expected).max())
+
+
+def test_free_winch_friction_run_down():
+    """A winch with no cable load: J ω̇ = −b ω − τ_c (ω >> ω_ε), so
+    ω(t) = (ω0 + τ_c/b) e^(−b t/J) − τ_c/b."""
+    model = load_robot(CONFIG / "rowc.toml")
+    plant = CdprPlant(model, PlantOptions(coulomb_velocity=1e-3))
+    plant.cable_cut[0] = True
+    plant.brake[0] = False
+    plant.theta_dot[0] = 200.0
+    w = model.cables[0].winch
+    J, b, tc = w.rotor_inertia, w.viscous_friction, w.coulomb_friction
+    t_stop = J / b * math.log((200.0 + tc / b) / (tc / b))
+    for t in (0.05, 0.15, 0.3):
+        plant.step(t - plant.time)
+        expected = (200.0 + tc / b) * math.exp(-b * t / J) - tc / b
+        assert plant.theta_dot[0] == pytest.approx(expected, rel=2e-3)
+    plant.step(t_stop + 0.2 - plant.time)  # Coulomb friction holds it once stopped, up to
+    # the chatter of one step's friction impulse (τ_c/J · dt)
+    assert abs(plant.theta_dot[0]) <= tc / J * plant.opt.physics_dt + 1e-9
+
+
+def test_slack_cable_carries_no_tension(model):
+    plant = CdprPlant(model)
+    plant.theta[3] -= 0.5 / plant.drum_ratio[3]  # pay out 0.5 m: far slacker than any stretch
+    plant.step(0.001)
+    assert plant.tension[3] == 0.0
+    assert np.all(plant.tension[[0, 1, 2, 4, 5, 6, 7]] > 0)
+
+
+def test_cut_cable_and_energy_drift_bounded():
+    """No damping, no friction, brakes closed, the platform set swinging: the symplectic
+    integrator keeps the total energy within 0.5 % of the motion's energy over 10 s."""
+    model = load_robot(CONFIG / "seed000.toml")
+    plant = CdprPlant(model, PlantOptions(damping_ratio=0.0))
+    plant.damping[:] = 0.0
+    plant.v[:] = [0.05, -0.03, 0.02]
+    plant.w[:] = [0.01, 0.0, -0.02]
+    e0 = plant.energy()
+    swing = 0.5 * model.platform.mass * 0.05**2
+    worst = 0.0
+    for _ in range(100):
+        plant.step(0.1)
+        worst = max(worst, abs(plant.energy() - e0))
+    assert worst < 0.005 * swing
