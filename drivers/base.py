@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import enum
+import logging
 import math
 import time
 from abc import ABC, abstractmethod
@@ -26,6 +27,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
+
+_LOG = logging.getLogger("cdprctl.drivers")
 
 if TYPE_CHECKING:
     from cdprctl.model.drives import DrivesConfig
@@ -108,6 +111,7 @@ class WinchDriver(ABC):
         self.bus_overrides = dict(bus_overrides or {})
         self.lifecycle = Lifecycle.UNCONFIGURED
         self.error: DriverError | None = None
+        self.warnings: list[str] = []
         self.states = WinchStates(self.m)
         self.stats = DriverStats()
         self.torque_limit = np.array([c.winch.torque_limit for c in model.cables])
@@ -117,8 +121,18 @@ class WinchDriver(ABC):
 
     # -- lifecycle (outside the loop: may block, may raise) -----------------------------------
     def configure(self, timeout: float = 2.0) -> None:
-        """Open the buses and wait for live feedback from every drive → ``INACTIVE``."""
+        """Check the bus-load budget at this period, open the buses and wait for live
+        feedback from every drive → ``INACTIVE``. A bus above 70 % load is a warning
+        (``self.warnings``, logged), above 100 % a :class:`DriverConfigurationError`."""
+        from drivers.busload import check_bus_load
+        from drivers.errors import DriverConfigurationError
+
         self._require(Lifecycle.UNCONFIGURED)
+        self.warnings, errors = check_bus_load(self.config, 1.0 / self.period)
+        for w in self.warnings:
+            _LOG.warning(w)
+        if errors:
+            raise DriverConfigurationError("; ".join(errors))
         try:
             self._open()
             self._configure_drives(timeout)

@@ -54,3 +54,30 @@ def test_bus_load_cli(capsys):
 @pytest.fixture
 def seed000():
     return load_robot(CONFIG / "seed000.toml")
+
+
+def test_driver_refuses_a_bus_beyond_capacity(seed000):
+    from drivers import DriverConfigurationError, Lifecycle, create_driver
+
+    drv = create_driver(seed000, period=0.001)  # 1 kHz: 190 % of 1 Mbit/s
+    with pytest.raises(DriverConfigurationError, match="more than the bus can carry"):
+        drv.configure()
+    assert drv.lifecycle is Lifecycle.UNCONFIGURED
+
+
+def test_traffic_log_candump(tmp_path):
+    """The optional CAN traffic log writes every frame, in python-can's candump format."""
+    from sim_backend.network import LockStep
+
+    model = load_robot(CONFIG / "rowc.toml")
+    log = tmp_path / "traffic.log"
+    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives,
+                                                                  log_file=str(log)))
+    with LockStep(model) as ls:
+        ls.driver.configure()
+        for _ in range(5):
+            ls.cycle([0.0] * 8)
+    text = log.read_text()
+    assert "#080#" in text or "080#" in text  # SYNC frames
+    assert "181#" in text  # TPDO1 of node 1
+    assert len(text.splitlines()) > 5 * 17

@@ -171,16 +171,24 @@ class Cia402Driver(WinchDriver):
                 )
             self.wait(self.period)
 
+    SDO_RETRY = 0.25  # s: a request (or its answer) lost on a lossy bus is sent again
+
     def _sdo_exchange(self, c: int, request: bytes, timeout: float) -> bytes:
         b, n = int(self.bus_of[c]), int(self.node[c])
         self._sdo_reply.pop(c, None)
-        self._send(b, can.Message(arbitration_id=p.SDO_RX + n, data=request, is_extended_id=False))
-        deadline = self.clock() + timeout
+        msg = can.Message(arbitration_id=p.SDO_RX + n, data=request, is_extended_id=False)
+        start = self.clock()
+        deadline = start + timeout
+        next_try = start
         while c not in self._sdo_reply:
-            if self.clock() > deadline:
+            now = self.clock()
+            if now > deadline:
                 raise DriverTimeoutError(
                     f"no SDO answer from node {n} (cable index {c}) within {timeout:g} s", c
                 )
+            if now >= next_try:
+                self._send(b, msg)  # expedited transfers are idempotent: safe to repeat
+                next_try = now + self.SDO_RETRY
             self.wait(self.period / 4)
             self._drain(self.clock())
         reply = self._sdo_reply.pop(c)
