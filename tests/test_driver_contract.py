@@ -157,3 +157,25 @@ def test_context_manager_and_wrong_state_calls(rig):
     with rig.driver as d:
         d.configure()
     assert rig.driver.lifecycle is Lifecycle.FINALIZED
+
+
+def test_two_buses_of_four_drives():
+    """The same driver over two buses (same node ids on each), lock-step."""
+    from cdprctl.model.drives import BusConfig
+
+    model = load_robot(CONFIG / "seed000.toml")
+    buses = (
+        BusConfig("socketcan", "can0", 1_000_000, (0, 1, 2, 3), (1, 2, 3, 4)),
+        BusConfig("socketcan", "can1", 1_000_000, (4, 5, 6, 7), (1, 2, 3, 4)),
+    )
+    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, buses=buses))
+    with LockStep(model, period=0.001) as ls:  # 1 kHz: 48 % per bus
+        assert ls.driver.warnings == []
+        ls.driver.configure()
+        ls.driver.activate()
+        tau = ls.plant.drum_ratio * ls.plant.tension
+        for _ in range(20):
+            ls.cycle(tau)
+        assert ls.driver.lifecycle is Lifecycle.ACTIVE
+        np.testing.assert_allclose(ls.plant.motor_torque, tau, atol=0.003)
+        assert len(ls.driver.buses) == 2

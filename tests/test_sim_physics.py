@@ -105,3 +105,25 @@ def test_cut_cable_and_energy_drift_bounded():
         plant.step(0.1)
         worst = max(worst, abs(plant.energy() - e0))
     assert worst < 0.005 * swing
+
+
+def test_pulley_friction_capstan_factor():
+    """A released winch paying out under tension sees t·exp(−μβ) through its pulley: its
+    first acceleration is ((r/G) t e^(−μβ) − friction)/J."""
+    model = load_robot(CONFIG / "caroca_pulleys.toml")
+    acc = {}
+    for mu in (0.0, 0.2):
+        plant = CdprPlant(model, PlantOptions(pulley_friction=mu, coulomb_velocity=1e-6))
+        plant.theta_dot[0] = -1e-3  # already paying out (direction of the friction)
+        plant.brake[0] = False
+        t = plant.tension[0]
+        beta = plant.kin.wrap_angle[0]
+        plant.step(1e-6)
+        acc[mu] = (plant.theta_dot[0] + 1e-3) / 1e-6
+    w = model.cables[0].winch
+    r = w.drum_radius / w.gear_ratio
+    J, tc, b = w.rotor_inertia, w.coulomb_friction, w.viscous_friction
+    for mu in acc:
+        expected = (-r * t * math.exp(-mu * beta) + tc - b * 1e-3 * -1) / J
+        assert acc[mu] == pytest.approx(expected, rel=1e-3)
+    assert abs(acc[0.2]) < abs(acc[0.0])
