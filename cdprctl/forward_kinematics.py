@@ -29,6 +29,7 @@ class FKStatus(enum.IntEnum):
     MAX_ITERATIONS = 1  # best pose returned, residual above tolerance
     DEGENERATE = 2  # a cable of zero length or a non-finite value on the way
     BAD_INPUT = 3  # non-finite measured lengths or start pose
+    INCONSISTENT = 4  # converged, but the lengths cannot all be met: least-squares pose
 
 
 @dataclass
@@ -53,6 +54,9 @@ class ForwardKinematics:
         it is of the order of the step squared, so the stepped pose is returned without one
         more inverse kinematics (the reported residual is then the linearised one).
     max_iterations : int
+    max_residual : float
+        RMS residual (m) above which a converged least-squares pose is reported
+        ``INCONSISTENT``: the lengths (encoders, stretch model) disagree with any pose.
     """
 
     def __init__(
@@ -61,8 +65,10 @@ class ForwardKinematics:
         tolerance: float = 1e-9,
         step_tolerance: float = 1e-5,
         max_iterations: int = 30,
+        max_residual: float = 1e-4,
     ):
         self.model = model
+        self.max_residual = max_residual  # m RMS: above it a minimum is INCONSISTENT
         self.data = KinematicsData(model)
         self.tolerance = tolerance
         self.step_tolerance = step_tolerance
@@ -111,7 +117,10 @@ class ForwardKinematics:
         )
         d.position[:] = p
         d.rotation[:] = R
-        return FKResult(p.copy(), R.copy(), float(info[0]), int(info[1]), FKStatus(int(info[2])))
+        status = FKStatus(int(info[2]))
+        if status is FKStatus.CONVERGED and float(info[0]) > self.max_residual:
+            status = FKStatus.INCONSISTENT
+        return FKResult(p.copy(), R.copy(), float(info[0]), int(info[1]), status)
 
 
 @njit(cache=True)

@@ -118,6 +118,8 @@ class WinchDriver(ABC):
         self.encoder_cpr = np.array([c.winch.encoder_counts_per_rev for c in model.cables])
         self._last_command = np.zeros(self.m)
         self._command = np.zeros(self.m)
+        self._activating = False
+        self._recover_until = -math.inf
 
     # -- lifecycle (outside the loop: may block, may raise) -----------------------------------
     def configure(self, timeout: float = 2.0) -> None:
@@ -208,6 +210,39 @@ class WinchDriver(ABC):
                 raise self.error or DriverTimeoutError("drives did not recover", None)
             self.wait(self.period)
 
+    # -- non-blocking lifecycle, for a running loop ------------------------------------------
+    def begin_activate(self) -> None:
+        """Start enabling the drives; the cyclic ``read`` moves to ``ACTIVE`` once every drive
+        reports enabled. Torques written meanwhile are passed on (a drive applies them from
+        the moment it is enabled: send the holding torques, so releasing the brake is not a
+        fall)."""
+        self._require(Lifecycle.INACTIVE)
+        self._activating = True
+        self._request_enable(True)
+
+    def begin_deactivate(self) -> None:
+        """Disable the drives (brakes hold) → ``INACTIVE`` at once; zero torque from now on."""
+        self._activating = False
+        self._request_enable(False)
+        if self.lifecycle is Lifecycle.ACTIVE:
+            self.lifecycle = Lifecycle.INACTIVE
+
+    def begin_recover(self, settle: float = 0.5) -> None:
+        """From ``ERROR``: fault reset, drives disabled; faults still latched during ``settle``
+        seconds are ignored; back in ``INACTIVE`` at once (``ERROR`` again if they persist)."""
+        if self.lifecycle is not Lifecycle.ERROR:
+            return
+        self.error = None
+        self._activating = False
+        self._request_enable(False)
+        self._fault_reset()
+        self._recover_until = self.clock() + settle
+        self.lifecycle = Lifecycle.INACTIVE
+
+    @property
+    def activating(self) -> bool:
+        return self._activating
+
     def shutdown(self) -> None:
         """Disable the drives if possible and close the buses; safe to call twice."""
         if self.lifecycle is Lifecycle.FINALIZED:
@@ -233,10 +268,19 @@ class WinchDriver(ABC):
         self.states.stamp = now
         try:
             err = self._read_internal(now)
-        except Exception as exc:
+        except Exception as exc:  # the loop never sees an exception
             err = DriverOperationError(f"read failed: {type(exc).__name__}: {exc}")
+        if err is not None and now < self._recover_until:
+            err = None  # a fault reset in progress: the latched fault is still reported
         if err is not None:
             self._fail(err)
+        elif (
+            self._activating
+            and self.lifecycle is Lifecycle.INACTIVE
+            and bool(np.all(self.states.state == DriveState.ENABLED))
+        ):
+            self._activating = False
+            self.lifecycle = Lifecycle.ACTIVE
         return self.states
 
     def write(self, t: float | None, torques: np.ndarray, force: bool = False) -> None:
@@ -260,7 +304,7 @@ class WinchDriver(ABC):
                 v = -lim
                 self.stats.clamped_commands += 1
             cmd[i] = v
-        if self.lifecycle is not Lifecycle.ACTIVE and not force:
+        if self.lifecycle is not Lifecycle.ACTIVE and not force and not self._activating:
             cmd[:] = 0.0
         self._last_command[:] = cmd
         try:
@@ -273,6 +317,7 @@ class WinchDriver(ABC):
 
     # -- helpers ------------------------------------------------------------------------------
     def _fail(self, err: DriverError) -> None:
+        self._activating = False
         if self.error is None:
             self.error = err
         if self.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ACTIVE):

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.model.control import read_control
 from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
 from cdprctl.model.reader import TableReader
@@ -28,6 +29,7 @@ TOP_KEYS = (
     "winch",
     "cables",
     "drives",
+    "control",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -108,6 +110,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     if cables is not None:
         rated = max(c.winch.torque_limit for c in cables)
         drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
+    control = read_control(rd, data, [c.name for c in cables] if cables else [])
 
     if (
         rd.errors
@@ -118,6 +121,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or home is None
         or workspace is None
         or drives is None
+        or control is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
 
@@ -131,6 +135,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         home=home,
         workspace=workspace,
         drives=drives,
+        control=control,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.rotation import FloatArray, rpy_to_matrix
 
@@ -125,6 +126,7 @@ class RobotModel:
     home: Pose
     workspace: Workspace
     drives: DrivesConfig
+    control: ControlConfig
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

@@ -1,0 +1,1 @@
+"""The control loop: estimation, trajectory, PD + feedforward, TDA, winch torques, supervisor."""

@@ -1,0 +1,432 @@
+"""One control cycle and the supervisor's state machine.
+
+Per cycle (``Controller.step``): read (drain the drives' feedback) → estimate (FK) → trajectory
+(ruckig) → control (PD on the pose error + feedforward of gravity, platform inertia and the known
+external wrench) → TDA (the configured method; the Picard et al. 2020 Fig. 3 scheme) → winch
+torques (``(r/G) t`` + friction and rotor-inertia feedforward, limits) → write (RPDOs, SYNC).
+Nothing in it raises, logs or allocates much: events go to a bounded deque that the daemon
+drains outside the loop; commands arrive through a bounded mailbox.
+
+Supervisor states::
+
+    INIT ─startup()→ READY ─enable→ ENABLING ─drives on→ ENABLED ⇄ MOVING (move / finished)
+    ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)    ─disable→ DISABLING → READY
+    any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
+    FAULT ─reset→ READY (drive faults reset, drives disabled)
+
+A driver fault skips STOPPING: the drives are not to be trusted, their brakes close.
+"""
+
+from __future__ import annotations
+
+import collections
+import enum
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.estimator import Estimator
+from cdprctl.control.trajectory import Trajectory
+from cdprctl.forward_kinematics import FKStatus
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray, exp_so3, log_so3
+from cdprctl.tda import (
+    ImposedQuantity,
+    Imposition,
+    TDAMethod,
+    TDAOptions,
+    TDAStatus,
+    TensionDistributor,
+)
+from drivers.base import Lifecycle, WinchDriver
+
+
+class State(enum.Enum):
+    INIT = "init"
+    READY = "ready"  # drives inactive (brakes), feedback live, pose estimated
+    ENABLING = "enabling"
+    ENABLED = "enabled"  # holding the pose
+    MOVING = "moving"
+    DISABLING = "disabling"
+    STOPPING = "stopping"  # a fault: holding, then disabling
+    FAULT = "fault"
+
+
+@dataclass
+class Command:
+    kind: str  # enable | disable | stop | reset | move | set_tda
+    pose: FloatArray | None = None  # move: x, y, z (m), roll, pitch, yaw (rad)
+    speed: float = 1.0  # move: fraction of the velocity limits
+    tda: TDAOptions | None = None
+
+
+PHASES = ("read", "estimate", "trajectory", "control", "tda", "torques", "write")
+
+
+def tda_options_of(model: RobotModel) -> TDAOptions:
+    c = model.control
+    return TDAOptions(
+        method=TDAMethod(c.tda_method),
+        nu=c.tda_nu,
+        direction=c.tda_direction,
+        impositions=tuple(
+            Imposition(i.cable, ImposedQuantity(i.quantity), i.value) for i in c.impositions
+        ),
+        max_tension_rate=c.max_tension_rate,
+        period=c.period,
+    )
+
+
+class Controller:
+    def __init__(self, model: RobotModel, driver: WinchDriver, tda: TDAOptions | None = None):
+        c = model.control
+        self.model = model
+        self.driver = driver
+        self.period = c.period
+        self.state = State.INIT
+        self.estimator = Estimator(model)
+        self.trajectory = Trajectory(model, self.period)
+        self.tda = TensionDistributor(model, tda or tda_options_of(model))
+        m = model.n_cables
+        self.r = self.estimator.drum_ratio  # m/rad
+        w = [x.winch for x in model.cables]
+        self.rotor_inertia = np.array([x.rotor_inertia for x in w])
+        self.viscous = np.array([x.viscous_friction for x in w])
+        self.coulomb = np.array([x.coulomb_friction for x in w])
+        self.torque_limit = np.array([x.torque_limit for x in w])
+        self.t_min = model.tension_min + c.tension_margin
+        self.t_max = model.tension_max - c.tension_margin
+        wn = 2.0 * math.pi * c.bandwidth
+        self.kp, self.kd = wn * wn, 2.0 * c.damping_ratio * wn  # 1/s², 1/s (accelerations)
+        self.ext_wrench = np.array(c.external_wrench, dtype=float)
+        self.tensions = np.zeros(m)  # N, commanded
+        # Tensions used for the estimator's stretch correction: the static ones (gravity and the
+        # known external wrench) at the estimated pose, refreshed every STRETCH_EVERY cycles.
+        # The commanded tensions would close an algebraic loop (tension → stretch → pose
+        # estimate → PD → tension) whose gain is about 1 on the window-cleaning robot: with
+        # them the estimate diverged by 9 mm within 0.13 s of enabling (lock-step, measured).
+        self.stretch_tensions = np.zeros(m)
+        self._last_stretch = np.full(m, np.inf)
+        self._static_tda = TensionDistributor(
+            model,
+            TDAOptions(method=TDAMethod.BARYCENTER if model.redundancy == 2 else TDAMethod.QP),
+        )
+        self.hold_tensions = np.zeros(m)  # N, the last feasible distribution
+        self.torques = np.zeros(m)  # N·m, commanded
+        self.wrench = np.zeros(6)  # what the cables were asked for
+        self.tda_status = TDAStatus.OK
+        self.pose_error = np.zeros(6)  # m, rad: desired − estimated
+        self.fault_reason = ""
+        self.cycle = 0
+        self.time = 0.0
+        self.events: collections.deque[tuple[float, str]] = collections.deque(maxlen=256)
+        self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
+        self.phase_us = np.zeros(len(PHASES))  # last cycle, µs
+        self._t_state = 0.0
+        self._stop_until = 0.0
+        self._after_stop = State.FAULT
+        self._tda_bad = 0
+        self._clock_ns = time.perf_counter_ns
+
+    # -- outside the loop ------------------------------------------------------------------------
+    def startup(self, timeout: float = 5.0) -> None:
+        """Configure the drives, read them, estimate the pose from the home pose as a start,
+        check it can be held (a TDA under gravity) → READY. Raises on failure."""
+        d = self.driver
+        d.configure(timeout)
+        now = d.clock()
+        st = d.read(now)
+        self.estimator.reset(self.model.home.position, self.model.home.rotation)
+        # The stretch depends on the tensions, which depend on the pose: a fixed point,
+        # from the minimum tensions (soft cables, e.g. the Sensors 2019 springs, need a few
+        # iterations; steel ones one or two).
+        self.stretch_tensions[:] = self.model.tension_min
+        for _ in range(100):
+            fk = self.estimator.update(now, st.position, self.stretch_tensions)
+            if fk.status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
+                raise RuntimeError(f"start-up: forward kinematics failed ({fk.status.name})")
+            out = self.tda.solve(
+                self.estimator.kin.W,
+                self._gravity_hold(),
+                self.t_min,
+                self.t_max,
+                k=self._stiffness(),
+                kin=self.estimator.kin,
+            )
+            if not out.ok:
+                p = self.estimator.position
+                raise RuntimeError(
+                    f"start-up: the estimated pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m "
+                    f"cannot be held ({out.status.name}: {out.message})"
+                )
+            self.hold_tensions[:] = out.tensions
+            self._refresh_stretch_tensions()
+            change = float(np.max(np.abs(self.stretch_tensions - self._last_stretch)))
+            self._last_stretch[:] = self.stretch_tensions
+            if change < 1e-3:
+                break
+        else:
+            raise RuntimeError("start-up: pose and tensions did not settle in 100 iterations")
+        if fk.status is not FKStatus.CONVERGED:
+            raise RuntimeError(
+                f"start-up: the encoders disagree with every pose "
+                f"({fk.status.name}, residual {fk.residual:.3g} m)"
+            )
+        self.tensions[:] = self.hold_tensions
+        self.estimator.velocity[:] = 0.0
+        self.estimator.omega[:] = 0.0
+        self.trajectory.reset(self._pose6())
+        self._set_state(State.READY, now, "drives inactive, feedback live, pose estimated")
+
+    def submit(self, cmd: Command) -> bool:
+        """Queue a command for the next cycle; False when the mailbox is full."""
+        if len(self.mailbox) >= (self.mailbox.maxlen or 0):
+            return False
+        self.mailbox.append(cmd)
+        return True
+
+    # -- the cycle ---------------------------------------------------------------------------------
+    def step(self, t: float) -> None:
+        """One control cycle at time ``t`` (s). Never raises."""
+        clock = self._clock_ns
+        ph = self.phase_us
+        try:
+            t0 = clock()
+            st = self.driver.read(t)
+            t1 = clock()
+            ph[0] = (t1 - t0) / 1e3
+            self.time = t
+            self.cycle += 1
+            self._handle_commands(t)
+            if self.cycle % self.STRETCH_EVERY == 0:
+                self._refresh_stretch_tensions()
+            fk = self.estimator.update(st.stamp, st.position, self.stretch_tensions)
+            t2 = clock()
+            ph[1] = (t2 - t1) / 1e3
+            self._supervise(t, fk.status)
+            self.trajectory.update()
+            t3 = clock()
+            ph[2] = (t3 - t2) / 1e3
+            active = self.state in (State.ENABLING, State.ENABLED, State.MOVING, State.STOPPING)
+            if active:
+                self._control()
+            t4 = clock()
+            ph[3] = (t4 - t3) / 1e3
+            if active:
+                self._distribute(t)
+            t5 = clock()
+            ph[4] = (t5 - t4) / 1e3
+            self._winch_torques(st.velocity, active)
+            t6 = clock()
+            ph[5] = (t6 - t5) / 1e3
+            self.driver.write(t, self.torques)
+            ph[6] = (clock() - t6) / 1e3
+        except Exception as exc:
+            self.torques[:] = self.r * self.hold_tensions
+            self._fault(t, f"internal error: {type(exc).__name__}: {exc}", hold=True)
+
+    STRETCH_EVERY = 25  # cycles
+    MAX_FK_RESIDUAL = 0.005  # m RMS
+
+    def _refresh_stretch_tensions(self) -> None:
+        out = self._static_tda.solve(
+            self.estimator.kin.W, self._gravity_hold(), self.t_min, self.t_max
+        )
+        if out.ok:
+            self.stretch_tensions[:] = out.tensions
+
+    # -- phases ------------------------------------------------------------------------------------
+    def _pose6(self) -> FloatArray:
+        e = self.estimator
+        return np.concatenate([e.position, log_so3(e.rotation @ self.model.home.rotation.T)])
+
+    def _gravity_hold(self) -> FloatArray:
+        return -(self.model.gravity_wrench(self.estimator.rotation) + self.ext_wrench)
+
+    def _stiffness(self) -> FloatArray:
+        return self.model.cable_stiffness(self.estimator.kin.length)
+
+    def _control(self) -> None:
+        """Cable wrench: ``M (a_d + Kp e + Kd ė) − w_g − w_e`` (PD + feedforward)."""
+        e, tr, pf = self.estimator, self.trajectory, self.model.platform
+        Rd = exp_so3(tr.position[3:]) @ self.model.home.rotation
+        err = self.pose_error
+        err[:3] = tr.position[:3] - e.position
+        err[3:] = log_so3(Rd @ e.rotation.T)
+        acc_lin = tr.acceleration[:3] + self.kp * err[:3] + self.kd * (tr.velocity[:3] - e.velocity)
+        acc_ang = tr.acceleration[3:] + self.kp * err[3:] + self.kd * (tr.velocity[3:] - e.omega)
+        Iw = e.rotation @ pf.inertia @ e.rotation.T
+        self.wrench[:3] = pf.mass * acc_lin
+        self.wrench[3:] = Iw @ acc_ang + np.cross(e.omega, Iw @ e.omega)
+        self.wrench += self._gravity_hold()
+
+    def _distribute(self, t: float) -> None:
+        e = self.estimator
+        out = self.tda.solve(
+            e.kin.W,
+            self.wrench,
+            self.t_min,
+            self.t_max,
+            k=self._stiffness(),
+            kin=e.kin,
+            t_prev=self.tensions,
+        )
+        self.tda_status = out.status
+        if out.status is TDAStatus.OK or out.status is TDAStatus.IMPOSITION_INFEASIBLE:
+            self.tensions[:] = out.tensions
+            self.hold_tensions[:] = out.tensions
+            self._tda_bad = 0
+        else:  # infeasible wrench: hold the last feasible tensions, never leave the limits
+            self.tensions[:] = self.hold_tensions
+            self._tda_bad += 1
+            if self._tda_bad >= 3 and self.state is not State.STOPPING:
+                self._fault(t, f"tension distribution {out.status.name}: {out.message}", hold=True)
+
+    def _winch_torques(self, motor_velocity: FloatArray, active: bool) -> None:
+        """``τ = (r/G) t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J θ̈_d``, clamped (θ > 0 winds in)."""
+        if not active:
+            self.torques[:] = 0.0
+            return
+        tau = self.r * self.tensions
+        if self.model.control.friction_compensation:
+            tau += self.viscous * motor_velocity + self.coulomb * np.tanh(motor_velocity / 0.05)
+        # rotor inertia: θ̈ = Wᵀ a / r for the desired acceleration (δl = −Wᵀ δX, l0 = l − r θ)
+        tau += self.rotor_inertia * (self.estimator.kin.WT @ self.trajectory.acceleration) / self.r
+        np.clip(tau, -self.torque_limit, self.torque_limit, out=tau)
+        self.torques[:] = tau
+
+    # -- supervisor ------------------------------------------------------------------------------
+    def _set_state(self, s: State, t: float, why: str) -> None:
+        if s is not self.state:
+            self.events.append((t, f"state {self.state.value} -> {s.value}: {why}"))
+        self.state = s
+        self._t_state = t
+
+    def _fault(self, t: float, reason: str, hold: bool) -> None:
+        if self.state in (State.FAULT, State.STOPPING):
+            return
+        self.fault_reason = reason
+        self.events.append((t, f"FAULT: {reason}"))
+        if hold and self.driver.lifecycle is Lifecycle.ACTIVE:
+            self.trajectory.stop_here()
+            self._stop_until = t + self.model.control.stop_duration
+            self._set_state(State.STOPPING, t, "controlled stop, holding the pose")
+        else:
+            self.driver.begin_deactivate()
+            self._set_state(State.FAULT, t, "drives disabled, brakes closed")
+
+    def _supervise(self, t: float, fk_status: FKStatus) -> None:
+        c = self.model.control
+        d = self.driver
+        if d.lifecycle is Lifecycle.ERROR and self.state is not State.FAULT:
+            self._fault(t, f"drives: {d.error}", hold=False)
+            return
+        if self.state is State.ENABLING:
+            if d.lifecycle is Lifecycle.ACTIVE:
+                self._set_state(State.ENABLED, t, "drives enabled, holding the pose")
+            elif t - self._t_state > 2.0:
+                self._fault(t, "drives not enabled within 2 s", hold=False)
+            return
+        if self.state is State.DISABLING:
+            self.driver.begin_deactivate()
+            self._set_state(State.READY, t, "drives disabled, brakes closed")
+            return
+        if self.state is State.STOPPING:
+            if t >= self._stop_until:
+                self.driver.begin_deactivate()
+                self._set_state(State.FAULT, t, "stopped; drives disabled, brakes closed")
+            return
+        if self.state not in (State.ENABLED, State.MOVING):
+            return
+        if self.state is State.MOVING and self.trajectory.finished:
+            self._set_state(State.ENABLED, t, "target reached")
+        e = self.estimator
+        age = float(np.max(d.states.feedback_age))
+        fk = e.last_fk
+        if fk_status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
+            self._fault(t, f"forward kinematics {fk_status.name}", hold=True)
+        elif fk is not None and fk.residual > self.MAX_FK_RESIDUAL:
+            self._fault(
+                t,
+                f"the encoders disagree with every pose: forward-kinematics residual "
+                f"{fk.residual * 1e3:.2f} mm > {self.MAX_FK_RESIDUAL * 1e3:.0f} mm "
+                "(an encoder jump, a slipped or broken cable)",
+                hold=True,
+            )
+        elif np.linalg.norm(self.pose_error[:3]) > c.max_position_error:
+            self._fault(
+                t,
+                f"tracking error {np.linalg.norm(self.pose_error[:3]) * 1e3:.1f} mm "
+                f"> {c.max_position_error * 1e3:.1f} mm",
+                hold=True,
+            )
+        elif np.linalg.norm(self.pose_error[3:]) > c.max_angle_error:
+            self._fault(
+                t,
+                f"orientation error {np.linalg.norm(self.pose_error[3:]):.3f} rad "
+                f"> {c.max_angle_error:.3f} rad",
+                hold=True,
+            )
+        elif np.linalg.norm(e.velocity) > c.max_speed:
+            self._fault(
+                t,
+                f"platform speed {np.linalg.norm(e.velocity):.2f} m/s > {c.max_speed:.2f} m/s",
+                hold=True,
+            )
+        elif age > c.max_feedback_age:
+            self._fault(
+                t, f"feedback {age * 1e3:.1f} ms old > {c.max_feedback_age * 1e3:.0f} ms", hold=True
+            )
+
+    def _handle_commands(self, t: float) -> None:
+        while self.mailbox:
+            cmd = self.mailbox.popleft()
+            k = cmd.kind
+            if k == "enable" and self.state is State.READY:
+                self.trajectory.reset(self._pose6())
+                self.tensions[:] = self.hold_tensions
+                self.driver.begin_activate()
+                self._set_state(State.ENABLING, t, "enabling the drives with holding torques")
+            elif (
+                k == "move"
+                and self.state in (State.ENABLED, State.MOVING)
+                and (cmd.pose is not None)
+            ):
+                from cdprctl.rotation import rpy_to_matrix
+
+                R = rpy_to_matrix(*cmd.pose[3:])
+                x = np.concatenate([cmd.pose[:3], log_so3(R @ self.model.home.rotation.T)])
+                self.trajectory.set_target(x, cmd.speed)
+                self._set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
+            elif k == "stop" and self.state in (State.ENABLED, State.MOVING):
+                self.trajectory.stop_here()
+                self._set_state(State.ENABLED, t, "stop: decelerating, then holding")
+            elif k == "disable" and self.state in (State.ENABLED, State.MOVING, State.ENABLING):
+                self._set_state(State.DISABLING, t, "disable requested")
+            elif k == "reset" and self.state is State.FAULT:
+                self.driver.begin_recover()
+                self.fault_reason = ""
+                self.trajectory.reset(self._pose6())
+                self._set_state(State.READY, t, "fault reset")
+            elif k == "set_tda" and cmd.tda is not None:
+                try:  # options are validated by whoever sends them; this is the last guard
+                    self.tda = TensionDistributor(self.model, cmd.tda)
+                    self.events.append((t, f"TDA method {cmd.tda.method.value}"))
+                except ValueError as exc:
+                    self.events.append((t, f"TDA options rejected: {exc}"))
+            else:
+                self.events.append((t, f"command {k} ignored in state {self.state.value}"))
+
+    def status(self) -> dict[str, Any]:
+        e = self.estimator
+        return {
+            "state": self.state.value,
+            "fault": self.fault_reason,
+            "position": e.position.tolist(),
+            "tensions": self.tensions.tolist(),
+            "tda_status": self.tda_status.name,
+            "cycle": self.cycle,
+        }

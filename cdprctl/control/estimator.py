@@ -1,0 +1,80 @@
+"""Platform state from the winch encoders.
+
+Motor angles → unstretched cable lengths (``l0 = l_home − (r/G) θ``: encoders calibrated at the
+home pose, docs/simulator.md) → stretched lengths under the tensions commanded last cycle →
+forward kinematics warm-started from the last pose → twist by finite differences of successive
+poses through a first-order low-pass filter (cut-off ``velocity_filter`` Hz): ``v ← v + α (Δp/Δt
+− v)``, ``α = 1 − exp(−2π f_c Δt)``; the angular velocity from ``log(R_k R_(k−1)ᵀ)/Δt``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray, log_so3
+
+
+class Estimator:
+    def __init__(self, model: RobotModel):
+        self.model = model
+        c = model.cables
+        self.drum_ratio = np.array([x.winch.drum_radius / x.winch.gear_ratio for x in c])
+        kin = KinematicsData(model)
+        inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+        self.l_home = kin.length.copy()
+        self.k_fixed = np.array([x.stiffness if x.stiffness is not None else 0.0 for x in c])
+        self.es = np.array([(x.youngs_modulus or 0.0) * (x.cross_section or 0.0) for x in c])
+        self.inv_spring = np.array(
+            [1.0 / x.spring_stiffness if x.spring_stiffness else 0.0 for x in c]
+        )
+        self.l_winch = np.array([x.length_to_winch for x in c])
+        self.fk = ForwardKinematics(model)
+        self.kin = KinematicsData(model)  # at the estimated pose: W, lengths for the TDA
+        self.position = np.array(model.home.position, dtype=float)
+        self.rotation = np.array(model.home.rotation, dtype=float)
+        self.velocity = np.zeros(3)  # m/s, base frame
+        self.omega = np.zeros(3)  # rad/s, base frame
+        self.last_fk: FKResult | None = None
+        self.lengths = np.zeros(model.n_cables)
+        self._stamp = -math.inf
+        self._alpha_fc = 2.0 * math.pi * model.control.velocity_filter
+
+    def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
+        """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
+        l0 = self.l_home - self.drum_ratio * theta
+        fixed = self.k_fixed > 0
+        stretch = np.where(
+            fixed,
+            tensions / np.where(fixed, self.k_fixed, 1.0),
+            tensions * (l0 + self.l_winch) / np.where(fixed, 1.0, self.es),
+        )
+        return l0 + stretch + tensions * self.inv_spring
+
+    def reset(self, position: FloatArray, rotation: FloatArray) -> None:
+        self.position[:] = position
+        self.rotation[:] = rotation
+        self.velocity[:] = 0.0
+        self.omega[:] = 0.0
+        self._stamp = -math.inf
+
+    def update(self, t: float, theta: FloatArray, tensions: FloatArray) -> FKResult:
+        """New pose and twist at the feedback time ``t`` (s); never raises."""
+        self.lengths[:] = self.cable_lengths(theta, tensions)
+        res = self.fk.solve(self.lengths, self.position, self.rotation)
+        self.last_fk = res
+        if res.status in (FKStatus.CONVERGED, FKStatus.MAX_ITERATIONS, FKStatus.INCONSISTENT):
+            dt = t - self._stamp
+            if 0.0 < dt < 0.5:
+                a = 1.0 - math.exp(-self._alpha_fc * dt)
+                self.velocity += a * ((res.position - self.position) / dt - self.velocity)
+                self.omega += a * (log_so3(res.rotation @ self.rotation.T) / dt - self.omega)
+            self.position[:] = res.position
+            self.rotation[:] = res.rotation
+            self._stamp = t
+            inverse_kinematics(self.model, self.kin, self.position, self.rotation)
+        return res

@@ -1,0 +1,103 @@
+"""Jerk-limited 6-DOF trajectories with ruckig.
+
+The 6 coordinates are the position of ``P`` (m, base frame) and the rotation vector ``φ`` of
+the orientation relative to the home orientation (``R = exp([φ]×) R_home``, rad, base frame);
+for the small tilts of a CDPR (``workspace.max_angle``) ``φ̇`` is taken as the angular velocity.
+ruckig ignores position limits in its community edition: targets are clamped to the workspace
+box and the largest angle here, before ruckig sees them. Targets may change mid-motion: the
+next update starts from the current state. The call never raises.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray
+
+
+class Trajectory:
+    def __init__(self, model: RobotModel, period: float):
+        c = model.control
+        self.model = model
+        self.otg = Ruckig(6, period)
+        self.inp = InputParameter(6)
+        self.out = OutputParameter(6)
+        self.limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
+        self.inp.max_velocity = self.limits.tolist()
+        self.inp.max_acceleration = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
+        self.inp.max_jerk = [c.max_jerk] * 3 + [c.max_angular_jerk] * 3
+        self.position = np.zeros(6)  # desired [p, φ]
+        self.velocity = np.zeros(6)
+        self.acceleration = np.zeros(6)
+        self.target = np.zeros(6)
+        self.finished = True
+        self.result = Result.Finished
+        self._velocity_mode = False  # braking: ruckig's velocity interface to zero velocity
+
+    def reset(self, x: FloatArray) -> None:
+        """Hold still at ``x`` (no motion, no jump)."""
+        self.position[:] = x
+        self.velocity[:] = 0.0
+        self.acceleration[:] = 0.0
+        self.target[:] = x
+        self.finished = True
+        self._velocity_mode = False
+
+    def clamp(self, x: FloatArray) -> tuple[FloatArray, bool]:
+        """``x`` inside the workspace box and the largest angle; True when it was changed."""
+        ws = self.model.workspace
+        y = np.array(x, dtype=float)
+        y[:3] = np.clip(y[:3], ws.position_min, ws.position_max)
+        angle = float(np.linalg.norm(y[3:]))
+        if angle > ws.max_angle:
+            y[3:] *= ws.max_angle / angle
+        return y, bool(np.any(np.abs(y - x) > 1e-12))
+
+    def set_target(self, x: FloatArray, speed_scale: float = 1.0) -> bool:
+        """New target (clamped); ``speed_scale`` in (0, 1] scales the velocity limits."""
+        y, _ = self.clamp(x)
+        self.target[:] = y
+        self.inp.max_velocity = (self.limits * min(1.0, max(1e-3, speed_scale))).tolist()
+        self.finished = False
+        self._velocity_mode = False
+        return True
+
+    def stop_here(self) -> None:
+        """Decelerate to rest (jerk-limited) wherever that ends."""
+        self.inp.current_position = self.position.tolist()
+        self.inp.current_velocity = self.velocity.tolist()
+        self.inp.current_acceleration = self.acceleration.tolist()
+        self.inp.control_interface = ControlInterface.Velocity
+        self.inp.target_velocity = [0.0] * 6
+        self.inp.target_acceleration = [0.0] * 6
+        self.finished = False
+        self._velocity_mode = True
+
+    def update(self) -> None:
+        if self.finished:
+            return
+        inp = self.inp
+        inp.current_position = self.position.tolist()
+        inp.current_velocity = self.velocity.tolist()
+        inp.current_acceleration = self.acceleration.tolist()
+        if not self._velocity_mode:
+            inp.control_interface = ControlInterface.Position
+            inp.target_position = self.target.tolist()
+            inp.target_velocity = [0.0] * 6
+            inp.target_acceleration = [0.0] * 6
+        res = self.otg.update(inp, self.out)
+        self.result = res
+        if res in (Result.Working, Result.Finished):
+            self.position[:] = self.out.new_position
+            self.velocity[:] = self.out.new_velocity
+            self.acceleration[:] = self.out.new_acceleration
+            if res == Result.Finished:
+                self.finished = True
+                self._velocity_mode = False
+        else:  # an error of ruckig's input: hold where we are
+            self.velocity[:] = 0.0
+            self.acceleration[:] = 0.0
+            self.finished = True
+            self._velocity_mode = False

@@ -1,0 +1,229 @@
+"""The ``[control]`` section of a robot description: loop rate, gains, trajectory limits, TDA,
+safety limits and real-time settings. Every key has a default; the section may be absent."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from cdprctl.model.reader import TableReader
+
+CONTROL_KEYS = (
+    "rate",
+    "bandwidth",
+    "damping_ratio",
+    "velocity_filter",
+    "max_velocity",
+    "max_acceleration",
+    "max_jerk",
+    "max_angular_velocity",
+    "max_angular_acceleration",
+    "max_angular_jerk",
+    "tda",
+    "safety",
+    "realtime",
+    "friction_compensation",
+    "external_wrench",
+)
+TDA_KEYS = ("method", "nu", "direction", "max_tension_rate", "impose")
+SAFETY_KEYS = (
+    "max_position_error",
+    "max_angle_error",
+    "max_speed",
+    "max_feedback_age",
+    "stop_duration",
+    "tension_margin",
+)
+REALTIME_KEYS = ("sleep_margin", "sched_priority", "cpu", "lock_memory", "freeze_gc")
+METHODS = ("pinv", "closed-form", "barycenter", "min-2-norm", "min-1-norm", "sotda", "energy", "qp")
+
+
+@dataclass(frozen=True)
+class ImposeConfig:
+    cable: int  # 0-based
+    quantity: str  # energy | tension | deformation
+    value: float
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    rate: float = 500.0  # Hz
+    bandwidth: float = 2.0  # Hz, closed-loop natural frequency of the PD pose loop
+    damping_ratio: float = 1.0
+    velocity_filter: float = 40.0  # Hz, first-order low-pass on the finite-difference twist
+    max_velocity: float = 0.3  # m/s
+    max_acceleration: float = 1.0  # m/s²
+    max_jerk: float = 10.0  # m/s³
+    max_angular_velocity: float = 0.3  # rad/s
+    max_angular_acceleration: float = 1.0  # rad/s²
+    max_angular_jerk: float = 10.0  # rad/s³
+    friction_compensation: bool = True  # winch viscous + Coulomb friction feedforward
+    external_wrench: tuple[float, ...] = (0.0,) * 6  # N, N·m at P, base frame: known, fed forward
+    tda_method: str = "barycenter"
+    tda_nu: float = 0.0
+    tda_direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    max_tension_rate: float = 5000.0  # N/s per cable
+    impositions: tuple[ImposeConfig, ...] = ()
+    max_position_error: float = 0.05  # m, tracking error that faults
+    max_angle_error: float = 0.1  # rad
+    max_speed: float = 1.0  # m/s, estimated platform speed that faults
+    max_feedback_age: float = 0.05  # s
+    stop_duration: float = 0.5  # s, controlled stop before the brakes close
+    tension_margin: float = 0.0  # N, kept from each limit by the TDA
+    sleep_margin: float = 0.0002  # s, spin (instead of sleep) this long before each deadline
+    sched_priority: int = 80  # SCHED_FIFO priority when permitted
+    cpu: int = -1  # CPU to pin the loop to; -1: the last one
+    lock_memory: bool = True
+    freeze_gc: bool = True
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate
+
+
+def read_control(
+    rd: TableReader, data: dict[str, Any], cable_names: list[str]
+) -> ControlConfig | None:
+    t = rd.table(data, "control", "", required=False)
+    if t is None:
+        return ControlConfig()
+    n0 = len(rd.errors)
+    path = "control"
+    rd.check_keys(t, CONTROL_KEYS, path)
+    d = ControlConfig()
+    vals: dict[str, Any] = {}
+
+    def num(key: str, unit: str, **rules: Any) -> None:
+        v = rd.number(t, key, path, unit, required=False, default=getattr(d, key), **rules)
+        if v is not None:
+            vals[key] = v
+
+    num("rate", "Hz", positive=True, maximum=10000.0)
+    num("bandwidth", "Hz", positive=True)
+    num("damping_ratio", "", positive=True)
+    num("velocity_filter", "Hz", positive=True)
+    for key, unit in (
+        ("max_velocity", "m/s"),
+        ("max_acceleration", "m/s²"),
+        ("max_jerk", "m/s³"),
+        ("max_angular_velocity", "rad/s"),
+        ("max_angular_acceleration", "rad/s²"),
+        ("max_angular_jerk", "rad/s³"),
+    ):
+        num(key, unit, positive=True)
+    if "friction_compensation" in t:
+        if not isinstance(t["friction_compensation"], bool):
+            rd.error(
+                f"{path}.friction_compensation",
+                t["friction_compensation"],
+                "",
+                "must be true or false",
+            )
+        else:
+            vals["friction_compensation"] = t["friction_compensation"]
+    ext = rd.vector(t, "external_wrench", path, "N, N·m", length=6, required=False, default=None)
+    if ext is not None:
+        vals["external_wrench"] = tuple(float(x) for x in ext)
+    tda = rd.table(t, "tda", path, required=False)
+    if tda is not None:
+        tp = f"{path}.tda"
+        rd.check_keys(tda, TDA_KEYS, tp)
+        method = rd.string(tda, "method", tp, required=False, default=d.tda_method)
+        if method not in METHODS:
+            rd.error(f"{tp}.method", method, "", f"must be one of {', '.join(METHODS)}")
+        else:
+            vals["tda_method"] = method
+        nu = rd.number(
+            tda, "nu", tp, "", required=False, default=d.tda_nu, minimum=0.0, maximum=1.0
+        )
+        if nu is not None:
+            vals["tda_nu"] = nu
+        direction = rd.vector(tda, "direction", tp, "", required=False, default=None)
+        if direction is not None:
+            vals["tda_direction"] = tuple(float(x) for x in direction)
+        rate = rd.number(
+            tda,
+            "max_tension_rate",
+            tp,
+            "N/s",
+            required=False,
+            default=d.max_tension_rate,
+            positive=True,
+        )
+        if rate is not None:
+            vals["max_tension_rate"] = rate
+        imps = tda.get("impose", [])
+        if not isinstance(imps, list) or not all(isinstance(x, dict) for x in imps):
+            rd.error(f"{tp}.impose", imps, "", "must be an array of tables")
+            imps = []
+        out = []
+        for k, imp in enumerate(imps):
+            ip = f"{tp}.impose[{k}]"
+            rd.check_keys(imp, ("cable", "quantity", "value"), ip)
+            cable = imp.get("cable")
+            q = imp.get("quantity")
+            v = rd.number(imp, "value", ip, {"energy": "J", "tension": "N"}.get(q, "m"))
+            if cable not in cable_names:
+                rd.error(f"{ip}.cable", cable, "", f"is not a cable ({', '.join(cable_names)})")
+            elif q not in ("energy", "tension", "deformation"):
+                rd.error(f"{ip}.quantity", q, "", "must be energy, tension or deformation")
+            elif v is not None:
+                out.append(ImposeConfig(cable_names.index(cable), q, v))
+        vals["impositions"] = tuple(out)
+    safety = rd.table(t, "safety", path, required=False)
+    if safety is not None:
+        sp = f"{path}.safety"
+        rd.check_keys(safety, SAFETY_KEYS, sp)
+        for key, unit, rules in (
+            ("max_position_error", "m", {"positive": True}),
+            ("max_angle_error", "rad", {"positive": True}),
+            ("max_speed", "m/s", {"positive": True}),
+            ("max_feedback_age", "s", {"positive": True}),
+            ("stop_duration", "s", {"positive": True}),
+            ("tension_margin", "N", {"minimum": 0.0}),
+        ):
+            v = rd.number(safety, key, sp, unit, required=False, default=getattr(d, key), **rules)
+            if v is not None:
+                vals[key] = v
+    rt = rd.table(t, "realtime", path, required=False)
+    if rt is not None:
+        rp = f"{path}.realtime"
+        rd.check_keys(rt, REALTIME_KEYS, rp)
+        v = rd.number(
+            rt,
+            "sleep_margin",
+            rp,
+            "s",
+            required=False,
+            default=d.sleep_margin,
+            minimum=0.0,
+            maximum=0.01,
+        )
+        if v is not None:
+            vals["sleep_margin"] = v
+        v = rd.number(
+            rt,
+            "sched_priority",
+            rp,
+            "",
+            required=False,
+            default=d.sched_priority,
+            minimum=1,
+            maximum=99,
+            integer=True,
+        )
+        if v is not None:
+            vals["sched_priority"] = int(v)
+        v = rd.number(rt, "cpu", rp, "", required=False, default=d.cpu, minimum=-1, integer=True)
+        if v is not None:
+            vals["cpu"] = int(v)
+        for key in ("lock_memory", "freeze_gc"):
+            if key in rt:
+                if not isinstance(rt[key], bool):
+                    rd.error(f"{rp}.{key}", rt[key], "", "must be true or false")
+                else:
+                    vals[key] = rt[key]
+    if len(rd.errors) > n0:
+        return None
+    return ControlConfig(**vals)

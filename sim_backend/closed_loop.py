@@ -1,0 +1,64 @@
+"""The controller against the simulated robot in lock-step: deterministic closed-loop runs."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.controller import Command, Controller
+from cdprctl.model.robot import RobotModel
+from sim_backend.network import LockStep
+
+
+class ClosedLoop:
+    """``Controller`` + ``LockStep``: ``run(seconds)`` alternates one control cycle and one
+    period of simulation; ``log`` keeps per-cycle arrays for the figures."""
+
+    def __init__(self, model: RobotModel, tda: Any = None, driver: str | None = None):
+        self.model = model
+        self.period = model.control.period
+        self.rig = LockStep(model, period=self.period, driver=driver)
+        self.plant = self.rig.plant
+        self.net = self.rig.net
+        self.controller = Controller(model, self.rig.driver, tda)
+        self.log: dict[str, list[Any]] = {
+            k: []
+            for k in ("t", "state", "p_true", "p_est", "p_des", "tensions", "torques", "tda_ok")
+        }
+
+    def startup(self) -> None:
+        self.controller.startup()
+
+    def command(self, kind: str, **kw: Any) -> None:
+        self.controller.submit(Command(kind, **kw))
+
+    def run(self, seconds: float, until: Any = None) -> None:
+        c = self.controller
+        for _ in range(round(seconds / self.period)):
+            t = self.net.time
+            c.step(t)
+            self.net.advance(self.period)
+            lg = self.log
+            lg["t"].append(t)
+            lg["state"].append(c.state.value)
+            lg["p_true"].append(self.plant.position.copy())
+            lg["p_est"].append(c.estimator.position.copy())
+            lg["p_des"].append(c.trajectory.position[:3].copy())
+            lg["tensions"].append(c.tensions.copy())
+            lg["torques"].append(c.torques.copy())
+            lg["tda_ok"].append(c.tda_status.name == "OK")
+            if until is not None and until(self):
+                break
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.array(v) for k, v in self.log.items()}
+
+    def close(self) -> None:
+        self.rig.close()
+
+    def __enter__(self) -> ClosedLoop:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
