@@ -100,20 +100,28 @@ class Controller:
         self.t_min = model.tension_min + c.tension_margin
         self.t_max = model.tension_max - c.tension_margin
         wn = 2.0 * math.pi * c.bandwidth
-        self.kp, self.kd = wn * wn, 2.0 * c.damping_ratio * wn  # 1/s², 1/s (accelerations)
+        # PID by pole placement, a triple pole at −ω_n (s + ω)³: kp = 3ω², kd = 3ω, ki = ω³
+        # (accelerations per m, per m/s, per m·s). The integral removes the PD's compliance
+        # to a steady force (the water jet): what remains is the cables' own elasticity, the
+        # stiffness the SOTDA acts on (Picard et al. 2020). damping_ratio scales kd.
+        self.kp = 3.0 * wn * wn
+        self.kd = 3.0 * c.damping_ratio * wn
+        self.ki = wn**3
+        self.integral = np.zeros(6)  # m·s, rad·s
+        self.integral_limit = 10.0 / self.ki  # the integral term stays within 10 m/s² (rad/s²)
         self.ext_wrench = np.array(c.external_wrench, dtype=float)
         self.tensions = np.zeros(m)  # N, commanded
-        # Tensions used for the estimator's stretch correction: the static ones (gravity and the
-        # known external wrench) at the estimated pose, refreshed every STRETCH_EVERY cycles.
-        # The commanded tensions would close an algebraic loop (tension → stretch → pose
-        # estimate → PD → tension) whose gain is about 1 on the window-cleaning robot: with
-        # them the estimate diverged by 9 mm within 0.13 s of enabling (lock-step, measured).
+        # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
+        # the known external wrench and the trajectory's inertial load, distributed like the
+        # commanded ones) at the estimated pose. The commanded tensions, PD feedback included,
+        # would close an algebraic loop (tension → stretch → pose estimate → PD → tension) of
+        # gain ~1 on the window-cleaning robot: the estimate diverged by 9 mm within 0.13 s of
+        # enabling; static tensions alone leave out the inertial load, and the ill-conditioned
+        # y direction turned its 0.2 mm of stretch into 6 mm of estimate (lock-step, measured).
         self.stretch_tensions = np.zeros(m)
         self._last_stretch = np.full(m, np.inf)
-        self._static_tda = TensionDistributor(
-            model,
-            TDAOptions(method=TDAMethod.BARYCENTER if model.redundancy == 2 else TDAMethod.QP),
-        )
+        self._ff_wrench = np.zeros(6)
+        self._static_tda = TensionDistributor(model, tda or tda_options_of(model))
         self.hold_tensions = np.zeros(m)  # N, the last feasible distribution
         self.torques = np.zeros(m)  # N·m, commanded
         self.wrench = np.zeros(6)  # what the cables were asked for
@@ -170,7 +178,7 @@ class Controller:
                 break
         else:
             raise RuntimeError("start-up: pose and tensions did not settle in 100 iterations")
-        if fk.status is not FKStatus.CONVERGED:
+        if fk.residual > self.MAX_FK_RESIDUAL:
             raise RuntimeError(
                 f"start-up: the encoders disagree with every pose "
                 f"({fk.status.name}, residual {fk.residual:.3g} m)"
@@ -201,8 +209,7 @@ class Controller:
             self.time = t
             self.cycle += 1
             self._handle_commands(t)
-            if self.cycle % self.STRETCH_EVERY == 0:
-                self._refresh_stretch_tensions()
+            self._refresh_stretch_tensions()
             fk = self.estimator.update(st.stamp, st.position, self.stretch_tensions)
             t2 = clock()
             ph[1] = (t2 - t1) / 1e3
@@ -228,12 +235,17 @@ class Controller:
             self.torques[:] = self.r * self.hold_tensions
             self._fault(t, f"internal error: {type(exc).__name__}: {exc}", hold=True)
 
-    STRETCH_EVERY = 25  # cycles
     MAX_FK_RESIDUAL = 0.005  # m RMS
 
     def _refresh_stretch_tensions(self) -> None:
+        e, tr, pf = self.estimator, self.trajectory, self.model.platform
+        ff = self._ff_wrench
+        ff[:] = self._gravity_hold()
+        if self.state in (State.ENABLED, State.MOVING, State.STOPPING):
+            ff[:3] += pf.mass * tr.acceleration[:3]
+            ff[3:] += e.rotation @ pf.inertia @ e.rotation.T @ tr.acceleration[3:]
         out = self._static_tda.solve(
-            self.estimator.kin.W, self._gravity_hold(), self.t_min, self.t_max
+            e.kin.W, ff, self.t_min, self.t_max, k=self._stiffness(), kin=e.kin
         )
         if out.ok:
             self.stretch_tensions[:] = out.tensions
@@ -256,8 +268,19 @@ class Controller:
         err = self.pose_error
         err[:3] = tr.position[:3] - e.position
         err[3:] = log_so3(Rd @ e.rotation.T)
-        acc_lin = tr.acceleration[:3] + self.kp * err[:3] + self.kd * (tr.velocity[:3] - e.velocity)
-        acc_ang = tr.acceleration[3:] + self.kp * err[3:] + self.kd * (tr.velocity[3:] - e.omega)
+        if self.state in (State.ENABLED, State.MOVING):
+            self.integral += err * self.period
+            np.clip(self.integral, -self.integral_limit, self.integral_limit, out=self.integral)
+        ki = self.ki * self.integral
+        acc_lin = (
+            tr.acceleration[:3]
+            + self.kp * err[:3]
+            + ki[:3]
+            + self.kd * (tr.velocity[:3] - e.velocity)
+        )
+        acc_ang = (
+            tr.acceleration[3:] + self.kp * err[3:] + ki[3:] + self.kd * (tr.velocity[3:] - e.omega)
+        )
         Iw = e.rotation @ pf.inertia @ e.rotation.T
         self.wrench[:3] = pf.mass * acc_lin
         self.wrench[3:] = Iw @ acc_ang + np.cross(e.omega, Iw @ e.omega)
@@ -388,6 +411,7 @@ class Controller:
             if k == "enable" and self.state is State.READY:
                 self.trajectory.reset(self._pose6())
                 self.tensions[:] = self.hold_tensions
+                self.integral[:] = 0.0
                 self.driver.begin_activate()
                 self._set_state(State.ENABLING, t, "enabling the drives with holding torques")
             elif (

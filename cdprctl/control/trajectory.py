@@ -11,10 +11,24 @@ next update starts from the current state. The call never raises.
 from __future__ import annotations
 
 import numpy as np
-from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
+from ruckig import (
+    ControlInterface,
+    InputParameter,
+    OutputParameter,
+    Result,
+    Ruckig,
+    RuckigError,
+    Synchronization,
+)
+
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
+
+# Phase synchronisation: a straight line in the 6-D pose space, what a point-to-point move of
+# a CDPR should be; ruckig (0.19) raises RuckigError on some inputs ("error in step 1"), then
+# time synchronisation, then none, are tried.
+_SYNC_ORDER = (Synchronization.Phase, Synchronization.Time, Synchronization.No)
 
 
 class Trajectory:
@@ -87,7 +101,15 @@ class Trajectory:
             inp.target_position = self.target.tolist()
             inp.target_velocity = [0.0] * 6
             inp.target_acceleration = [0.0] * 6
-        res = self.otg.update(inp, self.out)
+        res = Result.Error
+        for sync in _SYNC_ORDER:
+            inp.synchronization = sync
+            try:
+                res = self.otg.update(inp, self.out)
+            except RuckigError:
+                res = Result.Error
+            if res in (Result.Working, Result.Finished):
+                break
         self.result = res
         if res in (Result.Working, Result.Finished):
             self.position[:] = self.out.new_position

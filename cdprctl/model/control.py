@@ -48,7 +48,7 @@ class ImposeConfig:
 @dataclass(frozen=True)
 class ControlConfig:
     rate: float = 500.0  # Hz
-    bandwidth: float = 2.0  # Hz, closed-loop natural frequency of the PD pose loop
+    bandwidth: float = 1.0  # Hz, closed-loop natural frequency of the PD pose loop
     damping_ratio: float = 1.0
     velocity_filter: float = 40.0  # Hz, first-order low-pass on the finite-difference twist
     max_velocity: float = 0.3  # m/s

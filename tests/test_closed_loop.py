@@ -1,0 +1,135 @@
+"""The controller against the simulated robot, lock-step (deterministic), on the
+window-cleaning robot: start without a jump, point-to-point motions, a 30 N lateral force,
+faults handled by the supervisor; SOTDA against the barycenter under the force."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.control.controller import State
+from cdprctl.model import load_robot
+from sim_backend.closed_loop import ClosedLoop
+from sim_backend.faults import FaultEvent, FaultInjector
+
+
+@pytest.fixture(scope="module")
+def rowc():
+    return load_robot(CONFIG / "rowc.toml")
+
+
+def enabled(model, tda=None):
+    cl = ClosedLoop(model, tda)
+    cl.startup()
+    cl.command("enable")
+    cl.run(0.3)
+    assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+    return cl
+
+
+def test_start_holds_the_pose_without_a_jump(rowc):
+    with enabled(rowc) as cl:
+        cl.run(1.0)
+        a = cl.arrays()
+        dev = np.linalg.norm(a["p_true"] - rowc.home.position, axis=1)
+        assert dev.max() < 0.2e-3  # m
+        assert np.all(a["tensions"] >= rowc.tension_min - 1e-9)
+        assert np.all(a["tensions"] <= rowc.tension_max + 1e-9)
+
+
+@pytest.mark.parametrize(
+    "target", [[1.8, 0.35, 0.55], [1.0, 0.35, 0.45], [2.2, 0.35, 0.4], [1.5, 0.35, 0.35]]
+)
+def test_point_to_point(rowc, target):
+    with enabled(rowc) as cl:
+        goal = np.array(target)
+        cl.command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]]))
+        cl.run(4.0)
+        c = cl.controller
+        assert c.state is State.ENABLED, c.fault_reason
+        a = cl.arrays()
+        err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)
+        assert err.max() < 2e-3  # m, tracking the jerk-limited reference
+        assert np.linalg.norm(cl.plant.position - goal) < 0.5e-3  # m, at rest on the target
+        assert np.all(a["tda_ok"])
+        assert np.all(a["torques"] <= np.array([w.winch.torque_limit for w in rowc.cables]))
+
+
+def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc):
+    """30 N along y ramped in over 1 s (the ARK 2020 water jet): the PID pulls the encoders'
+    pose back; what remains is the cables' elastic deflection, which the encoders cannot see
+    (of the order of K⁻¹ δw, 8-16 mm here)."""
+    with enabled(rowc) as cl:
+        FaultInjector([FaultEvent(cl.net.time, "external_wrench",
+                                  value=(0.0, 30.0, 0.0, 0.0, 0.0, 0.0), ramp=1.0)]).attach(cl.net)
+        cl.run(6.0)
+        c = cl.controller
+        assert c.state is State.ENABLED, c.fault_reason
+        a = cl.arrays()
+        y = a["p_true"][:, 1] - rowc.home.position[1]
+        assert y.max() < 0.03  # m, the peak while the integral catches up
+        final = float(np.mean(y[-250:]))
+        assert 0.004 < final < 0.02
+        assert abs(c.estimator.position[1] - rowc.home.position[1]) < 0.5e-3
+        assert np.all(a["tensions"] <= rowc.tension_max + 1e-9)
+
+
+def test_infeasible_wrench_stops_and_holds(rowc):
+    with enabled(rowc) as cl:
+        fi = FaultInjector([FaultEvent(cl.net.time, "external_wrench",
+                                       value=(0.0, 400.0, 0.0, 0.0, 0.0, 0.0), ramp=0.2)])
+        fi.attach(cl.net)
+        cl.run(1.5)
+        c = cl.controller
+        assert c.state is State.FAULT
+        assert "tension distribution" in c.fault_reason or "tracking" in c.fault_reason
+        a = cl.arrays()
+        # never a tension command outside the limits, never a non-finite torque
+        assert np.all(np.isfinite(a["torques"]))
+        assert np.all(a["tensions"] >= rowc.tension_min - 1e-9)
+        assert np.all(a["tensions"] <= rowc.tension_max + 1e-9)
+        assert np.all(cl.plant.brake)
+
+
+def test_drive_fault_disables_and_reset_recovers(rowc):
+    with enabled(rowc) as cl:
+        FaultInjector([FaultEvent(cl.net.time + 0.1, "drive_fault", cable=2,
+                                  value=0x2310)]).attach(cl.net)
+        cl.run(0.3)
+        c = cl.controller
+        assert c.state is State.FAULT and "0x2310" in c.fault_reason
+        assert np.all(cl.plant.brake)
+        cl.command("reset")
+        cl.run(0.6)
+        assert c.state is State.READY, c.fault_reason
+        cl.command("enable")
+        cl.run(0.3)
+        assert c.state is State.ENABLED, c.fault_reason
+
+
+def test_commands_in_the_wrong_state_are_ignored(rowc):
+    with ClosedLoop(rowc) as cl:
+        cl.startup()
+        cl.command("move", pose=np.array([1.6, 0.35, 0.6, 0, 0, 0]))
+        cl.run(0.05)
+        assert cl.controller.state is State.READY
+        assert any("ignored" in text for _, text in cl.controller.events)
+
+
+def test_workspace_clamp(rowc):
+    """ruckig ignores position limits: targets are clamped to the workspace box first."""
+    with enabled(rowc) as cl:
+        cl.command("move", pose=np.array([5.0, 0.35, 0.59, 0.0, 0.0, 0.0]))
+        cl.run(0.05)
+        assert cl.controller.trajectory.target[0] == pytest.approx(rowc.workspace.position_max[0])
+
+
+def test_lower_rate_config(rowc):
+    model = dataclasses.replace(rowc, control=dataclasses.replace(rowc.control, rate=250.0))
+    with enabled(model) as cl:
+        cl.command("move", pose=np.array([1.7, 0.35, 0.6, 0.0, 0.0, 0.0]))
+        cl.run(3.0)
+        assert np.linalg.norm(cl.plant.position - [1.7, 0.35, 0.6]) < 0.5e-3
