@@ -21,7 +21,6 @@ from ruckig import (
     Synchronization,
 )
 
-
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
 
