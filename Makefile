@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/cdprctl demo
+	$(BIN)/cdprctl run --config config/rowc.toml --sim --rate 250
 
 lint: $(STAMP)
 	$(BIN)/ruff check cdprctl drivers sim_backend tests benchmarks tools

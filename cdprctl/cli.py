@@ -43,11 +43,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="the main job of `make run` on the bundled robots")
     p.set_defaults(func=_cmd_demo)
     from cdprctl.commands import bus_load, sim
+    from cdprctl.commands import run as run_cmd
     from cdprctl.commands import tda as tda_cmd
 
+    run_cmd.add_parser(sub)
+    sim.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
-    sim.add_parser(sub)
     return parser
 
 

@@ -32,7 +32,7 @@ from cdprctl.control.estimator import Estimator
 from cdprctl.control.trajectory import Trajectory
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, exp_so3, log_so3
+from cdprctl.rotation import FloatArray, cross3, exp_so3, log_so3
 from cdprctl.tda import (
     ImposedQuantity,
     Imposition,
@@ -171,7 +171,8 @@ class Controller:
                     f"cannot be held ({out.status.name}: {out.message})"
                 )
             self.hold_tensions[:] = out.tensions
-            self._refresh_stretch_tensions()
+            if self.cycle % self.STRETCH_EVERY == 0:
+                self._refresh_stretch_tensions()
             change = float(np.max(np.abs(self.stretch_tensions - self._last_stretch)))
             self._last_stretch[:] = self.stretch_tensions
             if change < 1e-3:
@@ -237,6 +238,8 @@ class Controller:
 
     MAX_FK_RESIDUAL = 0.005  # m RMS
 
+    STRETCH_EVERY = 4  # cycles: the feed-forward load is jerk-limited, it changes slowly
+
     def _refresh_stretch_tensions(self) -> None:
         e, tr, pf = self.estimator, self.trajectory, self.model.platform
         ff = self._ff_wrench
@@ -259,7 +262,7 @@ class Controller:
         return -(self.model.gravity_wrench(self.estimator.rotation) + self.ext_wrench)
 
     def _stiffness(self) -> FloatArray:
-        return self.model.cable_stiffness(self.estimator.kin.length)
+        return self.estimator.stiffness(self.estimator.kin.length)
 
     def _control(self) -> None:
         """Cable wrench: ``M (a_d + Kp e + Kd ė) − w_g − w_e`` (PD + feedforward)."""
@@ -283,7 +286,7 @@ class Controller:
         )
         Iw = e.rotation @ pf.inertia @ e.rotation.T
         self.wrench[:3] = pf.mass * acc_lin
-        self.wrench[3:] = Iw @ acc_ang + np.cross(e.omega, Iw @ e.omega)
+        self.wrench[3:] = Iw @ acc_ang + cross3(e.omega, Iw @ e.omega)
         self.wrench += self._gravity_hold()
 
     def _distribute(self, t: float) -> None:

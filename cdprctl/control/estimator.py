@@ -27,13 +27,23 @@ class Estimator:
         kin = KinematicsData(model)
         inverse_kinematics(model, kin, model.home.position, model.home.rotation)
         self.l_home = kin.length.copy()
-        self.k_fixed = np.array([x.stiffness if x.stiffness is not None else 0.0 for x in c])
-        self.es = np.array([(x.youngs_modulus or 0.0) * (x.cross_section or 0.0) for x in c])
+        # compliance per cable: 1/k_fixed, or (l0 + l_w)/(E S), plus the series spring's 1/k_s
+        self.inv_k_fixed = np.array(
+            [1.0 / x.stiffness if x.stiffness is not None else 0.0 for x in c]
+        )
+        self.inv_es = np.array(
+            [
+                0.0
+                if x.stiffness is not None
+                else 1.0 / ((x.youngs_modulus or 1.0) * (x.cross_section or 1.0))
+                for x in c
+            ]
+        )
         self.inv_spring = np.array(
             [1.0 / x.spring_stiffness if x.spring_stiffness else 0.0 for x in c]
         )
         self.l_winch = np.array([x.length_to_winch for x in c])
-        self.fk = ForwardKinematics(model)
+        self.fk = ForwardKinematics(model, max_iterations=8)  # warm: 1-2 are the norm
         self.kin = KinematicsData(model)  # at the estimated pose: W, lengths for the TDA
         self.position = np.array(model.home.position, dtype=float)
         self.rotation = np.array(model.home.rotation, dtype=float)
@@ -47,13 +57,14 @@ class Estimator:
     def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
         """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
         l0 = self.l_home - self.drum_ratio * theta
-        fixed = self.k_fixed > 0
-        stretch = np.where(
-            fixed,
-            tensions / np.where(fixed, self.k_fixed, 1.0),
-            tensions * (l0 + self.l_winch) / np.where(fixed, 1.0, self.es),
+        return l0 + tensions * (
+            self.inv_k_fixed + self.inv_es * (l0 + self.l_winch) + self.inv_spring
         )
-        return l0 + stretch + tensions * self.inv_spring
+
+    def stiffness(self, lengths: FloatArray) -> FloatArray:
+        """Axial stiffness k_i (N/m) at geometric lengths (m), vectorised
+        (``RobotModel.cable_stiffness`` loops over cables)."""
+        return 1.0 / (self.inv_k_fixed + self.inv_es * (lengths + self.l_winch) + self.inv_spring)
 
     def reset(self, position: FloatArray, rotation: FloatArray) -> None:
         self.position[:] = position

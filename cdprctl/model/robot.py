@@ -13,7 +13,7 @@ import numpy as np
 
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
-from cdprctl.rotation import FloatArray, rpy_to_matrix
+from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
 
 
 def _frozen(a: FloatArray) -> FloatArray:
@@ -177,4 +177,4 @@ class RobotModel:
         """
         f = self.platform.mass * self.gravity
         r = R @ self.platform.com
-        return np.concatenate([f, np.cross(r, f)])
+        return np.concatenate([f, cross3(r, f)])

@@ -1,0 +1,90 @@
+"""``cdprctl run``: the controller daemon (see cdprctl.daemon.service)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Any
+
+from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from cdprctl.model import ConfigError, load_robot
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run the controller daemon",
+        description="The controller daemon: drives configured, pose estimated and checked, "
+        "then the fixed-rate loop (read, estimate, trajectory, PID + feedforward, tension "
+        "distribution, winch torques, write). With --sim the simulated robot runs in this "
+        "process and a demo motion is played (--disturbance N adds a lateral force; "
+        "--no-demo: none). SIGTERM or Ctrl-C: controlled stop, drives disabled, exit 0.",
+    )
+    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p.add_argument("--sim", action="store_true", help="run against the simulated robot")
+    p.add_argument("--no-demo", action="store_true", help="with --sim: no demo motion")
+    p.add_argument(
+        "--disturbance",
+        type=float,
+        default=0.0,
+        metavar="N",
+        help="with the demo: a lateral force (N along y, ramped) at home",
+    )
+    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--rate", type=float, help="loop rate in Hz, replacing [control] rate")
+    p.add_argument(
+        "--status", type=float, default=0.5, help="status line every this many seconds (0: none)"
+    )
+    p.add_argument(
+        "--no-realtime",
+        action="store_true",
+        help="do not ask for SCHED_FIFO, CPU pinning, locked memory",
+    )
+    add_bus_arguments(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cdprctl.daemon.service import Daemon
+
+    logging.basicConfig(
+        level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
+    )
+    logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)  # warnings printed by us
+    try:
+        model = load_robot(args.config)
+    except ConfigError as exc:
+        for e in exc.errors:
+            print(e, file=sys.stderr)
+        return 1
+    if args.rate is not None:
+        if not 1.0 <= args.rate <= 10000.0:
+            print(
+                f"cdprctl run: error: --rate = {args.rate} Hz must be in [1, 10000]",
+                file=sys.stderr,
+            )
+            return 2
+        import dataclasses
+
+        model = dataclasses.replace(
+            model, control=dataclasses.replace(model.control, rate=args.rate)
+        )
+    if args.duration is not None and not args.duration > 0:
+        print(f"cdprctl run: error: --duration = {args.duration} s must be > 0", file=sys.stderr)
+        return 2
+    from drivers.errors import DriverError
+
+    try:
+        daemon = Daemon(
+            model,
+            args.sim,
+            bus_overrides(args),
+            realtime=not args.no_realtime,
+            status_every=args.status,
+        )
+    except DriverError as exc:
+        print(f"cdprctl run: {exc}", file=sys.stderr)
+        return 1
+    demo = args.sim and not args.no_demo
+    return daemon.run(args.duration, demo, args.disturbance)

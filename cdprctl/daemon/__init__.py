@@ -1,0 +1,1 @@
+"""The daemon: real-time loop, OS real-time settings, systemd notification, `cdprctl run`."""

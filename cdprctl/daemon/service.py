@@ -1,0 +1,294 @@
+"""``cdprctl run``: the controller daemon.
+
+Start-up (config checked, drives configured, pose estimated and checked holdable), then the
+fixed-rate loop in the main thread. A second thread does all I/O: the status line, the events
+the loop queued, the demo's commands, the systemd watchdog. SIGTERM/SIGINT: a controlled stop
+(decelerate, disable the drives: the brakes hold), exit code 0.
+
+With ``--sim`` the simulated robot of ``sim_backend`` runs in this process on the ``inprocess``
+CAN interface, stepped by the loop right after each cycle's write: what a newcomer runs to see
+the whole system. Without it the drives are real (or ``cdprctl sim`` in another process, met
+through ``--can-interface/--can-channel``).
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import sys
+import threading
+import time
+import uuid
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.controller import PHASES, Command, Controller, State
+from cdprctl.control.loop import LoopStats, run_loop
+from cdprctl.daemon import rt
+from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
+from cdprctl.model.robot import RobotModel
+
+LOG = logging.getLogger("cdprctl")
+
+
+class Daemon:
+    def __init__(
+        self,
+        model: RobotModel,
+        sim: bool,
+        overrides: dict[str, Any],
+        realtime: bool = True,
+        status_every: float = 0.5,
+        out: Any = sys.stdout,
+    ):
+        from drivers import create_driver
+
+        self.model = model
+        self.sim = None
+        self.out = out
+        self.status_every = status_every
+        self.realtime = realtime
+        period = model.control.period
+        if sim:
+            from sim_backend.network import SimNetwork
+            from sim_backend.plant import CdprPlant
+
+            channels = [
+                f"cdprctl-sim-{uuid.uuid4().hex[:8]}-{b}" for b in range(len(model.drives.buses))
+            ]
+            overrides = {"interface": "inprocess", "channels": channels}
+            self.plant = CdprPlant(model)
+            sim_net = SimNetwork(model, self.plant, overrides)
+            self.sim = sim_net
+
+            def wait(dt: float) -> None:  # start-up calls: the simulated robot keeps time
+                sim_net.advance(dt)
+                time.sleep(dt)
+
+            self.driver = create_driver(model, period=period, wait=wait, bus_overrides=overrides)
+        else:
+            self.driver = create_driver(model, period=period, bus_overrides=overrides)
+        self.controller = Controller(model, self.driver)
+        self.stats = LoopStats(phases=len(PHASES))
+        self.stop_requested = threading.Event()
+        self.finished = threading.Event()
+        self.summary: dict[str, Any] = {}
+        self._errors: list[float] = []
+        self._last_t: float | None = None
+
+    # -- the loop thread ---------------------------------------------------------------------------
+    def _step(self, t: float) -> None:
+        self.controller.step(t)
+        if self.sim is not None:
+            # the simulated robot follows the loop's clock, skipped periods included
+            dt = self.model.control.period if self._last_t is None else t - self._last_t
+            self._last_t = t
+            self.sim.advance(min(max(dt, 0.0), 0.05))
+
+    def run(self, duration: float | None, demo: bool, force: float = 0.0) -> int:
+        c = self.controller
+        self._print(
+            f"cdprctl run: {self.model.name}, {self.model.n_cables} "
+            f"{self.model.drives.driver} drives, {self.model.control.rate:g} Hz, TDA "
+            f"{c.tda.options.method.value}" + (", simulated robot" if self.sim else "")
+        )
+        try:
+            c.startup()
+        except Exception as exc:  # start-up failures are reported, never a traceback
+            self._print(f"cdprctl run: start-up failed: {exc}", err=True)
+            self.driver.shutdown()
+            return 1
+        for w in self.driver.warnings:
+            self._print(f"warning: {w}", err=True)
+        p = c.estimator.position
+        self._print(
+            f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
+            f"{c.hold_tensions.min():.1f}..{c.hold_tensions.max():.1f} N"
+        )
+        warnings = []
+        if self.realtime:
+            rc = self.model.control
+            warnings = rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc)
+        for w in warnings:
+            self._print(f"warning: {w}", err=True)
+        notify("READY=1")
+        old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+        io = threading.Thread(
+            target=self._io, args=(duration, demo, force), name="cdprctl-io", daemon=True
+        )
+        wd = None
+        interval = watchdog_interval()
+        if interval:
+            wd = Watchdog(lambda: c.cycle, interval)
+            wd.start()
+        io.start()
+        try:
+            run_loop(
+                self.model.control.period,
+                self._step,
+                self.finished.is_set,
+                self.model.control.sleep_margin,
+                self.stats,
+                lambda: c.phase_us,
+            )
+        finally:
+            if self.realtime:
+                rt.restore_gc()
+            for s, h in old.items():
+                signal.signal(s, h)
+            if wd is not None:
+                wd.stop()
+            notify("STOPPING=1")
+            io.join(timeout=2.0)
+            self.driver.shutdown()
+            if self.sim is not None:
+                self.sim.close()
+        self._drain_events()
+        self._report()
+        return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.stop_requested.set()
+
+    # -- the I/O thread ----------------------------------------------------------------------------
+    def _io(self, duration: float | None, demo: bool, force: float) -> None:
+        c = self.controller
+        t0 = time.monotonic()
+        script = demo_script(self.model, force) if demo else []
+        next_status = 0.0
+        stopping_since: float | None = None
+        while True:
+            now = time.monotonic() - t0
+            self._drain_events()
+            while script and script[0][0] <= now:
+                _, action = script.pop(0)
+                action(self)
+            if c.state in (State.ENABLED, State.MOVING):
+                e = c.estimator
+                err = float(np.linalg.norm(c.trajectory.position[:3] - e.position))
+                self._errors.append(err)
+            if self.status_every and now >= next_status:
+                self._status_line(now)
+                next_status += self.status_every
+            end = (duration is not None and now >= duration) or (
+                demo and not script and c.state in (State.READY, State.FAULT)
+            )
+            if (end or self.stop_requested.is_set()) and stopping_since is None:
+                stopping_since = now
+                if c.state in (State.ENABLED, State.MOVING, State.ENABLING):
+                    c.submit(Command("stop"))
+                    c.submit(Command("disable"))
+            if stopping_since is not None and (
+                c.state in (State.READY, State.FAULT, State.INIT) or now - stopping_since > 3.0
+            ):
+                self.finished.set()
+                return
+            time.sleep(0.05)  # this thread holds the GIL as little as it can
+
+    def _drain_events(self) -> None:
+        ev = self.controller.events
+        while ev:
+            t, text = ev.popleft()
+            self._print(f"[t={t:9.3f}] {text}")
+
+    def _status_line(self, now: float) -> None:
+        c = self.controller
+        e = c.estimator
+        s = self.stats.summary()
+        sim = ""
+        if self.sim is not None:
+            true = self.plant.position
+            sim = f" true [{true[0]:.3f} {true[1]:.3f} {true[2]:.3f}]"
+        self._print(
+            f"t={now:6.1f}s {c.state.value:<9} P [{e.position[0]:.3f} {e.position[1]:.3f} "
+            f"{e.position[2]:.3f}] m{sim} err {np.linalg.norm(c.pose_error[:3]) * 1e3:5.2f} mm "
+            f"t {c.tensions.min():5.1f}..{c.tensions.max():5.1f} N tda {c.tda_status.name} "
+            f"late p99 {s.get('lateness_p99_us', 0):6.0f} us missed {int(s.get('missed', 0))}"
+        )
+
+    def _report(self) -> None:
+        s = self.stats.summary()
+        c = self.controller
+        errs = np.array(self._errors) if self._errors else np.zeros(1)
+        per_phase = self.stats.phases[: min(self.stats.count, self.stats.size)]
+        phases = (
+            {
+                name: (float(np.median(per_phase[:, k])), float(np.percentile(per_phase[:, k], 99)))
+                for k, name in enumerate(PHASES)
+            }
+            if len(per_phase)
+            else {}
+        )
+        self.summary = {
+            "loop": s,
+            "phases_us": phases,
+            "tracking_rms_mm": float(np.sqrt(np.mean(errs**2)) * 1e3),
+            "tracking_max_mm": float(errs.max() * 1e3),
+            "final_state": c.state.value,
+            "fault": c.fault_reason,
+            "driver": self.driver.stats.as_dict(),
+        }
+        self._print("summary:")
+        self._print(
+            f"  cycles {int(s.get('cycles', 0))}, wake lateness p50 "
+            f"{s.get('lateness_p50_us', 0):.1f} us, p99 {s.get('lateness_p99_us', 0):.1f}"
+            f" us, max {s.get('lateness_max_us', 0):.0f} us; compute p50 "
+            f"{s.get('compute_p50_us', 0):.0f} us, p99 {s.get('compute_p99_us', 0):.0f} "
+            f"us; overruns {int(s.get('overruns', 0))}, missed periods "
+            f"{int(s.get('missed', 0))} ({s.get('missed_percent', 0):.3f} %)"
+        )
+        if phases:
+            self._print(
+                "  per phase (median/p99 us): "
+                + ", ".join(f"{k} {v[0]:.0f}/{v[1]:.0f}" for k, v in phases.items())
+            )
+        self._print(
+            f"  tracking error (estimated) RMS {self.summary['tracking_rms_mm']:.2f} mm, "
+            f"max {self.summary['tracking_max_mm']:.2f} mm; final state "
+            f"{c.state.value}" + (f" ({c.fault_reason})" if c.fault_reason else "")
+        )
+
+    def _print(self, text: str, err: bool = False) -> None:
+        print(text, file=sys.stderr if err else self.out, flush=True)
+
+
+def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]]:
+    """Enable, a move and back, optionally a lateral disturbance at home (``force`` N along y,
+    ramped in over 1 s like the ARK 2020 water jet; simulated robot only), a move, home,
+    disable."""
+    home = model.home.position
+    lo, hi = model.workspace.position_min, model.workspace.position_max
+    a = np.clip([*home, 0.3, 0.0, -0.1], lo, hi)
+    b = np.clip([*home, -0.2, 0.0, 0.0], lo, hi)
+    rpy = model.home.rpy
+
+    def move(p: np.ndarray) -> Any:
+        return lambda d: d.controller.submit(Command("move", pose=np.concatenate([p, rpy])))
+
+    def lateral(on: bool) -> Any:
+        def act(d: Daemon) -> None:
+            if d.sim is None:
+                return
+            from sim_backend.faults import FaultEvent, FaultInjector
+
+            value = (0.0, force, 0.0, 0.0, 0.0, 0.0) if on else (0.0,) * 6
+            FaultInjector(
+                [FaultEvent(d.sim.time, "external_wrench", value=value, ramp=1.0)]
+            ).attach(d.sim)
+            d.controller.events.append(
+                (d.controller.time, f"demo: {force:g} N lateral force " + ("on" if on else "off"))
+            )
+
+        return act
+
+    return [
+        (0.3, lambda d: d.controller.submit(Command("enable"))),
+        (1.0, move(a)),
+        (4.0, move(home)),
+        *([(7.0, lateral(True))] if force else []),
+        (10.0, move(b)),
+        (13.0, move(home)),
+        *([(16.0, lateral(False))] if force else []),
+        (19.0, lambda d: d.controller.submit(Command("disable"))),
+    ]
