@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from cdprctl.model import ConfigError, load_robot
+from cdprctl.commands.common import load_or_report
 from drivers.busload import MAX_LOAD, WARN_LOAD, bus_loads
 
 
@@ -24,11 +24,8 @@ def add_parser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        model = load_robot(args.config)
-    except ConfigError as exc:
-        for e in exc.errors:
-            print(e, file=sys.stderr)
+    model = load_or_report(args.config)
+    if model is None:
         return 1
     if not (args.rate > 0):
         print(f"cdprctl bus-load: error: --rate = {args.rate} Hz must be > 0", file=sys.stderr)

@@ -7,8 +7,8 @@ import logging
 import sys
 from typing import Any
 
+from cdprctl.commands.common import load_or_report
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
-from cdprctl.model import ConfigError, load_robot
 
 
 def add_parser(sub: Any) -> None:
@@ -52,11 +52,8 @@ def run(args: argparse.Namespace) -> int:
         level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
     )
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)  # warnings printed by us
-    try:
-        model = load_robot(args.config)
-    except ConfigError as exc:
-        for e in exc.errors:
-            print(e, file=sys.stderr)
+    model = load_or_report(args.config)
+    if model is None:
         return 1
     if args.rate is not None:
         if not 1.0 <= args.rate <= 10000.0:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from cdprctl.model import ConfigError, load_robot
+from cdprctl.commands.common import load_or_report
 
 
 def add_bus_arguments(p: argparse.ArgumentParser) -> None:
@@ -71,11 +71,8 @@ def run(args: argparse.Namespace) -> int:
     from drivers.errors import DriverError
     from sim_backend.realtime import run_realtime
 
-    try:
-        model = load_robot(args.config)
-    except ConfigError as exc:
-        for e in exc.errors:
-            print(e, file=sys.stderr)
+    model = load_or_report(args.config)
+    if model is None:
         return 1
     overrides = bus_overrides(args)
     print(

@@ -10,8 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.commands.common import load_or_report
 from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
-from cdprctl.model import ConfigError, RobotModel, load_robot
+from cdprctl.model import RobotModel
 from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda import (
     ImposedQuantity,
@@ -138,11 +139,8 @@ def parse_imposition(text: str, model: RobotModel) -> Imposition:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        model = load_robot(args.config)
-    except ConfigError as exc:
-        for e in exc.errors:
-            print(e, file=sys.stderr)
+    model = load_or_report(args.config)
+    if model is None:
         return 1
     try:
         result, ctx = compute(model, args)

@@ -9,15 +9,14 @@ operation 10, heartbeat producer time, abort-connection option quick stop) happe
 
 from __future__ import annotations
 
-import contextlib
 import math
 from typing import Any
 
 import can
 import numpy as np
 
-from drivers.base import DriveState, WinchDriver, register_driver
-from drivers.buses import TrafficLog, open_bus
+from drivers.base import DriveState, register_driver
+from drivers.canbase import CanWinchDriver
 from drivers.cia402 import protocol as p
 from drivers.errors import (
     DriveFaultError,
@@ -40,21 +39,13 @@ _GENERIC_STATE = {
 
 
 @register_driver
-class Cia402Driver(WinchDriver):
+class Cia402Driver(CanWinchDriver):
     name = "cia402"
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         cfg = self.config
         m = self.m
-        self.buses: list[can.BusABC] = []
-        self.log: TrafficLog | None = None
-        self.node = np.zeros(m, dtype=np.int64)
-        self.bus_of = np.zeros(m, dtype=np.int64)
-        for b, bus in enumerate(cfg.buses):
-            for c, n in zip(bus.cables, bus.node_ids, strict=True):
-                self.node[c] = n
-                self.bus_of[c] = b
         # (bus, arbitration id) → (kind, cable)
         self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
         for c in range(m):
@@ -95,40 +86,10 @@ class Cia402Driver(WinchDriver):
         self._reset_request = 0  # cycles left sending the fault-reset edge
         self._last_sync = -math.inf
         self._last_hb_sent = -math.inf
-        self._send_fail_streak = 0
         self._started = False
         self._last_read = -math.inf
 
     # -- hooks: set-up ------------------------------------------------------------------------
-    def _open(self) -> None:
-        overrides = self.bus_overrides
-        for b, bus_cfg in enumerate(self.config.buses):
-            self.buses.append(open_bus(bus_cfg, overrides, b))
-        if self.config.log_file:
-            self.log = TrafficLog(self.config.log_file)
-
-    def _close(self) -> None:
-        for bus in self.buses:
-            with contextlib.suppress(Exception):
-                bus.shutdown()
-        self.buses = []
-        if self.log is not None:
-            self.log.close()
-            self.log = None
-
-    def _send(self, b: int, msg: can.Message) -> bool:
-        try:
-            self.buses[b].send(msg, timeout=0)
-        except can.CanError:
-            self.stats.send_errors += 1
-            self._send_fail_streak += 1
-            return False
-        self._send_fail_streak = 0
-        self.stats.frames_sent += 1
-        if self.log is not None:
-            self.log(msg)
-        return True
-
     def _nmt_start_all(self) -> None:
         for b in range(len(self.buses)):
             self._send(

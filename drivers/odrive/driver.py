@@ -8,15 +8,14 @@ heartbeat, encoder estimates and torques cyclically (configured on the ODrive); 
 
 from __future__ import annotations
 
-import contextlib
 import math
 from typing import Any
 
 import can
 import numpy as np
 
-from drivers.base import DriveState, WinchDriver, register_driver
-from drivers.buses import TrafficLog, open_bus
+from drivers.base import DriveState, register_driver
+from drivers.canbase import CanWinchDriver
 from drivers.errors import DriveFaultError, DriverError, DriverOperationError, DriverTimeoutError
 from drivers.odrive import protocol as p
 
@@ -24,19 +23,12 @@ TWO_PI = 2.0 * math.pi
 
 
 @register_driver
-class ODriveDriver(WinchDriver):
+class ODriveDriver(CanWinchDriver):
     name = "odrive"
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         m = self.m
-        self.buses: list[can.BusABC] = []
-        self.log: TrafficLog | None = None
-        self.node = np.zeros(m, dtype=np.int64)
-        self.bus_of = np.zeros(m, dtype=np.int64)
-        for b, bus in enumerate(self.config.buses):
-            for c, n in zip(bus.cables, bus.node_ids, strict=True):
-                self.node[c], self.bus_of[c] = n, b
         self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
         for c in range(m):
             b, n = int(self.bus_of[c]), int(self.node[c])
@@ -62,22 +54,6 @@ class ODriveDriver(WinchDriver):
         self._clear = False
         self._started = False
         self._last_read = -math.inf
-        self._fail_streak = 0
-
-    def _open(self) -> None:
-        for b, cfg in enumerate(self.config.buses):
-            self.buses.append(open_bus(cfg, self.bus_overrides, b))
-        if self.config.log_file:
-            self.log = TrafficLog(self.config.log_file)
-
-    def _close(self) -> None:
-        for bus in self.buses:
-            with contextlib.suppress(Exception):
-                bus.shutdown()
-        self.buses = []
-        if self.log is not None:
-            self.log.close()
-            self.log = None
 
     def _send_cmd(self, c: int, cmd: int, data: bytes) -> None:
         self._send(
@@ -88,18 +64,6 @@ class ODriveDriver(WinchDriver):
                 is_extended_id=False,
             ),
         )
-
-    def _send(self, b: int, msg: can.Message) -> None:
-        try:
-            self.buses[b].send(msg, timeout=0)
-        except can.CanError:
-            self.stats.send_errors += 1
-            self._fail_streak += 1
-            return
-        self._fail_streak = 0
-        self.stats.frames_sent += 1
-        if self.log is not None:
-            self.log(msg)
 
     def _configure_drives(self, timeout: float) -> None:
         for c in range(self.m):
@@ -231,6 +195,6 @@ class ODriveDriver(WinchDriver):
             msg = self._torque_msg[c]
             pack(msg.data, 0, float(torques[c]))
             self._send(int(self.bus_of[c]), msg)
-        if self._fail_streak > 10:
-            return DriverOperationError(f"CAN send failed {self._fail_streak} times in a row")
+        if self._send_fail_streak > 10:
+            return DriverOperationError(f"CAN send failed {self._send_fail_streak} times in a row")
         return None
