@@ -1,9 +1,11 @@
-"""What every CAN protocol driver shares: the buses of the config, the node of each cable, and
-sending (with the traffic log and a failure streak)."""
+"""What every CAN protocol driver shares: the buses of the config, the node of each cable,
+sending (with the traffic log and a failure streak), and the liveness rules (feedback age,
+missed cycles, heartbeat)."""
 
 from __future__ import annotations
 
 import contextlib
+import math
 from typing import Any
 
 import can
@@ -11,10 +13,15 @@ import numpy as np
 
 from drivers.base import WinchDriver
 from drivers.buses import TrafficLog, open_bus
+from drivers.errors import DriverError, DriverTimeoutError
 
 
 class CanWinchDriver(WinchDriver):
     """A :class:`WinchDriver` on python-can buses; protocols subclass it."""
+
+    #: what the drive is called in messages, and what its cyclic feedback is
+    drive_label = "drive"
+    feedback_label = "feedback"
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
@@ -26,6 +33,13 @@ class CanWinchDriver(WinchDriver):
             for c, n in zip(bus.cables, bus.node_ids, strict=True):
                 self.node[c], self.bus_of[c] = n, b
         self._send_fail_streak = 0
+        # liveness bookkeeping, per cable
+        self._fresh = np.zeros(self.m, dtype=bool)  # feedback arrived during this read
+        self._fb_stamp = np.full(self.m, -math.inf)  # s, time of the last feedback
+        self._missed = np.zeros(self.m, dtype=np.int64)  # consecutive reads without feedback
+        self._last_hb = np.full(self.m, -math.inf)  # s, the drive's last heartbeat
+        self._last_read = -math.inf
+        self._started = False  # the drives were started: silence now counts
 
     def _open(self) -> None:
         for b, bus_cfg in enumerate(self.config.buses):
@@ -55,3 +69,37 @@ class CanWinchDriver(WinchDriver):
         if self.log is not None:
             self.log(msg)
         return True
+
+    def _reads_elapsed(self, t: float) -> bool:
+        """True unless this read is at the same instant as the last (which misses nothing)."""
+        elapsed = t > self._last_read
+        self._last_read = t
+        return elapsed
+
+    def _liveness(self, c: int, t: float, elapsed: bool) -> DriverError | None:
+        """Feedback age, missed-cycle count and heartbeat of cable ``c``: the timeout error
+        when a limit is passed (``missed_feedback_limit`` cycles, ``heartbeat_timeout`` s)."""
+        if self._fresh[c]:
+            self._missed[c] = 0
+        elif elapsed and self._started and math.isfinite(self._fb_stamp[c]):
+            self._missed[c] += 1
+            self.stats.missed_feedback += 1
+        self.states.feedback_age[c] = t - self._fb_stamp[c]
+        where = f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
+        if self._missed[c] > self.config.missed_feedback_limit:
+            return DriverTimeoutError(
+                f"{where}: no {self.feedback_label} for {int(self._missed[c])} cycles "
+                f"(limit {self.config.missed_feedback_limit})",
+                c,
+            )
+        if (
+            self._started
+            and math.isfinite(self._last_hb[c])
+            and t - self._last_hb[c] > self.config.heartbeat_timeout
+        ):
+            return DriverTimeoutError(
+                f"{where} lost: no heartbeat for {t - self._last_hb[c]:.3f} s "
+                f"(timeout {self.config.heartbeat_timeout:g} s)",
+                c,
+            )
+        return None

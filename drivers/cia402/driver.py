@@ -73,12 +73,8 @@ class Cia402Driver(CanWinchDriver):
         self.power_state = [p.PowerState.NOT_READY_TO_SWITCH_ON] * m
         self._counts = np.zeros(m, dtype=np.int64)  # unwrapped multi-turn counts
         self._raw_last = [None] * m  # last 32-bit position, for unwrapping
-        self._fresh = np.zeros(m, dtype=bool)
-        self._fb_stamp = np.full(m, -math.inf)  # SYNC time the last TPDO1 was sampled at
         self._prev_pos = np.zeros(m)
         self._prev_stamp = np.full(m, -math.inf)
-        self._missed = np.zeros(m, dtype=np.int64)
-        self._last_hb = np.full(m, -math.inf)
         self._nmt_state = np.full(m, -1, dtype=np.int64)
         self._emcy = np.zeros(m, dtype=np.int64)
         self._sdo_reply: dict[int, bytes] = {}
@@ -86,8 +82,6 @@ class Cia402Driver(CanWinchDriver):
         self._reset_request = 0  # cycles left sending the fault-reset edge
         self._last_sync = -math.inf
         self._last_hb_sent = -math.inf
-        self._started = False
-        self._last_read = -math.inf
 
     # -- hooks: set-up ------------------------------------------------------------------------
     def _nmt_start_all(self) -> None:
@@ -228,8 +222,7 @@ class Cia402Driver(CanWinchDriver):
     def _read_internal(self, t: float) -> DriverError | None:
         self._fresh[:] = False
         self._drain(t)
-        elapsed = t > self._last_read  # a second read at the same instant misses nothing
-        self._last_read = t
+        elapsed = self._reads_elapsed(t)
         st = self.states
         err: DriverError | None = None
         for c in range(self.m):
@@ -242,44 +235,19 @@ class Cia402Driver(CanWinchDriver):
                         st.velocity[c] = (pos - self._prev_pos[c]) / dt
                 self._prev_pos[c], self._prev_stamp[c] = pos, stamp
                 st.position[c] = pos
-                self._missed[c] = 0
-            elif elapsed and self._started and math.isfinite(self._fb_stamp[c]):
-                self._missed[c] += 1
-                self.stats.missed_feedback += 1
-            st.feedback_age[c] = t - self._fb_stamp[c]
             ps = self.power_state[c]
             st.state[c] = _GENERIC_STATE[ps]
             code = int(self._emcy[c])
             st.fault_code[c] = code
-            if (
-                err is None
-                and (ps in (p.PowerState.FAULT, p.PowerState.FAULT_REACTION_ACTIVE) or code != 0)
-                and (code != 0 or ps is p.PowerState.FAULT)
-            ):
+            if err is None and (code != 0 or ps is p.PowerState.FAULT):
                 err = DriveFaultError(
                     c,
                     int(self.node[c]),
                     code,
                     p.describe_emcy(code) if code else "fault (statusword)",
                 )
-            if err is None and self._missed[c] > self.config.missed_feedback_limit:
-                err = DriverTimeoutError(
-                    f"drive of cable index {c} (node {int(self.node[c])}): no feedback for "
-                    f"{int(self._missed[c])} cycles (limit {self.config.missed_feedback_limit})",
-                    c,
-                )
-            if (
-                err is None
-                and self._started
-                and math.isfinite(self._last_hb[c])
-                and t - self._last_hb[c] > self.config.heartbeat_timeout
-            ):
-                err = DriverTimeoutError(
-                    f"drive of cable index {c} (node {int(self.node[c])}) lost: no heartbeat "
-                    f"for {t - self._last_hb[c]:.3f} s (timeout "
-                    f"{self.config.heartbeat_timeout:g} s)",
-                    c,
-                )
+            live = self._liveness(c, t, elapsed)
+            err = err or live
         return err
 
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:

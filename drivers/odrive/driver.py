@@ -25,6 +25,8 @@ TWO_PI = 2.0 * math.pi
 @register_driver
 class ODriveDriver(CanWinchDriver):
     name = "odrive"
+    drive_label = "ODrive axis"
+    feedback_label = "encoder estimate"
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
@@ -44,16 +46,10 @@ class ODriveDriver(CanWinchDriver):
         ]
         self.axis_state = [p.AxisState.UNDEFINED] * m
         self.axis_error = np.zeros(m, dtype=np.int64)
-        self._fresh = np.zeros(m, dtype=bool)
-        self._fb_time = np.full(m, -math.inf)
-        self._last_hb = np.full(m, -math.inf)
-        self._missed = np.zeros(m, dtype=np.int64)
         self._enable: bool | None = None
         self._enable_sent: bool | None = None
         self._enable_sent_at = -math.inf
         self._clear = False
-        self._started = False
-        self._last_read = -math.inf
 
     def _send_cmd(self, c: int, cmd: int, data: bytes) -> None:
         self._send(
@@ -79,10 +75,10 @@ class ODriveDriver(CanWinchDriver):
             now = self.clock()
             self._read_internal(now)
             self._write_internal(now, np.zeros(self.m))
-            if np.all(np.isfinite(self._fb_time)) and np.all(np.isfinite(self._last_hb)):
+            if np.all(np.isfinite(self._fb_stamp)) and np.all(np.isfinite(self._last_hb)):
                 return
             if now > deadline:
-                silent = [c for c in range(self.m) if not np.isfinite(self._fb_time[c])]
+                silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
                 raise DriverTimeoutError(
                     f"no encoder estimates from the ODrive axes of cable indices {silent} "
                     f"within {timeout:g} s",
@@ -116,7 +112,7 @@ class ODriveDriver(CanWinchDriver):
                     self.states.position[c] = pos * TWO_PI
                     self.states.velocity[c] = vel * TWO_PI
                     self._fresh[c] = True
-                    self._fb_time[c] = t
+                    self._fb_stamp[c] = t
                 elif cmd == p.GET_TORQUES and len(data) == 8:
                     self.states.torque[c] = p.TORQUES_STRUCT.unpack(data)[1]
                 elif cmd == p.HEARTBEAT and len(data) >= 7:
@@ -133,17 +129,10 @@ class ODriveDriver(CanWinchDriver):
     def _read_internal(self, t: float) -> DriverError | None:
         self._fresh[:] = False
         self._drain(t)
-        elapsed = t > self._last_read  # a second read at the same instant misses nothing
-        self._last_read = t
+        elapsed = self._reads_elapsed(t)
         st = self.states
         err: DriverError | None = None
         for c in range(self.m):
-            if self._fresh[c]:
-                self._missed[c] = 0
-            elif elapsed and self._started and math.isfinite(self._fb_time[c]):
-                self._missed[c] += 1
-                self.stats.missed_feedback += 1
-            st.feedback_age[c] = t - self._fb_time[c]
             code = int(self.axis_error[c])
             st.fault_code[c] = code
             if code:
@@ -156,23 +145,8 @@ class ODriveDriver(CanWinchDriver):
                 st.state[c] = DriveState.UNKNOWN
             if err is None and code:
                 err = DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
-            if err is None and self._missed[c] > self.config.missed_feedback_limit:
-                err = DriverTimeoutError(
-                    f"ODrive axis of cable index {c} (node {int(self.node[c])}): no encoder "
-                    f"estimate for {int(self._missed[c])} cycles",
-                    c,
-                )
-            if (
-                err is None
-                and self._started
-                and math.isfinite(self._last_hb[c])
-                and t - self._last_hb[c] > self.config.heartbeat_timeout
-            ):
-                err = DriverTimeoutError(
-                    f"ODrive axis of cable index {c} (node {int(self.node[c])}) lost: no "
-                    f"heartbeat for {t - self._last_hb[c]:.3f} s",
-                    c,
-                )
+            live = self._liveness(c, t, elapsed)
+            err = err or live
         return err
 
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
