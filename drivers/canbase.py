@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import can
@@ -33,6 +34,7 @@ class CanWinchDriver(WinchDriver):
             for c, n in zip(bus.cables, bus.node_ids, strict=True):
                 self.node[c], self.bus_of[c] = n, b
         self._send_fail_streak = 0
+        self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}  # filled by protocols
         # liveness bookkeeping, per cable
         self._fresh = np.zeros(self.m, dtype=bool)  # feedback arrived during this read
         self._fb_stamp = np.full(self.m, -math.inf)  # s, time of the last feedback
@@ -69,6 +71,26 @@ class CanWinchDriver(WinchDriver):
         if self.log is not None:
             self.log(msg)
         return True
+
+    def _frames(self) -> Iterator[tuple[int, int, bytearray]]:
+        """Every frame waiting on every bus (``recv(0)``: never blocks) that belongs to one of
+        our drives: ``(kind, cable, data)`` from the subclass's ``_dispatch`` table of
+        ``(bus, arbitration id) → (kind, cable)``; foreign, extended and remote frames are
+        counted as ignored."""
+        dispatch = self._dispatch
+        for b, bus in enumerate(self.buses):
+            while True:
+                msg = bus.recv(0)
+                if msg is None:
+                    break
+                self.stats.frames_received += 1
+                if self.log is not None:
+                    self.log(msg)
+                key = dispatch.get((b, msg.arbitration_id))
+                if key is None or msg.is_extended_id or msg.is_remote_frame:
+                    self.stats.frames_ignored += 1
+                    continue
+                yield key[0], key[1], msg.data
 
     def _reads_elapsed(self, t: float) -> bool:
         """True unless this read is at the same instant as the last (which misses nothing)."""

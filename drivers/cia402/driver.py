@@ -178,46 +178,33 @@ class Cia402Driver(CanWinchDriver):
     def _drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks)."""
         tp1, tp2 = p.TPDO1_STRUCT, p.TPDO2_STRUCT
-        for b, bus in enumerate(self.buses):
-            while True:
-                msg = bus.recv(0)
-                if msg is None:
-                    break
-                self.stats.frames_received += 1
-                if self.log is not None:
-                    self.log(msg)
-                key = self._dispatch.get((b, msg.arbitration_id))
-                if key is None or msg.is_extended_id or msg.is_remote_frame:
-                    self.stats.frames_ignored += 1
-                    continue
-                kind, c = key
-                data = msg.data
-                if kind == 1 and len(data) == 8:
-                    sw, tq, pos = tp1.unpack(data)
-                    self.power_state[c] = p.decode_statusword(sw)
-                    self.states.torque[c] = tq * self.rated_torque / 1000.0
-                    last = self._raw_last[c]
-                    if last is None:
-                        self._counts[c] = pos
-                    else:  # 32-bit wrap-around: the signed difference
-                        self._counts[c] += ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-                    self._raw_last[c] = pos
-                    self._fresh[c] = True
-                    self._fb_stamp[c] = self._last_sync if math.isfinite(self._last_sync) else t
-                elif kind == 2 and len(data) == 4:
-                    (vel,) = tp2.unpack(data)
-                    if self.config.velocity_source == "pdo":
-                        self.states.velocity[c] = vel * self.rad_per_count[c]
-                elif kind == 3 and len(data) == 8:
-                    code = p.EMCY_STRUCT.unpack(data)[0]
-                    self._emcy[c] = code
-                elif kind == 4 and len(data) >= 1:
-                    self._last_hb[c] = t
-                    self._nmt_state[c] = data[0]
-                elif kind == 5 and len(data) == 8:
-                    self._sdo_reply[c] = bytes(data)
-                else:
-                    self.stats.frames_ignored += 1
+        for kind, c, data in self._frames():
+            if kind == 1 and len(data) == 8:
+                sw, tq, pos = tp1.unpack(data)
+                self.power_state[c] = p.decode_statusword(sw)
+                self.states.torque[c] = tq * self.rated_torque / 1000.0
+                last = self._raw_last[c]
+                if last is None:
+                    self._counts[c] = pos
+                else:  # 32-bit wrap-around: the signed difference
+                    self._counts[c] += ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+                self._raw_last[c] = pos
+                self._fresh[c] = True
+                self._fb_stamp[c] = self._last_sync if math.isfinite(self._last_sync) else t
+            elif kind == 2 and len(data) == 4:
+                (vel,) = tp2.unpack(data)
+                if self.config.velocity_source == "pdo":
+                    self.states.velocity[c] = vel * self.rad_per_count[c]
+            elif kind == 3 and len(data) == 8:
+                code = p.EMCY_STRUCT.unpack(data)[0]
+                self._emcy[c] = code
+            elif kind == 4 and len(data) >= 1:
+                self._last_hb[c] = t
+                self._nmt_state[c] = data[0]
+            elif kind == 5 and len(data) == 8:
+                self._sdo_reply[c] = bytes(data)
+            else:
+                self.stats.frames_ignored += 1
 
     def _read_internal(self, t: float) -> DriverError | None:
         self._fresh[:] = False

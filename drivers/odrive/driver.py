@@ -93,38 +93,25 @@ class ODriveDriver(CanWinchDriver):
         self._clear = True
 
     def _drain(self, t: float) -> None:
-        for b, bus in enumerate(self.buses):
-            while True:
-                msg = bus.recv(0)
-                if msg is None:
-                    break
-                self.stats.frames_received += 1
-                if self.log is not None:
-                    self.log(msg)
-                key = self._dispatch.get((b, msg.arbitration_id))
-                if key is None or msg.is_extended_id or msg.is_remote_frame:
-                    self.stats.frames_ignored += 1
-                    continue
-                cmd, c = key
-                data = msg.data
-                if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
-                    pos, vel = p.ENCODER_STRUCT.unpack(data)
-                    self.states.position[c] = pos * TWO_PI
-                    self.states.velocity[c] = vel * TWO_PI
-                    self._fresh[c] = True
-                    self._fb_stamp[c] = t
-                elif cmd == p.GET_TORQUES and len(data) == 8:
-                    self.states.torque[c] = p.TORQUES_STRUCT.unpack(data)[1]
-                elif cmd == p.HEARTBEAT and len(data) >= 7:
-                    err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
-                    self.axis_error[c] = err
-                    try:
-                        self.axis_state[c] = p.AxisState(state)
-                    except ValueError:
-                        self.axis_state[c] = p.AxisState.UNDEFINED
-                    self._last_hb[c] = t
-                else:
-                    self.stats.frames_ignored += 1
+        for cmd, c, data in self._frames():
+            if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
+                pos, vel = p.ENCODER_STRUCT.unpack(data)
+                self.states.position[c] = pos * TWO_PI
+                self.states.velocity[c] = vel * TWO_PI
+                self._fresh[c] = True
+                self._fb_stamp[c] = t
+            elif cmd == p.GET_TORQUES and len(data) == 8:
+                self.states.torque[c] = p.TORQUES_STRUCT.unpack(data)[1]
+            elif cmd == p.HEARTBEAT and len(data) >= 7:
+                err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
+                self.axis_error[c] = err
+                try:
+                    self.axis_state[c] = p.AxisState(state)
+                except ValueError:
+                    self.axis_state[c] = p.AxisState.UNDEFINED
+                self._last_hb[c] = t
+            else:
+                self.stats.frames_ignored += 1
 
     def _read_internal(self, t: float) -> DriverError | None:
         self._fresh[:] = False
