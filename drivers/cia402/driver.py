@@ -47,7 +47,6 @@ class Cia402Driver(CanWinchDriver):
         cfg = self.config
         m = self.m
         # (bus, arbitration id) → (kind, cable)
-        self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
         for c in range(m):
             b, n = int(self.bus_of[c]), int(self.node[c])
             self._dispatch[(b, p.TPDO1 + n)] = (1, c)

@@ -31,7 +31,6 @@ class ODriveDriver(CanWinchDriver):
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         m = self.m
-        self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}
         for c in range(m):
             b, n = int(self.bus_of[c]), int(self.node[c])
             for cmd in (p.HEARTBEAT, p.GET_ENCODER_ESTIMATES, p.GET_TORQUES):
