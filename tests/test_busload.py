@@ -71,8 +71,7 @@ def test_traffic_log_candump(tmp_path):
 
     model = load_robot(CONFIG / "rowc.toml")
     log = tmp_path / "traffic.log"
-    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives,
-                                                                  log_file=str(log)))
+    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, log_file=str(log)))
     with LockStep(model) as ls:
         ls.driver.configure()
         for _ in range(5):

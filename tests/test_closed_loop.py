@@ -63,8 +63,13 @@ def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc):
     pose back; what remains is the cables' elastic deflection, which the encoders cannot see
     (of the order of K⁻¹ δw, 8-16 mm here)."""
     with enabled(rowc) as cl:
-        FaultInjector([FaultEvent(cl.net.time, "external_wrench",
-                                  value=(0.0, 30.0, 0.0, 0.0, 0.0, 0.0), ramp=1.0)]).attach(cl.net)
+        FaultInjector(
+            [
+                FaultEvent(
+                    cl.net.time, "external_wrench", value=(0.0, 30.0, 0.0, 0.0, 0.0, 0.0), ramp=1.0
+                )
+            ]
+        ).attach(cl.net)
         cl.run(6.0)
         c = cl.controller
         assert c.state is State.ENABLED, c.fault_reason
@@ -79,8 +84,13 @@ def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc):
 
 def test_infeasible_wrench_stops_and_holds(rowc):
     with enabled(rowc) as cl:
-        fi = FaultInjector([FaultEvent(cl.net.time, "external_wrench",
-                                       value=(0.0, 400.0, 0.0, 0.0, 0.0, 0.0), ramp=0.2)])
+        fi = FaultInjector(
+            [
+                FaultEvent(
+                    cl.net.time, "external_wrench", value=(0.0, 400.0, 0.0, 0.0, 0.0, 0.0), ramp=0.2
+                )
+            ]
+        )
         fi.attach(cl.net)
         cl.run(1.5)
         c = cl.controller
@@ -96,8 +106,9 @@ def test_infeasible_wrench_stops_and_holds(rowc):
 
 def test_drive_fault_disables_and_reset_recovers(rowc):
     with enabled(rowc) as cl:
-        FaultInjector([FaultEvent(cl.net.time + 0.1, "drive_fault", cable=2,
-                                  value=0x2310)]).attach(cl.net)
+        FaultInjector([FaultEvent(cl.net.time + 0.1, "drive_fault", cable=2, value=0x2310)]).attach(
+            cl.net
+        )
         cl.run(0.3)
         c = cl.controller
         assert c.state is State.FAULT and "0x2310" in c.fault_reason

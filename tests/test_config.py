@@ -254,19 +254,31 @@ def test_drives_section_two_buses(tmp_path):
 @pytest.mark.parametrize(
     "change,expected",
     [
-        (("node_ids = [1, 2, 3, 4]\n[[drives", "node_ids = [1, 2, 2, 4]\n[[drives"),
-         "drives.buses[0].node_ids = [1, 2, 2, 4] repeats node id 2"),
-        (('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7", "9"]'),
-         "drives.buses[1].cables = '9' is not a cable"),
-        (('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7", "1"]'),
-         "drives.buses[1].cables = '1' is already on drives.buses[0]"),
-        (('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7"]'),
-         "drives.buses[1].node_ids = [1, 2, 3, 4] must be a list of integers, one per cable"),
-        (('driver = "cia402"', 'driver = "ethercat"'),
-         "drives.driver = 'ethercat' must be one of cia402, odrive"),
+        (
+            ("node_ids = [1, 2, 3, 4]\n[[drives", "node_ids = [1, 2, 2, 4]\n[[drives"),
+            "drives.buses[0].node_ids = [1, 2, 2, 4] repeats node id 2",
+        ),
+        (
+            ('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7", "9"]'),
+            "drives.buses[1].cables = '9' is not a cable",
+        ),
+        (
+            ('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7", "1"]'),
+            "drives.buses[1].cables = '1' is already on drives.buses[0]",
+        ),
+        (
+            ('cables = ["5", "6", "7", "8"]', 'cables = ["5", "6", "7"]'),
+            "drives.buses[1].node_ids = [1, 2, 3, 4] must be a list of integers, one per cable",
+        ),
+        (
+            ('driver = "cia402"', 'driver = "ethercat"'),
+            "drives.driver = 'ethercat' must be one of cia402, odrive",
+        ),
         (("rated_torque = 2.6", "rated_torque = -1"), "drives.rated_torque = -1 N·m must be > 0"),
-        (("node_ids = [1, 2, 3, 4]\n[[drives", "node_ids = [1, 2, 3, 127]\n[[drives"),
-         "contains the controller's node id 127"),
+        (
+            ("node_ids = [1, 2, 3, 4]\n[[drives", "node_ids = [1, 2, 3, 127]\n[[drives"),
+            "contains the controller's node id 127",
+        ),
     ],
 )
 def test_drives_section_errors(tmp_path, change, expected):

@@ -25,8 +25,13 @@ GROUP = "239.74.163.2"
 
 
 def relaxed(model, driver):
-    drives = dataclasses.replace(model.drives, driver=driver, heartbeat_timeout=2.0,
-                                 missed_feedback_limit=50, comm_timeout=1.0)
+    drives = dataclasses.replace(
+        model.drives,
+        driver=driver,
+        heartbeat_timeout=2.0,
+        missed_feedback_limit=50,
+        comm_timeout=1.0,
+    )
     return dataclasses.replace(model, drives=drives)
 
 
@@ -36,9 +41,20 @@ def sim_process(tmp_path):
 
     def start(config: Path, overrides: list[str]):
         proc = subprocess.Popen(
-            [sys.executable, "-m", "cdprctl.cli", "sim", "--config", str(config), "--status",
-             "0", *overrides],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            [
+                sys.executable,
+                "-m",
+                "cdprctl.cli",
+                "sim",
+                "--config",
+                str(config),
+                "--status",
+                "0",
+                *overrides,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
         )
         procs.append(proc)
         for _ in range(5):
@@ -102,17 +118,34 @@ def test_contract_over_udp_multicast(tmp_path, sim_process, driver):
 
 def test_contract_on_real_vcan0():
     if not Path("/sys/class/net/vcan0").exists():
-        pytest.skip("no vcan0 on this machine (this kernel has no CAN support; create one with "
-                    "`ip link add dev vcan0 type vcan && ip link set up vcan0`)")
+        pytest.skip(
+            "no vcan0 on this machine (this kernel has no CAN support; create one with "
+            "`ip link add dev vcan0 type vcan && ip link set up vcan0`)"
+        )
     model = load_robot(CONFIG / "rowc.toml")
     overrides = ["--can-interface", "socketcan", "--can-channel", "vcan0"]
-    proc = subprocess.Popen([sys.executable, "-m", "cdprctl.cli", "sim", "--config",
-                             str(CONFIG / "rowc.toml"), "--status", "0", *overrides],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cdprctl.cli",
+            "sim",
+            "--config",
+            str(CONFIG / "rowc.toml"),
+            "--status",
+            "0",
+            *overrides,
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert "ready" in proc.stdout.readline() + proc.stdout.readline()
     try:
-        drv = create_driver(relaxed(model, "cia402"), period=0.005,
-                            bus_overrides={"interface": "socketcan", "channel": "vcan0"})
+        drv = create_driver(
+            relaxed(model, "cia402"),
+            period=0.005,
+            bus_overrides={"interface": "socketcan", "channel": "vcan0"},
+        )
         with drv:
             drv.configure(timeout=10.0)
             drv.activate(timeout=10.0)

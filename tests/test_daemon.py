@@ -32,8 +32,9 @@ def test_loop_skips_missed_periods_without_catching_up():
         if calls["n"] == 5:
             time.sleep(3.5 * period)
 
-    stats = run_loop(period, step, lambda: calls["n"] >= 12, sleep_margin=0.001,
-                     stats=LoopStats(size=100))
+    stats = run_loop(
+        period, step, lambda: calls["n"] >= 12, sleep_margin=0.001, stats=LoopStats(size=100)
+    )
     assert stats.missed >= 2  # the deadlines 2.5 periods behind
     assert stats.overruns == 1
     gaps = np.diff(starts[5:])
@@ -77,9 +78,24 @@ def test_daemon_sim_notify_and_sigterm(tmp_path):
     srv.settimeout(30.0)
     env = dict(os.environ, NOTIFY_SOCKET=path, WATCHDOG_USEC="400000")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(CONFIG / "rowc.toml"),
-         "--sim", "--no-demo", "--no-realtime", "--status", "0"],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        [
+            sys.executable,
+            "-m",
+            "cdprctl.cli",
+            "run",
+            "--config",
+            str(CONFIG / "rowc.toml"),
+            "--sim",
+            "--no-demo",
+            "--no-realtime",
+            "--status",
+            "0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     try:
         messages = []
         deadline = time.monotonic() + 60.0
@@ -129,3 +145,36 @@ def test_unit_file_verifies(tmp_path):
     # systemd-analyze exits 0 on warnings: any output is a failure
     assert res.returncode == 0 and res.stdout == "" and res.stderr == "", res.stdout + res.stderr
     assert "Type=notify" in text and "WatchdogSec=" in text and "Restart=on-failure" in text
+
+
+def test_demo_script_moves_inside_the_workspace():
+    from cdprctl.control.controller import Command
+    from cdprctl.daemon.service import demo_script
+    from cdprctl.model import load_robot
+
+    model = load_robot(CONFIG / "rowc.toml")
+
+    class Recorder:
+        def __init__(self):
+            self.commands = []
+            self.controller = self
+            self.sim = None
+            self.events = []
+            self.time = 0.0
+
+        def submit(self, cmd: Command) -> bool:
+            self.commands.append(cmd)
+            return True
+
+    rec = Recorder()
+    script = demo_script(model, force=30.0)
+    assert [t for t, _ in script] == sorted(t for t, _ in script)
+    for _, action in script:
+        action(rec)
+    kinds = [c.kind for c in rec.commands]
+    assert kinds[0] == "enable" and kinds[-1] == "disable" and kinds.count("move") == 4
+    ws = model.workspace
+    for c in rec.commands:
+        if c.kind == "move":
+            assert c.pose.shape == (6,)
+            assert np.all(c.pose[:3] >= ws.position_min) and np.all(c.pose[:3] <= ws.position_max)

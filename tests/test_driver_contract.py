@@ -18,8 +18,9 @@ from sim_backend.network import LockStep
 @pytest.fixture(params=driver_names())
 def rig(request):
     model = load_robot(CONFIG / "rowc.toml")
-    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives,
-                                                                  driver=request.param))
+    model = dataclasses.replace(
+        model, drives=dataclasses.replace(model.drives, driver=request.param)
+    )
     # ODrive CAN Simple streams two 8-byte frames per axis: 2,920 bits per cycle for 8 axes,
     # 147 % of 1 Mbit/s at 500 Hz (refused by the bus-load check), 58 % at 200 Hz
     period = 0.005 if request.param == "odrive" else 0.002

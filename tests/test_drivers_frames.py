@@ -77,8 +77,9 @@ class Cia402Script:
                 out.append(frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x60, index, sub, b"\0" * 4)))
             else:
                 val = self.modes[n] if index == p.OD_MODES_DISPLAY else 0
-                out.append(frame(p.SDO_TX + n,
-                                 p.SDO_STRUCT.pack(0x4F, index, sub, bytes([val, 0, 0, 0]))))
+                out.append(
+                    frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x4F, index, sub, bytes([val, 0, 0, 0])))
+                )
         elif p.RPDO1 < arb <= p.RPDO1 + 127:
             n = arb - p.RPDO1
             cw, tq = p.RPDO1_STRUCT.unpack(data)
@@ -90,8 +91,12 @@ class Cia402Script:
             for n, st in self.state.items():
                 if n in self.silent or n in self.drop_tpdo:
                     continue
-                out.append(frame(p.TPDO1 + n, p.TPDO1_STRUCT.pack(
-                    p.STATUSWORD_OF[st], self.torque[n], self.position[n])))
+                out.append(
+                    frame(
+                        p.TPDO1 + n,
+                        p.TPDO1_STRUCT.pack(p.STATUSWORD_OF[st], self.torque[n], self.position[n]),
+                    )
+                )
                 out.append(frame(p.HEARTBEAT + n, bytes([p.HB_OPERATIONAL])))
             for n, code in list(self.emcy.items()):
                 out.append(frame(p.EMCY + n, p.EMCY_STRUCT.pack(code, 1, b"\0" * 5)))
@@ -108,8 +113,14 @@ def seed():
 def make(model, script, name="cia402"):
     channel = f"frames-{uuid.uuid4()}"
     peer = ScriptedPeer(channel, script)
-    drv = create_driver(model, name, period=0.002, clock=lambda: peer.t, wait=peer.wait,
-                        bus_overrides={"interface": "virtual", "channel": channel})
+    drv = create_driver(
+        model,
+        name,
+        period=0.002,
+        clock=lambda: peer.t,
+        wait=peer.wait,
+        bus_overrides={"interface": "virtual", "channel": channel},
+    )
     return drv, peer
 
 
@@ -229,8 +240,11 @@ def test_cia402_ignores_foreign_and_malformed_frames(seed):
     drv, peer = make(seed, script)
     with drv:
         drv.configure()
-        junk = [frame(0x123, b"\1\2"), frame(p.TPDO1 + 1, b"\0\0"),
-                can.Message(arbitration_id=0x181, data=b"\0" * 8, is_extended_id=True)]
+        junk = [
+            frame(0x123, b"\1\2"),
+            frame(p.TPDO1 + 1, b"\0\0"),
+            can.Message(arbitration_id=0x181, data=b"\0" * 8, is_extended_id=True),
+        ]
         for m in junk:
             peer.bus.send(m)
         drv.read(peer.t + 0.001)
@@ -257,10 +271,18 @@ class ODriveScript:
             if node == 8:  # the last axis of the cycle: stream everyone's feedback
                 out = []
                 for n in self.state:
-                    out.append(frame(po.arbitration_id(n, po.GET_ENCODER_ESTIMATES),
-                                     po.ENCODER_STRUCT.pack(0.25 * n, 0.0)))
-                    out.append(frame(po.arbitration_id(n, po.HEARTBEAT), po.HEARTBEAT_STRUCT.pack(
-                        self.error[n], int(self.state[n]), 0, 0)))
+                    out.append(
+                        frame(
+                            po.arbitration_id(n, po.GET_ENCODER_ESTIMATES),
+                            po.ENCODER_STRUCT.pack(0.25 * n, 0.0),
+                        )
+                    )
+                    out.append(
+                        frame(
+                            po.arbitration_id(n, po.HEARTBEAT),
+                            po.HEARTBEAT_STRUCT.pack(self.error[n], int(self.state[n]), 0, 0),
+                        )
+                    )
                 return out
         elif cmd == po.CLEAR_ERRORS:
             self.error[node] = 0
@@ -273,7 +295,8 @@ def test_odrive_frames(seed):
     with drv:
         drv.configure()
         assert peer.sent(po.arbitration_id(3, po.SET_CONTROLLER_MODE))[0] == struct.pack(
-            "<II", 1, 1)  # torque control, passthrough
+            "<II", 1, 1
+        )  # torque control, passthrough
         drv.activate()
         assert peer.sent(po.arbitration_id(3, po.SET_AXIS_STATE))[-1] == struct.pack("<I", 8)
         assert drv.states.position[2] == pytest.approx(0.75 * 2 * math.pi)  # turns → rad

@@ -49,14 +49,21 @@ def test_static_deflection_equals_K_inverse_dw(model):
     samples = []
     for _ in range(320):
         plant.step(0.05)
-        samples.append(np.concatenate([plant.position - model.home.position,
-                                       log_so3(plant.R @ model.home.rotation.T)]))
+        samples.append(
+            np.concatenate(
+                [plant.position - model.home.position, log_so3(plant.R @ model.home.rotation.T)]
+            )
+        )
     got = np.mean(samples, axis=0)
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     l0 = plant.unstretched_length()
-    k = np.array([1.0 / (1.0 / (x.stiffness or x.youngs_modulus * x.cross_section / l0[i]))
-                  for i, x in enumerate(model.cables)])
+    k = np.array(
+        [
+            1.0 / (1.0 / (x.stiffness or x.youngs_modulus * x.cross_section / l0[i]))
+            for i, x in enumerate(model.cables)
+        ]
+    )
     K = stiffness_matrix(model, kin, equilibrium_tensions(model, kin), k)
     expected = np.linalg.solve(K, dw)
     np.testing.assert_allclose(got, expected, rtol=0.02, atol=2e-3 * np.abs(expected).max())

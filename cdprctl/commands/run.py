@@ -25,6 +25,11 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--sim", action="store_true", help="run against the simulated robot")
     p.add_argument("--no-demo", action="store_true", help="with --sim: no demo motion")
     p.add_argument(
+        "--demo",
+        action="store_true",
+        help="play the demo motion without --sim too (drives on the bus given)",
+    )
+    p.add_argument(
         "--disturbance",
         type=float,
         default=0.0,
@@ -83,5 +88,5 @@ def run(args: argparse.Namespace) -> int:
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)
         return 1
-    demo = args.sim and not args.no_demo
+    demo = (args.sim or args.demo) and not args.no_demo
     return daemon.run(args.duration, demo, args.disturbance)

@@ -76,6 +76,7 @@ class Daemon:
         self.summary: dict[str, Any] = {}
         self._errors: list[float] = []
         self._last_t: float | None = None
+        self._stop_deadline = float("inf")
 
     # -- the loop thread ---------------------------------------------------------------------------
     def _step(self, t: float) -> None:
@@ -93,6 +94,14 @@ class Daemon:
             f"{self.model.drives.driver} drives, {self.model.control.rate:g} Hz, TDA "
             f"{c.tda.options.method.value}" + (", simulated robot" if self.sim else "")
         )
+        # real-time settings first: locking memory and freezing the collector take a while,
+        # and once the drives are started their heartbeats are watched
+        warnings = []
+        if self.realtime:
+            rc = self.model.control
+            warnings = rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc)
+        for w in warnings:
+            self._print(f"warning: {w}", err=True)
         try:
             c.startup()
         except Exception as exc:  # start-up failures are reported, never a traceback
@@ -106,12 +115,6 @@ class Daemon:
             f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
             f"{c.hold_tensions.min():.1f}..{c.hold_tensions.max():.1f} N"
         )
-        warnings = []
-        if self.realtime:
-            rc = self.model.control
-            warnings = rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc)
-        for w in warnings:
-            self._print(f"warning: {w}", err=True)
         notify("READY=1")
         old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
         io = threading.Thread(
@@ -149,10 +152,29 @@ class Daemon:
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
 
     def _on_signal(self, signum: int, frame: Any) -> None:
+        if not self.stop_requested.is_set():
+            self._stop_deadline = time.monotonic() + 5.0
         self.stop_requested.set()
+
+    def _should_stop(self) -> bool:
+        # the I/O thread ends the run after a controlled stop; if it cannot (it died), a
+        # signal still ends the loop after 5 s: the drives' communication timeout then stops
+        # them, and shutdown() disables them
+        return self.finished.is_set() or (
+            self.stop_requested.is_set() and time.monotonic() > self._stop_deadline
+        )
 
     # -- the I/O thread ----------------------------------------------------------------------------
     def _io(self, duration: float | None, demo: bool, force: float) -> None:
+        try:
+            self._io_loop(duration, demo, force)
+        except Exception as exc:  # the I/O thread must not die silently: stop the run
+            self._print(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
+            self.controller.submit(Command("disable"))
+            time.sleep(0.5)
+            self.finished.set()
+
+    def _io_loop(self, duration: float | None, demo: bool, force: float) -> None:
         c = self.controller
         t0 = time.monotonic()
         script = demo_script(self.model, force) if demo else []
@@ -259,8 +281,8 @@ def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]
     disable."""
     home = model.home.position
     lo, hi = model.workspace.position_min, model.workspace.position_max
-    a = np.clip([*home, 0.3, 0.0, -0.1], lo, hi)
-    b = np.clip([*home, -0.2, 0.0, 0.0], lo, hi)
+    a = np.clip(home + np.array([0.3, 0.0, -0.1]), lo, hi)
+    b = np.clip(home + np.array([-0.2, 0.0, 0.0]), lo, hi)
     rpy = model.home.rpy
 
     def move(p: np.ndarray) -> Any:
