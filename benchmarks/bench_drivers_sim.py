@@ -41,8 +41,9 @@ def driver_cycle(model, interface: str, n: int = 3000) -> list[np.ndarray]:
         ls.net = nw.SimNetwork(model, ls.plant, ov)
         from drivers import create_driver
 
-        ls.driver = create_driver(model, period=0.002, clock=ls.clock, wait=ls.net.advance,
-                                  bus_overrides=ov)
+        ls.driver = create_driver(
+            model, period=0.002, clock=ls.clock, wait=ls.net.advance, bus_overrides=ov
+        )
     d = ls.driver
     d.configure()
     d.activate()
@@ -68,8 +69,10 @@ def sim_rates(model) -> None:
     for _ in range(round(sim_seconds / 0.002)):
         plant.step(0.002)
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    print(f"  physics alone (5 kHz sub-steps): real-time factor {sim_seconds / wall:7.1f}x, "
-          f"{cpu / sim_seconds * 1000:6.1f} ms CPU per simulated s")
+    print(
+        f"  physics alone (5 kHz sub-steps): real-time factor {sim_seconds / wall:7.1f}x, "
+        f"{cpu / sim_seconds * 1000:6.1f} ms CPU per simulated s"
+    )
     with LockStep(model) as ls:
         ls.driver.configure()
         ls.driver.activate()
@@ -85,11 +88,15 @@ def sim_rates(model) -> None:
             ls.net.advance(ls.period)
             sim_cpu += time.process_time() - s0
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    print(f"  simulated robot side (8 drive emulators + physics): real-time factor "
-          f"{sim_seconds / sim_cpu:7.1f}x, {sim_cpu / sim_seconds * 1000:6.1f} ms CPU per "
-          "simulated s")
-    print(f"  whole lock-step cycle (driver + simulated robot): real-time factor "
-          f"{sim_seconds / wall:7.1f}x, {cpu / sim_seconds * 1000:6.1f} ms CPU per simulated s")
+    print(
+        f"  simulated robot side (8 drive emulators + physics): real-time factor "
+        f"{sim_seconds / sim_cpu:7.1f}x, {sim_cpu / sim_seconds * 1000:6.1f} ms CPU per "
+        "simulated s"
+    )
+    print(
+        f"  whole lock-step cycle (driver + simulated robot): real-time factor "
+        f"{sim_seconds / wall:7.1f}x, {cpu / sim_seconds * 1000:6.1f} ms CPU per simulated s"
+    )
 
 
 def main() -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import random
+import signal
 import subprocess
 import sys
 import time
@@ -153,3 +154,55 @@ def test_contract_on_real_vcan0():
     finally:
         proc.terminate()
         proc.wait(timeout=10)
+
+
+def test_daemon_against_sim_process_over_udp_multicast(tmp_path, sim_process):
+    """The daemon and `cdprctl sim` in two processes over udp_multicast, in real time: start-up,
+    enable, a demo move to its target, then SIGTERM → controlled stop, drives disabled, exit 0."""
+    port = random.Random(os.getpid() * 11).randrange(40000, 50000)
+    config = write_config(tmp_path, "rowc.toml", "cia402")
+    opts = ["--can-option", f"port={port}"]
+    sim = sim_process(config, opts)
+    daemon = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "cdprctl.cli",
+            "run",
+            "--config",
+            str(config),
+            "--demo",
+            "--rate",
+            "250",  # rowc: 250 and 500 Hz are stable; at 100 Hz the cable modes oscillate
+            "--no-realtime",
+            "--status",
+            "0",
+            *opts,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    lines: list[str] = []
+    try:
+        deadline = time.monotonic() + 90.0
+        while time.monotonic() < deadline:
+            line = daemon.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "target reached" in line or "FAULT" in line:
+                break
+        daemon.send_signal(signal.SIGTERM)
+        out, _ = daemon.communicate(timeout=30)
+        lines.append(out)
+    finally:
+        if daemon.poll() is None:
+            daemon.kill()
+            daemon.wait()
+    text = "".join(lines)
+    assert "enabled -> moving" in text and "moving -> enabled: target reached" in text, text
+    assert "FAULT" not in text, text
+    assert "drives disabled" in text, text
+    assert daemon.returncode == 0, text
+    assert sim.poll() is None  # the simulated robot outlives its controller

@@ -211,7 +211,9 @@ class Controller:
             self.cycle += 1
             self._handle_commands(t)
             self._refresh_stretch_tensions()
-            fk = self.estimator.update(st.stamp, st.position, self.stretch_tensions)
+            fk = self.estimator.update(
+                st.stamp, st.position, self.stretch_tensions, st.velocity, st.feedback_age
+            )
             t2 = clock()
             ph[1] = (t2 - t1) / 1e3
             self._supervise(t, fk.status)

@@ -1,10 +1,20 @@
 """Platform state from the winch encoders.
 
 Motor angles → unstretched cable lengths (``l0 = l_home − (r/G) θ``: encoders calibrated at the
-home pose, docs/simulator.md) → stretched lengths under the tensions commanded last cycle →
-forward kinematics warm-started from the last pose → twist by finite differences of successive
-poses through a first-order low-pass filter (cut-off ``velocity_filter`` Hz): ``v ← v + α (Δp/Δt
-− v)``, ``α = 1 − exp(−2π f_c Δt)``; the angular velocity from ``log(R_k R_(k−1)ᵀ)/Δt``.
+home pose, docs/simulator.md) → stretched lengths under the tensions the caller gives (the
+controller passes feed-forward tensions, docs/control.md) → forward kinematics warm-started from
+the last pose → twist by finite differences of successive poses through a first-order low-pass
+filter (cut-off ``[control] velocity_filter`` Hz): ``v ← v + α (Δp/Δt − v)``,
+``α = 1 − exp(−2π f_c Δt)``; the angular velocity from ``log(R_k R_(k−1)ᵀ)/Δt``. The poses
+include the elastic stretch, so the platform's motion on its cables is seen too (a twist from the
+motor rates, ``l̇ = −Wᵀ ẋ``, misses it and lost the damping of a lateral push in the lock-step
+tests).
+
+Feedback of different ages (a drive's frame a cycle late or lost on a lossy bus) is brought to
+one instant, the newest sample's, by ``θ + θ̇ (age − age_min)`` before the forward kinematics,
+and ``Δt`` is taken between sample instants, not read times: otherwise one late drive shifts the
+pose by a cycle of that cable's motion and ``Δp/Δt`` spikes (tests/test_estimator.py: 0.05 m/s
+and more at 0.3 m/s with one drive late every third cycle).
 """
 
 from __future__ import annotations
@@ -53,6 +63,7 @@ class Estimator:
         self.lengths = np.zeros(model.n_cables)
         self._stamp = -math.inf
         self._alpha_fc = 2.0 * math.pi * model.control.velocity_filter
+        self._theta = np.zeros(model.n_cables)  # rad, the angles brought to one instant
 
     def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
         """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
@@ -73,9 +84,28 @@ class Estimator:
         self.omega[:] = 0.0
         self._stamp = -math.inf
 
-    def update(self, t: float, theta: FloatArray, tensions: FloatArray) -> FKResult:
-        """New pose and twist at the feedback time ``t`` (s); never raises."""
-        self.lengths[:] = self.cable_lengths(theta, tensions)
+    def update(
+        self,
+        t: float,
+        theta: FloatArray,
+        tensions: FloatArray,
+        theta_rate: FloatArray | None = None,
+        age: FloatArray | None = None,
+    ) -> FKResult:
+        """New pose and twist from motor angles ``theta`` (rad) read at time ``t`` (s), the
+        tensions (N) the cables carry, and optionally the motor velocities ``theta_rate``
+        (rad/s) and the age of each drive's feedback ``age`` (s). Never raises."""
+        th = self._theta
+        th[:] = theta
+        use_rate = theta_rate is not None and bool(np.all(np.isfinite(theta_rate)))
+        if use_rate and age is not None:
+            finite = np.isfinite(age)
+            if finite.any():
+                newest = float(np.min(age[finite]))
+                lag = np.where(finite, np.minimum(age - newest, 0.1), 0.0)
+                th += theta_rate * lag
+                t = t - newest
+        self.lengths[:] = self.cable_lengths(th, tensions)
         res = self.fk.solve(self.lengths, self.position, self.rotation)
         self.last_fk = res
         if res.status in (FKStatus.CONVERGED, FKStatus.MAX_ITERATIONS, FKStatus.INCONSISTENT):
@@ -84,8 +114,9 @@ class Estimator:
                 a = 1.0 - math.exp(-self._alpha_fc * dt)
                 self.velocity += a * ((res.position - self.position) / dt - self.velocity)
                 self.omega += a * (log_so3(res.rotation @ self.rotation.T) / dt - self.omega)
+            if dt > 0.0:
+                self._stamp = t
             self.position[:] = res.position
             self.rotation[:] = res.rotation
-            self._stamp = t
             inverse_kinematics(self.model, self.kin, self.position, self.rotation)
         return res

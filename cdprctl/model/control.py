@@ -50,7 +50,8 @@ class ControlConfig:
     rate: float = 500.0  # Hz
     bandwidth: float = 1.0  # Hz, closed-loop natural frequency of the PD pose loop
     damping_ratio: float = 1.0
-    velocity_filter: float = 40.0  # Hz, first-order low-pass on the finite-difference twist
+    # Hz, first-order low-pass on the finite-difference twist (docs/control.md: rate and filter)
+    velocity_filter: float = 40.0
     max_velocity: float = 0.3  # m/s
     max_acceleration: float = 1.0  # m/s²
     max_jerk: float = 10.0  # m/s³
