@@ -36,7 +36,11 @@ def add_parser(sub: Any) -> None:
         metavar="N",
         help="with the demo: a lateral force (N along y, ramped) at home",
     )
-    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument(
+        "--duration",
+        type=float,
+        help="stop after this many seconds (the demo plays again while a round fits)",
+    )
     p.add_argument("--rate", type=float, help="loop rate in Hz, replacing [control] rate")
     p.add_argument(
         "--status", type=float, default=0.5, help="status line every this many seconds (0: none)"

@@ -193,6 +193,11 @@ class Daemon:
             if self.status_every and now >= next_status:
                 self._status_line(now)
                 next_status += self.status_every
+            if demo and not script and duration is not None and c.state is State.READY:
+                # with --duration the demo plays again while a whole round still fits
+                again = demo_script(self.model, force)
+                if now + again[-1][0] < duration:
+                    script = [(now + at, action) for at, action in again]
             end = (duration is not None and now >= duration) or (
                 demo and not script and c.state in (State.READY, State.FAULT)
             )
