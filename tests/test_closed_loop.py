@@ -52,7 +52,7 @@ def test_point_to_point(rowc, target):
         assert c.state is State.ENABLED, c.fault_reason
         a = cl.arrays()
         err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)
-        assert err.max() < 2e-3  # m, tracking the jerk-limited reference
+        assert err.max() < 2.5e-3  # m, tracking the jerk-limited reference (ζ = 0.6: 2.0-2.1)
         assert np.linalg.norm(cl.plant.position - goal) < 0.5e-3  # m, at rest on the target
         assert np.all(a["tda_ok"])
         assert np.all(a["torques"] <= np.array([w.winch.torque_limit for w in rowc.cables]))
@@ -142,8 +142,8 @@ def test_lower_rate_config(rowc):
     model = dataclasses.replace(rowc, control=dataclasses.replace(rowc.control, rate=250.0))
     with enabled(model) as cl:
         cl.command("move", pose=np.array([1.7, 0.35, 0.6, 0.0, 0.0, 0.0]))
-        cl.run(3.0)
-        assert np.linalg.norm(cl.plant.position - [1.7, 0.35, 0.6]) < 0.5e-3
+        cl.run(4.0)
+        assert np.linalg.norm(cl.plant.position - [1.7, 0.35, 0.6]) < 1e-3  # ζ = 0.6 settles slower
 
 
 def test_a_100_hz_loop_moves_without_slack(rowc):
@@ -157,6 +157,24 @@ def test_a_100_hz_loop_moves_without_slack(rowc):
         lowest = np.inf
         for _ in range(400):
             cl.run(0.01)
+            lowest = min(lowest, float(cl.plant.tension.min()))
+        assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+        assert lowest > 0.5 * min(rowc.tension_min)
+        assert np.linalg.norm(cl.plant.position - [1.8, 0.35, 0.49]) < 2e-3
+
+
+def test_one_period_of_feedback_delay_is_tolerated(rowc):
+    """The drives' frames 1 ms late at 250 Hz (they miss the read: the feedback is a period
+    older, as across processes over udp_multicast). With ζ = 1 this oscillated into slack cables
+    and an over-speed fault; rowc's ζ = 0.6 keeps the move clean (docs/control.md)."""
+    model = dataclasses.replace(rowc, control=dataclasses.replace(rowc.control, rate=250.0))
+    with enabled(model) as cl:
+        FaultInjector([FaultEvent(cl.net.time, "frame_delay", value=0.001)]).attach(cl.net)
+        cl.run(0.5)
+        cl.command("move", pose=np.array([1.8, 0.35, 0.49, 0.0, 0.0, 0.0]))
+        lowest = np.inf
+        for _ in range(750):
+            cl.run(0.004)
             lowest = min(lowest, float(cl.plant.tension.min()))
         assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
         assert lowest > 0.5 * min(rowc.tension_min)
