@@ -92,11 +92,35 @@ class CanWinchDriver(WinchDriver):
                     continue
                 yield key[0], key[1], msg.data
 
+    def _read_internal(self, t: float) -> DriverError | None:
+        """Drain the feedback, then per cable its state (``_cable_state``) and liveness; the
+        first error, a cable's drive fault before its timeout."""
+        self._fresh[:] = False
+        self._drain(t)
+        elapsed = self._reads_elapsed(t)
+        err: DriverError | None = None
+        for c in range(self.m):
+            fault = self._cable_state(c)
+            live = self._liveness(c, t, elapsed)
+            err = err or fault or live
+        return err
+
+    def _drain(self, t: float) -> None:
+        """Decode every waiting frame (``_frames``) into the protocol's state."""
+        raise NotImplementedError
+
+    def _cable_state(self, c: int) -> DriverError | None:
+        """``self.states`` of cable ``c`` from the decoded feedback; its drive fault, if any."""
+        raise NotImplementedError
+
     def _reads_elapsed(self, t: float) -> bool:
         """True unless this read is at the same instant as the last (which misses nothing)."""
         elapsed = t > self._last_read
         self._last_read = t
         return elapsed
+
+    def _where(self, c: int) -> str:
+        return f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
 
     def _liveness(self, c: int, t: float, elapsed: bool) -> DriverError | None:
         """Feedback age, missed-cycle count and heartbeat of cable ``c``: the timeout error
@@ -107,10 +131,9 @@ class CanWinchDriver(WinchDriver):
             self._missed[c] += 1
             self.stats.missed_feedback += 1
         self.states.feedback_age[c] = t - self._fb_stamp[c]
-        where = f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
         if self._missed[c] > self.config.missed_feedback_limit:
             return DriverTimeoutError(
-                f"{where}: no {self.feedback_label} for {int(self._missed[c])} cycles "
+                f"{self._where(c)}: no {self.feedback_label} for {int(self._missed[c])} cycles "
                 f"(limit {self.config.missed_feedback_limit})",
                 c,
             )
@@ -120,7 +143,7 @@ class CanWinchDriver(WinchDriver):
             and t - self._last_hb[c] > self.config.heartbeat_timeout
         ):
             return DriverTimeoutError(
-                f"{where} lost: no heartbeat for {t - self._last_hb[c]:.3f} s "
+                f"{self._where(c)} lost: no heartbeat for {t - self._last_hb[c]:.3f} s "
                 f"(timeout {self.config.heartbeat_timeout:g} s)",
                 c,
             )

@@ -205,36 +205,29 @@ class Cia402Driver(CanWinchDriver):
             else:
                 self.stats.frames_ignored += 1
 
-    def _read_internal(self, t: float) -> DriverError | None:
-        self._fresh[:] = False
-        self._drain(t)
-        elapsed = self._reads_elapsed(t)
+    def _cable_state(self, c: int) -> DriverError | None:
         st = self.states
-        err: DriverError | None = None
-        for c in range(self.m):
-            if self._fresh[c]:
-                pos = self._counts[c] * self.rad_per_count[c]
-                stamp = self._fb_stamp[c]
-                if self.config.velocity_source == "derived" and math.isfinite(self._prev_stamp[c]):
-                    dt = stamp - self._prev_stamp[c]
-                    if dt > 0:
-                        st.velocity[c] = (pos - self._prev_pos[c]) / dt
-                self._prev_pos[c], self._prev_stamp[c] = pos, stamp
-                st.position[c] = pos
-            ps = self.power_state[c]
-            st.state[c] = _GENERIC_STATE[ps]
-            code = int(self._emcy[c])
-            st.fault_code[c] = code
-            if err is None and (code != 0 or ps is p.PowerState.FAULT):
-                err = DriveFaultError(
-                    c,
-                    int(self.node[c]),
-                    code,
-                    p.describe_emcy(code) if code else "fault (statusword)",
-                )
-            live = self._liveness(c, t, elapsed)
-            err = err or live
-        return err
+        if self._fresh[c]:
+            pos = self._counts[c] * self.rad_per_count[c]
+            stamp = self._fb_stamp[c]
+            if self.config.velocity_source == "derived" and math.isfinite(self._prev_stamp[c]):
+                dt = stamp - self._prev_stamp[c]
+                if dt > 0:
+                    st.velocity[c] = (pos - self._prev_pos[c]) / dt
+            self._prev_pos[c], self._prev_stamp[c] = pos, stamp
+            st.position[c] = pos
+        ps = self.power_state[c]
+        st.state[c] = _GENERIC_STATE[ps]
+        code = int(self._emcy[c])
+        st.fault_code[c] = code
+        if code != 0 or ps is p.PowerState.FAULT:
+            return DriveFaultError(
+                c,
+                int(self.node[c]),
+                code,
+                p.describe_emcy(code) if code else "fault (statusword)",
+            )
+        return None
 
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
         pack = p.RPDO1_STRUCT.pack_into

@@ -112,28 +112,21 @@ class ODriveDriver(CanWinchDriver):
             else:
                 self.stats.frames_ignored += 1
 
-    def _read_internal(self, t: float) -> DriverError | None:
-        self._fresh[:] = False
-        self._drain(t)
-        elapsed = self._reads_elapsed(t)
+    def _cable_state(self, c: int) -> DriverError | None:
         st = self.states
-        err: DriverError | None = None
-        for c in range(self.m):
-            code = int(self.axis_error[c])
-            st.fault_code[c] = code
-            if code:
-                st.state[c] = DriveState.FAULT
-            elif self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL:
-                st.state[c] = DriveState.ENABLED
-            elif self.axis_state[c] is p.AxisState.IDLE:
-                st.state[c] = DriveState.DISABLED
-            else:
-                st.state[c] = DriveState.UNKNOWN
-            if err is None and code:
-                err = DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
-            live = self._liveness(c, t, elapsed)
-            err = err or live
-        return err
+        code = int(self.axis_error[c])
+        st.fault_code[c] = code
+        if code:
+            st.state[c] = DriveState.FAULT
+        elif self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL:
+            st.state[c] = DriveState.ENABLED
+        elif self.axis_state[c] is p.AxisState.IDLE:
+            st.state[c] = DriveState.DISABLED
+        else:
+            st.state[c] = DriveState.UNKNOWN
+        if code:
+            return DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
+        return None
 
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
         if self._clear:
