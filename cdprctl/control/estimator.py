@@ -64,6 +64,7 @@ class Estimator:
         self._stamp = -math.inf
         self._alpha_fc = 2.0 * math.pi * model.control.velocity_filter
         self._theta = np.zeros(model.n_cables)  # rad, the angles brought to one instant
+        self._lag = np.zeros(model.n_cables)  # s, then rad: each cable's shift to that instant
 
     def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
         """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
@@ -97,13 +98,15 @@ class Estimator:
         (rad/s) and the age of each drive's feedback ``age`` (s). Never raises."""
         th = self._theta
         th[:] = theta
-        use_rate = theta_rate is not None and bool(np.all(np.isfinite(theta_rate)))
-        if use_rate and age is not None:
-            finite = np.isfinite(age)
-            if finite.any():
-                newest = float(np.min(age[finite]))
-                lag = np.where(finite, np.minimum(age - newest, 0.1), 0.0)
-                th += theta_rate * lag
+        if theta_rate is not None and age is not None and np.all(np.isfinite(theta_rate)):
+            newest = float(age.min())
+            if math.isfinite(newest):
+                # a drive never heard from has an infinite age but a zero velocity: no shift
+                lag = self._lag
+                np.subtract(age, newest, out=lag)
+                np.minimum(lag, 0.1, out=lag)
+                lag *= theta_rate
+                th += lag
                 t = t - newest
         self.lengths[:] = self.cable_lengths(th, tensions)
         res = self.fk.solve(self.lengths, self.position, self.rotation)
