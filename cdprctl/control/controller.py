@@ -179,7 +179,7 @@ class Controller:
                 break
         else:
             raise RuntimeError("start-up: pose and tensions did not settle in 100 iterations")
-        if fk.residual > self.MAX_FK_RESIDUAL:
+        if fk.residual > self.model.control.max_fk_residual:
             raise RuntimeError(
                 f"start-up: the encoders disagree with every pose "
                 f"({fk.status.name}, residual {fk.residual:.3g} m)"
@@ -237,8 +237,6 @@ class Controller:
         except Exception as exc:
             self.torques[:] = self.r * self.hold_tensions
             self._fault(t, f"internal error: {type(exc).__name__}: {exc}", hold=True)
-
-    MAX_FK_RESIDUAL = 0.005  # m RMS
 
     STRETCH_EVERY = 4  # cycles: the feed-forward load is jerk-limited, it changes slowly
 
@@ -376,11 +374,11 @@ class Controller:
         fk = e.last_fk
         if fk_status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
             self._fault(t, f"forward kinematics {fk_status.name}", hold=True)
-        elif fk is not None and fk.residual > self.MAX_FK_RESIDUAL:
+        elif fk is not None and fk.residual > self.model.control.max_fk_residual:
             self._fault(
                 t,
                 f"the encoders disagree with every pose: forward-kinematics residual "
-                f"{fk.residual * 1e3:.2f} mm > {self.MAX_FK_RESIDUAL * 1e3:.0f} mm "
+                f"{fk.residual * 1e3:.2f} mm > {self.model.control.max_fk_residual * 1e3:.0f} mm "
                 "(an encoder jump, a slipped or broken cable)",
                 hold=True,
             )
@@ -443,6 +441,8 @@ class Controller:
             elif k == "set_tda" and cmd.tda is not None:
                 try:  # options are validated by whoever sends them; this is the last guard
                     self.tda = TensionDistributor(self.model, cmd.tda)
+                    # the stretch estimate assumes the tensions the cables now get
+                    self._static_tda = TensionDistributor(self.model, cmd.tda)
                     self.events.append((t, f"TDA method {cmd.tda.method.value}"))
                 except ValueError as exc:
                     self.events.append((t, f"TDA options rejected: {exc}"))

@@ -33,6 +33,7 @@ SAFETY_KEYS = (
     "max_feedback_age",
     "stop_duration",
     "tension_margin",
+    "max_fk_residual",
 )
 REALTIME_KEYS = ("sleep_margin", "sched_priority", "cpu", "lock_memory", "freeze_gc")
 METHODS = ("pinv", "closed-form", "barycenter", "min-2-norm", "min-1-norm", "sotda", "energy", "qp")
@@ -71,6 +72,9 @@ class ControlConfig:
     max_feedback_age: float = 0.05  # s
     stop_duration: float = 0.5  # s, controlled stop before the brakes close
     tension_margin: float = 0.0  # N, kept from each limit by the TDA
+    # m RMS: cable lengths no pose explains (an encoder fault). Soft cables stretch under forces
+    # the controller does not know (Sensors 2019 springs: 30 N ≈ 10 mm), so they need more.
+    max_fk_residual: float = 0.005
     sleep_margin: float = 0.0002  # s, spin (instead of sleep) this long before each deadline
     sched_priority: int = 80  # SCHED_FIFO priority when permitted
     cpu: int = -1  # CPU to pin the loop to; -1: the last one
@@ -183,6 +187,7 @@ def read_control(
             ("max_feedback_age", "s", {"positive": True}),
             ("stop_duration", "s", {"positive": True}),
             ("tension_margin", "N", {"minimum": 0.0}),
+            ("max_fk_residual", "m", {"positive": True}),
         ):
             v = rd.number(safety, key, sp, unit, required=False, default=getattr(d, key), **rules)
             if v is not None:
