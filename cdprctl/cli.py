@@ -50,6 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
+    from cdprctl.commands import report, zenoh_tools
+
+    zenoh_tools.add_parsers(sub)
+    report.add_parser(sub)
     return parser
 
 

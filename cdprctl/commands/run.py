@@ -51,6 +51,21 @@ def add_parser(sub: Any) -> None:
         help="do not ask for SCHED_FIFO, CPU pinning, locked memory",
     )
     add_bus_arguments(p)
+    z = p.add_argument_group("Zenoh (see docs/telemetry.md; [zenoh] in the config sets the same)")
+    z.add_argument("--zenoh", action="store_true", help="start the Zenoh gateway")
+    z.add_argument(
+        "--zenoh-listen", action="append", metavar="ENDPOINT", help="e.g. tcp/0.0.0.0:7447"
+    )
+    z.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT")
+    z.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5: ACL, TLS, user/password")
+    z.add_argument(
+        "--no-multicast-scouting", action="store_true", help="find peers only by endpoints"
+    )
+    z.add_argument(
+        "--accept-commands",
+        action="store_true",
+        help="take commands over Zenoh (zenoh.commands = true)",
+    )
     p.set_defaults(func=run)
 
 
@@ -76,6 +91,29 @@ def run(args: argparse.Namespace) -> int:
         model = dataclasses.replace(
             model, control=dataclasses.replace(model.control, rate=args.rate)
         )
+    zo: dict[str, Any] = {}
+    if args.zenoh_listen:
+        zo["listen"] = tuple(args.zenoh_listen)
+    if args.zenoh_connect:
+        zo["connect"] = tuple(args.zenoh_connect)
+    if args.no_multicast_scouting:
+        zo["multicast_scouting"] = False
+    if args.accept_commands:
+        zo["commands"] = True
+    if args.zenoh_config:
+        from pathlib import Path
+
+        if not Path(args.zenoh_config).is_file():
+            print(
+                f"cdprctl run: error: --zenoh-config = {args.zenoh_config}: no such file",
+                file=sys.stderr,
+            )
+            return 2
+        zo["config_file"] = str(Path(args.zenoh_config).resolve())
+    if zo:
+        import dataclasses
+
+        model = dataclasses.replace(model, zenoh=dataclasses.replace(model.zenoh, **zo))
     if args.duration is not None and not args.duration > 0:
         print(f"cdprctl run: error: --duration = {args.duration} s must be > 0", file=sys.stderr)
         return 2
@@ -88,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             bus_overrides(args),
             realtime=not args.no_realtime,
             status_every=args.status,
+            zenoh=args.zenoh or bool(zo),
         )
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

@@ -60,6 +60,7 @@ class Command:
     kind: str  # enable | disable | stop | reset | move | set_tda
     pose: FloatArray | None = None  # move: x, y, z (m), roll, pitch, yaw (rad)
     speed: float = 1.0  # move: fraction of the velocity limits
+    accel: float = 1.0  # move: fraction of the acceleration limits
     tda: TDAOptions | None = None
 
 
@@ -426,7 +427,7 @@ class Controller:
 
                 R = rpy_to_matrix(*cmd.pose[3:])
                 x = np.concatenate([cmd.pose[:3], log_so3(R @ self.model.home.rotation.T)])
-                self.trajectory.set_target(x, cmd.speed)
+                self.trajectory.set_target(x, cmd.speed, cmd.accel)
                 self._set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
             elif k == "stop" and self.state in (State.ENABLED, State.MOVING):
                 self.trajectory.stop_here()

@@ -39,7 +39,8 @@ class Trajectory:
         self.out = OutputParameter(6)
         self.limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
         self.inp.max_velocity = self.limits.tolist()
-        self.inp.max_acceleration = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
+        self.acc_limits = np.array([c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3)
+        self.inp.max_acceleration = self.acc_limits.tolist()
         self.inp.max_jerk = [c.max_jerk] * 3 + [c.max_angular_jerk] * 3
         self.position = np.zeros(6)  # desired [p, φ]
         self.velocity = np.zeros(6)
@@ -68,11 +69,13 @@ class Trajectory:
             y[3:] *= ws.max_angle / angle
         return y, bool(np.any(np.abs(y - x) > 1e-12))
 
-    def set_target(self, x: FloatArray, speed_scale: float = 1.0) -> bool:
-        """New target (clamped); ``speed_scale`` in (0, 1] scales the velocity limits."""
+    def set_target(self, x: FloatArray, speed_scale: float = 1.0, accel_scale: float = 1.0) -> bool:
+        """New target (clamped); ``speed_scale`` and ``accel_scale`` in (0, 1] scale the
+        configured velocity and acceleration limits."""
         y, _ = self.clamp(x)
         self.target[:] = y
         self.inp.max_velocity = (self.limits * min(1.0, max(1e-3, speed_scale))).tolist()
+        self.inp.max_acceleration = (self.acc_limits * min(1.0, max(1e-3, accel_scale))).tolist()
         self.finished = False
         self._velocity_mode = False
         return True

@@ -41,6 +41,7 @@ class Daemon:
         realtime: bool = True,
         status_every: float = 0.5,
         out: Any = sys.stdout,
+        zenoh: bool = False,
     ):
         from drivers import create_driver
 
@@ -77,6 +78,11 @@ class Daemon:
         self._errors: list[float] = []
         self._last_t: float | None = None
         self._stop_deadline = float("inf")
+        self.link: Any = None
+        if zenoh or model.zenoh.enabled:
+            from cdprctl.telemetry.link import TelemetryLink
+
+            self.link = TelemetryLink(model, self._config_summary())
 
     # -- the loop thread ---------------------------------------------------------------------------
     def _step(self, t: float) -> None:
@@ -94,7 +100,20 @@ class Daemon:
             f"{self.model.drives.driver} drives, {self.model.control.rate:g} Hz, TDA "
             f"{c.tda.options.method.value}" + (", simulated robot" if self.sim else "")
         )
-        # real-time settings first: locking memory and freezing the collector take a while,
+        if self.link is not None:
+            if not self.link.start():
+                self._print("cdprctl run: the Zenoh gateway did not start in 20 s", err=True)
+                self.link.close()
+                self.driver.shutdown()
+                return 1
+            zc = self.model.zenoh
+            self._print(
+                f"zenoh: {zc.key_prefix(self.model.name)}/{{state,timing,events,status}}, "
+                f"commands {'on' if zc.commands else 'off'}"
+                + (f", listening on {', '.join(zc.listen)}" if zc.listen else "")
+            )
+        # real-time settings next (the gateway, started before, keeps its own CPU affinity);
+        # locking memory and freezing the collector take a while,
         # and once the drives are started their heartbeats are watched
         warnings = []
         if self.realtime:
@@ -107,6 +126,8 @@ class Daemon:
         except Exception as exc:  # start-up failures are reported, never a traceback
             self._print(f"cdprctl run: start-up failed: {exc}", err=True)
             self.driver.shutdown()
+            if self.link is not None:
+                self.link.close()
             return 1
         for w in self.driver.warnings:
             self._print(f"warning: {w}", err=True)
@@ -148,6 +169,8 @@ class Daemon:
             if self.sim is not None:
                 self.sim.close()
         self._drain_events()
+        if self.link is not None:
+            self.link.close()
         self._report()
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
 
@@ -180,9 +203,16 @@ class Daemon:
         script = demo_script(self.model, force) if demo else []
         next_status = 0.0
         stopping_since: float | None = None
+        link = self.link
+        tick = 0.05 if link is None else min(0.05, 1.0 / self.model.zenoh.state_rate)
         while True:
             now = time.monotonic() - t0
             self._drain_events()
+            if link is not None:
+                link.publish(c, self.stats, self.plant.position if self.sim is not None else None)
+                for cmd in link.take_commands():
+                    if not c.submit(cmd):
+                        link.event(c.time, f"command {cmd.kind} dropped: mailbox full", "reject")
             while script and script[0][0] <= now:
                 _, action = script.pop(0)
                 action(self)
@@ -211,13 +241,15 @@ class Daemon:
             ):
                 self.finished.set()
                 return
-            time.sleep(0.05)  # this thread holds the GIL as little as it can
+            time.sleep(tick)  # this thread holds the GIL as little as it can
 
     def _drain_events(self) -> None:
         ev = self.controller.events
         while ev:
             t, text = ev.popleft()
             self._print(f"[t={t:9.3f}] {text}")
+            if self.link is not None:
+                self.link.event(t, text)
 
     def _status_line(self, now: float) -> None:
         c = self.controller
@@ -276,8 +308,42 @@ class Daemon:
             f"{c.state.value}" + (f" ({c.fault_reason})" if c.fault_reason else "")
         )
 
+    def _config_summary(self) -> dict[str, Any]:
+        import cdprctl
+
+        m, c = self.model, self.model.control
+        return {
+            "robot": m.name,
+            "config_file": m.source_file,
+            "cables": [w.name for w in m.cables],
+            "tension_min": m.tension_min.tolist(),
+            "tension_max": m.tension_max.tolist(),
+            "torque_limit": [w.winch.torque_limit for w in m.cables],
+            "rate_hz": c.rate,
+            "tda": c.tda_method,
+            "workspace": {
+                "position_min": m.workspace.position_min.tolist(),
+                "position_max": m.workspace.position_max.tolist(),
+                "max_angle": m.workspace.max_angle,
+            },
+            "simulated": self.sim is not None,
+            "versions": {"cdprctl": getattr(cdprctl, "__version__", "?"), **_versions()},
+        }
+
     def _print(self, text: str, err: bool = False) -> None:
         print(text, file=sys.stderr if err else self.out, flush=True)
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("eclipse-zenoh", "python-can", "ruckig", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "?"
+    return out
 
 
 def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]]:

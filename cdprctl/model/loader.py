@@ -18,6 +18,7 @@ from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Cable, Platform, Pose, Pulley, RobotModel, Winch, Workspace
+from cdprctl.model.zenoh import read_zenoh
 
 TOP_KEYS = (
     "name",
@@ -30,6 +31,7 @@ TOP_KEYS = (
     "cables",
     "drives",
     "control",
+    "zenoh",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -111,6 +113,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         rated = max(c.winch.torque_limit for c in cables)
         drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
+    zenoh = read_zenoh(rd, data, name or "robot")
 
     if (
         rd.errors
@@ -122,6 +125,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or workspace is None
         or drives is None
         or control is None
+        or zenoh is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
 
@@ -136,6 +140,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         workspace=workspace,
         drives=drives,
         control=control,
+        zenoh=zenoh,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

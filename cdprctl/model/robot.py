@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
+from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
 
 
@@ -127,6 +128,7 @@ class RobotModel:
     workspace: Workspace
     drives: DrivesConfig
     control: ControlConfig
+    zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

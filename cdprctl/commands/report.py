@@ -1,0 +1,132 @@
+"""``cdprctl report RUN``: PNG plots of a run recorded by ``cdprctl record``."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "report",
+        help="draw PNG plots of a recorded run",
+        description="Reads RUN/state.csv, timing.csv, meta.json (from `cdprctl record`) and "
+        "writes RUN/pose.png (pose and reference), tracking.png, tensions.png (with the "
+        "limits, like the ARK 2020 paper's Fig. 5), torques.png and timing.png.",
+    )
+    p.add_argument("run", metavar="RUN", help="a directory written by cdprctl record")
+    p.set_defaults(func=report)
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    return rows[0], rows[1:]
+
+
+def _column(head: list[str], rows: list[list[str]], name: str) -> np.ndarray:
+    i = head.index(name)
+    return np.array([float(r[i]) if r[i] not in ("", "None") else np.nan for r in rows])
+
+
+def report(args: argparse.Namespace) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    run = Path(args.run)
+    if not (run / "state.csv").is_file():
+        print(f"cdprctl report: {run}/state.csv is missing (record a run first)", file=sys.stderr)
+        return 1
+    head, rows = _read_csv(run / "state.csv")
+    if not rows:
+        print(f"cdprctl report: {run}/state.csv has no rows", file=sys.stderr)
+        return 1
+    meta: dict[str, Any] = {}
+    if (run / "meta.json").is_file():
+        meta = json.loads((run / "meta.json").read_text()).get("config", {})
+    t = _column(head, rows, "time")
+    t = t - t[0]
+    cables = [h[2:] for h in head if h.startswith("t_")]
+    written = []
+
+    def save(fig: Any, name: str) -> None:
+        fig.tight_layout()
+        fig.savefig(run / name, dpi=110)
+        plt.close(fig)
+        written.append(name)
+
+    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
+    for ax, a in zip(axes, "xyz", strict=True):
+        ax.plot(t, _column(head, rows, a), label=f"{a} estimated")
+        ax.plot(t, _column(head, rows, f"ref_{a}"), "--", label=f"{a} reference")
+        true = _column(head, rows, f"true_{a}")
+        if np.any(np.isfinite(true)):
+            ax.plot(t, true, ":", label=f"{a} simulated (true)")
+        ax.set_ylabel(f"{a} (m)")
+        ax.legend(loc="best", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(f"{meta.get('robot', '')}: platform position and reference")
+    save(fig, "pose.png")
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    err = np.sqrt(sum(_column(head, rows, f"err_{a}") ** 2 for a in "xyz")) * 1e3
+    ax.plot(t, err)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("tracking error (mm)")
+    ax.set_title(
+        f"position tracking error: RMS {np.sqrt(np.nanmean(err**2)):.2f} mm, "
+        f"max {np.nanmax(err):.2f} mm"
+    )
+    save(fig, "tracking.png")
+
+    fig, ax = plt.subplots(figsize=(9, 5))
+    for c in cables:
+        ax.plot(t, _column(head, rows, f"t_{c}"), label=f"cable {c}")
+    lo, hi = meta.get("tension_min"), meta.get("tension_max")
+    if lo and hi:
+        ax.axhline(min(lo), color="k", ls="--", lw=1, label="t_min")
+        ax.axhline(max(hi), color="r", ls="--", lw=1, label="t_max")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("commanded tension (N)")
+    ax.legend(loc="best", fontsize=8, ncol=2)
+    ax.set_title("cable tensions")
+    save(fig, "tensions.png")
+
+    fig, ax = plt.subplots(figsize=(9, 4))
+    for c in cables:
+        ax.plot(t, _column(head, rows, f"tau_{c}"), label=f"winch {c}")
+    limits = meta.get("torque_limit")
+    if limits:
+        ax.axhline(max(limits), color="r", ls="--", lw=1, label="torque limit")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("motor torque (N·m)")
+    ax.legend(loc="best", fontsize=8, ncol=2)
+    save(fig, "torques.png")
+
+    if (run / "timing.csv").is_file():
+        th, tr = _read_csv(run / "timing.csv")
+        if tr:
+            fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+            tt = _column(th, tr, "time")
+            tt = tt - t[0] - (tt[0] - tt[0])
+            for k in ("lateness_p50_us", "lateness_p99_us", "lateness_max_us"):
+                ax1.plot(tt - tt[0], _column(th, tr, k), label=k.replace("_us", ""))
+            ax1.set_yscale("symlog", linthresh=1.0)
+            ax1.set_xlabel("time (s)")
+            ax1.set_ylabel("wake lateness (µs), over the run so far")
+            ax1.legend(fontsize=8)
+            ax2.hist(_column(th, tr, "compute_p50_us"), bins=20)
+            ax2.set_xlabel("compute per cycle, median of each report (µs)")
+            ax2.set_ylabel("reports")
+            fig.suptitle("loop timing")
+            save(fig, "timing.png")
+    print(f"cdprctl report: {', '.join(written)} in {run}")
+    return 0

@@ -1,0 +1,330 @@
+"""``cdprctl send``, ``monitor`` and ``record``: tools for people, over Zenoh."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+
+def add_zenoh_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("Zenoh")
+    g.add_argument("--robot", default="", help="robot name: key prefix cdpr/NAME")
+    g.add_argument("--prefix", default="", help="key prefix (instead of --robot)")
+    g.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/host:7447")
+    g.add_argument("--listen", action="append", metavar="ENDPOINT")
+    g.add_argument(
+        "--zenoh-config", default="", metavar="FILE", help="Zenoh JSON5 (TLS, user/password)"
+    )
+    g.add_argument("--no-multicast-scouting", action="store_true")
+
+
+def _prefix(args: argparse.Namespace) -> str | None:
+    if args.prefix:
+        return str(args.prefix).rstrip("/")
+    if args.robot:
+        return f"cdpr/{args.robot}"
+    print(f"cdprctl {args.cmd}: error: give --robot NAME or --prefix KEY", file=sys.stderr)
+    return None
+
+
+def _session(args: argparse.Namespace) -> Any:
+    from cdprctl.telemetry.session import open_session
+
+    return open_session(
+        mode="peer",
+        listen=args.listen or (),
+        connect=args.connect or (),
+        multicast_scouting=not args.no_multicast_scouting,
+        config_file=args.zenoh_config,
+    )
+
+
+def add_parsers(sub: Any) -> None:
+    p = sub.add_parser(
+        "send",
+        help="send a command to a robot over Zenoh",
+        description="Send a command and wait for its reply. Fields as key=value (a comma list "
+        "is a vector: position=1.8,0.35,0.5) or as one JSON object with --json. Commands: "
+        "enable, disable, stop, reset, move (position m, rpy rad, max_velocity m/s, "
+        "max_acceleration m/s²), set_tda (method, nu, direction), impose (cable, quantity "
+        "energy|tension|deformation, value J|N|m), gripper (opening m, force N, release). "
+        "Exit 0 accepted, 1 rejected, 2 no reply.",
+    )
+    p.add_argument("kind", help="command: enable, disable, stop, reset, move, set_tda, ...")
+    p.add_argument("fields", nargs="*", metavar="KEY=VALUE")
+    p.add_argument("--json", default="", help="the payload as one JSON object")
+    p.add_argument("--timeout", type=float, default=5.0, help="s to wait for the reply")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=send, cmd="send")
+
+    p = sub.add_parser(
+        "monitor",
+        help="a live terminal view of a robot's telemetry",
+        description="Pose, tensions as bars against their limits, state and loop timing, "
+        "refreshed as `state` arrives. Ctrl-C ends it.",
+    )
+    p.add_argument("--once", action="store_true", help="print one view and exit")
+    p.add_argument("--timeout", type=float, default=10.0, help="s to wait for data (--once)")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=monitor, cmd="monitor")
+
+    p = sub.add_parser(
+        "record",
+        help="record a robot's telemetry to CSV files",
+        description="Writes DIR/state.csv, DIR/timing.csv, DIR/events.csv and DIR/meta.json "
+        "(the robot's status: limits, cables) until --duration or Ctrl-C; "
+        "`cdprctl report DIR` draws them.",
+    )
+    p.add_argument("--output", required=True, metavar="DIR")
+    p.add_argument("--duration", type=float, help="s; default: until Ctrl-C")
+    add_zenoh_arguments(p)
+    p.set_defaults(func=record, cmd="record")
+
+
+def _value(text: str) -> Any:
+    if "," in text:
+        return [_value(x) for x in text.split(",") if x.strip()]
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    if text in ("true", "false"):
+        return text == "true"
+    return text
+
+
+def send(args: argparse.Namespace) -> int:
+    prefix = _prefix(args)
+    if prefix is None:
+        return 2
+    if args.json:
+        try:
+            payload = json.loads(args.json)
+        except ValueError as exc:
+            print(f"cdprctl send: error: --json is not JSON ({exc})", file=sys.stderr)
+            return 2
+        if not isinstance(payload, dict):
+            print("cdprctl send: error: --json must be a JSON object", file=sys.stderr)
+            return 2
+    else:
+        payload = {}
+        for f in args.fields:
+            if "=" not in f:
+                print(f"cdprctl send: error: {f!r} is not KEY=VALUE", file=sys.stderr)
+                return 2
+            k, v = f.split("=", 1)
+            payload[k] = _value(v)
+    payload.setdefault("id", uuid.uuid4().hex[:12])
+    got: dict[str, Any] = {}
+    done = threading.Event()
+
+    def on_reply(sample: Any) -> None:
+        try:
+            body = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        if body.get("id") == payload["id"]:
+            got.update(body)
+            done.set()
+
+    session = _session(args)
+    try:
+        sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
+        time.sleep(0.3)  # let the subscription reach the gateway before asking
+        session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
+        done.wait(args.timeout)
+        sub.undeclare()
+    finally:
+        session.close()
+    if not got:
+        print(f"cdprctl send: no reply from {prefix} in {args.timeout:g} s", file=sys.stderr)
+        return 2
+    if got.get("ok"):
+        print(f"{args.kind}: accepted")
+        return 0
+    print(f"{args.kind}: rejected: {got.get('reason')}", file=sys.stderr)
+    return 1
+
+
+def _bar(t: float, lo: float, hi: float, width: int = 30) -> str:
+    f = 0.0 if hi <= lo else min(1.0, max(0.0, (t - lo) / (hi - lo)))
+    n = round(f * width)
+    return "[" + "#" * n + "." * (width - n) + "]"
+
+
+def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str, Any]) -> str:
+    p, rpy = state["pose"]["position"], state["pose"]["rpy"]
+    err = state["tracking_error"]
+    lines = [
+        f"{meta.get('robot', '?')}  state {state['state']}"
+        + (f"  FAULT: {state['fault']}" if state.get("fault") else "")
+        + f"  t {state['time']:.2f} s  cycle {state['cycle']}",
+        f"pose     [{p[0]:8.4f} {p[1]:8.4f} {p[2]:8.4f}] m   rpy [{rpy[0]:7.4f} "
+        f"{rpy[1]:7.4f} {rpy[2]:7.4f}] rad",
+        f"target   [{state['target'][0]:8.4f} {state['target'][1]:8.4f} "
+        f"{state['target'][2]:8.4f}] m   tracking error "
+        f"{1e3 * sum(x * x for x in err[:3]) ** 0.5:6.2f} mm",
+        f"TDA      {state['tda']['method']} ({state['tda']['status']})",
+        "tensions",
+    ]
+    lo = meta.get("tension_min") or [0.0] * len(state["tensions"])
+    hi = meta.get("tension_max") or [max(state["tensions"]) or 1.0] * len(state["tensions"])
+    for name, t, a, b, tau in zip(
+        state["cables"], state["tensions"], lo, hi, state["torques"], strict=False
+    ):
+        lines.append(f"  {name:>4} {_bar(t, a, b)} {t:8.1f} N  [{a:g}, {b:g}]  τ {tau:7.3f} N·m")
+    if timing:
+        lines.append(
+            f"loop     lateness p50 {timing['lateness_p50_us']:.0f} / p99 "
+            f"{timing['lateness_p99_us']:.0f} / max {timing['lateness_max_us']:.0f} us, "
+            f"compute p50 {timing['compute_p50_us']:.0f} us, missed {timing['missed']:.0f}"
+        )
+    return "\n".join(lines)
+
+
+def _status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
+    for r in session.get(f"{prefix}/status", timeout=timeout):
+        if r.ok is not None:
+            try:
+                return dict(json.loads(r.ok.payload.to_bytes()))
+            except ValueError:
+                pass
+    return {}
+
+
+def monitor(args: argparse.Namespace) -> int:
+    prefix = _prefix(args)
+    if prefix is None:
+        return 2
+    latest: dict[str, Any] = {}
+    new = threading.Event()
+
+    def on_sample(sample: Any) -> None:
+        key = str(sample.key_expr).rsplit("/", 1)[-1]
+        try:
+            latest[key] = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        if key == "state":
+            new.set()
+
+    session = _session(args)
+    try:
+        subs = [session.declare_subscriber(f"{prefix}/{k}", on_sample) for k in ("state", "timing")]
+        meta = _status(session, prefix).get("config", {})
+        start = time.monotonic()
+        while True:
+            if not new.wait(0.5):
+                if args.once and time.monotonic() - start > args.timeout:
+                    print(f"cdprctl monitor: no state from {prefix}", file=sys.stderr)
+                    return 2
+                continue
+            new.clear()
+            view = render(latest["state"], latest.get("timing"), meta)
+            if args.once:
+                print(view)
+                return 0
+            print("\x1b[H\x1b[2J" + view, flush=True)
+            time.sleep(0.1)  # 10 frames/s are enough for a person
+    except KeyboardInterrupt:
+        return 0
+    finally:
+        for s in subs:
+            s.undeclare()
+        session.close()
+
+
+STATE_COLUMNS = ("time", "state", "tda_status")
+
+
+def record(args: argparse.Namespace) -> int:
+    prefix = _prefix(args)
+    if prefix is None:
+        return 2
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    lock = threading.Lock()
+    rows: dict[str, list[Any]] = {"state": [], "timing": [], "events": []}
+
+    def on_sample(sample: Any) -> None:
+        key = str(sample.key_expr).rsplit("/", 1)[-1]
+        try:
+            body = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        with lock:
+            rows[key].append(body)
+
+    session = _session(args)
+    try:
+        subs = [
+            session.declare_subscriber(f"{prefix}/{k}", on_sample)
+            for k in ("state", "timing", "events")
+        ]
+        status = _status(session, prefix)
+        (out / "meta.json").write_text(json.dumps(status, indent=1))
+        end = time.monotonic() + args.duration if args.duration else float("inf")
+        try:
+            while time.monotonic() < end:
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass
+        for s in subs:
+            s.undeclare()
+    finally:
+        session.close()
+    with lock:
+        n = _write_csvs(out, rows)
+    print(
+        f"cdprctl record: {n['state']} states, {n['timing']} timing, {n['events']} events → {out}"
+    )
+    return 0 if n["state"] else 1
+
+
+def _write_csvs(out: Path, rows: dict[str, list[Any]]) -> dict[str, int]:
+    states = rows["state"]
+    if states:
+        m = len(states[0]["tensions"])
+        names = states[0]["cables"]
+        head = ["time", "state", "tda_method", "tda_status", "x", "y", "z", "roll", "pitch", "yaw"]
+        head += ["ref_" + a for a in ("x", "y", "z", "rx", "ry", "rz")]
+        head += ["err_" + a for a in ("x", "y", "z", "rx", "ry", "rz")]
+        head += [f"t_{c}" for c in names] + [f"tau_{c}" for c in names]
+        head += ["true_x", "true_y", "true_z"]
+        with open(out / "state.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(head)
+            for s in states:
+                if len(s["tensions"]) != m:
+                    continue
+                w.writerow(
+                    [s["time"], s["state"], s["tda"]["method"], s["tda"]["status"]]
+                    + s["pose"]["position"]
+                    + s["pose"]["rpy"]
+                    + s["reference"]
+                    + s["tracking_error"]
+                    + s["tensions"]
+                    + s["torques"]
+                    + s.get("true_position", ["", "", ""])
+                )
+    if rows["timing"]:
+        keys = [k for k in rows["timing"][0] if k != "schema"]
+        with open(out / "timing.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(keys)
+            for t in rows["timing"]:
+                w.writerow([t.get(k) for k in keys])
+    with open(out / "events.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["time", "kind", "text"])
+        for e in rows["events"]:
+            w.writerow([e.get("time"), e.get("kind"), e.get("text")])
+    return {k: len(v) for k, v in rows.items()}

@@ -1,0 +1,155 @@
+"""The Zenoh gateway: a process of its own beside the loop's process, so that no publication,
+query or command flood can take the loop's CPU time or its GIL. It reads the loop's state
+from shared memory (:mod:`snapshot`), publishes ``state``, ``timing`` and ``events``, answers
+``status`` queries, validates commands (:mod:`validate`) and passes the accepted ones to the
+daemon through a bounded queue; each command gets a reply on ``<prefix>/reply/<kind>``."""
+
+from __future__ import annotations
+
+import os
+import queue
+import time
+from typing import Any
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.schema import (
+    SCHEMA,
+    encode,
+    event_payload,
+    state_payload,
+    timing_payload,
+)
+from cdprctl.telemetry.snapshot import STATES, SharedSnapshot
+from cdprctl.telemetry.validate import CommandError, CommandValidator
+
+
+def gateway_main(
+    model: RobotModel,
+    shm_name: str,
+    cmd_q: Any,
+    evt_q: Any,
+    stop: Any,
+    ready: Any,
+    summary: dict[str, Any],
+) -> None:
+    """Runs until ``stop`` is set or the daemon's process is gone."""
+    import zenoh
+
+    from cdprctl.telemetry.session import open_session
+
+    zc = model.zenoh
+    parent = os.getppid()
+    snap = SharedSnapshot(model.n_cables, shm_name)
+    session = open_session(
+        mode=zc.mode,
+        listen=zc.listen,
+        connect=zc.connect,
+        multicast_scouting=zc.multicast_scouting,
+        config_file=zc.config_file,
+    )
+    P = zc.key_prefix(model.name)
+    JSON = zenoh.Encoding.APPLICATION_JSON
+    pub_state = session.declare_publisher(
+        f"{P}/state", encoding=JSON, congestion_control=zenoh.CongestionControl.DROP
+    )
+    pub_timing = session.declare_publisher(f"{P}/timing", encoding=JSON)
+    pub_events = session.declare_publisher(
+        f"{P}/events",
+        encoding=JSON,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        reliability=zenoh.Reliability.RELIABLE,
+    )
+    names = [c.name for c in model.cables]
+    validator = CommandValidator(model, zc.commands)
+    shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
+    counts = {"accepted": 0, "rejected": 0}
+
+    def reply(kind: str, request_id: Any, ok: bool, text: str) -> None:
+        body = {"schema": SCHEMA, "command": kind, "id": request_id, "ok": ok, "reason": text}
+        try:
+            session.put(f"{P}/reply/{kind}", encode(body), encoding=JSON)
+            if not ok:
+                pub_events.put(
+                    encode(event_payload(time.monotonic(), f"{kind} rejected: {text}", "reject"))
+                )
+        except zenoh.ZError:  # the session is closing: nobody to answer
+            pass
+
+    def on_command(sample: Any) -> None:
+        if stop.is_set():
+            return
+        kind = str(sample.key_expr).rsplit("/", 1)[-1]
+        request_id = None
+        try:
+            d = validator.parse(sample.payload.to_bytes())
+            request_id = d.get("id")
+            if request_id is not None and (
+                not isinstance(request_id, (str, int)) or len(str(request_id)) > 64
+            ):
+                request_id = None
+                raise CommandError("id must be a string or integer of at most 64 characters")
+            cmd = validator.check(kind, d, shared["state"])
+            try:
+                cmd_q.put_nowait(cmd)
+            except queue.Full:
+                raise CommandError("the daemon's command mailbox is full: retry later") from None
+            counts["accepted"] += 1
+            reply(kind, request_id, True, "accepted")
+        except CommandError as exc:
+            counts["rejected"] += 1
+            reply(kind, request_id, False, str(exc))
+        except Exception as exc:  # a validator bug must not kill the gateway
+            counts["rejected"] += 1
+            reply(kind, request_id, False, f"internal error: {type(exc).__name__}: {exc}")
+
+    def on_status(query: Any) -> None:
+        snap_now = shared["last"]
+        body = {
+            "schema": SCHEMA,
+            "state": shared["state"],
+            "fault": shared["fault"],
+            "pose": state_payload(snap_now, names, shared["fault"])["pose"] if snap_now else None,
+            "config": summary,
+            "commands": {"enabled": zc.commands, **counts},
+        }
+        query.reply(f"{P}/status", encode(body), encoding=JSON)
+
+    sub = session.declare_subscriber(f"{P}/cmd/*", on_command)
+    qbl = session.declare_queryable(f"{P}/status", on_status)
+    ready.set()
+    state_dt = 1.0 / zc.state_rate
+    timing_dt = 1.0 / zc.timing_rate
+    next_state = next_timing = time.monotonic()
+    last_seq = -1.0
+    try:
+        while not stop.is_set() and os.getppid() == parent:
+            now = time.monotonic()
+            if now >= next_state:
+                s = snap.read()
+                if s is not None:
+                    shared["last"] = s
+                    shared["state"] = STATES[int(s["state"][0])]
+                    if s["seq"][0] != last_seq:
+                        last_seq = float(s["seq"][0])
+                        pub_state.put(encode(state_payload(s, names, shared["fault"])))
+                next_state += state_dt
+                if next_state < now:  # a stall: no burst
+                    next_state = now + state_dt
+            if now >= next_timing:
+                if shared["last"] is not None:
+                    pub_timing.put(encode(timing_payload(shared["last"])))
+                next_timing = max(next_timing + timing_dt, now)
+            try:
+                while True:
+                    kind, t, text = evt_q.get_nowait()
+                    if kind == "fault":
+                        shared["fault"] = text
+                    pub_events.put(encode(event_payload(t, text, kind)))
+            except queue.Empty:
+                pass
+            time.sleep(max(0.0, min(next_state, next_timing) - time.monotonic()))
+    finally:
+        sub.undeclare()
+        qbl.undeclare()
+        session.close()
+        snap.close()

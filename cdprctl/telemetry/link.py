@@ -1,0 +1,100 @@
+"""The daemon's side of the gateway: it starts the gateway process, writes the snapshot,
+forwards events and takes the validated commands. Used by the daemon's I/O thread only —
+never by the loop."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+import time
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.controller import Command
+from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values, timing_values
+
+
+class TelemetryLink:
+    def __init__(self, model: RobotModel, summary: dict[str, Any]):
+        from cdprctl.telemetry.gateway import gateway_main
+
+        ctx = mp.get_context("spawn")  # never fork a process that has threads
+        self.model = model
+        self.snapshot = SharedSnapshot(model.n_cables)
+        self.commands: Any = ctx.Queue(maxsize=32)
+        self.events: Any = ctx.Queue(maxsize=1000)
+        self.stop = ctx.Event()
+        self.ready = ctx.Event()
+        self.dropped_events = 0
+        self.process = ctx.Process(
+            target=gateway_main,
+            args=(
+                model,
+                self.snapshot.name,
+                self.commands,
+                self.events,
+                self.stop,
+                self.ready,
+                summary,
+            ),
+            name="cdprctl-zenoh",
+            daemon=True,
+        )
+        self._next_timing = 0.0
+        self._last_fault = ""
+
+    def start(self, timeout: float = 20.0) -> bool:
+        self.process.start()
+        return bool(self.ready.wait(timeout))
+
+    def publish(self, controller: Any, stats: Any, true_position: Any = None) -> None:
+        values = controller_values(controller, stats, true_position)
+        now = time.monotonic()
+        if now >= self._next_timing:
+            values["timing"] = timing_values(stats)
+            self._next_timing = now + 1.0 / self.model.zenoh.timing_rate
+        self.snapshot.write(values)
+        if controller.fault_reason != self._last_fault:
+            self._last_fault = controller.fault_reason
+            self.event(controller.time, controller.fault_reason, "fault")
+
+    def event(self, t: float, text: str, kind: str = "event") -> None:
+        try:
+            self.events.put_nowait((kind, t, text))
+        except queue.Full:
+            self.dropped_events += 1
+
+    def take_commands(self, limit: int = 32) -> list[Command]:
+        out = []
+        for _ in range(limit):
+            try:
+                kind, params = self.commands.get_nowait()
+            except queue.Empty:
+                break
+            if kind == "move":
+                out.append(
+                    Command(
+                        "move",
+                        pose=np.array(params["pose"], dtype=float),
+                        speed=params["speed"],
+                        accel=params["accel"],
+                    )
+                )
+            elif kind == "set_tda":
+                out.append(Command("set_tda", tda=params["tda"]))
+            else:
+                out.append(Command(kind))
+        return out
+
+    def close(self) -> None:
+        self.stop.set()
+        self.process.join(timeout=5.0)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(timeout=2.0)
+        for q in (self.commands, self.events):
+            q.cancel_join_thread()
+            q.close()
+        self.snapshot.close()

@@ -1,0 +1,71 @@
+"""Payloads on Zenoh: versioned JSON (``application/json``), documented in docs/telemetry.md.
+
+Keys under the robot's prefix ``P`` (``cdpr/<robot>`` by default):
+
+* ``P/state``  — at ``zenoh.state_rate``: pose, twist, reference, target, tracking error,
+  tensions, torques, motor positions, TDA method and status, supervisor state, fault.
+* ``P/timing`` — at ``zenoh.timing_rate``: the loop's statistics.
+* ``P/events`` — reliable: state changes, faults, command outcomes, as they happen.
+* ``P/status`` — a queryable: state, fault, config summary, versions.
+* ``P/cmd/<kind>`` — commands (puts); the answer comes on ``P/reply/<kind>``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from cdprctl.telemetry.snapshot import STATES, TDA_METHODS, TDA_STATUSES, TIMING
+
+SCHEMA = "cdprctl/1"  # bumped on any incompatible change; additions keep the version
+
+
+def _floats(a: np.ndarray, digits: int = 6) -> list[float | None]:
+    return [round(float(x), digits) if math.isfinite(x) else None for x in a]
+
+
+def state_payload(
+    snap: dict[str, np.ndarray], cable_names: list[str], fault: str
+) -> dict[str, Any]:
+    true = snap["true_position"]
+    return {
+        "schema": SCHEMA,
+        "time": round(float(snap["time"][0]), 6),
+        "cycle": int(snap["cycle"][0]),
+        "state": STATES[int(snap["state"][0])],
+        "fault": fault,
+        "pose": {"position": _floats(snap["position"]), "rpy": _floats(snap["rpy"])},
+        "twist": {"velocity": _floats(snap["velocity"]), "omega": _floats(snap["omega"])},
+        "reference": _floats(snap["reference"]),
+        "target": _floats(snap["target"]),
+        "tracking_error": _floats(snap["error"]),
+        "cables": cable_names,
+        "tensions": _floats(snap["tensions"], 3),
+        "torques": _floats(snap["torques"], 5),
+        "motor_position": _floats(snap["motor_position"]),
+        "tda": {
+            "method": TDA_METHODS[int(snap["tda_method"][0])],
+            "status": TDA_STATUSES[int(snap["tda_status"][0])],
+        },
+        **({"true_position": _floats(true)} if np.all(np.isfinite(true)) else {}),
+    }
+
+
+def timing_payload(snap: dict[str, np.ndarray]) -> dict[str, Any]:
+    t = snap["timing"]
+    return {
+        "schema": SCHEMA,
+        "time": round(float(snap["time"][0]), 6),
+        **{k: (float(v) if math.isfinite(v) else None) for k, v in zip(TIMING, t, strict=True)},
+    }
+
+
+def event_payload(t: float, text: str, kind: str = "event") -> dict[str, Any]:
+    return {"schema": SCHEMA, "time": round(t, 6), "kind": kind, "text": text}
+
+
+def encode(payload: dict[str, Any]) -> bytes:
+    return json.dumps(payload, separators=(",", ":"), allow_nan=False).encode()

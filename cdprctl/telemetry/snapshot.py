@@ -1,0 +1,141 @@
+"""The loop's state in shared memory, written by the daemon's I/O thread and read by the
+gateway process (a sequence lock: the writer makes the counter odd while it writes, so a
+reader retries instead of taking a torn copy). No pickling, no lock the loop could wait on.
+"""
+
+from __future__ import annotations
+
+from multiprocessing import shared_memory
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.controller import State
+from cdprctl.tda import TDAMethod, TDAStatus
+
+STATES = [s.value for s in State]
+TDA_METHODS = [m.value for m in TDAMethod]
+TDA_STATUSES = [s.name for s in TDAStatus]
+TIMING = (
+    "cycles",
+    "lateness_p50_us",
+    "lateness_p99_us",
+    "lateness_max_us",
+    "compute_p50_us",
+    "compute_p99_us",
+    "overruns",
+    "missed",
+    "missed_percent",
+)
+
+
+class Layout:
+    """Slices of the shared float64 vector for a robot of ``m`` cables."""
+
+    def __init__(self, m: int):
+        fields = [
+            ("seq", 1),
+            ("time", 1),  # s, the loop's monotonic clock
+            ("state", 1),
+            ("tda_method", 1),
+            ("tda_status", 1),
+            ("cycle", 1),
+            ("position", 3),  # m, P in the base frame
+            ("rpy", 3),  # rad, roll-pitch-yaw of the platform in the base frame
+            ("velocity", 3),  # m/s
+            ("omega", 3),  # rad/s, base frame
+            ("reference", 6),  # m and rad (rotation vector from home): the trajectory now
+            ("target", 6),  # same, where the trajectory ends
+            ("error", 6),  # m and rad: reference − estimate
+            ("tensions", m),  # N, commanded
+            ("torques", m),  # N·m, motor, commanded
+            ("motor_position", m),  # rad
+            ("true_position", 3),  # m, the simulated plant's (NaN on a real robot)
+            ("timing", len(TIMING)),
+        ]
+        self.slices: dict[str, slice] = {}
+        i = 0
+        for name, n in fields:
+            self.slices[name] = slice(i, i + n)
+            i += n
+        self.size = i
+
+
+class SharedSnapshot:
+    """Create (``name=None``, the daemon) or attach to (the gateway) the shared block."""
+
+    def __init__(self, m: int, name: str | None = None):
+        self.layout = Layout(m)
+        nbytes = self.layout.size * 8
+        self._owner = name is None
+        self.shm = shared_memory.SharedMemory(name=name, create=self._owner, size=nbytes)
+        self.buf: np.ndarray = np.ndarray(
+            (self.layout.size,), dtype=np.float64, buffer=self.shm.buf
+        )
+        if self._owner:
+            self.buf[:] = np.nan
+            self.buf[0] = 0.0
+        self._copy = np.empty_like(self.buf)
+
+    @property
+    def name(self) -> str:
+        return self.shm.name
+
+    def write(self, values: dict[str, Any]) -> None:
+        """Write the fields given (arrays or numbers), one sequence step."""
+        b, sl = self.buf, self.layout.slices
+        b[0] += 1.0  # odd: writing
+        for key, v in values.items():
+            b[sl[key]] = v
+        b[0] += 1.0  # even: consistent
+
+    def read(self, tries: int = 100) -> dict[str, np.ndarray] | None:
+        """A consistent copy as named arrays, None if never written or always torn."""
+        b, c = self.buf, self._copy
+        for _ in range(tries):
+            s1 = b[0]
+            c[:] = b
+            if s1 == b[0] and s1 % 2 == 0:
+                if s1 == 0:
+                    return None
+                return {k: c[s].copy() for k, s in self.layout.slices.items()}
+        return None
+
+    def close(self) -> None:
+        del self.buf
+        self.shm.close()
+        if self._owner:
+            self.shm.unlink()
+
+
+def controller_values(controller: Any, stats: Any, true_position: Any = None) -> dict[str, Any]:
+    """The snapshot fields from a Controller and its LoopStats (called by the I/O thread)."""
+    from cdprctl.rotation import matrix_to_rpy
+
+    c = controller
+    e = c.estimator
+    out: dict[str, Any] = {
+        "time": c.time,
+        "state": STATES.index(c.state.value),
+        "tda_method": TDA_METHODS.index(c.tda.options.method.value),
+        "tda_status": TDA_STATUSES.index(c.tda_status.name),
+        "cycle": c.cycle,
+        "position": e.position,
+        "rpy": matrix_to_rpy(e.rotation),
+        "velocity": e.velocity,
+        "omega": e.omega,
+        "reference": c.trajectory.position,
+        "target": c.trajectory.target,
+        "error": c.pose_error,
+        "tensions": c.tensions,
+        "torques": c.torques,
+        "motor_position": c.driver.states.position,
+    }
+    if true_position is not None:
+        out["true_position"] = true_position
+    return out
+
+
+def timing_values(stats: Any) -> np.ndarray:
+    s = stats.summary()
+    return np.array([float(s.get(k, 0.0)) for k in TIMING])

@@ -1,0 +1,206 @@
+"""Command validation, in the gateway process (never in the loop's): every field checked for
+type, finiteness, unit range, the workspace, the wrench-feasibility of a target pose and the
+supervisor state. A rejection names the field, the value, the unit and the rule."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.controller import tda_options_of
+from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
+from cdprctl.model.control import METHODS
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import log_so3, rpy_to_matrix
+from cdprctl.stiffness import cable_stiffnesses
+from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
+
+KINDS = ("enable", "disable", "stop", "reset", "move", "set_tda", "impose", "gripper")
+ALLOWED_STATES = {
+    "enable": ("ready",),
+    "disable": ("enabling", "enabled", "moving"),
+    "stop": ("enabled", "moving"),
+    "reset": ("fault",),
+    "move": ("enabled", "moving"),
+}
+FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is always allowed)
+    "enable": {},
+    "disable": {},
+    "stop": {},
+    "reset": {},
+    "move": {"position": "m", "rpy": "rad", "max_velocity": "m/s", "max_acceleration": "m/s²"},
+    "set_tda": {"method": "", "nu": "", "direction": ""},
+    "impose": {"cable": "", "quantity": "", "value": "J, N or m"},
+    "gripper": {"opening": "m", "force": "N", "release": ""},
+}
+
+
+class CommandError(Exception):
+    pass
+
+
+def _number(d: dict[str, Any], key: str, unit: str, lo: float, hi: float) -> float:
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise CommandError(f"{key} = {json.dumps(v)} must be a number ({unit})")
+    x = float(v)
+    if not math.isfinite(x):
+        raise CommandError(f"{key} = {v} must be finite")
+    if not lo <= x <= hi:
+        raise CommandError(f"{key} = {x:g} {unit} must be in [{lo:g}, {hi:g}] {unit}".strip())
+    return x
+
+
+def _vector(d: dict[str, Any], key: str, unit: str, n: int = 3) -> np.ndarray:
+    v = d[key]
+    if (
+        not isinstance(v, list)
+        or len(v) != n
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    ):
+        raise CommandError(f"{key} = {json.dumps(v)[:80]} must be a list of {n} numbers ({unit})")
+    a = np.array(v, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise CommandError(f"{key} = {json.dumps(v)} must contain only finite numbers ({unit})")
+    return a
+
+
+class CommandValidator:
+    """``check(kind, payload, state)`` → (command kind, parameters) for the daemon, or raises
+    :class:`CommandError` with the reason."""
+
+    def __init__(self, model: RobotModel, commands_enabled: bool):
+        self.model = model
+        self.enabled = commands_enabled
+        self.kin = KinematicsData(model)
+        self.tda = TensionDistributor(model, tda_options_of(model))
+
+    def parse(self, payload: bytes) -> dict[str, Any]:
+        if len(payload) > 4096:
+            raise CommandError(f"payload of {len(payload)} bytes exceeds 4096 bytes")
+        if not payload.strip():
+            return {}
+        try:
+            d = json.loads(payload)
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise CommandError(f"payload is not JSON ({exc})") from None
+        if not isinstance(d, dict):
+            raise CommandError(f"payload must be a JSON object, not {type(d).__name__}")
+        return d
+
+    def check(self, kind: str, d: dict[str, Any], state: str) -> tuple[str, dict[str, Any]]:
+        if not self.enabled:
+            raise CommandError("commands are disabled in the config (zenoh.commands = false)")
+        if kind not in KINDS:
+            raise CommandError(f"command {kind!r} is unknown (known: {', '.join(KINDS)})")
+        allowed = FIELDS[kind]
+        for key in d:
+            if key != "id" and key not in allowed:
+                known = ", ".join(sorted(allowed)) or "none"
+                raise CommandError(f"{kind}: field {key!r} is unknown (allowed: {known}, id)")
+        if kind in ALLOWED_STATES and state not in ALLOWED_STATES[kind]:
+            raise CommandError(
+                f"{kind} is not accepted in state {state} "
+                f"(only in: {', '.join(ALLOWED_STATES[kind])})"
+            )
+        if kind == "move":
+            return "move", self._move(d)
+        if kind == "set_tda":
+            return "set_tda", {"tda": self._set_tda(d)}
+        if kind == "impose":
+            return "set_tda", {"tda": self._impose(d)}
+        if kind == "gripper":
+            raise CommandError(f"robot {self.model.name} has no gripper in its config")
+        return kind, {}
+
+    def _move(self, d: dict[str, Any]) -> dict[str, Any]:
+        m, c, ws = self.model, self.model.control, self.model.workspace
+        if "position" not in d:
+            raise CommandError("move: position (m, base frame) is required")
+        p = _vector(d, "position", "m")
+        rpy = _vector(d, "rpy", "rad") if "rpy" in d else np.array(m.home.rpy, dtype=float)
+        for i, axis in enumerate("xyz"):
+            if not ws.position_min[i] <= p[i] <= ws.position_max[i]:
+                raise CommandError(
+                    f"position.{axis} = {p[i]:g} m is outside the workspace "
+                    f"[{ws.position_min[i]:g}, {ws.position_max[i]:g}] m"
+                )
+        R = rpy_to_matrix(*rpy)
+        angle = float(np.linalg.norm(log_so3(R @ m.home.rotation.T)))
+        if angle > ws.max_angle:
+            raise CommandError(
+                f"rpy = {np.round(rpy, 4).tolist()} rad is {angle:.3f} rad from the home "
+                f"orientation, more than workspace.max_angle = {ws.max_angle:g} rad"
+            )
+        speed = accel = 1.0
+        if "max_velocity" in d:
+            speed = _number(d, "max_velocity", "m/s", 1e-6, c.max_velocity) / c.max_velocity
+        if "max_acceleration" in d:
+            a = _number(d, "max_acceleration", "m/s²", 1e-6, c.max_acceleration)
+            accel = a / c.max_acceleration
+        inverse_kinematics(m, self.kin, p, R)
+        if not kinematics_ok(self.kin):
+            raise CommandError(
+                f"position = {p.tolist()} m: the cables' geometry is degenerate there"
+            )
+        hold = -(m.gravity_wrench(R) + np.asarray(c.external_wrench))
+        out = self.tda.solve(self.kin.W, hold, k=cable_stiffnesses(m, self.kin), kin=self.kin)
+        if not out.ok:
+            raise CommandError(
+                f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad "
+                f"cannot be held within the tension limits ({out.status.name}: {out.message})"
+            )
+        return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
+
+    def _options(self, opts: TDAOptions) -> TDAOptions:
+        errs = opts.validate(self.model)
+        if errs:
+            raise CommandError("; ".join(errs))
+        return opts
+
+    def _set_tda(self, d: dict[str, Any]) -> TDAOptions:
+        base = tda_options_of(self.model)
+        method = d.get("method", base.method.value)
+        if method not in METHODS:
+            raise CommandError(f"method = {json.dumps(method)} must be one of {', '.join(METHODS)}")
+        nu = _number(d, "nu", "", 0.0, 1.0) if "nu" in d else base.nu
+        direction = tuple(_vector(d, "direction", "")) if "direction" in d else base.direction
+        if np.linalg.norm(direction) < 1e-9:
+            raise CommandError(f"direction = {list(direction)} must be a non-zero 3-vector")
+        return self._options(
+            TDAOptions(
+                method=TDAMethod(method),
+                nu=nu,
+                direction=direction,
+                impositions=base.impositions if method == "energy" else (),
+                max_tension_rate=base.max_tension_rate,
+                period=base.period,
+            )
+        )
+
+    def _impose(self, d: dict[str, Any]) -> TDAOptions:
+        names = [c.name for c in self.model.cables]
+        for key in ("cable", "quantity", "value"):
+            if key not in d:
+                raise CommandError(f"impose: {key} is required")
+        if d["cable"] not in names:
+            raise CommandError(
+                f"cable = {json.dumps(d['cable'])} is not a cable ({', '.join(names)})"
+            )
+        q = d["quantity"]
+        if q not in [x.value for x in ImposedQuantity]:
+            raise CommandError(f"quantity = {json.dumps(q)} must be energy, tension or deformation")
+        unit = {"energy": "J", "tension": "N", "deformation": "m"}[q]
+        value = _number(d, "value", unit, 0.0, 1e6)
+        base = tda_options_of(self.model)
+        return self._options(
+            TDAOptions(
+                method=TDAMethod.ENERGY,
+                impositions=(Imposition(names.index(d["cable"]), ImposedQuantity(q), value),),
+                max_tension_rate=base.max_tension_rate,
+                period=base.period,
+            )
+        )
