@@ -205,6 +205,7 @@ class Daemon:
         stopping_since: float | None = None
         link = self.link
         tick = 0.05 if link is None else min(0.05, 1.0 / self.model.zenoh.state_rate)
+        next_tick = time.monotonic()
         while True:
             now = time.monotonic() - t0
             self._drain_events()
@@ -241,7 +242,9 @@ class Daemon:
             ):
                 self.finished.set()
                 return
-            time.sleep(tick)  # this thread holds the GIL as little as it can
+            # absolute ticks, so telemetry keeps its rate; this thread holds the GIL briefly
+            next_tick = max(next_tick + tick, time.monotonic())
+            time.sleep(max(0.0, next_tick - time.monotonic()))
 
     def _drain_events(self) -> None:
         ev = self.controller.events
