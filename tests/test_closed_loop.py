@@ -98,7 +98,10 @@ def test_infeasible_wrench_stops_and_holds(rowc):
         cl.run(1.5)
         c = cl.controller
         assert c.state is State.FAULT
-        assert "tension distribution" in c.fault_reason or "tracking" in c.fault_reason
+        # whichever check trips first: 400 N truly blows the platform away (> 1 m/s)
+        assert any(
+            why in c.fault_reason for why in ("tension distribution", "tracking", "platform speed")
+        ), c.fault_reason
         a = cl.arrays()
         # never a tension command outside the limits, never a non-finite torque
         assert np.all(np.isfinite(a["torques"]))
