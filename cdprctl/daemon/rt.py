@@ -46,6 +46,34 @@ def apply_realtime(priority: int, cpu: int, lock_memory: bool, freeze_gc: bool) 
     return warnings
 
 
+def loop_cpu(cpu: int) -> int | None:
+    """The CPU the loop is pinned to (``cpu``, -1: the last one allowed); None if unknown."""
+    try:
+        cpus = sorted(os.sched_getaffinity(0))
+    except (OSError, AttributeError):
+        return None
+    return cpus[-1] if cpu < 0 else cpu
+
+
+def yield_to_the_loop(loop_cpu_index: int | None, niceness: int = 10) -> list[str]:
+    """For a helper process (the Zenoh gateway): run at a lower priority and, when there is
+    another CPU, away from the loop's, so the helper's bursts (a command flood) never take the
+    loop's CPU. Returns warnings for what could not be applied."""
+    warnings: list[str] = []
+    try:
+        os.nice(niceness)
+    except OSError as exc:
+        warnings.append(f"nice {niceness} not applied ({exc})")
+    try:
+        cpus = set(os.sched_getaffinity(0))
+        others = cpus - {loop_cpu_index}
+        if loop_cpu_index is not None and others:
+            os.sched_setaffinity(0, others)
+    except (OSError, AttributeError) as exc:
+        warnings.append(f"CPU affinity away from the loop's CPU not applied ({exc})")
+    return warnings
+
+
 def restore_gc() -> None:
     gc.enable()
     gc.unfreeze()

@@ -35,8 +35,10 @@ def gateway_main(
     """Runs until ``stop`` is set or the daemon's process is gone."""
     import zenoh
 
+    from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
     from cdprctl.telemetry.session import open_session
 
+    yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
     zc = model.zenoh
     parent = os.getppid()
     snap = SharedSnapshot(model.n_cables, shm_name)
@@ -63,15 +65,21 @@ def gateway_main(
     validator = CommandValidator(model, zc.commands)
     shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
     counts = {"accepted": 0, "rejected": 0}
+    limiter = {"last": -1.0, "suppressed": 0}
 
     def reply(kind: str, request_id: Any, ok: bool, text: str) -> None:
         body = {"schema": SCHEMA, "command": kind, "id": request_id, "ok": ok, "reason": text}
         try:
             session.put(f"{P}/reply/{kind}", encode(body), encoding=JSON)
-            if not ok:
+            now = time.monotonic()
+            if not ok and now - limiter["last"] >= 0.05:  # a flood: 20 events/s at most
+                more = f" (+{limiter['suppressed']} more rejected)" if limiter["suppressed"] else ""
                 pub_events.put(
-                    encode(event_payload(time.monotonic(), f"{kind} rejected: {text}", "reject"))
+                    encode(event_payload(now, f"{kind} rejected: {text}{more}", "reject"))
                 )
+                limiter["last"], limiter["suppressed"] = now, 0
+            elif not ok:
+                limiter["suppressed"] += 1
         except zenoh.ZError:  # the session is closing: nobody to answer
             pass
 
