@@ -186,6 +186,7 @@ class LockStep:
             f"lockstep-{id(self)}-{LockStep._counter}-{b}" for b in range(len(model.drives.buses))
         ]
         overrides = {"interface": "inprocess", "channels": channels}
+        self.overrides = overrides  # a second driver (a restarted daemon) can join the buses
         self.model = model
         self.period = period
         self.plant = plant or CdprPlant(model)

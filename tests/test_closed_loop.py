@@ -78,11 +78,31 @@ def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc):
         assert c.state is State.ENABLED, c.fault_reason
         a = cl.arrays()
         y = a["p_true"][:, 1] - rowc.home.position[1]
-        assert y.max() < 0.03  # m, the peak while the integral catches up
+        assert y.max() < 0.065  # m, the peak while the y integral (0.6 Hz loop) catches up
         final = float(np.mean(y[-250:]))
         assert 0.004 < final < 0.02
         assert abs(c.estimator.position[1] - rowc.home.position[1]) < 0.5e-3
         assert np.all(a["tensions"] <= rowc.tension_max + 1e-9)
+
+
+def test_a_tiny_encoder_step_mid_move_does_not_grow(rowc):
+    """0.1 mrad on one motor (under a micrometre of cable) during a move: with the y axis at
+    1 Hz this grew into an over-speed fault — the loop was unstable in y and only the
+    simulation's symmetry hid it; at the shipped 0.6 Hz it dies out."""
+    with enabled(rowc) as cl:
+        cl.command("move", pose=np.array([1.9, 0.35, 0.5, 0.0, 0.0, 0.0]))
+        cl.run(0.5)
+        FaultInjector([FaultEvent(cl.net.time, "encoder_jump", cable=1, value=1e-4)]).attach(cl.net)
+        cl.run(3.0)
+        assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+        assert np.linalg.norm(cl.plant.position - [1.9, 0.35, 0.5]) < 1e-3
+        fast = dataclasses.replace(rowc.control, axis_bandwidth=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0))
+    with enabled(dataclasses.replace(rowc, control=fast)) as cl:  # the old tuning, for contrast
+        cl.command("move", pose=np.array([1.9, 0.35, 0.5, 0.0, 0.0, 0.0]))
+        cl.run(0.5)
+        FaultInjector([FaultEvent(cl.net.time, "encoder_jump", cable=1, value=1e-4)]).attach(cl.net)
+        cl.run(3.0)
+        assert cl.controller.state is State.FAULT and "speed" in cl.controller.fault_reason
 
 
 def test_infeasible_wrench_stops_and_holds(rowc):

@@ -59,7 +59,9 @@ def test_kernel_matches_the_numpy_law(seed):
     inertia = A @ A.T + np.eye(3)
     com, g, ext = rng.normal(size=3) * 0.1, np.array([0.0, 0.0, -9.81]), rng.normal(size=6)
     integral = rng.normal(size=6) * 0.01
-    args = (3.0, 2.0, 1.5, 0.02, True, 0.002, 12.0, inertia, com, g, ext)
+    gains = rng.uniform(0.5, 3.0, size=(3, 6))  # per-axis kp, kd, ki
+    lim = rng.uniform(0.005, 0.05, size=6)
+    args = (gains[0], gains[1], gains[2], lim, True, 0.002, 12.0, inertia, com, g, ext)
     kp, kd, ki, lim, integ, dt, mass = args[:7]
     err_ref, int_ref, wrench_ref = reference(
         ref_x,

@@ -101,11 +101,13 @@ class Controller:
         self.torque_limit = np.array([x.torque_limit for x in w])
         self.t_min = model.tension_min + c.tension_margin
         self.t_max = model.tension_max - c.tension_margin
-        wn = 2.0 * math.pi * c.bandwidth
+        bw = c.axis_bandwidth if c.axis_bandwidth is not None else (c.bandwidth,) * 6
+        wn = 2.0 * math.pi * np.array(bw, dtype=float)  # rad/s per axis
         # PID by pole placement, a triple pole at −ω_n (s + ω)³: kp = 3ω², kd = 3ω, ki = ω³
         # (accelerations per m, per m/s, per m·s). The integral removes the PD's compliance
         # to a steady force (the water jet): what remains is the cables' own elasticity, the
-        # stiffness the SOTDA acts on (Picard et al. 2020). damping_ratio scales kd.
+        # stiffness the SOTDA acts on (Picard et al. 2020). damping_ratio scales kd. Per axis
+        # (x, y, z, roll, pitch, yaw) when [control] axis_bandwidth is given.
         self.kp = 3.0 * wn * wn
         self.kd = 3.0 * c.damping_ratio * wn
         self.ki = wn**3

@@ -75,11 +75,11 @@ def pd_wrench_kernel(
     v,  # (3,) m/s
     w,  # (3,) rad/s, base frame
     R_home,  # (3, 3)
-    kp,
-    kd,
-    ki,
+    kp,  # (6,) 1/s² per axis
+    kd,  # (6,) 1/s
+    ki,  # (6,) 1/s³
     integral,  # (6,) m·s, rad·s — updated in place when ``integrate``
-    integral_limit,
+    integral_limit,  # (6,)
     integrate,
     dt,  # s
     mass,  # kg
@@ -104,13 +104,13 @@ def pd_wrench_kernel(
     _log_so3(E, err[3:])
     if integrate:
         for i in range(6):
-            integral[i] = min(integral_limit, max(-integral_limit, integral[i] + err[i] * dt))
+            lim = integral_limit[i]
+            integral[i] = min(lim, max(-lim, integral[i] + err[i] * dt))
     acc = np.empty(6)
     for i in range(3):
-        acc[i] = ref_a[i] + kp * err[i] + ki * integral[i] + kd * (ref_v[i] - v[i])
-        acc[3 + i] = (
-            ref_a[3 + i] + kp * err[3 + i] + ki * integral[3 + i] + kd * (ref_v[3 + i] - w[i])
-        )
+        j = 3 + i
+        acc[i] = ref_a[i] + kp[i] * err[i] + ki[i] * integral[i] + kd[i] * (ref_v[i] - v[i])
+        acc[j] = ref_a[j] + kp[j] * err[j] + ki[j] * integral[j] + kd[j] * (ref_v[j] - w[i])
     # Iw = R I Rᵀ (base frame), into E
     for i in range(3):
         for j in range(3):

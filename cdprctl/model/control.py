@@ -6,11 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from cdprctl.model.reader import TableReader
 
 CONTROL_KEYS = (
     "rate",
     "bandwidth",
+    "axis_bandwidth",
     "damping_ratio",
     "velocity_filter",
     "max_velocity",
@@ -50,6 +53,9 @@ class ImposeConfig:
 class ControlConfig:
     rate: float = 500.0  # Hz
     bandwidth: float = 1.0  # Hz, closed-loop natural frequency of the PD pose loop
+    # Hz per axis (x, y, z, roll, pitch, yaw), replacing ``bandwidth`` where given: a badly
+    # conditioned direction needs a slower loop (docs/control.md, "Per-axis bandwidth").
+    axis_bandwidth: tuple[float, ...] | None = None
     damping_ratio: float = 1.0
     # Hz, first-order low-pass on the finite-difference twist (docs/control.md: rate and filter)
     velocity_filter: float = 40.0
@@ -106,6 +112,12 @@ def read_control(
 
     num("rate", "Hz", positive=True, maximum=10000.0)
     num("bandwidth", "Hz", positive=True)
+    ab = rd.vector(t, "axis_bandwidth", path, "Hz", length=6, required=False, default=None)
+    if ab is not None:
+        if np.any(ab <= 0.0):
+            rd.error(f"{path}.axis_bandwidth", ab.tolist(), "Hz", "must contain only values > 0")
+        else:
+            vals["axis_bandwidth"] = tuple(float(x) for x in ab)
     num("damping_ratio", "", positive=True)
     num("velocity_filter", "Hz", positive=True)
     for key, unit in (
