@@ -74,6 +74,7 @@ class DriverStats:
         self.frames_received = 0
         self.frames_ignored = 0  # foreign ids, wrong lengths
         self.missed_feedback = 0  # cable-cycles without feedback
+        self.implausible_frames = 0  # position steps no motor can make: dropped
         self.clamped_commands = 0  # torques beyond the limit, clamped
         self.rejected_commands = 0  # non-finite torques, replaced by the last valid one
         self.send_errors = 0

@@ -42,6 +42,28 @@ class CanWinchDriver(WinchDriver):
         self._last_hb = np.full(self.m, -math.inf)  # s, the drive's last heartbeat
         self._last_read = -math.inf
         self._started = False  # the drives were started: silence now counts
+        # Plausibility of position feedback: a step no motor can make between two samples is a
+        # corrupted frame (or a failing encoder) and is dropped like a lost one; the liveness
+        # check then stops the robot if it persists.
+        r = np.array([w.winch.drum_radius / w.winch.gear_ratio for w in model.cables])
+        self._max_motor_speed = self.PLAUSIBLE_CABLE_SPEED / r  # rad/s
+        self._implausible = np.zeros(self.m, dtype=np.int64)  # in a row, per cable
+
+    PLAUSIBLE_CABLE_SPEED = 5.0  # m/s of cable: five times the supervisor's speed limit
+
+    def _plausible(self, c: int, step: float, stamp: float) -> bool:
+        """Whether motor ``c`` can have turned by ``step`` (rad) since its last accepted
+        sample, at ``stamp`` (s); counts the implausible ones."""
+        prev = self._fb_stamp[c]
+        if not math.isfinite(prev):
+            return True
+        dt = max(stamp - prev, 0.0) + self.period  # a period of slack for timing jitter
+        if abs(step) <= self._max_motor_speed[c] * dt:
+            self._implausible[c] = 0
+            return True
+        self._implausible[c] += 1
+        self.stats.implausible_frames += 1
+        return False
 
     def _open(self) -> None:
         for b, bus_cfg in enumerate(self.config.buses):
@@ -132,9 +154,15 @@ class CanWinchDriver(WinchDriver):
             self.stats.missed_feedback += 1
         self.states.feedback_age[c] = t - self._fb_stamp[c]
         if self._missed[c] > self.config.missed_feedback_limit:
+            why = (
+                f" (the last {int(self._implausible[c])} were position jumps no motor can "
+                "make: corrupted frames or a failing encoder)"
+                if self._implausible[c]
+                else ""
+            )
             return DriverTimeoutError(
                 f"{self._where(c)}: no {self.feedback_label} for {int(self._missed[c])} cycles "
-                f"(limit {self.config.missed_feedback_limit})",
+                f"(limit {self.config.missed_feedback_limit}){why}",
                 c,
             )
         if (

@@ -163,9 +163,9 @@ def test_cia402_position_units_and_wrap(seed):
     script = Cia402Script(range(1, 9))
     drv, peer = make(seed, script)
     cpr = seed.cables[0].winch.encoder_counts_per_rev
+    script.position[1] = 2**31 - 100  # from the first frame on: a step would be implausible
     with drv:
         drv.configure()
-        script.position[1] = 2**31 - 100
         for _ in range(2):
             drv.read(peer.t)
             drv.write(peer.t, np.zeros(8))
@@ -179,6 +179,34 @@ def test_cia402_position_units_and_wrap(seed):
         assert drv.states.position[0] - before == pytest.approx(200 * 2 * math.pi / cpr)
         # velocity derived between the two SYNCs (0.002 s apart)
         assert drv.states.velocity[0] == pytest.approx(200 * 2 * math.pi / cpr / 0.002)
+
+
+def test_a_position_step_no_motor_can_make_is_dropped_then_reported(seed):
+    """A corrupted position (a flipped high bit) is dropped like a lost frame and counted;
+    if every later frame disagrees the same way (a failing encoder), the feedback timeout
+    names the implausible jumps."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        for _ in range(2):
+            drv.read(peer.t)
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+        before = drv.states.position[0]
+        script.position[1] += 1 << 24  # 256 motor turns in 2 ms
+        drv.read(peer.t)
+        drv.write(peer.t, np.zeros(8))
+        peer.wait(0.002)
+        drv.read(peer.t)
+        assert drv.states.position[0] == before  # dropped
+        assert drv.stats.implausible_frames >= 1
+        for _ in range(drv.config.missed_feedback_limit + 2):
+            drv.write(peer.t, np.zeros(8))
+            peer.wait(0.002)
+            drv.read(peer.t)
+        assert drv.lifecycle is Lifecycle.ERROR
+        assert "no motor can make" in str(drv.error)
 
 
 def test_cia402_emcy_is_a_typed_fault_and_reset_recovers(seed):

@@ -180,16 +180,21 @@ class Cia402Driver(CanWinchDriver):
         for kind, c, data in self._frames():
             if kind == 1 and len(data) == 8:
                 sw, tq, pos = tp1.unpack(data)
+                last = self._raw_last[c]
+                stamp = self._last_sync if math.isfinite(self._last_sync) else t
+                # 32-bit wrap-around: the signed difference
+                step = 0 if last is None else ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+                if last is not None and not self._plausible(c, step * self.rad_per_count[c], stamp):
+                    continue  # a corrupted frame: dropped whole, like a lost one
                 self.power_state[c] = p.decode_statusword(sw)
                 self.states.torque[c] = tq * self.rated_torque / 1000.0
-                last = self._raw_last[c]
                 if last is None:
                     self._counts[c] = pos
-                else:  # 32-bit wrap-around: the signed difference
-                    self._counts[c] += ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+                else:
+                    self._counts[c] += step
                 self._raw_last[c] = pos
                 self._fresh[c] = True
-                self._fb_stamp[c] = self._last_sync if math.isfinite(self._last_sync) else t
+                self._fb_stamp[c] = stamp
             elif kind == 2 and len(data) == 4:
                 (vel,) = tp2.unpack(data)
                 if self.config.velocity_source == "pdo":

@@ -95,6 +95,11 @@ class ODriveDriver(CanWinchDriver):
         for cmd, c, data in self._frames():
             if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
                 pos, vel = p.ENCODER_STRUCT.unpack(data)
+                step = pos * TWO_PI - self.states.position[c]
+                if not (math.isfinite(pos) and math.isfinite(vel)) or not self._plausible(
+                    c, step, t
+                ):
+                    continue  # a corrupted frame: dropped whole, like a lost one
                 self.states.position[c] = pos * TWO_PI
                 self.states.velocity[c] = vel * TWO_PI
                 self._fresh[c] = True
