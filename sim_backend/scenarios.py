@@ -185,6 +185,8 @@ def _recover(cl: ClosedLoop, res: Result, watch: _Watch, t_clear: float) -> None
         return
     if cl.net.time < t_clear:
         _steps(cl, watch, t_clear - cl.net.time)
+    # a controlled stop ends in FAULT after stop_duration: reset only then
+    _steps(cl, watch, 3.0, until=lambda: c.state is not State.STOPPING)
     c.submit(Command("reset"))
     _steps(cl, watch, 1.0)
     if c.state is not State.READY:

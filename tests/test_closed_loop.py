@@ -130,6 +130,28 @@ def test_infeasible_wrench_stops_and_holds(rowc):
         assert np.all(cl.plant.brake)
 
 
+def test_a_drive_fault_during_the_controlled_stop_ends_it(rowc):
+    """The stop after a fault holds the pose for stop_duration (0.5 s); if a drive fails
+    meanwhile, holding is over: brakes at once and FAULT (it used to stay in STOPPING for
+    good, ignoring reset)."""
+    with enabled(rowc) as cl:
+        fi = FaultInjector(
+            [FaultEvent(cl.net.time, "external_wrench", value=(0, 400.0, 0, 0, 0, 0), ramp=0.2)]
+        )
+        fi.attach(cl.net)
+        cl.run(0.5, until=lambda x: x.controller.state is State.STOPPING)
+        c = cl.controller
+        assert c.state is State.STOPPING, c.fault_reason
+        fi.events.append(FaultEvent(cl.net.time + 0.01, "drive_fault", cable=2, value=0x2310))
+        cl.run(0.1)  # well inside the 0.5 s stop
+        assert c.state is State.FAULT
+        assert any("during the stop" in text for _, text in c.events)
+        assert np.all(cl.plant.brake)
+        cl.command("reset")
+        cl.run(0.3)
+        assert c.state is not State.STOPPING
+
+
 def test_drive_fault_disables_and_reset_recovers(rowc):
     with enabled(rowc) as cl:
         FaultInjector([FaultEvent(cl.net.time + 0.1, "drive_fault", cable=2, value=0x2310)]).attach(

@@ -369,7 +369,12 @@ class Controller:
         c = self.model.control
         d = self.driver
         if d.lifecycle is Lifecycle.ERROR and self.state is not State.FAULT:
-            self._fault(t, f"drives: {d.error}", hold=False)
+            if self.state is State.STOPPING:  # the drives failed during the controlled stop
+                self.events.append((t, f"FAULT during the stop: drives: {d.error}"))
+                self.driver.begin_deactivate()
+                self._set_state(State.FAULT, t, "drives disabled, brakes closed")
+            else:
+                self._fault(t, f"drives: {d.error}", hold=False)
             return
         if self.state is State.ENABLING:
             if d.lifecycle is Lifecycle.ACTIVE:
