@@ -443,11 +443,15 @@ class Controller:
                 self.integral[:] = 0.0
                 self.driver.begin_activate()
                 self._set_state(State.ENABLING, t, "enabling the drives with holding torques")
-            elif (
-                k == "move"
-                and self.state in (State.ENABLED, State.MOVING)
-                and (cmd.pose is not None)
-            ):
+            elif k == "move" and (
+                cmd.pose is None
+                or len(cmd.pose) != 6
+                or not np.all(np.isfinite(cmd.pose))
+                or not (0.0 < cmd.speed <= 1.0 and 0.0 < cmd.accel <= 1.0)
+            ):  # the gateway validates; this is the last guard before the trajectory
+                self.events.append((t, "move ignored: pose or speed not finite/in range"))
+            elif k == "move" and self.state in (State.ENABLED, State.MOVING):
+                assert cmd.pose is not None
                 from cdprctl.rotation import rpy_to_matrix
 
                 R = rpy_to_matrix(*cmd.pose[3:])

@@ -1,0 +1,139 @@
+"""Lock-step soak: the controller against the simulated window-cleaning robot for a long
+stretch of simulated time, random moves and random faults (seeded), the supervisor's
+recoveries played like an operator would (reset, enable). Writes a JSON summary.
+
+    .venv/bin/python tools/soak.py [--minutes 30] [--seed 1] [--out build/soak.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import logging
+import random
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cdprctl.control.controller import Command, State  # noqa: E402
+from cdprctl.model import load_robot  # noqa: E402
+from sim_backend.closed_loop import ClosedLoop  # noqa: E402
+from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
+
+
+def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
+    """About one fault every 30 s: frame-loss bursts, drive faults, silent drives, lateral
+    pushes (all transient: the robot can come back from each)."""
+    rng = random.Random(seed)
+    events = []
+    t = rng.expovariate(1 / 30.0)
+    while t < minutes * 60.0:
+        kind = rng.choice(["frame_loss", "drive_fault", "silent_drive", "external_wrench"])
+        value = {
+            "frame_loss": rng.uniform(0.01, 0.2),
+            "drive_fault": 0x2310,
+            "external_wrench": (0.0, rng.uniform(-20, 20), rng.uniform(-20, 20), 0.0, 0.0, 0.0),
+        }.get(kind, 0.0)
+        events.append(
+            FaultEvent(t, kind, rng.randrange(8), value, duration=rng.uniform(0.05, 2.0), ramp=0.5)
+        )
+        t += rng.expovariate(1 / 30.0)
+    return events
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=30.0)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=ROOT / "build" / "soak.json")
+    args = ap.parse_args()
+    logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    rng = np.random.default_rng(args.seed)
+    limit = np.array([c.winch.torque_limit for c in model.cables])
+    lo = np.array([0.9, 0.35, 0.35])  # m: the box the random targets come from
+    hi = np.array([2.1, 0.35, 0.58])
+    events = fault_schedule(args.minutes, args.seed)
+    counts: collections.Counter[str] = collections.Counter()
+    faults: collections.Counter[str] = collections.Counter()
+    violations = collections.Counter()
+    compute = []
+    wall0 = time.perf_counter()
+    with ClosedLoop(model) as cl:
+        injector = FaultInjector(events, seed=args.seed)
+        injector.attach(cl.net)
+        cl.startup()
+        c = cl.controller
+        c.submit(Command("enable"))
+        n = round(args.minutes * 60.0 / cl.period)
+        next_move = 1.0
+        last_state = c.state
+        for i in range(n):
+            t = cl.net.time
+            t0 = time.perf_counter_ns()
+            c.step(t)
+            compute.append((time.perf_counter_ns() - t0) / 1e3)
+            cl.net.advance(cl.period)
+            tau = c.torques
+            if not np.all(np.isfinite(tau)):
+                violations["non-finite torque"] += 1
+            elif np.any(np.abs(tau) > limit + 1e-9):
+                violations["torque beyond limit"] += 1
+            if c.state in (State.ENABLED, State.MOVING) and (
+                np.any(c.tensions < model.tension_min - 1e-9)
+                or np.any(c.tensions > model.tension_max + 1e-9)
+            ):
+                violations["tension outside limits while healthy"] += 1
+            if c.state is not last_state:
+                counts[f"-> {c.state.value}"] += 1
+                if c.state is State.STOPPING or (
+                    c.state is State.FAULT and last_state is not State.STOPPING
+                ):
+                    faults[
+                        c.fault_reason.split(":")[0].split(" ")[0] + " ..."
+                        if c.fault_reason
+                        else "?"
+                    ] += 1
+                last_state = c.state
+            if c.state is State.FAULT and i % 250 == 0:
+                c.submit(Command("reset"))
+            elif c.state is State.READY and i % 250 == 0:
+                c.submit(Command("enable"))
+            elif c.state is State.ENABLED and t >= next_move:
+                goal = rng.uniform(lo, hi)
+                c.submit(Command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]])))
+                counts["moves"] += 1
+                next_move = t + 4.0
+    comp = np.array(compute)
+    summary = {
+        "simulated_minutes": args.minutes,
+        "seed": args.seed,
+        "cycles": int(n),
+        "wall_seconds": round(time.perf_counter() - wall0, 1),
+        "compute_us": {
+            "p50": round(float(np.percentile(comp, 50)), 1),
+            "p99": round(float(np.percentile(comp, 99)), 1),
+            "max": round(float(comp.max()), 1),
+        },
+        "faults_injected": dict(collections.Counter(e.kind for e in events)),
+        "frames": dict(injector.counts),
+        "faults_detected_by_reason": dict(faults),
+        "state_changes": dict(counts),
+        "invariant_violations": dict(violations),
+        "final_state": c.state.value,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(summary, indent=1))
+    print(json.dumps(summary, indent=1))
+    if violations:
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
