@@ -41,12 +41,12 @@ class Scenario:
 
 SCENARIOS = (
     Scenario("frame loss 1 %", "frame_loss", value=0.01, expected="ride through"),
-    Scenario("frame loss 5 %", "frame_loss", value=0.05, expected="ride through, or stop and recover"),
+    Scenario(
+        "frame loss 5 %", "frame_loss", value=0.05, expected="ride through, or stop and recover"
+    ),
     Scenario("frame loss 20 %", "frame_loss", value=0.20, expected="ride through or stop"),
     Scenario("frames delayed 3 ms", "frame_delay", value=0.003, expected="ride through"),
-    Scenario(
-        "frames corrupted 5 %", "frame_corruption", value=0.05, expected="stop and recover"
-    ),
+    Scenario("frames corrupted 5 %", "frame_corruption", value=0.05, expected="stop and recover"),
     Scenario("drive fault (0x2310)", "drive_fault", cable=2, value=0x2310, expected="stop"),
     Scenario("drive silent 1 s", "silent_drive", cable=3, expected="stop"),
     Scenario(
