@@ -169,6 +169,24 @@ def test_drive_fault_disables_and_reset_recovers(rowc):
         assert c.state is State.ENABLED, c.fault_reason
 
 
+def test_enable_as_a_drive_faults_is_refused_not_an_internal_error(rowc):
+    """The soak found it: an enable handled in the same cycle the driver went to ERROR made
+    the driver raise inside the cycle ("internal error"). Now the enable is refused and the
+    supervisor reports the drive fault."""
+    with ClosedLoop(rowc) as cl:
+        cl.startup()
+        FaultInjector([FaultEvent(cl.net.time, "drive_fault", cable=4, value=0x2310)]).attach(
+            cl.net
+        )
+        cl.net.advance(cl.period)  # the EMCY is on the bus
+        cl.command("enable")
+        cl.run(cl.period)
+        c = cl.controller
+        assert c.state is State.FAULT
+        assert "internal" not in c.fault_reason and "0x2310" in c.fault_reason
+        assert any("enable refused" in text for _, text in c.events)
+
+
 def test_commands_in_the_wrong_state_are_ignored(rowc):
     with ClosedLoop(rowc) as cl:
         cl.startup()

@@ -47,6 +47,24 @@ def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
     return events
 
 
+def _category(reason: str) -> str:
+    """The fault's kind without its numbers: "platform speed", "drives: ... no feedback"."""
+    for words in (
+        "no feedback",
+        "fault 0x",
+        "heartbeat",
+        "platform speed",
+        "tracking",
+        "orientation",
+        "tension distribution",
+        "encoders disagree",
+        "feedback",
+    ):
+        if words in reason:
+            return words
+    return reason[:40]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=30.0)
@@ -95,11 +113,8 @@ def main() -> None:
                 if c.state is State.STOPPING or (
                     c.state is State.FAULT and last_state is not State.STOPPING
                 ):
-                    faults[
-                        c.fault_reason.split(":")[0].split(" ")[0] + " ..."
-                        if c.fault_reason
-                        else "?"
-                    ] += 1
+                    reason = c.fault_reason or "?"
+                    faults[reason if reason.startswith("internal") else _category(reason)] += 1
                 last_state = c.state
             if c.state is State.FAULT and i % 250 == 0:
                 c.submit(Command("reset"))

@@ -452,7 +452,15 @@ class Controller:
         while self.mailbox:
             cmd = self.mailbox.popleft()
             k = cmd.kind
-            if k == "enable" and self.state is State.READY:
+            if (
+                k == "enable"
+                and self.state is State.READY
+                and (self.driver.lifecycle is not Lifecycle.INACTIVE)
+            ):  # a drive fault came back after the reset: the supervisor faults next
+                self.events.append(
+                    (t, f"enable refused: drives {self.driver.lifecycle.value} {self.driver.error}")
+                )
+            elif k == "enable" and self.state is State.READY:
                 self.trajectory.reset(self._pose6())
                 self.tensions[:] = self.hold_tensions
                 self.integral[:] = 0.0
