@@ -22,6 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdprctl.control.controller import Command, State  # noqa: E402
+from cdprctl.daemon.service import fault_kind  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
 from sim_backend.closed_loop import ClosedLoop  # noqa: E402
 from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
@@ -45,24 +46,6 @@ def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
         )
         t += rng.expovariate(1 / 30.0)
     return events
-
-
-def _category(reason: str) -> str:
-    """The fault's kind without its numbers: "platform speed", "drives: ... no feedback"."""
-    for words in (
-        "no feedback",
-        "fault 0x",
-        "heartbeat",
-        "platform speed",
-        "tracking",
-        "orientation",
-        "tension distribution",
-        "encoders disagree",
-        "feedback",
-    ):
-        if words in reason:
-            return words
-    return reason[:40]
 
 
 def main() -> None:
@@ -114,7 +97,7 @@ def main() -> None:
                     c.state is State.FAULT and last_state is not State.STOPPING
                 ):
                     reason = c.fault_reason or "?"
-                    faults[reason if reason.startswith("internal") else _category(reason)] += 1
+                    faults[reason if reason.startswith("internal") else fault_kind(reason)] += 1
                 last_state = c.state
             if c.state is State.FAULT and i % 250 == 0:
                 c.submit(Command("reset"))

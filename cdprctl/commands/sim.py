@@ -64,6 +64,15 @@ def add_parser(sub: Any) -> None:
         default=1.0,
         help="print a status line every this many seconds (0: never)",
     )
+    p.add_argument(
+        "--faults",
+        type=float,
+        default=0.0,
+        metavar="RATE",
+        help="random transient faults, RATE a second on average: frame-loss bursts, drive "
+        "faults, silent drives, lateral pushes (sim_backend/faults.py)",
+    )
+    p.add_argument("--fault-seed", type=int, default=1, help="seed of --faults")
     p.set_defaults(func=run)
 
 
@@ -81,8 +90,20 @@ def run(args: argparse.Namespace) -> int:
         f"{overrides.get('channel') or model.drives.buses[0].channel}",
         flush=True,
     )
+    faults = None
+    if args.faults > 0:
+        from sim_backend.faults import FaultInjector
+
+        faults = FaultInjector.random_faults(
+            args.duration or 3600.0,
+            model.n_cables,
+            args.faults,
+            args.fault_seed,
+            kinds=("frame_loss", "drive_fault", "silent_drive", "external_wrench"),
+        )
+        print(f"cdprctl sim: {len(faults.events)} faults scheduled (seed {args.fault_seed})")
     try:
-        net = run_realtime(model, overrides, args.duration, status_every=args.status)
+        net = run_realtime(model, overrides, args.duration, faults=faults, status_every=args.status)
     except DriverError as exc:
         print(f"cdprctl sim: error: {exc}", file=sys.stderr)
         return 1

@@ -13,6 +13,7 @@ through ``--can-interface/--can-channel``).
 
 from __future__ import annotations
 
+import collections
 import logging
 import signal
 import sys
@@ -78,6 +79,7 @@ class Daemon:
         self._errors: list[float] = []
         self._last_t: float | None = None
         self._stop_deadline = float("inf")
+        self.faults: collections.Counter[str] = collections.Counter()
         self.link: Any = None
         if zenoh or model.zenoh.enabled:
             from cdprctl.telemetry.link import TelemetryLink
@@ -224,13 +226,15 @@ class Daemon:
             if self.status_every and now >= next_status:
                 self._status_line(now)
                 next_status += self.status_every
+            if demo and not script and duration is not None and c.state is State.FAULT:
+                c.submit(Command("reset"))  # a long demo run carries on after a fault
             if demo and not script and duration is not None and c.state is State.READY:
                 # with --duration the demo plays again while a whole round still fits
                 again = demo_script(self.model, force)
                 if now + again[-1][0] < duration:
                     script = [(now + at, action) for at, action in again]
             end = (duration is not None and now >= duration) or (
-                demo and not script and c.state in (State.READY, State.FAULT)
+                demo and not script and duration is None and c.state in (State.READY, State.FAULT)
             )
             if (end or self.stop_requested.is_set()) and stopping_since is None:
                 stopping_since = now
@@ -251,6 +255,8 @@ class Daemon:
         while ev:
             t, text = ev.popleft()
             self._print(f"[t={t:9.3f}] {text}")
+            if text.startswith("FAULT"):
+                self.faults[fault_kind(text)] += 1
             if self.link is not None:
                 self.link.event(t, text)
 
@@ -290,6 +296,7 @@ class Daemon:
             "final_state": c.state.value,
             "fault": c.fault_reason,
             "driver": self.driver.stats.as_dict(),
+            "faults": dict(self.faults),
         }
         self._print("summary:")
         self._print(
@@ -304,6 +311,10 @@ class Daemon:
             self._print(
                 "  per phase (median/p99 us): "
                 + ", ".join(f"{k} {v[0]:.0f}/{v[1]:.0f}" for k, v in phases.items())
+            )
+        if self.faults:
+            self._print(
+                "  faults handled: " + ", ".join(f"{k} {n}" for k, n in self.faults.most_common())
             )
         self._print(
             f"  tracking error (estimated) RMS {self.summary['tracking_rms_mm']:.2f} mm, "
@@ -335,6 +346,26 @@ class Daemon:
 
     def _print(self, text: str, err: bool = False) -> None:
         print(text, file=sys.stderr if err else self.out, flush=True)
+
+
+def fault_kind(text: str) -> str:
+    """A fault's kind without its numbers, for counting: "no feedback", "platform speed"."""
+    for words in (
+        "no feedback",
+        "fault 0x",
+        "heartbeat",
+        "platform speed",
+        "tracking",
+        "orientation",
+        "tension distribution",
+        "encoders disagree",
+        "feedback",
+        "during the stop",
+        "internal error",
+    ):
+        if words in text:
+            return words
+    return text[:40]
 
 
 def _versions() -> dict[str, str]:
