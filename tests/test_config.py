@@ -176,6 +176,15 @@ CASES = [
 ]
 
 
+CASES.append(
+    (
+        "negative stiffness",
+        sub(r"^youngs_modulus = 80.0e9  # Pa\ncross_section = 0.75e-6", "stiffness = -1000.0"),
+        ["cables[0].stiffness = -1000 N/m must be > 0"],
+    )
+)
+
+
 @pytest.mark.parametrize("text,expected", [(c[1], c[2]) for c in CASES], ids=[c[0] for c in CASES])
 def test_bad_file_gets_a_clear_error(tmp_path, text, expected):
     errors = errors_of(tmp_path, text)
@@ -285,3 +294,14 @@ def test_drives_section_errors(tmp_path, change, expected):
     text = (BASE + DRIVES).replace(*change)
     errors = errors_of(tmp_path, text)
     assert any(expected in e for e in errors), errors
+
+
+@pytest.mark.parametrize("text,expected", [(c[1], c[2]) for c in CASES], ids=[c[0] for c in CASES])
+def test_no_broken_file_starts_the_loop(tmp_path, capsys, text, expected):
+    """`cdprctl run` on each broken file of the corpus: exit code 1, the error on stderr,
+    and the loop never starts (no "ready:", no drive opened)."""
+    p = write(tmp_path, text)
+    assert main(["run", "--config", str(p), "--sim", "--no-realtime", "--duration", "1"]) == 1
+    out = capsys.readouterr()
+    assert any(all(x in line for x in expected) for line in out.err.splitlines()), out.err
+    assert "ready:" not in out.out and "cycles" not in out.out
