@@ -54,6 +54,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--soak", type=Path, help="a JSON file written by tools/soak.py")
+    ap.add_argument(
+        "--realtime", type=Path, help="output of benchmarks/bench_realtime.py ... --faults"
+    )
     ap.add_argument("--out", type=Path, default=ROOT / "docs" / "reliability.md")
     args = ap.parse_args()
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)
@@ -109,6 +112,20 @@ def main() -> None:
     if args.soak and args.soak.is_file():
         soak = json.loads(args.soak.read_text())
         lines += ["", "## Soak", "", "```", json.dumps(soak, indent=1), "```"]
+    if args.realtime and args.realtime.is_file():
+        lines += [
+            "",
+            "## Real time across processes, with random faults",
+            "",
+            "The daemon and `cdprctl sim --faults 0.05` (random transient faults: frame-loss",
+            "bursts, drive faults, silent drives, lateral pushes) over udp_multicast; the demo",
+            "resets after each fault and carries on. `benchmarks/bench_realtime.py --seconds 600",
+            "--rates 250 --faults 0.05`:",
+            "",
+            "```",
+            *args.realtime.read_text().strip().splitlines(),
+            "```",
+        ]
     args.out.write_text("\n".join(lines) + "\n")
     print(f"wrote {args.out}")
 
