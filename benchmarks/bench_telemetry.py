@@ -39,8 +39,15 @@ def free_port() -> int:
 
 def flood(endpoint: str, stop: threading.Event, counter: dict[str, int]) -> None:
     sys.path.insert(0, str(ROOT))
+    import os
+
     from cdprctl.telemetry.session import open_session
 
+    # this thread (and the Zenoh threads its session starts) off the loop's CPU (the last):
+    # the flood stands for operators on other machines, not for load on the robot PC
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) > 1:
+        os.sched_setaffinity(0, set(cpus[:-1]))
     session = open_session(connect=[endpoint], multicast_scouting=False)
     bad = [b"{nonsense", json.dumps({"position": [9.0, 0.35, 0.5]}).encode()]
     good = json.dumps({"method": "barycenter"}).encode()
