@@ -33,21 +33,27 @@ class ClosedLoop:
     def command(self, kind: str, **kw: Any) -> None:
         self.controller.submit(Command(kind, **kw))
 
-    def run(self, seconds: float, until: Any = None) -> None:
+    def run(self, seconds: float, until: Any = None, each: Any = None, record: bool = True) -> None:
+        """``seconds`` of control cycles and simulation; after each cycle ``each(self)`` (a
+        per-cycle check), then ``until(self)`` ends the run early when true; ``record=False``
+        keeps nothing in ``log``."""
         c = self.controller
         for _ in range(round(seconds / self.period)):
             t = self.net.time
             c.step(t)
             self.net.advance(self.period)
-            lg = self.log
-            lg["t"].append(t)
-            lg["state"].append(c.state.value)
-            lg["p_true"].append(self.plant.position.copy())
-            lg["p_est"].append(c.estimator.position.copy())
-            lg["p_des"].append(c.trajectory.position[:3].copy())
-            lg["tensions"].append(c.tensions.copy())
-            lg["torques"].append(c.torques.copy())
-            lg["tda_ok"].append(c.tda_status.name == "OK")
+            if record:
+                lg = self.log
+                lg["t"].append(t)
+                lg["state"].append(c.state.value)
+                lg["p_true"].append(self.plant.position.copy())
+                lg["p_est"].append(c.estimator.position.copy())
+                lg["p_des"].append(c.trajectory.position[:3].copy())
+                lg["tensions"].append(c.tensions.copy())
+                lg["torques"].append(c.torques.copy())
+                lg["tda_ok"].append(c.tda_status.name == "OK")
+            if each is not None:
+                each(self)
             if until is not None and until(self):
                 break
 

@@ -101,7 +101,7 @@ class Result:
         )
 
 
-class _Watch:
+class Watch:
     """Per-cycle checks of a controller against the plant."""
 
     def __init__(self, model: RobotModel, res: Result):
@@ -133,7 +133,7 @@ class _Watch:
 def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) -> Result:
     """The scenario on ``model`` (rowc): enable, start the move, inject the fault 0.5 s in."""
     res = Result(sc)
-    watch = _Watch(model, res)
+    watch = Watch(model, res)
     cl = ClosedLoop(model)
     try:
         cl.startup()
@@ -156,18 +156,18 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
     return res
 
 
-def _observe(cl: ClosedLoop, watch: _Watch, res: Result, t_fault: float, seconds: float) -> None:
-    c = cl.controller
-    for _ in range(round(seconds / cl.period)):
-        c.step(cl.net.time)
-        cl.net.advance(cl.period)
-        healthy = c.state in HEALTHY
+def _observe(cl: ClosedLoop, watch: Watch, res: Result, t_fault: float, seconds: float) -> None:
+    def each(cl: ClosedLoop) -> None:
+        c = cl.controller
         if res.detection_s is None and c.state in (State.STOPPING, State.FAULT):
             res.detection_s = cl.net.time - cl.period - t_fault
-        watch.check(c, cl.plant.position, measure_excursion=healthy or c.state is State.STOPPING)
+        stopping = c.state is State.STOPPING
+        watch.check(c, cl.plant.position, measure_excursion=c.state in HEALTHY or stopping)
+
+    cl.run(seconds, each=each, record=False)
 
 
-def _recover(cl: ClosedLoop, res: Result, watch: _Watch, t_clear: float) -> None:
+def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     """Once the fault has cleared: reset (if it faulted), enable, a move back to the start."""
     c = cl.controller
     if c.state in HEALTHY and res.detection_s is None:
@@ -210,18 +210,18 @@ def _recover(cl: ClosedLoop, res: Result, watch: _Watch, t_clear: float) -> None
 
 
 def _steps(
-    cl: ClosedLoop, watch: _Watch, seconds: float, until: Callable[[], bool] | None = None
+    cl: ClosedLoop, watch: Watch, seconds: float, until: Callable[[], bool] | None = None
 ) -> None:
-    c = cl.controller
-    for _ in range(max(1, round(seconds / cl.period))):
-        c.step(cl.net.time)
-        cl.net.advance(cl.period)
-        watch.check(c, cl.plant.position, measure_excursion=False)
-        if until is not None and until():
-            return
+    """At least one cycle, each checked by ``watch``; ends early when ``until()``."""
+    cl.run(
+        max(seconds, cl.period),
+        until=None if until is None else lambda _: until(),
+        each=lambda cl: watch.check(cl.controller, cl.plant.position, measure_excursion=False),
+        record=False,
+    )
 
 
-def _sigkill(model: RobotModel, cl: ClosedLoop, res: Result, watch: _Watch, sc: Scenario) -> Result:
+def _sigkill(model: RobotModel, cl: ClosedLoop, res: Result, watch: Watch, sc: Scenario) -> Result:
     """The controller stops dead mid-motion (no frame, no disable): the drives' communication
     timeout must stop them and close the brakes; a new controller on a new driver (the
     restarted daemon) must find the pose and hold it without a jump."""

@@ -159,6 +159,14 @@ def test_cia402_enable_sequence_follows_transition_table(seed):
         assert peer.sent(p.RPDO1 + 1)[-1] == struct.pack("<Hh", 0x000F, 260)
 
 
+def cycles(drv, peer, n: int = 1) -> None:
+    """``n`` control periods of 2 ms: read, write zero torques, let the drives answer."""
+    for _ in range(n):
+        drv.read(peer.t)
+        drv.write(peer.t, np.zeros(8))
+        peer.wait(0.002)
+
+
 def test_cia402_position_units_and_wrap(seed):
     script = Cia402Script(range(1, 9))
     drv, peer = make(seed, script)
@@ -166,15 +174,10 @@ def test_cia402_position_units_and_wrap(seed):
     script.position[1] = 2**31 - 100  # from the first frame on: a step would be implausible
     with drv:
         drv.configure()
-        for _ in range(2):
-            drv.read(peer.t)
-            drv.write(peer.t, np.zeros(8))
-            peer.wait(0.002)
+        cycles(drv, peer, 2)
         before = drv.states.position[0]
         script.position[1] = -(2**31) + 100  # +200 counts through the 32-bit wrap
-        drv.read(peer.t)
-        drv.write(peer.t, np.zeros(8))
-        peer.wait(0.002)
+        cycles(drv, peer)
         drv.read(peer.t)
         assert drv.states.position[0] - before == pytest.approx(200 * 2 * math.pi / cpr)
         # velocity derived between the two SYNCs (0.002 s apart)
@@ -189,15 +192,10 @@ def test_a_position_step_no_motor_can_make_is_dropped_then_reported(seed):
     drv, peer = make(seed, script)
     with drv:
         drv.configure()
-        for _ in range(2):
-            drv.read(peer.t)
-            drv.write(peer.t, np.zeros(8))
-            peer.wait(0.002)
+        cycles(drv, peer, 2)
         before = drv.states.position[0]
         script.position[1] += 1 << 24  # 256 motor turns in 2 ms
-        drv.read(peer.t)
-        drv.write(peer.t, np.zeros(8))
-        peer.wait(0.002)
+        cycles(drv, peer)
         drv.read(peer.t)
         assert drv.states.position[0] == before  # dropped
         assert drv.stats.implausible_frames >= 1
@@ -216,10 +214,7 @@ def test_cia402_emcy_is_a_typed_fault_and_reset_recovers(seed):
         drv.configure()
         drv.activate()
         script.emcy[4] = 0x2310
-        for _ in range(3):
-            drv.read(peer.t)
-            drv.write(peer.t, np.zeros(8))
-            peer.wait(0.002)
+        cycles(drv, peer, 3)
         assert drv.lifecycle is Lifecycle.ERROR
         assert isinstance(drv.error, DriveFaultError)
         assert drv.error.code == 0x2310 and drv.error.cable == 3
@@ -238,9 +233,7 @@ def test_cia402_missing_feedback_tolerated_then_fault(seed):
         drv.configure()
         script.drop_tpdo.add(2)
         for k in range(seed.drives.missed_feedback_limit + 2):
-            drv.read(peer.t)
-            drv.write(peer.t, np.zeros(8))
-            peer.wait(0.002)
+            cycles(drv, peer)
             if k == 1:
                 assert drv.lifecycle is Lifecycle.INACTIVE
                 assert drv.states.feedback_age[1] > 0.002  # one TPDO missed: reported
@@ -256,9 +249,7 @@ def test_cia402_lost_heartbeat(seed):
         script.silent.add(6)
         t_end = peer.t + seed.drives.heartbeat_timeout + 0.05
         while peer.t < t_end and drv.lifecycle is Lifecycle.INACTIVE:
-            drv.read(peer.t)
-            drv.write(peer.t, np.zeros(8))
-            peer.wait(0.002)
+            cycles(drv, peer)
         assert isinstance(drv.error, DriverTimeoutError)
         assert drv.error.cable == 5
 

@@ -26,6 +26,7 @@ from cdprctl.daemon.service import fault_kind  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
 from sim_backend.closed_loop import ClosedLoop  # noqa: E402
 from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
+from sim_backend.scenarios import Result, Scenario, Watch  # noqa: E402
 
 
 def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
@@ -57,13 +58,13 @@ def main() -> None:
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)
     model = load_robot(ROOT / "config" / "rowc.toml")
     rng = np.random.default_rng(args.seed)
-    limit = np.array([c.winch.torque_limit for c in model.cables])
     lo = np.array([0.9, 0.35, 0.35])  # m: the box the random targets come from
     hi = np.array([2.1, 0.35, 0.58])
     events = fault_schedule(args.minutes, args.seed)
     counts: collections.Counter[str] = collections.Counter()
     faults: collections.Counter[str] = collections.Counter()
-    violations = collections.Counter()
+    checked = Result(Scenario("soak", "soak"))
+    watch = Watch(model, checked)  # the invariants of the fault matrix, every cycle
     compute = []
     wall0 = time.perf_counter()
     with ClosedLoop(model) as cl:
@@ -81,16 +82,7 @@ def main() -> None:
             c.step(t)
             compute.append((time.perf_counter_ns() - t0) / 1e3)
             cl.net.advance(cl.period)
-            tau = c.torques
-            if not np.all(np.isfinite(tau)):
-                violations["non-finite torque"] += 1
-            elif np.any(np.abs(tau) > limit + 1e-9):
-                violations["torque beyond limit"] += 1
-            if c.state in (State.ENABLED, State.MOVING) and (
-                np.any(c.tensions < model.tension_min - 1e-9)
-                or np.any(c.tensions > model.tension_max + 1e-9)
-            ):
-                violations["tension outside limits while healthy"] += 1
+            watch.check(c, cl.plant.position, measure_excursion=False)
             if c.state is not last_state:
                 counts[f"-> {c.state.value}"] += 1
                 if c.state is State.STOPPING or (
@@ -109,6 +101,15 @@ def main() -> None:
                 counts["moves"] += 1
                 next_move = t + 4.0
     comp = np.array(compute)
+    violations = {
+        what: n
+        for what, n in (
+            ("non-finite torque", checked.nonfinite_torques),
+            ("torque beyond limit", checked.torques_over_limit),
+            ("tension outside limits while healthy", checked.tensions_outside_limits_while_healthy),
+        )
+        if n
+    }
     summary = {
         "simulated_minutes": args.minutes,
         "seed": args.seed,
@@ -123,7 +124,7 @@ def main() -> None:
         "frames": dict(injector.counts),
         "faults_detected_by_reason": dict(faults),
         "state_changes": dict(counts),
-        "invariant_violations": dict(violations),
+        "invariant_violations": violations,
         "final_state": c.state.value,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

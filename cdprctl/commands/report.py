@@ -116,7 +116,6 @@ def report(args: argparse.Namespace) -> int:
         if tr:
             fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
             tt = _column(th, tr, "time")
-            tt = tt - t[0] - (tt[0] - tt[0])
             for k in ("lateness_p50_us", "lateness_p99_us", "lateness_max_us"):
                 ax1.plot(tt - tt[0], _column(th, tr, k), label=k.replace("_us", ""))
             ax1.set_yscale("symlog", linthresh=1.0)
