@@ -18,6 +18,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -140,3 +141,59 @@ def sense_grasp(g: GripperParams, energy: float, contact_band: float = 1e-3) -> 
     if delta <= g.free_travel + contact_band:
         return GraspEstimate(GraspState.CONTACT, delta, force)
     return GraspEstimate(GraspState.SQUEEZING, delta, force)
+
+
+class GripperSet:
+    """The grippers of a robot (``[[grippers]]``) as the controller and the simulator use them:
+    which cables carry one, the weight wrench ``J_weight F_BW`` (eq. (32), (35), (46)) and the
+    load ``jB`` carries, at a platform orientation."""
+
+    def __init__(self, model: Any):
+        gs = model.grippers
+        self.n = len(gs)
+        self.cables = np.array([g.cable for g in gs], dtype=np.int64)
+        self.weight = np.array([g.jaw_mass for g in gs]) * float(np.linalg.norm(model.gravity))
+        self.p_body = [np.asarray(model.attachments[g.cable], float) for g in gs]
+        self.L1_body = [np.asarray(g.jaw_offset, float) for g in gs]
+        self.guide_body = [np.asarray(g.guide_axis, float) for g in gs]
+        self.k_a = np.array([model.cables[g.cable].stiffness or 0.0 for g in gs])
+        self.k_b = np.array([g.k_b for g in gs])
+        self.friction = np.array([g.guide_friction for g in gs])
+        self.up = -np.asarray(model.gravity, float) / max(
+            float(np.linalg.norm(model.gravity)), 1e-12
+        )
+
+    def weight_wrench(self, R: FloatArray) -> FloatArray:
+        """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the
+        grippers' weights on the main body (Sensors 2019, eq. (35), (46))."""
+        w = np.zeros(6)
+        for i in range(self.n):
+            kM = R @ self.guide_body[i]
+            w += self.weight[i] * weight_column(R @ self.p_body[i], R @ self.L1_body[i], kM)
+        return w
+
+    def parallel_load(self, R: FloatArray) -> FloatArray:
+        """``‖F∥_jBW‖`` (N) per gripper: the part of the jaw's weight along its guide, which
+        ``jB`` holds (eq. (26)-(27))."""
+        return np.array(
+            [self.weight[i] * float(self.up @ (R @ self.guide_body[i])) for i in range(self.n)]
+        )
+
+    def spring_wrench(self, W: FloatArray, wrench: FloatArray, jb_load: FloatArray) -> FloatArray:
+        """The wrench the springs ``jA`` must give when the cables give ``wrench`` and each
+        gripper's ``jB`` carries ``jb_load`` (N): ``τ_j = τ_jA + τ_jB`` (eq. (26)), so
+        ``W τ_A = wrench − Σ_j τ_jB W_j``. The tension distribution works on ``τ_A``: its
+        limits and energies are the springs' (Sensors 2019 §3.2 imposes δ_8A)."""
+        if self.n == 0:
+            return wrench
+        return wrench - W[:, self.cables] @ jb_load
+
+    def params(self, i: int, free_travel: float) -> GripperParams:
+        """The closed-form parameters of gripper ``i`` (eq. (36)-(45)) at orientation-free
+        load (vertical guide): ``F∥ = F_BW``, with ``free_travel`` (m) the ``L21`` in use."""
+        return GripperParams(
+            k_a=float(self.k_a[i]),
+            k_b=float(self.k_b[i]),
+            f_parallel=float(self.weight[i]),
+            free_travel=free_travel,
+        )

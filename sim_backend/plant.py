@@ -41,6 +41,11 @@ class PlantOptions:
         0.02  # cable damping as a fraction of critical (when the config has none)
     )
     coulomb_velocity: float = 0.05  # rad/s, smoothing of the Coulomb friction sign
+    # grippers (Sensors 2019 §2.4): the cable jB and the guide's end stops are stiff springs
+    jb_stiffness: float = 1.0e5  # N/m
+    stop_stiffness: float = 1.0e5  # N/m
+    jaw_damping_ratio: float = 0.3  # of critical, on jB, the stops and the contact
+    jaw_friction_velocity: float = 0.002  # m/s, smoothing of the guide's Coulomb friction
 
 
 class CdprPlant:
@@ -93,6 +98,7 @@ class CdprPlant:
         self.drum_slip = np.zeros(m)  # m of cable slipped off the drum, unseen by the encoder
         self.ext_force = np.zeros(3)  # N at P, base frame
         self.ext_moment = np.zeros(3)  # N·m, base frame
+        self._init_grippers()
         # outputs of the last step
         self.tension = np.zeros(m)
         self._scratch = (
@@ -105,6 +111,75 @@ class CdprPlant:
             np.zeros((6, m)),
         )
         self.set_pose(model.home.position, model.home.rotation, None)
+
+    def _init_grippers(self) -> None:
+        """Jaw bodies of the reconfigurable end-effector (``[[grippers]]``): each a point mass
+        on a 1-DOF guide fixed to the platform, pulled along it by ``jB`` (Sensors 2019 §2.4,
+        Fig. 1-3, 18), with its end stops, Coulomb friction and the object met at ``L21``."""
+        gs = self.model.grippers
+        ng = len(gs)
+        o = self.opt
+        self.gripper_of_cable = np.full(self.m, -1, dtype=np.int64)
+        for j, g in enumerate(gs):
+            self.gripper_of_cable[g.cable] = j
+        self.g_mass = np.array([g.jaw_mass for g in gs])
+        # jaw at zero travel, platform frame, relative to P; the guide's unit vector
+        self.g_jaw0 = np.array(
+            [self.model.attachments[g.cable] + g.jaw_offset for g in gs]
+        ).reshape(ng, 3)
+        self.g_axis = np.array([g.guide_axis for g in gs]).reshape(ng, 3)
+        self.g_friction = np.array([g.guide_friction for g in gs])
+        self.g_travel_max = np.array([g.travel_max for g in gs])
+        self.g_k_jb = np.full(ng, o.jb_stiffness)
+        self.g_k_stop = np.full(ng, o.stop_stiffness)
+        crit = 2.0 * np.sqrt(o.jb_stiffness * np.maximum(self.g_mass, 1e-9))
+        self.g_c_jb = o.jaw_damping_ratio * crit
+        self.g_c_stop = o.jaw_damping_ratio * crit
+        # the object: met at free_travel, stiffness K_B in series with its own
+        self.g_object_travel = np.array([g.free_travel for g in gs])
+        self.g_k_contact = np.array([g.contact_stiffness for g in gs])
+        self.g_c_contact = o.jaw_damping_ratio * 2.0 * np.sqrt(self.g_k_contact * self.g_mass)
+        # state and outputs
+        self.jaw_travel = np.zeros(ng)  # m along the guide from the lower end stop
+        self.jaw_speed = np.zeros(ng)  # m/s
+        self.jb_tension = np.zeros(ng)  # N
+        self.contact_force = np.zeros(ng)  # N, jaw on the object
+
+    def set_object(self, gripper: int, travel: float, stiffness: float) -> None:
+        """Put an object in gripper ``gripper``'s way: met at ``travel`` (m, the L21 it makes),
+        ``stiffness`` (N/m, in series with K_B; ``inf`` rigid, ``travel`` beyond the guide for
+        none)."""
+        kb = self.model.grippers[gripper].k_b
+        k = kb if math.isinf(stiffness) else 1.0 / (1.0 / kb + 1.0 / stiffness)
+        self.g_object_travel[gripper] = travel
+        self.g_k_contact[gripper] = k
+        self.g_c_contact[gripper] = (
+            self.opt.jaw_damping_ratio * 2.0 * math.sqrt(k * self.g_mass[gripper])
+        )
+
+    def _settle_grippers(self, tensions: FloatArray, lengths: FloatArray, l0: FloatArray) -> None:
+        """Static jaws under the cable tensions ``tensions`` (N): ``τ = K_A δ + τ_B``,
+        ``τ_B = F∥ + F_c(q)``, ``q = δ − τ_B/k_jB`` (eq. (25)-(26) with a stiff jB); writes
+        the unstretched lengths ``l0`` (m) of the gripper cables."""
+        up = -self.gravity / max(float(np.linalg.norm(self.gravity)), 1e-12)
+        g = float(np.linalg.norm(self.gravity))
+        for j in range(len(self.g_mass)):
+            i = int(self.model.grippers[j].cable)
+            ka, kjb = self.k_fixed[i], self.g_k_jb[j]
+            f_par = self.g_mass[j] * g * float(up @ (self.R @ self.g_axis[j]))
+            t = float(tensions[i])
+            kc, L = self.g_k_contact[j], self.g_object_travel[j]
+            q = (t - f_par) / ka - f_par / kjb  # no contact
+            if q > L:
+                q = ((t - f_par + kc * L) / ka - (f_par - kc * L) / kjb) / (1 + kc / ka + kc / kjb)
+            q = min(max(q, 0.0), self.g_travel_max[j])
+            tb = f_par + (kc * (q - L) if q > L else 0.0)
+            delta = q + tb / kjb
+            l0[i] = lengths[i] - delta
+            self.jaw_travel[j] = q
+            self.jaw_speed[j] = 0.0
+            self.jb_tension[j] = tb
+            self.contact_force[j] = tb - f_par
 
     # -- set-up -------------------------------------------------------------------------------
     def set_pose(self, position: FloatArray, R: FloatArray, tensions: FloatArray | None) -> None:
@@ -127,9 +202,10 @@ class CdprPlant:
             else:
                 es = self.es[i]
                 l0[i] = (length[i] - extra - t[i] * self.l_winch[i] / es) / (1.0 + t[i] / es)
+        self.R[:] = R
+        self._settle_grippers(t, length, l0)
         self.theta[:] = (self.l_home - l0) / self.drum_ratio
         self.theta_dot[:] = 0.0
-        self.R[:] = R
         self.com_pos[:] = position + R @ self.com
         self.v[:] = 0.0
         self.w[:] = 0.0
@@ -140,6 +216,11 @@ class CdprPlant:
     def position(self) -> FloatArray:
         """Platform reference point P (m, base frame)."""
         return self.com_pos - self.R @ self.com
+
+    @property
+    def cable_lengths(self) -> FloatArray:
+        """Geometric cable lengths (m) at the last physics step."""
+        return self._scratch[5]
 
     def unstretched_length(self) -> FloatArray:
         return self.l_home - self.drum_ratio * self.theta + self.drum_slip
@@ -188,6 +269,24 @@ class CdprPlant:
             self.ext_moment,
             self.tension,
             *self._scratch,
+            self.gripper_of_cable,
+            self.g_mass,
+            self.g_jaw0,
+            self.g_axis,
+            self.g_friction,
+            self.opt.jaw_friction_velocity,
+            self.g_travel_max,
+            self.g_k_jb,
+            self.g_c_jb,
+            self.g_k_stop,
+            self.g_c_stop,
+            self.g_object_travel,
+            self.g_k_contact,
+            self.g_c_contact,
+            self.jaw_travel,
+            self.jaw_speed,
+            self.jb_tension,
+            self.contact_force,
         )
         self.time += duration
 
@@ -206,19 +305,54 @@ class CdprPlant:
             if stretch[i] > 0 and not self.cable_cut[i]:
                 k = _k_eff(self.k_fixed[i], self.es[i], self.k_spring[i], l0[i] + self.l_winch[i])
                 e += 0.5 * k * stretch[i] ** 2
+        return e + self._jaw_energy(stretch)
+
+    def jaw_positions(self) -> FloatArray:
+        """(grippers, 3) m, base frame: where each jaw is."""
+        k = self.g_axis @ self.R.T
+        return self.position + self.g_jaw0 @ self.R.T + self.jaw_travel[:, None] * k
+
+    def _jaw_energy(self, stretch: FloatArray) -> float:
+        """Kinetic and potential energy (J) of the jaws, jB, the object and the stops."""
+        e = 0.0
+        x = self.jaw_positions()
+        for j in range(len(self.g_mass)):
+            i = int(self.model.grippers[j].cable)
+            k = self.R @ self.g_axis[j]
+            r = x[j] - self.com_pos
+            vj = self.v + np.cross(self.w, r) + self.jaw_speed[j] * k
+            e += 0.5 * self.g_mass[j] * float(vj @ vj) - self.g_mass[j] * float(self.gravity @ x[j])
+            q = self.jaw_travel[j]
+            e += 0.5 * self.g_k_jb[j] * max(stretch[i] - q, 0.0) ** 2
+            e += 0.5 * self.g_k_contact[j] * max(q - self.g_object_travel[j], 0.0) ** 2
+            e += (
+                0.5
+                * self.g_k_stop[j]
+                * (min(q, 0.0) ** 2 + max(q - self.g_travel_max[j], 0.0) ** 2)
+            )
         return e
 
 
 def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
-    """Tensions (N) holding the platform's weight at the pose of ``kin``: the barycenter (or
-    QP for r != 2); the minimum tensions when the pose cannot be held."""
+    """Tensions (N) holding the platform's weight (and the jaws', eq. (46)) at the pose of
+    ``kin``: the barycenter (QP for r != 2; the minimum energy when the robot's TDA is the
+    energy one); the minimum tensions when the pose cannot be held."""
+    from cdprctl.gripper import GripperSet
     from cdprctl.tda import TDAMethod, TDAOptions, TensionDistributor
 
     method = TDAMethod.BARYCENTER if model.redundancy == 2 else TDAMethod.QP
+    if model.control.tda_method == "energy":  # the robot was parked by its own distribution
+        method = TDAMethod.ENERGY
+    gs = GripperSet(model)
+    R = kin.rotation
+    load = gs.parallel_load(R)
+    hold = -(model.gravity_wrench(R) + gs.weight_wrench(R))
     out = TensionDistributor(model, TDAOptions(method=method)).solve(
-        kin.W, -model.gravity_wrench(kin.rotation)
+        kin.W, gs.spring_wrench(kin.W, hold, load), k=model.cable_stiffness(kin.length)
     )
-    return out.tensions.copy() if out.ok else model.tension_min.copy()
+    t = out.tensions.copy() if out.ok else model.tension_min.copy()
+    t[gs.cables] += load  # jB carries the jaws
+    return t
 
 
 @njit(cache=True)
@@ -227,6 +361,111 @@ def _k_eff(k_fixed, es, k_spring, l_total):  # pragma: no cover - compiled
     if k_spring > 0.0:
         k = 1.0 / (1.0 / k + 1.0 / k_spring)
     return k
+
+
+@njit(cache=True)
+def _jaw_dynamics(
+    dt, P, R, com_pos, v, w, F, Mc, mass, Iw, g, rbT, g_of_cable, g_mass, g_jaw0, g_axis,
+    g_fric, g_fric_v, g_qmax, g_kstop, g_cstop, g_L21, g_kc, g_cc, q, qd, g_tb, g_fc,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Platform and jaws together (Kane's method): generalised speeds ``u = [v_COM, ω, q̇_j]``,
+    jaw velocity ``v_j = v + ω × r_j + q̇_j k_j`` (``k_j`` the guide, ``r_j`` COM → jaw), so
+    ``(M_b + Σ m_j J_jᵀJ_j) u̇ = Q − Σ m_j J_jᵀ (ω×(ω×r_j) + 2 ω×q̇_j k_j)``; the guide's
+    reactions do no work and drop out. Advances ``v``, ``ω``, ``q̇`` and ``q`` by ``dt``.
+    ``F``/``Mc``: force and moment (about the COM, Euler term included) on the platform from
+    the cables, gravity and the external wrench; jB pulls the jaw along ``k_j`` and the pulley
+    at the cable's attachment along ``−k_j``; the object, the stops and the friction act
+    between jaw and platform along the guide."""
+    ng = g_mass.shape[0]
+    n = 6 + ng
+    A = np.zeros((n, n))
+    Q = np.zeros(n)
+    for a in range(3):
+        A[a, a] = mass
+        Q[a] = F[a]
+        Q[3 + a] = Mc[a]
+        for b in range(3):
+            A[3 + a, 3 + b] = Iw[a, b]
+    for j in range(ng):
+        i = g_of_cable.shape[0]
+        for c in range(g_of_cable.shape[0]):
+            if g_of_cable[c] == j:
+                i = c
+        k = R @ g_axis[j]
+        r = P + R @ g_jaw0[j] + q[j] * k - com_pos
+        mj = g_mass[j]
+        # pulley at the attachment: −t_B k on the platform
+        tb = g_tb[j]
+        y = np.empty(3)
+        for a in range(3):
+            y[a] = rbT[a, i] + P[a] - com_pos[a]  # rbT: R b_i, from P
+            Q[a] -= tb * k[a]
+        Q[3] -= y[1] * tb * k[2] - y[2] * tb * k[1]
+        Q[4] -= y[2] * tb * k[0] - y[0] * tb * k[2]
+        Q[5] -= y[0] * tb * k[1] - y[1] * tb * k[0]
+        # forces on the jaw: gravity and t_B along k, through J_jᵀ = [I; [r]×; kᵀ]
+        f = np.empty(3)
+        for a in range(3):
+            f[a] = mj * g[a] + tb * k[a]
+        # velocity-product acceleration c = ω×(ω×r) + 2 ω×(q̇ k), as forces −m c
+        wr = np.cross(w, r)
+        c = np.cross(w, wr) + 2.0 * qd[j] * np.cross(w, k)
+        for a in range(3):
+            f[a] -= mj * c[a]
+        rf = np.cross(r, f)
+        for a in range(3):
+            Q[a] += f[a]
+            Q[3 + a] += rf[a]
+        Q[6 + j] += f[0] * k[0] + f[1] * k[1] + f[2] * k[2]
+        # along the guide, between jaw and platform: object, end stops, friction
+        s = 0.0
+        fc = 0.0
+        if q[j] > g_L21[j]:
+            fc = g_kc[j] * (q[j] - g_L21[j]) + g_cc[j] * qd[j]
+            if fc < 0.0:
+                fc = 0.0
+        s -= fc
+        g_fc[j] = fc
+        if q[j] < 0.0:
+            st = -g_kstop[j] * q[j] - g_cstop[j] * qd[j]
+            s += st if st > 0.0 else 0.0
+        elif q[j] > g_qmax[j]:
+            st = g_kstop[j] * (q[j] - g_qmax[j]) + g_cstop[j] * qd[j]
+            s -= st if st > 0.0 else 0.0
+        s -= g_fric[j] * math.tanh(qd[j] / g_fric_v)
+        Q[6 + j] += s
+        # mass matrix: m J_jᵀ J_j with J_j = [I, −[r]×, k e_j]
+        rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+        rk = np.cross(r, k)
+        for a in range(3):
+            A[a, a] += mj
+            A[a, 6 + j] += mj * k[a]
+            A[6 + j, a] += mj * k[a]
+            A[3 + a, 6 + j] += mj * rk[a]
+            A[6 + j, 3 + a] += mj * rk[a]
+            for b in range(3):
+                A[3 + a, 3 + b] += mj * ((rr if a == b else 0.0) - r[a] * r[b])
+        # −[r]× block: (−[r]×) x = −r × x = x × r
+        A[0, 4] += mj * r[2]
+        A[0, 5] -= mj * r[1]
+        A[1, 3] -= mj * r[2]
+        A[1, 5] += mj * r[0]
+        A[2, 3] += mj * r[1]
+        A[2, 4] -= mj * r[0]
+        A[4, 0] += mj * r[2]
+        A[5, 0] -= mj * r[1]
+        A[3, 1] -= mj * r[2]
+        A[5, 1] += mj * r[0]
+        A[3, 2] += mj * r[1]
+        A[4, 2] -= mj * r[0]
+        A[6 + j, 6 + j] += mj
+    udot = np.linalg.solve(A, Q)
+    for a in range(3):
+        v[a] += udot[a] * dt
+        w[a] += udot[3 + a] * dt
+    for j in range(ng):
+        qd[j] += udot[6 + j] * dt
+        q[j] += qd[j] * dt
 
 
 @njit(cache=True)
@@ -274,8 +513,27 @@ def physics_kernel(
     wrap,
     length,
     W,
+    g_of_cable,
+    g_mass,
+    g_jaw0,
+    g_axis,
+    g_fric,
+    g_fric_v,
+    g_qmax,
+    g_kjb,
+    g_cjb,
+    g_kstop,
+    g_cstop,
+    g_L21,
+    g_kc,
+    g_cc,
+    q,
+    qd,
+    g_tb,
+    g_fc,
 ):  # pragma: no cover - compiled
     m = anchors.shape[0]
+    ng = g_mass.shape[0]
     P = np.empty(3)
     twist = np.empty(6)
     for _ in range(n):
@@ -303,6 +561,13 @@ def physics_kernel(
                 t = k * e + damping[i] * edot
                 if t < 0.0:
                     t = 0.0
+                j = g_of_cable[i]
+                if j >= 0:  # the cable splits: jA (the spring, t) and jB to the jaw
+                    tb = g_kjb[j] * (e - q[j]) + g_cjb[j] * (edot - qd[j])
+                    g_tb[j] = tb if tb > 0.0 else 0.0
+                    t += g_tb[j]
+            elif g_of_cable[i] >= 0:
+                g_tb[g_of_cable[i]] = 0.0
             tension[i] = t
             if t > 0.0:
                 fx, fy, fz = t * W[0, i], t * W[1, i], t * W[2, i]
@@ -344,10 +609,18 @@ def physics_kernel(
         rhs[0] = M[0] - (w[1] * Iww[2] - w[2] * Iww[1])
         rhs[1] = M[1] - (w[2] * Iww[0] - w[0] * Iww[2])
         rhs[2] = M[2] - (w[0] * Iww[1] - w[1] * Iww[0])
-        wdot = np.linalg.solve(Iw, rhs)
+        if ng == 0:
+            wdot = np.linalg.solve(Iw, rhs)
+            for a in range(3):
+                v[a] += F[a] / mass * dt
+                w[a] += wdot[a] * dt
+        else:
+            _jaw_dynamics(
+                dt, P, R, com_pos, v, w, F, rhs, mass, Iw, g, rbT, g_of_cable, g_mass,
+                g_jaw0, g_axis, g_fric, g_fric_v, g_qmax, g_kstop, g_cstop, g_L21, g_kc, g_cc,
+                q, qd, g_tb, g_fc,
+            )  # fmt: skip
         for a in range(3):
-            v[a] += F[a] / mass * dt
-            w[a] += wdot[a] * dt
             com_pos[a] += v[a] * dt
         # R ← exp([ω dt]×) R
         x, y, z = w[0] * dt, w[1] * dt, w[2] * dt

@@ -48,7 +48,7 @@ def validator(rowc):
         ("set_tda", b'{"direction": [0, 0, 0]}', "enabled", ["direction", "non-zero"]),
         ("impose", b'{"cable": "9", "quantity": "energy", "value": 1}', "enabled", ["cable"]),
         ("impose", b'{"cable": "1", "quantity": "energy", "value": -1}', "enabled", ["J"]),
-        ("gripper", b'{"opening": 0.1}', "enabled", ["no gripper"]),
+        ("gripper", b'{"travel": 0.1}', "enabled", ["no gripper"]),
         ("launch", b"", "enabled", ["unknown"]),
         ("move", b'{"position": [1.8, 0.35, 0.5], "id": [1]}', "enabled", ["id"]),
     ],

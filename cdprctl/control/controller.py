@@ -20,6 +20,7 @@ A driver fault skips STOPPING: the drives are not to be trusted, their brakes cl
 from __future__ import annotations
 
 import collections
+import dataclasses
 import enum
 import math
 import time
@@ -29,9 +30,11 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.estimator import Estimator
+from cdprctl.control.grasp import GraspSensor
 from cdprctl.control.pd_kernel import pd_wrench_kernel
 from cdprctl.control.trajectory import Trajectory
 from cdprctl.forward_kinematics import FKStatus
+from cdprctl.gripper import GraspState, GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray, log_so3
 from cdprctl.tda import (
@@ -58,11 +61,14 @@ class State(enum.Enum):
 
 @dataclass
 class Command:
-    kind: str  # enable | disable | stop | reset | move | set_tda
+    kind: str  # enable | disable | stop | reset | move | set_tda | gripper
     pose: FloatArray | None = None  # move: x, y, z (m), roll, pitch, yaw (rad)
     speed: float = 1.0  # move: fraction of the velocity limits
     accel: float = 1.0  # move: fraction of the acceleration limits
     tda: TDAOptions | None = None
+    gripper: int = 0  # gripper: index in [[grippers]]
+    grip: str = ""  # gripper: travel | force | release
+    value: float = 0.0  # gripper: travel (m) or squeeze force (N)
 
 
 PHASES = ("read", "estimate", "trajectory", "control", "tda", "torques", "write")
@@ -114,6 +120,18 @@ class Controller:
         self.integral = np.zeros(6)  # m·s, rad·s
         self.integral_limit = 10.0 / self.ki  # the integral term stays within 10 m/s² (rad/s²)
         self.ext_wrench = np.array(c.external_wrench, dtype=float)
+        # The reconfigurable end-effector (Sensors 2019 §2.4): the jaws' weight wrench joins
+        # the known external wrench (eq. (46)), updated with the orientation every cycle; the
+        # TDA works on the springs' tensions τ_A (jB's load added back, eq. (26)).
+        self.grippers = GripperSet(model)
+        self.jb_load = np.zeros(self.grippers.n)  # N, what each jB carries
+        self.grasp = GraspSensor(self.grippers, self.period)
+        self.grip_target = np.full(self.grippers.n, math.nan)  # m, commanded travel
+        self.grip_imposed = np.full(self.grippers.n, math.nan)  # m, ramping towards it
+        # without grippers the known external wrench is all: the same array, whoever sets it
+        self._ext_total = self.ext_wrench.copy() if self.grippers.n else self.ext_wrench
+        self._spring_prev = np.zeros(m)
+        self._range_tda: TensionDistributor | None = None
         self.tensions = np.zeros(m)  # N, commanded
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
@@ -169,22 +187,14 @@ class Controller:
             fk = self.estimator.update(now, st.position, self.stretch_tensions)
             if fk.status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
                 raise RuntimeError(f"start-up: forward kinematics failed ({fk.status.name})")
-            out = self.tda.solve(
-                self.estimator.kin.W,
-                self._gravity_hold(),
-                self.t_min,
-                self.t_max,
-                k=self._stiffness(),
-                kin=self.estimator.kin,
-            )
-            if not out.ok:
-                p = self.estimator.position
-                raise RuntimeError(
-                    f"start-up: the estimated pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m "
-                    f"cannot be held ({out.status.name}: {out.message})"
-                )
-            self.hold_tensions[:] = out.tensions
-            if self.cycle % self._stretch_every == 0:
+            self._update_grippers(st, sense=False)
+            out = self._solve(self.tda, self._gravity_hold(), None)
+            # on the way, a pose that cannot be held gives its least-violating tensions: the
+            # fixed point goes on from them (from the minimum tensions, with the pose from six
+            # cables, the first poses of the springy Sensors 2019 robot are far off)
+            self._total(out.tensions, self.hold_tensions)
+            self._total(out.tensions, self.stretch_tensions)
+            if out.ok and self.cycle % self._stretch_every == 0:
                 self._refresh_stretch_tensions()
             change = float(np.max(np.abs(self.stretch_tensions - self._last_stretch)))
             self._last_stretch[:] = self.stretch_tensions
@@ -192,6 +202,12 @@ class Controller:
                 break
         else:
             raise RuntimeError("start-up: pose and tensions did not settle in 100 iterations")
+        if not out.ok:
+            p = self.estimator.position
+            raise RuntimeError(
+                f"start-up: the estimated pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m "
+                f"cannot be held ({out.status.name}: {out.message})"
+            )
         if fk.residual > self.model.control.max_fk_residual:
             raise RuntimeError(
                 f"start-up: the encoders disagree with every pose "
@@ -228,6 +244,8 @@ class Controller:
             fk = self.estimator.update(
                 st.stamp, st.position, self.stretch_tensions, st.velocity, st.feedback_age
             )
+            if self.grippers.n:
+                self._update_grippers(st, sense=True)
             t2 = clock()
             ph[1] = (t2 - t1) / 1e3
             self._supervise(t, fk.status)
@@ -263,11 +281,48 @@ class Controller:
         if self.state in (State.ENABLED, State.MOVING, State.STOPPING):
             ff[:3] += pf.mass * tr.acceleration[:3]
             ff[3:] += e.rotation @ pf.inertia @ e.rotation.T @ tr.acceleration[3:]
-        out = self._static_tda.solve(
-            e.kin.W, ff, self.t_min, self.t_max, k=self._stiffness(), kin=e.kin
-        )
+        out = self._solve(self._static_tda, ff, None)
         if out.ok:
-            self.stretch_tensions[:] = out.tensions
+            self._total(out.tensions, self.stretch_tensions)
+
+    def _solve(self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None) -> Any:
+        """The TDA at the estimated pose, on the springs' tensions when there are grippers."""
+        e, gs = self.estimator, self.grippers
+        if gs.n:
+            wrench = gs.spring_wrench(e.kin.W, wrench, self.jb_load)
+            if t_prev is not None:
+                tp = self._spring_prev
+                tp[:] = t_prev
+                tp[gs.cables] -= self.jb_load
+                t_prev = tp
+        return tda.solve(
+            e.kin.W, wrench, self.t_min, self.t_max, k=self._stiffness(), kin=e.kin, t_prev=t_prev
+        )
+
+    def _total(self, spring: FloatArray, out: FloatArray) -> None:
+        """Cable tensions (N) into ``out`` from the springs' ``spring``: ``τ = τ_A + τ_B``."""
+        out[:] = spring
+        if self.grippers.n:
+            out[self.grippers.cables] += self.jb_load
+
+    def _update_grippers(self, st: Any, sense: bool) -> None:
+        """The jaws' weight wrench and jB's load at the estimated orientation; the grasp state
+        from the drives' torque and position; the imposed travels ramped to their targets."""
+        gs, e = self.grippers, self.estimator
+        R = e.rotation
+        self._ext_total[:] = self.ext_wrench + gs.weight_wrench(R)
+        f_par = gs.parallel_load(R)
+        if sense:
+            c = gs.cables
+            th, w = st.position[c], st.velocity[c]
+            l0 = e.l_home[c] - self.r[c] * th
+            torque = st.torque[c] - self.viscous[c] * w - self.coulomb[c] * np.tanh(w / 0.05)
+            self.grasp.update(torque / self.r[c], e.kin.length[c] - l0, f_par)
+        # jB's load as the open model has it: the sensed squeeze is not fed back here (a loop
+        # through the sensor's own estimate drifted into an infeasible wrench in lock-step);
+        # a squeeze command puts the force into the imposition instead (_gripper_command)
+        self.jb_load[:] = f_par
+        self._ramp_grip_impositions()
 
     # -- phases ------------------------------------------------------------------------------------
     def _pose6(self) -> FloatArray:
@@ -275,7 +330,7 @@ class Controller:
         return np.concatenate([e.position, log_so3(e.rotation @ self.model.home.rotation.T)])
 
     def _gravity_hold(self) -> FloatArray:
-        return -(self.model.gravity_wrench(self.estimator.rotation) + self.ext_wrench)
+        return -(self.model.gravity_wrench(self.estimator.rotation) + self._ext_total)
 
     def _stiffness(self) -> FloatArray:
         return self.estimator.stiffness(self.estimator.kin.length)
@@ -304,7 +359,7 @@ class Controller:
             self._inertia,
             self._com,
             self._gravity,
-            self.ext_wrench,
+            self._ext_total,
             self._Rd,
             self._E,
             self.pose_error,
@@ -312,20 +367,11 @@ class Controller:
         )
 
     def _distribute(self, t: float) -> None:
-        e = self.estimator
-        out = self.tda.solve(
-            e.kin.W,
-            self.wrench,
-            self.t_min,
-            self.t_max,
-            k=self._stiffness(),
-            kin=e.kin,
-            t_prev=self.tensions,
-        )
+        out = self._solve(self.tda, self.wrench, self.tensions)
         self.tda_status = out.status
         if out.status is TDAStatus.OK or out.status is TDAStatus.IMPOSITION_INFEASIBLE:
-            self.tensions[:] = out.tensions
-            self.hold_tensions[:] = out.tensions
+            self._total(out.tensions, self.tensions)
+            self.hold_tensions[:] = self.tensions
             self._tda_bad = 0
         else:  # infeasible wrench: hold the last feasible tensions, never leave the limits
             self.tensions[:] = self.hold_tensions
@@ -491,6 +537,8 @@ class Controller:
                 self.fault_reason = ""
                 self.trajectory.reset(self._pose6())
                 self._set_state(State.READY, t, "fault reset")
+            elif k == "gripper" and self.state in (State.ENABLED, State.MOVING):
+                self._gripper_command(t, cmd)
             elif k == "set_tda" and cmd.tda is not None:
                 try:  # options are validated by whoever sends them; this is the last guard
                     self.tda = TensionDistributor(self.model, cmd.tda)
@@ -502,6 +550,126 @@ class Controller:
             else:
                 self.events.append((t, f"command {k} ignored in state {self.state.value}"))
 
+    # -- the reconfigurable end-effector -------------------------------------------------------
+    # The imposed travel moves at this speed: a jump of the imposition is a jump of two cables'
+    # tensions, which the jaw and the platform would feel as a blow.
+    GRIP_SPEED = 0.02  # m/s
+
+    def gripper_range(self, j: int) -> tuple[float, float]:
+        """Travel (m) the redundancy can give gripper ``j`` here, holding the other grippers'
+        impositions and the platform's static wrench (Sensors 2019 §3.2: the energy range of
+        cable 1A with δ_8A imposed, eq. (17)-(20), (38)-(39)). NaN when none."""
+        gs = self.grippers
+        c = int(gs.cables[j])
+        others = tuple(
+            Imposition(int(gs.cables[i]), ImposedQuantity.DEFORMATION, float(self.grip_imposed[i]))
+            for i in range(gs.n)
+            if i != j and not math.isnan(self.grip_imposed[i])
+        )
+        opts = dataclasses.replace(
+            self.tda.options, method=TDAMethod.ENERGY, impositions=others, max_tension_rate=None
+        )
+        if self._range_tda is None:
+            self._range_tda = TensionDistributor(self.model, opts)
+        self._range_tda.options = opts
+        out = self._solve(self._range_tda, self._gravity_hold(), None)
+        if not out.ok:
+            return math.nan, math.nan
+        k = float(gs.k_a[j])
+        lo, hi = (math.sqrt(2.0 * k * float(u)) / k for u in out.energy_range[c])
+        return lo, hi
+
+    def _gripper_command(self, t: float, cmd: Command) -> None:
+        gs, j = self.grippers, cmd.gripper
+        if not 0 <= j < gs.n:
+            self.events.append((t, f"gripper {j} refused: the robot has {gs.n} gripper(s)"))
+            return
+        name = self.model.grippers[j].name
+        lo, hi = self.gripper_range(j)
+        if cmd.grip == "travel":
+            target = cmd.value
+        elif cmd.grip == "force":
+            if self.grasp.state[j] is GraspState.OPEN:
+                self.events.append(
+                    (t, f"gripper {name} squeeze refused: no contact sensed (close it first)")
+                )
+                return
+            # eq. (43): F_BA = K_B (δ − L21), the object taken as rigid; the cable carries
+            # F_BA on top of K_A δ (eq. (26)), so the imposed spring travel holds F_BA/K_A more
+            target = float(self.grasp.contact_travel[j]) + cmd.value * (
+                1.0 / float(gs.k_b[j]) + 1.0 / float(gs.k_a[j])
+            )
+        else:  # release: as open as the redundancy allows here
+            target = lo + 0.002 if math.isfinite(lo) else math.nan
+        if not (math.isfinite(target) and lo <= target <= hi):
+            self.events.append(
+                (
+                    t,
+                    f"gripper {name} {cmd.grip} refused: travel {target * 1e3:.1f} mm is outside "
+                    f"what the redundancy gives here, [{lo * 1e3:.1f}, {hi * 1e3:.1f}] mm",
+                )
+            )
+            return
+        self.grip_target[j] = target
+        self.events.append((t, f"gripper {name} {cmd.grip}: travel to {target * 1e3:.1f} mm"))
+
+    def _ramp_grip_impositions(self) -> None:
+        gs = self.grippers
+        step = self.GRIP_SPEED * self.period
+        changed = False
+        for j in range(gs.n):
+            target = self.grip_target[j]
+            if math.isnan(target):
+                continue
+            cur = self.grip_imposed[j]
+            if math.isnan(cur):
+                cur = float(self.grasp.travel[j])
+            new = cur + max(-step, min(step, target - cur))
+            if new != self.grip_imposed[j]:
+                self.grip_imposed[j] = new
+                changed = True
+        if changed:
+            self._apply_grip_impositions()
+
+    def _apply_grip_impositions(self) -> None:
+        gs = self.grippers
+        base = self.tda.options
+        keep = tuple(i for i in base.impositions if i.cable not in gs.cables)
+        grip = tuple(
+            Imposition(int(gs.cables[j]), ImposedQuantity.DEFORMATION, float(self.grip_imposed[j]))
+            for j in range(gs.n)
+            if not math.isnan(self.grip_imposed[j])
+        )
+        self.impose(keep + grip)
+
+    def impose(self, impositions: tuple[Imposition, ...]) -> None:
+        """Switch the energy TDA's impositions (Sensors 2019 eq. (24)) from the next cycle,
+        for the loop's and the stretch estimate's distribution alike (a tension planner calls
+        it every cycle; values are the caller's to keep feasible and to ramp)."""
+        base = self.tda.options
+        opts = dataclasses.replace(base, method=TDAMethod.ENERGY, impositions=impositions)
+        if base.method is not TDAMethod.ENERGY:  # once: the energy TDA's set-up
+            self.tda = TensionDistributor(self.model, opts)
+            self._static_tda = TensionDistributor(self.model, opts)
+        self.tda.options = opts
+        self._static_tda.options = opts
+
+    def gripper_status(self) -> list[dict[str, Any]]:
+        g = self.grasp
+        return [
+            {
+                "cable": x.name,
+                "state": g.state[j].value,
+                "travel": float(g.travel[j]),
+                "force": float(g.force[j]) if g.state[j] is not GraspState.OPEN else 0.0,
+                "contact_travel": float(g.contact_travel[j]),
+                "energy": float(g.energy[j]),
+                "tension": float(g.tension[j]),
+                "target": float(self.grip_target[j]),
+            }
+            for j, x in enumerate(self.model.grippers)
+        ]
+
     def status(self) -> dict[str, Any]:
         e = self.estimator
         return {
@@ -511,4 +679,5 @@ class Controller:
             "tensions": self.tensions.tolist(),
             "tda_status": self.tda_status.name,
             "cycle": self.cycle,
+            **({"grippers": self.gripper_status()} if self.grippers.n else {}),
         }

@@ -19,6 +19,7 @@ and more at 0.3 m/s with one drive late every third cycle).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -53,7 +54,17 @@ class Estimator:
             [1.0 / x.spring_stiffness if x.spring_stiffness else 0.0 for x in c]
         )
         self.l_winch = np.array([x.length_to_winch for x in c])
-        self.fk = ForwardKinematics(model, max_iterations=8)  # warm: 1-2 are the norm
+        # A gripper cable's length is the jaw's travel plus the pose (Sensors 2019 §2.4): the
+        # pose comes from the other cables, the grippers take the redundancy (docs/gripper.md).
+        grip = {g.cable for g in model.grippers}
+        self.fk_cables = np.array([i for i in range(model.n_cables) if i not in grip])
+        fk_model = (
+            dataclasses.replace(model, cables=tuple(c[i] for i in self.fk_cables), grippers=())
+            if grip
+            else model
+        )
+        self.fk = ForwardKinematics(fk_model, max_iterations=8)  # warm: 1-2 are the norm
+        self._fk_all = not grip
         self.kin = KinematicsData(model)  # at the estimated pose: W, lengths for the TDA
         self.position = np.array(model.home.position, dtype=float)
         self.rotation = np.array(model.home.rotation, dtype=float)
@@ -109,7 +120,8 @@ class Estimator:
                 th += lag
                 t = t - newest
         self.lengths[:] = self.cable_lengths(th, tensions)
-        res = self.fk.solve(self.lengths, self.position, self.rotation)
+        lengths = self.lengths if self._fk_all else self.lengths[self.fk_cables]
+        res = self.fk.solve(lengths, self.position, self.rotation)
         self.last_fk = res
         if res.status in (FKStatus.CONVERGED, FKStatus.MAX_ITERATIONS, FKStatus.INCONSISTENT):
             dt = t - self._stamp

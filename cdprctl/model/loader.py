@@ -16,6 +16,7 @@ import numpy as np
 from cdprctl.model.control import read_control
 from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
+from cdprctl.model.grippers import read_grippers
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Cable, Platform, Pose, Pulley, RobotModel, Winch, Workspace
 from cdprctl.model.zenoh import read_zenoh
@@ -32,6 +33,7 @@ TOP_KEYS = (
     "drives",
     "control",
     "zenoh",
+    "grippers",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -77,12 +79,20 @@ _WINCH_FIELDS: tuple[tuple[str, str, dict[str, Any]], ...] = (
 def load_robot(path: str | Path) -> RobotModel:
     """Read, validate and freeze the robot description in ``path``.
 
+    A file may start from another: ``base = "other.toml"`` (relative to the file) takes every
+    key of that file; its own tables are merged into the base's key by key, its values and
+    arrays (``[[cables]]`` included) replace the base's.
+
     Raises
     ------
     ConfigError
         With every problem of the file, each naming the key, the value, the unit and the rule.
     """
     path = Path(path)
+    return parse_robot(_read_toml(path, []), str(path))
+
+
+def _read_toml(path: Path, chain: list[Path]) -> dict[str, Any]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -91,7 +101,27 @@ def load_robot(path: str | Path) -> RobotModel:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError([f"{path}: not valid TOML: {exc}"]) from exc
-    return parse_robot(data, str(path))
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str) or not base.strip():
+        raise ConfigError([f"{path}: base = {base!r} must be the path of a robot TOML file"])
+    base_path = (path.parent / base).resolve()
+    if base_path in chain or base_path == path.resolve():
+        raise ConfigError([f"{path}: base = {base!r} includes itself (a cycle of base files)"])
+    if len(chain) >= 8:
+        raise ConfigError([f"{path}: base = {base!r}: more than 8 base files deep"])
+    return _merge(_read_toml(base_path, [*chain, path.resolve()]), data)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
 
 
 def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
@@ -114,6 +144,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
     zenoh = read_zenoh(rd, data, name or "robot")
+    grippers = read_grippers(rd, data, cables)
 
     if (
         rd.errors
@@ -126,6 +157,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or drives is None
         or control is None
         or zenoh is None
+        or grippers is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
 
@@ -141,6 +173,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         drives=drives,
         control=control,
         zenoh=zenoh,
+        grippers=grippers,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

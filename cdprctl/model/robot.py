@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
+from cdprctl.model.grippers import Gripper
 from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
 
@@ -129,6 +130,7 @@ class RobotModel:
     drives: DrivesConfig
     control: ControlConfig
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

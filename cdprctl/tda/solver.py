@@ -12,7 +12,7 @@ N and N·m, base frame, moments about ``P``; in statics ``w = −(w_e + w_g)``).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import njit
@@ -281,6 +281,20 @@ class TensionDistributor:
         free = impose(ns.N, ns.t0, cables, targets)
         sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free) if free.ok else None
         status = TDAStatus.OK
+        if (sol is None or not sol.feasible) and free.ok:
+            # Saturate: the last imposition clamped into the range the others leave it (a
+            # planner ramping to the end of the range meets it there, not a jump to none)
+            clamped = self._clamp_last(cables, targets, lo, hi, k)
+            if clamped is not None:
+                targets = clamped
+                free = impose(ns.N, ns.t0, cables, targets)
+                sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free)
+                if sol.feasible:
+                    out.message = (
+                        f"imposition on cable {self.model.cables[cables[-1]].name} saturated "
+                        f"at {targets[-1]:.6g} N"
+                    )
+                    return self._energy_done(sol, free, cables, k, TDAStatus.IMPOSITION_INFEASIBLE)
         if sol is None or not sol.feasible:
             # Keep the platform's wrench: drop the impositions, report why.
             unconstrained = impose(ns.N, ns.t0, [], [])
@@ -290,7 +304,29 @@ class TensionDistributor:
                 return self._least_violating(lo, hi)
             status = TDAStatus.IMPOSITION_INFEASIBLE
             out.free_directions = ns.N.copy()
-        else:
+            return self._energy_done(sol, None, cables, k, status)
+        return self._energy_done(sol, free, cables, k, status)
+
+    def _clamp_last(
+        self, cables: list[int], targets: list[float], lo: FloatArray, hi: FloatArray, k: FloatArray
+    ) -> list[float] | None:
+        """``targets`` with the last one clamped into the tension range (N) the other
+        impositions leave its cable (Sensors 2019 eq. (17)-(20)); None if they leave none."""
+        ns = self.ns
+        free = impose(ns.N, ns.t0, cables[:-1], targets[:-1])
+        if not free.ok:
+            return None
+        sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free)
+        rng = sol.t_range[cables[-1]]
+        if not sol.feasible or not np.all(np.isfinite(rng)):
+            return None
+        return [*targets[:-1], min(max(targets[-1], float(rng[0])), float(rng[1]))]
+
+    def _energy_done(
+        self, sol: Any, free: Any, cables: list[int], k: FloatArray, status: TDAStatus
+    ) -> TDAStatus:
+        out, ns = self.out, self.ns
+        if free is not None:
             out.free_directions = ns.N @ free.F
             out.polygon = np.array(sol.polygon).reshape(-1, 2)
         out.lam[:] = sol.lam

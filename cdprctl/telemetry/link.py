@@ -82,6 +82,15 @@ class TelemetryLink:
                         accel=params["accel"],
                     )
                 )
+            elif kind == "gripper":
+                out.append(
+                    Command(
+                        "gripper",
+                        gripper=int(params["gripper"]),
+                        grip=str(params["grip"]),
+                        value=float(params["value"]),
+                    )
+                )
             elif kind == "set_tda":
                 out.append(Command("set_tda", tda=params["tda"]))
             else:

@@ -25,6 +25,7 @@ ALLOWED_STATES = {
     "stop": ("enabled", "moving"),
     "reset": ("fault",),
     "move": ("enabled", "moving"),
+    "gripper": ("enabled", "moving"),
 }
 FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is always allowed)
     "enable": {},
@@ -34,7 +35,7 @@ FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is alway
     "move": {"position": "m", "rpy": "rad", "max_velocity": "m/s", "max_acceleration": "m/s²"},
     "set_tda": {"method": "", "nu": "", "direction": ""},
     "impose": {"cable": "", "quantity": "", "value": "J, N or m"},
-    "gripper": {"opening": "m", "force": "N", "release": ""},
+    "gripper": {"gripper": "", "travel": "m", "force": "N", "release": ""},
 }
 
 
@@ -113,7 +114,7 @@ class CommandValidator:
         if kind == "impose":
             return "set_tda", {"tda": self._impose(d)}
         if kind == "gripper":
-            raise CommandError(f"robot {self.model.name} has no gripper in its config")
+            return "gripper", self._gripper(d)
         return kind, {}
 
     def _move(self, d: dict[str, Any]) -> dict[str, Any]:
@@ -154,6 +155,34 @@ class CommandValidator:
                 f"cannot be held within the tension limits ({out.status.name}: {out.message})"
             )
         return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
+
+    def _gripper(self, d: dict[str, Any]) -> dict[str, Any]:
+        """``{"gripper": cable name, and one of "travel": m | "force": N | "release": true}``.
+        What the redundancy can give is the controller's to check at the pose it holds (a
+        refusal, with the feasible travel, comes back as an event)."""
+        gs = self.model.grippers
+        if not gs:
+            raise CommandError(f"robot {self.model.name} has no gripper in its config")
+        names = [g.name for g in gs]
+        name = d.get("gripper", names[0] if len(names) == 1 else None)
+        if name not in names:
+            raise CommandError(
+                f"gripper = {json.dumps(name)} must name a gripper's cable ({', '.join(names)})"
+            )
+        j = names.index(name)
+        given = [k for k in ("travel", "force", "release") if k in d]
+        if len(given) != 1:
+            raise CommandError("gripper: give exactly one of travel (m), force (N), release")
+        g = gs[j]
+        if given[0] == "travel":
+            v = _number(d, "travel", "m", 0.0, g.travel_max)
+        elif given[0] == "force":
+            v = _number(d, "force", "N", 0.0, float(self.model.cables[g.cable].tension_max))
+        else:
+            if d["release"] is not True:
+                raise CommandError(f"release = {json.dumps(d['release'])} must be true")
+            v = 0.0
+        return {"gripper": j, "grip": given[0], "value": v}
 
     def _options(self, opts: TDAOptions) -> TDAOptions:
         errs = opts.validate(self.model)
