@@ -172,7 +172,7 @@ def free_port() -> int:
 class Robot:
     """``cdprctl run --sim`` with its gateway listening on a free port on 127.0.0.1."""
 
-    def __init__(self, extra: list[str], duration: float = 60.0):
+    def __init__(self, extra: list[str], duration: float = 60.0, config: str = "rowc.toml"):
         self.port = free_port()
         self.endpoint = f"tcp/127.0.0.1:{self.port}"
         self.proc = subprocess.Popen(
@@ -182,7 +182,7 @@ class Robot:
                 "cdprctl.cli",
                 "run",
                 "--config",
-                str(CONFIG / "rowc.toml"),
+                str(CONFIG / config),
                 "--sim",
                 "--no-demo",
                 "--status",
@@ -229,9 +229,10 @@ class Robot:
 class Client:
     """A Zenoh peer here, connected to the robot, keeping what it receives."""
 
-    def __init__(self, endpoint: str, config_file: str = ""):
+    def __init__(self, endpoint: str, config_file: str = "", prefix: str = "cdpr/rowc"):
         from cdprctl.telemetry.session import open_session
 
+        self.prefix = prefix
         self.session = open_session(
             connect=[endpoint], multicast_scouting=False, config_file=config_file
         )
@@ -239,8 +240,8 @@ class Client:
         self.replies: list[dict[str, Any]] = []
         self.encodings: set[str] = set()
         self.subs = [
-            self.session.declare_subscriber("cdpr/rowc/state", self._on_state),
-            self.session.declare_subscriber("cdpr/rowc/reply/*", self._on_reply),
+            self.session.declare_subscriber(f"{prefix}/state", self._on_state),
+            self.session.declare_subscriber(f"{prefix}/reply/*", self._on_reply),
         ]
 
     def _on_state(self, sample: Any) -> None:
@@ -251,7 +252,7 @@ class Client:
         self.replies.append(json.loads(sample.payload.to_bytes()))
 
     def put(self, kind: str, payload: dict[str, Any]) -> None:
-        self.session.put(f"cdpr/rowc/cmd/{kind}", json.dumps(payload))
+        self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(payload))
 
     def wait(self, what: Any, timeout: float = 20.0) -> bool:
         deadline = time.monotonic() + timeout
@@ -277,10 +278,13 @@ class Client:
 def robot_and_client():
     made: list[Any] = []
 
-    def make(extra: list[str], client_config: str = "") -> tuple[Robot, Client]:
-        robot = Robot(extra)
+    def make(
+        extra: list[str], client_config: str = "", robot_file: str = "rowc.toml"
+    ) -> tuple[Robot, Client]:
+        robot = Robot(extra, config=robot_file)
         made.append(robot)
-        client = Client(robot.endpoint, client_config)
+        prefix = "cdpr/" + load_robot(CONFIG / robot_file).name
+        client = Client(robot.endpoint, client_config, prefix)
         made.append(client)
         return robot, client
 
@@ -394,4 +398,43 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
         assert operator.reply("o")["ok"] is True
     finally:
         operator.close()
+    assert robot.stop() == 0
+
+
+def test_gripper_commands_state_and_report_over_zenoh(robot_and_client, tmp_path):
+    """The Sensors 2019 end-effector across processes: the state carries each gripper as
+    sensed from the drives, a `gripper` command moves the jaw's travel there, one the
+    redundancy cannot give leaves the target where it was, and `cdprctl report` draws
+    grippers.png from a recording."""
+    robot, client = robot_and_client(
+        ["--accept-commands", "--rate", "250"], robot_file="seed000_grippers.toml"
+    )
+    assert client.wait(lambda: len(client.states) > 5), "\n".join(robot.lines)
+    assert [g["cable"] for g in client.last()["grippers"]] == ["1", "8"]
+    client.put("enable", {"id": "e"})
+    assert client.wait(lambda: client.last()["state"] == "enabled", timeout=30), robot.lines[-5:]
+    client.put("gripper", {"gripper": "1", "travel": 0.09, "id": "g1"})
+    assert client.wait(lambda: client.reply("g1") is not None)
+    assert client.reply("g1")["ok"] is True
+    assert client.wait(
+        lambda: abs(client.last()["grippers"][0]["travel"] - 0.09) < 4e-3, timeout=30
+    ), (client.last()["grippers"], robot.lines[-5:])
+    assert client.last()["grippers"][0]["state"] == "open"
+    client.put("gripper", {"gripper": "1", "travel": 0.29, "id": "g2"})  # beyond the range
+    assert client.wait(lambda: client.reply("g2") is not None)
+    time.sleep(1.0)
+    assert client.last()["grippers"][0]["target"] == pytest.approx(0.09)
+    assert client.last()["state"] == "enabled"
+
+    name = load_robot(CONFIG / "seed000_grippers.toml").name
+    z = ["--robot", name, "--connect", robot.endpoint, "--no-multicast-scouting"]
+    cli = [sys.executable, "-m", "cdprctl.cli"]
+    run_dir = tmp_path / "run"
+    rec = subprocess.Popen([*cli, "record", *z, "--output", str(run_dir), "--duration", "4"])
+    time.sleep(1.0)
+    client.put("gripper", {"gripper": "1", "travel": 0.07})
+    assert rec.wait(timeout=60) == 0
+    rep = subprocess.run([*cli, "report", str(run_dir)], capture_output=True, text=True)
+    assert rep.returncode == 0, rep.stderr
+    assert (run_dir / "grippers.png").stat().st_size > 10_000
     assert robot.stop() == 0

@@ -18,7 +18,8 @@ def add_parser(sub: Any) -> None:
         help="draw PNG plots of a recorded run",
         description="Reads RUN/state.csv, timing.csv, meta.json (from `cdprctl record`) and "
         "writes RUN/pose.png (pose and reference), tracking.png, tensions.png (with the "
-        "limits, like the ARK 2020 paper's Fig. 5), torques.png and timing.png.",
+        "limits, like the ARK 2020 paper's Fig. 5), torques.png, timing.png and, with "
+        "grippers, grippers.png (travel, squeeze and state as sensed from the drives).",
     )
     p.add_argument("run", metavar="RUN", help="a directory written by cdprctl record")
     p.set_defaults(func=report)
@@ -110,6 +111,24 @@ def report(args: argparse.Namespace) -> int:
     ax.set_ylabel("motor torque (N·m)")
     ax.legend(loc="best", fontsize=8, ncol=2)
     save(fig, "torques.png")
+
+    grips = [h[len("grip_travel_") :] for h in head if h.startswith("grip_travel_")]
+    if grips:
+        fig, (ax1, ax2, ax3) = plt.subplots(3, 1, sharex=True, figsize=(9, 8))
+        for gname in grips:
+            ax1.plot(t, _column(head, rows, f"grip_travel_{gname}") * 1e3, label=f"gripper {gname}")
+            ax1.plot(t, _column(head, rows, f"grip_target_{gname}") * 1e3, "--", lw=1)
+            ax2.plot(t, _column(head, rows, f"grip_force_{gname}"), label=f"gripper {gname}")
+            i = head.index(f"grip_state_{gname}")
+            code = {"open": 0, "contact": 1, "squeezing": 2}
+            ax3.step(t, [code.get(r[i], np.nan) for r in rows], where="post", label=gname)
+        ax1.set_ylabel("travel δ (mm), target dashed")
+        ax1.legend(fontsize=8)
+        ax2.set_ylabel("estimated squeeze (N)")
+        ax3.set_yticks([0, 1, 2], ["open", "contact", "squeezing"])
+        ax3.set_xlabel("time (s)")
+        fig.suptitle("grippers, sensed from the drives (Sensors 2019 §2.4)")
+        save(fig, "grippers.png")
 
     if (run / "timing.csv").is_file():
         th, tr = _read_csv(run / "timing.csv")

@@ -54,7 +54,8 @@ def add_parsers(sub: Any) -> None:
         "is a vector: position=1.8,0.35,0.5) or as one JSON object with --json. Commands: "
         "enable, disable, stop, reset, move (position m, rpy rad, max_velocity m/s, "
         "max_acceleration m/s²), set_tda (method, nu, direction), impose (cable, quantity "
-        "energy|tension|deformation, value J|N|m), gripper (opening m, force N, release). "
+        "energy|tension|deformation, value J|N|m), gripper (gripper = its cable, and travel m, "
+        "force N or release=true). "
         "Exit 0 accepted, 1 rejected, 2 no reply.",
     )
     p.add_argument("kind", help="command: enable, disable, stop, reset, move, set_tda, ...")
@@ -181,6 +182,16 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
         state["cables"], state["tensions"], lo, hi, state["torques"], strict=False
     ):
         lines.append(f"  {name:>4} {_bar(t, a, b)} {t:8.1f} N  [{a:g}, {b:g}]  τ {tau:7.3f} N·m")
+
+    def mm(x: Any) -> str:
+        return f"{x * 1e3:6.1f}" if isinstance(x, (int, float)) else "     —"
+
+    for g in state.get("grippers", []):
+        lines.append(
+            f"gripper {g['cable']:>3}: {g['state'] or '?':9s} travel {mm(g['travel'])} mm "
+            f"(target {mm(g['target'])})  squeeze {g['force'] or 0.0:5.1f} N  "
+            f"energy {g['energy'] or 0.0:6.2f} J"
+        )
     if timing:
         lines.append(
             f"loop     lateness p50 {timing['lateness_p50_us']:.0f} / p99 "
@@ -299,6 +310,11 @@ def _write_csvs(out: Path, rows: dict[str, list[Any]]) -> dict[str, int]:
         head += ["err_" + a for a in ("x", "y", "z", "rx", "ry", "rz")]
         head += [f"t_{c}" for c in names] + [f"tau_{c}" for c in names]
         head += ["true_x", "true_y", "true_z"]
+        grips = [g["cable"] for g in states[0].get("grippers", [])]
+        for gname in grips:
+            head += [
+                f"{k}_{gname}" for k in ("grip_state", "grip_travel", "grip_force", "grip_target")
+            ]
         with open(out / "state.csv", "w", newline="") as f:
             w = csv.writer(f)
             w.writerow(head)
@@ -314,6 +330,11 @@ def _write_csvs(out: Path, rows: dict[str, list[Any]]) -> dict[str, int]:
                     + s["tensions"]
                     + s["torques"]
                     + s.get("true_position", ["", "", ""])
+                    + [
+                        g.get(k)
+                        for g in s.get("grippers", [])[: len(grips)]
+                        for k in ("state", "travel", "force", "target")
+                    ]
                 )
     if rows["timing"]:
         keys = [k for k in rows["timing"][0] if k != "schema"]

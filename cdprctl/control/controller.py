@@ -510,6 +510,7 @@ class Controller:
                 self.trajectory.reset(self._pose6())
                 self.tensions[:] = self.hold_tensions
                 self.integral[:] = 0.0
+                self._hold_grippers()
                 self.driver.begin_activate()
                 self._set_state(State.ENABLING, t, "enabling the drives with holding torques")
             elif k == "move" and (
@@ -613,6 +614,20 @@ class Controller:
         self.grip_target[j] = target
         self.events.append((t, f"gripper {name} {cmd.grip}: travel to {target * 1e3:.1f} mm"))
 
+    def _hold_grippers(self) -> None:
+        """Every gripper holds the travel it has: left to the minimum of energy, a jaw would
+        wander with every change of the wrench, and its 10 kg on K_A (a ~1.6 Hz mode) fed the
+        platform's loop a growing oscillation near the end of the other gripper's range
+        (lock-step, seed000_grippers)."""
+        gs = self.grippers
+        if not gs.n:
+            return
+        travel = (self.hold_tensions[gs.cables] - self.jb_load) / gs.k_a
+        for j in range(gs.n):
+            if math.isnan(self.grip_target[j]):
+                self.grip_target[j] = self.grip_imposed[j] = float(travel[j])
+        self._apply_grip_impositions()
+
     def _ramp_grip_impositions(self) -> None:
         gs = self.grippers
         step = self.GRIP_SPEED * self.period
@@ -635,9 +650,12 @@ class Controller:
         gs = self.grippers
         base = self.tda.options
         keep = tuple(i for i in base.impositions if i.cable not in gs.cables)
+        # the moving ones last: at the end of its range the TDA saturates the last imposition
+        # (the one being driven there), not a gripper that holds
+        order = sorted(range(gs.n), key=lambda j: self.grip_imposed[j] != self.grip_target[j])
         grip = tuple(
             Imposition(int(gs.cables[j]), ImposedQuantity.DEFORMATION, float(self.grip_imposed[j]))
-            for j in range(gs.n)
+            for j in order
             if not math.isnan(self.grip_imposed[j])
         )
         self.impose(keep + grip)

@@ -41,7 +41,7 @@ def gateway_main(
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
     zc = model.zenoh
     parent = os.getppid()
-    snap = SharedSnapshot(model.n_cables, shm_name)
+    snap = SharedSnapshot(model.n_cables, shm_name, g=len(model.grippers))
     session = open_session(
         mode=zc.mode,
         listen=zc.listen,
@@ -62,6 +62,7 @@ def gateway_main(
         reliability=zenoh.Reliability.RELIABLE,
     )
     names = [c.name for c in model.cables]
+    grip_names = [g.name for g in model.grippers]
     validator = CommandValidator(model, zc.commands)
     shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
     counts = {"accepted": 0, "rejected": 0}
@@ -139,7 +140,7 @@ def gateway_main(
                     shared["state"] = STATES[int(s["state"][0])]
                     if s["seq"][0] != last_seq:
                         last_seq = float(s["seq"][0])
-                        pub_state.put(encode(state_payload(s, names, shared["fault"])))
+                        pub_state.put(encode(state_payload(s, names, shared["fault"], grip_names)))
                 next_state += state_dt
                 if next_state < now:  # a stall: no burst
                     next_state = now + state_dt

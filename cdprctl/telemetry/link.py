@@ -22,7 +22,7 @@ class TelemetryLink:
 
         ctx = mp.get_context("spawn")  # never fork a process that has threads
         self.model = model
-        self.snapshot = SharedSnapshot(model.n_cables)
+        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
         self.commands: Any = ctx.Queue(maxsize=32)
         self.events: Any = ctx.Queue(maxsize=1000)
         self.stop = ctx.Event()

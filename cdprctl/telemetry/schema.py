@@ -18,7 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.gripper import GraspState
 from cdprctl.telemetry.snapshot import STATES, TDA_METHODS, TDA_STATUSES, TIMING
+
+GRASP_STATES = [s.value for s in GraspState]
 
 SCHEMA = "cdprctl/1"  # bumped on any incompatible change; additions keep the version
 
@@ -28,9 +31,25 @@ def _floats(a: np.ndarray, digits: int = 6) -> list[float | None]:
 
 
 def state_payload(
-    snap: dict[str, np.ndarray], cable_names: list[str], fault: str
+    snap: dict[str, np.ndarray],
+    cable_names: list[str],
+    fault: str,
+    gripper_names: list[str] | tuple[str, ...] = (),
 ) -> dict[str, Any]:
     true = snap["true_position"]
+    grip = [
+        {
+            "cable": name,
+            "state": GRASP_STATES[int(snap["grip_state"][j])]
+            if math.isfinite(snap["grip_state"][j])
+            else None,
+            "travel": _floats(snap["grip_travel"][j : j + 1], 5)[0],  # m
+            "force": _floats(snap["grip_force"][j : j + 1], 3)[0],  # N
+            "energy": _floats(snap["grip_energy"][j : j + 1], 4)[0],  # J
+            "target": _floats(snap["grip_target"][j : j + 1], 5)[0],  # m
+        }
+        for j, name in enumerate(gripper_names)
+    ]
     return {
         "schema": SCHEMA,
         "time": round(float(snap["time"][0]), 6),
@@ -51,6 +70,7 @@ def state_payload(
             "status": TDA_STATUSES[int(snap["tda_status"][0])],
         },
         **({"true_position": _floats(true)} if np.all(np.isfinite(true)) else {}),
+        **({"grippers": grip} if grip else {}),
     }
 
 

@@ -32,7 +32,7 @@ TIMING = (
 class Layout:
     """Slices of the shared float64 vector for a robot of ``m`` cables."""
 
-    def __init__(self, m: int):
+    def __init__(self, m: int, g: int = 0):
         fields = [
             ("seq", 1),
             ("time", 1),  # s, the loop's monotonic clock
@@ -52,6 +52,12 @@ class Layout:
             ("motor_position", m),  # rad
             ("true_position", 3),  # m, the simulated plant's (NaN on a real robot)
             ("timing", len(TIMING)),
+            # the reconfigurable end-effector, per gripper (docs/gripper.md)
+            ("grip_state", g),  # index in GRASP_STATES
+            ("grip_travel", g),  # m, δ from the drives
+            ("grip_force", g),  # N, estimated squeeze
+            ("grip_energy", g),  # J, actuator energy, eq. (36)/(40)
+            ("grip_target", g),  # m, commanded travel
         ]
         self.slices: dict[str, slice] = {}
         i = 0
@@ -64,8 +70,8 @@ class Layout:
 class SharedSnapshot:
     """Create (``name=None``, the daemon) or attach to (the gateway) the shared block."""
 
-    def __init__(self, m: int, name: str | None = None):
-        self.layout = Layout(m)
+    def __init__(self, m: int, name: str | None = None, g: int = 0):
+        self.layout = Layout(m, g)
         nbytes = self.layout.size * 8
         self._owner = name is None
         self.shm = shared_memory.SharedMemory(name=name, create=self._owner, size=nbytes)
@@ -133,6 +139,18 @@ def controller_values(controller: Any, stats: Any, true_position: Any = None) ->
     }
     if true_position is not None:
         out["true_position"] = true_position
+    if c.grippers.n:
+        from cdprctl.gripper import GraspState
+
+        states = list(GraspState)
+        g = c.grasp
+        out["grip_state"] = [states.index(s) for s in g.state]
+        out["grip_travel"] = g.travel
+        out["grip_force"] = [
+            f if s is not GraspState.OPEN else 0.0 for f, s in zip(g.force, g.state, strict=True)
+        ]
+        out["grip_energy"] = g.energy
+        out["grip_target"] = c.grip_target
     return out
 
 

@@ -165,6 +165,8 @@ class CommandValidator:
             raise CommandError(f"robot {self.model.name} has no gripper in its config")
         names = [g.name for g in gs]
         name = d.get("gripper", names[0] if len(names) == 1 else None)
+        if isinstance(name, int) and not isinstance(name, bool):  # `cdprctl send ... gripper=1`
+            name = str(name)
         if name not in names:
             raise CommandError(
                 f"gripper = {json.dumps(name)} must name a gripper's cable ({', '.join(names)})"
