@@ -1,5 +1,6 @@
 """Benchmark: the controller's compute per cycle, by phase (lock-step against the simulated
-robot, so the simulator's time is not counted), with the barycenter and with SOTDA (ν = 0.9).
+robot, so the simulator's time is not counted): the window-cleaning robot with the barycenter
+and with SOTDA (ν = 0.9), and the Sensors 2019 robot with its two grippers (energy TDA).
 
 Run: ``.venv/bin/python benchmarks/bench_loop.py``.
 """
@@ -26,16 +27,21 @@ CONFIG = Path(__file__).resolve().parents[1] / "config"
 def main() -> None:
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)
     print(machine_line())
-    model = load_robot(CONFIG / "rowc.toml")
-    for label, tda in (
-        ("barycenter", TDAOptions(method=TDAMethod.BARYCENTER)),
-        ("sotda nu=0.9", TDAOptions(method=TDAMethod.SOTDA, nu=0.9)),
-    ):
+    rowc = load_robot(CONFIG / "rowc.toml")
+    grip = load_robot(CONFIG / "seed000_grippers.toml")
+    cases = (
+        ("rowc barycenter", rowc, TDAOptions(method=TDAMethod.BARYCENTER), [1.8, 0.35, 0.5]),
+        ("rowc sotda nu=0.9", rowc, TDAOptions(method=TDAMethod.SOTDA, nu=0.9), [1.8, 0.35, 0.5]),
+        # the Sensors 2019 robot with its two grippers held: energy TDA, J_weight, grasp sensing
+        ("seed000_grippers energy", grip, None, [7.05, 4.0, 1.5]),
+    )
+    for label, model, tda, goal in cases:
         with ClosedLoop(model, tda) as cl:
             cl.startup()
             cl.command("enable")
             cl.run(0.3)
-            cl.command("move", pose=np.array([1.8, 0.35, 0.5, 0.0, 0.0, 0.0]))
+            rpy = np.array(model.home.rpy, dtype=float)  # the move keeps the home orientation
+            cl.command("move", pose=np.concatenate([goal, rpy]))
             c = cl.controller
             phases = []
             for _ in range(2500):  # 5 s: the move and the hold after it

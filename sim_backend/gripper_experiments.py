@@ -33,8 +33,8 @@ class ExperimentError(RuntimeError):
 
 def _loop(model: RobotModel, ext: tuple[float, ...]) -> ClosedLoop:
     """A started, enabled closed loop with ``ext`` ramped in and fed forward, the energy TDA
-    from the start (a switch of distribution steps soft cables' stretch, which the pose
-    estimate would see as an encoder fault)."""
+    from the start (the plant is parked in the controller's distribution: the springs' stretch
+    the pose estimate assumes is then the one they have)."""
     if model.control.tda_method != "energy":
         model = dataclasses.replace(
             model, control=dataclasses.replace(model.control, tda_method="energy")

@@ -50,3 +50,26 @@ def test_lateral_force_deflects_the_springs_as_the_stiffness_predicts(seed000):
         assert c.state is State.ENABLED, c.fault_reason
         y = cl.arrays()["p_true"][-250:, 1] - seed000.home.position[1]
         assert float(np.mean(y)) == pytest.approx(static_deflection(seed000, c.tensions), rel=0.1)
+
+
+def test_switching_the_distribution_blends_instead_of_faulting(seed000):
+    """set_tda barycenter → energy (minimum of energy) while holding: the new tensions take
+    over in BLEND_TIME, every blend holding the wrench, so the soft cables' stretch moves
+    smoothly and the pose estimate does not take it for an encoder fault (a step faulted at
+    once: residual 20.5 mm > 20 mm)."""
+    from cdprctl.control.controller import Controller
+    from cdprctl.tda import TDAMethod, TDAOptions
+
+    with enabled(seed000) as cl:
+        cl.run(1.0)
+        before = cl.controller.tensions.copy()
+        cl.command("set_tda", tda=TDAOptions(method=TDAMethod.ENERGY, period=cl.period))
+        cl.run(4.0)
+        c = cl.controller
+        assert c.state is State.ENABLED, c.fault_reason
+        a = cl.arrays()
+        steps = np.abs(np.diff(a["tensions"], axis=0)).max()
+        assert steps < 1.0  # N per cycle; the switch moves some cables by 10-20 N in all
+        assert np.abs(c.tensions - before).max() > 5.0  # it did switch
+        assert np.abs(a["p_true"] - seed000.home.position).max() < 2e-3
+        assert Controller.BLEND_TIME == 1.0

@@ -219,6 +219,32 @@ def test_bad_gripper_commands_are_rejected(grippers, payload, words):
         assert w in str(exc.value), str(exc.value)
 
 
+def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
+    """The reply itself gives the feasible travel, computed at the snapshot's pose with the
+    other gripper held at its target; the controller computes the same range."""
+    from cdprctl.rotation import matrix_to_rpy
+    from sim_backend.closed_loop import ClosedLoop
+
+    v = CommandValidator(grippers, True)
+    with ClosedLoop(grippers) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5, record=False)
+        c = cl.controller
+        lo, hi = c.gripper_range(0)
+        snap = {
+            "position": c.estimator.position.copy(),
+            "rpy": matrix_to_rpy(c.estimator.rotation),
+            "grip_target": c.grip_target.copy(),
+        }
+    ok = v.check("gripper", {"gripper": "1", "travel": round((lo + hi) / 2, 4)}, "enabled", snap)
+    assert ok[0] == "gripper"
+    with pytest.raises(CommandError) as exc:
+        v.check("gripper", {"gripper": "1", "travel": 0.29}, "enabled", snap)
+    text = str(exc.value)
+    assert f"[{lo:.4f}, {hi:.4f}] m" in text, text
+
+
 def test_good_gripper_command_becomes_a_controller_command(grippers):
     v = CommandValidator(grippers, True)
     kind, params = v.check("gripper", v.parse(b'{"gripper": "8", "force": 12.5}'), "enabled")

@@ -422,6 +422,8 @@ def test_gripper_commands_state_and_report_over_zenoh(robot_and_client, tmp_path
     assert client.last()["grippers"][0]["state"] == "open"
     client.put("gripper", {"gripper": "1", "travel": 0.29, "id": "g2"})  # beyond the range
     assert client.wait(lambda: client.reply("g2") is not None)
+    reason = client.reply("g2")["reason"]
+    assert client.reply("g2")["ok"] is False and "redundancy gives gripper 1 here" in reason
     time.sleep(1.0)
     assert client.last()["grippers"][0]["target"] == pytest.approx(0.09)
     assert client.last()["state"] == "enabled"

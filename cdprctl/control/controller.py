@@ -31,6 +31,7 @@ import numpy as np
 
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.grasp import GraspSensor
+from cdprctl.control.grip_range import travel_range
 from cdprctl.control.pd_kernel import pd_wrench_kernel
 from cdprctl.control.trajectory import Trajectory
 from cdprctl.forward_kinematics import FKStatus
@@ -132,6 +133,11 @@ class Controller:
         self._ext_total = self.ext_wrench.copy() if self.grippers.n else self.ext_wrench
         self._spring_prev = np.zeros(m)
         self._range_tda: TensionDistributor | None = None
+        # a switch of distribution blends from the old one (see _blend)
+        self._old_tda: TensionDistributor | None = None
+        self._old_static: TensionDistributor | None = None
+        self._blend_start = -math.inf
+        self._blend_old = np.zeros(m)
         self.tensions = np.zeros(m)  # N, commanded
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
@@ -284,6 +290,7 @@ class Controller:
         out = self._solve(self._static_tda, ff, None)
         if out.ok:
             self._total(out.tensions, self.stretch_tensions)
+            self._blend(self._old_static, ff, None, self.stretch_tensions)
 
     def _solve(self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None) -> Any:
         """The TDA at the estimated pose, on the springs' tensions when there are grippers."""
@@ -367,10 +374,15 @@ class Controller:
         )
 
     def _distribute(self, t: float) -> None:
-        out = self._solve(self.tda, self.wrench, self.tensions)
+        # while a switch blends, the blend limits the tension rate: a rate limit on either
+        # side would hold the commanded tensions back from the stretch estimate's (which has
+        # none) and the pose estimate would see the difference as an encoder fault
+        blending = self._old_tda is not None
+        out = self._solve(self.tda, self.wrench, None if blending else self.tensions)
         self.tda_status = out.status
         if out.status is TDAStatus.OK or out.status is TDAStatus.IMPOSITION_INFEASIBLE:
             self._total(out.tensions, self.tensions)
+            self._blend(self._old_tda, self.wrench, None, self.tensions)
             self.hold_tensions[:] = self.tensions
             self._tda_bad = 0
         else:  # infeasible wrench: hold the last feasible tensions, never leave the limits
@@ -378,6 +390,34 @@ class Controller:
             self._tda_bad += 1
             if self._tda_bad >= 3 and self.state is not State.STOPPING:
                 self._fault(t, f"tension distribution {out.status.name}: {out.message}", hold=True)
+
+    # A new distribution takes over in this time: both hold the wrench, so every blend does,
+    # inside the limits (a convex set). A step from the barycenter to the minimum of energy
+    # moved seed000's soft cables by 10-20 N, 1-2 cm of stretch the pose estimate took for an
+    # encoder fault at once (lock-step, tests/test_closed_loop_seed000.py).
+    BLEND_TIME = 1.0  # s
+
+    def _blend(
+        self,
+        old: TensionDistributor | None,
+        wrench: FloatArray,
+        t_prev: FloatArray | None,
+        tensions: FloatArray,
+    ) -> None:
+        """``tensions`` (the new distribution's, N) ← a blend with the old distribution's
+        while a switch is under way; unchanged when the old one has nothing feasible."""
+        if old is None:
+            return
+        s = (self.time - self._blend_start) / self.BLEND_TIME
+        if s >= 1.0:
+            self._old_tda = self._old_static = None
+            return
+        out = self._solve(old, wrench, t_prev)
+        if out.status is TDAStatus.OK or out.status is TDAStatus.IMPOSITION_INFEASIBLE:
+            old_total = self._blend_old
+            self._total(out.tensions, old_total)
+            tensions *= s
+            tensions += (1.0 - s) * old_total
 
     def _winch_torques(self, motor_velocity: FloatArray, active: bool) -> None:
         """``τ = (r/G) t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J θ̈_d``, clamped (θ > 0 winds in)."""
@@ -542,9 +582,13 @@ class Controller:
                 self._gripper_command(t, cmd)
             elif k == "set_tda" and cmd.tda is not None:
                 try:  # options are validated by whoever sends them; this is the last guard
-                    self.tda = TensionDistributor(self.model, cmd.tda)
+                    new_tda = TensionDistributor(self.model, cmd.tda)
                     # the stretch estimate assumes the tensions the cables now get
-                    self._static_tda = TensionDistributor(self.model, cmd.tda)
+                    new_static = TensionDistributor(self.model, cmd.tda)
+                    if self.state in (State.ENABLED, State.MOVING):
+                        self._old_tda, self._old_static = self.tda, self._static_tda
+                        self._blend_start = t
+                    self.tda, self._static_tda = new_tda, new_static
                     self.events.append((t, f"TDA method {cmd.tda.method.value}"))
                 except ValueError as exc:
                     self.events.append((t, f"TDA options rejected: {exc}"))
@@ -557,28 +601,25 @@ class Controller:
     GRIP_SPEED = 0.02  # m/s
 
     def gripper_range(self, j: int) -> tuple[float, float]:
-        """Travel (m) the redundancy can give gripper ``j`` here, holding the other grippers'
-        impositions and the platform's static wrench (Sensors 2019 §3.2: the energy range of
-        cable 1A with δ_8A imposed, eq. (17)-(20), (38)-(39)). NaN when none."""
-        gs = self.grippers
-        c = int(gs.cables[j])
-        others = tuple(
-            Imposition(int(gs.cables[i]), ImposedQuantity.DEFORMATION, float(self.grip_imposed[i]))
-            for i in range(gs.n)
-            if i != j and not math.isnan(self.grip_imposed[i])
-        )
-        opts = dataclasses.replace(
-            self.tda.options, method=TDAMethod.ENERGY, impositions=others, max_tension_rate=None
-        )
+        """Travel (m) the redundancy can give gripper ``j`` here, the other grippers held
+        where they are imposed (``grip_range.travel_range``). NaN when none."""
         if self._range_tda is None:
+            opts = dataclasses.replace(self.tda.options, method=TDAMethod.ENERGY, impositions=())
             self._range_tda = TensionDistributor(self.model, opts)
-        self._range_tda.options = opts
-        out = self._solve(self._range_tda, self._gravity_hold(), None)
-        if not out.ok:
-            return math.nan, math.nan
-        k = float(gs.k_a[j])
-        lo, hi = (math.sqrt(2.0 * k * float(u)) / k for u in out.energy_range[c])
-        return lo, hi
+        e = self.estimator
+        return travel_range(
+            self.model,
+            self._range_tda,
+            self.grippers,
+            j,
+            self.grip_imposed,
+            e.kin.W,
+            e.rotation,
+            self._stiffness(),
+            self.ext_wrench,
+            self.t_min,
+            self.t_max,
+        )
 
     def _gripper_command(self, t: float, cmd: Command) -> None:
         gs, j = self.grippers, cmd.gripper

@@ -97,7 +97,7 @@ def gateway_main(
             ):
                 request_id = None
                 raise CommandError("id must be a string or integer of at most 64 characters")
-            cmd = validator.check(kind, d, shared["state"])
+            cmd = validator.check(kind, d, shared["state"], shared["last"])
             try:
                 cmd_q.put_nowait(cmd)
             except queue.Full:

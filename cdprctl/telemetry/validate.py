@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.controller import tda_options_of
+from cdprctl.control.grip_range import travel_range
+from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model.control import METHODS
 from cdprctl.model.robot import RobotModel
@@ -78,6 +80,8 @@ class CommandValidator:
         self.enabled = commands_enabled
         self.kin = KinematicsData(model)
         self.tda = TensionDistributor(model, tda_options_of(model))
+        self._grip: GripperSet | None = None
+        self._range_tda: TensionDistributor | None = None
 
     def parse(self, payload: bytes) -> dict[str, Any]:
         if len(payload) > 4096:
@@ -92,7 +96,11 @@ class CommandValidator:
             raise CommandError(f"payload must be a JSON object, not {type(d).__name__}")
         return d
 
-    def check(self, kind: str, d: dict[str, Any], state: str) -> tuple[str, dict[str, Any]]:
+    def check(
+        self, kind: str, d: dict[str, Any], state: str, snap: dict[str, Any] | None = None
+    ) -> tuple[str, dict[str, Any]]:
+        """``snap``: the loop's last snapshot (pose, grippers' targets), for the checks that
+        depend on where the robot is now (a gripper's feasible travel)."""
         if not self.enabled:
             raise CommandError("commands are disabled in the config (zenoh.commands = false)")
         if kind not in KINDS:
@@ -114,7 +122,7 @@ class CommandValidator:
         if kind == "impose":
             return "set_tda", {"tda": self._impose(d)}
         if kind == "gripper":
-            return "gripper", self._gripper(d)
+            return "gripper", self._gripper(d, snap)
         return kind, {}
 
     def _move(self, d: dict[str, Any]) -> dict[str, Any]:
@@ -156,10 +164,11 @@ class CommandValidator:
             )
         return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
 
-    def _gripper(self, d: dict[str, Any]) -> dict[str, Any]:
+    def _gripper(self, d: dict[str, Any], snap: dict[str, Any] | None) -> dict[str, Any]:
         """``{"gripper": cable name, and one of "travel": m | "force": N | "release": true}``.
-        What the redundancy can give is the controller's to check at the pose it holds (a
-        refusal, with the feasible travel, comes back as an event)."""
+        A travel the redundancy cannot give at the pose of ``snap`` (the other grippers held
+        at their targets) is refused with the feasible range; the controller checks again at
+        the pose it holds when the command arrives (a refusal there is an event)."""
         gs = self.model.grippers
         if not gs:
             raise CommandError(f"robot {self.model.name} has no gripper in its config")
@@ -178,6 +187,12 @@ class CommandValidator:
         g = gs[j]
         if given[0] == "travel":
             v = _number(d, "travel", "m", 0.0, g.travel_max)
+            lo, hi = self._travel_range(j, snap)
+            if math.isfinite(lo) and not lo <= v <= hi:
+                raise CommandError(
+                    f"travel = {v:g} m is outside what the redundancy gives gripper {name} "
+                    f"here: [{lo:.4f}, {hi:.4f}] m"
+                )
         elif given[0] == "force":
             v = _number(d, "force", "N", 0.0, float(self.model.cables[g.cable].tension_max))
         else:
@@ -185,6 +200,30 @@ class CommandValidator:
                 raise CommandError(f"release = {json.dumps(d['release'])} must be true")
             v = 0.0
         return {"gripper": j, "grip": given[0], "value": v}
+
+    def _travel_range(self, j: int, snap: dict[str, Any] | None) -> tuple[float, float]:
+        if snap is None or not np.all(np.isfinite(snap["position"])):
+            return math.nan, math.nan
+        m, c = self.model, self.model.control
+        R = rpy_to_matrix(*snap["rpy"])
+        inverse_kinematics(m, self.kin, snap["position"], R)
+        if self._grip is None:
+            self._grip = GripperSet(m)
+            self._range_tda = TensionDistributor(m, TDAOptions(method=TDAMethod.ENERGY))
+        assert self._range_tda is not None
+        return travel_range(
+            m,
+            self._range_tda,
+            self._grip,
+            j,
+            np.asarray(snap["grip_target"], dtype=float),
+            self.kin.W,
+            R,
+            cable_stiffnesses(m, self.kin),
+            np.asarray(c.external_wrench, dtype=float),
+            m.tension_min + c.tension_margin,
+            m.tension_max - c.tension_margin,
+        )
 
     def _options(self, opts: TDAOptions) -> TDAOptions:
         errs = opts.validate(self.model)
