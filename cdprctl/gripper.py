@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from cdprctl.rotation import FloatArray
 
@@ -143,6 +144,27 @@ def sense_grasp(g: GripperParams, energy: float, contact_band: float = 1e-3) -> 
     return GraspEstimate(GraspState.SQUEEZING, delta, force)
 
 
+@njit(cache=True)
+def _weight_wrench_kernel(p_b, L1_b, k_b, weight, up, R, w):  # pragma: no cover - compiled
+    """Σ_j F_jBW [−k̂; p_j × (−k̂) + L1_j × (−k̂ − Ω_j)] with p, L1, k̂_M turned by R
+    (Sensors 2019, eq. (27), (35))."""
+    for j in range(p_b.shape[0]):
+        p = R @ p_b[j]
+        L1 = R @ L1_b[j]
+        k = R @ k_b[j]
+        c = k[0] * up[0] + k[1] * up[1] + k[2] * up[2]
+        f = weight[j]
+        # −k̂ − Ω = −up + (up·k) k
+        q0, q1, q2 = -up[0] + c * k[0], -up[1] + c * k[1], -up[2] + c * k[2]
+        d0, d1, d2 = -up[0], -up[1], -up[2]
+        w[0] += f * d0
+        w[1] += f * d1
+        w[2] += f * d2
+        w[3] += f * (p[1] * d2 - p[2] * d1 + L1[1] * q2 - L1[2] * q1)
+        w[4] += f * (p[2] * d0 - p[0] * d2 + L1[2] * q0 - L1[0] * q2)
+        w[5] += f * (p[0] * d1 - p[1] * d0 + L1[0] * q1 - L1[1] * q0)
+
+
 class GripperSet:
     """The grippers of a robot (``[[grippers]]``) as the controller and the simulator use them:
     which cables carry one, the weight wrench ``J_weight F_BW`` (eq. (32), (35), (46)) and the
@@ -162,22 +184,23 @@ class GripperSet:
         self.up = -np.asarray(model.gravity, float) / max(
             float(np.linalg.norm(model.gravity)), 1e-12
         )
+        self._p = np.array(self.p_body).reshape(self.n, 3)
+        self._L1 = np.array(self.L1_body).reshape(self.n, 3)
+        self._k = np.array(self.guide_body).reshape(self.n, 3)
 
     def weight_wrench(self, R: FloatArray) -> FloatArray:
         """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the
-        grippers' weights on the main body (Sensors 2019, eq. (35), (46))."""
+        grippers' weights on the main body (Sensors 2019, eq. (35), (46)); the columns of
+        :func:`weight_column`, compiled (it runs every control cycle)."""
         w = np.zeros(6)
-        for i in range(self.n):
-            kM = R @ self.guide_body[i]
-            w += self.weight[i] * weight_column(R @ self.p_body[i], R @ self.L1_body[i], kM)
+        if self.n:
+            _weight_wrench_kernel(self._p, self._L1, self._k, self.weight, self.up, R, w)
         return w
 
     def parallel_load(self, R: FloatArray) -> FloatArray:
         """``‖F∥_jBW‖`` (N) per gripper: the part of the jaw's weight along its guide, which
         ``jB`` holds (eq. (26)-(27))."""
-        return np.array(
-            [self.weight[i] * float(self.up @ (R @ self.guide_body[i])) for i in range(self.n)]
-        )
+        return self.weight * ((self._k @ R.T) @ self.up)
 
     def spring_wrench(self, W: FloatArray, wrench: FloatArray, jb_load: FloatArray) -> FloatArray:
         """The wrench the springs ``jA`` must give when the cables give ``wrench`` and each

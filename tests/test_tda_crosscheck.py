@@ -366,3 +366,41 @@ def test_options_validated_outside_the_loop(seed000):
             ),
         )
     assert math.isfinite(TDAOptions().nu)
+
+
+def test_energy_two_impositions_fast_path_equals_the_general_one(seed000):
+    """r = 2 with two impositions: the 2×2 solve against the general QR + minimum-energy path
+    (`cdprctl.tda.energy.impose`/`minimum_energy`) over random feasible targets."""
+    import math
+
+    from cdprctl.kinematics import KinematicsData, inverse_kinematics
+    from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
+    from cdprctl.tda.energy import impose, minimum_energy
+
+    rng = np.random.default_rng(7)
+    kin = KinematicsData(seed000)
+    inverse_kinematics(seed000, kin, seed000.home.position, seed000.home.rotation)
+    k = seed000.cable_stiffness(kin.length)
+    w = -seed000.gravity_wrench(seed000.home.rotation)
+    base = TensionDistributor(seed000, TDAOptions(method=TDAMethod.BARYCENTER)).solve(kin.W, w)
+    checked = 0
+    for _ in range(40):
+        t1, t8 = base.tensions[0] + rng.uniform(-40, 40), base.tensions[7] + rng.uniform(-40, 40)
+        imps = (
+            Imposition(0, ImposedQuantity.TENSION, t1),
+            Imposition(7, ImposedQuantity.TENSION, t8),
+        )
+        tda = TensionDistributor(seed000, TDAOptions(method=TDAMethod.ENERGY, impositions=imps))
+        out = tda.solve(kin.W, w, k=k)
+        ns = tda.ns
+        free = impose(ns.N, ns.t0, [0, 7], [t1, t8])
+        sol = minimum_energy(ns.N, ns.t0, k, seed000.tension_min, seed000.tension_max, free)
+        if not sol.feasible:
+            continue
+        checked += 1
+        assert out.ok
+        np.testing.assert_allclose(out.tensions, ns.t0 + ns.N @ sol.lam, atol=1e-8)
+        assert out.tensions[0] == pytest.approx(t1) and out.tensions[7] == pytest.approx(t8)
+        assert math.isnan(out.energy_range[0, 0]) and math.isnan(out.energy_range[7, 1])
+        np.testing.assert_allclose(out.energy_range[1], out.tensions[1] ** 2 / (2 * k[1]))
+    assert checked > 20

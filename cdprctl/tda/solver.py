@@ -49,6 +49,7 @@ class TensionDistributor:
         self._lam2 = np.zeros(2)
         self._verts = np.zeros((2 * self.m + 8, 2))
         self._no_polygon = np.zeros((0, 2))
+        self._no_free = np.zeros((self.m, 0))
         self._verts_rate = np.zeros((2 * self.m + 8, 2))
         self._verts_tmp = np.zeros((2 * self.m + 8, 2))
         d = np.asarray(self.options.direction, dtype=float)
@@ -278,6 +279,10 @@ class TensionDistributor:
             fast = self._energy_line_r2(cables[0], targets[0], lo, hi, k)
             if fast is not None:
                 return fast
+        if self.r == 2 and len(cables) == 2:
+            fast = self._energy_point_r2(cables, targets, lo, hi, k)
+            if fast is not None:
+                return fast
         free = impose(ns.N, ns.t0, cables, targets)
         sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free) if free.ok else None
         status = TDAStatus.OK
@@ -362,6 +367,35 @@ class TensionDistributor:
         if not ok:
             return None
         out.free_directions = ns.N @ self._f[:, None]
+        return TDAStatus.OK
+
+    def _energy_point_r2(
+        self, cables: list[int], targets: list[float], lo: FloatArray, hi: FloatArray, k: FloatArray
+    ) -> TDAStatus | None:
+        """Two impositions for r = 2 (Sensors 2019 §3.2: δ_8A imposed, cable 1A's energy set):
+        eq. (24) twice leaves one point, ``a_i·λ = t_i* − b_i``, a 2×2 solve. ``None`` when
+        the rows are dependent or the point breaks a limit (the general path reports it)."""
+        out, ns = self.out, self.ns
+        A = ns.N[cables]
+        det = float(A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
+        if abs(det) <= 1e-10 * max(1.0, float(np.abs(A).max()) ** 2):
+            return None
+        b0 = targets[0] - float(ns.t0[cables[0]])
+        b1 = targets[1] - float(ns.t0[cables[1]])
+        lam = self._lam2
+        lam[0] = (A[1, 1] * b0 - A[0, 1] * b1) / det
+        lam[1] = (A[0, 0] * b1 - A[1, 0] * b0) / det
+        t = ns.t0 + ns.N @ lam
+        if np.any(t < lo - 1e-9) or np.any(t > hi + 1e-9):
+            return None
+        out.lam[:] = lam
+        out.tensions[:] = t
+        out.free_directions = self._no_free
+        out.segment_ends[:] = math.nan
+        e = t * t / (2.0 * k)  # the point's energies: each free cable's range is one value
+        e[cables] = math.nan
+        out.energy_range[:, 0] = e
+        out.energy_range[:, 1] = e
         return TDAStatus.OK
 
     # -- the guarantee ------------------------------------------------------------------------
