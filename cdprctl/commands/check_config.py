@@ -36,6 +36,13 @@ def summary(model: RobotModel) -> str:
             f"{c.name:>6} {c.tension_min:9.1f} {c.tension_max:9.1f} {data.length[i]:9.4f} "
             f"{k[i]:10.4g} {c.winch.max_cable_force:11.1f}"
         )
+    for g in model.grippers:
+        obj = "rigid" if math.isinf(g.object_stiffness) else f"{g.object_stiffness:g} N/m"
+        lines.append(
+            f"gripper on cable {g.name}: jaw {g.jaw_mass:g} kg, K_A {k[g.cable]:g} N/m, "
+            f"K_B {g.k_b:g} N/m, L21 {g.free_travel:g} m (object {obj}), guide "
+            f"0-{g.travel_max:g} m, friction {g.guide_friction:g} N"
+        )
     return "\n".join(lines)
 
 
