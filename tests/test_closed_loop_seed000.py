@@ -73,3 +73,15 @@ def test_switching_the_distribution_blends_instead_of_faulting(seed000):
         assert np.abs(c.tensions - before).max() > 5.0  # it did switch
         assert np.abs(a["p_true"] - seed000.home.position).max() < 2e-3
         assert Controller.BLEND_TIME == 1.0
+
+
+def test_the_same_distribution_again_changes_nothing(seed000):
+    from cdprctl.control.controller import tda_options_of
+
+    with enabled(seed000) as cl:
+        c = cl.controller
+        tda = c.tda
+        cl.command("set_tda", tda=tda_options_of(seed000))
+        cl.run(0.1)
+        assert c.tda is tda and c._old_tda is None
+        assert "unchanged" in c.events[-1][1]

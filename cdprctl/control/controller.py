@@ -580,6 +580,9 @@ class Controller:
                 self._set_state(State.READY, t, "fault reset")
             elif k == "gripper" and self.state in (State.ENABLED, State.MOVING):
                 self._gripper_command(t, cmd)
+            elif k == "set_tda" and cmd.tda is not None and cmd.tda == self.tda.options:
+                # the same options again (an operator's retry, a script): no rebuild, no blend
+                self.events.append((t, f"TDA method {cmd.tda.method.value} unchanged"))
             elif k == "set_tda" and cmd.tda is not None:
                 try:  # options are validated by whoever sends them; this is the last guard
                     new_tda = TensionDistributor(self.model, cmd.tda)
