@@ -175,18 +175,15 @@ class GripperSet:
         self.n = len(gs)
         self.cables = np.array([g.cable for g in gs], dtype=np.int64)
         self.weight = np.array([g.jaw_mass for g in gs]) * float(np.linalg.norm(model.gravity))
-        self.p_body = [np.asarray(model.attachments[g.cable], float) for g in gs]
-        self.L1_body = [np.asarray(g.jaw_offset, float) for g in gs]
-        self.guide_body = [np.asarray(g.guide_axis, float) for g in gs]
+        # platform frame, (n, 3): attachment p_j^M, jaw offset L1^M, guide k̂_M
+        self._p = np.array([model.attachments[g.cable] for g in gs], float).reshape(self.n, 3)
+        self._L1 = np.array([g.jaw_offset for g in gs], float).reshape(self.n, 3)
+        self._k = np.array([g.guide_axis for g in gs], float).reshape(self.n, 3)
         self.k_a = np.array([model.cables[g.cable].stiffness or 0.0 for g in gs])
         self.k_b = np.array([g.k_b for g in gs])
-        self.friction = np.array([g.guide_friction for g in gs])
         self.up = -np.asarray(model.gravity, float) / max(
             float(np.linalg.norm(model.gravity)), 1e-12
         )
-        self._p = np.array(self.p_body).reshape(self.n, 3)
-        self._L1 = np.array(self.L1_body).reshape(self.n, 3)
-        self._k = np.array(self.guide_body).reshape(self.n, 3)
 
     def weight_wrench(self, R: FloatArray) -> FloatArray:
         """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the

@@ -112,7 +112,7 @@ def tension_planner(
     t0 = cl.net.time
     log: dict[str, list[float]] = {
         k_: []
-        for k_ in ("t", "u_imposed", "t_desired", "t_plant", "held_def", "pos_err", "ang_err", "ok")
+        for k_ in ("t", "u_imposed", "t_desired", "t_plant", "held_def", "pos_err", "ang_err")
     }
     home = model.home
 
@@ -126,7 +126,6 @@ def tension_planner(
         log["u_imposed"].append(u)
         log["t_desired"].append(math.sqrt(2.0 * k * u))
         log["t_plant"].append(float(p.tension[cable_swept]))
-        log["ok"].append(loop.controller.tda_status.name == "OK")
         log["held_def"].append(spring_deformation(loop, cable_held))
         log["pos_err"].append(float(np.linalg.norm(p.position - home.position)))
         dR = p.R @ home.rotation.T

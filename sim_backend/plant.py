@@ -28,7 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
+from cdprctl.model.grippers import in_series
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
 
@@ -119,9 +121,10 @@ class CdprPlant:
         gs = self.model.grippers
         ng = len(gs)
         o = self.opt
+        self.g_cable = np.array([g.cable for g in gs], dtype=np.int64)
         self.gripper_of_cable = np.full(self.m, -1, dtype=np.int64)
-        for j, g in enumerate(gs):
-            self.gripper_of_cable[g.cable] = j
+        self.gripper_of_cable[self.g_cable] = np.arange(ng)
+        self._grippers = GripperSet(self.model)
         self.g_mass = np.array([g.jaw_mass for g in gs])
         # jaw at zero travel, platform frame, relative to P; the guide's unit vector
         self.g_jaw0 = np.array(
@@ -136,9 +139,11 @@ class CdprPlant:
         self.g_c_jb = o.jaw_damping_ratio * crit
         self.g_c_stop = o.jaw_damping_ratio * crit
         # the object: met at free_travel, stiffness K_B in series with its own
-        self.g_object_travel = np.array([g.free_travel for g in gs])
-        self.g_k_contact = np.array([g.contact_stiffness for g in gs])
-        self.g_c_contact = o.jaw_damping_ratio * 2.0 * np.sqrt(self.g_k_contact * self.g_mass)
+        self.g_object_travel = np.zeros(ng)
+        self.g_k_contact = np.zeros(ng)
+        self.g_c_contact = np.zeros(ng)
+        for j, g in enumerate(gs):
+            self.set_object(j, g.free_travel, g.object_stiffness)
         # state and outputs
         self.jaw_travel = np.zeros(ng)  # m along the guide from the lower end stop
         self.jaw_speed = np.zeros(ng)  # m/s
@@ -149,8 +154,7 @@ class CdprPlant:
         """Put an object in gripper ``gripper``'s way: met at ``travel`` (m, the L21 it makes),
         ``stiffness`` (N/m, in series with K_B; ``inf`` rigid, ``travel`` beyond the guide for
         none)."""
-        kb = self.model.grippers[gripper].k_b
-        k = kb if math.isinf(stiffness) else 1.0 / (1.0 / kb + 1.0 / stiffness)
+        k = in_series(self.model.grippers[gripper].k_b, stiffness)
         self.g_object_travel[gripper] = travel
         self.g_k_contact[gripper] = k
         self.g_c_contact[gripper] = (
@@ -161,12 +165,10 @@ class CdprPlant:
         """Static jaws under the cable tensions ``tensions`` (N): ``τ = K_A δ + τ_B``,
         ``τ_B = F∥ + F_c(q)``, ``q = δ − τ_B/k_jB`` (eq. (25)-(26) with a stiff jB); writes
         the unstretched lengths ``l0`` (m) of the gripper cables."""
-        up = -self.gravity / max(float(np.linalg.norm(self.gravity)), 1e-12)
-        g = float(np.linalg.norm(self.gravity))
-        for j in range(len(self.g_mass)):
-            i = int(self.model.grippers[j].cable)
+        parallel = self._grippers.parallel_load(self.R)
+        for j, i in enumerate(self.g_cable):
             ka, kjb = self.k_fixed[i], self.g_k_jb[j]
-            f_par = self.g_mass[j] * g * float(up @ (self.R @ self.g_axis[j]))
+            f_par = float(parallel[j])
             t = float(tensions[i])
             kc, L = self.g_k_contact[j], self.g_object_travel[j]
             q = (t - f_par) / ka - f_par / kjb  # no contact
@@ -222,6 +224,11 @@ class CdprPlant:
         """Geometric cable lengths (m) at the last physics step."""
         return self._scratch[5]
 
+    @property
+    def wrench_matrix(self) -> FloatArray:
+        """W (6 × m, base frame, about P) at the last physics step."""
+        return self._scratch[6]
+
     def unstretched_length(self) -> FloatArray:
         return self.l_home - self.drum_ratio * self.theta + self.drum_slip
 
@@ -270,6 +277,7 @@ class CdprPlant:
             self.tension,
             *self._scratch,
             self.gripper_of_cable,
+            self.g_cable,
             self.g_mass,
             self.g_jaw0,
             self.g_axis,
@@ -316,8 +324,7 @@ class CdprPlant:
         """Kinetic and potential energy (J) of the jaws, jB, the object and the stops."""
         e = 0.0
         x = self.jaw_positions()
-        for j in range(len(self.g_mass)):
-            i = int(self.model.grippers[j].cable)
+        for j, i in enumerate(self.g_cable):
             k = self.R @ self.g_axis[j]
             r = x[j] - self.com_pos
             vj = self.v + np.cross(self.w, r) + self.jaw_speed[j] * k
@@ -365,7 +372,7 @@ def _k_eff(k_fixed, es, k_spring, l_total):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _jaw_dynamics(
-    dt, P, R, com_pos, v, w, F, Mc, mass, Iw, g, rbT, g_of_cable, g_mass, g_jaw0, g_axis,
+    dt, P, R, com_pos, v, w, F, Mc, mass, Iw, g, rbT, g_cable, g_mass, g_jaw0, g_axis,
     g_fric, g_fric_v, g_qmax, g_kstop, g_cstop, g_L21, g_kc, g_cc, q, qd, g_tb, g_fc,
 ):  # fmt: skip  # pragma: no cover - compiled
     """Platform and jaws together (Kane's method): generalised speeds ``u = [v_COM, ω, q̇_j]``,
@@ -387,10 +394,7 @@ def _jaw_dynamics(
         for b in range(3):
             A[3 + a, 3 + b] = Iw[a, b]
     for j in range(ng):
-        i = g_of_cable.shape[0]
-        for c in range(g_of_cable.shape[0]):
-            if g_of_cable[c] == j:
-                i = c
+        i = g_cable[j]
         k = R @ g_axis[j]
         r = P + R @ g_jaw0[j] + q[j] * k - com_pos
         mj = g_mass[j]
@@ -445,19 +449,13 @@ def _jaw_dynamics(
             A[6 + j, 3 + a] += mj * rk[a]
             for b in range(3):
                 A[3 + a, 3 + b] += mj * ((rr if a == b else 0.0) - r[a] * r[b])
-        # −[r]× block: (−[r]×) x = −r × x = x × r
-        A[0, 4] += mj * r[2]
-        A[0, 5] -= mj * r[1]
-        A[1, 3] -= mj * r[2]
-        A[1, 5] += mj * r[0]
-        A[2, 3] += mj * r[1]
-        A[2, 4] -= mj * r[0]
-        A[4, 0] += mj * r[2]
-        A[5, 0] -= mj * r[1]
-        A[3, 1] -= mj * r[2]
-        A[5, 1] += mj * r[0]
-        A[3, 2] += mj * r[1]
-        A[4, 2] -= mj * r[0]
+        # the −[r]× block and its transpose: (−[r]×)[a, b] = ε_abc r_c
+        for a in range(3):
+            b, c = (a + 1) % 3, (a + 2) % 3
+            A[a, 3 + b] += mj * r[c]
+            A[a, 3 + c] -= mj * r[b]
+            A[3 + b, a] += mj * r[c]
+            A[3 + c, a] -= mj * r[b]
         A[6 + j, 6 + j] += mj
     udot = np.linalg.solve(A, Q)
     for a in range(3):
@@ -514,6 +512,7 @@ def physics_kernel(
     length,
     W,
     g_of_cable,
+    g_cable,
     g_mass,
     g_jaw0,
     g_axis,
@@ -616,7 +615,7 @@ def physics_kernel(
                 w[a] += wdot[a] * dt
         else:
             _jaw_dynamics(
-                dt, P, R, com_pos, v, w, F, rhs, mass, Iw, g, rbT, g_of_cable, g_mass,
+                dt, P, R, com_pos, v, w, F, rhs, mass, Iw, g, rbT, g_cable, g_mass,
                 g_jaw0, g_axis, g_fric, g_fric_v, g_qmax, g_kstop, g_cstop, g_L21, g_kc, g_cc,
                 q, qd, g_tb, g_fc,
             )  # fmt: skip

@@ -118,7 +118,7 @@ def test_plant_jaws_hang_in_equilibrium_with_the_paper_statics(grippers):
         assert p.jaw_travel[j] == pytest.approx(delta - p.jb_tension[j] / 1e5, abs=1e-9)
         k_a = grippers.cables[g.cable].stiffness
         assert p.tension[g.cable] == pytest.approx(k_a * delta + 10.2 * 9.8, rel=1e-6)
-    W = p._scratch[6]
+    W = p.wrench_matrix
     residual = W @ p.tension + grippers.gravity_wrench(p.R) + gs.weight_wrench(p.R)
     assert np.abs(residual).max() < 1e-6
 

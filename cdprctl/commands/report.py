@@ -115,12 +115,12 @@ def report(args: argparse.Namespace) -> int:
     grips = [h[len("grip_travel_") :] for h in head if h.startswith("grip_travel_")]
     if grips:
         fig, (ax1, ax2, ax3) = plt.subplots(3, 1, sharex=True, figsize=(9, 8))
+        code = {"open": 0, "contact": 1, "squeezing": 2}
         for gname in grips:
             ax1.plot(t, _column(head, rows, f"grip_travel_{gname}") * 1e3, label=f"gripper {gname}")
             ax1.plot(t, _column(head, rows, f"grip_target_{gname}") * 1e3, "--", lw=1)
             ax2.plot(t, _column(head, rows, f"grip_force_{gname}"), label=f"gripper {gname}")
             i = head.index(f"grip_state_{gname}")
-            code = {"open": 0, "contact": 1, "squeezing": 2}
             ax3.step(t, [code.get(r[i], np.nan) for r in rows], where="post", label=gname)
         ax1.set_ylabel("travel δ (mm), target dashed")
         ax1.legend(fontsize=8)

@@ -718,14 +718,15 @@ class Controller:
 
     def gripper_status(self) -> list[dict[str, Any]]:
         g = self.grasp
+        force, energy = g.reported_force(), g.energies()
         return [
             {
                 "cable": x.name,
                 "state": g.state[j].value,
                 "travel": float(g.travel[j]),
-                "force": float(g.force[j]) if g.state[j] is not GraspState.OPEN else 0.0,
+                "force": float(force[j]),
                 "contact_travel": float(g.contact_travel[j]),
-                "energy": float(g.energy[j]),
+                "energy": float(energy[j]),
                 "tension": float(g.tension[j]),
                 "target": float(self.grip_target[j]),
             }

@@ -64,7 +64,6 @@ class Estimator:
             else model
         )
         self.fk = ForwardKinematics(fk_model, max_iterations=8)  # warm: 1-2 are the norm
-        self._fk_all = not grip
         self.kin = KinematicsData(model)  # at the estimated pose: W, lengths for the TDA
         self.position = np.array(model.home.position, dtype=float)
         self.rotation = np.array(model.home.rotation, dtype=float)
@@ -120,7 +119,7 @@ class Estimator:
                 th += lag
                 t = t - newest
         self.lengths[:] = self.cable_lengths(th, tensions)
-        lengths = self.lengths if self._fk_all else self.lengths[self.fk_cables]
+        lengths = self.lengths[self.fk_cables] if self.model.grippers else self.lengths
         res = self.fk.solve(lengths, self.position, self.rotation)
         self.last_fk = res
         if res.status in (FKStatus.CONVERGED, FKStatus.MAX_ITERATIONS, FKStatus.INCONSISTENT):

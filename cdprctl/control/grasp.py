@@ -13,8 +13,8 @@ Per gripper cable ``j``, each cycle:
   ``F_BA = τ_j − K_A δ_j − ‖F∥_jBW‖`` (zero while the jaw is free), low-passed;
 * the state with hysteresis: open → contact above ``contact_force`` → squeezing above
   ``squeeze_force``, open again below half of ``contact_force``; the contact travel
-  ``L21 = δ − F_BA/K_B`` (eq. (43) inverted), and the actuator energy by eq. (36) open, (40)
-  closed.
+  ``L21 = δ − F_BA/K_B`` (eq. (43) inverted); the actuator energy by eq. (36) open, (40)
+  closed, on demand (telemetry), not in the cycle.
 
 The guide's friction (``F_jBA``) and the winch's static friction are inside ``F_BA``'s error:
 the thresholds must stand above them (docs/gripper.md gives the measured accuracy).
@@ -49,14 +49,7 @@ class GraspSensor:
         self.travel = np.zeros(n)  # m, δ: the jaw's travel
         self.tension = np.zeros(n)  # N, cable tension from the motor torque
         self.contact_travel = np.full(n, math.nan)  # m, L21 once in contact
-        self.energy = np.zeros(n)  # J, actuator energy, eq. (36)/(40)
         self._primed = False
-
-    def reset(self) -> None:
-        self._primed = False
-        self.force[:] = 0.0
-        self.state = [GraspState.OPEN] * self.gs.n
-        self.contact_travel[:] = math.nan
 
     def update(self, tension: FloatArray, delta: FloatArray, f_parallel: FloatArray) -> None:
         """``tension`` (N) and ``delta`` (m) of the gripper cables, ``f_parallel`` (N) the
@@ -82,12 +75,23 @@ class GraspSensor:
             elif s is GraspState.SQUEEZING and f < self.contact_force:
                 s = GraspState.CONTACT
             self.state[j] = s
-            d = float(self.travel[j])
-            if s is GraspState.OPEN:
-                self.contact_travel[j] = math.nan
-                L21 = math.inf
-            else:
-                L21 = d - max(f, 0.0) / float(gs.k_b[j])
-                self.contact_travel[j] = L21
-            p = gs.params(j, L21)
-            self.energy[j] = actuator_energy(p, d)
+            self.contact_travel[j] = (
+                math.nan
+                if s is GraspState.OPEN
+                else float(self.travel[j]) - max(f, 0.0) / float(gs.k_b[j])
+            )
+
+    def reported_force(self) -> FloatArray:
+        """N per gripper: the estimated squeeze, 0 while open (what telemetry shows)."""
+        open_ = np.array([s is GraspState.OPEN for s in self.state], dtype=bool)
+        return np.where(open_, 0.0, self.force)
+
+    def energies(self) -> FloatArray:
+        """J per gripper: the actuator energy at the sensed travel, eq. (36) open, eq. (40)
+        closed at the sensed contact travel."""
+        out = np.zeros(self.gs.n)
+        for j in range(self.gs.n):
+            L21 = float(self.contact_travel[j])
+            p = self.gs.params(j, math.inf if math.isnan(L21) else L21)
+            out[j] = actuator_energy(p, float(self.travel[j]))
+        return out

@@ -49,9 +49,16 @@ class Gripper:
     @property
     def contact_stiffness(self) -> float:
         """N/m, K_B in series with the object."""
-        if math.isinf(self.object_stiffness):
-            return self.k_b
-        return 1.0 / (1.0 / self.k_b + 1.0 / self.object_stiffness)
+        return in_series(self.k_b, self.object_stiffness)
+
+
+def in_series(k1: float, k2: float) -> float:
+    """Stiffness (N/m) of two springs in series; an infinite one is rigid."""
+    if math.isinf(k2):
+        return k1
+    if math.isinf(k1):
+        return k2
+    return 1.0 / (1.0 / k1 + 1.0 / k2)
 
 
 def read_grippers(

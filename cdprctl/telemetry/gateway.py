@@ -16,6 +16,7 @@ from cdprctl.telemetry.schema import (
     SCHEMA,
     encode,
     event_payload,
+    pose_payload,
     state_payload,
     timing_payload,
 )
@@ -117,7 +118,7 @@ def gateway_main(
             "schema": SCHEMA,
             "state": shared["state"],
             "fault": shared["fault"],
-            "pose": state_payload(snap_now, names, shared["fault"])["pose"] if snap_now else None,
+            "pose": pose_payload(snap_now) if snap_now else None,
             "config": summary,
             "commands": {"enabled": zc.commands, **counts},
         }

@@ -26,8 +26,16 @@ GRASP_STATES = [s.value for s in GraspState]
 SCHEMA = "cdprctl/1"  # bumped on any incompatible change; additions keep the version
 
 
+def _float(x: float, digits: int = 6) -> float | None:
+    return round(float(x), digits) if math.isfinite(x) else None
+
+
 def _floats(a: np.ndarray, digits: int = 6) -> list[float | None]:
-    return [round(float(x), digits) if math.isfinite(x) else None for x in a]
+    return [_float(x, digits) for x in a]
+
+
+def pose_payload(snap: dict[str, np.ndarray]) -> dict[str, Any]:
+    return {"position": _floats(snap["position"]), "rpy": _floats(snap["rpy"])}
 
 
 def state_payload(
@@ -43,10 +51,10 @@ def state_payload(
             "state": GRASP_STATES[int(snap["grip_state"][j])]
             if math.isfinite(snap["grip_state"][j])
             else None,
-            "travel": _floats(snap["grip_travel"][j : j + 1], 5)[0],  # m
-            "force": _floats(snap["grip_force"][j : j + 1], 3)[0],  # N
-            "energy": _floats(snap["grip_energy"][j : j + 1], 4)[0],  # J
-            "target": _floats(snap["grip_target"][j : j + 1], 5)[0],  # m
+            "travel": _float(snap["grip_travel"][j], 5),  # m
+            "force": _float(snap["grip_force"][j], 3),  # N
+            "energy": _float(snap["grip_energy"][j], 4),  # J
+            "target": _float(snap["grip_target"][j], 5),  # m
         }
         for j, name in enumerate(gripper_names)
     ]
@@ -56,7 +64,7 @@ def state_payload(
         "cycle": int(snap["cycle"][0]),
         "state": STATES[int(snap["state"][0])],
         "fault": fault,
-        "pose": {"position": _floats(snap["position"]), "rpy": _floats(snap["rpy"])},
+        "pose": pose_payload(snap),
         "twist": {"velocity": _floats(snap["velocity"]), "omega": _floats(snap["omega"])},
         "reference": _floats(snap["reference"]),
         "target": _floats(snap["target"]),

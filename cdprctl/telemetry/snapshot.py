@@ -146,10 +146,8 @@ def controller_values(controller: Any, stats: Any, true_position: Any = None) ->
         g = c.grasp
         out["grip_state"] = [states.index(s) for s in g.state]
         out["grip_travel"] = g.travel
-        out["grip_force"] = [
-            f if s is not GraspState.OPEN else 0.0 for f, s in zip(g.force, g.state, strict=True)
-        ]
-        out["grip_energy"] = g.energy
+        out["grip_force"] = g.reported_force()
+        out["grip_energy"] = g.energies()
         out["grip_target"] = c.grip_target
     return out
 
