@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
@@ -126,3 +127,33 @@ def log_so3(R: FloatArray) -> FloatArray:
         return angle * axis
     f = angle / (2.0 * math.sin(angle))
     return np.array([f * wx, f * wy, f * wz])
+
+
+@njit(cache=True)
+def log_so3_kernel(R, out):  # pragma: no cover - compiled
+    """Rotation vector of ``R`` (as :func:`log_so3`), compiled, into ``out[0:3]``."""
+    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
+    c = max(-1.0, min(1.0, c))
+    angle = math.acos(c)
+    wx = R[2, 1] - R[1, 2]
+    wy = R[0, 2] - R[2, 0]
+    wz = R[1, 0] - R[0, 1]
+    if angle < 1e-8:
+        out[0] = 0.5 * wx
+        out[1] = 0.5 * wy
+        out[2] = 0.5 * wz
+    elif math.pi - angle < 1e-6:  # near π: the axis from the symmetric part
+        k = 0
+        for i in range(1, 3):
+            if R[i, i] > R[k, k]:
+                k = i
+        mkk = max((R[k, k] + 1.0) / 2.0, 1e-300)
+        s = math.sqrt(mkk)
+        for i in range(3):
+            m_ik = (R[i, k] + R[k, i]) / 4.0 + (0.5 if i == k else 0.0)
+            out[i] = angle * m_ik / s
+    else:
+        f = angle / (2.0 * math.sin(angle))
+        out[0] = f * wx
+        out[1] = f * wy
+        out[2] = f * wz

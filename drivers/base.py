@@ -25,6 +25,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numba import njit
 
 from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
 
@@ -292,19 +293,12 @@ class WinchDriver(ABC):
             return
         now = self.clock() if t is None else t
         cmd = self._command
-        for i in range(self.m):
-            v = float(torques[i])
-            if not math.isfinite(v):
-                self.stats.rejected_commands += 1
-                v = float(self._last_command[i])
-            lim = float(self.torque_limit[i])
-            if v > lim:
-                v = lim
-                self.stats.clamped_commands += 1
-            elif v < -lim:
-                v = -lim
-                self.stats.clamped_commands += 1
-            cmd[i] = v
+        torques = np.asarray(torques, dtype=float)
+        if torques.shape != cmd.shape:  # not one torque per winch: none is trusted
+            torques = np.full(self.m, math.nan)
+        rejected, clamped = clamp_kernel(torques, self._last_command, self.torque_limit, cmd)
+        self.stats.rejected_commands += rejected
+        self.stats.clamped_commands += clamped
         if self.lifecycle is not Lifecycle.ACTIVE and not force and not self._activating:
             cmd[:] = 0.0
         self._last_command[:] = cmd
@@ -361,6 +355,27 @@ class WinchDriver(ABC):
     @abstractmethod
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
         """Encode and send the torques (N·m); return an error, never raise."""
+
+
+@njit(cache=True)
+def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
+    """``out`` ← ``torques`` (N·m) within ±``limit``, a non-finite one replaced by ``last``
+    (the last valid command); returns the counts of replaced and clamped commands."""
+    rejected = 0
+    clamped = 0
+    for i in range(len(out)):
+        v = torques[i]
+        if not np.isfinite(v):
+            rejected += 1
+            v = last[i]
+        if v > limit[i]:
+            v = limit[i]
+            clamped += 1
+        elif v < -limit[i]:
+            v = -limit[i]
+            clamped += 1
+        out[i] = v
+    return rejected, clamped
 
 
 _REGISTRY: dict[str, type[WinchDriver]] = {}

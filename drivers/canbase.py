@@ -11,6 +11,7 @@ from typing import Any
 
 import can
 import numpy as np
+from numba import njit
 
 from drivers.base import WinchDriver
 from drivers.buses import TrafficLog, open_bus
@@ -115,24 +116,45 @@ class CanWinchDriver(WinchDriver):
                 yield key[0], key[1], msg.data
 
     def _read_internal(self, t: float) -> DriverError | None:
-        """Drain the feedback, then per cable its state (``_cable_state``) and liveness; the
-        first error, a cable's drive fault before its timeout."""
+        """Drain the feedback, then every cable's state and liveness (compiled, once per
+        cycle); when one is wrong, the first error in cable order, a cable's drive fault
+        before its timeout (``_cable_fault``, ``_liveness_error``)."""
         self._fresh[:] = False
         self._drain(t)
         elapsed = self._reads_elapsed(t)
-        err: DriverError | None = None
+        fault = self._update_states()
+        missed, late = liveness_kernel(
+            self._fresh,
+            self._fb_stamp,
+            self._missed,
+            self._last_hb,
+            t,
+            elapsed,
+            self._started,
+            self.config.missed_feedback_limit,
+            self.config.heartbeat_timeout,
+            self.states.feedback_age,
+        )
+        self.stats.missed_feedback += missed
+        if not (fault or late):
+            return None
         for c in range(self.m):
-            fault = self._cable_state(c)
-            live = self._liveness(c, t, elapsed)
-            err = err or fault or live
-        return err
+            err = self._cable_fault(c) or self._liveness_error(c, t)
+            if err is not None:
+                return err
+        return None
 
     def _drain(self, t: float) -> None:
         """Decode every waiting frame (``_frames``) into the protocol's state."""
         raise NotImplementedError
 
-    def _cable_state(self, c: int) -> DriverError | None:
-        """``self.states`` of cable ``c`` from the decoded feedback; its drive fault, if any."""
+    def _update_states(self) -> bool:
+        """``self.states`` of every cable from the decoded feedback; True if a drive reports a
+        fault. The default asks ``_cable_fault`` cable by cable."""
+        return any([self._cable_fault(c) is not None for c in range(self.m)])
+
+    def _cable_fault(self, c: int) -> DriverError | None:
+        """Cable ``c``'s drive fault, if any (sets its state and fault code)."""
         raise NotImplementedError
 
     def _reads_elapsed(self, t: float) -> bool:
@@ -144,15 +166,9 @@ class CanWinchDriver(WinchDriver):
     def _where(self, c: int) -> str:
         return f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
 
-    def _liveness(self, c: int, t: float, elapsed: bool) -> DriverError | None:
-        """Feedback age, missed-cycle count and heartbeat of cable ``c``: the timeout error
-        when a limit is passed (``missed_feedback_limit`` cycles, ``heartbeat_timeout`` s)."""
-        if self._fresh[c]:
-            self._missed[c] = 0
-        elif elapsed and self._started and math.isfinite(self._fb_stamp[c]):
-            self._missed[c] += 1
-            self.stats.missed_feedback += 1
-        self.states.feedback_age[c] = t - self._fb_stamp[c]
+    def _liveness_error(self, c: int, t: float) -> DriverError | None:
+        """The timeout error of cable ``c`` when a limit is passed (``missed_feedback_limit``
+        cycles without feedback, ``heartbeat_timeout`` s without heartbeat)."""
         if self._missed[c] > self.config.missed_feedback_limit:
             why = (
                 f" (the last {int(self._implausible[c])} were position jumps no motor can "
@@ -176,3 +192,27 @@ class CanWinchDriver(WinchDriver):
                 c,
             )
         return None
+
+
+@njit(cache=True)
+def liveness_kernel(
+    fresh, fb_stamp, missed, last_hb, t, elapsed, started, missed_limit, hb_timeout, age
+):  # pragma: no cover - compiled
+    """Per cable: the count of consecutive reads without feedback (a read at the same instant
+    as the last misses nothing; silence counts once the drives were started and have spoken),
+    the feedback age (s). Returns the cable-reads missed now and whether a cable passed
+    ``missed_limit`` or went ``hb_timeout`` s without heartbeat."""
+    n_missed = 0
+    late = False
+    for c in range(len(fresh)):
+        if fresh[c]:
+            missed[c] = 0
+        elif elapsed and started and np.isfinite(fb_stamp[c]):
+            missed[c] += 1
+            n_missed += 1
+        age[c] = t - fb_stamp[c]
+        if missed[c] > missed_limit:
+            late = True
+        if started and np.isfinite(last_hb[c]) and t - last_hb[c] > hb_timeout:
+            late = True
+    return n_missed, late

@@ -23,11 +23,12 @@ import dataclasses
 import math
 
 import numpy as np
+from numba import njit
 
-from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics, fk_kernel
+from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, log_so3
+from cdprctl.rotation import FloatArray, log_so3_kernel
 
 
 class Estimator:
@@ -71,10 +72,17 @@ class Estimator:
         self.omega = np.zeros(3)  # rad/s, base frame
         self.last_fk: FKResult | None = None
         self.lengths = np.zeros(model.n_cables)
-        self._stamp = -math.inf
-        self._alpha_fc = 2.0 * math.pi * model.control.velocity_filter
+        # [s of the last sample, 2π f_c (rad/s) of the velocity filter]
+        self._clock = np.array([-math.inf, 2.0 * math.pi * model.control.velocity_filter])
         self._theta = np.zeros(model.n_cables)  # rad, the angles brought to one instant
-        self._lag = np.zeros(model.n_cables)  # s, then rad: each cable's shift to that instant
+        self._fk_lengths = np.zeros(len(self.fk_cables))  # m, the lengths FK works from
+        self._fk_res = np.zeros(len(self.fk_cables))  # m, FK's length residuals
+        self._fk_p = np.zeros(3)
+        self._fk_R = np.eye(3)
+        self._info = np.zeros(3)  # FK: RMS residual (m), iterations, FKStatus
+        self.k = self.stiffness(self.l_home)  # N/m, each cable's at the estimated pose
+        # the FK result of the last update (its arrays are the estimator's: copy to keep)
+        self._result = FKResult(self._fk_p, self._fk_R, 0.0, 0, FKStatus.CONVERGED)
 
     def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
         """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
@@ -93,7 +101,7 @@ class Estimator:
         self.rotation[:] = rotation
         self.velocity[:] = 0.0
         self.omega[:] = 0.0
-        self._stamp = -math.inf
+        self._clock[0] = -math.inf
 
     def update(
         self,
@@ -105,32 +113,220 @@ class Estimator:
     ) -> FKResult:
         """New pose and twist from motor angles ``theta`` (rad) read at time ``t`` (s), the
         tensions (N) the cables carry, and optionally the motor velocities ``theta_rate``
-        (rad/s) and the age of each drive's feedback ``age`` (s). Never raises."""
-        th = self._theta
-        th[:] = theta
-        if theta_rate is not None and age is not None and np.all(np.isfinite(theta_rate)):
-            newest = float(age.min())
-            if math.isfinite(newest):
-                # a drive never heard from has an infinite age but a zero velocity: no shift
-                lag = self._lag
-                np.subtract(age, newest, out=lag)
-                np.minimum(lag, 0.1, out=lag)
-                lag *= theta_rate
-                th += lag
-                t = t - newest
-        self.lengths[:] = self.cable_lengths(th, tensions)
-        lengths = self.lengths[self.fk_cables] if self.model.grippers else self.lengths
-        res = self.fk.solve(lengths, self.position, self.rotation)
+        (rad/s) and the age of each drive's feedback ``age`` (s). Never raises. One compiled
+        call (``estimate_kernel``): in numpy the ~40 small operations cost ~60 µs a cycle."""
+        fk, d, k = self.fk, self.fk.data, self.kin
+        lag = theta_rate is not None and age is not None
+        estimate_kernel(
+            t,
+            theta,
+            tensions,
+            theta_rate if lag else theta,
+            age if lag else theta,
+            lag,
+            self.l_home,
+            self.drum_ratio,
+            self.inv_k_fixed,
+            self.inv_es,
+            self.l_winch,
+            self.inv_spring,
+            self.fk_cables,
+            self._theta,
+            self.lengths,
+            self._fk_lengths,
+            d.anchors,
+            d.attachments,
+            d.pulley_radius,
+            d.pulley_axis,
+            fk.tolerance,
+            fk.step_tolerance,
+            fk.max_iterations,
+            fk.max_residual,
+            d.rbT,
+            d.exitT,
+            d.cable_vectorsT,
+            d.free_length,
+            d.wrap_angle,
+            d.length,
+            d.W,
+            self._fk_res,
+            self._fk_p,
+            self._fk_R,
+            self._info,
+            k.anchors,
+            k.attachments,
+            k.pulley_radius,
+            k.pulley_axis,
+            k.rbT,
+            k.exitT,
+            k.cable_vectorsT,
+            k.free_length,
+            k.wrap_angle,
+            k.length,
+            k.W,
+            self.position,
+            self.rotation,
+            self.velocity,
+            self.omega,
+            self._clock,
+            self.k,
+        )
+        res = self._result
+        res.residual, res.iterations = float(self._info[0]), int(self._info[1])
+        res.status = FKStatus(int(self._info[2]))
         self.last_fk = res
-        if res.status in (FKStatus.CONVERGED, FKStatus.MAX_ITERATIONS, FKStatus.INCONSISTENT):
-            dt = t - self._stamp
-            if 0.0 < dt < 0.5:
-                a = 1.0 - math.exp(-self._alpha_fc * dt)
-                self.velocity += a * ((res.position - self.position) / dt - self.velocity)
-                self.omega += a * (log_so3(res.rotation @ self.rotation.T) / dt - self.omega)
-            if dt > 0.0:
-                self._stamp = t
-            self.position[:] = res.position
-            self.rotation[:] = res.rotation
-            inverse_kinematics(self.model, self.kin, self.position, self.rotation)
         return res
+
+
+# FKStatus codes for the compiled kernel
+CONVERGED, MAX_ITERATIONS, INCONSISTENT = (
+    int(FKStatus.CONVERGED),
+    int(FKStatus.MAX_ITERATIONS),
+    int(FKStatus.INCONSISTENT),
+)
+
+
+@njit(cache=True)
+def estimate_kernel(
+    t,
+    theta,
+    tensions,
+    rate,
+    age,
+    lag,
+    l_home,
+    drum_ratio,
+    inv_k_fixed,
+    inv_es,
+    l_winch,
+    inv_spring,
+    fk_cables,
+    th,
+    lengths,
+    fk_lengths,
+    f_anchors,
+    f_attach,
+    f_pulley_r,
+    f_pulley_axis,
+    tol,
+    step_tol,
+    max_iter,
+    max_residual,
+    f_rbT,
+    f_exitT,
+    f_vT,
+    f_free,
+    f_wrap,
+    f_length,
+    f_W,
+    f_res,
+    p,
+    R,
+    info,
+    anchors,
+    attach,
+    pulley_r,
+    pulley_axis,
+    rbT,
+    exitT,
+    vT,
+    free_len,
+    wrap,
+    length,
+    W,
+    position,
+    rotation,
+    velocity,
+    omega,
+    clock,
+    k,
+):  # pragma: no cover - compiled
+    """``Estimator.update`` (see the module docstring for the steps): angles brought to the
+    newest sample's instant when ``lag``, lengths (``cable_lengths``), the forward kinematics
+    of the ``fk_cables`` warm-started from ``position``/``rotation`` (``fk_kernel``, into
+    ``p``, ``R`` and ``info`` = [RMS residual, iterations, FKStatus]), the filtered twist and
+    the inverse kinematics at the new pose and there the cable stiffness ``k`` (N/m, as
+    ``Estimator.stiffness``). ``clock`` = [last sample instant (s), 2π f_c]."""
+    m = theta.shape[0]
+    shift = 0.0
+    for i in range(m):
+        th[i] = theta[i]
+    if lag:
+        newest = math.inf
+        finite_rate = True
+        for i in range(m):
+            newest = min(newest, age[i])
+            finite_rate = finite_rate and math.isfinite(rate[i])
+        if finite_rate and math.isfinite(newest):
+            # a drive never heard from has an infinite age but a zero velocity: no shift
+            for i in range(m):
+                th[i] += min(age[i] - newest, 0.1) * rate[i]
+            shift = newest
+    t = t - shift
+    for i in range(m):
+        l0 = l_home[i] - drum_ratio[i] * th[i]
+        lengths[i] = l0 + tensions[i] * (
+            inv_k_fixed[i] + inv_es[i] * (l0 + l_winch[i]) + inv_spring[i]
+        )
+    for j in range(fk_cables.shape[0]):
+        fk_lengths[j] = lengths[fk_cables[j]]
+    p[:] = position
+    R[:, :] = rotation
+    fk_kernel(
+        f_anchors,
+        f_attach,
+        f_pulley_r,
+        f_pulley_axis,
+        fk_lengths,
+        p,
+        R,
+        tol,
+        step_tol,
+        max_iter,
+        f_rbT,
+        f_exitT,
+        f_vT,
+        f_free,
+        f_wrap,
+        f_length,
+        f_W,
+        f_res,
+        info,
+    )
+    status = int(info[2])
+    if status == CONVERGED and info[0] > max_residual:
+        status = INCONSISTENT
+        info[2] = INCONSISTENT
+    if status != CONVERGED and status != MAX_ITERATIONS and status != INCONSISTENT:
+        return
+    dt = t - clock[0]
+    if 0.0 < dt < 0.5:
+        a = 1.0 - math.exp(-clock[1] * dt)
+        for j in range(3):
+            velocity[j] += a * ((p[j] - position[j]) / dt - velocity[j])
+        dR = R @ rotation.T
+        w = np.empty(3)
+        log_so3_kernel(dR, w)
+        for j in range(3):
+            omega[j] += a * (w[j] / dt - omega[j])
+    if dt > 0.0:
+        clock[0] = t
+    position[:] = p
+    rotation[:, :] = R
+    ik_kernel(
+        anchors,
+        attach,
+        pulley_r,
+        pulley_axis,
+        position,
+        rotation,
+        rbT,
+        exitT,
+        vT,
+        free_len,
+        wrap,
+        length,
+        W,
+    )
+    for i in range(m):
+        k[i] = 1.0 / (inv_k_fixed[i] + inv_es[i] * (length[i] + l_winch[i]) + inv_spring[i])

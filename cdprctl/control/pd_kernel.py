@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from cdprctl.rotation import log_so3_kernel
+
 
 @njit(cache=True)
 def _exp_so3(x, y, z, out):  # pragma: no cover - compiled
@@ -33,36 +35,6 @@ def _exp_so3(x, y, z, out):  # pragma: no cover - compiled
     out[2, 0] = -a * y + b * x * z
     out[2, 1] = a * x + b * y * z
     out[2, 2] = 1.0 + b * (z * z - angle2)
-
-
-@njit(cache=True)
-def _log_so3(R, out):  # pragma: no cover - compiled
-    """Rotation vector of ``R`` (as ``cdprctl.rotation.log_so3``) into ``out[0:3]``."""
-    c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
-    c = max(-1.0, min(1.0, c))
-    angle = math.acos(c)
-    wx = R[2, 1] - R[1, 2]
-    wy = R[0, 2] - R[2, 0]
-    wz = R[1, 0] - R[0, 1]
-    if angle < 1e-8:
-        out[0] = 0.5 * wx
-        out[1] = 0.5 * wy
-        out[2] = 0.5 * wz
-    elif math.pi - angle < 1e-6:  # near π: the axis from the symmetric part
-        k = 0
-        for i in range(1, 3):
-            if R[i, i] > R[k, k]:
-                k = i
-        mkk = max((R[k, k] + 1.0) / 2.0, 1e-300)
-        s = math.sqrt(mkk)
-        for i in range(3):
-            m_ik = (R[i, k] + R[k, i]) / 4.0 + (0.5 if i == k else 0.0)
-            out[i] = angle * m_ik / s
-    else:
-        f = angle / (2.0 * math.sin(angle))
-        out[0] = f * wx
-        out[1] = f * wy
-        out[2] = f * wz
 
 
 @njit(cache=True)
@@ -101,7 +73,7 @@ def pd_wrench_kernel(
             E[i, j] = Rd[i, 0] * R[j, 0] + Rd[i, 1] * R[j, 1] + Rd[i, 2] * R[j, 2]
     for i in range(3):
         err[i] = ref_x[i] - p[i]
-    _log_so3(E, err[3:])
+    log_so3_kernel(E, err[3:])
     if integrate:
         for i in range(6):
             lim = integral_limit[i]

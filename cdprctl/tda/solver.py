@@ -19,6 +19,7 @@ from numba import njit
 
 from cdprctl.kinematics import KinematicsData
 from cdprctl.rotation import FloatArray
+from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
 from cdprctl.tda.energy import cable_energies, impose, minimum_energy
 from cdprctl.tda.nullspace import NullSpace
@@ -28,6 +29,12 @@ from cdprctl.tda.types import TDAMethod, TDAOptions, TDAOutput, TDAStatus
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
 
+_PLANAR_CODE = {
+    TDAMethod.BARYCENTER: planar.BARYCENTER,
+    TDAMethod.MIN_2NORM: planar.MIN_2NORM,
+    TDAMethod.MIN_1NORM: planar.MIN_1NORM,
+    TDAMethod.SOTDA: planar.SOTDA,
+}
 BOUND_TOLERANCE = 1e-6  # N: round-off accepted on a bound, then clipped onto it
 
 
@@ -52,6 +59,10 @@ class TensionDistributor:
         self._no_free = np.zeros((self.m, 0))
         self._verts_rate = np.zeros((2 * self.m + 8, 2))
         self._verts_tmp = np.zeros((2 * self.m + 8, 2))
+        self._planar_info = np.zeros(6)
+        self._planar_method = _PLANAR_CODE.get(self.options.method, planar.BARYCENTER)
+        self._ones = np.ones(self.m)
+        self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
         d = np.asarray(self.options.direction, dtype=float)
         self._direction = d / np.linalg.norm(d)
         self._delta_wrench = (
@@ -135,6 +146,15 @@ class TensionDistributor:
         t_prev: FloatArray | None,
     ) -> TDAStatus:
         out, ns, opt = self.out, self.ns, self.options
+        method = opt.method
+        if method is not TDAMethod.SOTDA:
+            return self._planar(lo, hi, k, kin, t_prev)
+        if k is None or kin is None:
+            out.message = "sotda needs the cable stiffness k and the kinematics"
+            return TDAStatus.DEGENERATE
+        if opt.sotda_variant != "grid":
+            return self._planar(lo, hi, k, kin, t_prev)
+        # the grid variant (the paper's meshgrid over the polygon): candidates in Python
         N, t0 = ns.N, ns.t0
         verts = self._verts
         nv = pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, self._verts_tmp)
@@ -143,64 +163,90 @@ class TensionDistributor:
         out.polygon = verts[:nv]
         area, bx, by = pg.area_centroid_kernel(verts, nv)
         out.area, out.barycenter = area, (bx, by)
-        method = opt.method
-        if method is TDAMethod.BARYCENTER:
-            x, y = bx, by
-        elif method is TDAMethod.MIN_2NORM:
-            # ‖t‖² = ‖t0‖² + ‖λ‖² (orthonormal N, t0 ⊥ null(W)): the point nearest λ = 0
-            x, y = pg.min_quadratic_kernel(verts, nv, 1.0, 0.0, 1.0, 0.0, 0.0)
-        elif method is TDAMethod.MIN_1NORM:
-            c = N.sum(axis=0)  # Σ t_i = Σ t0_i + (1ᵀN) λ, tensions being positive
-            j = int(np.argmin(verts[:nv] @ c))
-            x, y = float(verts[j, 0]), float(verts[j, 1])
-        else:  # SOTDA
-            if k is None or kin is None:
-                out.message = "sotda needs the cable stiffness k and the kinematics"
-                return TDAStatus.DEGENERATE
-            sm = SotdaModel(kin, k, t0, N)
-            if opt.sotda_variant == "grid":
-                cand = grid_candidates(verts[:nv], opt.grid_points)
-            else:
-                cand = verts[:nv]
-            best, _ = sotda_point(sm, cand, self._delta_wrench, self._direction)
-            sx, sy = float(cand[best, 0]), float(cand[best, 1])
-            nu = opt.nu
-            x, y = bx + nu * (sx - bx), by + nu * (sy - by)  # intermediate solution (Fig. 2)
-            self._lam1[0, 0], self._lam1[0, 1] = x, y
-            dX = sm.displacements(self._lam1, self._delta_wrench)[0]
-            out.sotda_displacement = float(dX[:3] @ self._direction)
+        sm = SotdaModel(kin, k, t0, N)
+        cand = grid_candidates(verts[:nv], opt.grid_points)
+        best, _ = sotda_point(sm, cand, self._delta_wrench, self._direction)
+        sx, sy = float(cand[best, 0]), float(cand[best, 1])
+        nu = opt.nu
+        x, y = bx + nu * (sx - bx), by + nu * (sy - by)  # intermediate solution (Fig. 2)
+        self._lam1[0, 0], self._lam1[0, 1] = x, y
+        dX = sm.displacements(self._lam1, self._delta_wrench)[0]
+        out.sotda_displacement = float(dX[:3] @ self._direction)
         if t_prev is not None and opt.max_tension_rate is not None:
-            x, y = self._rate_limit_2d(x, y, lo, hi, t_prev)
+            x, y, flag = planar.rate_limit_kernel(
+                x,
+                y,
+                N,
+                t0,
+                lo,
+                hi,
+                t_prev,
+                opt.max_tension_rate * opt.period,
+                self._verts_rate,
+                self._verts_tmp,
+            )
+            self._rate_flag(flag)
         out.lam[0], out.lam[1] = x, y
         np.dot(N, out.lam, out=out.tensions)
         out.tensions += t0
         return TDAStatus.OK
 
-    def _rate_limit_2d(
-        self, x: float, y: float, lo: FloatArray, hi: FloatArray, t_prev: FloatArray
-    ) -> tuple[float, float]:
-        """Nearest point to ``(x, y)`` whose tensions stay within ``max_tension_rate·period``
-        of ``t_prev``: the polygon with bounds tightened around ``t_prev``. Unchanged when the
-        wrench cannot be met within the rate (equilibrium first)."""
-        step = (self.options.max_tension_rate or 0.0) * self.options.period
-        lo2 = np.maximum(lo, t_prev - step)
-        hi2 = np.minimum(hi, t_prev + step)
-        N, t0 = self.ns.N, self.ns.t0
-        self._lam2[0], self._lam2[1] = x, y
-        tx = t0 + N @ self._lam2
-        if np.all(tx >= lo2 - 1e-9) and np.all(tx <= hi2 + 1e-9):
-            return x, y
-        verts = self._verts_rate
-        nv = (
-            pg.polygon_kernel(N, t0, lo2, hi2, 1e-9, verts, self._verts_tmp)
-            if np.all(lo2 <= hi2)
-            else 0
+    def _planar(
+        self,
+        lo: FloatArray,
+        hi: FloatArray,
+        k: FloatArray | None,
+        kin: KinematicsData | None,
+        t_prev: FloatArray | None,
+    ) -> TDAStatus:
+        """``_polygon_method`` in one compiled call (``planar.planar_kernel``)."""
+        out, ns, opt = self.out, self.ns, self.options
+        info = self._planar_info
+        kd = kin if kin is not None else self._no_kin
+        rate = t_prev is not None and opt.max_tension_rate is not None
+        ok = planar.planar_kernel(
+            self._planar_method,
+            ns.N,
+            ns.t0,
+            lo,
+            hi,
+            self._verts,
+            self._verts_rate,
+            self._verts_tmp,
+            k if k is not None else self._ones,
+            kd.uT,
+            kd.W,
+            kd.rbT,
+            kd.free_length,
+            self._delta_wrench,
+            self._direction,
+            opt.nu,
+            t_prev if rate else lo,
+            (opt.max_tension_rate or 0.0) * opt.period if rate else math.inf,
+            out.lam,
+            out.tensions,
+            info,
         )
-        if nv == 0:
+        if not ok:
+            return self._least_violating(lo, hi)
+        out.polygon = self._verts[: int(info[planar.NV])]
+        out.area, out.barycenter = (
+            float(info[planar.AREA]),
+            (
+                float(info[planar.BX]),
+                float(info[planar.BY]),
+            ),
+        )
+        out.sotda_displacement = float(info[planar.SOTDA_DP])
+        self._rate_flag(int(info[planar.RATE_FLAG]))
+        return TDAStatus.OK
+
+    def _rate_flag(self, flag: int) -> None:
+        """What ``planar.rate_limit_kernel`` did: 1 moved the point, 2 could not."""
+        if flag == 1:
+            self.out.rate_limited = True
+        elif flag == 2:
             self.out.message = "tension rate limit cannot hold the wrench: not applied"
-            return x, y
-        self.out.rate_limited = True
-        return pg.min_quadratic_kernel(verts, nv, 1.0, 0.0, 1.0, -x, -y)
 
     def _least_violating(self, lo: FloatArray, hi: FloatArray) -> TDAStatus:
         out, ns = self.out, self.ns

@@ -17,6 +17,7 @@ import numpy as np
 
 from drivers.base import DriveState, register_driver
 from drivers.canbase import CanWinchDriver
+from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
 from drivers.errors import (
     DriveFaultError,
@@ -69,11 +70,16 @@ class Cia402Driver(CanWinchDriver):
         self.rated_torque = cfg.rated_torque  # N·m per 1000 per-mille
         self.rad_per_count = 2.0 * math.pi / self.encoder_cpr
         # raw feedback
-        self.power_state = [p.PowerState.NOT_READY_TO_SWITCH_ON] * m
+        self._ps = np.full(m, int(p.PowerState.NOT_READY_TO_SWITCH_ON), dtype=np.int64)
         self._counts = np.zeros(m, dtype=np.int64)  # unwrapped multi-turn counts
-        self._raw_last = [None] * m  # last 32-bit position, for unwrapping
-        self._prev_pos = np.zeros(m)
-        self._prev_stamp = np.full(m, -math.inf)
+        # per cable: last 32-bit position (for unwrapping), 1 once there is one, implausible
+        # frames in a row
+        self._raw = np.zeros((m, 3), dtype=np.int64)
+        self._implausible = self._raw[:, 2]  # a view: what the liveness error reports
+        self._prev = np.full((m, 2), -math.inf)  # last position (rad) and its instant (s)
+        self._tpdo1 = np.zeros((4 * m, 4), dtype=np.int64)  # the cycle's TPDO1s, decoded
+        self._rpdo_fields = np.zeros((m, 2), dtype=np.int64)  # controlword, torque per-mille
+        self._generic = np.array([int(_GENERIC_STATE[s]) for s in sorted(p.PowerState)])
         self._nmt_state = np.full(m, -1, dtype=np.int64)
         self._emcy = np.zeros(m, dtype=np.int64)
         self._sdo_reply: dict[int, bytes] = {}
@@ -81,6 +87,7 @@ class Cia402Driver(CanWinchDriver):
         self._reset_request = 0  # cycles left sending the fault-reset edge
         self._last_sync = -math.inf
         self._last_hb_sent = -math.inf
+        self._bus_of_list = [int(b) for b in self.bus_of]
 
     # -- hooks: set-up ------------------------------------------------------------------------
     def _nmt_start_all(self) -> None:
@@ -174,34 +181,31 @@ class Cia402Driver(CanWinchDriver):
         self._reset_request = 4  # a few cycles of 0x00 then 0x80: a clean rising edge
 
     # -- hooks: the cyclic path ---------------------------------------------------------------
+    @property
+    def power_state(self) -> list[p.PowerState]:
+        """Each drive's CiA 402 power state, from its last accepted statusword."""
+        return [p.PowerState(int(x)) for x in self._ps]
+
     def _drain(self, t: float) -> None:
-        """Decode every frame waiting on every bus (``recv(0)``: never blocks)."""
-        tp1, tp2 = p.TPDO1_STRUCT, p.TPDO2_STRUCT
+        """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
+        applied together, in their order of arrival (``cyclic.tpdo1_kernel``)."""
+        tp1, tp2 = p.TPDO1_STRUCT.unpack, p.TPDO2_STRUCT.unpack
+        rows, n = self._tpdo1, 0
+        pdo_velocity = self.config.velocity_source == "pdo"
         for kind, c, data in self._frames():
             if kind == 1 and len(data) == 8:
-                sw, tq, pos = tp1.unpack(data)
-                last = self._raw_last[c]
-                stamp = self._last_sync if math.isfinite(self._last_sync) else t
-                # 32-bit wrap-around: the signed difference
-                step = 0 if last is None else ((pos - last + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-                if last is not None and not self._plausible(c, step * self.rad_per_count[c], stamp):
-                    continue  # a corrupted frame: dropped whole, like a lost one
-                self.power_state[c] = p.decode_statusword(sw)
-                self.states.torque[c] = tq * self.rated_torque / 1000.0
-                if last is None:
-                    self._counts[c] = pos
-                else:
-                    self._counts[c] += step
-                self._raw_last[c] = pos
-                self._fresh[c] = True
-                self._fb_stamp[c] = stamp
+                if n == len(rows):  # more than 4 per drive since the last read: apply them
+                    self._apply_tpdo1(n, t)
+                    n = 0
+                row = rows[n]
+                row[0] = c
+                row[1], row[2], row[3] = tp1(data)
+                n += 1
             elif kind == 2 and len(data) == 4:
-                (vel,) = tp2.unpack(data)
-                if self.config.velocity_source == "pdo":
-                    self.states.velocity[c] = vel * self.rad_per_count[c]
+                if pdo_velocity:
+                    self.states.velocity[c] = tp2(data)[0] * self.rad_per_count[c]
             elif kind == 3 and len(data) == 8:
-                code = p.EMCY_STRUCT.unpack(data)[0]
-                self._emcy[c] = code
+                self._emcy[c] = p.EMCY_STRUCT.unpack(data)[0]
             elif kind == 4 and len(data) >= 1:
                 self._last_hb[c] = t
                 self._nmt_state[c] = data[0]
@@ -209,23 +213,52 @@ class Cia402Driver(CanWinchDriver):
                 self._sdo_reply[c] = bytes(data)
             else:
                 self.stats.frames_ignored += 1
+        if n:
+            self._apply_tpdo1(n, t)
 
-    def _cable_state(self, c: int) -> DriverError | None:
+    def _apply_tpdo1(self, n: int, t: float) -> None:
+        stamp = self._last_sync if math.isfinite(self._last_sync) else t
+        dropped = cyclic.tpdo1_kernel(
+            n,
+            self._tpdo1,
+            stamp,
+            self.period,
+            self._max_motor_speed,
+            self.rad_per_count,
+            self.rated_torque,
+            self._raw,
+            cyclic.POWER_STATE_OF_SW7,
+            self._counts,
+            self._ps,
+            self.states.torque,
+            self._fresh,
+            self._fb_stamp,
+        )
+        self.stats.implausible_frames += dropped
+
+    def _update_states(self) -> bool:
         st = self.states
-        if self._fresh[c]:
-            pos = self._counts[c] * self.rad_per_count[c]
-            stamp = self._fb_stamp[c]
-            if self.config.velocity_source == "derived" and math.isfinite(self._prev_stamp[c]):
-                dt = stamp - self._prev_stamp[c]
-                if dt > 0:
-                    st.velocity[c] = (pos - self._prev_pos[c]) / dt
-            self._prev_pos[c], self._prev_stamp[c] = pos, stamp
-            st.position[c] = pos
-        ps = self.power_state[c]
-        st.state[c] = _GENERIC_STATE[ps]
+        return bool(
+            cyclic.state_kernel(
+                self._fresh,
+                self._counts,
+                self.rad_per_count,
+                self._fb_stamp,
+                self._prev,
+                self.config.velocity_source == "derived",
+                self._ps,
+                self._emcy,
+                self._generic,
+                st.position,
+                st.velocity,
+                st.state,
+                st.fault_code,
+            )
+        )
+
+    def _cable_fault(self, c: int) -> DriverError | None:
         code = int(self._emcy[c])
-        st.fault_code[c] = code
-        if code != 0 or ps is p.PowerState.FAULT:
+        if code != 0 or self._ps[c] == p.PowerState.FAULT:
             return DriveFaultError(
                 c,
                 int(self.node[c]),
@@ -235,25 +268,25 @@ class Cia402Driver(CanWinchDriver):
         return None
 
     def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
-        pack = p.RPDO1_STRUCT.pack_into
         reset = self._reset_request
         if reset:
             self._reset_request -= 1
-        for c in range(self.m):
-            ps = self.power_state[c]
-            if reset and ps in (p.PowerState.FAULT, p.PowerState.FAULT_REACTION_ACTIVE):
-                cw = p.Command.FAULT_RESET if reset <= 2 else p.Command.DISABLE_VOLTAGE
-                if reset <= 2:
-                    self._emcy[c] = 0
-            elif self._enable:
-                cw = p.TOWARDS_ENABLED[ps]
-            else:
-                cw = p.Command.DISABLE_VOLTAGE
-            pm = round(float(torques[c]) * 1000.0 / self.rated_torque)
-            pm = max(-32767, min(32767, pm))
+        fields = self._rpdo_fields
+        cyclic.controlword_kernel(
+            torques,
+            self._ps,
+            self._emcy,
+            reset,
+            self._enable,
+            self.rated_torque,
+            cyclic.CONTROLWORD_TOWARDS_ENABLED,
+            fields,
+        )
+        pack, send, bus_of = p.RPDO1_STRUCT.pack_into, self._send, self._bus_of_list
+        for c, (cw, pm) in enumerate(fields.tolist()):
             msg = self._rpdo[c]
-            pack(msg.data, 0, int(cw), pm)
-            self._send(int(self.bus_of[c]), msg)
+            pack(msg.data, 0, cw, pm)
+            send(bus_of[c], msg)
         for b in range(len(self.buses)):
             self._send(b, self._sync)
         self._last_sync = t

@@ -117,7 +117,7 @@ class ODriveDriver(CanWinchDriver):
             else:
                 self.stats.frames_ignored += 1
 
-    def _cable_state(self, c: int) -> DriverError | None:
+    def _cable_fault(self, c: int) -> DriverError | None:
         st = self.states
         code = int(self.axis_error[c])
         st.fault_code[c] = code

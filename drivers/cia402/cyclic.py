@@ -1,0 +1,141 @@
+"""The CiA 402 driver's cyclic decode and encode, compiled.
+
+Per frame, Python does only what it must (``recv``, the dispatch lookup, ``struct.unpack``);
+the per-cable work of a cycle (32-bit unwrap, plausibility, statusword decode, derived velocity,
+controlword choice, per-mille conversion) runs here, once per cycle. Done per cable in Python it
+cost ~60 µs of a 500 Hz cycle on 8 drives (benchmarks/bench_loop.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from drivers.cia402 import protocol as p
+
+#: PowerState of every statusword, by its bits 0-6 (the only ones Table 30 looks at)
+POWER_STATE_OF_SW7 = np.array([int(p.decode_statusword(sw)) for sw in range(128)], dtype=np.int64)
+#: controlword that moves each PowerState towards ENABLED
+CONTROLWORD_TOWARDS_ENABLED = np.array(
+    [int(p.TOWARDS_ENABLED[s]) for s in sorted(p.PowerState)], dtype=np.int64
+)
+_FAULT = int(p.PowerState.FAULT)
+_FAULT_REACTION = int(p.PowerState.FAULT_REACTION_ACTIVE)
+_FAULT_RESET = int(p.Command.FAULT_RESET)
+_DISABLE_VOLTAGE = int(p.Command.DISABLE_VOLTAGE)
+
+
+@njit(cache=True)
+def tpdo1_kernel(
+    n,
+    frames,
+    stamp,
+    period,
+    max_speed,
+    rad_per_count,
+    rated_torque,
+    raw,
+    ps_table,
+    counts,
+    ps,
+    torque,
+    fresh,
+    fb_stamp,
+):  # pragma: no cover - compiled
+    """Apply ``n`` TPDO1 frames in their order of arrival. ``frames[i]`` = (cable, statusword,
+    torque per-mille, 32-bit position); ``raw[c]`` = (last 32-bit position, 1 if any,
+    implausible frames in a row); ``stamp`` (s) the frames' sample instant. A position step no
+    motor can make within the time since the last accepted sample (plus a period of slack) is a
+    corrupted frame: dropped whole. Sets the power state, torque actual (N·m, ``rated_torque``
+    per 1000 per-mille), unwrapped counts, freshness and sample instant of each cable; returns
+    the number of frames dropped."""
+    dropped = 0
+    for i in range(n):
+        c = frames[i, 0]
+        pos = frames[i, 3]
+        have = raw[c, 1] != 0
+        step = 0
+        if have:
+            step = ((pos - raw[c, 0] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+            prev = fb_stamp[c]
+            if np.isfinite(prev):
+                dt = max(stamp - prev, 0.0) + period
+                if abs(step * rad_per_count[c]) <= max_speed[c] * dt:
+                    raw[c, 2] = 0
+                else:
+                    raw[c, 2] += 1
+                    dropped += 1
+                    continue
+        ps[c] = ps_table[frames[i, 1] & 0x7F]
+        torque[c] = frames[i, 2] * rated_torque / 1000.0
+        if have:
+            counts[c] += step
+        else:
+            counts[c] = pos
+        raw[c, 0] = pos
+        raw[c, 1] = 1
+        fresh[c] = True
+        fb_stamp[c] = stamp
+    return dropped
+
+
+@njit(cache=True)
+def state_kernel(
+    fresh,
+    counts,
+    rad_per_count,
+    fb_stamp,
+    prev,
+    derived,
+    ps,
+    emcy,
+    generic,
+    position,
+    velocity,
+    state,
+    fault_code,
+):  # pragma: no cover - compiled
+    """Motor position (rad) of the fresh cables, their velocity (rad/s) by differences of
+    sample instants when ``derived``, the generic state and fault code of every cable;
+    ``prev[c]`` = (last position, its instant). True if a drive is in fault."""
+    fault = False
+    for c in range(len(fresh)):
+        if fresh[c]:
+            pos = counts[c] * rad_per_count[c]
+            stamp = fb_stamp[c]
+            if derived and np.isfinite(prev[c, 1]):
+                dt = stamp - prev[c, 1]
+                if dt > 0.0:
+                    velocity[c] = (pos - prev[c, 0]) / dt
+            prev[c, 0] = pos
+            prev[c, 1] = stamp
+            position[c] = pos
+        state[c] = generic[ps[c]]
+        fault_code[c] = emcy[c]
+        if emcy[c] != 0 or ps[c] == _FAULT:
+            fault = True
+    return fault
+
+
+@njit(cache=True)
+def controlword_kernel(
+    torques, ps, emcy, reset, enable, rated_torque, towards, out
+):  # pragma: no cover - compiled
+    """``out[c]`` = (controlword, target torque per-mille) of each drive's RPDO1: a fault
+    reset edge (``reset`` cycles left: 0x00 then 0x80) to drives in fault, else towards
+    enabled or disable voltage; torques (N·m) rounded half to even like Python's ``round``,
+    within ±32767 per-mille."""
+    for c in range(len(torques)):
+        s = ps[c]
+        if reset > 0 and (s == _FAULT or s == _FAULT_REACTION):  # noqa: SIM109 - compiled
+            if reset <= 2:
+                out[c, 0] = _FAULT_RESET
+                emcy[c] = 0
+            else:
+                out[c, 0] = _DISABLE_VOLTAGE
+        elif enable:
+            out[c, 0] = towards[s]
+        else:
+            out[c, 0] = _DISABLE_VOLTAGE
+        pm = np.rint(torques[c] * 1000.0 / rated_torque)
+        out[c, 1] = int(min(32767.0, max(-32767.0, pm)))
