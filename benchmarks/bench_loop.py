@@ -35,34 +35,52 @@ def main() -> None:
         # the Sensors 2019 robot with its two grippers held: energy TDA, J_weight, grasp sensing
         ("seed000_grippers energy", grip, None, [7.05, 4.0, 1.5]),
     )
-    for label, model, tda, goal in cases:
-        with ClosedLoop(model, tda) as cl:
-            cl.startup()
-            cl.command("enable")
-            cl.run(0.3)
-            rpy = np.array(model.home.rpy, dtype=float)  # the move keeps the home orientation
-            cl.command("move", pose=np.concatenate([goal, rpy]))
-            c = cl.controller
-            phases = []
-            for _ in range(2500):  # 5 s: the move and the hold after it
-                t = cl.net.time
-                c.step(t)
-                cl.net.advance(cl.period)
-                phases.append(c.phase_us.copy())
-            ph = np.array(phases)
+    # Rounds in turn over the cases: the other tenants of this VM come and go, and a case
+    # run only once can land in a slow minute. Each round prints its figures; the summary
+    # takes, per case, the round with the lowest median (the machine's own speed).
+    rounds: dict[str, list[tuple[float, float, np.ndarray]]] = {c[0]: [] for c in cases}
+    for k in range(ROUNDS):
+        for label, model, tda, goal in cases:
+            ph, state = _measure(model, tda, goal)
             total = ph.sum(axis=1)
-            print(
-                f"\n{label}: state {c.state.value}; compute per cycle median "
-                f"{np.median(total):.0f} us, p99 {np.percentile(total, 99):.0f} us"
+            med, p99 = float(np.median(total)), float(np.percentile(total, 99))
+            rounds[label].append((med, p99, ph))
+            print(f"round {k + 1} {label}: state {state}; median {med:.0f} us, p99 {p99:.0f} us")
+    print("\nper case, the round with the lowest median:")
+    for label, rs in rounds.items():
+        med, p99, ph = min(rs, key=lambda r: r[0])
+        print(
+            f"\n{label}: compute per cycle median {med:.0f} us, p99 {p99:.0f} us "
+            f"(medians of the rounds: {', '.join(f'{r[0]:.0f}' for r in rs)} us)"
+        )
+        print(
+            "  "
+            + ", ".join(
+                f"{n} {np.median(ph[:, k]):.0f}/{np.percentile(ph[:, k], 99):.0f}"
+                for k, n in enumerate(PHASES)
             )
-            print(
-                "  "
-                + ", ".join(
-                    f"{n} {np.median(ph[:, k]):.0f}/{np.percentile(ph[:, k], 99):.0f}"
-                    for k, n in enumerate(PHASES)
-                )
-                + " (median/p99 us)"
-            )
+            + " (median/p99 us)"
+        )
+
+
+ROUNDS = 3
+
+
+def _measure(model, tda, goal) -> tuple[np.ndarray, str]:  # type: ignore[no-untyped-def]
+    """Per-phase compute (µs) of 2500 cycles (5 s: a move and the hold after it)."""
+    with ClosedLoop(model, tda) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.3, record=False)
+        rpy = np.array(model.home.rpy, dtype=float)  # the move keeps the home orientation
+        cl.command("move", pose=np.concatenate([goal, rpy]))
+        c = cl.controller
+        phases = np.zeros((2500, len(PHASES)))
+        for i in range(len(phases)):
+            c.step(cl.net.time)
+            cl.net.advance(cl.period)
+            phases[i] = c.phase_us
+        return phases, c.state.value
 
 
 if __name__ == "__main__":

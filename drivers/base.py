@@ -132,6 +132,7 @@ class WinchDriver(ABC):
         from drivers.errors import DriverConfigurationError
 
         self._require(Lifecycle.UNCONFIGURED)
+        self._warm_up()
         self.warnings, errors = check_bus_load(self.config, 1.0 / self.period)
         for w in self.warnings:
             _LOG.warning(w)
@@ -327,6 +328,12 @@ class WinchDriver(ABC):
             )
 
     # -- hooks --------------------------------------------------------------------------------
+    def _warm_up(self) -> None:
+        """Call the cyclic path's compiled kernels once, on copies, before the drives start:
+        a first call compiles (seconds) or loads from numba's cache (ms), neither of which
+        belongs in the loop (cdprctl/control/warm_up.py)."""
+        clamp_kernel(self._command, self._last_command.copy(), self.torque_limit, np.zeros(self.m))
+
     @abstractmethod
     def _open(self) -> None:
         """Open the buses (raise DriverInitializationError)."""

@@ -66,6 +66,21 @@ class CanWinchDriver(WinchDriver):
         self.stats.implausible_frames += 1
         return False
 
+    def _warm_up(self) -> None:
+        super()._warm_up()
+        liveness_kernel(
+            self._fresh.copy(),
+            self._fb_stamp.copy(),
+            self._missed.copy(),
+            self._last_hb.copy(),
+            0.0,
+            True,
+            True,
+            self.config.missed_feedback_limit,
+            self.config.heartbeat_timeout,
+            self.states.feedback_age.copy(),
+        )
+
     def _open(self) -> None:
         for b, bus_cfg in enumerate(self.config.buses):
             self.buses.append(open_bus(bus_cfg, self.bus_overrides, b))

@@ -34,6 +34,7 @@ from cdprctl.control.grasp import GraspSensor
 from cdprctl.control.grip_range import travel_range
 from cdprctl.control.pd_kernel import pd_wrench_kernel
 from cdprctl.control.trajectory import Trajectory
+from cdprctl.control.warm_up import warm_up
 from cdprctl.control.winch_torque import FRICTION_SMOOTHING, winch_torque_kernel
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.gripper import GraspState, GripperSet
@@ -182,6 +183,7 @@ class Controller:
         """Configure the drives, read them, estimate the pose from the home pose as a start,
         check it can be held (a TDA under gravity) → READY. Raises on failure."""
         d = self.driver
+        warm_up(self)  # every kernel compiled before the drives start (cdprctl/control/warm_up.py)
         d.configure(timeout)
         now = d.clock()
         st = d.read(now)

@@ -123,6 +123,10 @@ class Daemon:
             warnings = rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc)
         for w in warnings:
             self._print(f"warning: {w}", err=True)
+        self._print(
+            "start-up: loading the compiled kernels (the first run on a machine compiles "
+            "them: about a minute), configuring the drives, estimating the pose"
+        )
         try:
             c.startup()
         except Exception as exc:  # start-up failures are reported, never a traceback

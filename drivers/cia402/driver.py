@@ -181,6 +181,51 @@ class Cia402Driver(CanWinchDriver):
         self._reset_request = 4  # a few cycles of 0x00 then 0x80: a clean rising edge
 
     # -- hooks: the cyclic path ---------------------------------------------------------------
+    def _warm_up(self) -> None:
+        super()._warm_up()
+        m, st = self.m, self.states
+        cyclic.tpdo1_kernel(
+            0,
+            self._tpdo1,
+            0.0,
+            self.period,
+            self._max_motor_speed,
+            self.rad_per_count,
+            self.rated_torque,
+            self._raw,
+            cyclic.POWER_STATE_OF_SW7,
+            self._counts,
+            self._ps,
+            st.torque,
+            self._fresh,
+            self._fb_stamp,
+        )  # no frame: nothing written
+        cyclic.state_kernel(
+            np.zeros(m, dtype=bool),
+            self._counts,
+            self.rad_per_count,
+            self._fb_stamp,
+            self._prev.copy(),
+            True,
+            self._ps,
+            self._emcy,
+            self._generic,
+            st.position.copy(),
+            st.velocity.copy(),
+            st.state.copy(),
+            st.fault_code.copy(),
+        )
+        cyclic.controlword_kernel(
+            np.zeros(m),
+            self._ps,
+            self._emcy.copy(),
+            0,
+            False,
+            self.rated_torque,
+            cyclic.CONTROLWORD_TOWARDS_ENABLED,
+            self._rpdo_fields.copy(),
+        )
+
     @property
     def power_state(self) -> list[p.PowerState]:
         """Each drive's CiA 402 power state, from its last accepted statusword."""

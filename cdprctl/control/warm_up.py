@@ -1,0 +1,67 @@
+"""Every compiled kernel the loop can call, compiled before the drives start.
+
+numba compiles a kernel at its first call: seconds each on a machine that has not cached it
+yet (~60 s in all on this VM). A compilation in the loop is a missed deadline; one between the
+drives' start and the loop is a heartbeat timeout (a cold `cdprctl run --sim` faulted so).
+Loading from numba's cache is also done at the first call: ~10 ms a kernel. So the start-up
+calls each kernel once, on throwaway objects at the home pose, along every branch the loop can
+take: each distribution method's, with and without the rate limit, and the energy method's
+fast paths for one and two impositions (the grippers hold theirs from `enable` on).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cdprctl.control.estimator import Estimator
+from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
+
+if TYPE_CHECKING:
+    from cdprctl.control.controller import Controller
+
+
+def _tda_variants(options: TDAOptions, r: int, mid: np.ndarray) -> list[TDAOptions]:
+    """The options in use, and one of each compiled path the loop may switch to (``mid``:
+    the middle of each cable's tension range, N, for the impositions)."""
+    m = len(mid)
+    rate = dataclasses.replace(options, max_tension_rate=options.max_tension_rate or 1e3)
+    out = [options, rate, TDAOptions(method=TDAMethod.ENERGY, period=options.period)]
+    if r == 2:
+        out.append(TDAOptions(method=TDAMethod.SOTDA, nu=0.5, max_tension_rate=1e3))
+        for n in (1, 2):
+            imp = tuple(
+                Imposition(c, ImposedQuantity.TENSION, float(mid[c])) for c in range(m - n, m)
+            )
+            out.append(TDAOptions(method=TDAMethod.ENERGY, impositions=imp))
+    return out
+
+
+def warm_up(controller: Controller) -> None:
+    """Call every kernel of the cycle once (see the module docstring); leaves the controller
+    as it was but for its outputs (wrench, pose error, torques: zero), rewritten each cycle."""
+    c = controller
+    model = c.model
+    m = model.n_cables
+    zeros = np.zeros(m)
+    est = Estimator(model)
+    # θ = 0: the home lengths. Writable arrays, as in the loop: numba compiles a read-only
+    # array (the model's) as another type
+    est.update(0.0, zeros, c.t_min.copy(), zeros, zeros)
+    hold = -(model.gravity_wrench(est.rotation) + c.ext_wrench)
+    if c.grippers.n:
+        hold = hold - c.grippers.weight_wrench(est.rotation)
+    prev = 0.5 * (c.t_min + c.t_max)
+    for opts in _tda_variants(c.tda.options, model.redundancy, prev):
+        if opts.validate(model):
+            continue  # not a method this robot can use
+        tda = TensionDistributor(model, opts)
+        for t_prev in (None, prev):
+            tda.solve(est.kin.W, hold, c.t_min, c.t_max, k=est.k, kin=est.kin, t_prev=t_prev)
+    c._control()
+    c._winch_torques(zeros, True)
+    c.torques[:] = 0.0
+    c.wrench[:] = 0.0
+    c.pose_error[:] = 0.0
