@@ -184,22 +184,7 @@ class Cia402Driver(CanWinchDriver):
     def _warm_up(self) -> None:
         super()._warm_up()
         m, st = self.m, self.states
-        cyclic.tpdo1_kernel(
-            0,
-            self._tpdo1,
-            0.0,
-            self.period,
-            self._max_motor_speed,
-            self.rad_per_count,
-            self.rated_torque,
-            self._raw,
-            cyclic.POWER_STATE_OF_SW7,
-            self._counts,
-            self._ps,
-            st.torque,
-            self._fresh,
-            self._fb_stamp,
-        )  # no frame: nothing written
+        self._apply_tpdo1(0, 0.0)  # no frame: nothing written
         cyclic.state_kernel(
             np.zeros(m, dtype=bool),
             self._counts,
