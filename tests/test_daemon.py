@@ -4,6 +4,7 @@ real unix socket, the watchdog's rule, SIGTERM → controlled stop → exit 0, t
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import socket
@@ -96,6 +97,8 @@ def test_daemon_sim_notify_and_sigterm(tmp_path):
             "--no-realtime",
             "--status",
             "0",
+            "--timing-file",
+            str(tmp_path / "timing.npz"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -122,6 +125,16 @@ def test_daemon_sim_notify_and_sigterm(tmp_path):
         srv.close()
     assert proc.returncode == 0, out
     assert "ready: pose" in out and "summary:" in out
+    # --timing-file: every cycle of the summary, on the period's grid, in order
+    timing = np.load(tmp_path / "timing.npz")
+    cycles = int(re.search(r"cycles (\d+)", out).group(1))
+    period = float(timing["period"])
+    steps = np.diff(timing["deadline"]) / period
+    assert len(timing["lateness"]) == cycles > 100
+    assert np.all(steps > 0.999) and np.allclose(steps, np.round(steps), atol=1e-6)
+    assert round(float(np.sum(np.round(steps) - 1))) <= int(timing["missed"])
+    assert np.all(timing["lateness"] >= 0) and np.all(timing["compute"] > 0)
+    assert timing["phases"].shape == (cycles, 7)
 
 
 def test_daemon_bad_config_exit_code(tmp_path, capsys):
@@ -184,3 +197,21 @@ def test_demo_script_moves_inside_the_workspace():
         if c.kind == "move":
             assert c.pose.shape == (6,)
             assert np.all(c.pose[:3] >= ws.position_min) and np.all(c.pose[:3] <= ws.position_max)
+
+
+def test_loop_stats_window_follows_the_ring():
+    """summary(last=n): percentiles over the n newest cycles, across the ring's wrap; the
+    totals stay whole-run."""
+    rng = np.random.default_rng(7)
+    st = LoopStats(size=50, phases=1)
+    late = rng.exponential(1e-5, 130)
+    for i, x in enumerate(late):
+        st.record(x, 2 * x, None, float(i))
+    st.missed = 3
+    s = st.summary(last=20)
+    assert s["cycles"] == 130 and s["missed"] == 3
+    assert s["lateness_p99_us"] == pytest.approx(np.percentile(late[-20:] * 1e6, 99))
+    assert s["lateness_max_us"] == pytest.approx(late[-20:].max() * 1e6)
+    assert s["compute_p50_us"] == pytest.approx(np.median(late[-20:]) * 2e6)
+    whole = st.summary()  # the ring holds the 50 newest
+    assert whole["lateness_p50_us"] == pytest.approx(np.median(late[-50:]) * 1e6)

@@ -51,6 +51,12 @@ def add_parser(sub: Any) -> None:
         help="do not ask for SCHED_FIFO, CPU pinning, locked memory",
     )
     add_bus_arguments(p)
+    p.add_argument(
+        "--timing-file",
+        metavar="FILE",
+        help="at exit, save the loop's per-cycle timing (deadline, wake lateness, compute, "
+        "per phase; numpy .npz) to FILE",
+    )
     z = p.add_argument_group("Zenoh (see docs/telemetry.md; [zenoh] in the config sets the same)")
     z.add_argument("--zenoh", action="store_true", help="start the Zenoh gateway")
     z.add_argument(
@@ -127,6 +133,7 @@ def run(args: argparse.Namespace) -> int:
             realtime=not args.no_realtime,
             status_every=args.status,
             zenoh=args.zenoh or bool(zo),
+            timing_file=args.timing_file,
         )
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

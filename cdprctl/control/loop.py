@@ -19,6 +19,7 @@ import numpy as np
 class LoopStats:
     def __init__(self, size: int = 120_000, phases: int = 7):
         self.size = size
+        self.deadline = np.zeros(size)  # s, monotonic clock: each cycle's deadline
         self.lateness = np.zeros(size)  # s, wake-up after the deadline
         self.compute = np.zeros(size)  # s, step duration
         self.phases = np.zeros((size, phases))  # µs per phase (from the controller)
@@ -26,20 +27,45 @@ class LoopStats:
         self.overruns = 0  # steps longer than a period
         self.missed = 0  # periods skipped
 
-    def record(self, late: float, compute: float, phases: np.ndarray | None) -> None:
+    def record(
+        self, late: float, compute: float, phases: np.ndarray | None, deadline: float = math.nan
+    ) -> None:
         i = self.count % self.size
+        self.deadline[i] = deadline
         self.lateness[i] = late
         self.compute[i] = compute
         if phases is not None:
             self.phases[i] = phases
         self.count += 1
 
-    def summary(self) -> dict[str, float]:
+    def save(self, path: str, period: float) -> None:
+        """The recorded cycles, oldest first, to ``path`` (numpy ``.npz``): ``deadline`` (s,
+        monotonic clock), ``lateness`` and ``compute`` (s), ``phases`` (µs, the
+        controller's), ``period`` (s), and the totals ``overruns`` and ``missed``."""
         n = min(self.count, self.size)
-        if n == 0:
+        order = np.arange(self.count - n, self.count) % self.size
+        np.savez(
+            path,
+            deadline=self.deadline[order],
+            lateness=self.lateness[order],
+            compute=self.compute[order],
+            phases=self.phases[order],
+            period=period,
+            overruns=self.overruns,
+            missed=self.missed,
+        )
+
+    def summary(self, last: int | None = None) -> dict[str, float]:
+        """Totals (cycles, overruns, missed) and the percentiles of wake lateness and compute
+        (µs) over the whole ring, or over the ``last`` cycles: what the daemon's I/O thread
+        reports while the loop runs (a percentile of the whole ring holds the GIL ~10 ms and
+        delays the loop's wake-up)."""
+        n = min(self.count, self.size, self.size if last is None else max(1, last))
+        if self.count == 0:
             return {"cycles": 0}
-        late = self.lateness[:n] * 1e6
-        comp = self.compute[:n] * 1e6
+        idx = np.arange(self.count - n, self.count) % self.size
+        late = self.lateness[idx] * 1e6
+        comp = self.compute[idx] * 1e6
         return {
             "cycles": float(self.count),
             "lateness_p50_us": float(np.percentile(late, 50)),
@@ -61,8 +87,10 @@ def run_loop(
     stats: LoopStats | None = None,
     phases: Callable[[], np.ndarray] | None = None,
     clock: Callable[[], float] = time.monotonic,
+    after: Callable[[], None] | None = None,
 ) -> LoopStats:
-    """Call ``step(t)`` every ``period`` seconds until ``should_stop()``."""
+    """Call ``step(t)`` every ``period`` seconds until ``should_stop()``; ``after()`` at the
+    end of each cycle (the daemon's I/O thread works in the idle rest of the period)."""
     st = stats or LoopStats()
     deadline = clock() + period
     while not should_stop():
@@ -82,6 +110,8 @@ def run_loop(
         compute = clock() - now
         if compute > period:
             st.overruns += 1
-        st.record(late, compute, phases() if phases is not None else None)
+        st.record(late, compute, phases() if phases is not None else None, deadline)
+        if after is not None:
+            after()
         deadline += period
     return st

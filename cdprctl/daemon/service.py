@@ -43,6 +43,7 @@ class Daemon:
         status_every: float = 0.5,
         out: Any = sys.stdout,
         zenoh: bool = False,
+        timing_file: str | None = None,
     ):
         from drivers import create_driver
 
@@ -50,6 +51,8 @@ class Daemon:
         self.sim = None
         self.out = out
         self.status_every = status_every
+        self.timing_file = timing_file  # the loop's per-cycle timing is saved there at exit
+        self._cycle_done = threading.Event()  # set by the loop after each cycle
         self.realtime = realtime
         period = model.control.period
         if sim:
@@ -161,6 +164,7 @@ class Daemon:
                 self.model.control.sleep_margin,
                 self.stats,
                 lambda: c.phase_us,
+                after=self._cycle_done.set,
             )
         finally:
             if self.realtime:
@@ -169,6 +173,8 @@ class Daemon:
                 signal.signal(s, h)
             if wd is not None:
                 wd.stop()
+            if self.timing_file:
+                self.stats.save(self.timing_file, self.model.control.period)
             notify("STOPPING=1")
             io.join(timeout=2.0)
             self.driver.shutdown()
@@ -250,9 +256,13 @@ class Daemon:
             ):
                 self.finished.set()
                 return
-            # absolute ticks, so telemetry keeps its rate; this thread holds the GIL briefly
+            # absolute ticks, so telemetry keeps its rate; then the end of the loop's next
+            # cycle: this thread's work (it holds the GIL) falls in the idle rest of that
+            # period, not on the loop's wake-up (benchmarks/bench_telemetry.py)
             next_tick = max(next_tick + tick, time.monotonic())
             time.sleep(max(0.0, next_tick - time.monotonic()))
+            self._cycle_done.clear()
+            self._cycle_done.wait(2.0 * self.model.control.period)
 
     def _drain_events(self) -> None:
         ev = self.controller.events
@@ -267,7 +277,8 @@ class Daemon:
     def _status_line(self, now: float) -> None:
         c = self.controller
         e = c.estimator
-        s = self.stats.summary()
+        # percentiles over the cycles since the last line (the whole run: in the summary)
+        s = self.stats.summary(round(self.status_every / self.model.control.period))
         sim = ""
         if self.sim is not None:
             true = self.plant.position

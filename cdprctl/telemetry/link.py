@@ -53,8 +53,10 @@ class TelemetryLink:
         values = controller_values(controller, stats, true_position)
         now = time.monotonic()
         if now >= self._next_timing:
-            values["timing"] = timing_values(stats)
-            self._next_timing = now + 1.0 / self.model.zenoh.timing_rate
+            # percentiles over the cycles since the last report (docs/telemetry.md)
+            dt = 1.0 / self.model.zenoh.timing_rate
+            values["timing"] = timing_values(stats, round(dt / self.model.control.period))
+            self._next_timing = now + dt
         self.snapshot.write(values)
         if controller.fault_reason != self._last_fault:
             self._last_fault = controller.fault_reason

@@ -152,6 +152,7 @@ def controller_values(controller: Any, stats: Any, true_position: Any = None) ->
     return out
 
 
-def timing_values(stats: Any) -> np.ndarray:
-    s = stats.summary()
+def timing_values(stats: Any, last: int | None = None) -> np.ndarray:
+    """The ``TIMING`` fields; percentiles over the ``last`` cycles (all when None)."""
+    s = stats.summary(last)
     return np.array([float(s.get(k, 0.0)) for k in TIMING])
