@@ -119,17 +119,29 @@ def run_once(
 
 
 def split(
-    data: dict[str, np.ndarray], on: list[tuple[float, float]], skip: float = 1.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    data: dict[str, np.ndarray], on: list[tuple[float, float]], segment: float, skip: float = 1.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per cycle (the first ``skip`` s left out): lateness (µs), periods missed just before,
-    and whether the flood was on at its deadline."""
+    whether the flood was on at its deadline, and the index of its segment (each flood
+    interval, each quiet one between them; runs without a flood in ``segment`` s windows)."""
     t, late = data["deadline"], data["lateness"] * 1e6
     gaps = np.concatenate([[0.0], np.round(np.diff(t) / float(data["period"])) - 1.0])
     keep = t >= t[0] + skip
     flooded = np.zeros(len(t), dtype=bool)
     for a, b in on:
         flooded |= (t >= a) & (t < b)
-    return late[keep], gaps[keep], flooded[keep]
+    if on:
+        seg = np.cumsum(np.concatenate([[0], flooded[1:] != flooded[:-1]]))
+    else:
+        seg = np.floor((t - t[0]) / segment).astype(int)
+    return late[keep], gaps[keep], flooded[keep], seg[keep]
+
+
+def segment_p99(late: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """The p99 lateness (µs) of each segment with at least 100 cycles."""
+    return np.array(
+        [np.percentile(late[seg == k], 99) for k in np.unique(seg) if np.sum(seg == k) >= 100]
+    )
 
 
 def describe(late: np.ndarray, gaps: np.ndarray) -> str:
@@ -152,30 +164,40 @@ def main() -> None:
     args = ap.parse_args()
     print(machine_line())
     pooled: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"A": [], "on": [], "off": []}
+    segments: dict[str, list[np.ndarray]] = {"A": [], "on": [], "off": []}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(args.rounds):
             for gateway in (False, True):
                 data, on, _ = run_once(
                     args.seconds, gateway, args.rate, args.segment, Path(tmp) / f"{r}{gateway}.npz"
                 )
-                late, gaps, flooded = split(data, on)
+                late, gaps, flooded, seg = split(data, on, args.segment)
                 if gateway:
                     parts = {"on": flooded, "off": ~flooded}
                 else:
                     parts = {"A": np.ones(len(late), dtype=bool)}
                 for key, sel in parts.items():
                     pooled[key].append((late[sel], gaps[sel]))
+                    segments[key].append(segment_p99(late[sel], seg[sel]))
                     print(f"round {r + 1} {LABELS[key]}: {describe(late[sel], gaps[sel])}")
     print("\npooled over the rounds:")
-    p99 = {}
+    p99, typical = {}, {}
     for key, runs in pooled.items():
         late = np.concatenate([x[0] for x in runs])
         gaps = np.concatenate([x[1] for x in runs])
         p99[key] = float(np.percentile(late, 99))
-        print(f"  {LABELS[key]}: {describe(late, gaps)}")
+        seg = np.concatenate(segments[key])
+        typical[key] = float(np.median(seg))
+        print(
+            f"  {LABELS[key]}: {describe(late, gaps)}; per {args.segment:g} s segment p99: "
+            f"median {typical[key]:.1f} us, {np.mean(seg > 50.0) * 100:.0f} % of {len(seg)} "
+            "segments above 50 us"
+        )
     for key, what in (("off", "the same runs' quiet cycles"), ("A", "no gateway (runs A)")):
-        if p99[key] > 0:
-            print(f"  p99 with the flood / {what}: {p99['on'] / p99[key]:.2f}")
+        print(
+            f"  with the flood / {what}: p99 of all cycles {p99['on'] / p99[key]:.2f}, "
+            f"median segment p99 {typical['on'] / typical[key]:.2f}"
+        )
 
 
 LABELS = {

@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import gc
 import os
 
 MCL_CURRENT, MCL_FUTURE = 1, 2
+
+try:  # the CPUs this process may use, before the loop's thread is pinned to one of them
+    ALLOWED_CPUS = frozenset(os.sched_getaffinity(0))
+except (OSError, AttributeError):
+    ALLOWED_CPUS = frozenset()
 
 
 def apply_realtime(priority: int, cpu: int, lock_memory: bool, freeze_gc: bool) -> list[str]:
@@ -48,11 +54,29 @@ def apply_realtime(priority: int, cpu: int, lock_memory: bool, freeze_gc: bool) 
 
 def loop_cpu(cpu: int) -> int | None:
     """The CPU the loop is pinned to (``cpu``, -1: the last one allowed); None if unknown."""
-    try:
-        cpus = sorted(os.sched_getaffinity(0))
-    except (OSError, AttributeError):
+    if not ALLOWED_CPUS:
         return None
-    return cpus[-1] if cpu < 0 else cpu
+    return max(ALLOWED_CPUS) if cpu < 0 else cpu
+
+
+def helper_thread(loop_cpu_index: int | None, loop_priority: int) -> None:
+    """For the calling thread of the loop's process (the daemon's I/O thread, the watchdog):
+    the CPUs but the loop's, and ``SCHED_FIFO`` one below the loop (the normal scheduler
+    where that is refused). Threads inherit the loop's priority and CPU from the loop's
+    thread, which starts them: a FIFO helper on the loop's CPU runs until it blocks, however
+    late the loop's wake-up. And the helpers share the loop's GIL: a helper preempted by
+    other work while it holds it (a command flood in the gateway, on the other CPU) stalls
+    the loop, so it keeps a real-time priority. Best effort, silent: the loop's own settings
+    were reported already."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, loop_priority - 1)))
+    except (OSError, AttributeError):
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    others = ALLOWED_CPUS - {loop_cpu_index}
+    if loop_cpu_index is not None and others:
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setaffinity(0, others)
 
 
 def yield_to_the_loop(loop_cpu_index: int | None, niceness: int = 10) -> list[str]:

@@ -40,9 +40,15 @@ def watchdog_interval(env: dict[str, str] | None = None) -> float | None:
 
 class Watchdog(threading.Thread):
     def __init__(
-        self, counter: Callable[[], int], interval: float, send: Callable[[str], bool] = notify
+        self,
+        counter: Callable[[], int],
+        interval: float,
+        send: Callable[[str], bool] = notify,
+        on_start: Callable[[], None] | None = None,
     ):
+        """``on_start()`` runs first in the thread (the daemon: leave the loop's CPU)."""
         super().__init__(name="sd-watchdog", daemon=True)
+        self.on_start = on_start
         self.counter = counter
         self.interval = interval
         self.send = send
@@ -51,6 +57,8 @@ class Watchdog(threading.Thread):
         self.withheld = 0
 
     def run(self) -> None:
+        if self.on_start is not None:
+            self.on_start()
         last = self.counter()
         while not self.stop_event.wait(self.interval):
             now = self.counter()

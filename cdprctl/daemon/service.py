@@ -153,7 +153,7 @@ class Daemon:
         wd = None
         interval = watchdog_interval()
         if interval:
-            wd = Watchdog(lambda: c.cycle, interval)
+            wd = Watchdog(lambda: c.cycle, interval, on_start=self._helper_thread)
             wd.start()
         io.start()
         try:
@@ -200,7 +200,13 @@ class Daemon:
         )
 
     # -- the I/O thread ----------------------------------------------------------------------------
+    def _helper_thread(self) -> None:
+        if self.realtime:
+            rc = self.model.control
+            rt.helper_thread(rt.loop_cpu(rc.cpu), rc.sched_priority)
+
     def _io(self, duration: float | None, demo: bool, force: float) -> None:
+        self._helper_thread()
         try:
             self._io_loop(duration, demo, force)
         except Exception as exc:  # the I/O thread must not die silently: stop the run
