@@ -60,7 +60,6 @@ class TensionDistributor:
         self._verts_rate = np.zeros((2 * self.m + 8, 2))
         self._verts_tmp = np.zeros((2 * self.m + 8, 2))
         self._planar_info = np.zeros(6)
-        self._planar_method = _PLANAR_CODE.get(self.options.method, planar.BARYCENTER)
         self._ones = np.ones(self.m)
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
         d = np.asarray(self.options.direction, dtype=float)
@@ -205,7 +204,7 @@ class TensionDistributor:
         kd = kin if kin is not None else self._no_kin
         rate = t_prev is not None and opt.max_tension_rate is not None
         ok = planar.planar_kernel(
-            self._planar_method,
+            _PLANAR_CODE.get(opt.method, planar.BARYCENTER),
             ns.N,
             ns.t0,
             lo,

@@ -211,11 +211,6 @@ class Cia402Driver(CanWinchDriver):
             self._rpdo_fields.copy(),
         )
 
-    @property
-    def power_state(self) -> list[p.PowerState]:
-        """Each drive's CiA 402 power state, from its last accepted statusword."""
-        return [p.PowerState(int(x)) for x in self._ps]
-
     def _drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
         applied together, in their order of arrival (``cyclic.tpdo1_kernel``)."""
