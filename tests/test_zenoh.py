@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import CONFIG, ROOT
+from mcap.reader import make_reader
 
 from cdprctl.model import load_robot
 from cdprctl.model.errors import ConfigError
@@ -340,7 +341,9 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     )
     assert mon.returncode == 0 and "tensions" in mon.stdout and "enabled" in mon.stdout
     run_dir = tmp_path / "run"
-    rec = subprocess.Popen([*cli, "record", *z, "--output", str(run_dir), "--duration", "4"])
+    rec = subprocess.Popen(
+        [*cli, "record", *z, "--output", str(run_dir), "--duration", "4", "--mcap"]
+    )
     time.sleep(1.5)
     sent = subprocess.run(
         [*cli, "send", *z, "move", "position=1.6,0.35,0.55"], capture_output=True, text=True
@@ -355,6 +358,13 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     assert rep.returncode == 0, rep.stderr
     for png in ("pose.png", "tracking.png", "tensions.png", "torques.png"):
         assert (run_dir / png).stat().st_size > 10_000
+    # the same recording as MCAP: as many states as the CSV has rows, the move in them
+    with open(run_dir / "telemetry.mcap", "rb") as f:
+        messages = list(make_reader(f).iter_messages(topics=["cdpr/rowc/state"]))
+    with open(run_dir / "state.csv") as f:
+        assert len(messages) == sum(1 for _ in f) - 1 > 100
+    targets = {tuple(json.loads(m.data)["target"][:3]) for _, _, m in messages}
+    assert (1.6, 0.35, 0.55) in targets
     assert robot.stop() == 0
 
 

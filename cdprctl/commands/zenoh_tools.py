@@ -78,12 +78,17 @@ def add_parsers(sub: Any) -> None:
 
     p = sub.add_parser(
         "record",
-        help="record a robot's telemetry to CSV files",
+        help="record a robot's telemetry to CSV files (and MCAP)",
         description="Writes DIR/state.csv, DIR/timing.csv, DIR/events.csv and DIR/meta.json "
-        "(the robot's status: limits, cables) until --duration or Ctrl-C; "
-        "`cdprctl report DIR` draws them.",
+        "(the robot's status: limits, cables) until --duration or Ctrl-C, and with --mcap "
+        "DIR/telemetry.mcap (Foxglove); `cdprctl report DIR` draws them.",
     )
     p.add_argument("--output", required=True, metavar="DIR")
+    p.add_argument(
+        "--mcap",
+        action="store_true",
+        help="also write DIR/telemetry.mcap: every payload as received, for Foxglove",
+    )
     p.add_argument("--duration", type=float, help="s; default: until Ctrl-C")
     add_zenoh_arguments(p)
     p.set_defaults(func=record, cmd="record")
@@ -264,15 +269,19 @@ def record(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     lock = threading.Lock()
     rows: dict[str, list[Any]] = {"state": [], "timing": [], "events": []}
+    raw: list[tuple[int, str, bytes]] = []  # (receive time ns, key, payload), for MCAP
 
     def on_sample(sample: Any) -> None:
         key = str(sample.key_expr).rsplit("/", 1)[-1]
+        data = sample.payload.to_bytes()
         try:
-            body = json.loads(sample.payload.to_bytes())
+            body = json.loads(data)
         except ValueError:
             return
         with lock:
             rows[key].append(body)
+            if args.mcap:
+                raw.append((time.time_ns(), key, data))
 
     session = _session(args)
     try:
@@ -294,8 +303,13 @@ def record(args: argparse.Namespace) -> int:
         session.close()
     with lock:
         n = _write_csvs(out, rows)
+        if args.mcap:
+            from cdprctl.telemetry.mcap_log import write_mcap
+
+            write_mcap(out / "telemetry.mcap", prefix, raw)
     print(
         f"cdprctl record: {n['state']} states, {n['timing']} timing, {n['events']} events → {out}"
+        + (" (CSV, telemetry.mcap)" if args.mcap else "")
     )
     return 0 if n["state"] else 1
 
