@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 from conftest import CONFIG, ROOT
 
 from cdprctl.control.loop import LoopStats, run_loop
+from cdprctl.daemon import rt
 from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 
 
@@ -215,3 +217,43 @@ def test_loop_stats_window_follows_the_ring():
     assert s["compute_p50_us"] == pytest.approx(np.median(late[-20:]) * 2e6)
     whole = st.summary()  # the ring holds the 50 newest
     assert whole["lateness_p50_us"] == pytest.approx(np.median(late[-50:]) * 1e6)
+
+
+def test_after_hook_runs_once_per_cycle_after_the_step():
+    """run_loop(after=...): called after every step (the daemon's I/O thread waits for it)."""
+    order: list[str] = []
+    run_loop(
+        0.002,
+        lambda t: order.append("step"),
+        lambda: len(order) >= 20,
+        sleep_margin=0.0005,
+        stats=LoopStats(size=50),
+        after=lambda: order.append("after"),
+    )
+    assert order == ["step", "after"] * 10
+
+
+def test_helper_thread_leaves_the_loop_cpu_and_priority():
+    """A thread started by the pinned, real-time loop thread moves to the other CPUs and below
+    the loop's priority (SCHED_FIFO where permitted, else the normal scheduler)."""
+    cpus = sorted(rt.ALLOWED_CPUS)
+    if len(cpus) < 2:
+        pytest.skip("one CPU: nowhere else to go")
+    loop_cpu = cpus[-1]
+    seen: dict[str, object] = {}
+
+    def helper() -> None:
+        os.sched_setaffinity(0, {loop_cpu})  # as inherited from the pinned loop thread
+        rt.helper_thread(loop_cpu, 50)
+        seen["cpus"] = os.sched_getaffinity(0)
+        seen["policy"] = os.sched_getscheduler(0)
+        seen["priority"] = os.sched_getparam(0).sched_priority
+
+    th = threading.Thread(target=helper)
+    th.start()
+    th.join()
+    assert loop_cpu not in seen["cpus"] and seen["cpus"] == set(cpus[:-1])
+    if seen["policy"] == os.SCHED_FIFO:
+        assert seen["priority"] == 49
+    else:
+        assert seen["policy"] == os.SCHED_OTHER
