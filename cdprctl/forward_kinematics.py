@@ -113,13 +113,12 @@ class ForwardKinematics:
             d.length,
             d.W,
             self._res,
+            self.max_residual,
             info,
         )
         d.position[:] = p
         d.rotation[:] = R
         status = FKStatus(int(info[2]))
-        if status is FKStatus.CONVERGED and float(info[0]) > self.max_residual:
-            status = FKStatus.INCONSISTENT
         return FKResult(p.copy(), R.copy(), float(info[0]), int(info[1]), status)
 
 
@@ -193,10 +192,12 @@ def fk_kernel(
     length,
     W,
     res,
+    max_residual,
     info,
 ):  # pragma: no cover
     """Levenberg-Marquardt FK; ``p``/``R`` hold the warm start in and the pose out;
-    ``info`` receives [RMS residual (m), iterations, FKStatus]."""
+    ``info`` receives [RMS residual (m), iterations, FKStatus]: a converged least-squares pose
+    whose RMS residual is above ``max_residual`` (m) is INCONSISTENT."""
     m = anchors.shape[0]
     s = 0.0
     for i in range(m):
@@ -226,7 +227,7 @@ def fk_kernel(
     p_new = np.empty(3)
     while it < max_iter:
         if cost < tol * tol * m:
-            info[0], info[1], info[2] = math.sqrt(cost / m), it, 0.0
+            _converged(info, math.sqrt(cost / m), it, max_residual)
             return
         it += 1
         for a in range(6):
@@ -260,7 +261,7 @@ def fk_kernel(
                 lin += r_i * r_i
             p[:] = p_new
             R[:, :] = R_new
-            info[0], info[1], info[2] = math.sqrt(lin / m), it, 0.0
+            _converged(info, math.sqrt(lin / m), it, max_residual)
             return
         ik_kernel(anchors, attach, pr, pa, p_new, R_new, rbT, exitT, vT, free_len, wrap, length, W)
         if not _lengths_ok(free_len):
@@ -284,8 +285,18 @@ def fk_kernel(
             if mu > 1e6:
                 break
     rms = math.sqrt(cost / m)
-    info[0], info[1] = rms, it
-    info[2] = 0.0 if rms < tol else 1.0
+    if rms < tol:
+        _converged(info, rms, it, max_residual)
+    else:
+        info[0], info[1], info[2] = rms, it, 1.0  # MAX_ITERATIONS
+
+
+@njit(cache=True)
+def _converged(info, rms, iterations, max_residual):  # pragma: no cover - compiled
+    """``info`` of a converged solve: CONVERGED, or INCONSISTENT when the least-squares pose
+    leaves an RMS residual above ``max_residual`` (m)."""
+    info[0], info[1] = rms, iterations
+    info[2] = 0.0 if rms <= max_residual else 4.0
 
 
 @njit(cache=True)

@@ -404,3 +404,27 @@ def test_energy_two_impositions_fast_path_equals_the_general_one(seed000):
         assert math.isnan(out.energy_range[0, 0]) and math.isnan(out.energy_range[7, 1])
         np.testing.assert_allclose(out.energy_range[1], out.tensions[1] ** 2 / (2 * k[1]))
     assert checked > 20
+
+
+def test_sotda_grid_candidates_match_a_numpy_meshgrid():
+    """The compiled grid of the SOTDA's grid variant: numpy's meshgrid of two linspaces, the
+    points left of every edge, then the vertices — point for point, on random polygons."""
+    from cdprctl.tda.sotda import grid_candidates
+
+    rng = np.random.default_rng(11)
+    for _ in range(100):
+        ang = np.sort(rng.uniform(0.0, 2.0 * np.pi, rng.integers(3, 9)))
+        radius = rng.uniform(1.0, 50.0)
+        P = np.stack([np.cos(ang), np.sin(ang)], axis=1) * radius + rng.normal(0.0, 100.0, 2)
+        n = int(rng.integers(2, 80))
+        gx, gy = np.meshgrid(
+            np.linspace(P[:, 0].min(), P[:, 0].max(), n),
+            np.linspace(P[:, 1].min(), P[:, 1].max(), n),
+        )
+        pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        inside = np.ones(len(pts), dtype=bool)
+        for (px, py), (qx, qy) in zip(P, np.roll(P, -1, axis=0), strict=True):
+            ex, ey = qx - px, qy - py
+            cross = ex * (pts[:, 1] - py) - ey * (pts[:, 0] - px)
+            inside &= cross / max(abs(ex) + abs(ey), 1e-300) >= -1e-12
+        np.testing.assert_array_equal(grid_candidates(P, n), np.concatenate([pts[inside], P]))

@@ -306,7 +306,7 @@ class Controller:
                 tp[gs.cables] -= self.jb_load
                 t_prev = tp
         return tda.solve(
-            e.kin.W, wrench, self.t_min, self.t_max, k=self._stiffness(), kin=e.kin, t_prev=t_prev
+            e.kin.W, wrench, self.t_min, self.t_max, k=e.k, kin=e.kin, t_prev=t_prev
         )
 
     def _total(self, spring: FloatArray, out: FloatArray) -> None:
@@ -342,9 +342,6 @@ class Controller:
 
     def _gravity_hold(self) -> FloatArray:
         return -(self.model.gravity_wrench(self.estimator.rotation) + self._ext_total)
-
-    def _stiffness(self) -> FloatArray:
-        return self.estimator.k
 
     def _control(self) -> None:
         """Cable wrench: ``M (a_d + Kp e + Ki ∫e + Kd ė) − w_g − w_e`` (PID + feedforward;
@@ -632,7 +629,7 @@ class Controller:
             self.grip_imposed,
             e.kin.W,
             e.rotation,
-            self._stiffness(),
+            self.estimator.k,
             self.ext_wrench,
             self.t_min,
             self.t_max,

@@ -80,21 +80,12 @@ class Estimator:
         self._fk_p = np.zeros(3)
         self._fk_R = np.eye(3)
         self._info = np.zeros(3)  # FK: RMS residual (m), iterations, FKStatus
-        self.k = self.stiffness(self.l_home)  # N/m, each cable's at the estimated pose
+        self.k = np.zeros(model.n_cables)  # N/m, each cable's at the estimated pose
+        stiffness_kernel(
+            self.l_home, self.inv_k_fixed, self.inv_es, self.l_winch, self.inv_spring, self.k
+        )
         # the FK result of the last update (its arrays are the estimator's: copy to keep)
         self._result = FKResult(self._fk_p, self._fk_R, 0.0, 0, FKStatus.CONVERGED)
-
-    def cable_lengths(self, theta: FloatArray, tensions: FloatArray) -> FloatArray:
-        """Geometric lengths (m) from motor angles (rad) and the tensions (N) they carry."""
-        l0 = self.l_home - self.drum_ratio * theta
-        return l0 + tensions * (
-            self.inv_k_fixed + self.inv_es * (l0 + self.l_winch) + self.inv_spring
-        )
-
-    def stiffness(self, lengths: FloatArray) -> FloatArray:
-        """Axial stiffness k_i (N/m) at geometric lengths (m), vectorised
-        (``RobotModel.cable_stiffness`` loops over cables)."""
-        return 1.0 / (self.inv_k_fixed + self.inv_es * (lengths + self.l_winch) + self.inv_spring)
 
     def reset(self, position: FloatArray, rotation: FloatArray) -> None:
         self.position[:] = position
@@ -245,8 +236,8 @@ def estimate_kernel(
     newest sample's instant when ``lag``, lengths (``cable_lengths``), the forward kinematics
     of the ``fk_cables`` warm-started from ``position``/``rotation`` (``fk_kernel``, into
     ``p``, ``R`` and ``info`` = [RMS residual, iterations, FKStatus]), the filtered twist and
-    the inverse kinematics at the new pose and there the cable stiffness ``k`` (N/m, as
-    ``Estimator.stiffness``). ``clock`` = [last sample instant (s), 2π f_c]."""
+    the inverse kinematics at the new pose and there the cable stiffness ``k`` (N/m).
+    ``clock`` = [last sample instant (s), 2π f_c]."""
     m = theta.shape[0]
     shift = 0.0
     for i in range(m):
@@ -265,9 +256,7 @@ def estimate_kernel(
     t = t - shift
     for i in range(m):
         l0 = l_home[i] - drum_ratio[i] * th[i]
-        lengths[i] = l0 + tensions[i] * (
-            inv_k_fixed[i] + inv_es[i] * (l0 + l_winch[i]) + inv_spring[i]
-        )
+        lengths[i] = l0 + tensions[i] * compliance(i, l0, inv_k_fixed, inv_es, l_winch, inv_spring)
     for j in range(fk_cables.shape[0]):
         fk_lengths[j] = lengths[fk_cables[j]]
     p[:] = position
@@ -291,12 +280,10 @@ def estimate_kernel(
         f_length,
         f_W,
         f_res,
+        max_residual,
         info,
     )
     status = int(info[2])
-    if status == CONVERGED and info[0] > max_residual:
-        status = INCONSISTENT
-        info[2] = INCONSISTENT
     if status != CONVERGED and status != MAX_ITERATIONS and status != INCONSISTENT:
         return
     dt = t - clock[0]
@@ -328,5 +315,18 @@ def estimate_kernel(
         length,
         W,
     )
-    for i in range(m):
-        k[i] = 1.0 / (inv_k_fixed[i] + inv_es[i] * (length[i] + l_winch[i]) + inv_spring[i])
+    stiffness_kernel(length, inv_k_fixed, inv_es, l_winch, inv_spring, k)
+
+
+@njit(cache=True)
+def compliance(i, length, inv_k_fixed, inv_es, l_winch, inv_spring):  # pragma: no cover
+    """1/k (m/N) of cable ``i`` at ``length`` (m): a fixed stiffness, or ``(l + l_w)/(E S)``,
+    plus its series spring."""
+    return inv_k_fixed[i] + inv_es[i] * (length + l_winch[i]) + inv_spring[i]
+
+
+@njit(cache=True)
+def stiffness_kernel(lengths, inv_k_fixed, inv_es, l_winch, inv_spring, out):  # pragma: no cover
+    """``out`` ← the axial stiffness k_i (N/m) of each cable at ``lengths`` (m)."""
+    for i in range(lengths.shape[0]):
+        out[i] = 1.0 / compliance(i, lengths[i], inv_k_fixed, inv_es, l_winch, inv_spring)

@@ -50,9 +50,8 @@ def warm_up(controller: Controller) -> None:
     # θ = 0: the home lengths. Writable arrays, as in the loop: numba compiles a read-only
     # array (the model's) as another type
     est.update(0.0, zeros, c.t_min.copy(), zeros, zeros)
-    hold = -(model.gravity_wrench(est.rotation) + c.ext_wrench)
-    if c.grippers.n:
-        hold = hold - c.grippers.weight_wrench(est.rotation)
+    c.grippers.weight_wrench(est.rotation)
+    hold = c._gravity_hold()  # any wrench: a kernel compiles whole, whatever branch it takes
     prev = 0.5 * (c.t_min + c.t_max)
     for opts in _tda_variants(c.tda.options, model.redundancy, prev):
         if opts.validate(model):

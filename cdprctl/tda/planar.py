@@ -1,10 +1,8 @@
 """The r = 2 polygon methods in one compiled call: feasible polygon, barycenter, minimum
-2-norm or 1-norm point, SOTDA (vertex variant) and the tension rate limit.
+2-norm or 1-norm point, SOTDA (vertices or a grid) and the tension rate limit.
 
-The same steps as the Python path of ``solver.TensionDistributor._polygon_method`` (which the
-SOTDA grid variant still takes) built from the same kernels; one call instead of ~30 numpy
-operations and five kernel calls per cycle (87 → ~15 µs for SOTDA on rowc,
-benchmarks/bench_loop.py).
+One call instead of ~30 numpy operations and five kernel calls per cycle (87 → ~15 µs for
+SOTDA on rowc, benchmarks/bench_loop.py).
 """
 
 from __future__ import annotations
@@ -16,7 +14,7 @@ from numba import njit
 
 from cdprctl.stiffness import _ka_weighted
 from cdprctl.tda import polygon as pg
-from cdprctl.tda.sotda import displacements_kernel
+from cdprctl.tda.sotda import displacements_kernel, grid_candidates_kernel
 
 # method codes of the kernel
 BARYCENTER, MIN_2NORM, MIN_1NORM, SOTDA = 0, 1, 2, 3
@@ -109,6 +107,7 @@ def planar_kernel(
     dw,
     direction,
     nu,
+    grid,
     t_prev,
     step,
     lam,
@@ -116,7 +115,8 @@ def planar_kernel(
     info,
 ):  # pragma: no cover - compiled
     """The polygon of ``t0 + N λ`` within ``[lo, hi]`` into ``verts``, the method's point
-    (``method``: BARYCENTER, MIN_2NORM, MIN_1NORM or SOTDA), rate-limited around ``t_prev``
+    (``method``: BARYCENTER, MIN_2NORM, MIN_1NORM or SOTDA — its candidates the vertices, or
+    with ``grid`` > 0 a ``grid × grid`` mesh over the polygon too), rate-limited around ``t_prev``
     when ``step`` (N) is finite; ``lam`` and ``tensions`` (N) out, and ``info`` (see the
     slots above). False when the polygon is empty (nothing else written but ``info[NV]``)."""
     nv = pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, tmp)
@@ -142,8 +142,12 @@ def planar_kernel(
                 j = v
         x, y = verts[j, 0], verts[j, 1]
     else:
+        cand, nc = verts, nv
+        if grid > 0:  # the paper's meshgrid search
+            cand = np.empty((grid * grid + nv, 2))
+            nc = grid_candidates_kernel(verts, nv, grid, cand)
         x, y, info[SOTDA_DP] = sotda_kernel(
-            verts, nv, bx, by, N, t0, k, uT, W, rbT, free_len, dw, direction, nu
+            cand, nc, bx, by, N, t0, k, uT, W, rbT, free_len, dw, direction, nu
         )
     info[RATE_FLAG] = 0.0
     if math.isfinite(step):

@@ -23,7 +23,6 @@ from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
 from cdprctl.tda.energy import cable_energies, impose, minimum_energy
 from cdprctl.tda.nullspace import NullSpace
-from cdprctl.tda.sotda import SotdaModel, grid_candidates, sotda_point
 from cdprctl.tda.types import TDAMethod, TDAOptions, TDAOutput, TDAStatus
 
 if TYPE_CHECKING:
@@ -52,7 +51,6 @@ class TensionDistributor:
         self.ns = NullSpace(self.m)
         self.out = TDAOutput(self.m, self.r)
         self._f = np.zeros(2)
-        self._lam1 = np.zeros((1, 2))
         self._lam2 = np.zeros(2)
         self._verts = np.zeros((2 * self.m + 8, 2))
         self._no_polygon = np.zeros((0, 2))
@@ -144,62 +142,12 @@ class TensionDistributor:
         kin: KinematicsData | None,
         t_prev: FloatArray | None,
     ) -> TDAStatus:
+        """The r = 2 polygon methods in one compiled call (``planar.planar_kernel``)."""
         out, ns, opt = self.out, self.ns, self.options
-        method = opt.method
-        if method is not TDAMethod.SOTDA:
-            return self._planar(lo, hi, k, kin, t_prev)
-        if k is None or kin is None:
+        sotda = opt.method is TDAMethod.SOTDA
+        if sotda and (k is None or kin is None):
             out.message = "sotda needs the cable stiffness k and the kinematics"
             return TDAStatus.DEGENERATE
-        if opt.sotda_variant != "grid":
-            return self._planar(lo, hi, k, kin, t_prev)
-        # the grid variant (the paper's meshgrid over the polygon): candidates in Python
-        N, t0 = ns.N, ns.t0
-        verts = self._verts
-        nv = pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, self._verts_tmp)
-        if nv == 0:
-            return self._least_violating(lo, hi)
-        out.polygon = verts[:nv]
-        area, bx, by = pg.area_centroid_kernel(verts, nv)
-        out.area, out.barycenter = area, (bx, by)
-        sm = SotdaModel(kin, k, t0, N)
-        cand = grid_candidates(verts[:nv], opt.grid_points)
-        best, _ = sotda_point(sm, cand, self._delta_wrench, self._direction)
-        sx, sy = float(cand[best, 0]), float(cand[best, 1])
-        nu = opt.nu
-        x, y = bx + nu * (sx - bx), by + nu * (sy - by)  # intermediate solution (Fig. 2)
-        self._lam1[0, 0], self._lam1[0, 1] = x, y
-        dX = sm.displacements(self._lam1, self._delta_wrench)[0]
-        out.sotda_displacement = float(dX[:3] @ self._direction)
-        if t_prev is not None and opt.max_tension_rate is not None:
-            x, y, flag = planar.rate_limit_kernel(
-                x,
-                y,
-                N,
-                t0,
-                lo,
-                hi,
-                t_prev,
-                opt.max_tension_rate * opt.period,
-                self._verts_rate,
-                self._verts_tmp,
-            )
-            self._rate_flag(flag)
-        out.lam[0], out.lam[1] = x, y
-        np.dot(N, out.lam, out=out.tensions)
-        out.tensions += t0
-        return TDAStatus.OK
-
-    def _planar(
-        self,
-        lo: FloatArray,
-        hi: FloatArray,
-        k: FloatArray | None,
-        kin: KinematicsData | None,
-        t_prev: FloatArray | None,
-    ) -> TDAStatus:
-        """``_polygon_method`` in one compiled call (``planar.planar_kernel``)."""
-        out, ns, opt = self.out, self.ns, self.options
         info = self._planar_info
         kd = kin if kin is not None else self._no_kin
         rate = t_prev is not None and opt.max_tension_rate is not None
@@ -220,6 +168,7 @@ class TensionDistributor:
             self._delta_wrench,
             self._direction,
             opt.nu,
+            opt.grid_points if sotda and opt.sotda_variant == "grid" else 0,
             t_prev if rate else lo,
             (opt.max_tension_rate or 0.0) * opt.period if rate else math.inf,
             out.lam,
@@ -229,23 +178,15 @@ class TensionDistributor:
         if not ok:
             return self._least_violating(lo, hi)
         out.polygon = self._verts[: int(info[planar.NV])]
-        out.area, out.barycenter = (
-            float(info[planar.AREA]),
-            (
-                float(info[planar.BX]),
-                float(info[planar.BY]),
-            ),
-        )
+        out.area = float(info[planar.AREA])
+        out.barycenter = (float(info[planar.BX]), float(info[planar.BY]))
         out.sotda_displacement = float(info[planar.SOTDA_DP])
-        self._rate_flag(int(info[planar.RATE_FLAG]))
-        return TDAStatus.OK
-
-    def _rate_flag(self, flag: int) -> None:
-        """What ``planar.rate_limit_kernel`` did: 1 moved the point, 2 could not."""
+        flag = int(info[planar.RATE_FLAG])
         if flag == 1:
-            self.out.rate_limited = True
+            out.rate_limited = True
         elif flag == 2:
-            self.out.message = "tension rate limit cannot hold the wrench: not applied"
+            out.message = "tension rate limit cannot hold the wrench: not applied"
+        return TDAStatus.OK
 
     def _least_violating(self, lo: FloatArray, hi: FloatArray) -> TDAStatus:
         out, ns = self.out, self.ns

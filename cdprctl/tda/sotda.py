@@ -43,23 +43,6 @@ class SotdaModel:
         return out
 
 
-def sotda_point(
-    model: SotdaModel,
-    candidates: FloatArray,
-    delta_wrench: FloatArray,
-    direction: FloatArray,
-) -> tuple[int, FloatArray]:
-    """Index of the candidate with the smallest ``|direction · δp|`` and all those values (m).
-
-    Candidates whose stiffness matrix is singular (an unstable equilibrium, signalled by a
-    non-finite displacement) are never selected.
-    """
-    dX = model.displacements(candidates, delta_wrench)
-    dp = np.abs(dX[:, :3] @ direction)
-    dp = np.where(np.isfinite(dp), dp, np.inf)
-    return int(np.argmin(dp)), dp
-
-
 @njit(cache=True)
 def displacements_kernel(K0, A1, A2, lam, n, dw, out):  # pragma: no cover - compiled
     """``out[j] = (K0 + λ_j1 A1 + λ_j2 A2)⁻¹ dw`` by Gaussian elimination with partial
@@ -100,14 +83,41 @@ def displacements_kernel(K0, A1, A2, lam, n, dw, out):  # pragma: no cover - com
 def grid_candidates(poly: Sequence[Point] | FloatArray, n: int) -> FloatArray:
     """Points of an ``n × n`` grid over the polygon's bounding box that lie inside it, plus its
     vertices (the paper's meshgrid search of the feasible polygon)."""
-    P = np.array(poly)
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], n), np.linspace(lo[1], hi[1], n))
-    pts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    inside = np.ones(len(pts), dtype=bool)
-    Q = np.roll(P, -1, axis=0)
-    for (px, py), (qx, qy) in zip(P, Q, strict=True):  # CCW: inside is left of each edge
-        ex, ey = qx - px, qy - py
-        scale = max(abs(ex) + abs(ey), 1e-300)
-        inside &= (ex * (pts[:, 1] - py) - ey * (pts[:, 0] - px)) / scale >= -1e-12
-    return np.concatenate([pts[inside], P], axis=0)
+    P = np.ascontiguousarray(np.array(poly, dtype=float).reshape(-1, 2))
+    out = np.empty((n * n + len(P), 2))
+    return out[: grid_candidates_kernel(P, len(P), n, out)]
+
+
+@njit(cache=True)
+def grid_candidates_kernel(verts, nv, n, out):  # pragma: no cover - compiled
+    """:func:`grid_candidates` of the counter-clockwise polygon ``verts[:nv]`` into ``out``
+    (room for ``n² + nv`` rows); returns the number of rows written. The grid is numpy's
+    ``linspace`` per axis, x fastest; inside means left of every edge within 1e-12."""
+    lo_x = hi_x = verts[0, 0]
+    lo_y = hi_y = verts[0, 1]
+    for k in range(1, nv):
+        lo_x, hi_x = min(lo_x, verts[k, 0]), max(hi_x, verts[k, 0])
+        lo_y, hi_y = min(lo_y, verts[k, 1]), max(hi_y, verts[k, 1])
+    step_x = (hi_x - lo_x) / (n - 1) if n > 1 else 0.0
+    step_y = (hi_y - lo_y) / (n - 1) if n > 1 else 0.0
+    count = 0
+    for i in range(n):
+        y = hi_y if i == n - 1 and n > 1 else i * step_y + lo_y
+        for j in range(n):
+            x = hi_x if j == n - 1 and n > 1 else j * step_x + lo_x
+            inside = True
+            for k in range(nv):
+                px, py = verts[k, 0], verts[k, 1]
+                qx, qy = verts[(k + 1) % nv, 0], verts[(k + 1) % nv, 1]
+                ex, ey = qx - px, qy - py
+                scale = max(abs(ex) + abs(ey), 1e-300)
+                if (ex * (y - py) - ey * (x - px)) / scale < -1e-12:
+                    inside = False
+                    break
+            if inside:
+                out[count, 0], out[count, 1] = x, y
+                count += 1
+    for k in range(nv):
+        out[count, 0], out[count, 1] = verts[k, 0], verts[k, 1]
+        count += 1
+    return count
