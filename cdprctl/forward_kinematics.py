@@ -18,7 +18,8 @@ import numpy as np
 from numba import njit
 
 from cdprctl.kinematics import KinematicsData, ik_kernel
-from cdprctl.rotation import FloatArray
+from cdprctl.numerics import cable_compliance_py, compliance_terms
+from cdprctl.rotation import FloatArray, exp_so3_kernel
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
@@ -124,19 +125,9 @@ class ForwardKinematics:
 
 @njit(cache=True)
 def _exp_left(phi0, phi1, phi2, R):  # pragma: no cover - compiled
-    """``exp([φ]×) @ R`` (Rodrigues), as a new array."""
-    x, y, z = phi0, phi1, phi2
-    angle2 = x * x + y * y + z * z
-    if angle2 < 1e-16:
-        a, b = 1.0 - angle2 / 6.0, 0.5 - angle2 / 24.0
-    else:
-        angle = math.sqrt(angle2)
-        a = math.sin(angle) / angle
-        b = (1.0 - math.cos(angle)) / angle2
+    """``exp([φ]×) @ R``, as a new array."""
     E = np.empty((3, 3))
-    E[0, 0], E[0, 1], E[0, 2] = 1.0 + b * (x * x - angle2), -a * z + b * x * y, a * y + b * x * z
-    E[1, 0], E[1, 1], E[1, 2] = a * z + b * x * y, 1.0 + b * (y * y - angle2), -a * x + b * y * z
-    E[2, 0], E[2, 1], E[2, 2] = -a * y + b * x * z, a * x + b * y * z, 1.0 + b * (z * z - angle2)
+    exp_so3_kernel(phi0, phi1, phi2, E)
     return E @ R
 
 
@@ -318,12 +309,5 @@ def stretched_lengths(
     """
     out = np.array(unstretched, dtype=np.float64)
     for i, c in enumerate(model.cables):
-        t = float(tensions[i])
-        if c.stiffness is not None:
-            out[i] += t / c.stiffness
-        else:
-            es = (c.youngs_modulus or 0.0) * (c.cross_section or 0.0)
-            out[i] += t * (out[i] + c.length_to_winch) / es
-        if c.spring_stiffness is not None:
-            out[i] += t / c.spring_stiffness
+        out[i] += float(tensions[i]) * cable_compliance_py(*compliance_terms(c), out[i])
     return out

@@ -80,28 +80,38 @@ def skew(v: FloatArray) -> FloatArray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def exp_so3(phi: FloatArray) -> FloatArray:
-    """Rotation matrix of the rotation vector ``phi`` (rad), by Rodrigues' formula.
-
-    Plain floats: this sits in the forward-kinematics iteration, where numpy's per-call
-    overhead on 3×3 arrays would dominate.
-    """
-    x, y, z = float(phi[0]), float(phi[1]), float(phi[2])
+def rodrigues_into(x: float, y: float, z: float, out: FloatArray) -> None:
+    """``out`` (3×3) ← ``exp([φ]×)`` of the rotation vector ``φ = (x, y, z)`` (rad), by
+    Rodrigues' formula ``R = I + a K + b K²`` (``K = [φ]×``, ``K² = φφᵀ − θ² I``). The one
+    rotation exponential of cdprctl: plain Python here, compiled as ``exp_so3_kernel`` for the
+    kernels (forward kinematics, pose control, the simulated platform)."""
     angle2 = x * x + y * y + z * z
     if angle2 < 1e-16:  # Taylor expansion avoids 0/0: a = 1 − θ²/6, b = 1/2 − θ²/24
-        a, b = 1.0 - angle2 / 6.0, 0.5 - angle2 / 24.0
+        a = 1.0 - angle2 / 6.0
+        b = 0.5 - angle2 / 24.0
     else:
         angle = math.sqrt(angle2)
         a = math.sin(angle) / angle
         b = (1.0 - math.cos(angle)) / angle2
-    # R = I + a K + b K², K = [phi]×, K² = phi phiᵀ − θ² I
-    return np.array(
-        [
-            [1.0 + b * (x * x - angle2), -a * z + b * x * y, a * y + b * x * z],
-            [a * z + b * x * y, 1.0 + b * (y * y - angle2), -a * x + b * y * z],
-            [-a * y + b * x * z, a * x + b * y * z, 1.0 + b * (z * z - angle2)],
-        ]
-    )
+    out[0, 0] = 1.0 + b * (x * x - angle2)
+    out[0, 1] = -a * z + b * x * y
+    out[0, 2] = a * y + b * x * z
+    out[1, 0] = a * z + b * x * y
+    out[1, 1] = 1.0 + b * (y * y - angle2)
+    out[1, 2] = -a * x + b * y * z
+    out[2, 0] = -a * y + b * x * z
+    out[2, 1] = a * x + b * y * z
+    out[2, 2] = 1.0 + b * (z * z - angle2)
+
+
+exp_so3_kernel = njit(cache=True)(rodrigues_into)
+
+
+def exp_so3(phi: FloatArray) -> FloatArray:
+    """Rotation matrix of the rotation vector ``phi`` (rad) (:func:`rodrigues_into`)."""
+    out = np.empty((3, 3))
+    rodrigues_into(float(phi[0]), float(phi[1]), float(phi[2]), out)
+    return out
 
 
 def orthonormalize(R: FloatArray) -> FloatArray:
@@ -110,28 +120,10 @@ def orthonormalize(R: FloatArray) -> FloatArray:
     return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
 
 
-def log_so3(R: FloatArray) -> FloatArray:
-    """Rotation vector (rad) of the rotation matrix ``R`` (inverse of :func:`exp_so3`).
-
-    Plain floats: it runs a few times per control cycle."""
-    r = R.tolist()
-    cos_angle = max(-1.0, min(1.0, (r[0][0] + r[1][1] + r[2][2] - 1.0) / 2.0))
-    angle = math.acos(cos_angle)
-    wx, wy, wz = r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]
-    if angle < 1e-8:
-        return np.array([0.5 * wx, 0.5 * wy, 0.5 * wz])
-    if math.pi - angle < 1e-6:  # near π: take the axis from the symmetric part
-        M = (np.asarray(R) + np.eye(3)) / 2.0
-        k = int(np.argmax(np.diag(M)))
-        axis = M[:, k] / math.sqrt(max(float(M[k, k]), 1e-300))
-        return angle * axis
-    f = angle / (2.0 * math.sin(angle))
-    return np.array([f * wx, f * wy, f * wz])
-
-
-@njit(cache=True)
-def log_so3_kernel(R, out):  # pragma: no cover - compiled
-    """Rotation vector of ``R`` (as :func:`log_so3`), compiled, into ``out[0:3]``."""
+def log_so3_into(R: FloatArray, out: FloatArray) -> None:
+    """``out[0:3]`` ← the rotation vector (rad) of the rotation matrix ``R`` (inverse of
+    :func:`rodrigues_into`). The one rotation logarithm: plain Python here, compiled as
+    ``log_so3_kernel``."""
     c = (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0
     c = max(-1.0, min(1.0, c))
     angle = math.acos(c)
@@ -157,3 +149,13 @@ def log_so3_kernel(R, out):  # pragma: no cover - compiled
         out[0] = f * wx
         out[1] = f * wy
         out[2] = f * wz
+
+
+log_so3_kernel = njit(cache=True)(log_so3_into)
+
+
+def log_so3(R: FloatArray) -> FloatArray:
+    """Rotation vector (rad) of the rotation matrix ``R`` (:func:`log_so3_into`)."""
+    out = np.empty(3)
+    log_so3_into(np.asarray(R, dtype=float), out)
+    return out

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import clamp
 from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
 
 _LOG = logging.getLogger("cdprctl.drivers")
@@ -375,13 +376,9 @@ def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
         if not np.isfinite(v):
             rejected += 1
             v = last[i]
-        if v > limit[i]:
-            v = limit[i]
+        out[i] = clamp(v, -limit[i], limit[i])
+        if out[i] != v:
             clamped += 1
-        elif v < -limit[i]:
-            v = -limit[i]
-            clamped += 1
-        out[i] = v
     return rejected, clamped
 
 

@@ -13,6 +13,7 @@ import can
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import plausible_step_py
 from drivers.base import WinchDriver
 from drivers.buses import TrafficLog, open_bus
 from drivers.errors import DriverError, DriverTimeoutError
@@ -58,13 +59,36 @@ class CanWinchDriver(WinchDriver):
         prev = self._fb_stamp[c]
         if not math.isfinite(prev):
             return True
-        dt = max(stamp - prev, 0.0) + self.period  # a period of slack for timing jitter
-        if abs(step) <= self._max_motor_speed[c] * dt:
+        # a period of slack for timing jitter (the one rule: cdprctl.numerics.plausible_step)
+        if plausible_step_py(step, float(self._max_motor_speed[c]), stamp - prev, self.period):
             self._implausible[c] = 0
             return True
         self._implausible[c] += 1
         self.stats.implausible_frames += 1
         return False
+
+    def _await_first_feedback(
+        self, timeout: float, heard: Any, what: str, on_tick: Any = None
+    ) -> None:
+        """Cycle (zero torque, drives disabled) until ``heard()`` says every drive has sent
+        feedback; ``on_tick(now)`` once a cycle (a repeated NMT start, say). Raises
+        ``DriverTimeoutError`` naming the silent cables' indices and ``what`` was awaited."""
+        deadline = self.clock() + timeout
+        while True:
+            now = self.clock()
+            self._read_internal(now)
+            self._write_internal(now, np.zeros(self.m))
+            if heard():
+                return
+            if on_tick is not None:
+                on_tick(now)
+            if now > deadline:
+                silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
+                raise DriverTimeoutError(
+                    f"no {what} from the drives of cable indices {silent} within {timeout:g} s",
+                    silent[0] if silent else None,
+                )
+            self.wait(self.period)
 
     def _warm_up(self) -> None:
         super()._warm_up()

@@ -32,7 +32,8 @@ from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
 from cdprctl.model.grippers import in_series
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
+from cdprctl.numerics import cable_compliance, cable_compliance_py, compliance_terms
+from cdprctl.rotation import FloatArray, exp_so3_kernel
 
 
 @dataclass
@@ -63,10 +64,11 @@ class CdprPlant:
         self.rotor_inertia = np.array([w.winch.rotor_inertia for w in c])
         self.viscous = np.array([w.winch.viscous_friction for w in c])
         self.coulomb = np.array([w.winch.coulomb_friction for w in c])
-        self.k_fixed = np.array([x.stiffness if x.stiffness is not None else 0.0 for x in c])
-        self.es = np.array([(x.youngs_modulus or 0.0) * (x.cross_section or 0.0) for x in c])
-        self.k_spring = np.array([x.spring_stiffness or 0.0 for x in c])
-        self.l_winch = np.array([x.length_to_winch for x in c])
+        # the cable law's terms (cdprctl.numerics.cable_compliance), per cable
+        terms = np.array([compliance_terms(x) for x in c]).reshape(len(c), 4)
+        self.inv_k_fixed, self.inv_es, self.l_winch, self.inv_spring = (
+            np.ascontiguousarray(terms[:, j]) for j in range(4)
+        )
         self.kin = KinematicsData(model)
         inverse_kinematics(model, self.kin, model.home.position, model.home.rotation)
         self.l_home = self.kin.length.copy()
@@ -167,7 +169,7 @@ class CdprPlant:
         the unstretched lengths ``l0`` (m) of the gripper cables."""
         parallel = self._grippers.parallel_load(self.R)
         for j, i in enumerate(self.g_cable):
-            ka, kjb = self.k_fixed[i], self.g_k_jb[j]
+            ka, kjb = 1.0 / self.inv_k_fixed[i], self.g_k_jb[j]
             f_par = float(parallel[j])
             t = float(tensions[i])
             kc, L = self.g_k_contact[j], self.g_object_travel[j]
@@ -194,16 +196,10 @@ class CdprPlant:
             tensions = equilibrium_tensions(model, self.kin)
         t = np.asarray(tensions, float)
         length = self.kin.length
-        # unstretched length l0 giving tension t at geometric length l:
-        # l − l0 = t/k_s + t (l0 + l_w)/(E S)   or   t/k_s + t/k
-        l0 = np.empty(self.m)
-        for i in range(self.m):
-            extra = t[i] / self.k_spring[i] if self.k_spring[i] > 0 else 0.0
-            if self.k_fixed[i] > 0:
-                l0[i] = length[i] - extra - t[i] / self.k_fixed[i]
-            else:
-                es = self.es[i]
-                l0[i] = (length[i] - extra - t[i] * self.l_winch[i] / es) / (1.0 + t[i] / es)
+        # unstretched length l0 giving tension t at geometric length l, the cable law solved
+        # for l0: l = l0 + t (1/k + (l0 + l_w)/(E S) + 1/k_s)
+        c0 = self.inv_k_fixed + self.inv_es * self.l_winch + self.inv_spring
+        l0 = (length - t * c0) / (1.0 + t * self.inv_es)
         self.R[:] = R
         self._settle_grippers(t, length, l0)
         self.theta[:] = (self.l_home - l0) / self.drum_ratio
@@ -255,9 +251,9 @@ class CdprPlant:
             self.viscous,
             self.coulomb,
             self.opt.coulomb_velocity,
-            self.k_fixed,
-            self.es,
-            self.k_spring,
+            self.inv_k_fixed,
+            self.inv_es,
+            self.inv_spring,
             self.l_winch,
             self.damping,
             self.opt.pulley_friction,
@@ -311,7 +307,9 @@ class CdprPlant:
         stretch = self.kin.length - l0
         for i in range(self.m):
             if stretch[i] > 0 and not self.cable_cut[i]:
-                k = _k_eff(self.k_fixed[i], self.es[i], self.k_spring[i], l0[i] + self.l_winch[i])
+                k = 1.0 / cable_compliance_py(
+                    self.inv_k_fixed[i], self.inv_es[i], self.l_winch[i], self.inv_spring[i], l0[i]
+                )
                 e += 0.5 * k * stretch[i] ** 2
         return e + self._jaw_energy(stretch)
 
@@ -360,14 +358,6 @@ def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
     t = out.tensions.copy() if out.ok else model.tension_min.copy()
     t[gs.cables] += load  # jB carries the jaws
     return t
-
-
-@njit(cache=True)
-def _k_eff(k_fixed, es, k_spring, l_total):  # pragma: no cover - compiled
-    k = k_fixed if k_fixed > 0.0 else es / l_total
-    if k_spring > 0.0:
-        k = 1.0 / (1.0 / k + 1.0 / k_spring)
-    return k
 
 
 @njit(cache=True)
@@ -484,9 +474,9 @@ def physics_kernel(
     visc,
     coul,
     coul_v,
-    k_fixed,
-    es,
-    k_spring,
+    inv_k_fixed,
+    inv_es,
+    inv_spring,
     l_w,
     damping,
     mu_p,
@@ -552,7 +542,7 @@ def physics_kernel(
             e = length[i] - l0
             t = 0.0
             if e > 0.0 and not cut[i]:
-                k = _k_eff(k_fixed[i], es[i], k_spring[i], l0 + l_w[i])
+                k = 1.0 / cable_compliance(inv_k_fixed[i], inv_es[i], l_w[i], inv_spring[i], l0)
                 ldot = 0.0
                 for a in range(6):
                     ldot -= W[a, i] * twist[a]  # dl/dt = −Wᵀ twist
@@ -622,27 +612,6 @@ def physics_kernel(
         for a in range(3):
             com_pos[a] += v[a] * dt
         # R ← exp([ω dt]×) R
-        x, y, z = w[0] * dt, w[1] * dt, w[2] * dt
-        th2 = x * x + y * y + z * z
-        if th2 < 1e-16:
-            sa, sb = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-        else:
-            th = math.sqrt(th2)
-            sa, sb = math.sin(th) / th, (1.0 - math.cos(th)) / th2
         E = np.empty((3, 3))
-        E[0, 0], E[0, 1], E[0, 2] = (
-            1 + sb * (x * x - th2),
-            -sa * z + sb * x * y,
-            sa * y + sb * x * z,
-        )
-        E[1, 0], E[1, 1], E[1, 2] = (
-            sa * z + sb * x * y,
-            1 + sb * (y * y - th2),
-            -sa * x + sb * y * z,
-        )
-        E[2, 0], E[2, 1], E[2, 2] = (
-            -sa * y + sb * x * z,
-            sa * x + sb * y * z,
-            1 + sb * (z * z - th2),
-        )
+        exp_so3_kernel(w[0] * dt, w[1] * dt, w[2] * dt, E)
         R[:, :] = E @ R

@@ -28,6 +28,7 @@ from numba import njit
 from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics, fk_kernel
 from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
 from cdprctl.model.robot import RobotModel
+from cdprctl.numerics import cable_compliance, compliance_terms
 from cdprctl.rotation import FloatArray, log_so3_kernel
 
 
@@ -39,22 +40,11 @@ class Estimator:
         kin = KinematicsData(model)
         inverse_kinematics(model, kin, model.home.position, model.home.rotation)
         self.l_home = kin.length.copy()
-        # compliance per cable: 1/k_fixed, or (l0 + l_w)/(E S), plus the series spring's 1/k_s
-        self.inv_k_fixed = np.array(
-            [1.0 / x.stiffness if x.stiffness is not None else 0.0 for x in c]
+        # the cable law's terms per cable (cdprctl.numerics.cable_compliance)
+        terms = np.array([compliance_terms(x) for x in c]).reshape(len(c), 4)
+        self.inv_k_fixed, self.inv_es, self.l_winch, self.inv_spring = (
+            np.ascontiguousarray(terms[:, j]) for j in range(4)
         )
-        self.inv_es = np.array(
-            [
-                0.0
-                if x.stiffness is not None
-                else 1.0 / ((x.youngs_modulus or 1.0) * (x.cross_section or 1.0))
-                for x in c
-            ]
-        )
-        self.inv_spring = np.array(
-            [1.0 / x.spring_stiffness if x.spring_stiffness else 0.0 for x in c]
-        )
-        self.l_winch = np.array([x.length_to_winch for x in c])
         # A gripper cable's length is the jaw's travel plus the pose (Sensors 2019 §2.4): the
         # pose comes from the other cables, the grippers take the redundancy (docs/gripper.md).
         grip = {g.cable for g in model.grippers}
@@ -256,7 +246,9 @@ def estimate_kernel(
     t = t - shift
     for i in range(m):
         l0 = l_home[i] - drum_ratio[i] * th[i]
-        lengths[i] = l0 + tensions[i] * compliance(i, l0, inv_k_fixed, inv_es, l_winch, inv_spring)
+        lengths[i] = l0 + tensions[i] * cable_compliance(
+            inv_k_fixed[i], inv_es[i], l_winch[i], inv_spring[i], l0
+        )
     for j in range(fk_cables.shape[0]):
         fk_lengths[j] = lengths[fk_cables[j]]
     p[:] = position
@@ -319,14 +311,9 @@ def estimate_kernel(
 
 
 @njit(cache=True)
-def compliance(i, length, inv_k_fixed, inv_es, l_winch, inv_spring):  # pragma: no cover
-    """1/k (m/N) of cable ``i`` at ``length`` (m): a fixed stiffness, or ``(l + l_w)/(E S)``,
-    plus its series spring."""
-    return inv_k_fixed[i] + inv_es[i] * (length + l_winch[i]) + inv_spring[i]
-
-
-@njit(cache=True)
 def stiffness_kernel(lengths, inv_k_fixed, inv_es, l_winch, inv_spring, out):  # pragma: no cover
     """``out`` ← the axial stiffness k_i (N/m) of each cable at ``lengths`` (m)."""
     for i in range(lengths.shape[0]):
-        out[i] = 1.0 / compliance(i, lengths[i], inv_k_fixed, inv_es, l_winch, inv_spring)
+        out[i] = 1.0 / cable_compliance(
+            inv_k_fixed[i], inv_es[i], l_winch[i], inv_spring[i], lengths[i]
+        )

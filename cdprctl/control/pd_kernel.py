@@ -7,34 +7,10 @@ tests/test_pd_kernel.py checks it against a numpy transcription of the law.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
-from cdprctl.rotation import log_so3_kernel
-
-
-@njit(cache=True)
-def _exp_so3(x, y, z, out):  # pragma: no cover - compiled
-    """Rodrigues' formula (as ``cdprctl.rotation.exp_so3``) into ``out`` (3×3)."""
-    angle2 = x * x + y * y + z * z
-    if angle2 < 1e-16:
-        a = 1.0 - angle2 / 6.0
-        b = 0.5 - angle2 / 24.0
-    else:
-        angle = math.sqrt(angle2)
-        a = math.sin(angle) / angle
-        b = (1.0 - math.cos(angle)) / angle2
-    out[0, 0] = 1.0 + b * (x * x - angle2)
-    out[0, 1] = -a * z + b * x * y
-    out[0, 2] = a * y + b * x * z
-    out[1, 0] = a * z + b * x * y
-    out[1, 1] = 1.0 + b * (y * y - angle2)
-    out[1, 2] = -a * x + b * y * z
-    out[2, 0] = -a * y + b * x * z
-    out[2, 1] = a * x + b * y * z
-    out[2, 2] = 1.0 + b * (z * z - angle2)
+from cdprctl.rotation import exp_so3_kernel, log_so3_kernel
 
 
 @njit(cache=True)
@@ -64,7 +40,7 @@ def pd_wrench_kernel(
     err,  # (6,) out: reference − estimate
     wrench,  # (6,) out: what the cables must exert, N and N·m at P, base frame
 ):  # pragma: no cover - compiled
-    _exp_so3(ref_x[3], ref_x[4], ref_x[5], E)
+    exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
     for i in range(3):
         for j in range(3):
             Rd[i, j] = E[i, 0] * R_home[0, j] + E[i, 1] * R_home[1, j] + E[i, 2] * R_home[2, j]

@@ -15,6 +15,7 @@ from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.model.grippers import Gripper
 from cdprctl.model.zenoh import ZenohConfig
+from cdprctl.numerics import cable_compliance_py, compliance_terms
 from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
 
 
@@ -75,16 +76,10 @@ class Cable:
     winch: Winch
 
     def axial_stiffness(self, length: float) -> float:
-        """Axial stiffness (N/m) of cable + series spring at geometric length ``length`` (m)."""
-        if self.stiffness is not None:
-            k = self.stiffness
-        else:
-            # The loader guarantees E and S are set whenever ``stiffness`` is not.
-            es = (self.youngs_modulus or 0.0) * (self.cross_section or 0.0)
-            k = es / (length + self.length_to_winch)
-        if self.spring_stiffness is not None:
-            k = 1.0 / (1.0 / k + 1.0 / self.spring_stiffness)
-        return k
+        """Axial stiffness (N/m) of cable + series spring at geometric length ``length`` (m)
+        (``cdprctl.numerics.cable_compliance``; the loader guarantees E and S are set whenever
+        ``stiffness`` is not)."""
+        return 1.0 / cable_compliance_py(*compliance_terms(self), length)
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import clamp, plausible_step
 from drivers.cia402 import protocol as p
 
 #: PowerState of every statusword, by its bits 0-6 (the only ones Table 30 looks at)
@@ -59,8 +60,7 @@ def tpdo1_kernel(
             step = ((pos - raw[c, 0] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
             prev = fb_stamp[c]
             if np.isfinite(prev):
-                dt = max(stamp - prev, 0.0) + period
-                if abs(step * rad_per_count[c]) <= max_speed[c] * dt:
+                if plausible_step(step * rad_per_count[c], max_speed[c], stamp - prev, period):
                     raw[c, 2] = 0
                 else:
                     raw[c, 2] += 1
@@ -138,4 +138,4 @@ def controlword_kernel(
         else:
             out[c, 0] = _DISABLE_VOLTAGE
         pm = np.rint(torques[c] * 1000.0 / rated_torque)
-        out[c, 1] = int(min(32767.0, max(-32767.0, pm)))
+        out[c, 1] = int(clamp(pm, -32767.0, 32767.0))

@@ -113,24 +113,18 @@ class Cia402Driver(CanWinchDriver):
                     f"{mode} in 0x6061, expected {p.MODE_CST} (cyclic synchronous torque)"
                 )
         self._started = True
+
         # cycle (zero torque, drives disabled) until every drive has sent feedback
-        deadline = self.clock() + timeout
-        while True:
-            now = self.clock()
-            self._read_internal(now)
-            self._write_internal(now, np.zeros(self.m))
-            if np.all(np.isfinite(self._fb_stamp)):
-                return
+        def resend_start(now: float) -> None:
             if int(now / 0.5) != int((now - self.period) / 0.5):
                 self._nmt_start_all()  # a lost NMT start (lossy buses) is sent again
-            if now > deadline:
-                silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
-                raise DriverTimeoutError(
-                    f"no feedback (TPDO1) from the drives of cable indices {silent} within "
-                    f"{timeout:g} s",
-                    silent[0],
-                )
-            self.wait(self.period)
+
+        self._await_first_feedback(
+            timeout,
+            lambda: bool(np.all(np.isfinite(self._fb_stamp))),
+            "feedback (TPDO1)",
+            resend_start,
+        )
 
     SDO_RETRY = 0.25  # s: a request (or its answer) lost on a lossy bus is sent again
 

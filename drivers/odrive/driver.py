@@ -16,7 +16,7 @@ import numpy as np
 
 from drivers.base import DriveState, register_driver
 from drivers.canbase import CanWinchDriver
-from drivers.errors import DriveFaultError, DriverError, DriverOperationError, DriverTimeoutError
+from drivers.errors import DriveFaultError, DriverError, DriverOperationError
 from drivers.odrive import protocol as p
 
 TWO_PI = 2.0 * math.pi
@@ -69,21 +69,13 @@ class ODriveDriver(CanWinchDriver):
             )
             self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(p.AxisState.IDLE))
         self._started = True
-        deadline = self.clock() + timeout
-        while True:
-            now = self.clock()
-            self._read_internal(now)
-            self._write_internal(now, np.zeros(self.m))
-            if np.all(np.isfinite(self._fb_stamp)) and np.all(np.isfinite(self._last_hb)):
-                return
-            if now > deadline:
-                silent = [c for c in range(self.m) if not np.isfinite(self._fb_stamp[c])]
-                raise DriverTimeoutError(
-                    f"no encoder estimates from the ODrive axes of cable indices {silent} "
-                    f"within {timeout:g} s",
-                    silent[0] if silent else None,
-                )
-            self.wait(self.period)
+        self._await_first_feedback(
+            timeout,
+            lambda: bool(
+                np.all(np.isfinite(self._fb_stamp)) and np.all(np.isfinite(self._last_hb))
+            ),
+            "encoder estimates (ODrive axes)",
+        )
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable

@@ -1,0 +1,63 @@
+"""Scalar rules written once for every layer: plain Python, each also compiled (``*_kernel``
+names or the ``njit`` wrappers below) so that the kernels and the Python paths apply the same
+text. Rotations are in ``rotation.py``.
+
+* ``clamp``: a value within [lo, hi] (the torque limit of the drivers and the controller, the
+  integral limit).
+* ``plausible_step``: whether a motor can have turned by a step between two samples (the
+  drivers' rejection of corrupted position feedback).
+* ``cable_compliance``: 1/k (m/N) of a cable and its series spring at a length (the model's
+  stiffness, the estimator's stretch, the simulated plant's cable force).
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+
+def _clamp(v: float, lo: float, hi: float) -> float:
+    return min(hi, max(lo, v))
+
+
+def _plausible_step(step: float, max_speed: float, elapsed: float, slack: float) -> bool:
+    """A motor turning at most ``max_speed`` (rad/s) can move by ``step`` (rad) in the
+    ``elapsed`` s since its last accepted sample plus ``slack`` s (a period, for timing
+    jitter). A non-finite step is never plausible."""
+    return abs(step) <= max_speed * (max(elapsed, 0.0) + slack)
+
+
+def _cable_compliance(
+    inv_k_fixed: float, inv_es: float, l_winch: float, inv_spring: float, length: float
+) -> float:
+    """1/k (m/N) of a cable at ``length`` (m): a fixed stiffness ``1/k_fixed``, or the
+    elastic ``(l + l_w)/(E S)`` (the cable from the exit point to the drum), plus the series
+    spring's ``1/k_s`` (each term zero where it does not apply)."""
+    return inv_k_fixed + inv_es * (length + l_winch) + inv_spring
+
+
+clamp = njit(cache=True)(_clamp)
+plausible_step = njit(cache=True)(_plausible_step)
+cable_compliance = njit(cache=True)(_cable_compliance)
+#: the same rules for Python callers outside the loop (no compilation at import)
+clamp_py = _clamp
+plausible_step_py = _plausible_step
+cable_compliance_py = _cable_compliance
+
+
+def compliance_terms(cable: object) -> tuple[float, float, float, float]:
+    """``(1/k_fixed, 1/(E S), l_w, 1/k_s)`` of a ``CableConfig`` for ``cable_compliance``."""
+    stiffness = getattr(cable, "stiffness", None)
+    spring = getattr(cable, "spring_stiffness", None)
+    if stiffness is not None:
+        inv_k, inv_es = 1.0 / stiffness, 0.0
+    else:
+        es = (getattr(cable, "youngs_modulus", None) or 0.0) * (
+            getattr(cable, "cross_section", None) or 0.0
+        )
+        inv_k, inv_es = 0.0, (1.0 / es if es > 0.0 else 0.0)
+    return (
+        inv_k,
+        inv_es,
+        float(getattr(cable, "length_to_winch", 0.0)),
+        (1.0 / spring if spring else 0.0),
+    )
