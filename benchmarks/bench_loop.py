@@ -16,11 +16,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line
 
-from cdprctl.control.controller import PHASES
+from cdprctl.control.data import PHASES
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model import load_robot
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import TDAMethod, TDAOptions
-from sim_backend.closed_loop import ClosedLoop
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 
@@ -80,7 +80,7 @@ def _measure(
         c = cl.controller
         phases = np.zeros((2500, len(PHASES)))
         for i in range(len(phases)):
-            c.step(cl.net.time)
+            cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
             phases[i] = c.phase_us
         return phases, c.state.value

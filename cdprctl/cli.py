@@ -40,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"cdprctl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_check_config(sub)
-    p = sub.add_parser("demo", help="the main job of `make run` on the bundled robots")
+    p = sub.add_parser("demo", help="the offline TDA tools on the papers' robots (plots into out/)")
     p.set_defaults(func=_cmd_demo)
     from cdprctl.commands import bus_load, sim
     from cdprctl.commands import run as run_cmd

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from conftest import CONFIG
 
-from cdprctl.control.controller import State
+from cdprctl.control.states import State
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
 from cdprctl.stiffness import stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
-from sim_backend.closed_loop import ClosedLoop
 from sim_backend.faults import FaultEvent, FaultInjector
 
 

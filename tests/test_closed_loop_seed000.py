@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_closed_loop import enabled, static_deflection
 
-from cdprctl.control.controller import State
+from cdprctl.control.states import State
 from cdprctl.rotation import log_so3
 from sim_backend.faults import FaultEvent, FaultInjector
 
@@ -57,7 +57,7 @@ def test_switching_the_distribution_blends_instead_of_faulting(seed000):
     over in BLEND_TIME, every blend holding the wrench, so the soft cables' stretch moves
     smoothly and the pose estimate does not take it for an encoder fault (a step faulted at
     once: residual 20.5 mm > 20 mm)."""
-    from cdprctl.control.controller import Controller
+    from cdprctl.control.distribution import Distribution
     from cdprctl.tda import TDAMethod, TDAOptions
 
     with enabled(seed000) as cl:
@@ -72,16 +72,16 @@ def test_switching_the_distribution_blends_instead_of_faulting(seed000):
         assert steps < 1.0  # N per cycle; the switch moves some cables by 10-20 N in all
         assert np.abs(c.tensions - before).max() > 5.0  # it did switch
         assert np.abs(a["p_true"] - seed000.home.position).max() < 2e-3
-        assert Controller.BLEND_TIME == 1.0
+        assert Distribution.BLEND_TIME == 1.0
 
 
 def test_the_same_distribution_again_changes_nothing(seed000):
-    from cdprctl.control.controller import tda_options_of
+    from cdprctl.tda import tda_options_of
 
     with enabled(seed000) as cl:
         c = cl.controller
         tda = c.tda
         cl.command("set_tda", tda=tda_options_of(seed000))
         cl.run(0.1)
-        assert c.tda is tda and c._old_tda is None
+        assert c.tda is tda and c.distribution.old is None
         assert "unchanged" in c.events[-1][1]

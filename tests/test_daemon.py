@@ -3,6 +3,7 @@ real unix socket, the watchdog's rule, SIGTERM → controlled stop → exit 0, t
 
 from __future__ import annotations
 
+import io
 import os
 import re
 import shutil
@@ -169,7 +170,7 @@ def test_unit_file_verifies(tmp_path):
 
 
 def test_demo_script_moves_inside_the_workspace():
-    from cdprctl.control.controller import Command
+    from cdprctl.control.commands import Command
     from cdprctl.daemon.service import demo_script
     from cdprctl.model import load_robot
 
@@ -257,3 +258,44 @@ def test_helper_thread_leaves_the_loop_cpu_and_priority():
         assert seen["priority"] == 49
     else:
         assert seen["policy"] == os.SCHED_OTHER
+
+
+def test_a_signal_ends_the_loop_even_when_the_io_thread_hangs():
+    """The I/O thread normally ends the run after a signal (controlled stop); when it hangs,
+    the loop itself ends STOP_FALLBACK after the signal and the drives are shut down."""
+    from cdprctl.daemon.service import Daemon
+    from cdprctl.model import load_robot
+
+    model = load_robot(CONFIG / "rowc.toml")
+    d = Daemon(model, sim=True, overrides={}, realtime=False, status_every=0.0, out=io.StringIO())
+    d.STOP_FALLBACK = 0.3
+    release = threading.Event()
+    d._io_loop = lambda *a: release.wait(30.0)  # a hung I/O thread
+    signalled: dict[str, float] = {}
+    ended = threading.Event()
+
+    def signal_when_running() -> None:
+        deadline = time.monotonic() + 60.0
+        while d.stats.count < 50 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        signalled["at"] = time.monotonic()
+        d._on_signal(signal.SIGTERM, None)
+        if not ended.wait(20.0):  # without the fallback the loop would run on: end it,
+            d.finished.set()  # and let the timing assertion fail
+
+    th = threading.Thread(target=signal_when_running)
+    th.start()
+    try:
+        code = d.run(duration=None, demo=False)
+        end = time.monotonic()
+    finally:
+        ended.set()
+        release.set()
+        th.join()
+    assert code == 0
+    assert d.stats.count >= 50
+    # the loop ran until the fallback, then stopped (io.join waits ≤ 2 s for the hung thread)
+    assert 0.3 <= end - signalled["at"] < 0.3 + 2.0 + 5.0
+    last = d.stats.deadline[(d.stats.count - 1) % d.stats.size]
+    assert last - signalled["at"] < 0.3 + 1.0  # the loop's last cycle: soon after the deadline
+    assert d.driver.lifecycle.value == "finalized"

@@ -14,10 +14,11 @@ from conftest import CONFIG
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cdprctl.control.controller import Command, State
+from cdprctl.control.commands import Command
+from cdprctl.control.states import State
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model import load_robot
 from cdprctl.telemetry.validate import KINDS, CommandError, CommandValidator
-from sim_backend.closed_loop import ClosedLoop
 
 ROWC = load_robot(CONFIG / "rowc.toml")
 VALIDATOR = CommandValidator(ROWC, commands_enabled=True)
@@ -121,7 +122,7 @@ def test_a_command_flood_never_stalls_or_breaks_the_loop():
                 else:
                     cmd = Command("enable")
                 refused += not c.submit(cmd)
-            c.step(cl.net.time)
+            cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
             assert len(c.mailbox) <= 64
             assert np.all(np.isfinite(c.trajectory.target))  # the NaN moves never got in
@@ -156,7 +157,7 @@ def test_random_and_malformed_can_frames_change_nothing():
                     )
                 )
             cl.net._send(0, frames)
-            c.step(cl.net.time)
+            cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
             assert np.all(np.isfinite(c.torques)) and np.all(np.abs(c.torques) <= limit + 1e-9)
         drv = cl.rig.driver

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from conftest import CONFIG
 
+from cdprctl.experiments import grippers as ge
 from cdprctl.gripper import GripperSet, gripper_travel, weight_column
 from cdprctl.model import ConfigError, load_robot
 from cdprctl.telemetry.validate import CommandError, CommandValidator
-from sim_backend import gripper_experiments as ge
 from sim_backend.plant import CdprPlant, PlantOptions
 
 
@@ -180,7 +180,7 @@ def test_open_gripper_travel_follows_eq_37(grippers):
 
 
 def test_gripper_command_beyond_the_redundancy_is_refused_with_the_range(grippers):
-    from sim_backend.closed_loop import ClosedLoop
+    from cdprctl.experiments.closed_loop import ClosedLoop
 
     with ClosedLoop(grippers) as cl:
         cl.startup()
@@ -222,8 +222,8 @@ def test_bad_gripper_commands_are_rejected(grippers, payload, words):
 def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
     """The reply itself gives the feasible travel, computed at the snapshot's pose with the
     other gripper held at its target; the controller computes the same range."""
+    from cdprctl.experiments.closed_loop import ClosedLoop
     from cdprctl.rotation import matrix_to_rpy
-    from sim_backend.closed_loop import ClosedLoop
 
     v = CommandValidator(grippers, True)
     with ClosedLoop(grippers) as cl:
@@ -314,7 +314,7 @@ def test_grasp_sensing_from_the_drives(grippers, closed_run, stiffness):
 def test_squeeze_force_command_and_release(grippers):
     """Close onto an object, then `force` commands: the plant's contact force within 1.5 N of
     10 N and 2 N of 25 N (eq. (43), the object rigid); `release` opens the jaw."""
-    from cdprctl.control.controller import Command
+    from cdprctl.control.commands import Command
 
     cl = ge._loop(grippers, ge.PAPER_EXT)
     try:

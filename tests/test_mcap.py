@@ -38,9 +38,14 @@ def _check(schema: dict, value: object) -> bool:
 
 def test_mcap_round_trip(tmp_path):
     states = [
-        {"schema": "cdprctl/1", "time": 10.0 + 0.01 * i, "state": "enabled",
-         "pose": {"position": [1.5, 0.35, 0.59 + 1e-3 * i], "rpy": [0.0, None, 0.0]},
-         "tensions": [100.0 + i] * 8, "grippers": []}
+        {
+            "schema": "cdprctl/1",
+            "time": 10.0 + 0.01 * i,
+            "state": "enabled",
+            "pose": {"position": [1.5, 0.35, 0.59 + 1e-3 * i], "rpy": [0.0, None, 0.0]},
+            "tensions": [100.0 + i] * 8,
+            "grippers": [],
+        }
         for i in range(5)
     ]
     event = {"schema": "cdprctl/1", "time": 10.02, "kind": "event", "text": "state a -> b"}

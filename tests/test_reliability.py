@@ -1,4 +1,4 @@
-"""The reliability matrix (sim_backend/scenarios.py) in lock-step, one test per fault: the
+"""The reliability matrix (cdprctl/experiments/scenarios.py) in lock-step, one test per fault: the
 invariants hold in every run (no non-finite torque, no torque beyond its limit, no commanded
 tension outside [t_min, t_max] while healthy), every fault ends in a documented state, and the
 recoverable ones recover. docs/reliability.md is the table of these same runs
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from sim_backend.scenarios import SCENARIOS, run
+from cdprctl.experiments.scenarios import SCENARIOS, run
 
 RIDE_THROUGH = {"frame loss 1 %", "frames delayed 3 ms"}
 STOPS = {

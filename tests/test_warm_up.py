@@ -23,7 +23,7 @@ SCRIPT = textwrap.dedent(
     from numba.core.dispatcher import Dispatcher
     from cdprctl.model import load_robot
     from cdprctl.tda import TDAMethod, TDAOptions
-    from sim_backend.closed_loop import ClosedLoop
+    from cdprctl.experiments.closed_loop import ClosedLoop
 
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)
 

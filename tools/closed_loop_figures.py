@@ -13,13 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.control.controller import Command, Controller, State
+from cdprctl.control.commands import Command
+from cdprctl.control.controller import Controller
+from cdprctl.control.states import State
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import RobotModel, load_robot
 from cdprctl.rotation import log_so3
 from cdprctl.stiffness import stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
-from sim_backend.closed_loop import ClosedLoop
 from sim_backend.faults import FaultEvent, FaultInjector
 
 MOVES = {

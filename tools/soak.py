@@ -21,12 +21,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cdprctl.control.controller import Command, State  # noqa: E402
-from cdprctl.daemon.service import fault_kind  # noqa: E402
+from cdprctl.control.commands import Command  # noqa: E402
+from cdprctl.control.states import FaultKind, State  # noqa: E402
+from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
+from cdprctl.experiments.scenarios import Result, Scenario, Watch  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
-from sim_backend.closed_loop import ClosedLoop  # noqa: E402
 from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
-from sim_backend.scenarios import Result, Scenario, Watch  # noqa: E402
 
 
 def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
@@ -79,7 +79,7 @@ def main() -> None:
         for i in range(n):
             t = cl.net.time
             t0 = time.perf_counter_ns()
-            c.step(t)
+            cl.manager.step(t)
             compute.append((time.perf_counter_ns() - t0) / 1e3)
             cl.net.advance(cl.period)
             watch.check(c, cl.plant.position, measure_excursion=False)
@@ -88,8 +88,9 @@ def main() -> None:
                 if c.state is State.STOPPING or (
                     c.state is State.FAULT and last_state is not State.STOPPING
                 ):
-                    reason = c.fault_reason or "?"
-                    faults[reason if reason.startswith("internal") else fault_kind(reason)] += 1
+                    kind = c.fault_kind
+                    internal = kind is FaultKind.INTERNAL  # keep what failed
+                    faults[c.fault_reason if internal else kind.value if kind else "?"] += 1
                 last_state = c.state
             if c.state is State.FAULT and i % 250 == 0:
                 c.submit(Command("reset"))

@@ -1,17 +1,25 @@
-"""``cdprctl demo``: the main job of ``make run`` — the offline tools on the bundled robots.
-
-(Until the daemon exists; then ``make run`` starts it on the simulated robot.)
-"""
+"""``cdprctl demo``: the offline TDA tools on the papers' robots (``make run`` runs the daemon
+on the simulated robot)."""
 
 from __future__ import annotations
 
+import argparse
+from collections.abc import Sequence
 from pathlib import Path
 
-from cdprctl.cli import main as cli_main
+from cdprctl.commands import tda as tda_cmd
 from cdprctl.commands.check_config import summary
 from cdprctl.model import load_robot
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
+
+
+def cli_main(argv: Sequence[str]) -> int:
+    """``cdprctl tda ARGS``, without going back up through the command line's module."""
+    parser = argparse.ArgumentParser(prog="cdprctl")
+    tda_cmd.add_parser(parser.add_subparsers())
+    args = parser.parse_args(list(argv))
+    return int(args.func(args))
 
 
 def run(config_dir: Path = CONFIG_DIR, out_dir: Path = Path("out")) -> int:

@@ -43,24 +43,30 @@ def warm_up(controller: Controller) -> None:
     """Call every kernel of the cycle once (see the module docstring); leaves the controller
     as it was but for its outputs (wrench, pose error, torques: zero), rewritten each cycle."""
     c = controller
+    d = c.data
     model = c.model
     m = model.n_cables
     zeros = np.zeros(m)
     est = Estimator(model)
+    t_min, t_max = c.distribution.t_min, c.distribution.t_max
     # θ = 0: the home lengths. Writable arrays, as in the loop: numba compiles a read-only
     # array (the model's) as another type
-    est.update(0.0, zeros, c.t_min.copy(), zeros, zeros)
-    c.grippers.weight_wrench(est.rotation)
-    hold = c._gravity_hold()  # any wrench: a kernel compiles whole, whatever branch it takes
-    prev = 0.5 * (c.t_min + c.t_max)
-    for opts in _tda_variants(c.tda.options, model.redundancy, prev):
+    est.update(0.0, zeros, t_min.copy(), zeros, zeros)
+    c.grippers.set.weight_wrench(est.rotation)
+    if c.grippers.n:
+        c.grippers.warm_up()
+    hold = c.pose.gravity_hold(est.rotation)  # any wrench: a kernel compiles whole
+    prev = 0.5 * (t_min + t_max)
+    for opts in _tda_variants(c.distribution.options, model.redundancy, prev):
         if opts.validate(model):
             continue  # not a method this robot can use
         tda = TensionDistributor(model, opts)
         for t_prev in (None, prev):
-            tda.solve(est.kin.W, hold, c.t_min, c.t_max, k=est.k, kin=est.kin, t_prev=t_prev)
-    c._control()
-    c._winch_torques(zeros, True)
-    c.torques[:] = 0.0
-    c.wrench[:] = 0.0
-    c.pose_error[:] = 0.0
+            tda.solve(est.kin.W, hold, t_min, t_max, k=est.k, kin=est.kin, t_prev=t_prev)
+    c.pose.update(c.trajectory, c.estimator, True)
+    c.pose.reset()
+    c.winches.update(d.tensions, c.estimator.kin.WT, c.trajectory.acceleration, zeros, True,
+                     d.torques)  # fmt: skip
+    d.torques[:] = 0.0
+    d.wrench[:] = 0.0
+    d.pose_error[:] = 0.0

@@ -24,8 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import PHASES, Command, Controller, State
-from cdprctl.control.loop import LoopStats, run_loop
+from cdprctl.control.commands import Command, CommandKind
+from cdprctl.control.data import PHASES
+from cdprctl.control.loop import LoopStats
+from cdprctl.control.manager import ControllerManager
+from cdprctl.control.states import State
 from cdprctl.daemon import rt
 from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 from cdprctl.model.robot import RobotModel
@@ -74,7 +77,8 @@ class Daemon:
             self.driver = create_driver(model, period=period, wait=wait, bus_overrides=overrides)
         else:
             self.driver = create_driver(model, period=period, bus_overrides=overrides)
-        self.controller = Controller(model, self.driver)
+        self.manager = ControllerManager(model, self.driver)
+        self.controller = self.manager.controller
         self.stats = LoopStats(phases=len(PHASES))
         self.stop_requested = threading.Event()
         self.finished = threading.Event()
@@ -91,7 +95,7 @@ class Daemon:
 
     # -- the loop thread ---------------------------------------------------------------------------
     def _step(self, t: float) -> None:
-        self.controller.step(t)
+        self.manager.step(t)
         if self.sim is not None:
             # the simulated robot follows the loop's clock, skipped periods included
             dt = self.model.control.period if self._last_t is None else t - self._last_t
@@ -131,7 +135,7 @@ class Daemon:
             "them: about a minute), configuring the drives, estimating the pose"
         )
         try:
-            c.startup()
+            self.manager.startup()
         except Exception as exc:  # start-up failures are reported, never a traceback
             self._print(f"cdprctl run: start-up failed: {exc}", err=True)
             self.driver.shutdown()
@@ -157,14 +161,8 @@ class Daemon:
             wd.start()
         io.start()
         try:
-            run_loop(
-                self.model.control.period,
-                self._step,
-                self.finished.is_set,
-                self.model.control.sleep_margin,
-                self.stats,
-                lambda: c.phase_us,
-                after=self._cycle_done.set,
+            self.manager.run(
+                self._should_stop, self.stats, after=self._cycle_done.set, step=self._step
             )
         finally:
             if self.realtime:
@@ -186,15 +184,17 @@ class Daemon:
         self._report()
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
 
+    # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
+    # or hangs), the loop ends this long after the signal: the drives' communication timeout
+    # then stops them, and shutdown() disables them
+    STOP_FALLBACK = 5.0  # s
+
     def _on_signal(self, signum: int, frame: Any) -> None:
         if not self.stop_requested.is_set():
-            self._stop_deadline = time.monotonic() + 5.0
+            self._stop_deadline = time.monotonic() + self.STOP_FALLBACK
         self.stop_requested.set()
 
     def _should_stop(self) -> bool:
-        # the I/O thread ends the run after a controlled stop; if it cannot (it died), a
-        # signal still ends the loop after 5 s: the drives' communication timeout then stops
-        # them, and shutdown() disables them
         return self.finished.is_set() or (
             self.stop_requested.is_set() and time.monotonic() > self._stop_deadline
         )
@@ -211,7 +211,7 @@ class Daemon:
             self._io_loop(duration, demo, force)
         except Exception as exc:  # the I/O thread must not die silently: stop the run
             self._print(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
-            self.controller.submit(Command("disable"))
+            self.controller.submit(Command(CommandKind.DISABLE))
             time.sleep(0.5)
             self.finished.set()
 
@@ -228,7 +228,8 @@ class Daemon:
             now = time.monotonic() - t0
             self._drain_events()
             if link is not None:
-                link.publish(c, self.stats, self.plant.position if self.sim is not None else None)
+                true = self.plant.position if self.sim is not None else None
+                link.publish(c.data, self.stats, true)
                 for cmd in link.take_commands():
                     if not c.submit(cmd):
                         link.event(c.time, f"command {cmd.kind} dropped: mailbox full", "reject")
@@ -243,7 +244,7 @@ class Daemon:
                 self._status_line(now)
                 next_status += self.status_every
             if demo and not script and duration is not None and c.state is State.FAULT:
-                c.submit(Command("reset"))  # a long demo run carries on after a fault
+                c.submit(Command(CommandKind.RESET))  # a long demo run carries on after a fault
             if demo and not script and duration is not None and c.state is State.READY:
                 # with --duration the demo plays again while a whole round still fits
                 again = demo_script(self.model, force)
@@ -255,8 +256,8 @@ class Daemon:
             if (end or self.stop_requested.is_set()) and stopping_since is None:
                 stopping_since = now
                 if c.state in (State.ENABLED, State.MOVING, State.ENABLING):
-                    c.submit(Command("stop"))
-                    c.submit(Command("disable"))
+                    c.submit(Command(CommandKind.STOP))
+                    c.submit(Command(CommandKind.DISABLE))
             if stopping_since is not None and (
                 c.state in (State.READY, State.FAULT, State.INIT) or now - stopping_since > 3.0
             ):
@@ -271,14 +272,14 @@ class Daemon:
             self._cycle_done.wait(2.0 * self.model.control.period)
 
     def _drain_events(self) -> None:
-        ev = self.controller.events
-        while ev:
-            t, text = ev.popleft()
+        d = self.controller.data
+        while d.events:
+            t, text = d.events.popleft()
             self._print(f"[t={t:9.3f}] {text}")
-            if text.startswith("FAULT"):
-                self.faults[fault_kind(text)] += 1
             if self.link is not None:
                 self.link.event(t, text)
+        while d.faults:
+            self.faults[d.faults.popleft()[1].value] += 1
 
     def _status_line(self, now: float) -> None:
         c = self.controller
@@ -369,26 +370,6 @@ class Daemon:
         print(text, file=sys.stderr if err else self.out, flush=True)
 
 
-def fault_kind(text: str) -> str:
-    """A fault's kind without its numbers, for counting: "no feedback", "platform speed"."""
-    for words in (
-        "no feedback",
-        "fault 0x",
-        "heartbeat",
-        "platform speed",
-        "tracking",
-        "orientation",
-        "tension distribution",
-        "encoders disagree",
-        "feedback",
-        "during the stop",
-        "internal error",
-    ):
-        if words in text:
-            return words
-    return text[:40]
-
-
 def _versions() -> dict[str, str]:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -412,7 +393,8 @@ def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]
     rpy = model.home.rpy
 
     def move(p: np.ndarray) -> Any:
-        return lambda d: d.controller.submit(Command("move", pose=np.concatenate([p, rpy])))
+        pose = np.concatenate([p, rpy])
+        return lambda d: d.controller.submit(Command(CommandKind.MOVE, pose=pose))
 
     def lateral(on: bool) -> Any:
         def act(d: Daemon) -> None:
@@ -431,12 +413,12 @@ def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]
         return act
 
     return [
-        (0.3, lambda d: d.controller.submit(Command("enable"))),
+        (0.3, lambda d: d.controller.submit(Command(CommandKind.ENABLE))),
         (1.0, move(a)),
         (4.0, move(home)),
         *([(7.0, lateral(True))] if force else []),
         (10.0, move(b)),
         (13.0, move(home)),
         *([(16.0, lateral(False))] if force else []),
-        (19.0, lambda d: d.controller.submit(Command("disable"))),
+        (19.0, lambda d: d.controller.submit(Command(CommandKind.DISABLE))),
     ]

@@ -8,6 +8,7 @@ from cdprctl.tda.types import (
     TDAOptions,
     TDAOutput,
     TDAStatus,
+    tda_options_of,
 )
 
 __all__ = [
@@ -18,4 +19,5 @@ __all__ = [
     "TDAOutput",
     "TDAStatus",
     "TensionDistributor",
+    "tda_options_of",
 ]

@@ -60,13 +60,25 @@ class TensionDistributor:
         self._planar_info = np.zeros(6)
         self._ones = np.ones(self.m)
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
-        d = np.asarray(self.options.direction, dtype=float)
-        self._direction = d / np.linalg.norm(d)
-        self._delta_wrench = (
-            np.asarray(self.options.delta_wrench, dtype=float)
-            if self.options.delta_wrench is not None
-            else np.concatenate([self._direction, np.zeros(3)])
-        )
+        self._direction = np.zeros(3)
+        self._delta_wrench = np.zeros(6)
+        self.set_options(self.options)
+
+    def set_options(self, options: TDAOptions) -> None:
+        """Use ``options`` from the next solve: the loop switches a distributor built at
+        start-up this way, allocating nothing. The options must have been validated for
+        this robot (``TDAOptions.validate``)."""
+        self.options = options
+        d = options.direction
+        n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        for i in range(3):
+            self._direction[i] = d[i] / n
+        if options.delta_wrench is not None:
+            for i in range(6):
+                self._delta_wrench[i] = options.delta_wrench[i]
+        else:
+            self._delta_wrench[:3] = self._direction
+            self._delta_wrench[3:] = 0.0
 
     # -- the in-loop call ---------------------------------------------------------------------
     def solve(

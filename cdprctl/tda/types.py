@@ -188,3 +188,18 @@ class TDAOutput:
     @property
     def ok(self) -> bool:
         return self.status == TDAStatus.OK
+
+
+def tda_options_of(model: RobotModel) -> TDAOptions:
+    """The options the robot file's ``[control]`` asks for."""
+    c = model.control
+    return TDAOptions(
+        method=TDAMethod(c.tda_method),
+        nu=c.tda_nu,
+        direction=c.tda_direction,
+        impositions=tuple(
+            Imposition(i.cable, ImposedQuantity(i.quantity), i.value) for i in c.impositions
+        ),
+        max_tension_rate=c.max_tension_rate,
+        period=c.period,
+    )

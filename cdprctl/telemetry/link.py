@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import Command
+from cdprctl.control.commands import Command, CommandKind, GripKind
+from cdprctl.control.data import ControlData
 from cdprctl.model.robot import RobotModel
 from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values, timing_values
 
@@ -49,8 +50,8 @@ class TelemetryLink:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
-    def publish(self, controller: Any, stats: Any, true_position: Any = None) -> None:
-        values = controller_values(controller, stats, true_position)
+    def publish(self, data: ControlData, stats: Any, true_position: Any = None) -> None:
+        values = controller_values(data, true_position)
         now = time.monotonic()
         if now >= self._next_timing:
             # percentiles over the cycles since the last report (docs/telemetry.md)
@@ -58,9 +59,9 @@ class TelemetryLink:
             values["timing"] = timing_values(stats, round(dt / self.model.control.period))
             self._next_timing = now + dt
         self.snapshot.write(values)
-        if controller.fault_reason != self._last_fault:
-            self._last_fault = controller.fault_reason
-            self.event(controller.time, controller.fault_reason, "fault")
+        if data.fault_reason != self._last_fault:
+            self._last_fault = data.fault_reason
+            self.event(data.time, data.fault_reason, "fault")
 
     def event(self, t: float, text: str, kind: str = "event") -> None:
         try:
@@ -78,7 +79,7 @@ class TelemetryLink:
             if kind == "move":
                 out.append(
                     Command(
-                        "move",
+                        CommandKind.MOVE,
                         pose=np.array(params["pose"], dtype=float),
                         speed=params["speed"],
                         accel=params["accel"],
@@ -87,16 +88,16 @@ class TelemetryLink:
             elif kind == "gripper":
                 out.append(
                     Command(
-                        "gripper",
+                        CommandKind.GRIPPER,
                         gripper=int(params["gripper"]),
-                        grip=str(params["grip"]),
+                        grip=GripKind(params["grip"]),
                         value=float(params["value"]),
                     )
                 )
             elif kind == "set_tda":
-                out.append(Command("set_tda", tda=params["tda"]))
+                out.append(Command(CommandKind.SET_TDA, tda=params["tda"]))
             else:
-                out.append(Command(kind))
+                out.append(Command(CommandKind(kind)))
         return out
 
     def close(self) -> None:

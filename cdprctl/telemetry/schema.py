@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.gripper import GraspState
-from cdprctl.telemetry.snapshot import STATES, TDA_METHODS, TDA_STATUSES, TIMING
+from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES, TDA_METHODS, TDA_STATUSES, TIMING
 
 GRASP_STATES = [s.value for s in GraspState]
 
@@ -36,6 +36,12 @@ def _floats(a: np.ndarray, digits: int = 6) -> list[float | None]:
 
 def pose_payload(snap: dict[str, np.ndarray]) -> dict[str, Any]:
     return {"position": _floats(snap["position"]), "rpy": _floats(snap["rpy"])}
+
+
+def _fault_kind(snap: dict[str, np.ndarray]) -> str:
+    """The supervisor's FaultKind of the current fault ("" when none)."""
+    i = float(snap["fault_kind"][0])
+    return FAULT_KINDS[int(i)] if math.isfinite(i) and 0 <= i < len(FAULT_KINDS) else ""
 
 
 def state_payload(
@@ -64,6 +70,7 @@ def state_payload(
         "cycle": int(snap["cycle"][0]),
         "state": STATES[int(snap["state"][0])],
         "fault": fault,
+        "fault_kind": _fault_kind(snap),
         "pose": pose_payload(snap),
         "twist": {"velocity": _floats(snap["velocity"]), "omega": _floats(snap["omega"])},
         "reference": _floats(snap["reference"]),

@@ -10,10 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import State
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import FaultKind, State
 from cdprctl.tda import TDAMethod, TDAStatus
 
 STATES = [s.value for s in State]
+FAULT_KINDS = [k.value for k in FaultKind]
 TDA_METHODS = [m.value for m in TDAMethod]
 TDA_STATUSES = [s.name for s in TDAStatus]
 TIMING = (
@@ -37,6 +39,7 @@ class Layout:
             ("seq", 1),
             ("time", 1),  # s, the loop's monotonic clock
             ("state", 1),
+            ("fault_kind", 1),  # index in FAULT_KINDS, −1: none
             ("tda_method", 1),
             ("tda_status", 1),
             ("cycle", 1),
@@ -114,41 +117,40 @@ class SharedSnapshot:
             self.shm.unlink()
 
 
-def controller_values(controller: Any, stats: Any, true_position: Any = None) -> dict[str, Any]:
-    """The snapshot fields from a Controller and its LoopStats (called by the I/O thread)."""
+def controller_values(d: ControlData, true_position: Any = None) -> dict[str, Any]:
+    """The snapshot fields from the loop's ``ControlData`` (called by the I/O thread)."""
     from cdprctl.rotation import matrix_to_rpy
 
-    c = controller
-    e = c.estimator
     out: dict[str, Any] = {
-        "time": c.time,
-        "state": STATES.index(c.state.value),
-        "tda_method": TDA_METHODS.index(c.tda.options.method.value),
-        "tda_status": TDA_STATUSES.index(c.tda_status.name),
-        "cycle": c.cycle,
-        "position": e.position,
-        "rpy": matrix_to_rpy(e.rotation),
-        "velocity": e.velocity,
-        "omega": e.omega,
-        "reference": c.trajectory.position,
-        "target": c.trajectory.target,
-        "error": c.pose_error,
-        "tensions": c.tensions,
-        "torques": c.torques,
-        "motor_position": c.driver.states.position,
+        "time": d.time,
+        "state": STATES.index(d.state.value),
+        "fault_kind": FAULT_KINDS.index(d.fault_kind.value) if d.fault_kind is not None else -1,
+        "tda_method": TDA_METHODS.index(d.tda_method),
+        "tda_status": TDA_STATUSES.index(d.tda_status.name),
+        "cycle": d.cycle,
+        "position": d.position,
+        "rpy": matrix_to_rpy(d.rotation),
+        "velocity": d.velocity,
+        "omega": d.omega,
+        "reference": d.reference,
+        "target": d.target,
+        "error": d.pose_error,
+        "tensions": d.tensions,
+        "torques": d.torques,
+        "motor_position": d.motor_position,
     }
     if true_position is not None:
         out["true_position"] = true_position
-    if c.grippers.n:
+    if d.grasp is not None and len(d.grip_target):
         from cdprctl.gripper import GraspState
 
         states = list(GraspState)
-        g = c.grasp
+        g = d.grasp
         out["grip_state"] = [states.index(s) for s in g.state]
         out["grip_travel"] = g.travel
         out["grip_force"] = g.reported_force()
         out["grip_energy"] = g.energies()
-        out["grip_target"] = c.grip_target
+        out["grip_target"] = d.grip_target
     return out
 
 

@@ -10,24 +10,31 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import tda_options_of
-from cdprctl.control.grip_range import travel_range
+from cdprctl.control.commands import ACCEPTED_IN, CommandKind
+from cdprctl.control.states import State
 from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model.control import METHODS
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import log_so3, rpy_to_matrix
 from cdprctl.stiffness import cable_stiffnesses
-from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
+from cdprctl.tda import (
+    ImposedQuantity,
+    Imposition,
+    TDAMethod,
+    TDAOptions,
+    TensionDistributor,
+    tda_options_of,
+)
+from cdprctl.tda.grip_range import travel_range
 
-KINDS = ("enable", "disable", "stop", "reset", "move", "set_tda", "impose", "gripper")
+# the loop's kinds, and "impose", which the gateway turns into a set_tda
+KINDS = (*(k.value for k in CommandKind), "impose")
+# the controller's own acceptance table (control/commands.py), as state names
 ALLOWED_STATES = {
-    "enable": ("ready",),
-    "disable": ("enabling", "enabled", "moving"),
-    "stop": ("enabled", "moving"),
-    "reset": ("fault",),
-    "move": ("enabled", "moving"),
-    "gripper": ("enabled", "moving"),
+    k.value: tuple(s.value for s in State if s in states)
+    for k, states in ACCEPTED_IN.items()
+    if states != frozenset(State)
 }
 FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is always allowed)
     "enable": {},

@@ -17,11 +17,12 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import Command, State
+from cdprctl.control.commands import Command, CommandKind, GripKind
+from cdprctl.control.states import State
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.gripper import GraspState
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import ImposedQuantity, Imposition
-from sim_backend.closed_loop import ClosedLoop
 
 PAPER_EXT = (200.0, 0.0, 0.0, -0.5, 0.0, 0.0)  # N, N·m at P, base frame (besides gravity)
 RAMP = 2.0  # s
@@ -162,8 +163,8 @@ def gripper_sweep(
     p.set_object(gripper, object_travel if object_travel is not None else 10.0, object_stiffness)
     wait = 0.0
     for j, travel in (hold or {}).items():
-        wait = max(wait, abs(travel - float(c.grasp.travel[j])) / c.GRIP_SPEED)
-        c.submit(Command("gripper", gripper=j, grip="travel", value=travel))
+        wait = max(wait, abs(travel - float(c.grasp.travel[j])) / c.grippers.GRIP_SPEED)
+        c.submit(Command(CommandKind.GRIPPER, gripper=j, grip=GripKind.TRAVEL, value=travel))
         cl.run(0.01, record=False)
     cl.run(wait + 2.0 if hold else 0.0, record=False)
     _check(cl, "moving the held grippers")
@@ -171,14 +172,14 @@ def gripper_sweep(
     if not math.isfinite(lo):
         cl.close()
         raise ExperimentError("no feasible travel for the gripper here")
-    c.submit(Command("gripper", gripper=gripper, grip="travel", value=lo + 0.001))
-    cl.run(max(abs(lo - c.grasp.travel[gripper]) / c.GRIP_SPEED, 0.0) + 4.0, record=False)
+    c.submit(Command(CommandKind.GRIPPER, gripper=gripper, grip=GripKind.TRAVEL, value=lo + 0.001))
+    cl.run(max(abs(lo - c.grasp.travel[gripper]) / c.grippers.GRIP_SPEED, 0.0) + 4.0, record=False)
     _check(cl, "opening the gripper")
     end = min(hi, travel_to) if travel_to is not None else hi
     end -= 0.001
-    c.submit(Command("gripper", gripper=gripper, grip="travel", value=end))
-    cable = int(c.grippers.cables[gripper])
-    params = c.grippers.params(gripper, math.inf)
+    c.submit(Command(CommandKind.GRIPPER, gripper=gripper, grip=GripKind.TRAVEL, value=end))
+    cable = int(c.grippers.set.cables[gripper])
+    params = c.grippers.set.params(gripper, math.inf)
     d0 = spring_deformation(cl, cable)
     work = [actuator_energy(params, d0)]
     keys = ("t", "travel", "deformation", "tension", "contact", "state", "force_est", "travel_est")
@@ -201,7 +202,7 @@ def gripper_sweep(
         log["force_est"].append(float(g.force[gripper]))
         log["travel_est"].append(float(g.travel[gripper]))
 
-    cl.run((end - lo) / c.GRIP_SPEED + 3.0, each=record, record=False)
+    cl.run((end - lo) / c.grippers.GRIP_SPEED + 3.0, each=record, record=False)
     _check(cl, "closing the gripper")
     cl.close()
     out: dict[str, Any] = {k: np.array(v) for k, v in log.items()}

@@ -6,14 +6,15 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import Command, Controller
+from cdprctl.control.commands import Command, CommandKind
+from cdprctl.control.manager import ControllerManager
 from cdprctl.model.robot import RobotModel
 from sim_backend.network import LockStep
 
 
 class ClosedLoop:
-    """``Controller`` + ``LockStep``: ``run(seconds)`` alternates one control cycle and one
-    period of simulation; ``log`` keeps per-cycle arrays for the figures."""
+    """``ControllerManager`` + ``LockStep``: ``run(seconds)`` alternates one control cycle
+    and one period of simulation; ``log`` keeps per-cycle arrays for the figures."""
 
     def __init__(self, model: RobotModel, tda: Any = None, driver: str | None = None):
         self.model = model
@@ -21,26 +22,27 @@ class ClosedLoop:
         self.rig = LockStep(model, period=self.period, driver=driver)
         self.plant = self.rig.plant
         self.net = self.rig.net
-        self.controller = Controller(model, self.rig.driver, tda)
+        self.manager = ControllerManager(model, self.rig.driver, tda)
+        self.controller = self.manager.controller
         self.log: dict[str, list[Any]] = {
             k: []
             for k in ("t", "state", "p_true", "p_est", "p_des", "tensions", "torques", "tda_ok")
         }
 
     def startup(self) -> None:
-        self.controller.startup()
+        self.manager.startup()
 
     def command(self, kind: str, **kw: Any) -> None:
-        self.controller.submit(Command(kind, **kw))
+        self.controller.submit(Command(CommandKind(kind), **kw))
 
     def run(self, seconds: float, until: Any = None, each: Any = None, record: bool = True) -> None:
         """``seconds`` of control cycles and simulation; after each cycle ``each(self)`` (a
         per-cycle check), then ``until(self)`` ends the run early when true; ``record=False``
         keeps nothing in ``log``."""
-        c = self.controller
+        c, step = self.controller, self.manager.step
         for _ in range(round(seconds / self.period)):
             t = self.net.time
-            c.step(t)
+            step(t)
             self.net.advance(self.period)
             if record:
                 lg = self.log

@@ -12,7 +12,8 @@ import numpy as np
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
-from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TensionDistributor
+from cdprctl.tda.solver import TensionDistributor
+from cdprctl.tda.types import ImposedQuantity, Imposition, TDAMethod
 
 
 def travel_range(

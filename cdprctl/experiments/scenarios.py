@@ -19,9 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.controller import Command, Controller, State
+from cdprctl.control.commands import Command, CommandKind
+from cdprctl.control.controller import Controller
+from cdprctl.control.manager import ControllerManager
+from cdprctl.control.states import State
+from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model.robot import RobotModel
-from sim_backend.closed_loop import ClosedLoop
 from sim_backend.faults import FaultEvent, FaultInjector
 
 HEALTHY = (State.ENABLED, State.MOVING)
@@ -179,7 +182,7 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     if not math.isfinite(t_clear):
         res.recovered = "no (the fault is permanent)"
         if c.state is State.FAULT:
-            c.submit(Command("reset"))
+            c.submit(Command(CommandKind.RESET))
             _steps(cl, watch, 1.0)
             res.notes.append(
                 f"reset with the fault still present: {c.state.value} {c.fault_reason}"
@@ -189,15 +192,15 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
         _steps(cl, watch, t_clear - cl.net.time)
     # a controlled stop ends in FAULT after stop_duration: reset only then
     _steps(cl, watch, 3.0, until=lambda: c.state is not State.STOPPING)
-    c.submit(Command("reset"))
+    c.submit(Command(CommandKind.RESET))
     _steps(cl, watch, 1.0)
     if c.state is not State.READY:
         res.recovered = f"no: reset left it {c.state.value} {c.fault_reason}"
         return
-    c.submit(Command("enable"))
+    c.submit(Command(CommandKind.ENABLE))
     _steps(cl, watch, 0.5)
     before = cl.plant.position.copy()
-    c.submit(Command("move", pose=np.concatenate([START, cl.model.home.rpy])))
+    c.submit(Command(CommandKind.MOVE, pose=np.concatenate([START, cl.model.home.rpy])))
     _steps(cl, watch, 4.0)
     err = np.linalg.norm(cl.plant.position - START) * 1e3
     ok = c.state is State.ENABLED and err < 2.0
@@ -259,14 +262,15 @@ def _sigkill(model: RobotModel, cl: ClosedLoop, res: Result, watch: Watch, sc: S
         wait=cl.net.advance,
         bus_overrides=cl.rig.overrides,
     )
-    c2 = Controller(model, driver)
+    m2 = ControllerManager(model, driver)
+    c2 = m2.controller
     try:
-        c2.startup()
-        c2.submit(Command("enable"))
+        m2.startup()
+        c2.submit(Command(CommandKind.ENABLE))
         p0 = cl.plant.position.copy()
         jump = 0.0
         for _ in range(round(1.0 / cl.period)):
-            c2.step(cl.net.time)
+            m2.step(cl.net.time)
             cl.net.advance(cl.period)
             watch.check(c2, cl.plant.position, measure_excursion=False)
             jump = max(jump, float(np.linalg.norm(cl.plant.position - p0)) * 1e3)

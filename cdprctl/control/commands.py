@@ -1,0 +1,66 @@
+"""What an operator can ask of the controller: the command kinds, the command record, and in
+which states each kind is acted on — one table, read by the controller and the gateway."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from cdprctl.control.states import State
+from cdprctl.rotation import FloatArray
+from cdprctl.tda import TDAOptions
+
+
+class CommandKind(enum.StrEnum):
+    ENABLE = "enable"
+    DISABLE = "disable"
+    STOP = "stop"
+    RESET = "reset"
+    MOVE = "move"
+    SET_TDA = "set_tda"
+    GRIPPER = "gripper"
+
+
+class GripKind(enum.StrEnum):
+    TRAVEL = "travel"  # value: the jaw's travel (m)
+    FORCE = "force"  # value: squeeze force (N) on a sensed object
+    RELEASE = "release"  # as open as the redundancy allows
+
+
+@dataclass
+class Command:
+    kind: CommandKind
+    pose: FloatArray | None = None  # move: x, y, z (m), roll, pitch, yaw (rad)
+    speed: float = 1.0  # move: fraction of the velocity limits
+    accel: float = 1.0  # move: fraction of the acceleration limits
+    tda: TDAOptions | None = None
+    gripper: int = 0  # gripper: index in [[grippers]]
+    grip: GripKind = GripKind.TRAVEL
+    value: float = 0.0  # gripper: travel (m) or squeeze force (N)
+    # move: x, y, z (m) and the rotation vector from home (rad), set by Controller.submit
+    target: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        # built outside the loop (the gateway, the daemon, a test): the kinds are checked
+        # here, once, so the cycle never meets an unknown one
+        self.kind = CommandKind(self.kind)
+        self.grip = GripKind(self.grip)
+
+
+_MOTION = frozenset({State.ENABLED, State.MOVING})
+
+#: the states in which each kind is acted on; in any other it is ignored (with an event)
+ACCEPTED_IN: dict[CommandKind, frozenset[State]] = {
+    CommandKind.ENABLE: frozenset({State.READY}),
+    CommandKind.DISABLE: frozenset({State.ENABLED, State.MOVING, State.ENABLING}),
+    CommandKind.STOP: _MOTION,
+    CommandKind.RESET: frozenset({State.FAULT}),
+    CommandKind.MOVE: _MOTION,
+    CommandKind.GRIPPER: _MOTION,
+    CommandKind.SET_TDA: frozenset(State),
+}
+
+
+def accepted(kind: CommandKind, state: State) -> bool:
+    """Whether a command of ``kind`` is acted on in ``state`` (``ACCEPTED_IN``)."""
+    return state in ACCEPTED_IN[kind]

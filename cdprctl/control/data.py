@@ -1,0 +1,64 @@
+"""Everything one control cycle produces, in one place: the arrays (allocated once, rewritten
+in place every cycle) and the scalars outside readers see — the daemon's status line, the
+telemetry snapshot, the recordings and the tests read this, never a component's internals.
+
+Pose and trajectory arrays are the estimator's and the trajectory's own (references, no
+copies); the rest is written by the component named beside it.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.states import FaultKind, State
+from cdprctl.tda import TDAStatus
+
+PHASES = ("read", "estimate", "trajectory", "control", "tda", "torques", "write")
+
+
+class ControlData:
+    def __init__(self, m: int, g: int):
+        """``m`` cables, ``g`` grippers."""
+        # supervisor
+        self.state = State.INIT
+        self.fault_reason = ""
+        self.fault_kind: FaultKind | None = None
+        self.cycle = 0
+        self.time = 0.0  # s, the loop's clock at the last cycle
+        # (t, text) for the daemon's log and the telemetry; drained outside the loop
+        self.events: collections.deque[tuple[float, str]] = collections.deque(maxlen=256)
+        # (t, kind) of every fault, for counting by kind (the daemon's summary, the soak)
+        self.faults: collections.deque[tuple[float, FaultKind]] = collections.deque(maxlen=256)
+        # pose control (wrench.py)
+        self.pose_error = np.zeros(6)  # m, rad: desired − estimated
+        self.wrench = np.zeros(6)  # N, N·m: what the cables were asked for
+        self.ext_total = np.zeros(6)  # N, N·m: the known external wrench, jaws' weight included
+        # tension distribution (distribution.py)
+        self.tensions = np.zeros(m)  # N, commanded
+        self.hold_tensions = np.zeros(m)  # N, the last feasible distribution
+        self.stretch_tensions = np.zeros(m)  # N, feed-forward ones, for the estimator
+        self.tda_status = TDAStatus.OK
+        # winch torques (torques.py)
+        self.torques = np.zeros(m)  # N·m, motor, commanded
+        # grippers (grippers.py)
+        self.jb_load = np.zeros(g)  # N, what each jB carries
+        self.grip_target = np.full(g, math.nan)  # m, commanded travel
+        self.grip_imposed = np.full(g, math.nan)  # m, ramping towards it
+        # µs per phase of the last cycle (PHASES; the manager's read/write, the rest the
+        # controller's)
+        self.phase_us = np.zeros(len(PHASES))
+        # references, bound by the controller: estimator and trajectory arrays, the grasp
+        # sensor, the TDA options in use, the drives' motor angles
+        self.position: np.ndarray = np.zeros(3)  # m, P in the base frame
+        self.rotation: np.ndarray = np.eye(3)
+        self.velocity: np.ndarray = np.zeros(3)  # m/s
+        self.omega: np.ndarray = np.zeros(3)  # rad/s, base frame
+        self.reference: np.ndarray = np.zeros(6)  # trajectory now (m, rotation vector rad)
+        self.target: np.ndarray = np.zeros(6)  # where the trajectory ends
+        self.motor_position: np.ndarray = np.zeros(m)  # rad
+        self.grasp: Any = None  # GraspSensor, with grippers
+        self.tda_method = ""

@@ -1,0 +1,199 @@
+"""The tension distribution in the loop: the distributor in use, the one the stretch estimate
+uses, and the switch between methods (Picard et al. 2020, Fig. 3: the TDA between the pose
+controller and the winches).
+
+Every distributor the robot can switch to is built here, at start-up, two of each method
+(``BANKS``): a switch (``set_tda``, ``impose``) swaps references and sets options in place,
+so the cycle builds nothing. The old pair stays in the other bank and blends out over
+``BLEND_TIME``: both hold the wrench, so every blend does, inside the limits (a convex set).
+With grippers the TDA works on the springs' tensions τ_A (jB's load added back, Sensors 2019
+eq. (26)).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.estimator import Estimator
+from cdprctl.gripper import GripperSet
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray
+from cdprctl.tda import (
+    Imposition,
+    TDAMethod,
+    TDAOptions,
+    TDAOutput,
+    TDAStatus,
+    TensionDistributor,
+)
+
+BANKS = 2
+
+
+def usable(status: TDAStatus) -> bool:
+    """Tensions the loop may command: feasible, or feasible with an imposition saturated."""
+    return status is TDAStatus.OK or status is TDAStatus.IMPOSITION_INFEASIBLE
+
+
+class Distribution:
+    # A new distribution takes over in this time. A step from the barycenter to the minimum of
+    # energy moved seed000's soft cables by 10-20 N, 1-2 cm of stretch the pose estimate took
+    # for an encoder fault at once (lock-step, tests/test_closed_loop_seed000.py).
+    BLEND_TIME = 1.0  # s
+    # infeasible wrenches in a row before the supervisor faults (the last feasible tensions
+    # are held meanwhile): a one-cycle spike of the PID is not a fault
+    BAD_CYCLES = 3
+
+    def __init__(
+        self,
+        model: RobotModel,
+        data: ControlData,
+        estimator: Estimator,
+        grippers: GripperSet,
+        options: TDAOptions,
+    ):
+        c = model.control
+        m = model.n_cables
+        self.model = model
+        self.data = data
+        self.estimator = estimator
+        self.grippers = grippers
+        self.t_min = model.tension_min + c.tension_margin  # N
+        self.t_max = model.tension_max - c.tension_margin  # N
+        errors = options.validate(model)
+        if errors:
+            raise ValueError("invalid TDA options: " + "; ".join(errors))
+        self.methods = tuple(
+            x for x in TDAMethod if not TDAOptions(method=x, period=c.period).validate(model)
+        )
+        # _pool[bank][method] = (the loop's distributor, the stretch estimate's)
+        self._pool = [
+            {
+                x: tuple(
+                    TensionDistributor(model, TDAOptions(method=x, period=c.period))
+                    for _ in range(2)
+                )
+                for x in self.methods
+            }
+            for _ in range(BANKS)
+        ]
+        self._bank = 0
+        self.current, self.static = self._pool[0][options.method]
+        self.current.set_options(options)
+        self.static.set_options(options)
+        self.old: TensionDistributor | None = None  # blending out, with its static twin
+        self.old_static: TensionDistributor | None = None
+        self.blend_start = -np.inf
+        self.bad_cycles = 0
+        self._spring_prev = np.zeros(m)
+        self._blend_old = np.zeros(m)
+        data.tda_method = options.method.value
+
+    @property
+    def options(self) -> TDAOptions:
+        return self.current.options
+
+    # -- switching (in the cycle: references and options only) ------------------------------------
+    def switch(self, options: TDAOptions, t: float, blend: bool) -> None:
+        """Use ``options`` (validated for this robot) from this cycle on; ``blend``: the old
+        distribution hands over over ``BLEND_TIME`` (the drives hold the platform)."""
+        bank = (self._bank + 1) % BANKS
+        new, new_static = self._pool[bank][options.method]
+        new.set_options(options)
+        new_static.set_options(options)
+        if blend:
+            self.old, self.old_static = self.current, self.static
+            self.blend_start = t
+        else:
+            self.old = self.old_static = None
+        self.current, self.static, self._bank = new, new_static, bank
+        self.data.tda_method = options.method.value
+
+    def impose(self, impositions: tuple[Imposition, ...]) -> None:
+        """Switch the energy TDA's impositions (Sensors 2019 eq. (24)) from the next cycle,
+        for the loop's and the stretch estimate's distribution alike (a tension planner calls
+        it every cycle; values are the caller's to keep feasible and to ramp)."""
+        base = self.current.options
+        opts = dataclasses.replace(base, method=TDAMethod.ENERGY, impositions=impositions)
+        if base.method is not TDAMethod.ENERGY:  # once: the energy TDA's set-up
+            self.current, self.static = self._pool[self._bank][TDAMethod.ENERGY]
+            self.data.tda_method = TDAMethod.ENERGY.value
+        self.current.options = opts
+        self.static.options = opts
+
+    # -- solving -------------------------------------------------------------------------------
+    def solve(
+        self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None
+    ) -> TDAOutput:
+        """The TDA at the estimated pose, on the springs' tensions when there are grippers."""
+        e, gs = self.estimator, self.grippers
+        if gs.n:
+            jb = self.data.jb_load
+            wrench = gs.spring_wrench(e.kin.W, wrench, jb)
+            if t_prev is not None:
+                tp = self._spring_prev
+                tp[:] = t_prev
+                tp[gs.cables] -= jb
+                t_prev = tp
+        return tda.solve(e.kin.W, wrench, self.t_min, self.t_max, k=e.k, kin=e.kin, t_prev=t_prev)
+
+    def total(self, spring: FloatArray, out: FloatArray) -> None:
+        """Cable tensions (N) into ``out`` from the springs' ``spring``: ``τ = τ_A + τ_B``."""
+        out[:] = spring
+        if self.grippers.n:
+            out[self.grippers.cables] += self.data.jb_load
+
+    def blend(
+        self,
+        old: TensionDistributor | None,
+        wrench: FloatArray,
+        t_prev: FloatArray | None,
+        tensions: FloatArray,
+    ) -> None:
+        """``tensions`` (the new distribution's, N) ← a blend with the old distribution's
+        while a switch is under way; unchanged when the old one has nothing feasible."""
+        if old is None:
+            return
+        s = (self.data.time - self.blend_start) / self.BLEND_TIME
+        if s >= 1.0:
+            self.old = self.old_static = None
+            return
+        out = self.solve(old, wrench, t_prev)
+        if usable(out.status):
+            old_total = self._blend_old
+            self.total(out.tensions, old_total)
+            tensions *= s
+            tensions += (1.0 - s) * old_total
+
+    def distribute(self) -> TDAOutput:
+        """``data.tensions`` for ``data.wrench``; an infeasible wrench holds the last feasible
+        tensions (never outside the limits) and counts ``bad_cycles``."""
+        d = self.data
+        # while a switch blends, the blend limits the tension rate: a rate limit on either
+        # side would hold the commanded tensions back from the stretch estimate's (which has
+        # none) and the pose estimate would see the difference as an encoder fault
+        blending = self.old is not None
+        out = self.solve(self.current, d.wrench, None if blending else d.tensions)
+        d.tda_status = out.status
+        if usable(out.status):
+            self.total(out.tensions, d.tensions)
+            self.blend(self.old, d.wrench, None, d.tensions)
+            d.hold_tensions[:] = d.tensions
+            self.bad_cycles = 0
+        else:
+            d.tensions[:] = d.hold_tensions
+            self.bad_cycles += 1
+        return out
+
+    def stretch(self, ff_wrench: FloatArray) -> bool:
+        """``data.stretch_tensions`` ← the static distribution of the feed-forward wrench
+        ``ff_wrench``; False (unchanged) when it has none."""
+        out = self.solve(self.static, ff_wrench, None)
+        if not out.ok:
+            return False
+        self.total(out.tensions, self.data.stretch_tensions)
+        self.blend(self.old_static, ff_wrench, None, self.data.stretch_tensions)
+        return True

@@ -1,0 +1,78 @@
+"""The controller manager: it owns the drives' I/O and the loop (ros2_control's controller
+manager is the pattern). Per cycle: ``driver.read`` → ``Controller.update`` → ``driver.write``,
+each phase timed into ``ControlData.phase_us``; a cycle that fails anywhere ends in the
+controlled stop, never in an exception out of the loop."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from cdprctl.control.commands import Command
+from cdprctl.control.controller import Controller
+from cdprctl.control.data import ControlData
+from cdprctl.control.loop import LoopStats, run_loop
+from cdprctl.control.warm_up import warm_up
+from cdprctl.model.robot import RobotModel
+from cdprctl.tda import TDAOptions
+from drivers.base import WinchDriver
+
+
+class ControllerManager:
+    def __init__(self, model: RobotModel, driver: WinchDriver, tda: TDAOptions | None = None):
+        self.model = model
+        self.driver = driver
+        self.period = model.control.period
+        self.controller = Controller(model, driver, tda)
+        self.data: ControlData = self.controller.data
+        self._clock_ns = time.perf_counter_ns
+
+    def startup(self, timeout: float = 5.0) -> None:
+        """Compile every kernel, configure the drives, read them, estimate and check the pose
+        → READY. Raises on failure."""
+        warm_up(self.controller)  # before the drives start (cdprctl/control/warm_up.py)
+        d = self.driver
+        d.configure(timeout)
+        now = d.clock()
+        self.controller.initialise(now, d.read(now))
+
+    def submit(self, cmd: Command) -> bool:
+        return self.controller.submit(cmd)
+
+    def step(self, t: float) -> None:
+        """One cycle at time ``t`` (s). Never raises."""
+        clock, ph = self._clock_ns, self.data.phase_us
+        try:
+            t0 = clock()
+            st = self.driver.read(t)
+            ph[0] = (clock() - t0) / 1e3
+            self.controller.update(t, st)
+            t6 = clock()
+            self.driver.write(t, self.data.torques)
+            ph[6] = (clock() - t6) / 1e3
+        except Exception as exc:
+            self.controller.internal_error(t, exc)
+
+    def run(
+        self,
+        should_stop: Callable[[], bool],
+        stats: LoopStats,
+        after: Callable[[], None] | None = None,
+        step: Callable[[float], None] | None = None,
+    ) -> LoopStats:
+        """The fixed-rate loop (``loop.run_loop``) until ``should_stop()``; ``step`` replaces
+        ``self.step`` (the daemon adds its simulated robot's step after the cycle)."""
+        return run_loop(
+            self.period,
+            step or self.step,
+            should_stop,
+            self.model.control.sleep_margin,
+            stats=stats,
+            phases=self._phases,
+            after=after,
+        )
+
+    def _phases(self) -> np.ndarray:
+        return self.data.phase_us

@@ -1,0 +1,64 @@
+"""The supervisor's states and the kinds of fault: plain definitions, shared by the control
+layer, the telemetry and the tools (no logic here; ``supervisor.py`` has the transitions)."""
+
+from __future__ import annotations
+
+import enum
+
+
+class State(enum.Enum):
+    INIT = "init"
+    READY = "ready"  # drives inactive (brakes), feedback live, pose estimated
+    ENABLING = "enabling"
+    ENABLED = "enabled"  # holding the pose
+    MOVING = "moving"
+    DISABLING = "disabling"
+    STOPPING = "stopping"  # a fault: holding, then disabling
+    FAULT = "fault"
+
+
+#: the states in which the controller commands tensions
+ACTIVE_STATES = frozenset({State.ENABLING, State.ENABLED, State.MOVING, State.STOPPING})
+#: the states the supervisor watches the motion in
+HEALTHY_STATES = frozenset({State.ENABLED, State.MOVING})
+
+
+class FaultKind(enum.StrEnum):
+    """Why the supervisor stopped the robot. ``PERSISTENCE`` says for each kind whether one
+    cycle suffices and why, or what must persist first."""
+
+    DRIVE_FAULT = "drive fault"
+    DRIVE_SILENT = "drive silent"
+    DRIVES = "drives"
+    ENABLE_TIMEOUT = "enable timeout"
+    FORWARD_KINEMATICS = "forward kinematics"
+    ENCODERS_DISAGREE = "encoders disagree"
+    TRACKING = "tracking"
+    ORIENTATION = "orientation"
+    OVER_SPEED = "platform speed"
+    FEEDBACK_AGE = "feedback age"
+    TENSION_DISTRIBUTION = "tension distribution"
+    DURING_STOP = "during the stop"
+    INTERNAL = "internal error"
+
+
+PERSISTENCE: dict[FaultKind, str] = {
+    FaultKind.DRIVE_FAULT: "immediate: the drive itself reports a fault and has stopped "
+    "producing torque",
+    FaultKind.DRIVE_SILENT: "persistent: the driver's own time limits (heartbeat, feedback) "
+    "have run out",
+    FaultKind.DRIVES: "immediate: the driver cannot operate the drives",
+    FaultKind.ENABLE_TIMEOUT: "persistent: the drives did not reach operation within 2 s",
+    FaultKind.FORWARD_KINEMATICS: "immediate: without a pose no tension can be computed",
+    FaultKind.ENCODERS_DISAGREE: "immediate: a residual beyond any elastic stretch is an encoder "
+    "jump, a slipped or a broken cable",
+    FaultKind.TRACKING: "immediate: the error bound is the hazard itself",
+    FaultKind.ORIENTATION: "immediate: the error bound is the hazard itself",
+    FaultKind.OVER_SPEED: "persistent: 30 ms over the limit (taking over from the brakes gives "
+    "short false spikes)",
+    FaultKind.FEEDBACK_AGE: "persistent: the limit is itself a time ([control] max_feedback_age)",
+    FaultKind.TENSION_DISTRIBUTION: "persistent: 3 cycles without feasible tensions (the last "
+    "feasible ones are held meanwhile)",
+    FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
+    FaultKind.INTERNAL: "immediate: the cycle itself failed",
+}

@@ -1,0 +1,201 @@
+"""The supervisor: the state machine, its transition table, and the checks that stop the robot.
+
+::
+
+    INIT ─startup→ READY ─enable→ ENABLING ─drives on→ ENABLED ⇄ MOVING (move / finished)
+    ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)    ─disable→ DISABLING → READY
+    any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
+    FAULT ─reset→ READY (drive faults reset, drives disabled)
+
+A driver fault skips STOPPING: the drives are not to be trusted, their brakes close. Every
+fault has a ``FaultKind``; ``states.PERSISTENCE`` says why it is immediate or what must
+persist. Nothing here raises or allocates but the event text of a transition or a fault.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import FaultKind, State
+from cdprctl.forward_kinematics import FKStatus
+from cdprctl.model.control import ControlConfig
+from drivers.base import Lifecycle, WinchStates
+from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError
+
+
+class DrivePort(Protocol):
+    """What the control side may see and ask of the drives; the manager owns their I/O."""
+
+    lifecycle: Lifecycle
+    error: DriverError | None
+    states: WinchStates
+
+    def begin_activate(self) -> None: ...
+    def begin_deactivate(self) -> None: ...
+    def begin_recover(self, settle: float = 0.5) -> None: ...
+
+
+S = State
+#: every transition the supervisor makes; a transition missing here is refused (an event)
+TRANSITIONS: dict[State, frozenset[State]] = {
+    S.INIT: frozenset({S.READY, S.FAULT}),
+    S.READY: frozenset({S.ENABLING, S.STOPPING, S.FAULT}),
+    S.ENABLING: frozenset({S.ENABLED, S.DISABLING, S.STOPPING, S.FAULT}),
+    S.ENABLED: frozenset({S.ENABLED, S.MOVING, S.DISABLING, S.STOPPING, S.FAULT}),
+    S.MOVING: frozenset({S.MOVING, S.ENABLED, S.DISABLING, S.STOPPING, S.FAULT}),
+    S.DISABLING: frozenset({S.READY, S.STOPPING, S.FAULT}),
+    S.STOPPING: frozenset({S.FAULT}),
+    S.FAULT: frozenset({S.READY}),
+}
+
+
+def driver_fault_kind(err: DriverError | None) -> FaultKind:
+    if isinstance(err, DriveFaultError):
+        return FaultKind.DRIVE_FAULT
+    if isinstance(err, DriverTimeoutError):
+        return FaultKind.DRIVE_SILENT
+    return FaultKind.DRIVES
+
+
+class Supervisor:
+    # The estimated speed must stay over the limit this long: taking over from the brakes moves
+    # the drums for a few ms while the cables find their tensions, and in a badly conditioned
+    # direction that is a short, false spike of estimated speed (seen across processes after
+    # a restart: 2 of 10). A real runaway at the limit goes 30 mm further before the stop.
+    OVER_SPEED_FOR = 0.03  # s
+    ENABLE_TIMEOUT = 2.0  # s
+
+    def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here):
+        """``stop_here()``: the trajectory's stop at the current pose (the controlled stop)."""
+        self.config = config
+        self.data = data
+        self.drives = drives
+        self._stop_here = stop_here
+        self.t_state = 0.0  # s, when the state was entered
+        self._stop_until = 0.0
+        self._over_speed_since = math.inf
+
+    @property
+    def state(self) -> State:
+        return self.data.state
+
+    def set_state(self, s: State, t: float, why: str) -> None:
+        d = self.data
+        if s not in TRANSITIONS[d.state]:
+            d.events.append((t, f"internal: transition {d.state.value} -> {s.value} refused"))
+            return
+        if s is not d.state:
+            d.events.append((t, f"state {d.state.value} -> {s.value}: {why}"))
+        d.state = s
+        self.t_state = t
+
+    def fault(self, t: float, kind: FaultKind, reason: str, hold: bool) -> None:
+        """Stop the robot for ``reason``: hold the pose with feasible tensions for
+        ``stop_duration`` when ``hold`` and the drives can, else disable at once."""
+        d = self.data
+        if d.state in (State.FAULT, State.STOPPING):
+            return
+        d.fault_reason = reason
+        d.fault_kind = kind
+        d.events.append((t, f"FAULT: {reason}"))
+        d.faults.append((t, kind))
+        if hold and self.drives.lifecycle is Lifecycle.ACTIVE:
+            self._stop_here()
+            self._stop_until = t + self.config.stop_duration
+            self.set_state(State.STOPPING, t, "controlled stop, holding the pose")
+        else:
+            self.drives.begin_deactivate()
+            self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+
+    def clear_fault(self) -> None:
+        self.data.fault_reason = ""
+        self.data.fault_kind = None
+
+    def supervise(
+        self,
+        t: float,
+        fk_status: FKStatus,
+        fk_residual: float,
+        speed: float,
+        trajectory_finished: bool,
+    ) -> None:
+        """One cycle's checks, in order of precedence (``speed``: m/s, estimated)."""
+        d, drv = self.data, self.drives
+        if drv.lifecycle is Lifecycle.ERROR and d.state is not State.FAULT:
+            if d.state is State.STOPPING:  # the drives failed during the controlled stop
+                d.events.append((t, f"FAULT during the stop: drives: {drv.error}"))
+                d.faults.append((t, FaultKind.DURING_STOP))
+                drv.begin_deactivate()
+                self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+            else:
+                self.fault(t, driver_fault_kind(drv.error), f"drives: {drv.error}", hold=False)
+            return
+        if d.state is State.ENABLING:
+            if drv.lifecycle is Lifecycle.ACTIVE:
+                self.set_state(State.ENABLED, t, "drives enabled, holding the pose")
+            elif t - self.t_state > self.ENABLE_TIMEOUT:
+                self.fault(t, FaultKind.ENABLE_TIMEOUT, "drives not enabled within 2 s", False)
+            return
+        if d.state is State.DISABLING:
+            drv.begin_deactivate()
+            self.set_state(State.READY, t, "drives disabled, brakes closed")
+            return
+        if d.state is State.STOPPING:
+            if t >= self._stop_until:
+                drv.begin_deactivate()
+                self.set_state(State.FAULT, t, "stopped; drives disabled, brakes closed")
+            return
+        if d.state is not State.ENABLED and d.state is not State.MOVING:
+            return
+        if d.state is State.MOVING and trajectory_finished:
+            self.set_state(State.ENABLED, t, "target reached")
+        failure = self._motion_failure(t, fk_status, fk_residual, speed)
+        if failure is not None:
+            self.fault(t, failure[0], failure[1], hold=True)
+
+    def _motion_failure(
+        self, t: float, fk_status: FKStatus, fk_residual: float, speed: float
+    ) -> tuple[FaultKind, str] | None:
+        """The first check that fails while holding or moving, in order of precedence."""
+        c = self.config
+        # plain floats: five numpy reductions here cost ~15 µs a cycle
+        age = max(self.drives.states.feedback_age.tolist())
+        pe = self.data.pose_error.tolist()
+        position_error = math.hypot(pe[0], pe[1], pe[2])
+        angle_error = math.hypot(pe[3], pe[4], pe[5])
+        if fk_status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
+            return FaultKind.FORWARD_KINEMATICS, f"forward kinematics {fk_status.name}"
+        if fk_residual > c.max_fk_residual:
+            return FaultKind.ENCODERS_DISAGREE, (
+                f"the encoders disagree with every pose: forward-kinematics residual "
+                f"{fk_residual * 1e3:.2f} mm > {c.max_fk_residual * 1e3:.0f} mm "
+                "(an encoder jump, a slipped or broken cable)"
+            )
+        if position_error > c.max_position_error:
+            return FaultKind.TRACKING, (
+                f"tracking error {position_error * 1e3:.1f} mm "
+                f"> {c.max_position_error * 1e3:.1f} mm"
+            )
+        if angle_error > c.max_angle_error:
+            return FaultKind.ORIENTATION, (
+                f"orientation error {angle_error:.3f} rad > {c.max_angle_error:.3f} rad"
+            )
+        if self._over_speed(t, speed, c.max_speed):
+            return FaultKind.OVER_SPEED, (
+                f"platform speed {speed:.2f} m/s > {c.max_speed:.2f} m/s "
+                f"for {self.OVER_SPEED_FOR * 1e3:.0f} ms"
+            )
+        if age > c.max_feedback_age:
+            return FaultKind.FEEDBACK_AGE, (
+                f"feedback {age * 1e3:.1f} ms old > {c.max_feedback_age * 1e3:.0f} ms"
+            )
+        return None
+
+    def _over_speed(self, t: float, speed: float, limit: float) -> bool:
+        if speed <= limit:
+            self._over_speed_since = math.inf
+            return False
+        self._over_speed_since = min(self._over_speed_since, t)
+        return t - self._over_speed_since >= self.OVER_SPEED_FOR - 1e-9

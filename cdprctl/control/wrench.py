@@ -1,0 +1,82 @@
+"""Pose control: the wrench the cables must exert, ``M (a_d + kp e + ki ∫e + kd ė) − w_g − w_e``
+(PID on the pose error plus feed-forward of the trajectory's acceleration, gravity and the
+known external wrench; the compiled kernel of ``pd_kernel.py``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.estimator import Estimator
+from cdprctl.control.pd_kernel import pd_wrench_kernel
+from cdprctl.control.trajectory import Trajectory
+from cdprctl.model.robot import RobotModel
+from cdprctl.rotation import FloatArray
+
+
+class PoseController:
+    def __init__(self, model: RobotModel, data: ControlData):
+        c = model.control
+        self.model = model
+        self.data = data
+        self.period = c.period
+        bw = c.axis_bandwidth if c.axis_bandwidth is not None else (c.bandwidth,) * 6
+        wn = 2.0 * math.pi * np.array(bw, dtype=float)  # rad/s per axis
+        # PID by pole placement, a triple pole at −ω_n (s + ω)³: kp = 3ω², kd = 3ω, ki = ω³
+        # (accelerations per m, per m/s, per m·s). The integral removes the PD's compliance
+        # to a steady force (the water jet): what remains is the cables' own elasticity, the
+        # stiffness the SOTDA acts on (Picard et al. 2020). damping_ratio scales kd. Per axis
+        # (x, y, z, roll, pitch, yaw) when [control] axis_bandwidth is given.
+        self.kp = 3.0 * wn * wn
+        self.kd = 3.0 * c.damping_ratio * wn
+        self.ki = wn**3
+        self.integral = np.zeros(6)  # m·s, rad·s
+        self.integral_limit = 10.0 / self.ki  # the integral term stays within 10 m/s² (rad/s²)
+        # contiguous float64 copies for the compiled kernel
+        self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
+        self._inertia = np.ascontiguousarray(model.platform.inertia, dtype=float)
+        self._com = np.ascontiguousarray(model.platform.com, dtype=float)
+        self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
+        self._Rd = np.zeros((3, 3))
+        self._E = np.zeros((3, 3))
+
+    def reset(self) -> None:
+        self.integral[:] = 0.0
+
+    def gravity_hold(self, R: FloatArray) -> FloatArray:
+        """The wrench (N, N·m at P, base frame) that holds the platform at rest at orientation
+        ``R`` against gravity and the known external wrench."""
+        return -(self.model.gravity_wrench(R) + self.data.ext_total)
+
+    def update(self, tr: Trajectory, e: Estimator, integrate: bool) -> None:
+        """``data.wrench`` and ``data.pose_error`` for this cycle; the integral grows only
+        when ``integrate`` (holding or moving, not while enabling or stopping)."""
+        d, pf = self.data, self.model.platform
+        pd_wrench_kernel(
+            tr.position,
+            tr.velocity,
+            tr.acceleration,
+            e.position,
+            e.rotation,
+            e.velocity,
+            e.omega,
+            self._R_home,
+            self.kp,
+            self.kd,
+            self.ki,
+            self.integral,
+            self.integral_limit,
+            integrate,
+            self.period,
+            pf.mass,
+            self._inertia,
+            self._com,
+            self._gravity,
+            d.ext_total,
+            self._Rd,
+            self._E,
+            d.pose_error,
+            d.wrench,
+        )

@@ -1,0 +1,108 @@
+"""The import layers (docs/architecture.md): a module imports only from its own layer or the
+layers below, wherever the import stands (function bodies included). Read from the source with
+``ast``: nothing is imported to check it."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# bottom → top; the first prefix that matches a module names its layer
+LAYERS: list[tuple[str, tuple[str, ...]]] = [
+    ("core", ("cdprctl.rotation", "cdprctl.numerics")),
+    (
+        "model",
+        tuple(
+            f"cdprctl.model.{m}"
+            for m in ("robot", "control", "drives", "grippers", "zenoh", "errors", "reader")
+        ),
+    ),
+    (
+        "geometry",  # and the loader, whose checks need the geometry
+        (
+            "cdprctl.kinematics",
+            "cdprctl.forward_kinematics",
+            "cdprctl.stiffness",
+            "cdprctl.gripper",
+            "cdprctl.model",
+        ),
+    ),
+    ("tda", ("cdprctl.tda", "cdprctl.plots")),
+    ("hardware", ("drivers", "sim_backend")),
+    ("control", ("cdprctl.control",)),
+    ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon")),
+    ("commands", ("cdprctl.commands", "cdprctl.cli")),
+]
+EXACT = {"cdprctl": 0}  # the package itself: its version string
+# the telemetry sees the control layer only through its data and command definitions
+TELEMETRY_MAY_USE = ("cdprctl.control.data", "cdprctl.control.commands", "cdprctl.control.states")
+
+
+def layer_of(module: str) -> int | None:
+    if module in EXACT:
+        return EXACT[module]
+    for i, (_, prefixes) in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    return None
+
+
+def modules() -> list[tuple[str, Path]]:
+    out = []
+    for pkg in ("cdprctl", "drivers", "sim_backend"):
+        for f in sorted((ROOT / pkg).rglob("*.py")):
+            rel = f.relative_to(ROOT).with_suffix("")
+            name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+            out.append((name, f))
+    return out
+
+
+def imports_of(module: str, path: Path) -> list[str]:
+    tree = ast.parse(path.read_text())
+    out = []
+    pkg = module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:  # relative: from the package
+                parts = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                base = ".".join([*parts, base] if base else parts)
+            out += [f"{base}.{a.name}" if layer_of(f"{base}.{a.name}") is not None else base
+                    for a in node.names]  # fmt: skip
+    return [m for m in out if layer_of(m) is not None]
+
+
+def test_every_module_has_a_layer():
+    assert [m for m, _ in modules() if layer_of(m) is None] == []
+
+
+@pytest.mark.parametrize("module,path", modules(), ids=[m for m, _ in modules()])
+def test_imports_point_down(module, path):
+    mine = layer_of(module)
+    assert mine is not None
+    up = []
+    for imp in imports_of(module, path):
+        theirs = layer_of(imp)
+        assert theirs is not None
+        if theirs > mine:
+            up.append(f"{imp} ({LAYERS[theirs][0]} above {LAYERS[mine][0]})")
+        telemetry = module.startswith("cdprctl.telemetry")
+        control = imp.startswith("cdprctl.control")
+        if telemetry and control and not imp.startswith(TELEMETRY_MAY_USE):
+            up.append(f"{imp} (telemetry may use only {', '.join(TELEMETRY_MAY_USE)})")
+    assert up == [], f"{module} imports upwards: {up}"
+
+
+def test_the_checker_sees_an_upward_import(tmp_path):
+    """The check itself can fail: a driver importing the controller is caught."""
+    f = tmp_path / "x.py"
+    f.write_text("def f():\n    from cdprctl.control.controller import Controller\n")
+    imps = imports_of("drivers.x", f)
+    assert imps == ["cdprctl.control.controller.Controller"]
+    assert layer_of(imps[0]) > layer_of("drivers.x")

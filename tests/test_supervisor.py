@@ -1,0 +1,231 @@
+"""The supervisor's transitions and checks, table-driven, on a stand-in for the drives; the
+command acceptance table against the controller; typed faults end to end in lock-step."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdprctl.control.commands import ACCEPTED_IN, Command, CommandKind, accepted
+from cdprctl.control.controller import Controller
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import PERSISTENCE, FaultKind, State
+from cdprctl.control.supervisor import TRANSITIONS, Supervisor
+from cdprctl.forward_kinematics import FKStatus
+from cdprctl.model import load_robot
+from cdprctl.tda import TDAMethod, TDAOptions
+from drivers.base import Lifecycle, WinchStates
+from drivers.errors import DriveFaultError, DriverOperationError, DriverTimeoutError
+
+ROOT = Path(__file__).resolve().parents[1]
+ROWC = load_robot(ROOT / "config" / "rowc.toml")
+CFG = ROWC.control
+
+
+class Drives:
+    """The drives as the control side sees them (``DrivePort``), recording its requests."""
+
+    def __init__(self, m: int, lifecycle: Lifecycle = Lifecycle.ACTIVE):
+        self.lifecycle = lifecycle
+        self.error = None
+        self.states = WinchStates(m)
+        self.states.feedback_age[:] = 0.0
+        self.calls: list[str] = []
+
+    def begin_activate(self) -> None:
+        self.calls.append("activate")
+
+    def begin_deactivate(self) -> None:
+        self.calls.append("deactivate")
+        if self.lifecycle is Lifecycle.ACTIVE:
+            self.lifecycle = Lifecycle.INACTIVE
+
+    def begin_recover(self, settle: float = 0.5) -> None:
+        self.calls.append("recover")
+
+
+def rig(state: State, lifecycle: Lifecycle = Lifecycle.ACTIVE):
+    d = ControlData(ROWC.n_cables, 0)
+    d.state = state
+    drives = Drives(ROWC.n_cables, lifecycle)
+    stops: list[bool] = []
+    return Supervisor(CFG, d, drives, lambda: stops.append(True)), d, drives, stops
+
+
+def healthy(s: Supervisor, t: float = 1.0, **kw) -> None:
+    args = {"fk_status": FKStatus.CONVERGED, "fk_residual": 0.0, "speed": 0.0}
+    args.update(kw)
+    s.supervise(t, args["fk_status"], args["fk_residual"], args["speed"], False)
+
+
+# (name, start state, drives' lifecycle, what happens, expected state, expected fault kind)
+CASES = [
+    ("enabled when drives are on", State.ENABLING, Lifecycle.ACTIVE,
+     lambda s, d, v: healthy(s, 0.1), State.ENABLED, None),
+    ("enable times out", State.ENABLING, Lifecycle.INACTIVE,
+     lambda s, d, v: healthy(s, 2.5), State.FAULT, FaultKind.ENABLE_TIMEOUT),
+    ("still enabling", State.ENABLING, Lifecycle.INACTIVE,
+     lambda s, d, v: healthy(s, 1.5), State.ENABLING, None),
+    ("disabling ends ready", State.DISABLING, Lifecycle.ACTIVE,
+     lambda s, d, v: healthy(s), State.READY, None),
+    ("target reached", State.MOVING, Lifecycle.ACTIVE,
+     lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True), State.ENABLED, None),
+    ("drive fault: no hold", State.MOVING, Lifecycle.ERROR,
+     lambda s, d, v: setattr(v, "error", DriveFaultError(1, 2, 0x2310, "overcurrent"))
+     or healthy(s), State.FAULT, FaultKind.DRIVE_FAULT),
+    ("silent drive", State.ENABLED, Lifecycle.ERROR,
+     lambda s, d, v: setattr(v, "error", DriverTimeoutError("no feedback", 3)) or healthy(s),
+     State.FAULT, FaultKind.DRIVE_SILENT),
+    ("other driver error", State.READY, Lifecycle.ERROR,
+     lambda s, d, v: setattr(v, "error", DriverOperationError("send failed")) or healthy(s),
+     State.FAULT, FaultKind.DRIVES),
+    ("FK degenerate", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: healthy(s, fk_status=FKStatus.DEGENERATE),
+     State.STOPPING, FaultKind.FORWARD_KINEMATICS),
+    ("encoders disagree", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: healthy(s, fk_residual=2 * CFG.max_fk_residual),
+     State.STOPPING, FaultKind.ENCODERS_DISAGREE),
+    ("tracking error", State.MOVING, Lifecycle.ACTIVE,
+     lambda s, d, v: d.pose_error.__setitem__(1, 1.01 * CFG.max_position_error) or healthy(s),
+     State.STOPPING, FaultKind.TRACKING),
+    ("orientation error", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: d.pose_error.__setitem__(5, 1.01 * CFG.max_angle_error) or healthy(s),
+     State.STOPPING, FaultKind.ORIENTATION),
+    ("old feedback", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: v.states.feedback_age.__setitem__(4, 1.01 * CFG.max_feedback_age)
+     or healthy(s), State.STOPPING, FaultKind.FEEDBACK_AGE),
+    ("a fault with the drives off skips the stop", State.ENABLED, Lifecycle.INACTIVE,
+     lambda s, d, v: healthy(s, fk_status=FKStatus.BAD_INPUT),
+     State.FAULT, FaultKind.FORWARD_KINEMATICS),
+    ("the controlled stop ends in FAULT", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x", True)
+     or healthy(s, 1.0 + CFG.stop_duration), State.FAULT, FaultKind.TRACKING),
+    ("drives fail during the stop", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x", True)
+     or setattr(v, "lifecycle", Lifecycle.ERROR) or healthy(s, 1.1),
+     State.FAULT, FaultKind.TRACKING),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("name,start,lc,act,end,kind", CASES, ids=[c[0] for c in CASES])
+def test_transition(name, start, lc, act, end, kind):
+    s, d, drives, _ = rig(start, lc)
+    act(s, d, drives)
+    assert d.state is end, d.events
+    assert d.fault_kind is kind
+    if kind is not None:
+        assert next(k for _, k in d.faults) is kind
+        assert d.fault_reason
+    if end is State.FAULT:
+        assert "deactivate" in drives.calls  # brakes
+
+
+def test_during_the_stop_is_counted_but_keeps_the_first_reason():
+    s, d, drives, stops = rig(State.MOVING)
+    s.fault(1.0, FaultKind.OVER_SPEED, "too fast", hold=True)
+    assert d.state is State.STOPPING and stops == [True]
+    drives.lifecycle = Lifecycle.ERROR
+    healthy(s, 1.01)
+    assert [k for _, k in d.faults] == [FaultKind.OVER_SPEED, FaultKind.DURING_STOP]
+    assert d.fault_kind is FaultKind.OVER_SPEED and d.fault_reason == "too fast"
+
+
+def test_over_speed_must_persist():
+    s, d, _, _ = rig(State.ENABLED)
+    fast = 1.5 * CFG.max_speed
+    for i in range(14):  # 28 ms at 2 ms
+        healthy(s, 1.0 + 0.002 * i, speed=fast)
+    assert d.state is State.ENABLED
+    healthy(s, 1.0 + Supervisor.OVER_SPEED_FOR, speed=fast)
+    assert d.state is State.STOPPING and d.fault_kind is FaultKind.OVER_SPEED
+    s2, d2, _, _ = rig(State.ENABLED)  # a dip below the limit starts the count again
+    for i in range(30):
+        healthy(s2, 1.0 + 0.002 * i, speed=fast if i % 10 else 0.0)
+    assert d2.state is State.ENABLED
+
+
+@pytest.mark.parametrize("start", list(State))
+def test_transition_table_is_enforced(start):
+    for to in State:
+        s, d, _, _ = rig(start)
+        s.set_state(to, 1.0, "test")
+        if to in TRANSITIONS[start]:
+            assert d.state is to
+        else:
+            assert d.state is start
+            assert "refused" in d.events[-1][1]
+
+
+def test_every_fault_kind_says_why_it_is_immediate_or_persistent():
+    for k in FaultKind:
+        assert PERSISTENCE[k].split(":")[0] in ("immediate", "persistent"), k
+
+
+def command_of(kind: CommandKind) -> Command:
+    if kind is CommandKind.MOVE:
+        return Command(kind, pose=np.array([1.6, 0.35, 0.55, 0.0, 0.0, 0.0]))
+    if kind is CommandKind.SET_TDA:
+        return Command(kind, tda=TDAOptions(method=TDAMethod.ENERGY, period=CFG.period))
+    return Command(kind)
+
+
+@pytest.fixture(scope="module")
+def controller():
+    return Controller(ROWC, Drives(ROWC.n_cables, Lifecycle.INACTIVE))
+
+
+@pytest.mark.parametrize("kind", list(CommandKind))
+def test_command_acceptance_table(controller, kind):
+    c = controller
+    for state in State:
+        c.data.state = state
+        c.drives.lifecycle = Lifecycle.INACTIVE
+        c.data.events.clear()
+        assert c.submit(command_of(kind))
+        c._handle_commands(0.0)
+        ignored = any("ignored in state" in e for _, e in c.data.events)
+        assert ignored is (not accepted(kind, state)), (kind, state, list(c.data.events))
+        assert accepted(kind, state) is (state in ACCEPTED_IN[kind])
+
+
+def test_bad_commands_stop_at_the_mailbox(controller):
+    c = controller
+    c.mailbox.clear()
+    c.data.events.clear()
+    assert c.submit(Command(CommandKind.MOVE, pose=np.array([np.nan, 0, 0, 0, 0, 0])))
+    assert c.submit(Command(CommandKind.MOVE, pose=np.zeros(6), speed=2.0))
+    assert c.submit(Command(CommandKind.SET_TDA, tda=TDAOptions(method=TDAMethod.QP, nu=3.0)))
+    assert len(c.mailbox) == 0
+    texts = [e for _, e in c.data.events]
+    assert texts[0].startswith("move ignored") and texts[1].startswith("move ignored")
+    assert "nu = 3.0 must be in [0, 1]" in texts[2]
+    with pytest.raises(ValueError):
+        Command("jump")  # an unknown kind never reaches the loop
+
+
+def test_typed_faults_in_the_closed_loop():
+    """A drive fault and a silent drive injected into the lock-step robot end in their kinds,
+    in the data and in the counted faults."""
+    from cdprctl.experiments.closed_loop import ClosedLoop
+    from sim_backend.faults import FaultEvent, FaultInjector
+
+    for event, kind in (
+        (FaultEvent(0.0, "drive_fault", cable=2, value=0x2310), FaultKind.DRIVE_FAULT),
+        (FaultEvent(0.0, "silent_drive", cable=3), FaultKind.DRIVE_SILENT),
+    ):
+        with ClosedLoop(ROWC) as cl:
+            cl.startup()
+            cl.command("enable")
+            cl.run(0.3)
+            fi = FaultInjector([], seed=1)
+            fi.attach(cl.net)
+            fi.events.append(
+                FaultEvent(cl.net.time + 0.01, event.kind, cable=event.cable, value=event.value)
+            )
+            cl.run(1.5, until=lambda c: c.controller.state is State.FAULT)
+            c = cl.controller
+            assert c.state in (State.STOPPING, State.FAULT)
+            assert c.fault_kind is kind, c.fault_reason
+            assert next(k for _, k in c.data.faults) is kind
