@@ -12,9 +12,12 @@ import math
 import numpy as np
 from numba import njit
 
-from cdprctl.stiffness import _ka_weighted
 from cdprctl.tda import polygon as pg
-from cdprctl.tda.sotda import displacements_kernel, grid_candidates_kernel
+from cdprctl.tda.sotda import (
+    displacements_kernel,
+    grid_candidates_kernel,
+    sotda_stiffness_kernel,
+)
 
 # method codes of the kernel
 BARYCENTER, MIN_2NORM, MIN_1NORM, SOTDA = 0, 1, 2, 3
@@ -30,21 +33,9 @@ def sotda_kernel(
     ``K(λ) = K0 + λ1 A1 + λ2 A2`` gives the smallest ``|d · δp|`` for ``δX = K⁻¹ δw`` (a
     singular ``K`` is never chosen), then the intermediate point ``λ_b + ν (λ_s − λ_b)``
     (Fig. 2). Returns ``(x, y, d · δp at that point)``."""
-    m = N.shape[0]
-    T = np.empty((3, m))
-    for i in range(m):
-        T[0, i] = t0[i]
-        T[1, i] = N[i, 0]
-        T[2, i] = N[i, 1]
     S = np.empty((3, 6, 6))
-    _ka_weighted(uT, W, rbT, free_len, T, S)
+    sotda_stiffness_kernel(N, t0, k, uT, W, rbT, free_len, S)
     K0 = S[0]
-    for r in range(6):  # K0 = Kp + Ka(t0), Kp = W diag(k) Wᵀ
-        for c in range(6):
-            s = 0.0
-            for i in range(m):
-                s += W[r, i] * k[i] * W[c, i]
-            K0[r, c] += s
     dX = np.empty((nv, 6))
     displacements_kernel(K0, S[1], S[2], verts, nv, dw, dX)
     best = 0

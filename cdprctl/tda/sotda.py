@@ -16,22 +16,45 @@ from numba import njit
 
 from cdprctl.kinematics import KinematicsData
 from cdprctl.rotation import FloatArray
-from cdprctl.stiffness import active_stiffness_weighted
+from cdprctl.stiffness import _ka_weighted
 from cdprctl.tda.polygon import Point
 
 
+@njit(cache=True)
+def sotda_stiffness_kernel(N, t0, k, uT, W, rbT, free_len, S):  # pragma: no cover - compiled
+    """``S`` (3, 6, 6) ← ``K0 = Kp + Ka(t0)``, ``A1 = Ka(N_1)``, ``A2 = Ka(N_2)`` (Picard et
+    al. 2020, eq. (3)-(4): ``K(λ) = K0 + λ1 A1 + λ2 A2``), ``Kp = W diag(k) Wᵀ``."""
+    m = N.shape[0]
+    T = np.empty((3, m))
+    for i in range(m):
+        T[0, i] = t0[i]
+        T[1, i] = N[i, 0]
+        T[2, i] = N[i, 1]
+    _ka_weighted(uT, W, rbT, free_len, T, S)
+    for r in range(6):
+        for c in range(6):
+            s = 0.0
+            for i in range(m):
+                s += W[r, i] * k[i] * W[c, i]
+            S[0, r, c] += s
+
+
 class SotdaModel:
-    """``K(λ) = K0 + λ1 A1 + λ2 A2`` at one pose (Picard et al. 2020, eq. (3)-(4))."""
+    """``K(λ) = K0 + λ1 A1 + λ2 A2`` at one pose (``sotda_stiffness_kernel``)."""
 
     def __init__(self, data: KinematicsData, k: FloatArray, t0: FloatArray, N: FloatArray):
-        T = np.empty((3, data.n_cables))
-        T[0] = t0
-        T[1:] = N.T
-        S = active_stiffness_weighted(data, T)
-        Kp = (data.W * k) @ data.WT
-        self.K0 = Kp + S[0]
-        self.A1 = S[1]
-        self.A2 = S[2]
+        S = np.empty((3, 6, 6))
+        sotda_stiffness_kernel(
+            np.ascontiguousarray(N, dtype=float),
+            np.ascontiguousarray(t0, dtype=float),
+            np.ascontiguousarray(k, dtype=float),
+            data.uT,
+            data.W,
+            data.rbT,
+            data.free_length,
+            S,
+        )
+        self.K0, self.A1, self.A2 = S[0], S[1], S[2]
 
     def displacements(self, lam: FloatArray, delta_wrench: FloatArray) -> FloatArray:
         """Displacement screws ``δX = K(λ)⁻¹ δw`` (m, rad) for candidates ``lam`` (n, 2);
