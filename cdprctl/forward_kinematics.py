@@ -12,13 +12,13 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from cdprctl.kinematics import KinematicsData, ik_kernel
-from cdprctl.numerics import cable_compliance_py, compliance_terms
+from cdprctl.numerics import cable_compliance_py, compliance_terms, kernel_args
 from cdprctl.rotation import FloatArray, exp_so3_kernel
 
 if TYPE_CHECKING:
@@ -31,6 +31,17 @@ class FKStatus(enum.IntEnum):
     DEGENERATE = 2  # a cable of zero length or a non-finite value on the way
     BAD_INPUT = 3  # non-finite measured lengths or start pose
     INCONSISTENT = 4  # converged, but the lengths cannot all be met: least-squares pose
+
+
+class FKLimits(NamedTuple):
+    """When the iteration stops: ``tolerance`` (m RMS of the length residual),
+    ``step_tolerance`` (largest step component, m or rad), ``max_iterations``, and
+    ``max_residual`` (m RMS) above which a converged pose is INCONSISTENT."""
+
+    tolerance: float
+    step_tolerance: float
+    max_iterations: int
+    max_residual: float
 
 
 @dataclass
@@ -69,11 +80,9 @@ class ForwardKinematics:
         max_residual: float = 1e-4,
     ):
         self.model = model
-        self.max_residual = max_residual  # m RMS: above it a minimum is INCONSISTENT
         self.data = KinematicsData(model)
-        self.tolerance = tolerance
-        self.step_tolerance = step_tolerance
-        self.max_iterations = max_iterations
+        limits = FKLimits(tolerance, step_tolerance, int(max_iterations), max_residual)
+        self.limits = kernel_args(limits)
         m = model.n_cables
         self._p = np.zeros(3)
         self._R = np.eye(3)
@@ -95,28 +104,7 @@ class ForwardKinematics:
         p, R, info = self._p, self._R, self._info
         p[:] = position0
         R[:] = rotation0
-        fk_kernel(
-            d.anchors,
-            d.attachments,
-            d.pulley_radius,
-            d.pulley_axis,
-            lengths,
-            p,
-            R,
-            self.tolerance,
-            self.step_tolerance,
-            self.max_iterations,
-            d.rbT,
-            d.exitT,
-            d.cable_vectorsT,
-            d.free_length,
-            d.wrap_angle,
-            d.length,
-            d.W,
-            self._res,
-            self.max_residual,
-            info,
-        )
+        fk_kernel(d.arrays, lengths, p, R, self.limits, self._res, info)
         d.position[:] = p
         d.rotation[:] = R
         status = FKStatus(int(info[2]))
@@ -164,32 +152,14 @@ def _cholesky_solve6(A, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def fk_kernel(
-    anchors,
-    attach,
-    pr,
-    pa,
-    lengths,
-    p,
-    R,
-    tol,
-    step_tol,
-    max_iter,
-    rbT,
-    exitT,
-    vT,
-    free_len,
-    wrap,
-    length,
-    W,
-    res,
-    max_residual,
-    info,
-):  # pragma: no cover
+def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compiled
     """Levenberg-Marquardt FK; ``p``/``R`` hold the warm start in and the pose out;
     ``info`` receives [RMS residual (m), iterations, FKStatus]: a converged least-squares pose
-    whose RMS residual is above ``max_residual`` (m) is INCONSISTENT."""
-    m = anchors.shape[0]
+    whose RMS residual is above ``max_residual`` (m) is INCONSISTENT. ``k``: the
+    :class:`KinArrays` the iteration's IK writes into."""
+    m = lengths.shape[0]
+    free_len, length, W = k[7], k[9], k[10]  # KinArrays: free_len, length, W
+    tol, step_tol, max_iter, max_residual = limits
     s = 0.0
     for i in range(m):
         s += lengths[i]
@@ -203,7 +173,7 @@ def fk_kernel(
     # one Newton step of the polar decomposition: warm starts chain products off SO(3)
     Rn = 0.5 * (R @ (3.0 * np.eye(3) - R.T @ R))
     R[:, :] = Rn
-    ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+    ik_kernel(k, p, R)
     if not _lengths_ok(free_len):
         info[0], info[1], info[2] = math.inf, 0.0, 2.0  # DEGENERATE
         return
@@ -254,10 +224,10 @@ def fk_kernel(
             R[:, :] = R_new
             _converged(info, math.sqrt(lin / m), it, max_residual)
             return
-        ik_kernel(anchors, attach, pr, pa, p_new, R_new, rbT, exitT, vT, free_len, wrap, length, W)
+        ik_kernel(k, p_new, R_new)
         if not _lengths_ok(free_len):
             mu = mu * 100.0 + 1e-6
-            ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+            ik_kernel(k, p, R)
             continue
         cost_new = 0.0
         for i in range(m):
@@ -272,7 +242,7 @@ def fk_kernel(
             mu = max(mu * 0.1, 1e-12)
         else:
             mu = mu * 10.0 + 1e-9
-            ik_kernel(anchors, attach, pr, pa, p, R, rbT, exitT, vT, free_len, wrap, length, W)
+            ik_kernel(k, p, R)
             if mu > 1e6:
                 break
     rms = math.sqrt(cost / m)

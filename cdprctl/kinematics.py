@@ -27,15 +27,35 @@ The arithmetic runs in a numba-compiled kernel: at 8 cables, numpy's per-call ov
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
+
+
+class KinArrays(NamedTuple):
+    """The arrays of one :class:`KinematicsData`, as the compiled kernels take them (the same
+    objects: a kernel writes into the data's arrays; ``KinematicsData.arrays``, a plain tuple
+    in this order, see ``numerics.kernel_args``). Inputs: ``anchors``, ``attach``,
+    ``pulley_r``, ``pulley_axis``; outputs: the rest (see :func:`inverse_kinematics`)."""
+
+    anchors: FloatArray
+    attach: FloatArray
+    pulley_r: FloatArray
+    pulley_axis: FloatArray
+    rbT: FloatArray
+    exitT: FloatArray
+    vT: FloatArray
+    free_len: FloatArray
+    wrap: FloatArray
+    length: FloatArray
+    W: FloatArray
 
 
 class KinematicsData:
@@ -62,6 +82,21 @@ class KinematicsData:
         self.W = np.zeros((6, m))  # wrench matrix, C order
         self.WT = self.W.T  # (m, 6) view
         self.uT = self.W[:3]  # (3, m) unit vectors, base frame: B_i → exit point
+        self.arrays = kernel_args(
+            KinArrays(
+                self.anchors,
+                self.attachments,
+                self.pulley_radius,
+                self.pulley_axis,
+                self.rbT,
+                self.exitT,
+                self.cable_vectorsT,
+                self.free_length,
+                self.wrap_angle,
+                self.length,
+                self.W,
+            )
+        )
 
     # Row-major (m, 3) views for callers that think per cable.
     @property
@@ -109,28 +144,14 @@ def inverse_kinematics(
     d = data
     d.position[:] = position
     d.rotation[:] = rotation
-    ik_kernel(
-        d.anchors,
-        d.attachments,
-        d.pulley_radius,
-        d.pulley_axis,
-        d.position,
-        d.rotation,
-        d.rbT,
-        d.exitT,
-        d.cable_vectorsT,
-        d.free_length,
-        d.wrap_angle,
-        d.length,
-        d.W,
-    )
+    ik_kernel(d.arrays, d.position, d.rotation)
 
 
 @njit(cache=True, fastmath=False)
-def ik_kernel(
-    anchors, attach, pulley_r, pulley_axis, p, R, rbT, exitT, vT, free_len, wrap, length, W
-):  # pragma: no cover - compiled; covered through inverse_kinematics
-    """IK of every cable into the output arrays (see :func:`inverse_kinematics`)."""
+def ik_kernel(k, p, R):  # pragma: no cover - compiled; covered through inverse_kinematics
+    """IK of every cable at the pose ``p``, ``R`` into the output arrays of ``k``
+    (:class:`KinArrays`; see :func:`inverse_kinematics`)."""
+    anchors, attach, pulley_r, pulley_axis, rbT, exitT, vT, free_len, wrap, length, W = k
     m = anchors.shape[0]
     for i in range(m):
         bx, by, bz = attach[i, 0], attach[i, 1], attach[i, 2]

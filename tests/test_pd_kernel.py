@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprctl.control.pd_kernel import pd_wrench_kernel
+from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd_wrench_kernel
 from cdprctl.rotation import exp_so3, exp_so3_kernel, log_so3, log_so3_kernel
 
 
@@ -88,25 +88,12 @@ def test_kernel_matches_the_numpy_law(seed):
     err, wrench = np.zeros(6), np.zeros(6)
     integral_k = integral.copy()
     pd_wrench_kernel(
-        ref_x,
-        ref_v,
-        ref_a,
-        p,
-        R,
-        v,
-        w,
-        R_home,
-        kp,
-        kd,
-        ki,
-        integral_k,
-        lim,
+        Reference(ref_x, ref_v, ref_a),
+        PoseEstimate(p, R, v, w),
+        Pid(kp, kd, ki, integral_k, lim),
         integ,
         dt,
-        mass,
-        inertia,
-        com,
-        g,
+        Platform(R_home, mass, inertia, com, g),
         ext,
         np.zeros((3, 3)),
         np.zeros((3, 3)),

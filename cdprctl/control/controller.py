@@ -55,7 +55,7 @@ class Controller:
         self.data = d = ControlData(model.n_cables, gs.n)
         self.estimator = e = Estimator(model)
         self.trajectory = tr = Trajectory(model, self.period)
-        self.pose = PoseController(model, d)
+        self.pose = PoseController(model, d, tr, e)
         self.winches = WinchTorques(model)
         self.distribution = Distribution(model, d, e, gs, tda or tda_options_of(model))
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
@@ -200,7 +200,7 @@ class Controller:
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES
         if active:
-            self.pose.update(self.trajectory, e, d.state in HEALTHY_STATES)
+            self.pose.update(d.state in HEALTHY_STATES)
         t4 = clock()
         ph[3] = (t4 - t3) / 1e3
         if active:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -28,7 +29,7 @@ from numba import njit
 from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics, fk_kernel
 from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import cable_compliance, compliance_terms
+from cdprctl.numerics import compliance_at, compliance_of, kernel_args, stiffness_kernel
 from cdprctl.rotation import FloatArray, log_so3_kernel
 
 
@@ -40,11 +41,8 @@ class Estimator:
         kin = KinematicsData(model)
         inverse_kinematics(model, kin, model.home.position, model.home.rotation)
         self.l_home = kin.length.copy()
-        # the cable law's terms per cable (cdprctl.numerics.cable_compliance)
-        terms = np.array([compliance_terms(x) for x in c]).reshape(len(c), 4)
-        self.inv_k_fixed, self.inv_es, self.l_winch, self.inv_spring = (
-            np.ascontiguousarray(terms[:, j]) for j in range(4)
-        )
+        self.law = compliance_of(c)  # the cable law's terms (cdprctl.numerics)
+        self._law = kernel_args(self.law)
         # A gripper cable's length is the jaw's travel plus the pose (Sensors 2019 §2.4): the
         # pose comes from the other cables, the grippers take the redundancy (docs/gripper.md).
         grip = {g.cable for g in model.grippers}
@@ -65,15 +63,18 @@ class Estimator:
         # [s of the last sample, 2π f_c (rad/s) of the velocity filter]
         self._clock = np.array([-math.inf, 2.0 * math.pi * model.control.velocity_filter])
         self._theta = np.zeros(model.n_cables)  # rad, the angles brought to one instant
-        self._fk_lengths = np.zeros(len(self.fk_cables))  # m, the lengths FK works from
-        self._fk_res = np.zeros(len(self.fk_cables))  # m, FK's length residuals
         self._fk_p = np.zeros(3)
         self._fk_R = np.eye(3)
         self._info = np.zeros(3)  # FK: RMS residual (m), iterations, FKStatus
         self.k = np.zeros(model.n_cables)  # N/m, each cable's at the estimated pose
-        stiffness_kernel(
-            self.l_home, self.inv_k_fixed, self.inv_es, self.l_winch, self.inv_spring, self.k
-        )
+        stiffness_kernel(self.l_home, self._law, self.k)
+        nf = len(self.fk_cables)
+        scratch = FKScratch(self._theta, self.lengths, np.zeros(nf), np.zeros(nf), self._fk_p,
+                            self._fk_R, self._info)  # fmt: skip
+        self._scratch = kernel_args(scratch)
+        state = EstimateState(self.position, self.rotation, self.velocity, self.omega,
+                              self._clock, self.k)  # fmt: skip
+        self._state = kernel_args(state)
         # the FK result of the last update (its arrays are the estimator's: copy to keep)
         self._result = FKResult(self._fk_p, self._fk_R, 0.0, 0, FKStatus.CONVERGED)
 
@@ -96,7 +97,6 @@ class Estimator:
         tensions (N) the cables carry, and optionally the motor velocities ``theta_rate``
         (rad/s) and the age of each drive's feedback ``age`` (s). Never raises. One compiled
         call (``estimate_kernel``): in numpy the ~40 small operations cost ~60 µs a cycle."""
-        fk, d, k = self.fk, self.fk.data, self.kin
         lag = theta_rate is not None and age is not None
         estimate_kernel(
             t,
@@ -107,50 +107,13 @@ class Estimator:
             lag,
             self.l_home,
             self.drum_ratio,
-            self.inv_k_fixed,
-            self.inv_es,
-            self.l_winch,
-            self.inv_spring,
+            self._law,
             self.fk_cables,
-            self._theta,
-            self.lengths,
-            self._fk_lengths,
-            d.anchors,
-            d.attachments,
-            d.pulley_radius,
-            d.pulley_axis,
-            fk.tolerance,
-            fk.step_tolerance,
-            fk.max_iterations,
-            fk.max_residual,
-            d.rbT,
-            d.exitT,
-            d.cable_vectorsT,
-            d.free_length,
-            d.wrap_angle,
-            d.length,
-            d.W,
-            self._fk_res,
-            self._fk_p,
-            self._fk_R,
-            self._info,
-            k.anchors,
-            k.attachments,
-            k.pulley_radius,
-            k.pulley_axis,
-            k.rbT,
-            k.exitT,
-            k.cable_vectorsT,
-            k.free_length,
-            k.wrap_angle,
-            k.length,
-            k.W,
-            self.position,
-            self.rotation,
-            self.velocity,
-            self.omega,
-            self._clock,
-            self.k,
+            self.fk.data.arrays,
+            self.fk.limits,
+            self._scratch,
+            self.kin.arrays,
+            self._state,
         )
         res = self._result
         res.residual, res.iterations = float(self._info[0]), int(self._info[1])
@@ -167,67 +130,44 @@ CONVERGED, MAX_ITERATIONS, INCONSISTENT = (
 )
 
 
+class FKScratch(NamedTuple):
+    """The estimator's working arrays: angles brought to one instant (rad), all cables'
+    lengths (m), the FK cables' lengths and residuals (m), FK's pose and ``info``."""
+
+    th: np.ndarray
+    lengths: np.ndarray
+    fk_lengths: np.ndarray
+    res: np.ndarray
+    p: np.ndarray
+    R: np.ndarray
+    info: np.ndarray
+
+
+class EstimateState(NamedTuple):
+    """What the estimate keeps between cycles: pose (m; rotation), twist (m/s, rad/s, base
+    frame), ``clock`` = [last sample instant (s), 2π f_c of the velocity filter], and each
+    cable's stiffness ``k`` (N/m) at the pose."""
+
+    position: np.ndarray
+    rotation: np.ndarray
+    velocity: np.ndarray
+    omega: np.ndarray
+    clock: np.ndarray
+    k: np.ndarray
+
+
 @njit(cache=True)
 def estimate_kernel(
-    t,
-    theta,
-    tensions,
-    rate,
-    age,
-    lag,
-    l_home,
-    drum_ratio,
-    inv_k_fixed,
-    inv_es,
-    l_winch,
-    inv_spring,
-    fk_cables,
-    th,
-    lengths,
-    fk_lengths,
-    f_anchors,
-    f_attach,
-    f_pulley_r,
-    f_pulley_axis,
-    tol,
-    step_tol,
-    max_iter,
-    max_residual,
-    f_rbT,
-    f_exitT,
-    f_vT,
-    f_free,
-    f_wrap,
-    f_length,
-    f_W,
-    f_res,
-    p,
-    R,
-    info,
-    anchors,
-    attach,
-    pulley_r,
-    pulley_axis,
-    rbT,
-    exitT,
-    vT,
-    free_len,
-    wrap,
-    length,
-    W,
-    position,
-    rotation,
-    velocity,
-    omega,
-    clock,
-    k,
-):  # pragma: no cover - compiled
+    t, theta, tensions, rate, age, lag, l_home, drum_ratio, law, fk_cables, fk_kin, limits,
+    scratch, kin, state,
+):  # pragma: no cover - compiled  # fmt: skip
     """``Estimator.update`` (see the module docstring for the steps): angles brought to the
-    newest sample's instant when ``lag``, lengths (``cable_lengths``), the forward kinematics
-    of the ``fk_cables`` warm-started from ``position``/``rotation`` (``fk_kernel``, into
-    ``p``, ``R`` and ``info`` = [RMS residual, iterations, FKStatus]), the filtered twist and
-    the inverse kinematics at the new pose and there the cable stiffness ``k`` (N/m).
-    ``clock`` = [last sample instant (s), 2π f_c]."""
+    newest sample's instant when ``lag``, lengths under ``tensions`` (the cable law ``law``),
+    the forward kinematics of the ``fk_cables`` (``fk_kin``, ``limits``) warm-started from the
+    state's pose, the filtered twist, and the inverse kinematics (``kin``) and each cable's
+    stiffness at the new pose, into ``state``."""
+    th, lengths, fk_lengths, res, p, R, info = scratch
+    position, rotation, velocity, omega, clock, k = state
     m = theta.shape[0]
     shift = 0.0
     for i in range(m):
@@ -246,35 +186,12 @@ def estimate_kernel(
     t = t - shift
     for i in range(m):
         l0 = l_home[i] - drum_ratio[i] * th[i]
-        lengths[i] = l0 + tensions[i] * cable_compliance(
-            inv_k_fixed[i], inv_es[i], l_winch[i], inv_spring[i], l0
-        )
+        lengths[i] = l0 + tensions[i] * compliance_at(law, i, l0)
     for j in range(fk_cables.shape[0]):
         fk_lengths[j] = lengths[fk_cables[j]]
     p[:] = position
     R[:, :] = rotation
-    fk_kernel(
-        f_anchors,
-        f_attach,
-        f_pulley_r,
-        f_pulley_axis,
-        fk_lengths,
-        p,
-        R,
-        tol,
-        step_tol,
-        max_iter,
-        f_rbT,
-        f_exitT,
-        f_vT,
-        f_free,
-        f_wrap,
-        f_length,
-        f_W,
-        f_res,
-        max_residual,
-        info,
-    )
+    fk_kernel(fk_kin, fk_lengths, p, R, limits, res, info)
     status = int(info[2])
     if status != CONVERGED and status != MAX_ITERATIONS and status != INCONSISTENT:
         return
@@ -292,28 +209,5 @@ def estimate_kernel(
         clock[0] = t
     position[:] = p
     rotation[:, :] = R
-    ik_kernel(
-        anchors,
-        attach,
-        pulley_r,
-        pulley_axis,
-        position,
-        rotation,
-        rbT,
-        exitT,
-        vT,
-        free_len,
-        wrap,
-        length,
-        W,
-    )
-    stiffness_kernel(length, inv_k_fixed, inv_es, l_winch, inv_spring, k)
-
-
-@njit(cache=True)
-def stiffness_kernel(lengths, inv_k_fixed, inv_es, l_winch, inv_spring, out):  # pragma: no cover
-    """``out`` ← the axial stiffness k_i (N/m) of each cable at ``lengths`` (m)."""
-    for i in range(lengths.shape[0]):
-        out[i] = 1.0 / cable_compliance(
-            inv_k_fixed[i], inv_es[i], l_winch[i], inv_spring[i], lengths[i]
-        )
+    ik_kernel(kin, position, rotation)
+    stiffness_kernel(kin[9], law, k)  # KinArrays.length

@@ -7,39 +7,65 @@ tests/test_pd_kernel.py checks it against a numpy transcription of the law.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 from cdprctl.rotation import exp_so3_kernel, log_so3_kernel
 
 
+class Reference(NamedTuple):
+    """The trajectory now: position and rotation vector from home (m, rad), their rates
+    (m/s, rad/s) and accelerations (m/s², rad/s²), each (6,)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+class PoseEstimate(NamedTuple):
+    """The estimate: P (m, base frame), orientation (3, 3), velocity (m/s), ω (rad/s, base)."""
+
+    p: np.ndarray
+    R: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+
+
+class Pid(NamedTuple):
+    """Per axis (x, y, z, roll, pitch, yaw): kp (1/s²), kd (1/s), ki (1/s³), the integral
+    (m·s, rad·s; updated in place) and its limit."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    ki: np.ndarray
+    integral: np.ndarray
+    integral_limit: np.ndarray
+
+
+class Platform(NamedTuple):
+    """Home orientation (3, 3), mass (kg), inertia (kg·m², platform frame, about the COM),
+    COM (m, platform frame), gravity (m/s², base frame)."""
+
+    R_home: np.ndarray
+    mass: float
+    inertia: np.ndarray
+    com: np.ndarray
+    gravity: np.ndarray
+
+
 @njit(cache=True)
 def pd_wrench_kernel(
-    ref_x,  # (6,) m, rad: reference position and rotation vector from home
-    ref_v,  # (6,) m/s, rad/s
-    ref_a,  # (6,) m/s², rad/s²
-    p,  # (3,) m, estimated position of P, base frame
-    R,  # (3, 3) estimated orientation
-    v,  # (3,) m/s
-    w,  # (3,) rad/s, base frame
-    R_home,  # (3, 3)
-    kp,  # (6,) 1/s² per axis
-    kd,  # (6,) 1/s
-    ki,  # (6,) 1/s³
-    integral,  # (6,) m·s, rad·s — updated in place when ``integrate``
-    integral_limit,  # (6,)
-    integrate,
-    dt,  # s
-    mass,  # kg
-    inertia,  # (3, 3) kg·m², platform frame, about the COM
-    com,  # (3,) m, platform frame
-    gravity,  # (3,) m/s²
-    ext_wrench,  # (6,) N, N·m at P, base frame: known, fed forward
-    Rd,  # (3, 3) scratch
-    E,  # (3, 3) scratch
-    err,  # (6,) out: reference − estimate
-    wrench,  # (6,) out: what the cables must exert, N and N·m at P, base frame
+    ref, est, pid, integrate, dt, platform, ext_wrench, Rd, E, err, wrench
 ):  # pragma: no cover - compiled
+    """``err`` (6,) ← reference − estimate; ``wrench`` (6,) ← what the cables must exert (N,
+    N·m at P, base frame), the known ``ext_wrench`` fed forward; the integral grows by
+    ``err dt`` when ``integrate``. ``Rd``, ``E``: (3, 3) scratch."""
+    ref_x, ref_v, ref_a = ref
+    p, R, v, w = est
+    kp, kd, ki, integral, integral_limit = pid
+    R_home, mass, inertia, com, gravity = platform
     exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
     for i in range(3):
         for j in range(3):

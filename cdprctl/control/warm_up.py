@@ -63,7 +63,7 @@ def warm_up(controller: Controller) -> None:
         tda = TensionDistributor(model, opts)
         for t_prev in (None, prev):
             tda.solve(est.kin.W, hold, t_min, t_max, k=est.k, kin=est.kin, t_prev=t_prev)
-    c.pose.update(c.trajectory, c.estimator, True)
+    c.pose.update(True)
     c.pose.reset()
     c.winches.update(d.tensions, c.estimator.kin.WT, c.trajectory.acceleration, zeros, True,
                      d.torques)  # fmt: skip

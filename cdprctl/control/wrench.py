@@ -10,14 +10,17 @@ import numpy as np
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
-from cdprctl.control.pd_kernel import pd_wrench_kernel
+from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd_wrench_kernel
 from cdprctl.control.trajectory import Trajectory
 from cdprctl.model.robot import RobotModel
+from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 
 
 class PoseController:
-    def __init__(self, model: RobotModel, data: ControlData):
+    def __init__(
+        self, model: RobotModel, data: ControlData, trajectory: Trajectory, estimator: Estimator
+    ):
         c = model.control
         self.model = model
         self.data = data
@@ -41,6 +44,13 @@ class PoseController:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._Rd = np.zeros((3, 3))
         self._E = np.zeros((3, 3))
+        tr, e = trajectory, estimator
+        self._ref = kernel_args(Reference(tr.position, tr.velocity, tr.acceleration))
+        self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
+        self._pid = kernel_args(Pid(self.kp, self.kd, self.ki, self.integral, self.integral_limit))
+        platform = Platform(self._R_home, float(model.platform.mass), self._inertia, self._com,
+                            self._gravity)  # fmt: skip
+        self._platform = kernel_args(platform)
 
     def reset(self) -> None:
         self.integral[:] = 0.0
@@ -50,30 +60,17 @@ class PoseController:
         ``R`` against gravity and the known external wrench."""
         return -(self.model.gravity_wrench(R) + self.data.ext_total)
 
-    def update(self, tr: Trajectory, e: Estimator, integrate: bool) -> None:
+    def update(self, integrate: bool) -> None:
         """``data.wrench`` and ``data.pose_error`` for this cycle; the integral grows only
         when ``integrate`` (holding or moving, not while enabling or stopping)."""
-        d, pf = self.data, self.model.platform
+        d = self.data
         pd_wrench_kernel(
-            tr.position,
-            tr.velocity,
-            tr.acceleration,
-            e.position,
-            e.rotation,
-            e.velocity,
-            e.omega,
-            self._R_home,
-            self.kp,
-            self.kd,
-            self.ki,
-            self.integral,
-            self.integral_limit,
+            self._ref,
+            self._est,
+            self._pid,
             integrate,
             self.period,
-            pf.mass,
-            self._inertia,
-            self._com,
-            self._gravity,
+            self._platform,
             d.ext_total,
             self._Rd,
             self._E,

@@ -1,0 +1,301 @@
+"""The simulated robot's physics steps, compiled (numba): cable forces, winches, the platform
+and the jaws (the conventions are ``plant.py``'s). The kernel takes named bundles of the plant's
+own arrays, written in place."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from cdprctl.kinematics import ik_kernel
+from cdprctl.numerics import Compliance, compliance_at
+from cdprctl.rotation import exp_so3_kernel
+
+
+class Body(NamedTuple):
+    """The platform: COM (m, platform frame), mass (kg), inertia (kg·m², platform frame,
+    about the COM), gravity (m/s², base frame)."""
+
+    com: np.ndarray
+    mass: float
+    inertia: np.ndarray
+    gravity: np.ndarray
+
+
+class Winches(NamedTuple):
+    """Per cable: home length (m), drum radius over gear ratio (m/rad), rotor inertia
+    (kg·m²), viscous (N·m·s/rad) and Coulomb (N·m) friction, the Coulomb smoothing (rad/s),
+    the cable law, the cable damping (N·s/m); the pulleys' capstan μ."""
+
+    l_home: np.ndarray
+    drum_ratio: np.ndarray
+    rotor_inertia: np.ndarray
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    coulomb_velocity: float
+    law: Compliance
+    damping: np.ndarray
+    pulley_friction: float
+
+
+class BodyState(NamedTuple):
+    """COM position (m) and orientation, COM velocity (m/s) and ω (rad/s, base frame), motor
+    angles (rad) and speeds (rad/s)."""
+
+    com_pos: np.ndarray
+    R: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    theta: np.ndarray
+    theta_dot: np.ndarray
+
+
+class Inputs(NamedTuple):
+    """Motor torques (N·m), brakes, a brake's slip speed (rad/s), cut cables, cable slipped
+    off the drums (m), the external force (N at P) and moment (N·m), base frame."""
+
+    motor_torque: np.ndarray
+    brake: np.ndarray
+    brake_slip: np.ndarray
+    cable_cut: np.ndarray
+    drum_slip: np.ndarray
+    ext_force: np.ndarray
+    ext_moment: np.ndarray
+
+
+class Jaws(NamedTuple):
+    """The reconfigurable end-effector's jaws (``CdprPlant._init_grippers`` has the units)."""
+
+    of_cable: np.ndarray
+    cable: np.ndarray
+    mass: np.ndarray
+    jaw0: np.ndarray
+    axis: np.ndarray
+    friction: np.ndarray
+    friction_velocity: float
+    travel_max: np.ndarray
+    k_jb: np.ndarray
+    c_jb: np.ndarray
+    k_stop: np.ndarray
+    c_stop: np.ndarray
+    object_travel: np.ndarray
+    k_contact: np.ndarray
+    c_contact: np.ndarray
+
+
+class JawState(NamedTuple):
+    """Travel (m), speed (m/s), jB's tension (N), the object's force on the jaw (N)."""
+
+    travel: np.ndarray
+    speed: np.ndarray
+    jb_tension: np.ndarray
+    contact_force: np.ndarray
+
+
+@njit(cache=True)
+def _jaw_dynamics(
+    dt, P, R, com_pos, v, w, F, Mc, mass, Iw, g, rbT, jaws, jaw_state
+):  # pragma: no cover - compiled
+    """Platform and jaws together (Kane's method): generalised speeds ``u = [v_COM, ω, q̇_j]``,
+    jaw velocity ``v_j = v + ω × r_j + q̇_j k_j`` (``k_j`` the guide, ``r_j`` COM → jaw), so
+    ``(M_b + Σ m_j J_jᵀJ_j) u̇ = Q − Σ m_j J_jᵀ (ω×(ω×r_j) + 2 ω×q̇_j k_j)``; the guide's
+    reactions do no work and drop out. Advances ``v``, ``ω``, ``q̇`` and ``q`` by ``dt``.
+    ``F``/``Mc``: force and moment (about the COM, Euler term included) on the platform from
+    the cables, gravity and the external wrench; jB pulls the jaw along ``k_j`` and the pulley
+    at the cable's attachment along ``−k_j``; the object, the stops and the friction act
+    between jaw and platform along the guide. ``jaws``/``jaw_state``: ``Jaws``, ``JawState``."""
+    (_, g_cable, g_mass, g_jaw0, g_axis, g_fric, g_fric_v, g_qmax, _, _, g_kstop, g_cstop,
+     g_L21, g_kc, g_cc) = jaws  # fmt: skip
+    q, qd, g_tb, g_fc = jaw_state
+    ng = g_mass.shape[0]
+    n = 6 + ng
+    A = np.zeros((n, n))
+    Q = np.zeros(n)
+    for a in range(3):
+        A[a, a] = mass
+        Q[a] = F[a]
+        Q[3 + a] = Mc[a]
+        for b in range(3):
+            A[3 + a, 3 + b] = Iw[a, b]
+    for j in range(ng):
+        i = g_cable[j]
+        k = R @ g_axis[j]
+        r = P + R @ g_jaw0[j] + q[j] * k - com_pos
+        mj = g_mass[j]
+        # pulley at the attachment: −t_B k on the platform
+        tb = g_tb[j]
+        y = np.empty(3)
+        for a in range(3):
+            y[a] = rbT[a, i] + P[a] - com_pos[a]  # rbT: R b_i, from P
+            Q[a] -= tb * k[a]
+        Q[3] -= y[1] * tb * k[2] - y[2] * tb * k[1]
+        Q[4] -= y[2] * tb * k[0] - y[0] * tb * k[2]
+        Q[5] -= y[0] * tb * k[1] - y[1] * tb * k[0]
+        # forces on the jaw: gravity and t_B along k, through J_jᵀ = [I; [r]×; kᵀ]
+        f = np.empty(3)
+        for a in range(3):
+            f[a] = mj * g[a] + tb * k[a]
+        # velocity-product acceleration c = ω×(ω×r) + 2 ω×(q̇ k), as forces −m c
+        wr = np.cross(w, r)
+        c = np.cross(w, wr) + 2.0 * qd[j] * np.cross(w, k)
+        for a in range(3):
+            f[a] -= mj * c[a]
+        rf = np.cross(r, f)
+        for a in range(3):
+            Q[a] += f[a]
+            Q[3 + a] += rf[a]
+        Q[6 + j] += f[0] * k[0] + f[1] * k[1] + f[2] * k[2]
+        # along the guide, between jaw and platform: object, end stops, friction
+        s = 0.0
+        fc = 0.0
+        if q[j] > g_L21[j]:
+            fc = g_kc[j] * (q[j] - g_L21[j]) + g_cc[j] * qd[j]
+            if fc < 0.0:
+                fc = 0.0
+        s -= fc
+        g_fc[j] = fc
+        if q[j] < 0.0:
+            st = -g_kstop[j] * q[j] - g_cstop[j] * qd[j]
+            s += st if st > 0.0 else 0.0
+        elif q[j] > g_qmax[j]:
+            st = g_kstop[j] * (q[j] - g_qmax[j]) + g_cstop[j] * qd[j]
+            s -= st if st > 0.0 else 0.0
+        s -= g_fric[j] * math.tanh(qd[j] / g_fric_v)
+        Q[6 + j] += s
+        # mass matrix: m J_jᵀ J_j with J_j = [I, −[r]×, k e_j]
+        rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+        rk = np.cross(r, k)
+        for a in range(3):
+            A[a, a] += mj
+            A[a, 6 + j] += mj * k[a]
+            A[6 + j, a] += mj * k[a]
+            A[3 + a, 6 + j] += mj * rk[a]
+            A[6 + j, 3 + a] += mj * rk[a]
+            for b in range(3):
+                A[3 + a, 3 + b] += mj * ((rr if a == b else 0.0) - r[a] * r[b])
+        # the −[r]× block and its transpose: (−[r]×)[a, b] = ε_abc r_c
+        for a in range(3):
+            b, c = (a + 1) % 3, (a + 2) % 3
+            A[a, 3 + b] += mj * r[c]
+            A[a, 3 + c] -= mj * r[b]
+            A[3 + b, a] += mj * r[c]
+            A[3 + c, a] -= mj * r[b]
+        A[6 + j, 6 + j] += mj
+    udot = np.linalg.solve(A, Q)
+    for a in range(3):
+        v[a] += udot[a] * dt
+        w[a] += udot[3 + a] * dt
+    for j in range(ng):
+        qd[j] += udot[6 + j] * dt
+        q[j] += qd[j] * dt
+
+
+@njit(cache=True)
+def physics_kernel(
+    n, dt, kin, body, winches, state, inputs, tension, jaws, jaw_state
+):  # pragma: no cover - compiled
+    """``n`` explicit steps of ``dt`` (s): cable forces from the stretch of each cable
+    (``winches.law``) and its damping, winch dynamics with brakes and capstan friction, the
+    platform by Newton-Euler (with jaws: ``_jaw_dynamics``). ``kin``: the steps' IK arrays;
+    ``tension`` (N) out; the bundles are the plant's (``Body``, ``Winches``, ``BodyState``,
+    ``Inputs``, ``Jaws``, ``JawState``, as plain tuples: ``numerics.kernel_args``)."""
+    com, mass, inertia, g = body
+    l_home, drum_ratio, J, visc, coul, coul_v, law, damping, mu_p = winches
+    com_pos, R, v, w, theta, theta_dot = state
+    tau_m, brake, slip, cut, drum_slip, f_ext, m_ext = inputs
+    g_of_cable, _, g_mass, _, _, _, _, _, g_kjb, g_cjb, _, _, _, _, _ = jaws
+    q, qd, g_tb, _ = jaw_state
+    _, _, _, _, rbT, _, _, _, wrap, length, W = kin  # KinArrays
+    m = l_home.shape[0]
+    ng = g_mass.shape[0]
+    P = np.empty(3)
+    twist = np.empty(6)
+    for _ in range(n):
+        Rc = R @ com
+        for a in range(3):
+            P[a] = com_pos[a] - Rc[a]
+        ik_kernel(kin, P, R)
+        # twist at P: v_P = v_com + ω × (P − COM) = v_com − ω × Rc
+        twist[0] = v[0] - (w[1] * Rc[2] - w[2] * Rc[1])
+        twist[1] = v[1] - (w[2] * Rc[0] - w[0] * Rc[2])
+        twist[2] = v[2] - (w[0] * Rc[1] - w[1] * Rc[0])
+        twist[3], twist[4], twist[5] = w[0], w[1], w[2]
+        F = np.zeros(3)
+        M = np.zeros(3)  # about the COM
+        for i in range(m):
+            l0 = l_home[i] - drum_ratio[i] * theta[i] + drum_slip[i]
+            e = length[i] - l0
+            t = 0.0
+            if e > 0.0 and not cut[i]:
+                k = 1.0 / compliance_at(law, i, l0)
+                ldot = 0.0
+                for a in range(6):
+                    ldot -= W[a, i] * twist[a]  # dl/dt = −Wᵀ twist
+                edot = ldot + drum_ratio[i] * theta_dot[i]
+                t = k * e + damping[i] * edot
+                if t < 0.0:
+                    t = 0.0
+                j = g_of_cable[i]
+                if j >= 0:  # the cable splits: jA (the spring, t) and jB to the jaw
+                    tb = g_kjb[j] * (e - q[j]) + g_cjb[j] * (edot - qd[j])
+                    g_tb[j] = tb if tb > 0.0 else 0.0
+                    t += g_tb[j]
+            elif g_of_cable[i] >= 0:
+                g_tb[g_of_cable[i]] = 0.0
+            tension[i] = t
+            if t > 0.0:
+                fx, fy, fz = t * W[0, i], t * W[1, i], t * W[2, i]
+                F[0] += fx
+                F[1] += fy
+                F[2] += fz
+                # moment about the COM: (R b_i − R c) × f
+                rx, ry, rz = rbT[0, i] - Rc[0], rbT[1, i] - Rc[1], rbT[2, i] - Rc[2]
+                M[0] += ry * fz - rz * fy
+                M[1] += rz * fx - rx * fz
+                M[2] += rx * fy - ry * fx
+            # winch: J θ̈ = τ_m − (r/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)
+            if brake[i]:
+                theta_dot[i] = -slip[i]  # a slipping brake pays cable out
+                theta[i] += theta_dot[i] * dt
+            else:
+                cap = 1.0
+                if mu_p > 0.0 and wrap[i] > 0.0:
+                    cap = math.exp(mu_p * wrap[i] * math.tanh(theta_dot[i] / coul_v))
+                acc = (
+                    tau_m[i]
+                    - drum_ratio[i] * t * cap
+                    - visc[i] * theta_dot[i]
+                    - coul[i] * math.tanh(theta_dot[i] / coul_v)
+                ) / J[i]
+                theta_dot[i] += acc * dt
+                theta[i] += theta_dot[i] * dt
+        # external wrench at P: moment about the COM adds (P − COM) × f = −Rc × f
+        for a in range(3):
+            F[a] += mass * g[a] + f_ext[a]
+            M[a] += m_ext[a]
+        M[0] += -(Rc[1] * f_ext[2] - Rc[2] * f_ext[1])
+        M[1] += -(Rc[2] * f_ext[0] - Rc[0] * f_ext[2])
+        M[2] += -(Rc[0] * f_ext[1] - Rc[1] * f_ext[0])
+        # Newton-Euler at the COM, world frame: I_w ω̇ = M − ω × I_w ω
+        Iw = R @ inertia @ R.T
+        Iww = Iw @ w
+        rhs = np.empty(3)
+        rhs[0] = M[0] - (w[1] * Iww[2] - w[2] * Iww[1])
+        rhs[1] = M[1] - (w[2] * Iww[0] - w[0] * Iww[2])
+        rhs[2] = M[2] - (w[0] * Iww[1] - w[1] * Iww[0])
+        if ng == 0:
+            wdot = np.linalg.solve(Iw, rhs)
+            for a in range(3):
+                v[a] += F[a] / mass * dt
+                w[a] += wdot[a] * dt
+        else:
+            _jaw_dynamics(dt, P, R, com_pos, v, w, F, rhs, mass, Iw, g, rbT, jaws, jaw_state)
+        for a in range(3):
+            com_pos[a] += v[a] * dt
+        # R ← exp([ω dt]×) R
+        E = np.empty((3, 3))
+        exp_so3_kernel(w[0] * dt, w[1] * dt, w[2] * dt, E)
+        R[:, :] = E @ R
