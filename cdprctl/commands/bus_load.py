@@ -6,24 +6,22 @@ import argparse
 import sys
 from typing import Any
 
-from cdprctl.commands.common import load_or_report
+from cdprctl.commands.common import command_parser, load_or_report
 from drivers.busload import MAX_LOAD, WARN_LOAD, bus_loads
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "bus-load",
-        help="CAN bus load per bus at a control rate",
-        description="Bits per control cycle on each CAN bus (worst-case bit stuffing), the load "
-        "at the control rate, and the verdict the daemon applies at start-up: warn above "
-        f"{WARN_LOAD:.0%}, refuse above {MAX_LOAD:.0%}. Exit code 1 when a bus would be refused.",
-    )
-    p.add_argument("--config", required=True, help="robot description (TOML)")
+    limits = {"warn": f"{WARN_LOAD:.0%}", "refuse": f"{MAX_LOAD:.0%}"}
+    description = (run.__doc__ or "").format(**limits)
+    help = "CAN bus load per bus at a control rate"
+    p = command_parser(sub, "bus-load", help, run, description=description)
     p.add_argument("--rate", type=float, default=500.0, help="control rate in Hz (default 500)")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Bits per control cycle on each CAN bus (worst-case bit stuffing), the load at the
+    control rate, and the verdict the daemon applies at start-up: warn above {warn}, refuse
+    above {refuse}. Exit code 1 when a bus would be refused."""
     model = load_or_report(args.config)
     if model is None:
         return 1

@@ -2,9 +2,31 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
 
 from cdprctl.model import ConfigError, RobotModel, load_robot
+
+
+def command_parser(
+    sub: Any,
+    name: str,
+    help: str,
+    func: Callable[[argparse.Namespace], int],
+    config: bool = True,
+    description: str | None = None,
+) -> argparse.ArgumentParser:
+    """The parser of sub-command ``name``, run by ``func``, described by ``func``'s docstring
+    (or ``description``); with ``config`` its ``--config FILE`` (the robot description)."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        name, help=help, description=description or func.__doc__
+    )
+    if config:
+        p.add_argument("--config", required=True, help="robot description (TOML)")
+    p.set_defaults(func=func, cmd=name)
+    return p
 
 
 def load_or_report(path: str) -> RobotModel | None:

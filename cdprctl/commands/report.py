@@ -11,18 +11,12 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.commands.common import command_parser
+
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "report",
-        help="draw PNG plots of a recorded run",
-        description="Reads RUN/state.csv, timing.csv, meta.json (from `cdprctl record`) and "
-        "writes RUN/pose.png (pose and reference), tracking.png, tensions.png (with the "
-        "limits, like the ARK 2020 paper's Fig. 5), torques.png, timing.png and, with "
-        "grippers, grippers.png (travel, squeeze and state as sensed from the drives).",
-    )
+    p = command_parser(sub, "report", "draw PNG plots of a recorded run", report, config=False)
     p.add_argument("run", metavar="RUN", help="a directory written by cdprctl record")
-    p.set_defaults(func=report)
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
@@ -37,6 +31,10 @@ def _column(head: list[str], rows: list[list[str]], name: str) -> np.ndarray:
 
 
 def report(args: argparse.Namespace) -> int:
+    """Reads RUN/state.csv, timing.csv, meta.json (from `cdprctl record`) and writes
+    RUN/pose.png (pose and reference), tracking.png, tensions.png (with the limits, like the
+    ARK 2020 paper's Fig. 5), torques.png, timing.png and, with grippers, grippers.png
+    (travel, squeeze and state as sensed from the drives)."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -7,21 +7,12 @@ import logging
 import sys
 from typing import Any
 
-from cdprctl.commands.common import load_or_report
+from cdprctl.commands.common import command_parser, load_or_report
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "run",
-        help="run the controller daemon",
-        description="The controller daemon: drives configured, pose estimated and checked, "
-        "then the fixed-rate loop (read, estimate, trajectory, PID + feedforward, tension "
-        "distribution, winch torques, write). With --sim the simulated robot runs in this "
-        "process and a demo motion is played (--disturbance N adds a lateral force; "
-        "--no-demo: none). SIGTERM or Ctrl-C: controlled stop, drives disabled, exit 0.",
-    )
-    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p = command_parser(sub, "run", "run the controller daemon", run)
     p.add_argument("--sim", action="store_true", help="run against the simulated robot")
     p.add_argument("--no-demo", action="store_true", help="with --sim: no demo motion")
     p.add_argument(
@@ -72,10 +63,14 @@ def add_parser(sub: Any) -> None:
         action="store_true",
         help="take commands over Zenoh (zenoh.commands = true)",
     )
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """The controller daemon: drives configured, pose estimated and checked, then the fixed-
+    rate loop (read, estimate, trajectory, PID + feedforward, tension distribution, winch
+    torques, write). With --sim the simulated robot runs in this process and a demo motion
+    is played (--disturbance N adds a lateral force; --no-demo: none). SIGTERM or Ctrl-C:
+    controlled stop, drives disabled, exit 0."""
     from cdprctl.daemon.service import Daemon
 
     logging.basicConfig(

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from cdprctl.commands.common import load_or_report
+from cdprctl.commands.common import command_parser, load_or_report
 
 
 def add_bus_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,15 +47,7 @@ def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "sim",
-        help="run the simulated robot in real time on a CAN bus",
-        description="The simulated robot of sim_backend: drive emulators (the protocol of the "
-        "config's [drives]) on the config's buses, or on the bus given here, with the winch, "
-        "cable and platform physics, in real time. The platform starts at rest at the home "
-        "pose, cables pre-tensioned to the equilibrium. Stop with Ctrl-C or SIGTERM.",
-    )
-    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p = command_parser(sub, "sim", "run the simulated robot in real time on a CAN bus", run)
     add_bus_arguments(p)
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument(
@@ -73,10 +65,13 @@ def add_parser(sub: Any) -> None:
         "faults, silent drives, lateral pushes (sim_backend/faults.py)",
     )
     p.add_argument("--fault-seed", type=int, default=1, help="seed of --faults")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """The simulated robot of sim_backend: drive emulators (the protocol of the config's
+    [drives]) on the config's buses, or on the bus given here, with the winch, cable and
+    platform physics, in real time. The platform starts at rest at the home pose, cables
+    pre-tensioned to the equilibrium. Stop with Ctrl-C or SIGTERM."""
     from drivers.errors import DriverError
     from sim_backend.realtime import run_realtime
 

@@ -12,6 +12,8 @@ import uuid
 from pathlib import Path
 from typing import Any
 
+from cdprctl.commands.common import command_parser
+
 
 def add_zenoh_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("Zenoh")
@@ -47,41 +49,22 @@ def _session(args: argparse.Namespace) -> Any:
 
 
 def add_parsers(sub: Any) -> None:
-    p = sub.add_parser(
-        "send",
-        help="send a command to a robot over Zenoh",
-        description="Send a command and wait for its reply. Fields as key=value (a comma list "
-        "is a vector: position=1.8,0.35,0.5) or as one JSON object with --json. Commands: "
-        "enable, disable, stop, reset, move (position m, rpy rad, max_velocity m/s, "
-        "max_acceleration m/s²), set_tda (method, nu, direction), impose (cable, quantity "
-        "energy|tension|deformation, value J|N|m), gripper (gripper = its cable, and travel m, "
-        "force N or release=true). "
-        "Exit 0 accepted, 1 rejected, 2 no reply.",
-    )
+    p = command_parser(sub, "send", "send a command to a robot over Zenoh", send, config=False)
     p.add_argument("kind", help="command: enable, disable, stop, reset, move, set_tda, ...")
     p.add_argument("fields", nargs="*", metavar="KEY=VALUE")
     p.add_argument("--json", default="", help="the payload as one JSON object")
     p.add_argument("--timeout", type=float, default=5.0, help="s to wait for the reply")
     add_zenoh_arguments(p)
-    p.set_defaults(func=send, cmd="send")
 
-    p = sub.add_parser(
-        "monitor",
-        help="a live terminal view of a robot's telemetry",
-        description="Pose, tensions as bars against their limits, state and loop timing, "
-        "refreshed as `state` arrives. Ctrl-C ends it.",
+    p = command_parser(
+        sub, "monitor", "a live terminal view of a robot's telemetry", monitor, config=False
     )
     p.add_argument("--once", action="store_true", help="print one view and exit")
     p.add_argument("--timeout", type=float, default=10.0, help="s to wait for data (--once)")
     add_zenoh_arguments(p)
-    p.set_defaults(func=monitor, cmd="monitor")
 
-    p = sub.add_parser(
-        "record",
-        help="record a robot's telemetry to CSV files (and MCAP)",
-        description="Writes DIR/state.csv, DIR/timing.csv, DIR/events.csv and DIR/meta.json "
-        "(the robot's status: limits, cables) until --duration or Ctrl-C, and with --mcap "
-        "DIR/telemetry.mcap (Foxglove); `cdprctl report DIR` draws them.",
+    p = command_parser(
+        sub, "record", "record a robot's telemetry to CSV files (and MCAP)", record, config=False
     )
     p.add_argument("--output", required=True, metavar="DIR")
     p.add_argument(
@@ -91,7 +74,6 @@ def add_parsers(sub: Any) -> None:
     )
     p.add_argument("--duration", type=float, help="s; default: until Ctrl-C")
     add_zenoh_arguments(p)
-    p.set_defaults(func=record, cmd="record")
 
 
 def _value(text: str) -> Any:
@@ -108,6 +90,12 @@ def _value(text: str) -> Any:
 
 
 def send(args: argparse.Namespace) -> int:
+    """Send a command and wait for its reply. Fields as key=value (a comma list is a vector:
+    position=1.8,0.35,0.5) or as one JSON object with --json. Commands: enable, disable,
+    stop, reset, move (position m, rpy rad, max_velocity m/s, max_acceleration m/s²),
+    set_tda (method, nu, direction), impose (cable, quantity energy|tension|deformation,
+    value J|N|m), gripper (gripper = its cable, and travel m, force N or release=true). Exit
+    0 accepted, 1 rejected, 2 no reply."""
     prefix = _prefix(args)
     if prefix is None:
         return 2
@@ -217,6 +205,8 @@ def _status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
 
 
 def monitor(args: argparse.Namespace) -> int:
+    """Pose, tensions as bars against their limits, state and loop timing, refreshed as `state`
+    arrives. Ctrl-C ends it."""
     prefix = _prefix(args)
     if prefix is None:
         return 2
@@ -262,6 +252,9 @@ STATE_COLUMNS = ("time", "state", "tda_status")
 
 
 def record(args: argparse.Namespace) -> int:
+    """Writes DIR/state.csv, DIR/timing.csv, DIR/events.csv and DIR/meta.json (the robot's
+    status: limits, cables) until --duration or Ctrl-C, and with --mcap DIR/telemetry.mcap
+    (Foxglove); `cdprctl report DIR` draws them."""
     prefix = _prefix(args)
     if prefix is None:
         return 2
