@@ -51,6 +51,9 @@ def cell(results: list[Result], what: str) -> str:
             if short not in seen:
                 seen.append(short)
         return "; ".join(seen)
+    if what == "kind":
+        kinds = sorted({r.fault_kind for r in results if r.fault_kind})
+        return ", ".join(kinds) or "—"
     if what == "recovered":
         seen = []
         for r in results:
@@ -83,7 +86,8 @@ def main() -> None:
         all_ok &= ok
         rows.append(
             f"| {sc.name} | {sc.expected} | {cell(results, 'detection')} | "
-            f"{cell(results, 'reaction')} | {max(r.excursion_mm for r in results):.1f} | "
+            f"{cell(results, 'kind')} | {cell(results, 'reaction')} | "
+            f"{max(r.excursion_mm for r in results):.1f} | "
             f"{max(r.max_tension_n for r in results):.0f} | "
             f"{max(r.max_torque_nm for r in results):.2f} / {results[0].torque_limit_nm:g} | "
             f"{'yes' if ok else 'NO'} | {cell(results, 'recovered')} |"
@@ -108,9 +112,9 @@ def main() -> None:
         f"{slowest * 1e3:.0f} ms and ended in a controlled stop or FAULT with brakes; transient "
         "faults recover by reset + enable.**",
         "",
-        "| fault | expected | detection | reaction | excursion mm | max tension N | "
+        "| fault | expected | detection | fault kind | reaction | excursion mm | max tension N | "
         "max torque N·m / limit | invariants | recovered |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         *SIGKILL_ACROSS_PROCESSES.strip().splitlines(),

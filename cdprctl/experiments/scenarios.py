@@ -85,6 +85,7 @@ class Result:
     scenario: Scenario
     detection_s: float | None = None  # fault → STOPPING/FAULT (None: never left healthy)
     reaction: str = ""
+    fault_kind: str = ""  # the supervisor's FaultKind ("" when it never faulted)
     excursion_mm: float = 0.0
     max_tension_n: float = 0.0
     max_torque_nm: float = 0.0
@@ -153,6 +154,7 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
         c = cl.controller
         _observe(cl, watch, res, t_fault, observe)
         res.reaction = c.state.value + (f": {c.fault_reason}" if c.fault_reason else "")
+        res.fault_kind = c.fault_kind.value if c.fault_kind is not None else ""
         _recover(cl, res, watch, t_fault + sc.duration)
     finally:
         cl.close()
