@@ -113,3 +113,45 @@ def test_the_stretch_distribution_switches_with_the_loops(at_home):
     assert dist.static.options == sotda and dist.static is not dist.current
     assert dist.stretch(c.data.wrench)
     np.testing.assert_allclose(c.data.stretch_tensions, reference(sotda, c), atol=1e-6)
+
+
+def feasible_lp(W: np.ndarray, w: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Independent check (scipy's HiGHS): some t in [lo, hi] with W t = w."""
+    from scipy.optimize import linprog
+
+    res = linprog(np.zeros(W.shape[1]), A_eq=W, b_eq=w, bounds=list(zip(lo, hi, strict=True)))
+    return bool(res.status == 0)
+
+
+@pytest.mark.parametrize("push", [[0.0, 600.0, 0.0], [900.0, 0.0, 0.0], [0.0, 0.0, 2000.0]])
+def test_an_infeasible_wrench_is_saturated_not_dropped(at_home, push):
+    """The PID asks for more than the cables can give: its feedback part is scaled to the
+    largest fraction that stays feasible (scipy's LP agrees at s, and disagrees 1e-3 beyond),
+    the feed-forward kept whole, the tensions inside their limits."""
+    c = at_home
+    d, dist, W = c.data, c.distribution, c.estimator.kin.W
+    ff = c.pose.gravity_hold(c.estimator.rotation)
+    fb = np.array([*push, 0.0, 0.0, 0.0])
+    assert not feasible_lp(W, ff + fb, dist.t_min, dist.t_max)
+    d.wrench[:] = ff + fb
+    d.feedback_wrench[:] = fb
+    d.tensions[:] = d.hold_tensions[:] = dist.t_min
+    out = dist.distribute()
+    s = d.saturation
+    assert out.ok and 0.0 < s < 1.0 and dist.bad_cycles == 0
+    np.testing.assert_allclose(d.wrench, ff + s * fb, atol=1e-9)
+    np.testing.assert_allclose(W @ d.tensions, ff + s * fb, atol=1e-6)
+    assert np.all(d.tensions >= dist.t_min - 1e-9) and np.all(d.tensions <= dist.t_max + 1e-9)
+    assert feasible_lp(W, ff + s * fb, dist.t_min - 1e-6, dist.t_max + 1e-6)
+    assert not feasible_lp(W, ff + (s + 1e-3) * fb, dist.t_min, dist.t_max)
+
+
+def test_an_infeasible_feed_forward_holds_the_last_tensions(at_home):
+    c = at_home
+    d, dist = c.data, c.distribution
+    d.hold_tensions[:] = np.linspace(20.0, 30.0, ROWC.n_cables)
+    d.wrench[:] = [0.0, 0.0, 1e5, 0.0, 0.0, 0.0]  # 100 kN up: no tensions hold that
+    d.feedback_wrench[:] = 0.0
+    out = dist.distribute()
+    assert not out.ok and d.saturation == 1.0 and dist.bad_cycles == 1
+    np.testing.assert_allclose(d.tensions, d.hold_tensions)

@@ -85,7 +85,7 @@ def test_kernel_matches_the_numpy_law(seed):
         g,
         ext,
     )
-    err, wrench = np.zeros(6), np.zeros(6)
+    err, wrench, feedback = np.zeros(6), np.zeros(6), np.zeros(6)
     integral_k = integral.copy()
     pd_wrench_kernel(
         Reference(ref_x, ref_v, ref_a),
@@ -99,10 +99,16 @@ def test_kernel_matches_the_numpy_law(seed):
         np.zeros((3, 3)),
         err,
         wrench,
+        feedback,
     )
     np.testing.assert_allclose(err, err_ref, atol=1e-12)
     np.testing.assert_allclose(integral_k, int_ref, atol=1e-12)
     np.testing.assert_allclose(wrench, wrench_ref, rtol=1e-10, atol=1e-10)
+    # the feedback part: the law's wrench less the law with the PID's gains at zero
+    zero = np.zeros(6)
+    _, _, ff_ref = reference(ref_x, ref_v, ref_a, p, R, v, w, R_home, zero, zero, zero,
+                             integral, lim, False, dt, mass, inertia, com, g, ext)  # fmt: skip
+    np.testing.assert_allclose(feedback, wrench_ref - ff_ref, rtol=1e-10, atol=1e-10)
 
 
 @pytest.mark.parametrize("angle", [0.0, 1e-9, 0.3, 2.0, np.pi - 1e-7, np.pi])

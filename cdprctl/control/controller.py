@@ -22,10 +22,11 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, accepted
-from cdprctl.control.data import PHASES, ControlData
+from cdprctl.control.data import ControlData
 from cdprctl.control.distribution import Distribution
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.grippers import GripperControl
+from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.states import ACTIVE_STATES, HEALTHY_STATES, FaultKind, State
 from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
@@ -38,7 +39,8 @@ from cdprctl.rotation import FloatArray, log_so3, rpy_to_matrix
 from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.base import Lifecycle, WinchStates
 
-__all__ = ["PHASES", "Command", "Controller", "State", "tda_options_of"]
+# the states in which the external wrench is observed (the drives apply what is computed)
+OBSERVED_STATES = frozenset({State.ENABLED, State.MOVING, State.STOPPING})
 
 
 class Controller:
@@ -59,10 +61,8 @@ class Controller:
         self.winches = WinchTorques(model)
         self.distribution = Distribution(model, d, e, gs, tda or tda_options_of(model))
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
-        if not gs.n:  # the known external wrench is all: the same array, whoever sets it
-            d.ext_total = self.ext_wrench
-        else:
-            d.ext_total[:] = self.ext_wrench
+        d.ext_total[:] = self.ext_wrench
+        self.observer = WrenchObserver(model, d, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.winches, self.distribution,
                                        self.ext_wrench)  # fmt: skip
         self.supervisor = Supervisor(c, d, drives, tr.stop_here)
@@ -78,6 +78,7 @@ class Controller:
         self._last_stretch = np.full(model.n_cables, np.inf)
         self._stretch_every = max(1, round(self.STRETCH_PERIOD / self.period))
         self._clock_ns = time.perf_counter_ns
+        self._last_t = 0.0  # s, the last cycle's time (saturation time)
         self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
             CommandKind.ENABLE: self._enable,
             CommandKind.DISABLE: self._disable,
@@ -178,13 +179,17 @@ class Controller:
         t1 = clock()
         d.time = t
         d.cycle += 1
+        if not self.grippers.n:  # the known external wrench, whoever set it, from now on
+            d.ext_total[:] = self.ext_wrench
         self._handle_commands(t)
         if d.cycle % self._stretch_every == 0:
             self._refresh_stretch_tensions()
         e = self.estimator
         fk = e.update(st.stamp, st.position, d.stretch_tensions, st.velocity, st.feedback_age)
+        if d.state in OBSERVED_STATES:
+            self.observer.update(t, st.torque, st.velocity, self.trajectory.acceleration)
         if self.grippers.n:
-            self.grippers.update(st, sense=True)
+            self.grippers.update(st, sense=True)  # ext_total: + the jaws' weight
         t2 = clock()
         ph[1] = (t2 - t1) / 1e3
         last = e.last_fk
@@ -200,19 +205,30 @@ class Controller:
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES
         if active:
-            self.pose.update(d.state in HEALTHY_STATES)
+            # anti-windup: the integral holds while the feedback is saturated
+            self.pose.update(d.state in HEALTHY_STATES and d.saturation >= 1.0)
         t4 = clock()
         ph[3] = (t4 - t3) / 1e3
         if active:
             out = self.distribution.distribute()
-            if (
-                self.distribution.bad_cycles >= Distribution.BAD_CYCLES
-                and d.state is not State.STOPPING
-            ):
+            self._count_saturation(t)
+            if d.state is State.STOPPING:
+                pass
+            elif self.distribution.bad_cycles >= Distribution.BAD_CYCLES:
                 self.supervisor.fault(
                     t,
                     FaultKind.TENSION_DISTRIBUTION,
-                    f"tension distribution {out.status.name}: {out.message}",
+                    f"tension distribution {out.status.name} (the feed-forward alone): "
+                    f"{out.message}",
+                    hold=True,
+                )
+            elif d.saturated_for > self.model.control.max_saturation_time:
+                self.supervisor.fault(
+                    t,
+                    FaultKind.TENSION_DISTRIBUTION,
+                    f"feedback wrench saturated for {d.saturated_for:.2f} s "
+                    f"(> max_saturation_time {self.model.control.max_saturation_time:g} s; "
+                    f"the cables gave {d.saturation:.0%} of it last)",
                     hold=True,
                 )
         t5 = clock()
@@ -221,6 +237,24 @@ class Controller:
             d.tensions, e.kin.WT, self.trajectory.acceleration, st.velocity, active, d.torques
         )
         ph[5] = (clock() - t5) / 1e3
+
+    # Saturated time drains at this fraction of real time once the cables give the whole
+    # feedback again: a loop that saturates in most of its cycles (an unstable gain chattering
+    # on the limits: 60 % of the cycles on rowc tuned at 1 Hz in y, a 0.5 mm limit cycle) adds
+    # up to a fault; one long push that then recovers drains away.
+    SATURATION_LEAK = 0.25
+
+    def _count_saturation(self, t: float) -> None:
+        """``data.saturated_for``: the time (s, real elapsed) the feedback was saturated,
+        leaking at ``SATURATION_LEAK`` while it is not; ``saturated_cycles`` in all."""
+        d = self.data
+        dt = t - self._last_t if 0.0 < t - self._last_t < 0.1 else self.period
+        self._last_t = t
+        if d.saturation < 1.0:
+            d.saturated_for += dt
+            d.saturated_cycles += 1
+        else:
+            d.saturated_for = max(0.0, d.saturated_for - self.SATURATION_LEAK * dt)
 
     def internal_error(self, t: float, exc: Exception) -> None:
         """The cycle failed: hold the last feasible tensions and stop the controlled way."""
@@ -261,6 +295,7 @@ class Controller:
         self.trajectory.reset(self._pose6())
         d.tensions[:] = d.hold_tensions
         self.pose.reset()
+        self.observer.reset()
         self.grippers.hold()
         drv.begin_activate()
         self.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")

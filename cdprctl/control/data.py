@@ -36,7 +36,15 @@ class ControlData:
         # pose control (wrench.py)
         self.pose_error = np.zeros(6)  # m, rad: desired − estimated
         self.wrench = np.zeros(6)  # N, N·m: what the cables were asked for
+        self.feedback_wrench = np.zeros(6)  # N, N·m: the PID's part of it (wrench.py)
+        # the fraction of the feedback the cables could give this cycle (1: all; see
+        # distribution.py), the time (s) it was below 1 (leaking while it is not:
+        # Controller.SATURATION_LEAK), and the cycles it was
+        self.saturation = 1.0
+        self.saturated_for = 0.0
+        self.saturated_cycles = 0
         self.ext_total = np.zeros(6)  # N, N·m: the known external wrench, jaws' weight included
+        self.ext_estimate = np.zeros(6)  # N, N·m at P, base frame: the observer's (observer.py)
         # tension distribution (distribution.py)
         self.tensions = np.zeros(m)  # N, commanded
         self.hold_tensions = np.zeros(m)  # N, the last feasible distribution

@@ -29,6 +29,7 @@ from cdprctl.tda import (
     TDAStatus,
     TensionDistributor,
 )
+from cdprctl.tda.planar import feasible_scale_kernel
 
 BANKS = 2
 
@@ -90,6 +91,16 @@ class Distribution:
         self.bad_cycles = 0
         self._spring_prev = np.zeros(m)
         self._blend_old = np.zeros(m)
+        # saturation (distribute): the feed-forward wrench, the saturated one, the particular
+        # solutions of both parts and the polygon's scratch
+        self.r = model.redundancy
+        self._w_ff = np.zeros(6)
+        self._w_sat = np.zeros(6)
+        self._t_ff = np.zeros(m)
+        self._t_fb = np.zeros(m)
+        self._t_s = np.zeros(m)
+        self._verts = np.zeros((2 * m + 8, 2))
+        self._verts_tmp = np.zeros((2 * m + 8, 2))
         data.tda_method = options.method.value
 
     @property
@@ -169,14 +180,23 @@ class Distribution:
             tensions += (1.0 - s) * old_total
 
     def distribute(self) -> TDAOutput:
-        """``data.tensions`` for ``data.wrench``; an infeasible wrench holds the last feasible
-        tensions (never outside the limits) and counts ``bad_cycles``."""
+        """``data.tensions`` for ``data.wrench``. A wrench the cables cannot produce is
+        saturated: its feedback part (``data.feedback_wrench``) scaled down until it can
+        (``data.saturation`` < 1, ``data.wrench`` the saturated one); when even the
+        feed-forward cannot be held, the last feasible tensions are held (never outside the
+        limits) and ``bad_cycles`` counts."""
         d = self.data
         # while a switch blends, the blend limits the tension rate: a rate limit on either
         # side would hold the commanded tensions back from the stretch estimate's (which has
         # none) and the pose estimate would see the difference as an encoder fault
         blending = self.old is not None
-        out = self.solve(self.current, d.wrench, None if blending else d.tensions)
+        t_prev = None if blending else d.tensions
+        out = self.solve(self.current, d.wrench, t_prev)
+        d.saturation = 1.0
+        if out.status is TDAStatus.INFEASIBLE:
+            saturated = self._saturate(t_prev)
+            if saturated is not None:
+                out = saturated
         d.tda_status = out.status
         if usable(out.status):
             self.total(out.tensions, d.tensions)
@@ -187,6 +207,58 @@ class Distribution:
             d.tensions[:] = d.hold_tensions
             self.bad_cycles += 1
         return out
+
+    def _saturate(self, t_prev: FloatArray | None) -> TDAOutput | None:
+        """The solution for ``w_ff + s w_fb`` with the largest ``s`` in [0, 1] the cables can
+        produce (``w_fb``: the PID's feedback wrench, ``w_ff`` the rest: weight, inertia, the
+        known external wrench — never scaled); None when even ``s = 0`` is infeasible. For
+        r = 2 exactly, by bisection on the feasible polygon's emptiness (``planar.
+        feasible_scale_kernel``, ~20 polygons of a few µs); for other r by bisection on the
+        distributor's own solve (8 solves)."""
+        d, e, gs, dist = self.data, self.estimator, self.grippers, self.current
+        ff = self._w_ff
+        np.subtract(d.wrench, d.feedback_wrench, out=ff)
+        if self.r == 2:
+            ns = dist.ns  # factorised at this pose by the solve that failed
+            if not ns.rank_ok:
+                return None
+            spring_ff = gs.spring_wrench(e.kin.W, ff, d.jb_load) if gs.n else ff
+            ns.particular(spring_ff, self._t_ff)
+            np.subtract(ns.t0, self._t_ff, out=self._t_fb)
+            s = feasible_scale_kernel(
+                ns.N, self._t_ff, self._t_fb, self.t_min, self.t_max, self._verts,
+                self._verts_tmp, self._t_s,
+            )  # fmt: skip
+        else:
+            s = self._scale_by_solving(ff, d.feedback_wrench, t_prev)
+        if s < 0.0:
+            return None
+        w = self._w_sat
+        np.multiply(d.feedback_wrench, s, out=w)
+        w += ff
+        out = self.solve(dist, w, t_prev)
+        if not usable(out.status):
+            return None
+        d.saturation = s
+        d.wrench[:] = w
+        return out
+
+    def _scale_by_solving(self, ff: FloatArray, fb: FloatArray, t_prev: FloatArray | None) -> float:
+        """``_saturate``'s scale for r != 2: bisection on the distributor's own solve."""
+        w = self._w_sat
+        w[:] = ff
+        if not usable(self.solve(self.current, w, t_prev).status):
+            return -1.0
+        a, b = 0.0, 1.0  # feasible at a, not at b
+        for _ in range(8):
+            s = 0.5 * (a + b)
+            np.multiply(fb, s, out=w)
+            w += ff
+            if usable(self.solve(self.current, w, t_prev).status):
+                a = s
+            else:
+                b = s
+        return a
 
     def stretch(self, ff_wrench: FloatArray) -> bool:
         """``data.stretch_tensions`` ← the static distribution of the feed-forward wrench

@@ -57,11 +57,13 @@ class Platform(NamedTuple):
 
 @njit(cache=True)
 def pd_wrench_kernel(
-    ref, est, pid, integrate, dt, platform, ext_wrench, Rd, E, err, wrench
+    ref, est, pid, integrate, dt, platform, ext_wrench, Rd, E, err, wrench, feedback
 ):  # pragma: no cover - compiled
     """``err`` (6,) ← reference − estimate; ``wrench`` (6,) ← what the cables must exert (N,
-    N·m at P, base frame), the known ``ext_wrench`` fed forward; the integral grows by
-    ``err dt`` when ``integrate``. ``Rd``, ``E``: (3, 3) scratch."""
+    N·m at P, base frame), the known ``ext_wrench`` fed forward; ``feedback`` (6,) ← the part
+    of ``wrench`` the PID adds to the feed-forward (``M (kp e + ki ∫e + kd ė)``: what a
+    saturation may scale, the rest must be held); the integral grows by ``err dt`` when
+    ``integrate``. ``Rd``, ``E``: (3, 3) scratch."""
     ref_x, ref_v, ref_a = ref
     p, R, v, w = est
     kp, kd, ki, integral, integral_limit = pid
@@ -109,3 +111,9 @@ def pd_wrench_kernel(
     wrench[3] = Iwa[0] + (w[1] * Iww[2] - w[2] * Iww[1]) - (r[1] * f2 - r[2] * f1) - ext_wrench[3]
     wrench[4] = Iwa[1] + (w[2] * Iww[0] - w[0] * Iww[2]) - (r[2] * f0 - r[0] * f2) - ext_wrench[4]
     wrench[5] = Iwa[2] + (w[0] * Iww[1] - w[1] * Iww[0]) - (r[0] * f1 - r[1] * f0) - ext_wrench[5]
+    for i in range(3):
+        feedback[i] = mass * (acc[i] - ref_a[i])
+        s = 0.0
+        for j in range(3):
+            s += E[i, j] * (acc[3 + j] - ref_a[3 + j])
+        feedback[3 + i] = s

@@ -57,8 +57,9 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.OVER_SPEED: "persistent: 30 ms over the limit (taking over from the brakes gives "
     "short false spikes)",
     FaultKind.FEEDBACK_AGE: "persistent: the limit is itself a time ([control] max_feedback_age)",
-    FaultKind.TENSION_DISTRIBUTION: "persistent: 3 cycles without feasible tensions (the last "
-    "feasible ones are held meanwhile)",
+    FaultKind.TENSION_DISTRIBUTION: "persistent: the feedback wrench saturated longer than "
+    "[control.safety] max_saturation_time (the cables give what they can meanwhile), or 3 "
+    "cycles in which even the feed-forward cannot be held (the last feasible tensions held)",
     FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
     FaultKind.INTERNAL: "immediate: the cycle itself failed",
 }

@@ -18,6 +18,8 @@ import numpy as np
 
 from cdprctl.control.estimator import Estimator
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
+from cdprctl.tda.nullspace import NullSpace
+from cdprctl.tda.planar import feasible_scale_kernel
 
 if TYPE_CHECKING:
     from cdprctl.control.controller import Controller
@@ -63,6 +65,17 @@ def warm_up(controller: Controller) -> None:
         tda = TensionDistributor(model, opts)
         for t_prev in (None, prev):
             tda.solve(est.kin.W, hold, t_min, t_max, k=est.k, kin=est.kin, t_prev=t_prev)
+    # the saturation's kernels (distribution.py): a particular solution, one bisection
+    ns = NullSpace(m)
+    ns.update(est.kin.W, hold)
+    t_ff = np.zeros(m)
+    ns.particular(hold, t_ff)
+    if model.redundancy == 2:
+        verts = np.zeros((2 * m + 8, 2))
+        feasible_scale_kernel(
+            ns.N, t_ff, t_ff.copy(), t_min, t_max, verts, verts.copy(), zeros.copy()
+        )
+    c.observer.warm_up()
     c.pose.update(True)
     c.pose.reset()
     c.winches.update(d.tensions, c.estimator.kin.WT, c.trajectory.acceleration, zeros, True,

@@ -76,4 +76,5 @@ class PoseController:
             self._E,
             d.pose_error,
             d.wrench,
+            d.feedback_wrench,
         )

@@ -293,7 +293,9 @@ class Daemon:
         self._print(
             f"t={now:6.1f}s {c.state.value:<9} P [{e.position[0]:.3f} {e.position[1]:.3f} "
             f"{e.position[2]:.3f}] m{sim} err {np.linalg.norm(c.pose_error[:3]) * 1e3:5.2f} mm "
-            f"t {c.tensions.min():5.1f}..{c.tensions.max():5.1f} N tda {c.tda_status.name} "
+            f"t {c.tensions.min():5.1f}..{c.tensions.max():5.1f} N tda {c.tda_status.name}"
+            + (f" sat {c.data.saturation:.2f}" if c.data.saturation < 1.0 else "")
+            + " "
             f"late p99 {s.get('lateness_p99_us', 0):6.0f} us missed {int(s.get('missed', 0))}"
         )
 
@@ -319,6 +321,7 @@ class Daemon:
             "fault": c.fault_reason,
             "driver": self.driver.stats.as_dict(),
             "faults": dict(self.faults),
+            "saturated_cycles": c.data.saturated_cycles,
         }
         self._print("summary:")
         self._print(
@@ -333,6 +336,11 @@ class Daemon:
             self._print(
                 "  per phase (median/p99 us): "
                 + ", ".join(f"{k} {v[0]:.0f}/{v[1]:.0f}" for k, v in phases.items())
+            )
+        if c.data.saturated_cycles:
+            self._print(
+                f"  feedback saturated in {c.data.saturated_cycles} cycles (the cables gave "
+                "what they could: docs/control.md)"
             )
         if self.faults:
             self._print(

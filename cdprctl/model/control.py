@@ -16,6 +16,7 @@ CONTROL_KEYS = (
     "axis_bandwidth",
     "damping_ratio",
     "velocity_filter",
+    "observer_bandwidth",
     "max_velocity",
     "max_acceleration",
     "max_jerk",
@@ -35,6 +36,7 @@ SAFETY_KEYS = (
     "max_speed",
     "max_feedback_age",
     "stop_duration",
+    "max_saturation_time",
     "tension_margin",
     "max_fk_residual",
 )
@@ -59,6 +61,8 @@ class ControlConfig:
     damping_ratio: float = 1.0
     # Hz, first-order low-pass on the finite-difference twist (docs/control.md: rate and filter)
     velocity_filter: float = 40.0
+    # Hz, the external-wrench observer's bandwidth (control/observer.py); 0: off
+    observer_bandwidth: float = 0.0
     max_velocity: float = 0.3  # m/s
     max_acceleration: float = 1.0  # m/s²
     max_jerk: float = 10.0  # m/s³
@@ -77,6 +81,9 @@ class ControlConfig:
     max_speed: float = 1.0  # m/s, estimated platform speed that faults
     max_feedback_age: float = 0.05  # s
     stop_duration: float = 0.5  # s, controlled stop before the brakes close
+    # s: how long the cables may give only part of the PID's feedback wrench (the commanded
+    # wrench saturated into the feasible set, docs/control.md) before the supervisor faults
+    max_saturation_time: float = 1.0
     tension_margin: float = 0.0  # N, kept from each limit by the TDA
     # m RMS: cable lengths no pose explains (an encoder fault). Soft cables stretch under forces
     # the controller does not know (Sensors 2019 springs: 30 N ≈ 10 mm), so they need more.
@@ -120,6 +127,7 @@ def read_control(
             vals["axis_bandwidth"] = tuple(float(x) for x in ab)
     num("damping_ratio", "", positive=True)
     num("velocity_filter", "Hz", positive=True)
+    num("observer_bandwidth", "Hz", minimum=0.0)
     for key, unit in (
         ("max_velocity", "m/s"),
         ("max_acceleration", "m/s²"),
@@ -198,6 +206,7 @@ def read_control(
             ("max_speed", "m/s", {"positive": True}),
             ("max_feedback_age", "s", {"positive": True}),
             ("stop_duration", "s", {"positive": True}),
+            ("max_saturation_time", "s", {"positive": True}),
             ("tension_margin", "N", {"minimum": 0.0}),
             ("max_fk_residual", "m", {"positive": True}),
         ):

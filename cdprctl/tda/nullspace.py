@@ -43,6 +43,29 @@ class NullSpace:
         self.condition = float(self._info[0]) if ok else math.inf
         return self.rank_ok
 
+    def particular(self, w: FloatArray, out: FloatArray) -> None:
+        """``out`` (m,) ← ``W⁺ w`` for another wrench ``w`` (6,) with the factorisation of the
+        last :meth:`update` (which must have succeeded)."""
+        particular_kernel(self._A, self._Q, w, out)
+
+
+@njit(cache=True)
+def particular_kernel(A, Q, w, out):  # pragma: no cover - compiled
+    """``out = Q₆ R₆⁻ᵀ w`` from ``nullspace_kernel``'s factorisation (``A`` holds ``R``):
+    ``Rᵀ y = w`` by forward substitution, then ``Q₆ y``."""
+    d = A.shape[1]
+    y = np.empty(d)
+    for j in range(d):
+        s = w[j]
+        for k in range(j):
+            s -= A[k, j] * y[k]
+        y[j] = s / A[j, j]
+    for i in range(out.shape[0]):
+        s = 0.0
+        for j in range(d):
+            s += Q[i, j] * y[j]
+        out[i] = s
+
 
 @njit(cache=True)
 def nullspace_kernel(W, w, rcond, A, Q, N, t0, info):  # pragma: no cover - compiled
@@ -92,18 +115,8 @@ def nullspace_kernel(W, w, rcond, A, Q, N, t0, info):  # pragma: no cover - comp
     if not (dmin > rcond * dmax and dmax < math.inf):  # False for NaN too
         return False
     info[0] = dmax / dmin
-    # Rᵀ y = w (forward substitution), t0 = Q₆ y
-    y = np.empty(d)
-    for j in range(d):
-        s = w[j]
-        for k in range(j):
-            s -= A[k, j] * y[k]
-        y[j] = s / A[j, j]
+    particular_kernel(A, Q, w, t0)
     for i in range(m):
-        s = 0.0
-        for j in range(d):
-            s += Q[i, j] * y[j]
-        t0[i] = s
         for j in range(m - d):
             N[i, j] = Q[i, d + j]
     return math.isfinite(t0.sum())

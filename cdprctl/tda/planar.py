@@ -148,3 +148,30 @@ def planar_kernel(
     for i in range(N.shape[0]):
         tensions[i] = t0[i] + N[i, 0] * x + N[i, 1] * y
     return True
+
+
+@njit(cache=True)
+def feasible_scale_kernel(N, t_ff, t_fb, lo, hi, verts, tmp, t0):  # pragma: no cover - compiled
+    """The largest ``s`` in [0, 1] for which ``t_ff + s t_fb + N λ`` lies inside ``[lo, hi]``
+    for some ``λ`` (r = 2: the feasible polygon is not empty), by bisection to 1e-6; −1 when
+    even ``s = 0`` is infeasible. The set of such ``s`` is an interval (a convex set's
+    section), so bisection finds its end. ``t0`` (m,) scratch."""
+    m = N.shape[0]
+    for i in range(m):
+        t0[i] = t_ff[i] + t_fb[i]
+    if pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, tmp) > 0:
+        return 1.0
+    for i in range(m):
+        t0[i] = t_ff[i]
+    if pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, tmp) == 0:
+        return -1.0
+    a, b = 0.0, 1.0  # feasible at a, not at b
+    while b - a > 1e-6:
+        s = 0.5 * (a + b)
+        for i in range(m):
+            t0[i] = t_ff[i] + s * t_fb[i]
+        if pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, tmp) > 0:
+            a = s
+        else:
+            b = s
+    return a

@@ -76,6 +76,7 @@ def state_payload(
         "reference": _floats(snap["reference"]),
         "target": _floats(snap["target"]),
         "tracking_error": _floats(snap["error"]),
+        "external_wrench_estimate": _floats(snap["external_wrench"], 3),
         "cables": cable_names,
         "tensions": _floats(snap["tensions"], 3),
         "torques": _floats(snap["torques"], 5),
@@ -83,6 +84,10 @@ def state_payload(
         "tda": {
             "method": TDA_METHODS[int(snap["tda_method"][0])],
             "status": TDA_STATUSES[int(snap["tda_status"][0])],
+            "saturation": _float(snap["saturation"][0], 4),
+            "saturated_cycles": int(snap["saturated_cycles"][0])
+            if math.isfinite(snap["saturated_cycles"][0])
+            else 0,
         },
         **({"true_position": _floats(true)} if np.all(np.isfinite(true)) else {}),
         **({"grippers": grip} if grip else {}),

@@ -42,6 +42,8 @@ class Layout:
             ("fault_kind", 1),  # index in FAULT_KINDS, −1: none
             ("tda_method", 1),
             ("tda_status", 1),
+            ("saturation", 1),  # the fraction of the feedback wrench the cables give (1: all)
+            ("saturated_cycles", 1),
             ("cycle", 1),
             ("position", 3),  # m, P in the base frame
             ("rpy", 3),  # rad, roll-pitch-yaw of the platform in the base frame
@@ -50,6 +52,7 @@ class Layout:
             ("reference", 6),  # m and rad (rotation vector from home): the trajectory now
             ("target", 6),  # same, where the trajectory ends
             ("error", 6),  # m and rad: reference − estimate
+            ("external_wrench", 6),  # N, N·m at P, base frame: the observer's estimate
             ("tensions", m),  # N, commanded
             ("torques", m),  # N·m, motor, commanded
             ("motor_position", m),  # rad
@@ -127,6 +130,8 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "fault_kind": FAULT_KINDS.index(d.fault_kind.value) if d.fault_kind is not None else -1,
         "tda_method": TDA_METHODS.index(d.tda_method),
         "tda_status": TDA_STATUSES.index(d.tda_status.name),
+        "saturation": d.saturation,
+        "saturated_cycles": d.saturated_cycles,
         "cycle": d.cycle,
         "position": d.position,
         "rpy": matrix_to_rpy(d.rotation),
@@ -135,6 +140,7 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "reference": d.reference,
         "target": d.target,
         "error": d.pose_error,
+        "external_wrench": d.ext_estimate,
         "tensions": d.tensions,
         "torques": d.torques,
         "motor_position": d.motor_position,
