@@ -90,7 +90,8 @@ def run_once(
     endpoint = ""
     if gateway:
         endpoint = f"tcp/127.0.0.1:{free_port()}"
-        cmd += ["--zenoh", "--accept-commands", "--zenoh-listen", endpoint]
+        cmd += ["--zenoh", "--accept-commands", "--allow-unauthenticated-commands"]
+        cmd += ["--zenoh-listen", endpoint]
         cmd += ["--no-multicast-scouting"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     stop = threading.Event()

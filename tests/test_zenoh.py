@@ -5,6 +5,7 @@ scouting off); and the pieces alone: command validation, the [zenoh] section, th
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import socket
 import subprocess
@@ -131,6 +132,10 @@ ROWC_TOML = (CONFIG / "rowc.toml").read_text()
         ("state_rate = 0", ["zenoh.state_rate", "Hz", "> 0"]),
         ('mode = "server"', ["zenoh.mode", "peer, client or router"]),
         ("commands = 1", ["zenoh.commands", "true or false"]),
+        (
+            'allow_unauthenticated_commands = "yes"',
+            ["zenoh.allow_unauthenticated_commands", "true or false"],
+        ),
         ('config_file = "missing.json5"', ["zenoh.config_file", "existing file"]),
         ("colour = 1", ["zenoh.colour", "not a known key"]),
     ],
@@ -173,9 +178,15 @@ def free_port() -> int:
 class Robot:
     """``cdprctl run --sim`` with its gateway listening on a free port on 127.0.0.1."""
 
-    def __init__(self, extra: list[str], duration: float = 60.0, config: str = "rowc.toml"):
+    def __init__(
+        self,
+        extra: list[str],
+        duration: float = 60.0,
+        config: str = "rowc.toml",
+        scheme: str = "tcp",
+    ):
         self.port = free_port()
-        self.endpoint = f"tcp/127.0.0.1:{self.port}"
+        self.endpoint = f"{scheme}/127.0.0.1:{self.port}"
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -280,9 +291,9 @@ def robot_and_client():
     made: list[Any] = []
 
     def make(
-        extra: list[str], client_config: str = "", robot_file: str = "rowc.toml"
+        extra: list[str], client_config: str = "", robot_file: str = "rowc.toml", scheme="tcp"
     ) -> tuple[Robot, Client]:
-        robot = Robot(extra, config=robot_file)
+        robot = Robot(extra, config=robot_file, scheme=scheme)
         made.append(robot)
         prefix = "cdpr/" + load_robot(CONFIG / robot_file).name
         client = Client(robot.endpoint, client_config, prefix)
@@ -298,7 +309,7 @@ def robot_and_client():
 
 
 def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_client, tmp_path):
-    robot, client = robot_and_client(["--accept-commands"])
+    robot, client = robot_and_client(["--accept-commands", "--allow-unauthenticated-commands"])
     assert client.wait(lambda: len(client.states) > 10), "\n".join(robot.lines)
     n0, t0 = len(client.states), time.monotonic()
     time.sleep(2.0)
@@ -308,6 +319,9 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     s = client.last()
     assert s["schema"] == "cdprctl/1" and s["state"] == "ready"
     assert len(s["tensions"]) == 8 and s["tda"]["method"] == "barycenter"
+    # a bench's explicit choice: said at start and in every state payload
+    assert "unauthenticated" in s["warning"]
+    assert any("warning: commands are accepted from unauthenticated" in x for x in robot.lines)
 
     client.put("enable", {"id": "e1"})
     assert client.wait(lambda: client.last()["state"] == "enabled"), client.replies
@@ -378,28 +392,9 @@ def test_commands_off_by_default(robot_and_client):
     assert client.last()["state"] == "ready"
 
 
-def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path):
-    """config/zenoh/gateway-acl.json5 with its dictionary moved to a temporary file: the viewer
-    receives telemetry but its put never reaches the gateway; the operator's does."""
-    users = tmp_path / "users.txt"
-    users.write_text("operator:op-secret\nviewer:view-secret\n")
-    gw = (ROOT / "config" / "zenoh" / "gateway-acl.json5").read_text()
-    gw = gw.replace("/etc/cdprctl/zenoh-users.txt", str(users))
-    (tmp_path / "gw.json5").write_text(gw)
-    for who, pw in (("operator", "op-secret"), ("viewer", "view-secret")):
-        (tmp_path / f"{who}.json5").write_text(
-            f'{{transport: {{auth: {{usrpwd: {{user: "{who}", password: "{pw}"}}}}}}}}'
-        )
-    robot, viewer = robot_and_client(
-        ["--accept-commands", "--zenoh-config", str(tmp_path / "gw.json5")],
-        str(tmp_path / "viewer.json5"),
-    )
-    assert viewer.wait(lambda: len(viewer.states) > 0), "\n".join(robot.lines)
-    viewer.put("enable", {"id": "v"})
-    time.sleep(1.5)
-    assert viewer.reply("v") is None  # dropped by the gateway's ACL: no reply, no action
-    assert viewer.last()["state"] == "ready"
-    operator = Client(robot.endpoint, str(tmp_path / "operator.json5"))
+def operator_enables(robot: Robot, viewer: Client, operator_config: str) -> None:
+    """The operator's ``enable`` (id "o") is answered and executed; the robot then stops."""
+    operator = Client(robot.endpoint, operator_config)
     try:
         time.sleep(0.5)
         operator.put("enable", {"id": "o"})
@@ -411,13 +406,58 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     assert robot.stop() == 0
 
 
+def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path):
+    """config/zenoh/gateway-acl.json5 (default deny) with its dictionary moved to a temporary
+    file: the viewer and a third account receive telemetry but their puts never reach the
+    gateway; the operator's does; a peer without credentials cannot connect."""
+    users = tmp_path / "users.txt"
+    users.write_text("operator:op-secret\nviewer:view-secret\nmaintenance:maint-secret\n")
+    gw = (ROOT / "config" / "zenoh" / "gateway-acl.json5").read_text()
+    gw = gw.replace("/etc/cdprctl/zenoh-users.txt", str(users))
+    (tmp_path / "gw.json5").write_text(gw)
+    for who, pw in (
+        ("operator", "op-secret"),
+        ("viewer", "view-secret"),
+        ("maintenance", "maint-secret"),
+    ):
+        (tmp_path / f"{who}.json5").write_text(
+            f'{{transport: {{auth: {{usrpwd: {{user: "{who}", password: "{pw}"}}}}}}}}'
+        )
+    robot, viewer = robot_and_client(
+        ["--accept-commands", "--zenoh-config", str(tmp_path / "gw.json5")],
+        str(tmp_path / "viewer.json5"),
+    )
+    assert viewer.wait(lambda: len(viewer.states) > 0), "\n".join(robot.lines)
+    viewer.put("enable", {"id": "v"})
+    third = Client(robot.endpoint, str(tmp_path / "maintenance.json5"))
+    stranger = Client(robot.endpoint)  # no credentials
+    try:
+        assert third.wait(lambda: len(third.states) > 0)  # any account watches
+        third.put("enable", {"id": "m"})
+        time.sleep(1.5)
+        assert viewer.reply("v") is None  # dropped by the gateway's ACL: no reply, no action
+        assert third.reply("m") is None and viewer.reply("m") is None
+        assert viewer.last()["state"] == "ready"
+        stranger.put("enable", {"id": "s"})
+        assert not stranger.wait(lambda: len(stranger.states) > 0, timeout=2.0)
+        assert viewer.reply("s") is None and viewer.last()["state"] == "ready"
+    finally:
+        third.close()
+        stranger.close()
+    operator_enables(robot, viewer, str(tmp_path / "operator.json5"))
+    # each command the gateway saw is logged once, with its id and kind
+    assert sum("command enable id=o: accepted" in x for x in robot.lines) == 1
+    assert not any("id=v" in x or "id=m" in x for x in robot.lines)  # dropped before it
+
+
 def test_gripper_commands_state_and_report_over_zenoh(robot_and_client, tmp_path):
     """The Sensors 2019 end-effector across processes: the state carries each gripper as
     sensed from the drives, a `gripper` command moves the jaw's travel there, one the
     redundancy cannot give leaves the target where it was, and `cdprctl report` draws
     grippers.png from a recording."""
     robot, client = robot_and_client(
-        ["--accept-commands", "--rate", "250"], robot_file="seed000_grippers.toml"
+        ["--accept-commands", "--allow-unauthenticated-commands", "--rate", "250"],
+        robot_file="seed000_grippers.toml",
     )
     assert client.wait(lambda: len(client.states) > 5), "\n".join(robot.lines)
     assert [g["cable"] for g in client.last()["grippers"]] == ["1", "8"]
@@ -450,3 +490,121 @@ def test_gripper_commands_state_and_report_over_zenoh(robot_and_client, tmp_path
     assert rep.returncode == 0, rep.stderr
     assert (run_dir / "grippers.png").stat().st_size > 10_000
     assert robot.stop() == 0
+
+
+# -- commands fail closed ------------------------------------------------------------------------
+ACL = (ROOT / "config" / "zenoh" / "gateway-acl.json5").read_text()
+
+
+def write_conf(tmp_path: Any, text: str) -> str:
+    f = tmp_path / "z.json5"
+    f.write_text(text)
+    return str(f)
+
+
+@pytest.mark.parametrize(
+    "text, listen, words",
+    [
+        (None, (), ["with no Zenoh configuration", "config_file", "allow_unauthenticated"]),
+        ("{}", (), ["not authenticated", "usrpwd", "access_control.enabled is not true"]),
+        (
+            ACL.replace('default_permission: "deny"', 'default_permission: "allow"'),
+            (),
+            ["default_permission = 'allow' must be \"deny\""],
+        ),
+        (
+            '{transport: {link: {tls: {enable_mtls: true, root_ca_certificate: "ca.pem"}}},'
+            ' access_control: {enabled: true, default_permission: "deny"}}',
+            ("tcp/127.0.0.1:7447",),
+            ["not authenticated", "tcp/127.0.0.1:7447 is not"],
+        ),
+    ],
+)
+def test_commands_are_refused_without_authentication_and_a_deny_acl(tmp_path, text, listen, words):
+    from cdprctl.model.zenoh import ZenohConfig
+    from cdprctl.telemetry.security import command_security_problems
+
+    conf = write_conf(tmp_path, text) if text is not None else ""
+    zc = ZenohConfig(commands=True, config_file=conf, listen=listen)
+    problems = " ".join(command_security_problems(zc))
+    for w in words:
+        assert w in problems, problems
+    # the same file passes as a bench's explicit choice, and without commands
+    assert not command_security_problems(
+        ZenohConfig(commands=True, config_file=conf, allow_unauthenticated_commands=True)
+    )
+    assert not command_security_problems(ZenohConfig(commands=False, config_file=conf))
+
+
+def test_the_shipped_examples_pass_the_check():
+    from cdprctl.model.zenoh import ZenohConfig
+    from cdprctl.telemetry.security import command_security_problems
+
+    acl = str(ROOT / "config" / "zenoh" / "gateway-acl.json5")
+    assert command_security_problems(ZenohConfig(commands=True, config_file=acl)) == []
+    tls = str(ROOT / "config" / "zenoh" / "gateway-tls.json5")
+    on_tls = ZenohConfig(commands=True, config_file=tls, listen=("tls/0.0.0.0:7447",))
+    assert command_security_problems(on_tls) == []
+    also_tcp = ZenohConfig(
+        commands=True, config_file=tls, listen=("tls/0.0.0.0:7447", "tcp/0.0.0.0:7448")
+    )
+    assert "tcp/0.0.0.0:7448 is not" in " ".join(command_security_problems(also_tcp))
+
+
+def test_the_daemon_refuses_to_start_with_open_commands():
+    res = subprocess.run(
+        [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(CONFIG / "rowc.toml"),
+         "--sim", "--zenoh", "--accept-commands", "--no-realtime"],
+        capture_output=True, text=True, cwd=ROOT, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 1
+    assert "refused" in res.stderr and "config_file" in res.stderr
+    assert "allow_unauthenticated_commands" in res.stderr
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="tools/make_certs.sh needs openssl")
+def test_mutual_tls_certifies_who_watches_and_who_commands(robot_and_client, tmp_path):
+    """config/zenoh/gateway-tls.json5 with certificates from tools/make_certs.sh: the viewer's
+    certificate watches but cannot command, the operator's commands; a client whose certificate
+    another CA signed, and one without a certificate, cannot connect."""
+    certs, rogue = tmp_path / "certs", tmp_path / "rogue"
+    for d, names in ((certs, ["operator", "viewer"]), (rogue, ["operator"])):
+        subprocess.run(
+            ["bash", str(ROOT / "tools" / "make_certs.sh"), str(d), "localhost", "127.0.0.1",
+             "--clients", *names],
+            check=True, capture_output=True, timeout=60,
+        )  # fmt: skip
+
+    def conf(name: str, where: Any = certs) -> str:
+        text = (ROOT / "config" / "zenoh" / name).read_text()
+        text = text.replace("/etc/cdprctl/tls/ca.pem", str(certs / "ca.pem"))
+        text = text.replace("/etc/cdprctl/tls/", f"{where}/")
+        f = tmp_path / f"{where.name}-{name}"
+        f.write_text(text)
+        return str(f)
+
+    robot, viewer = robot_and_client(
+        ["--accept-commands", "--zenoh-config", conf("gateway-tls.json5")],
+        conf("viewer-tls.json5"),
+        scheme="tls",
+    )
+    assert viewer.wait(lambda: len(viewer.states) > 0), "\n".join(robot.lines)
+    assert "warning" not in viewer.last()
+    viewer.put("enable", {"id": "v"})
+    impostor = Client(robot.endpoint, conf("operator-tls.json5", rogue))  # the wrong CA
+    bare = tmp_path / "bare.json5"  # the right CA, no certificate of its own
+    bare.write_text(
+        f'{{transport: {{link: {{tls: {{root_ca_certificate: "{certs / "ca.pem"}"}}}}}}}}'
+    )
+    nobody = Client(robot.endpoint, str(bare))
+    try:
+        time.sleep(1.5)
+        assert viewer.reply("v") is None and viewer.last()["state"] == "ready"
+        for c, name in ((impostor, "i"), (nobody, "n")):
+            c.put("enable", {"id": name})
+            assert not c.wait(lambda c=c: len(c.states) > 0, timeout=2.0)
+        assert viewer.last()["state"] == "ready"
+    finally:
+        impostor.close()
+        nobody.close()
+    operator_enables(robot, viewer, conf("operator-tls.json5"))

@@ -61,7 +61,14 @@ def add_parser(sub: Any) -> None:
     z.add_argument(
         "--accept-commands",
         action="store_true",
-        help="take commands over Zenoh (zenoh.commands = true)",
+        help="take commands over Zenoh (zenoh.commands = true); refused unless the Zenoh "
+        "config authenticates peers and denies by default (docs/telemetry.md)",
+    )
+    z.add_argument(
+        "--allow-unauthenticated-commands",
+        action="store_true",
+        help="take commands from any peer (zenoh.allow_unauthenticated_commands = true): an "
+        "isolated bench network only",
     )
 
 
@@ -101,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
         zo["multicast_scouting"] = False
     if args.accept_commands:
         zo["commands"] = True
+    if args.allow_unauthenticated_commands:
+        zo["allow_unauthenticated_commands"] = True
     if args.zenoh_config:
         from pathlib import Path
 
@@ -115,6 +124,14 @@ def run(args: argparse.Namespace) -> int:
         import dataclasses
 
         model = dataclasses.replace(model, zenoh=dataclasses.replace(model.zenoh, **zo))
+    if args.zenoh or bool(zo) or model.zenoh.enabled:
+        from cdprctl.telemetry.security import command_security_problems
+
+        problems = command_security_problems(model.zenoh)
+        for p in problems:
+            print(f"cdprctl run: refused: {p}", file=sys.stderr)
+        if problems:
+            return 1
     if args.duration is not None and not args.duration > 0:
         print(f"cdprctl run: error: --duration = {args.duration} s must be > 0", file=sys.stderr)
         return 2

@@ -116,6 +116,10 @@ class Daemon:
                 self.driver.shutdown()
                 return 1
             zc = self.model.zenoh
+            if zc.commands and zc.allow_unauthenticated_commands:
+                from cdprctl.telemetry.security import UNAUTHENTICATED_WARNING
+
+                self._print(f"warning: {UNAUTHENTICATED_WARNING}", err=True)
             self._print(
                 f"zenoh: {zc.key_prefix(self.model.name)}/{{state,timing,events,status}}, "
                 f"commands {'on' if zc.commands else 'off'}"

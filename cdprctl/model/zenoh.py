@@ -19,6 +19,7 @@ ZENOH_KEYS = (
     "state_rate",
     "timing_rate",
     "commands",
+    "allow_unauthenticated_commands",
     "config_file",
 )
 _KEY_CHUNK = re.compile(r"^[A-Za-z0-9_.\-]+$")  # no wildcards, no $, no empty chunks
@@ -35,6 +36,9 @@ class ZenohConfig:
     state_rate: float = 100.0  # Hz, decimated from the loop
     timing_rate: float = 1.0  # Hz
     commands: bool = False  # commands are refused unless this is true
+    # commands without authentication and a default-deny ACL (a bench on an isolated
+    # network): the daemon then warns at start, in status and in every state payload
+    allow_unauthenticated_commands: bool = False
     config_file: str = ""  # a Zenoh JSON5 file (ACL, TLS, user/password); relative to the TOML
 
     def key_prefix(self, robot: str) -> str:
@@ -49,7 +53,7 @@ def read_zenoh(rd: TableReader, data: dict[str, Any], robot: str) -> ZenohConfig
     rd.check_keys(t, ZENOH_KEYS, "zenoh")
     d = ZenohConfig()
     vals: dict[str, Any] = {}
-    for key in ("enabled", "multicast_scouting", "commands"):
+    for key in ("enabled", "multicast_scouting", "commands", "allow_unauthenticated_commands"):
         if key in t:
             if isinstance(t[key], bool):
                 vals[key] = t[key]

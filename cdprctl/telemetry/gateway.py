@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import queue
+import sys
 import time
 from typing import Any
 
@@ -20,6 +21,7 @@ from cdprctl.telemetry.schema import (
     state_payload,
     timing_payload,
 )
+from cdprctl.telemetry.security import UNAUTHENTICATED_WARNING
 from cdprctl.telemetry.snapshot import STATES, SharedSnapshot
 from cdprctl.telemetry.validate import CommandError, CommandValidator
 
@@ -65,11 +67,32 @@ def gateway_main(
     names = [c.name for c in model.cables]
     grip_names = [g.name for g in model.grippers]
     validator = CommandValidator(model, zc.commands)
+    warning = UNAUTHENTICATED_WARNING if zc.commands and zc.allow_unauthenticated_commands else ""
     shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
     counts = {"accepted": 0, "rejected": 0}
     limiter = {"last": -1.0, "suppressed": 0}
+    log_limit = {"second": -1, "lines": 0, "suppressed": 0}
+
+    def log(kind: str, request_id: Any, ok: bool, text: str) -> None:
+        """One line per command on stderr (journald): every accepted one; rejected ones at
+        most 20 a second, then how many more, so a flood cannot flood the journal."""
+        second = int(time.monotonic())
+        if second != log_limit["second"]:
+            if log_limit["suppressed"]:
+                n = log_limit["suppressed"]
+                line = f"cdprctl-zenoh: {n} more commands rejected in the last second"
+                print(line, file=sys.stderr, flush=True)
+            log_limit.update(second=second, lines=0, suppressed=0)
+        if not ok and log_limit["lines"] >= 20:
+            log_limit["suppressed"] += 1
+            return
+        log_limit["lines"] += 1
+        verdict = "accepted" if ok else f"rejected: {text}"
+        line = f"cdprctl-zenoh: command {kind} id={request_id}: {verdict}"
+        print(line, file=sys.stderr, flush=True)
 
     def reply(kind: str, request_id: Any, ok: bool, text: str) -> None:
+        log(kind, request_id, ok, text)
         body = {"schema": SCHEMA, "command": kind, "id": request_id, "ok": ok, "reason": text}
         try:
             session.put(f"{P}/reply/{kind}", encode(body), encoding=JSON)
@@ -120,7 +143,12 @@ def gateway_main(
             "fault": shared["fault"],
             "pose": pose_payload(snap_now) if snap_now else None,
             "config": summary,
-            "commands": {"enabled": zc.commands, **counts},
+            "commands": {
+                "enabled": zc.commands,
+                "unauthenticated": bool(zc.commands and zc.allow_unauthenticated_commands),
+                **counts,
+            },
+            **({"warning": warning} if warning else {}),
         }
         query.reply(f"{P}/status", encode(body), encoding=JSON)
 
@@ -141,7 +169,10 @@ def gateway_main(
                     shared["state"] = STATES[int(s["state"][0])]
                     if s["seq"][0] != last_seq:
                         last_seq = float(s["seq"][0])
-                        pub_state.put(encode(state_payload(s, names, shared["fault"], grip_names)))
+                        body = state_payload(s, names, shared["fault"], grip_names)
+                        if warning:
+                            body["warning"] = warning
+                        pub_state.put(encode(body))
                 next_state += state_dt
                 if next_state < now:  # a stall: no burst
                     next_state = now + state_dt
