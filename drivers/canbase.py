@@ -100,7 +100,7 @@ class CanWinchDriver(WinchDriver):
             0.0,
             True,
             True,
-            self.config.missed_feedback_limit,
+            self.config.feedback_timeout,
             self.config.heartbeat_timeout,
             self.states.feedback_age.copy(),
         )
@@ -170,7 +170,7 @@ class CanWinchDriver(WinchDriver):
             t,
             elapsed,
             self._started,
-            self.config.missed_feedback_limit,
+            self.config.feedback_timeout,
             self.config.heartbeat_timeout,
             self.states.feedback_age,
         )
@@ -206,9 +206,10 @@ class CanWinchDriver(WinchDriver):
         return f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
 
     def _liveness_error(self, c: int, t: float) -> DriverError | None:
-        """The timeout error of cable ``c`` when a limit is passed (``missed_feedback_limit``
-        cycles without feedback, ``heartbeat_timeout`` s without heartbeat)."""
-        if self._missed[c] > self.config.missed_feedback_limit:
+        """The timeout error of cable ``c`` when a limit is passed (``feedback_timeout`` s
+        without feedback, ``heartbeat_timeout`` s without heartbeat)."""
+        age = float(self.states.feedback_age[c])
+        if self._started and math.isfinite(age) and age > self.config.feedback_timeout:
             why = (
                 f" (the last {int(self._implausible[c])} were position jumps no motor can "
                 "make: corrupted frames or a failing encoder)"
@@ -216,8 +217,9 @@ class CanWinchDriver(WinchDriver):
                 else ""
             )
             return DriverTimeoutError(
-                f"{self._where(c)}: no {self.feedback_label} for {int(self._missed[c])} cycles "
-                f"(limit {self.config.missed_feedback_limit}){why}",
+                f"{self._where(c)}: no {self.feedback_label} for {age * 1e3:.1f} ms "
+                f"({int(self._missed[c])} reads; feedback_timeout "
+                f"{self.config.feedback_timeout * 1e3:g} ms){why}",
                 c,
             )
         if (
@@ -235,12 +237,12 @@ class CanWinchDriver(WinchDriver):
 
 @njit(cache=True)
 def liveness_kernel(
-    fresh, fb_stamp, missed, last_hb, t, elapsed, started, missed_limit, hb_timeout, age
+    fresh, fb_stamp, missed, last_hb, t, elapsed, started, fb_timeout, hb_timeout, age
 ):  # pragma: no cover - compiled
     """Per cable: the count of consecutive reads without feedback (a read at the same instant
     as the last misses nothing; silence counts once the drives were started and have spoken),
-    the feedback age (s). Returns the cable-reads missed now and whether a cable passed
-    ``missed_limit`` or went ``hb_timeout`` s without heartbeat."""
+    the feedback age (s). Returns the cable-reads missed now and whether a cable went
+    ``fb_timeout`` s without feedback or ``hb_timeout`` s without heartbeat."""
     n_missed = 0
     late = False
     for c in range(len(fresh)):
@@ -250,7 +252,7 @@ def liveness_kernel(
             missed[c] += 1
             n_missed += 1
         age[c] = t - fb_stamp[c]
-        if missed[c] > missed_limit:
+        if started and np.isfinite(fb_stamp[c]) and age[c] > fb_timeout:
             late = True
         if started and np.isfinite(last_hb[c]) and t - last_hb[c] > hb_timeout:
             late = True

@@ -31,7 +31,7 @@ def relaxed(model, driver):
         model.drives,
         driver=driver,
         heartbeat_timeout=2.0,
-        missed_feedback_limit=50,
+        feedback_timeout=0.1,
         comm_timeout=1.0,
     )
     return dataclasses.replace(model, drives=drives)
@@ -78,7 +78,7 @@ def sim_process(tmp_path):
 def write_config(tmp_path, model_file, driver):
     text = (CONFIG / model_file).read_text()
     text += (
-        f'\n[drives]\ndriver = "{driver}"\nheartbeat_timeout = 2.0\nmissed_feedback_limit = 50\n'
+        f'\n[drives]\ndriver = "{driver}"\nheartbeat_timeout = 2.0\nfeedback_timeout = 0.1\n'
         'comm_timeout = 1.0\n[[drives.buses]]\ninterface = "udp_multicast"\n'
         f'channel = "{GROUP}"\ncables = ["1", "2", "3", "4", "5", "6", "7", "8"]\n'
         "node_ids = [1, 2, 3, 4, 5, 6, 7, 8]\n"

@@ -78,7 +78,7 @@ class Controller:
         self._last_stretch = np.full(model.n_cables, np.inf)
         self._stretch_every = max(1, round(self.STRETCH_PERIOD / self.period))
         self._clock_ns = time.perf_counter_ns
-        self._last_t = 0.0  # s, the last cycle's time (saturation time)
+        self._last_t = -math.inf  # s, the last cycle's time
         self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
             CommandKind.ENABLE: self._enable,
             CommandKind.DISABLE: self._disable,
@@ -177,6 +177,11 @@ class Controller:
         clock, d = self._clock_ns, self.data
         ph = d.phase_us
         t1 = clock()
+        # the real elapsed time: after a late or missed period the integral, the trajectory,
+        # the tension rate limit, the ramps and the saturation time step by what passed
+        gap = t - self._last_t
+        d.dt = gap if 0.0 < gap < self.MAX_STEP else self.period
+        self._last_t = t
         d.time = t
         d.cycle += 1
         if not self.grippers.n:  # the known external wrench, whoever set it, from now on
@@ -200,7 +205,7 @@ class Controller:
             math.hypot(*e.velocity.tolist()),
             self.trajectory.finished,
         )
-        self.trajectory.update()
+        self.trajectory.update(d.dt)
         t3 = clock()
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES
@@ -238,6 +243,10 @@ class Controller:
         )
         ph[5] = (clock() - t5) / 1e3
 
+    # s: a longer gap between cycles (the first one, or after the loop stood still) steps by a
+    # period: what happened meanwhile is not the controller's to integrate
+    MAX_STEP = 0.1
+
     # Saturated time drains at this fraction of real time once the cables give the whole
     # feedback again: a loop that saturates in most of its cycles (an unstable gain chattering
     # on the limits: 60 % of the cycles on rowc tuned at 1 Hz in y, a 0.5 mm limit cycle) adds
@@ -248,8 +257,7 @@ class Controller:
         """``data.saturated_for``: the time (s, real elapsed) the feedback was saturated,
         leaking at ``SATURATION_LEAK`` while it is not; ``saturated_cycles`` in all."""
         d = self.data
-        dt = t - self._last_t if 0.0 < t - self._last_t < 0.1 else self.period
-        self._last_t = t
+        dt = d.dt
         if d.saturation < 1.0:
             d.saturated_for += dt
             d.saturated_cycles += 1

@@ -29,6 +29,9 @@ class ControlData:
         self.fault_kind: FaultKind | None = None
         self.cycle = 0
         self.time = 0.0  # s, the loop's clock at the last cycle
+        # s, the real time since the cycle before (a period, or more after a late or missed
+        # one): every time-dependent part steps by it (controller.py)
+        self.dt = 0.0
         # (t, text) for the daemon's log and the telemetry; drained outside the loop
         self.events: collections.deque[tuple[float, str]] = collections.deque(maxlen=256)
         # (t, kind) of every fault, for counting by kind (the daemon's summary, the soak)

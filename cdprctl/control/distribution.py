@@ -149,7 +149,10 @@ class Distribution:
                 tp[:] = t_prev
                 tp[gs.cables] -= jb
                 t_prev = tp
-        return tda.solve(e.kin.W, wrench, self.t_min, self.t_max, k=e.k, kin=e.kin, t_prev=t_prev)
+        dt = self.data.dt if self.data.dt > 0.0 else None
+        return tda.solve(
+            e.kin.W, wrench, self.t_min, self.t_max, k=e.k, kin=e.kin, t_prev=t_prev, dt=dt
+        )
 
     def total(self, spring: FloatArray, out: FloatArray) -> None:
         """Cable tensions (N) into ``out`` from the springs' ``spring``: ``τ = τ_A + τ_B``."""

@@ -163,7 +163,7 @@ class GripperControl:
 
     def _ramp(self) -> None:
         d = self.data
-        step = self.GRIP_SPEED * self.period
+        step = self.GRIP_SPEED * (d.dt if d.dt > 0.0 else self.period)
         changed = False
         for j in range(self.set.n):
             target = d.grip_target[j]

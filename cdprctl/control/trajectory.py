@@ -91,9 +91,13 @@ class Trajectory:
         self.finished = False
         self._velocity_mode = True
 
-    def update(self) -> None:
+    def update(self, dt: float = 0.0) -> None:
+        """One step of ``dt`` s (the period when 0): after a late or missed period the reference
+        moves on by the time that passed, not by one period."""
         if self.finished:
             return
+        if dt > 0.0 and abs(dt - self.otg.delta_time) > 1e-9:
+            self.otg.delta_time = dt
         inp = self.inp
         inp.current_position = self.position.tolist()
         inp.current_velocity = self.velocity.tolist()

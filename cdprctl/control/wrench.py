@@ -69,7 +69,7 @@ class PoseController:
             self._est,
             self._pid,
             integrate,
-            self.period,
+            d.dt if d.dt > 0.0 else self.period,
             self._platform,
             d.ext_total,
             self._Rd,

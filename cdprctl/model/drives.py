@@ -15,6 +15,7 @@ from cdprctl.model.reader import TableReader
 DRIVES_KEYS = (
     "driver",
     "rated_torque",
+    "feedback_timeout",
     "missed_feedback_limit",
     "heartbeat_timeout",
     "heartbeat_period",
@@ -42,7 +43,10 @@ class BusConfig:
 class DrivesConfig:
     driver: str = "cia402"
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
-    missed_feedback_limit: int = 5  # consecutive cycles without feedback before a fault
+    # s without feedback from a drive before it is taken as lost: a time, not a count of
+    # cycles, so the tolerance is the same at every rate (30 ms: a 20 ms stall of the loop
+    # rides through; the old count of 5 missed reads was 10-12 ms at 500 Hz, 20 at 250 Hz)
+    feedback_timeout: float = 0.03
     heartbeat_timeout: float = 0.5  # s without a drive's heartbeat: drive lost
     heartbeat_period: float = 0.1  # s, the controller's own heartbeat
     controller_node_id: int = 127
@@ -88,16 +92,17 @@ def read_drives(
     rated = rd.number(
         t, "rated_torque", "drives", "N·m", required=False, default=rated_default, positive=True
     )
-    missed = rd.number(
-        t,
-        "missed_feedback_limit",
-        "drives",
-        "cycles",
-        required=False,
-        default=5,
-        positive=True,
-        integer=True,
+    fb_to = rd.number(
+        t, "feedback_timeout", "drives", "s", required=False, default=0.03, positive=True
     )
+    if "missed_feedback_limit" in t:
+        rd.error(
+            "drives.missed_feedback_limit",
+            t["missed_feedback_limit"],
+            "cycles",
+            "is replaced by feedback_timeout, a time in s (e.g. feedback_timeout = 0.03): a "
+            "count of cycles meant a different time at every rate",
+        )
     hb_to = rd.number(
         t, "heartbeat_timeout", "drives", "s", required=False, default=0.5, positive=True
     )
@@ -222,7 +227,7 @@ def read_drives(
     return DrivesConfig(
         driver=driver,
         rated_torque=float(rated if rated is not None else rated_default),
-        missed_feedback_limit=int(missed or 5),
+        feedback_timeout=float(fb_to or 0.03),
         heartbeat_timeout=float(hb_to or 0.5),
         heartbeat_period=float(hb_p or 0.1),
         controller_node_id=int(ctrl_id or 127),

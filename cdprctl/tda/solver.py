@@ -59,6 +59,7 @@ class TensionDistributor(EnergyMethod):
         self._verts_tmp = np.zeros((2 * self.m + 8, 2))
         self._planar_info = np.zeros(6)
         self._ones = np.ones(self.m)
+        self._dt = self.options.period  # s, the rate limit's step of this solve
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
         self._direction = np.zeros(3)
         self._delta_wrench = np.zeros(6)
@@ -90,11 +91,13 @@ class TensionDistributor(EnergyMethod):
         k: FloatArray | None = None,
         kin: KinematicsData | None = None,
         t_prev: FloatArray | None = None,
+        dt: float | None = None,
     ) -> TDAOutput:
         """Tensions (N) with ``W t = wrench`` inside ``[t_min, t_max]`` (defaults: the model's).
 
         ``k`` (N/m, cable stiffness) is needed by ``energy`` and ``sotda``, ``kin`` (the
-        kinematics at the pose of ``W``) by ``sotda``; ``t_prev`` (N) enables the rate limit.
+        kinematics at the pose of ``W``) by ``sotda``; ``t_prev`` (N) enables the rate limit,
+        over ``dt`` s since ``t_prev`` (default: the options' period).
         """
         out = self.out
         lo = self.model.tension_min if t_min is None else t_min
@@ -113,6 +116,7 @@ class TensionDistributor(EnergyMethod):
         if k is None:
             out.energies[:] = math.nan
         try:
+            self._dt = dt if dt is not None else self.options.period
             status = self._solve(W, wrench, lo, hi, k, kin, t_prev)
         except Exception as exc:
             status = TDAStatus.INTERNAL_ERROR
@@ -182,7 +186,7 @@ class TensionDistributor(EnergyMethod):
             opt.nu,
             opt.grid_points if sotda and opt.sotda_variant == "grid" else 0,
             t_prev if rate else lo,
-            (opt.max_tension_rate or 0.0) * opt.period if rate else math.inf,
+            (opt.max_tension_rate or 0.0) * self._dt if rate else math.inf,
             out.lam,
             out.tensions,
             info,
