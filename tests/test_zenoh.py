@@ -608,3 +608,15 @@ def test_mutual_tls_certifies_who_watches_and_who_commands(robot_and_client, tmp
         impostor.close()
         nobody.close()
     operator_enables(robot, viewer, conf("operator-tls.json5"))
+
+
+def test_check_config_names_open_commands(tmp_path, capsys):
+    from cdprctl.commands.check_config import run as check
+
+    f = tmp_path / "robot.toml"
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[zenoh]\ncommands = true\n')
+    assert check(str(f)) == 1
+    assert "allow_unauthenticated_commands" in capsys.readouterr().err
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[zenoh]\ncommands = true\n'
+                 "allow_unauthenticated_commands = true\n")  # fmt: skip
+    assert check(str(f)) == 0

@@ -56,4 +56,9 @@ def run(file: str) -> int:
             print(f"  {e}", file=sys.stderr)
         return 1
     print(summary(model))
-    return 0
+    from cdprctl.telemetry.security import command_security_problems
+
+    problems = command_security_problems(model.zenoh)
+    for p in problems:  # cdprctl run would refuse to start with these
+        print(f"{file}: {p}", file=sys.stderr)
+    return 1 if problems else 0
