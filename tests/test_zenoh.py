@@ -354,6 +354,7 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
         [*cli, "monitor", *z, "--once"], capture_output=True, text=True, timeout=60
     )
     assert mon.returncode == 0 and "tensions" in mon.stdout and "enabled" in mon.stdout
+    assert "WARNING  commands are accepted from unauthenticated peers" in mon.stdout
     run_dir = tmp_path / "run"
     rec = subprocess.Popen(
         [*cli, "record", *z, "--output", str(run_dir), "--duration", "4", "--mcap"]

@@ -159,14 +159,22 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
     err = state["tracking_error"]
     lines = [
         f"{meta.get('robot', '?')}  state {state['state']}"
-        + (f"  FAULT: {state['fault']}" if state.get("fault") else "")
+        + (f"  FAULT ({state['fault_kind']}): " if state.get("fault_kind") else "  FAULT: ")
+        * bool(state.get("fault"))
+        + (state.get("fault") or "")
         + f"  t {state['time']:.2f} s  cycle {state['cycle']}",
         f"pose     [{p[0]:8.4f} {p[1]:8.4f} {p[2]:8.4f}] m   rpy [{rpy[0]:7.4f} "
         f"{rpy[1]:7.4f} {rpy[2]:7.4f}] rad",
         f"target   [{state['target'][0]:8.4f} {state['target'][1]:8.4f} "
         f"{state['target'][2]:8.4f}] m   tracking error "
         f"{1e3 * sum(x * x for x in err[:3]) ** 0.5:6.2f} mm",
-        f"TDA      {state['tda']['method']} ({state['tda']['status']})",
+        f"TDA      {state['tda']['method']} ({state['tda']['status']})"
+        + (
+            f"  feedback saturated: the cables give {state['tda']['saturation']:.0%} of it"
+            if (state["tda"].get("saturation") or 1.0) < 1.0
+            else ""
+        ),
+        *([f"WARNING  {state['warning']}"] if state.get("warning") else []),
         "tensions",
     ]
     lo = meta.get("tension_min") or [0.0] * len(state["tensions"])
