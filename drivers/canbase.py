@@ -41,6 +41,10 @@ class CanWinchDriver(WinchDriver):
         self._fresh = np.zeros(self.m, dtype=bool)  # feedback arrived during this read
         self._fb_stamp = np.full(self.m, -math.inf)  # s, time of the last feedback
         self._missed = np.zeros(self.m, dtype=np.int64)  # consecutive reads without feedback
+        # s of running cycles without feedback, per cable: each read adds the time since the
+        # last one, at most two periods — a stall of the loop itself sends no SYNC, so the
+        # drives could not answer; it is the loop's to report, not a drive's silence
+        self._silent = np.zeros(self.m)
         self._last_hb = np.full(self.m, -math.inf)  # s, the drive's last heartbeat
         self._last_read = -math.inf
         self._started = False  # the drives were started: silence now counts
@@ -96,9 +100,10 @@ class CanWinchDriver(WinchDriver):
             self._fresh.copy(),
             self._fb_stamp.copy(),
             self._missed.copy(),
+            self._silent.copy(),
             self._last_hb.copy(),
             0.0,
-            True,
+            0.002,
             True,
             self.config.feedback_timeout,
             self.config.heartbeat_timeout,
@@ -160,15 +165,16 @@ class CanWinchDriver(WinchDriver):
         before its timeout (``_cable_fault``, ``_liveness_error``)."""
         self._fresh[:] = False
         self._drain(t)
-        elapsed = self._reads_elapsed(t)
+        gap = self._read_gap(t)
         fault = self._update_states()
         missed, late = liveness_kernel(
             self._fresh,
             self._fb_stamp,
             self._missed,
+            self._silent,
             self._last_hb,
             t,
-            elapsed,
+            gap,
             self._started,
             self.config.feedback_timeout,
             self.config.heartbeat_timeout,
@@ -196,11 +202,12 @@ class CanWinchDriver(WinchDriver):
         """Cable ``c``'s drive fault, if any (sets its state and fault code)."""
         raise NotImplementedError
 
-    def _reads_elapsed(self, t: float) -> bool:
-        """True unless this read is at the same instant as the last (which misses nothing)."""
-        elapsed = t > self._last_read
+    def _read_gap(self, t: float) -> float:
+        """s since the last read, at most two periods (0 at the same instant: that misses
+        nothing; the first read: one period)."""
+        gap = t - self._last_read if math.isfinite(self._last_read) else self.period
         self._last_read = t
-        return elapsed
+        return min(max(gap, 0.0), 2.0 * self.period)
 
     def _where(self, c: int) -> str:
         return f"{self.drive_label} of cable index {c} (node {int(self.node[c])})"
@@ -209,7 +216,7 @@ class CanWinchDriver(WinchDriver):
         """The timeout error of cable ``c`` when a limit is passed (``feedback_timeout`` s
         without feedback, ``heartbeat_timeout`` s without heartbeat)."""
         age = float(self.states.feedback_age[c])
-        if self._started and math.isfinite(age) and age > self.config.feedback_timeout:
+        if self._silent[c] > self.config.feedback_timeout:
             why = (
                 f" (the last {int(self._implausible[c])} were position jumps no motor can "
                 "make: corrupted frames or a failing encoder)"
@@ -217,9 +224,9 @@ class CanWinchDriver(WinchDriver):
                 else ""
             )
             return DriverTimeoutError(
-                f"{self._where(c)}: no {self.feedback_label} for {age * 1e3:.1f} ms "
-                f"({int(self._missed[c])} reads; feedback_timeout "
-                f"{self.config.feedback_timeout * 1e3:g} ms){why}",
+                f"{self._where(c)}: no {self.feedback_label} for {self._silent[c] * 1e3:.1f} ms "
+                f"of running cycles ({int(self._missed[c])} reads, last {age * 1e3:.1f} ms ago; "
+                f"feedback_timeout {self.config.feedback_timeout * 1e3:g} ms){why}",
                 c,
             )
         if (
@@ -237,22 +244,25 @@ class CanWinchDriver(WinchDriver):
 
 @njit(cache=True)
 def liveness_kernel(
-    fresh, fb_stamp, missed, last_hb, t, elapsed, started, fb_timeout, hb_timeout, age
+    fresh, fb_stamp, missed, silent, last_hb, t, gap, started, fb_timeout, hb_timeout, age
 ):  # pragma: no cover - compiled
-    """Per cable: the count of consecutive reads without feedback (a read at the same instant
-    as the last misses nothing; silence counts once the drives were started and have spoken),
-    the feedback age (s). Returns the cable-reads missed now and whether a cable went
-    ``fb_timeout`` s without feedback or ``hb_timeout`` s without heartbeat."""
+    """Per cable: the count of consecutive reads without feedback and their time ``silent``
+    (s; each read adds ``gap``, the capped time since the last read; silence counts once the
+    drives were started and have spoken), the feedback age (s). Returns the cable-reads missed
+    now and whether a cable was silent over ``fb_timeout`` s or ``hb_timeout`` s without
+    heartbeat."""
     n_missed = 0
     late = False
     for c in range(len(fresh)):
         if fresh[c]:
             missed[c] = 0
-        elif elapsed and started and np.isfinite(fb_stamp[c]):
+            silent[c] = 0.0
+        elif gap > 0.0 and started and np.isfinite(fb_stamp[c]):
             missed[c] += 1
+            silent[c] += gap
             n_missed += 1
         age[c] = t - fb_stamp[c]
-        if started and np.isfinite(fb_stamp[c]) and age[c] > fb_timeout:
+        if silent[c] > fb_timeout:
             late = True
         if started and np.isfinite(last_hb[c]) and t - last_hb[c] > hb_timeout:
             late = True

@@ -43,9 +43,11 @@ class BusConfig:
 class DrivesConfig:
     driver: str = "cia402"
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
-    # s without feedback from a drive before it is taken as lost: a time, not a count of
-    # cycles, so the tolerance is the same at every rate (30 ms: a 20 ms stall of the loop
-    # rides through; the old count of 5 missed reads was 10-12 ms at 500 Hz, 20 at 250 Hz)
+    # s of running cycles without feedback from a drive before it is taken as lost: a time,
+    # not a count of cycles, so the tolerance is the same at every rate (30 ms; the old count
+    # of 5 missed reads was 10-12 ms at 500 Hz, 20 ms at 250 Hz). A stall of the loop itself
+    # counts at most two periods: no SYNC went out, the drives could not answer
+    # (drivers/canbase.py)
     feedback_timeout: float = 0.03
     heartbeat_timeout: float = 0.5  # s without a drive's heartbeat: drive lost
     heartbeat_period: float = 0.1  # s, the controller's own heartbeat
