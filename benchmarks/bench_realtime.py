@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 import random
+import signal
 import subprocess
 import sys
 import time
@@ -28,7 +29,25 @@ ROOT = Path(__file__).resolve().parents[1]
 GROUP = "239.74.163.2"
 
 
-def run_pair(rate: float, seconds: float, port: int, faults: float = 0.0) -> str:
+SNIFFER = """
+import sys, can
+bus = can.Bus(interface="udp_multicast", channel=sys.argv[1], port=int(sys.argv[2]))
+n = 0
+try:
+    while True:
+        if bus.recv(1.0) is not None:
+            n += 1
+except KeyboardInterrupt:
+    pass
+finally:
+    print(f"sniffer: {n} frames", flush=True)
+    bus.shutdown()
+"""
+
+
+def run_pair(
+    rate: float, seconds: float, port: int, faults: float = 0.0, sniffer: bool = False
+) -> str:
     bus = ["--can-interface", "udp_multicast", "--can-channel", GROUP]
     bus += ["--can-option", f"port={port}"]
     config = str(ROOT / "config" / "rowc.toml")
@@ -38,6 +57,15 @@ def run_pair(rate: float, seconds: float, port: int, faults: float = 0.0) -> str
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+    )
+    sniff = (
+        subprocess.Popen(
+            [sys.executable, "-c", SNIFFER, GROUP, str(port)],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        if sniffer
+        else None
     )
     try:
         assert sim.stdout is not None
@@ -51,8 +79,15 @@ def run_pair(rate: float, seconds: float, port: int, faults: float = 0.0) -> str
             text=True,
             timeout=seconds + 120,
         )
-        return run.stdout + run.stderr + f"(exit code {run.returncode})\n"
+        out = run.stdout + run.stderr + f"(exit code {run.returncode})\n"
+        if sniff is not None:
+            sniff.send_signal(signal.SIGINT)
+            out += sniff.communicate(timeout=10)[0]
+        return out
     finally:
+        if sniff is not None and sniff.poll() is None:
+            sniff.kill()
+            sniff.wait()
         sim.terminate()
         try:
             sim.wait(timeout=10)
@@ -68,14 +103,18 @@ def main() -> None:
     ap.add_argument(
         "--faults", type=float, default=0.0, help="random transient faults a second, in the sim"
     )
+    ap.add_argument(
+        "--sniffer", action="store_true", help="a third process reading every frame of the bus"
+    )
     args = ap.parse_args()
     print(machine_line())
     port = random.Random(os.getpid()).randrange(40000, 50000)
     for rate in (float(r) for r in args.rates.split(",")):
         t0 = time.monotonic()
-        out = run_pair(rate, args.seconds, port, args.faults)
+        out = run_pair(rate, args.seconds, port, args.faults, args.sniffer)
         print(f"--- {rate:g} Hz, {args.seconds:g} s ({time.monotonic() - t0:.0f} s wall)")
         keep = ("summary", "cycles", "per phase", "tracking", "exit code", "faults handled")
+        keep += ("sniffer",)
         keep += () if args.faults else ("FAULT", "warning")
         for line in out.splitlines():
             if any(k in line for k in keep):
