@@ -229,3 +229,18 @@ def test_typed_faults_in_the_closed_loop():
             assert c.state in (State.STOPPING, State.FAULT)
             assert c.fault_kind is kind, c.fault_reason
             assert next(k for _, k in c.data.faults) is kind
+
+
+def test_enable_starts_with_no_saturation_carried_over(controller):
+    """A saturation fault leaves its saturated time behind; an enable after the reset starts
+    from zero (the demo's reset + enable faulted again at once, every round: cross-process,
+    250 Hz, 5 minutes)."""
+    c = controller
+    c.data.state = State.READY
+    c.drives.lifecycle = Lifecycle.INACTIVE
+    c.data.saturated_for, c.data.saturation = 1.42, 0.3
+    c.mailbox.clear()
+    assert c.submit(Command(CommandKind.ENABLE))
+    c._handle_commands(0.0)
+    assert c.data.state is State.ENABLING
+    assert c.data.saturated_for == 0.0 and c.data.saturation == 1.0

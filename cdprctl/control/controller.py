@@ -304,6 +304,8 @@ class Controller:
         d.tensions[:] = d.hold_tensions
         self.pose.reset()
         self.observer.reset()
+        # a fresh start: the saturation of before the fault is not this run's
+        d.saturation, d.saturated_for = 1.0, 0.0
         self.grippers.hold()
         drv.begin_activate()
         self.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
