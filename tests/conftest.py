@@ -53,3 +53,30 @@ def random_poses(model: RobotModel, n: int, rng: np.random.Generator, tilt: floa
         axis /= np.linalg.norm(axis)
         R = exp_so3(axis * rng.uniform(0.0, tilt)) @ R0
         yield p, R
+
+
+class FakeDrives:
+    """The drives as the control side sees them (``control.supervisor.DrivePort``), recording
+    what it asks of them; ``lifecycle`` as given."""
+
+    def __init__(self, m: int, lifecycle=None):
+        from drivers.base import Lifecycle, WinchStates
+
+        self.lifecycle = Lifecycle.ACTIVE if lifecycle is None else lifecycle
+        self.error = None
+        self.states = WinchStates(m)
+        self.states.feedback_age[:] = 0.0
+        self.calls: list[str] = []
+
+    def begin_activate(self) -> None:
+        self.calls.append("activate")
+
+    def begin_deactivate(self) -> None:
+        from drivers.base import Lifecycle
+
+        self.calls.append("deactivate")
+        if self.lifecycle is Lifecycle.ACTIVE:
+            self.lifecycle = Lifecycle.INACTIVE
+
+    def begin_recover(self, settle: float = 0.5) -> None:
+        self.calls.append("recover")

@@ -9,33 +9,22 @@ from unittest import mock
 
 import numpy as np
 import pytest
+from conftest import FakeDrives
 
 from cdprctl.control.controller import Controller
 from cdprctl.control.distribution import Distribution
 from cdprctl.model import load_robot
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
-from drivers.base import Lifecycle, WinchStates
+from drivers.base import Lifecycle
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWC = load_robot(ROOT / "config" / "rowc.toml")
 
 
-class Drives:
-    lifecycle = Lifecycle.INACTIVE
-    error = None
-
-    def __init__(self, m: int):
-        self.states = WinchStates(m)
-
-    def begin_activate(self) -> None: ...
-    def begin_deactivate(self) -> None: ...
-    def begin_recover(self, settle: float = 0.5) -> None: ...
-
-
 @pytest.fixture()
 def at_home():
     """A controller whose estimate is the home pose (θ = 0: the home lengths)."""
-    c = Controller(ROWC, Drives(ROWC.n_cables))
+    c = Controller(ROWC, FakeDrives(ROWC.n_cables, Lifecycle.INACTIVE))
     m = ROWC.n_cables
     c.estimator.update(0.0, np.zeros(m), ROWC.tension_min.copy())
     c.data.wrench[:] = c.pose.gravity_hold(c.estimator.rotation)

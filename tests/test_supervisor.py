@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import FakeDrives
 
 from cdprctl.control.commands import ACCEPTED_IN, Command, CommandKind, accepted
 from cdprctl.control.controller import Controller
@@ -16,7 +17,7 @@ from cdprctl.control.supervisor import TRANSITIONS, Supervisor
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model import load_robot
 from cdprctl.tda import TDAMethod, TDAOptions
-from drivers.base import Lifecycle, WinchStates
+from drivers.base import Lifecycle
 from drivers.errors import DriveFaultError, DriverOperationError, DriverTimeoutError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,32 +25,10 @@ ROWC = load_robot(ROOT / "config" / "rowc.toml")
 CFG = ROWC.control
 
 
-class Drives:
-    """The drives as the control side sees them (``DrivePort``), recording its requests."""
-
-    def __init__(self, m: int, lifecycle: Lifecycle = Lifecycle.ACTIVE):
-        self.lifecycle = lifecycle
-        self.error = None
-        self.states = WinchStates(m)
-        self.states.feedback_age[:] = 0.0
-        self.calls: list[str] = []
-
-    def begin_activate(self) -> None:
-        self.calls.append("activate")
-
-    def begin_deactivate(self) -> None:
-        self.calls.append("deactivate")
-        if self.lifecycle is Lifecycle.ACTIVE:
-            self.lifecycle = Lifecycle.INACTIVE
-
-    def begin_recover(self, settle: float = 0.5) -> None:
-        self.calls.append("recover")
-
-
 def rig(state: State, lifecycle: Lifecycle = Lifecycle.ACTIVE):
     d = ControlData(ROWC.n_cables, 0)
     d.state = state
-    drives = Drives(ROWC.n_cables, lifecycle)
+    drives = FakeDrives(ROWC.n_cables, lifecycle)
     stops: list[bool] = []
     return Supervisor(CFG, d, drives, lambda: stops.append(True)), d, drives, stops
 
@@ -173,7 +152,7 @@ def command_of(kind: CommandKind) -> Command:
 
 @pytest.fixture(scope="module")
 def controller():
-    return Controller(ROWC, Drives(ROWC.n_cables, Lifecycle.INACTIVE))
+    return Controller(ROWC, FakeDrives(ROWC.n_cables, Lifecycle.INACTIVE))
 
 
 @pytest.mark.parametrize("kind", list(CommandKind))

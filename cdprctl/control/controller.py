@@ -35,7 +35,7 @@ from cdprctl.control.wrench import PoseController
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, log_so3, rpy_to_matrix
+from cdprctl.rotation import FloatArray, rpy_to_matrix
 from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.base import Lifecycle, WinchStates
 
@@ -158,8 +158,7 @@ class Controller:
             ):  # the gateway validates; this is the last guard before the trajectory
                 d.events.append((d.time, "move ignored: pose or speed not finite/in range"))
                 return True
-            R = rpy_to_matrix(*pose[3:])
-            cmd.target = np.concatenate([pose[:3], log_so3(R @ self.model.home.rotation.T)])
+            cmd.target = self.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
         elif cmd.kind is CommandKind.SET_TDA:
             errors = ["no options"] if cmd.tda is None else cmd.tda.validate(self.model)
             if errors:
@@ -281,8 +280,7 @@ class Controller:
         self.distribution.stretch(ff)
 
     def _pose6(self) -> FloatArray:
-        e = self.estimator
-        return np.concatenate([e.position, log_so3(e.rotation @ self.model.home.rotation.T)])
+        return self.trajectory.coordinates(self.estimator.position, self.estimator.rotation)
 
     # -- commands (acceptance: commands.ACCEPTED_IN) -----------------------------------------------
     def _handle_commands(self, t: float) -> None:

@@ -22,7 +22,7 @@ from ruckig import (
 )
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
+from cdprctl.rotation import FloatArray, log_so3
 
 # Phase synchronisation: a straight line in the 6-D pose space, what a point-to-point move of
 # a CDPR should be; ruckig (0.19) raises RuckigError on some inputs ("error in step 1"), then
@@ -35,6 +35,7 @@ class Trajectory:
         c = model.control
         self.model = model
         self.otg = Ruckig(6, period)
+        self._dt = period  # s, ruckig's step (read from Python: the binding's costs ~µs)
         self.inp = InputParameter(6)
         self.out = OutputParameter(6)
         self.limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
@@ -49,6 +50,11 @@ class Trajectory:
         self.finished = True
         self.result = Result.Finished
         self._velocity_mode = False  # braking: ruckig's velocity interface to zero velocity
+
+    def coordinates(self, position: FloatArray, rotation: FloatArray) -> FloatArray:
+        """The trajectory's 6 coordinates of a pose: ``position`` (m) and the rotation vector
+        (rad) of ``rotation`` from the home orientation."""
+        return np.concatenate([position, log_so3(rotation @ self.model.home.rotation.T)])
 
     def reset(self, x: FloatArray) -> None:
         """Hold still at ``x`` (no motion, no jump)."""
@@ -96,8 +102,8 @@ class Trajectory:
         moves on by the time that passed, not by one period."""
         if self.finished:
             return
-        if dt > 0.0 and abs(dt - self.otg.delta_time) > 1e-9:
-            self.otg.delta_time = dt
+        if dt > 0.0 and abs(dt - self._dt) > 1e-9:
+            self.otg.delta_time = self._dt = dt
         inp = self.inp
         inp.current_position = self.position.tolist()
         inp.current_velocity = self.velocity.tolist()
