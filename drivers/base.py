@@ -121,6 +121,9 @@ class WinchDriver(ABC):
         self.encoder_cpr = np.array([c.winch.encoder_counts_per_rev for c in model.cables])
         self._last_command = np.zeros(self.m)
         self._command = np.zeros(self.m)
+        # rad, motor side: each winch's position target, for drives in position mode
+        # ([drives] mode = "csp"); ``write`` takes it with the torques (their feed-forward)
+        self.targets = np.zeros(self.m)
         self._activating = False
         self._recover_until = -math.inf
 
@@ -287,10 +290,18 @@ class WinchDriver(ABC):
             self.lifecycle = Lifecycle.ACTIVE
         return self.states
 
-    def write(self, t: float | None, torques: np.ndarray, force: bool = False) -> None:
+    def write(
+        self,
+        t: float | None,
+        torques: np.ndarray,
+        force: bool = False,
+        targets: np.ndarray | None = None,
+    ) -> None:
         """Send motor torques (N·m), clamped to each winch's limit; non-finite values are
         replaced by the last valid command. Only applied while ``ACTIVE`` (zero otherwise,
-        the drives being disabled). Never raises."""
+        the drives being disabled). In position mode also each winch's position ``targets``
+        (rad; a non-finite one keeps the last valid target, none keeps them all): the
+        torques are their feed-forward. Never raises."""
         if self.lifecycle in (Lifecycle.UNCONFIGURED, Lifecycle.FINALIZED):
             return
         now = self.clock() if t is None else t
@@ -304,6 +315,12 @@ class WinchDriver(ABC):
         if self.lifecycle is not Lifecycle.ACTIVE and not force and not self._activating:
             cmd[:] = 0.0
         self._last_command[:] = cmd
+        if targets is not None and targets.shape == self.targets.shape:
+            finite_into(targets, self.targets)
+        elif self.lifecycle is not Lifecycle.ACTIVE and not self._activating:
+            # the drives are off: the targets follow the motors, so that an enable without
+            # targets given holds each motor where it stands instead of driving it to zero
+            self.targets[:] = self.states.position
         try:
             err = self._write_internal(now, cmd)
         except Exception as exc:
@@ -334,6 +351,7 @@ class WinchDriver(ABC):
         a first call compiles (seconds) or loads from numba's cache (ms), neither of which
         belongs in the loop (cdprctl/control/warm_up.py)."""
         clamp_kernel(self._command, self._last_command.copy(), self.torque_limit, np.zeros(self.m))
+        finite_into(self.targets, self.targets.copy())
 
     @abstractmethod
     def _open(self) -> None:
@@ -380,6 +398,14 @@ def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
         if out[i] != v:
             clamped += 1
     return rejected, clamped
+
+
+@njit(cache=True)
+def finite_into(values, out):  # pragma: no cover - compiled
+    """``out[i]`` ← ``values[i]`` where it is finite; the others keep their last value."""
+    for i in range(len(out)):
+        if np.isfinite(values[i]):
+            out[i] = values[i]
 
 
 _REGISTRY: dict[str, type[WinchDriver]] = {}

@@ -42,14 +42,18 @@ class BusLoad:
         return "ok"
 
 
-def cycle_frames(driver: str, n: int, velocity_pdo: bool) -> list[tuple[str, int, int]]:
+def cycle_frames(
+    driver: str, n: int, velocity_pdo: bool, mode: str = "cst"
+) -> list[tuple[str, int, int]]:
     """(what, count, data bytes) of one control cycle on a bus with ``n`` drives."""
     if driver == "odrive":
         # Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and Get_Torques (8) in
         return [("Set_Input_Torque", n, 4), ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
     frames = [
         ("SYNC", 1, 0),
-        ("RPDO1 controlword+torque", n, 4),
+        ("RPDO1 controlword+position+torque offset", n, 8)
+        if mode == "csp"
+        else ("RPDO1 controlword+torque", n, 4),
         ("TPDO1 status+torque+position", n, 8),
     ]
     if velocity_pdo:
@@ -63,7 +67,7 @@ def bus_loads(drives: DrivesConfig, rate: float, heartbeat_rate: float = 10.0) -
     out = []
     for b, bus in enumerate(drives.buses):
         n = len(bus.cables)
-        frames = cycle_frames(drives.driver, n, drives.velocity_source == "pdo")
+        frames = cycle_frames(drives.driver, n, drives.velocity_source == "pdo", drives.mode)
         bits = sum(count * frame_bits(nb) for _, count, nb in frames)
         hb_bits_per_s = (n + 1) * frame_bits(1 if drives.driver == "cia402" else 8) * heartbeat_rate
         load = (bits * rate + hb_bits_per_s) / bus.bitrate

@@ -8,6 +8,7 @@ each of its cycles; in real time (``cdprctl sim``) a loop calls it against the w
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import can
@@ -17,6 +18,17 @@ from drivers.buses import open_bus
 from drivers.cia402 import protocol as p402
 from sim_backend.drives.cia402 import Cia402Drive
 from sim_backend.plant import CdprPlant
+
+#: the damping ratio of the simulated drives' position loops
+POSITION_LOOP_DAMPING = 0.7
+
+
+def position_gains(rotor_inertia: float, bandwidth: float) -> tuple[float, float]:
+    """(kp N·m/rad, kd N·m·s/rad) of a simulated drive's position loop: the rotor alone
+    placed at ``bandwidth`` Hz with damping ``POSITION_LOOP_DAMPING`` (kp = J ω², kd = 2 ζ J ω);
+    the cable adds its stiffness on top (physics.servo_torque)."""
+    w = 2.0 * math.pi * bandwidth
+    return rotor_inertia * w * w, 2.0 * POSITION_LOOP_DAMPING * rotor_inertia * w
 
 
 class SimNetwork:
@@ -55,6 +67,7 @@ class SimNetwork:
                         w.torque_limit,
                         self.cfg.comm_timeout,
                         self.cfg.velocity_source == "pdo",
+                        position_gains(w.rotor_inertia, self.cfg.position_loop_bandwidth),
                     )
                 table[n] = drive
                 self.drives[c] = drive

@@ -11,7 +11,9 @@ Conventions (docs/simulator.md):
   geometric length (free part + arc on the pulley). Pulley friction as a capstan factor
   ``exp(±μ β)`` on the winch side, by the direction the cable moves.
 * Winch: ``J θ̈ = τ_m − (r_d/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)``; a closed brake holds ``θ``
-  (a slipping brake, a fault, lets the drum pay out at a set rate).
+  (a slipping brake, a fault, lets the drum pay out at a set rate). ``τ_m`` is the drive's
+  torque: its target (torque mode), or its own position loop at every physics step around the
+  target interpolated between SYNCs, plus a torque offset (position mode, CiA 402 CSP).
 * Platform: a rigid body (mass, COM, inertia about the COM), Newton-Euler at the COM, gravity,
   an external wrench at ``P`` (force and moment, base frame).
 
@@ -34,7 +36,16 @@ from cdprctl.model.grippers import in_series
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args
 from cdprctl.rotation import FloatArray
-from sim_backend.physics import Body, BodyState, Inputs, Jaws, JawState, Winches, physics_kernel
+from sim_backend.physics import (
+    Body,
+    BodyState,
+    Inputs,
+    Jaws,
+    JawState,
+    Servo,
+    Winches,
+    physics_kernel,
+)
 
 
 @dataclass
@@ -99,6 +110,11 @@ class CdprPlant:
         self.drum_slip = np.zeros(m)  # m of cable slipped off the drum, unseen by the encoder
         self.ext_force = np.zeros(3)  # N at P, base frame
         self.ext_moment = np.zeros(3)  # N·m, base frame
+        # the drives' position loops (CSP; physics.Servo): set by the simulated drives
+        self.servo = Servo(
+            np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
+            np.array([w.winch.torque_limit for w in c]), np.zeros(m),
+        )  # fmt: skip
         self._init_grippers()
         # outputs of the last step
         self.tension = np.zeros(m)
@@ -145,7 +161,7 @@ class CdprPlant:
             self.g_c_contact,
         )
         jaw_state = JawState(self.jaw_travel, self.jaw_speed, self.jb_tension, self.contact_force)
-        self._args = tuple(kernel_args(b) for b in (body, winches, state, inputs))
+        self._args = tuple(kernel_args(b) for b in (body, winches, state, inputs, self.servo))
         self._jaw_args = (kernel_args(jaws), kernel_args(jaw_state))
         self.set_pose(model.home.position, model.home.rotation, None)
 
@@ -267,7 +283,7 @@ class CdprPlant:
         """Advance ``duration`` seconds in physics steps of ``options.physics_dt``."""
         n = max(1, round(duration / self.opt.physics_dt))
         dt = duration / n
-        body, winches, state, inputs = self._args
+        body, winches, state, inputs, servo = self._args
         jaws, jaw_state = self._jaw_args
         physics_kernel(
             n,
@@ -277,6 +293,7 @@ class CdprPlant:
             winches,
             state,
             inputs,
+            servo,
             self.tension,
             jaws,
             jaw_state,

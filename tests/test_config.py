@@ -305,3 +305,17 @@ def test_no_broken_file_starts_the_loop(tmp_path, capsys, text, expected):
     out = capsys.readouterr()
     assert any(all(x in line for x in expected) for line in out.err.splitlines()), out.err
     assert "ready:" not in out.out and "cycles" not in out.out
+
+
+def test_drive_mode_keys(tmp_path):
+    """``[drives] mode`` names the mode and the rule; position mode needs CiA 402 drives; a
+    ``[drives]`` table without buses keeps the default simulated bus."""
+    errs = errors_of(tmp_path, BASE + '\n[drives]\nmode = "cps"\n')
+    assert any("drives.mode" in e and "cps" in e and "cst, csp" in e for e in errs), errs
+    errs = errors_of(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\nmode = "csp"\n')
+    assert any("drives.mode" in e and "cia402" in e for e in errs), errs
+    errs = errors_of(tmp_path, BASE + "\n[drives]\nposition_loop_bandwidth = -5\n")
+    assert any("drives.position_loop_bandwidth" in e and "Hz" in e for e in errs), errs
+    model = load_robot(write(tmp_path, BASE + '\n[drives]\nmode = "csp"\n', "ok.toml"))
+    assert model.drives.mode == "csp" and len(model.drives.buses) == 1
+    assert model.drives.buses[0].cables == tuple(range(model.n_cables))

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.control.cable_space import CableSpace
 from cdprctl.control.commands import Command, CommandKind, accepted
 from cdprctl.control.data import ControlData
 from cdprctl.control.distribution import Distribution
@@ -63,6 +64,7 @@ class Controller:
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
         self.observer = WrenchObserver(model, d, e, self.winches)
+        self.cable_space = CableSpace(model, d, tr, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.winches, self.distribution,
                                        self.ext_wrench)  # fmt: skip
         self.supervisor = Supervisor(c, d, drives, tr.stop_here)
@@ -186,7 +188,12 @@ class Controller:
         if not self.grippers.n:  # the known external wrench, whoever set it, from now on
             d.ext_total[:] = self.ext_wrench
         self._handle_commands(t)
-        if d.cycle % self._stretch_every == 0:
+        cs = self.cable_space
+        if cs.enabled and d.state in OBSERVED_STATES:
+            # the drives hold the lengths: the cables carry what their torques say
+            cs.measure(st.torque, st.velocity)
+            d.stretch_tensions[:] = d.measured_tensions
+        elif d.cycle % self._stretch_every == 0:
             self._refresh_stretch_tensions()
         e = self.estimator
         fk = e.update(st.stamp, st.position, d.stretch_tensions, st.velocity, st.feedback_age)
@@ -240,6 +247,8 @@ class Controller:
         self.winches.update(
             d.tensions, e.kin.WT, self.trajectory.acceleration, st.velocity, active, d.torques
         )
+        if cs.enabled:
+            cs.targets(active, st.position)
         ph[5] = (clock() - t5) / 1e3
 
     # s: a longer gap between cycles (the first one, or after the loop stood still) steps by a
@@ -302,6 +311,7 @@ class Controller:
         d.tensions[:] = d.hold_tensions
         self.pose.reset()
         self.observer.reset()
+        self.cable_space.start_measuring()
         # a fresh start: the saturation of before the fault is not this run's
         d.saturation, d.saturated_for = 1.0, 0.0
         self.grippers.hold()

@@ -52,9 +52,13 @@ class ControlData:
         self.tensions = np.zeros(m)  # N, commanded
         self.hold_tensions = np.zeros(m)  # N, the last feasible distribution
         self.stretch_tensions = np.zeros(m)  # N, feed-forward ones, for the estimator
+        # N: what the drives' torques say the cables carry, low-passed (cable_space.py; in
+        # position mode the estimator's stretch tensions while the drives are on)
+        self.measured_tensions = np.zeros(m)
         self.tda_status = TDAStatus.OK
         # winch torques (torques.py)
-        self.torques = np.zeros(m)  # N·m, motor, commanded
+        self.torques = np.zeros(m)  # N·m, motor, commanded (the feed-forward in position mode)
+        self.motor_target = np.zeros(m)  # rad: each winch's position target (cable_space.py)
         # grippers (grippers.py)
         self.jb_load = np.zeros(g)  # N, what each jB carries
         self.grip_target = np.full(g, math.nan)  # m, commanded travel

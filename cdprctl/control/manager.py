@@ -50,7 +50,7 @@ class ControllerManager:
             ph[0] = (clock() - t0) / 1e3
             self.controller.update(t, st)
             t6 = clock()
-            self.driver.write(t, self.data.torques)
+            self.driver.write(t, self.data.torques, targets=self.data.motor_target)
             ph[6] = (clock() - t6) / 1e3
         except Exception as exc:
             self.controller.internal_error(t, exc)

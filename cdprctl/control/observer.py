@@ -32,7 +32,7 @@ from numba import njit
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
-from cdprctl.control.torques import WinchTorques, friction_torque
+from cdprctl.control.torques import WinchTorques, applied_tension
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import kernel_args
 
@@ -75,9 +75,9 @@ def observer_kernel(
     r, viscous, coulomb = winches
     m = torque.shape[0]
     for i in range(m):
-        t_a[i] = (
-            torque[i] - friction_torque(viscous[i], coulomb[i], velocity[i]) - accel_term[i]
-        ) / r[i]
+        t_a[i] = applied_tension(
+            torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
+        )
     # known forces on the platform: cables and gravity (moment about P: (R c) × m g)
     rc = np.empty(3)
     for i in range(3):

@@ -25,6 +25,14 @@ def friction_torque(viscous, coulomb, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def applied_tension(torque, viscous, coulomb, w, accel_term, r):  # pragma: no cover - compiled
+    """N a winch applies to its cable from the drive's measured motor ``torque`` (N·m): the
+    torque law taken back, less friction at motor speed ``w`` (rad/s) and the rotor-inertia
+    term ``accel_term`` (N·m), over ``r`` (m/rad)."""
+    return (torque - friction_torque(viscous, coulomb, w) - accel_term) / r
+
+
+@njit(cache=True)
 def friction_kernel(viscous, coulomb, velocity, cables, out):  # pragma: no cover - compiled
     """``out[j]`` ← the friction torque (N·m) of winch ``cables[j]`` at ``velocity`` (rad/s)."""
     for j in range(cables.shape[0]):

@@ -81,5 +81,10 @@ def warm_up(controller: Controller) -> None:
     c.winches.update(d.tensions, c.estimator.kin.WT, c.trajectory.acceleration, zeros, True,
                      d.torques)  # fmt: skip
     d.torques[:] = 0.0
+    # the cable-space kernels (position mode), on throwaway outputs
+    target, measured = d.motor_target.copy(), d.measured_tensions.copy()
+    c.cable_space.targets(True, zeros)
+    c.cable_space.measure(zeros, zeros)
+    d.motor_target[:], d.measured_tensions[:] = target, measured
     d.wrench[:] = 0.0
     d.pose_error[:] = 0.0

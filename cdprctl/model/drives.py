@@ -14,6 +14,8 @@ from cdprctl.model.reader import TableReader
 
 DRIVES_KEYS = (
     "driver",
+    "mode",
+    "position_loop_bandwidth",
     "rated_torque",
     "feedback_timeout",
     "missed_feedback_limit",
@@ -42,6 +44,13 @@ class BusConfig:
 @dataclass(frozen=True)
 class DrivesConfig:
     driver: str = "cia402"
+    # "cst": the controller sends torques (cyclic synchronous torque); "csp": it sends each
+    # winch's position target with the torque as feed-forward (cyclic synchronous position,
+    # torque offset): the fast loop per cable is the drive's own (docs/control.md)
+    mode: str = "cst"
+    # Hz: the simulated drives' position loop in "csp" (kp = J ω², kd = 2 ζ J ω on the rotor
+    # inertia, ζ = 0.7); a real drive is tuned with its vendor's tool and ignores this
+    position_loop_bandwidth: float = 50.0
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
     # s of running cycles without feedback from a drive before it is taken as lost: a time,
     # not a count of cycles, so the tolerance is the same at every rate (30 ms; the old count
@@ -65,19 +74,24 @@ class DrivesConfig:
         raise KeyError(cable)
 
 
-def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
-    return DrivesConfig(
-        rated_torque=rated_torque,
-        buses=(
-            BusConfig(
-                interface="virtual",
-                channel=f"cdpr-{name}",
-                bitrate=1_000_000,
-                cables=tuple(range(n_cables)),
-                node_ids=tuple(range(1, n_cables + 1)),
-            ),
+MODES = ("cst", "csp")
+
+
+def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
+    """One simulated bus: node ids 1..m on python-can's ``virtual`` interface."""
+    return (
+        BusConfig(
+            interface="virtual",
+            channel=f"cdpr-{name}",
+            bitrate=1_000_000,
+            cables=tuple(range(n_cables)),
+            node_ids=tuple(range(1, n_cables + 1)),
         ),
     )
+
+
+def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
+    return DrivesConfig(rated_torque=rated_torque, buses=default_buses(name, n_cables))
 
 
 def read_drives(
@@ -91,6 +105,14 @@ def read_drives(
     driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
     if driver not in DRIVERS:
         rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
+    mode = rd.string(t, "mode", "drives", required=False, default="cst") or "cst"
+    if mode not in MODES:
+        rd.error("drives.mode", mode, "", f"must be one of {', '.join(MODES)}")
+    elif mode == "csp" and driver != "cia402":
+        rd.error("drives.mode", mode, "", "csp (position targets) needs driver = 'cia402'")
+    pos_bw = rd.number(
+        t, "position_loop_bandwidth", "drives", "Hz", required=False, default=50.0, positive=True
+    )
     rated = rd.number(
         t, "rated_torque", "drives", "N·m", required=False, default=rated_default, positive=True
     )
@@ -128,13 +150,17 @@ def read_drives(
         rd.error("drives.velocity_source", vsrc, "", "must be 'derived' or 'pdo'")
     log_file = rd.string(t, "log_file", "drives", required=False, default=None)
     buses: list[BusConfig] = []
+    seen_cable: dict[int, str] = {}
     raw = t.get("buses")
-    if not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
+    if raw is None:  # the default simulated bus
+        raw = []
+        buses.extend(default_buses(name, len(cable_names)))
+        seen_cable.update({i: "the default bus" for i in range(len(cable_names))})
+    elif not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
         rd.errors.append(
             f"{rd.file}: drives.buses must be an array of tables [[drives.buses]], at least one"
         )
         raw = []
-    seen_cable: dict[int, str] = {}
     for bi, bt in enumerate(raw):
         path = f"drives.buses[{bi}]"
         rd.check_keys(bt, BUS_KEYS, path)
@@ -228,6 +254,8 @@ def read_drives(
         return None
     return DrivesConfig(
         driver=driver,
+        mode=mode,
+        position_loop_bandwidth=float(pos_bw or 50.0),
         rated_torque=float(rated if rated is not None else rated_default),
         feedback_timeout=float(fb_to or 0.03),
         heartbeat_timeout=float(hb_to or 0.5),

@@ -139,3 +139,12 @@ def controlword_kernel(
             out[c, 0] = _DISABLE_VOLTAGE
         pm = np.rint(torques[c] * 1000.0 / rated_torque)
         out[c, 1] = int(clamp(pm, -32767.0, 32767.0))
+
+
+@njit(cache=True)
+def target_counts_kernel(targets, rad_per_count, out):  # pragma: no cover - compiled
+    """``out[c]`` ← the position target (rad) of each drive in encoder counts, as the 32-bit
+    signed value of 0x607A (the drive unwraps it against its own position actual)."""
+    for c in range(len(targets)):
+        n = np.int64(np.rint(targets[c] / rad_per_count[c]))
+        out[c] = ((n + 0x80000000) & 0xFFFFFFFF) - 0x80000000

@@ -1,9 +1,10 @@
-"""CiA 402 drives in cyclic synchronous torque mode over one or several python-can buses.
+"""CiA 402 drives in cyclic synchronous torque or position mode over python-can buses.
 
 Per cycle, ``read`` drains every bus with ``recv(0)`` and decodes TPDOs, EMCYs and heartbeats;
-``write`` sends each drive's RPDO (controlword from the power-state table + target torque) and
-then SYNC on each bus, and the controller's heartbeat when due. Set-up (NMT start, SDO: mode of
-operation 10, heartbeat producer time, abort-connection option quick stop) happens in
+``write`` sends each drive's RPDO (controlword from the power-state table + target torque, or
+in position mode target position + torque offset) and then SYNC on each bus, and the
+controller's heartbeat when due. Set-up (NMT start, SDO: mode of operation 10 or 8 by
+``[drives] mode``, heartbeat producer time, abort-connection option quick stop) happens in
 ``configure``, outside the loop.
 """
 
@@ -55,12 +56,18 @@ class Cia402Driver(CanWinchDriver):
             self._dispatch[(b, p.EMCY + n)] = (3, c)
             self._dispatch[(b, p.HEARTBEAT + n)] = (4, c)
             self._dispatch[(b, p.SDO_TX + n)] = (5, c)
+        self.mode = p.MODES[cfg.mode]
+        self._csp = self.mode == p.MODE_CSP
+        size = p.RPDO1_CSP_STRUCT.size if self._csp else p.RPDO1_STRUCT.size
         self._rpdo = [
             can.Message(
-                arbitration_id=p.RPDO1 + int(self.node[c]), data=bytearray(4), is_extended_id=False
+                arbitration_id=p.RPDO1 + int(self.node[c]),
+                data=bytearray(size),
+                is_extended_id=False,
             )
             for c in range(m)
         ]
+        self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
         self._sync = can.Message(arbitration_id=p.SYNC, data=b"", is_extended_id=False)
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
@@ -103,14 +110,15 @@ class Cia402Driver(CanWinchDriver):
         self._nmt_start_all()
         hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 3))
         for c in range(self.m):
-            self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, p.MODE_CST, 1, timeout)
+            self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, self.mode, 1, timeout)
             self._sdo_write(c, p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2, timeout)
             self._sdo_write(c, p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2, timeout)
             mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
-            if mode != p.MODE_CST:
+            if mode != self.mode:
                 raise DriverInitializationError(
                     f"drive of cable index {c} (node {int(self.node[c])}) reports mode "
-                    f"{mode} in 0x6061, expected {p.MODE_CST} (cyclic synchronous torque)"
+                    f"{mode} in 0x6061, expected {self.mode} (cyclic synchronous "
+                    f"{'position' if self._csp else 'torque'}, [drives] mode)"
                 )
         self._started = True
 
@@ -204,6 +212,7 @@ class Cia402Driver(CanWinchDriver):
             cyclic.CONTROLWORD_TOWARDS_ENABLED,
             self._rpdo_fields.copy(),
         )
+        cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
 
     def _drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
@@ -301,11 +310,22 @@ class Cia402Driver(CanWinchDriver):
             cyclic.CONTROLWORD_TOWARDS_ENABLED,
             fields,
         )
-        pack, send, bus_of = p.RPDO1_STRUCT.pack_into, self._send, self._bus_of_list
-        for c, (cw, pm) in enumerate(fields.tolist()):
-            msg = self._rpdo[c]
-            pack(msg.data, 0, cw, pm)
-            send(bus_of[c], msg)
+        send, bus_of = self._send, self._bus_of_list
+        if self._csp:
+            cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts)
+            pack = p.RPDO1_CSP_STRUCT.pack_into
+            for c, ((cw, pm), n) in enumerate(
+                zip(fields.tolist(), self._target_counts.tolist(), strict=True)
+            ):
+                msg = self._rpdo[c]
+                pack(msg.data, 0, cw, n, pm)
+                send(bus_of[c], msg)
+        else:
+            pack = p.RPDO1_STRUCT.pack_into
+            for c, (cw, pm) in enumerate(fields.tolist()):
+                msg = self._rpdo[c]
+                pack(msg.data, 0, cw, pm)
+                send(bus_of[c], msg)
         for b in range(len(self.buses)):
             self._send(b, self._sync)
         self._last_sync = t

@@ -3,8 +3,11 @@
 Static PDO mapping used by cdprctl (documented in docs/drivers.md; a real drive is configured to
 it with its own tool or by SDO):
 
-* RPDO1 (0x200 + node), 4 bytes: controlword 0x6040 (u16), target torque 0x6071 (i16, per-mille
-  of the rated torque 0x6076).
+* RPDO1 (0x200 + node), cyclic synchronous torque (mode 10), 4 bytes: controlword 0x6040
+  (u16), target torque 0x6071 (i16, per-mille of the rated torque 0x6076).
+* RPDO1, cyclic synchronous position (mode 8), 8 bytes: controlword 0x6040 (u16), target
+  position 0x607A (i32, encoder counts), torque offset 0x60B2 (i16, per-mille). The drive
+  interpolates the target linearly between SYNCs and closes its own position loop around it.
 * TPDO1 (0x180 + node), 8 bytes, on every SYNC: statusword 0x6041 (u16), torque actual 0x6077
   (i16, per-mille), position actual 0x6064 (i32, encoder counts).
 * TPDO2 (0x280 + node), 4 bytes, on every SYNC when enabled: velocity actual 0x606C (i32,
@@ -51,11 +54,17 @@ OD_RATED_TORQUE = 0x6076  # mN·m
 OD_TORQUE_ACTUAL = 0x6077
 OD_ABORT_CONNECTION = 0x6007  # what the drive does when the communication is lost
 OD_PRODUCER_HEARTBEAT = 0x1017  # ms
+OD_TARGET_POSITION = 0x607A
+OD_TORQUE_OFFSET = 0x60B2
+MODE_CSP = 8  # cyclic synchronous position (CiA 402 §8)
 MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
+#: the modes of operation cdprctl drives a CiA 402 drive in, by the ``[drives] mode`` name
+MODES = {"cst": MODE_CST, "csp": MODE_CSP}
 ABORT_CONNECTION_QUICK_STOP = 3
 
 # -- precompiled encoders/decoders of the cyclic path ------------------------------------------
 RPDO1_STRUCT = struct.Struct("<Hh")  # controlword, target torque (per-mille)
+RPDO1_CSP_STRUCT = struct.Struct("<Hih")  # controlword, target position, torque offset (pm)
 TPDO1_STRUCT = struct.Struct("<Hhi")  # statusword, torque actual (per-mille), position (counts)
 TPDO2_STRUCT = struct.Struct("<i")  # velocity actual (counts/s)
 EMCY_STRUCT = struct.Struct("<HB5s")  # error code, error register, manufacturer data

@@ -1,7 +1,9 @@
 """A CiA 402 drive as the simulator's CAN node: it answers the frames a real drive answers.
 
 NMT (pre-operational → operational on "start"), SDO server (expedited) for the objects the
-driver configures, RPDO1 latched and applied at the next SYNC (CiA 301 synchronous PDO), TPDO1
+driver configures, RPDO1 latched and applied at the next SYNC (CiA 301 synchronous PDO) in
+cyclic synchronous torque (mode 10) or position (mode 8: the target interpolated linearly
+between SYNCs, the drive's own position loop run at every physics step, ``physics.Servo``), TPDO1
 (and TPDO2) sampled at the SYNC, the power state machine of CiA 402 (the transition table of
 ``drivers.cia402.protocol``), heartbeat production (0x1017), EMCY on faults, and drive-side
 safety: the communication timeout triggers the abort-connection option (0x6007: quick stop),
@@ -29,6 +31,7 @@ class Cia402Drive:
         torque_limit: float,
         comm_timeout: float,
         velocity_pdo: bool = False,
+        position_gains: tuple[float, float] = (0.0, 0.0),
     ):
         self.node_id = node_id
         self.velocity_pdo = velocity_pdo  # TPDO2 (0x606C) mapped and sent on SYNC
@@ -38,6 +41,9 @@ class Cia402Drive:
         self.cpr = counts_per_rev
         self.torque_limit = torque_limit
         self.comm_timeout = comm_timeout
+        # the position loop's gains in mode 8 (N·m/rad, N·m·s/rad): the drive's own tuning
+        self.position_gains = position_gains
+        self.last_sync = -math.inf
         self.nmt = p.HB_PRE_OPERATIONAL
         self.state = p.PowerState.SWITCH_ON_DISABLED  # transitions 0 and 1 done at power-on
         self.od: dict[tuple[int, int], int] = {
@@ -47,8 +53,10 @@ class Cia402Drive:
             (p.OD_ABORT_CONNECTION, 0): 1,
             (p.OD_RATED_TORQUE, 0): round(rated_torque * 1000),
         }
-        self.pending: tuple[int, int] | None = None  # (controlword, torque per-mille)
-        self.torque_pm = 0  # applied
+        # (controlword, target torque or position, torque offset per-mille)
+        self.pending: tuple[int, int, int] | None = None
+        self.torque_pm = 0  # applied: the target torque (mode 10), the offset (mode 8)
+        self.target_counts: int | None = None  # mode 8: the last target position
         self.last_controlword = 0
         self.last_rx = -math.inf  # last RPDO or SYNC
         self.last_hb = -math.inf
@@ -70,10 +78,19 @@ class Cia402Drive:
             self.state = p.PowerState.SWITCH_ON_DISABLED
             self.pending = None
 
+    @property
+    def mode(self) -> int:
+        return self.od[(p.OD_MODES_OF_OPERATION, 0)]
+
     def on_rpdo(self, data: bytes, t: float) -> None:
-        if self.nmt != p.HB_OPERATIONAL or len(data) != 4:
+        if self.nmt != p.HB_OPERATIONAL:
             return
-        self.pending = p.RPDO1_STRUCT.unpack(data)
+        if self.mode == p.MODE_CSP and len(data) == 8:
+            self.pending = p.RPDO1_CSP_STRUCT.unpack(data)
+        elif self.mode != p.MODE_CSP and len(data) == 4:
+            self.pending = (*p.RPDO1_STRUCT.unpack(data), 0)
+        else:  # not this mode's mapping: ignored, like a real drive's length check
+            return
         self.last_rx = t
 
     def on_sdo(self, data: bytes) -> can.Message | None:
@@ -86,6 +103,8 @@ class Cia402Drive:
             value = int.from_bytes(raw[:size], "little", signed=True)
             if key not in self.od or key == (p.OD_MODES_DISPLAY, 0):
                 return self._sdo_abort(index, sub, 0x06020000 if key not in self.od else 0x06010002)
+            if key == (p.OD_MODES_OF_OPERATION, 0) and value not in (p.MODE_CSP, p.MODE_CST):
+                return self._sdo_abort(index, sub, 0x06090030)  # value range exceeded
             self.od[key] = value
             if key == (p.OD_MODES_OF_OPERATION, 0):
                 self.od[(p.OD_MODES_DISPLAY, 0)] = value
@@ -108,20 +127,28 @@ class Cia402Drive:
     def on_sync(self, t: float) -> list[can.Message]:
         """Apply the latched RPDO, then sample and send the TPDOs."""
         self.last_rx = t
+        interval, self.last_sync = t - self.last_sync, t
         if self.nmt != p.HB_OPERATIONAL:
             return []
         if self.pending is not None:
-            cw, tq = self.pending
+            cw, value, offset = self.pending
             self.pending = None
             self._apply_controlword(cw)
-            self.torque_pm = tq
-        self._apply_to_plant()
+            if self.mode == p.MODE_CSP:
+                self.target_counts, self.torque_pm = value, offset
+            else:
+                self.torque_pm = value
+        self._apply_to_plant(interval)
         if self.silent:
             return []
-        theta = self.plant.theta[self.cable]
-        counts = round(theta * self.cpr / (2.0 * math.pi)) + self.encoder_offset
-        counts = ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-        applied_pm = self.torque_pm if self.state is p.PowerState.OPERATION_ENABLED else 0
+        counts = self._counts()
+        if self.state is not p.PowerState.OPERATION_ENABLED:
+            applied_pm = 0
+        elif self.mode == p.MODE_CSP:  # what the position loop applies now
+            applied_pm = round(self.plant.servo.applied[self.cable] * 1000.0 / self.rated_torque)
+            applied_pm = max(-32767, min(32767, applied_pm))
+        else:
+            applied_pm = self.torque_pm
         sw = p.STATUSWORD_OF[self.state]
         out = [
             can.Message(
@@ -160,16 +187,41 @@ class Cia402Drive:
                 self.state, number = nxt
                 self.transitions.append(number)
 
-    def _apply_to_plant(self) -> None:
-        c = self.cable
+    def _apply_to_plant(self, interval: float = math.inf) -> None:
+        c, servo, plant = self.cable, self.plant.servo, self.plant
         if self.state is p.PowerState.OPERATION_ENABLED:
             tau = self.torque_pm * self.rated_torque / 1000.0
             tau = max(-self.torque_limit, min(self.torque_limit, tau))
-            self.plant.motor_torque[c] = tau
-            self.plant.brake[c] = False
+            plant.motor_torque[c] = tau
+            if self.mode == p.MODE_CSP:
+                theta = plant.theta[c]
+                if servo.kp[c] <= 0.0:  # just enabled: the loop starts where the motor is
+                    servo.target[c] = servo.end[c] = theta
+                if self.target_counts is not None:
+                    now = self._counts()
+                    step = ((self.target_counts - now + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+                    servo.end[c] = theta + step * 2.0 * math.pi / self.cpr
+                # linear interpolation over one SYNC interval (a first or late SYNC: a step)
+                servo.rate[c] = (
+                    (servo.end[c] - servo.target[c]) / interval if 0.0 < interval < 0.1 else 0.0
+                )
+                if servo.rate[c] == 0.0:
+                    servo.target[c] = servo.end[c]
+                servo.kp[c], servo.kd[c] = self.position_gains
+            else:
+                servo.kp[c] = 0.0
+            plant.brake[c] = False
         else:  # disabled, quick stop, fault: no torque, the brake holds the drum
-            self.plant.motor_torque[c] = 0.0
-            self.plant.brake[c] = True
+            plant.motor_torque[c] = 0.0
+            servo.kp[c] = 0.0
+            self.target_counts = None
+            plant.brake[c] = True
+
+    def _counts(self) -> int:
+        """Position actual (counts, 32-bit): the encoder, with an injected jump."""
+        counts = round(self.plant.theta[self.cable] * self.cpr / (2.0 * math.pi))
+        counts += self.encoder_offset
+        return ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
 
     # -- time passing ---------------------------------------------------------------------------
     def tick(self, t: float) -> list[can.Message]:

@@ -1,0 +1,119 @@
+"""The fast loop in cable space, for drives in cyclic synchronous position (``[drives] mode =
+"csp"``): each winch gets a position target with its torque as feed-forward, and the drive's
+own position loop (kHz, in the drive) holds the cable's unstretched length.
+
+Why: with torque-controlled winches a cable's tension does not depend on its length, so the
+platform is held only by the pose loop, whose gain the worst-conditioned direction and the
+feedback delay limit (rowc's y: 0.6 Hz; its 30 N water jet moved it 55 mm at 500 Hz and
+faulted at 250 Hz). Holding the lengths makes the cables' own elasticity the stiffness — the
+stiffness the SOTDA maximises (Picard et al. 2020, eq. (7)) — at every rate, and the pose loop
+only corrects slowly on top (docs/control.md has the measurements).
+
+* Targets: the cables' geometric lengths at the trajectory's reference pose (inverse
+  kinematics), less their stretch under the commanded tensions, ``l0 = l − t c(l0)`` (the cable
+  law of ``numerics``), as motor angles ``θ = (l_home − l0)/(r/G)``. Out of the active states
+  the target is where each motor is, so enabling starts without a step.
+* Measured tensions: from the drives' torques less friction and rotor inertia (the torque law
+  taken back, ``torques.applied_tension``), low-passed at ``MEASURED_TENSION_FILTER``: the
+  estimator's stretch, so the pose estimate sees the platform moved by a force the controller
+  does not know (in torque mode the feed-forward tensions are used: the cables get those).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.estimator import Estimator
+from cdprctl.control.torques import WinchTorques, applied_tension
+from cdprctl.control.trajectory import Trajectory
+from cdprctl.kinematics import KinematicsData, ik_kernel
+from cdprctl.model.robot import RobotModel
+from cdprctl.numerics import compliance_at
+from cdprctl.rotation import FloatArray, exp_so3_kernel
+
+
+@njit(cache=True)
+def motor_target_kernel(
+    kin, ref_x, R_home, tensions, law, l_home, drum_ratio, E, R, out
+):  # pragma: no cover - compiled
+    """``out`` (rad) ← each motor's angle that gives its cable the unstretched length which,
+    stretched by ``tensions`` (N), spans the reference pose ``ref_x`` (m, rotation vector rad
+    from ``R_home``). ``E``, ``R``: (3, 3) scratch."""
+    exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = E[i, 0] * R_home[0, j] + E[i, 1] * R_home[1, j] + E[i, 2] * R_home[2, j]
+    ik_kernel(kin, ref_x[:3], R)
+    length = kin[9]  # KinArrays.length
+    for i in range(out.shape[0]):
+        l0 = length[i]
+        for _ in range(3):  # l0 = l − t c(l0): the compliance depends on l0 weakly
+            l0 = length[i] - tensions[i] * compliance_at(law, i, l0)
+        out[i] = (l_home[i] - l0) / drum_ratio[i]
+
+
+@njit(cache=True)
+def measured_tension_kernel(
+    torque, velocity, accel_term, r, viscous, coulomb, alpha, out
+):  # pragma: no cover - compiled
+    """``out`` (N) ← a first-order low-pass (gain ``alpha``) towards the tensions the drives'
+    measured ``torque`` (N·m) apply (``torques.applied_tension``)."""
+    for i in range(out.shape[0]):
+        t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i])
+        if math.isfinite(t):
+            out[i] += alpha * (t - out[i])
+
+
+class CableSpace:
+    """``targets`` → ``data.motor_target``; ``measure`` → ``data.measured_tensions``."""
+
+    # Hz: the measured tensions' low-pass; below the winch-on-cable modes (23-34 Hz on the
+    # shipped robots), above the pose loop
+    MEASURED_TENSION_FILTER = 5.0
+
+    def __init__(self, model: RobotModel, data: ControlData, trajectory: Trajectory,
+                 estimator: Estimator, winches: WinchTorques):  # fmt: skip
+        self.enabled = model.drives.mode == "csp"
+        self.data = data
+        self.trajectory = trajectory
+        self.estimator = estimator
+        self.winches = winches
+        self.kin = KinematicsData(model)  # at the reference pose
+        self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
+        self._E = np.zeros((3, 3))
+        self._R = np.zeros((3, 3))
+        self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
+        self._J_over_r = winches.rotor_inertia / winches.r
+
+    def targets(self, active: bool, motor_position: FloatArray) -> None:
+        """``data.motor_target`` (rad): from the reference pose and the commanded tensions
+        when ``active``, else the motors' own ``motor_position`` (rad)."""
+        d = self.data
+        if not active:
+            d.motor_target[:] = motor_position
+            return
+        e = self.estimator
+        motor_target_kernel(
+            self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
+            e.l_home, e.drum_ratio, self._E, self._R, d.motor_target,
+        )  # fmt: skip
+
+    def start_measuring(self) -> None:
+        """The measured tensions start from the estimator's stretch tensions (enable)."""
+        self.data.measured_tensions[:] = self.data.stretch_tensions
+
+    def measure(self, torque: FloatArray, velocity: FloatArray) -> None:
+        """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
+        (rad/s), the rotor-inertia feed-forward of the trajectory's acceleration taken out."""
+        d, w = self.data, self.winches
+        np.dot(self.estimator.kin.WT, self.trajectory.acceleration, out=self._accel_term)
+        self._accel_term *= self._J_over_r
+        alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
+        measured_tension_kernel(
+            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, alpha,
+            d.measured_tensions,
+        )  # fmt: skip

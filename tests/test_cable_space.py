@@ -1,0 +1,154 @@
+"""The fast loop in cable space (control/cable_space.py) and the drives' position mode
+(CiA 402 cyclic synchronous position: the simulated drive's loop, the driver's RPDO)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.control.cable_space import motor_target_kernel
+from cdprctl.control.estimator import Estimator
+from cdprctl.experiments.closed_loop import ClosedLoop
+from cdprctl.kinematics import KinematicsData
+from cdprctl.model import load_robot
+from cdprctl.rotation import rpy_to_matrix
+from drivers.cia402 import protocol as p
+from sim_backend.network import LockStep
+from sim_backend.plant import CdprPlant
+
+
+def rowc_csp():
+    """rowc with its drives in position mode, at 250 Hz (8 drives with 8-byte RPDOs on one
+    1 Mbit/s bus: 55 % load; 111 % at 500 Hz) and a 0.1 Hz pose loop on top (0.3 Hz and more
+    went unstable during moves in position mode, lock-step, measured)."""
+    model = load_robot(CONFIG / "rowc.toml")
+    return dataclasses.replace(
+        model,
+        drives=dataclasses.replace(model.drives, mode="csp"),
+        control=dataclasses.replace(
+            model.control, rate=250.0, bandwidth=0.1, axis_bandwidth=None
+        ),
+    )
+
+
+@pytest.fixture
+def rig():
+    model = rowc_csp()
+    with LockStep(model, period=model.control.period) as ls:
+        yield ls
+
+
+def test_position_mode_is_configured_by_sdo(rig):
+    rig.driver.configure()
+    for drive in rig.net.drives:
+        assert drive.od[(p.OD_MODES_OF_OPERATION, 0)] == p.MODE_CSP
+        assert drive.od[(p.OD_MODES_DISPLAY, 0)] == p.MODE_CSP
+    assert all(len(msg.data) == 8 for msg in rig.driver._rpdo)
+
+
+def test_a_mode_the_drive_does_not_have_is_refused(rig):
+    drive = rig.net.drives[0]
+    reply = drive.on_sdo(p.sdo_download(p.OD_MODES_OF_OPERATION, 0, 3, 1))  # profile velocity
+    assert reply is not None and reply.data[0] == 0x80  # abort
+    assert int.from_bytes(reply.data[4:8], "little") == 0x06090030
+    assert drive.mode == 0
+
+
+def test_the_drive_holds_its_position_target(rig):
+    """A target 0.05 rad (0.45 mm of cable) from where a motor stands, with the holding torque
+    as offset: the drive's own loop brings the motor there and reports the torque it takes."""
+    d, plant = rig.driver, rig.plant
+    d.configure()
+    d.activate()
+    d.read(rig.net.time)
+    hold = plant.drum_ratio * plant.tension
+    start = d.states.position.copy()
+    target = start.copy()
+    target[0] += 0.05
+    for _ in range(round(0.5 / rig.period)):
+        t = rig.net.time
+        d.read(t)
+        d.write(t, hold, targets=target)
+        rig.net.advance(rig.period)
+    d.read(rig.net.time)
+    cpr = rig.model.cables[0].winch.encoder_counts_per_rev
+    # a PD loop (no integral): each motor sits a little short of its target under the load
+    # the offset does not carry, the same for all; cable 0 has made the 0.05 rad step
+    lag = plant.theta - target
+    assert np.all(np.abs(lag) < 0.01)
+    assert abs(lag[0] - np.median(lag[1:])) < 0.005
+    np.testing.assert_allclose(d.states.position, plant.theta, atol=2 * 2 * math.pi / cpr)
+    # the shortened cable 0 pulls harder: the torque actual is the loop's, not the offset
+    assert d.states.torque[0] > hold[0] + 0.05
+    # a non-finite target never reaches a drive: the last valid one is kept
+    bad = target.copy()
+    bad[2] = math.nan
+    d.write(rig.net.time, hold, targets=bad)
+    assert d.targets[2] == target[2]
+
+
+def test_motor_targets_match_the_plants_cable_law():
+    """The targets for a pose and tensions are the motor angles at which the simulator, which
+    solves its cable law its own way (``CdprPlant.set_pose``), holds that pose with those
+    tensions."""
+    model = rowc_csp()
+    plant = CdprPlant(model)
+    rng = np.random.default_rng(7)
+    est = Estimator(model)
+    kin = KinematicsData(model)
+    for _ in range(5):
+        pos = model.home.position + rng.uniform(-0.2, 0.2, 3) * [1, 0.1, 1]
+        rpy = rng.uniform(-0.05, 0.05, 3)
+        tensions = rng.uniform(20.0, 180.0, model.n_cables)
+        plant.set_pose(pos, rpy_to_matrix(*rpy), tensions)
+        ref = np.concatenate([pos, rpy_to_rotvec(rpy)])
+        out = np.zeros(model.n_cables)
+        motor_target_kernel(
+            kin.arrays, ref, np.ascontiguousarray(model.home.rotation), tensions, est._law,
+            est.l_home, est.drum_ratio, np.zeros((3, 3)), np.zeros((3, 3)), out,
+        )  # fmt: skip
+        np.testing.assert_allclose(out, plant.theta, atol=1e-9)
+
+
+def rpy_to_rotvec(rpy):
+    from scipy.spatial.transform import Rotation
+
+    R = rpy_to_matrix(*rpy)
+    return Rotation.from_matrix(R).as_rotvec()
+
+
+def test_water_jet_held_by_the_cables_at_250_hz():
+    """ARK 2020's 30 N lateral force on rowc, ramped in over 1 s like the demo's, at
+    250 Hz: no fault, the transient within the 15 mm the issue asks (55 mm with the
+    pose loop alone at 500 Hz, a fault at 250 Hz), the estimate seeing the deflection through
+    the measured tensions, then a move under the jet tracked."""
+    model = rowc_csp()
+    with ClosedLoop(model) as cl:
+        c = cl.controller
+        cl.startup()
+        cl.command("enable")
+        cl.run(1.0)
+        y0 = cl.plant.position[1]
+        t0 = cl.net.time
+
+        def jet(cl):
+            cl.plant.ext_force[1] = 30.0 * min(1.0, (cl.net.time - t0) / 1.0)
+
+        cl.run(3.0, each=jet)
+        a = cl.arrays()
+        dy = a["p_true"][a["t"] >= t0, 1] - y0
+        assert c.state.value == "enabled", c.fault_reason
+        assert np.max(np.abs(dy)) < 0.015
+        assert abs(c.estimator.position[1] - cl.plant.position[1]) < 0.001
+        pose = np.concatenate([np.add(model.home.position, [0.3, 0.0, -0.1]), model.home.rpy])
+        cl.command("move", pose=pose)
+        cl.run(3.0, each=jet)
+        a = cl.arrays()
+        err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)[a["t"] >= t0 + 3.0]
+        assert c.state.value == "enabled", c.fault_reason
+        assert err.max() < 0.02
+        assert np.all(np.isfinite(a["torques"]))
