@@ -188,7 +188,7 @@ class LockStep:
     def __init__(
         self,
         model: RobotModel,
-        period: float = 0.002,
+        period: float | None = None,
         driver: str | None = None,
         plant: CdprPlant | None = None,
     ):
@@ -201,7 +201,7 @@ class LockStep:
         overrides = {"interface": "inprocess", "channels": channels}
         self.overrides = overrides  # a second driver (a restarted daemon) can join the buses
         self.model = model
-        self.period = period
+        self.period = period = period if period is not None else model.control.period
         self.plant = plant or CdprPlant(model)
         self.net = SimNetwork(model, self.plant, overrides)
         self.driver = create_driver(

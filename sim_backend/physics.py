@@ -68,12 +68,11 @@ class Inputs(NamedTuple):
 
 class Servo(NamedTuple):
     """The drives' own position loops (CiA 402 cyclic synchronous position, per winch): the
-    interpolated target (rad), where this SYNC's interpolation ends (rad), its rate (rad/s),
-    the gains (N·m/rad, 0 = torque mode; N·m·s/rad), the torque limit (N·m) and the torque
-    applied in the last step (N·m, out). The torque offset is ``Inputs.motor_torque``."""
+    interpolated target (rad) and its rate (rad/s), the gains (N·m/rad, 0 = torque mode;
+    N·m·s/rad), the torque limit (N·m) and the torque applied in the last step (N·m, out).
+    The torque offset is ``Inputs.motor_torque``."""
 
     target: np.ndarray
-    end: np.ndarray
     rate: np.ndarray
     kp: np.ndarray
     kd: np.ndarray
@@ -84,23 +83,19 @@ class Servo(NamedTuple):
 @njit(cache=True)
 def servo_torque(servo, i, theta, theta_dot, offset, dt):  # pragma: no cover - compiled
     """N·m the drive of winch ``i`` applies this physics step: in position mode its loop
-    ``offset + kp (θ_t − θ) + kd (θ̇_t − θ̇)`` within its limit, the target moving towards
-    this SYNC's value at the interpolation rate (linear interpolation between SYNCs, as CSP
-    drives do); in torque mode ``offset``. No integral: with one on all eight winches of rowc
-    the platform's y mode (~3 Hz) grew from 0.5 to 9 mrad of motor error in 2 s at constant
-    targets (lock-step, measured); the torque offset carries the load instead."""
-    target, end, rate, kp, kd, limit, applied = servo
+    ``offset + kp (θ_t − θ) + kd (θ̇_t − θ̇)`` within its limit, the target moving at the
+    interpolation rate (set at each SYNC to reach the new target one SYNC later, and kept
+    beyond it while a SYNC is late: linear interpolation and extrapolation, as CSP drives
+    do; ``Cia402Drive`` holds it after ``EXTRAPOLATE_FOR``); in torque mode ``offset``. No
+    integral: with one on all eight winches of rowc the platform's y mode (~3 Hz) grew from
+    0.5 to 9 mrad of motor error in 2 s at constant targets (lock-step, measured); the torque
+    offset carries the load instead."""
+    target, rate, kp, kd, limit, applied = servo
     if kp[i] <= 0.0:
         applied[i] = offset
         return offset
-    step = rate[i] * dt
-    if abs(end[i] - target[i]) <= abs(step):
-        target[i] = end[i]
-        v = 0.0
-    else:
-        target[i] += step
-        v = rate[i]
-    tau = offset + kp[i] * (target[i] - theta) + kd[i] * (v - theta_dot)
+    target[i] += rate[i] * dt
+    tau = offset + kp[i] * (target[i] - theta) + kd[i] * (rate[i] - theta_dot)
     tau = min(limit[i], max(-limit[i], tau))
     applied[i] = tau
     return tau

@@ -112,7 +112,7 @@ class CdprPlant:
         self.ext_moment = np.zeros(3)  # N·m, base frame
         # the drives' position loops (CSP; physics.Servo): set by the simulated drives
         self.servo = Servo(
-            np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
+            np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
             np.array([w.winch.torque_limit for w in c]), np.zeros(m),
         )  # fmt: skip
         self._init_grippers()

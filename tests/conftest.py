@@ -80,3 +80,17 @@ class FakeDrives:
 
     def begin_recover(self, settle: float = 0.5) -> None:
         self.calls.append("recover")
+
+
+def without_table(text: str, name: str) -> str:
+    """A robot file's ``text`` without its ``[name]`` table (and sub-tables), for tests that
+    write their own."""
+    out, skipping = [], False
+    for line in text.splitlines(keepends=True):
+        head = line.strip()
+        if head.startswith("["):
+            key = head.strip("[]").split("]")[0].strip()
+            skipping = key == name or key.startswith(name + ".")
+        if not skipping:
+            out.append(line)
+    return "".join(out)

@@ -124,8 +124,9 @@ def rpy_to_rotvec(rpy):
 def test_water_jet_held_by_the_cables_at_250_hz():
     """ARK 2020's 30 N lateral force on rowc, ramped in over 1 s like the demo's, at
     250 Hz: no fault, the transient within the 15 mm the issue asks (55 mm with the
-    pose loop alone at 500 Hz, a fault at 250 Hz), the estimate seeing the deflection through
-    the measured tensions, then a move under the jet tracked."""
+    pose loop alone at 500 Hz, a fault at 250 Hz), then a move under the jet tracked. The
+    estimate is the pose the drives' lengths give: it does not see the elastic deflection
+    under a force the controller does not know (like the ARK 2020 prototype's encoders)."""
     model = rowc_csp()
     with ClosedLoop(model) as cl:
         c = cl.controller
@@ -143,7 +144,7 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         dy = a["p_true"][a["t"] >= t0, 1] - y0
         assert c.state.value == "enabled", c.fault_reason
         assert np.max(np.abs(dy)) < 0.015
-        assert abs(c.estimator.position[1] - cl.plant.position[1]) < 0.001
+        assert abs(c.estimator.position[1] - y0) < 0.003
         pose = np.concatenate([np.add(model.home.position, [0.3, 0.0, -0.1]), model.home.rpy])
         cl.command("move", pose=pose)
         cl.run(3.0, each=jet)
@@ -152,3 +153,53 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         assert c.state.value == "enabled", c.fault_reason
         assert err.max() < 0.02
         assert np.all(np.isfinite(a["torques"]))
+
+
+def test_internal_part_is_the_null_space_projection():
+    """``internal_part_kernel`` against scipy: ``e − W⁺ W e`` (the part of a tension error no
+    wrench explains), with the null space the loop's own QR gives."""
+    from scipy.linalg import null_space
+
+    from cdprctl.control.cable_space import internal_part_kernel
+    from cdprctl.kinematics import inverse_kinematics
+    from cdprctl.tda.nullspace import NullSpace
+
+    model = rowc_csp()
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    ns = NullSpace(model.n_cables)
+    assert ns.update(kin.W, np.zeros(6))
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        e = rng.normal(0.0, 50.0, model.n_cables)
+        out = np.zeros(model.n_cables)
+        internal_part_kernel(ns.N, e, out)
+        np.testing.assert_allclose(out, e - np.linalg.pinv(kin.W) @ (kin.W @ e), atol=1e-9)
+        Ns = null_space(kin.W)
+        np.testing.assert_allclose(out, Ns @ (Ns.T @ e), atol=1e-9)
+
+
+def test_a_snapped_cable_is_caught_by_its_tension_and_a_jet_is_not():
+    """Position mode: the drives hold every motor where its target says, so a snapped cable
+    leaves the encoders agreeing with a pose; the measured tensions do not — the supervisor's
+    cable-tension check stops the robot. A 50 N jet (beyond the paper's 30 N) changes the
+    tensions along range(Wᵀ) and passes."""
+    from sim_backend.faults import FaultEvent, FaultInjector
+
+    model = rowc_csp()
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5)
+        FaultInjector(
+            [FaultEvent(cl.net.time, "external_wrench", value=(0, 50.0, 0, 0, 0, 0), ramp=1.0)]
+        ).attach(cl.net)
+        cl.run(2.5)
+        c = cl.controller
+        assert c.state.value == "enabled", c.fault_reason
+        assert np.abs(c.data.internal_tension_error).max() < 5.0  # N (limit: 19 N)
+        t_snap = cl.net.time
+        FaultInjector([FaultEvent(t_snap, "cable_snap", cable=2)]).attach(cl.net)
+        cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
+        assert c.fault_kind is not None and c.fault_kind.value == "cable tension", c.fault_reason
+        assert cl.net.time - t_snap < 0.3

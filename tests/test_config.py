@@ -7,12 +7,12 @@ import re
 from pathlib import Path
 
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, without_table
 
 from cdprctl.cli import main
 from cdprctl.model import ConfigError, load_robot
 
-BASE = (CONFIG / "rowc.toml").read_text()
+BASE = without_table((CONFIG / "rowc.toml").read_text(), "drives")
 
 
 def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:

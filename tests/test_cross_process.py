@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, without_table
 
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
@@ -75,10 +75,12 @@ def sim_process(tmp_path):
             proc.wait()
 
 
-def write_config(tmp_path, model_file, driver):
-    text = (CONFIG / model_file).read_text()
+def write_config(tmp_path, model_file, driver, mode="cst"):
+    """The robot file with its drives on one udp_multicast bus, in ``mode``."""
+    text = without_table((CONFIG / model_file).read_text(), "drives")
     text += (
-        f'\n[drives]\ndriver = "{driver}"\nheartbeat_timeout = 2.0\nfeedback_timeout = 0.1\n'
+        f'\n[drives]\ndriver = "{driver}"\nmode = "{mode}"\n'
+        "heartbeat_timeout = 2.0\nfeedback_timeout = 0.1\n"
         'comm_timeout = 1.0\n[[drives.buses]]\ninterface = "udp_multicast"\n'
         f'channel = "{GROUP}"\ncables = ["1", "2", "3", "4", "5", "6", "7", "8"]\n'
         "node_ids = [1, 2, 3, 4, 5, 6, 7, 8]\n"
@@ -162,7 +164,7 @@ def test_daemon_against_sim_process_over_udp_multicast(tmp_path, sim_process):
     over the bus, enable, the demo's first move to its target (or, when the loaded machine
     makes the loop fault, a controlled stop), then SIGTERM → drives disabled, exit 0."""
     port = random.Random(os.getpid() * 11).randrange(40000, 50000)
-    config = write_config(tmp_path, "rowc.toml", "cia402")
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")  # as shipped
     opts = ["--can-option", f"port={port}"]
     sim = sim_process(config, opts)
     daemon = subprocess.Popen(
@@ -245,7 +247,7 @@ def test_daemon_sigkilled_mid_motion_then_restarted(tmp_path):
     simulated drives' communication timeout (1 s here) disables them and closes the brakes;
     a new daemon finds the pose, enables and holds it without a jump (its status lines)."""
     port = random.Random(os.getpid() * 13).randrange(40000, 50000)
-    config = write_config(tmp_path, "rowc.toml", "cia402")
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")  # as shipped
     opts = ["--can-option", f"port={port}"]
     cli = [sys.executable, "-m", "cdprctl.cli"]
     procs: list[subprocess.Popen] = []

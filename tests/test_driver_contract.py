@@ -18,8 +18,9 @@ from sim_backend.network import LockStep
 @pytest.fixture(params=driver_names())
 def rig(request):
     model = load_robot(CONFIG / "rowc.toml")
+    # the torque-mode contract (position mode: tests/test_cable_space.py)
     model = dataclasses.replace(
-        model, drives=dataclasses.replace(model.drives, driver=request.param)
+        model, drives=dataclasses.replace(model.drives, driver=request.param, mode="cst")
     )
     # ODrive CAN Simple streams two 8-byte frames per axis: 2,920 bits per cycle for 8 axes,
     # 147 % of 1 Mbit/s at 500 Hz (refused by the bus-load check), 58 % at 200 Hz

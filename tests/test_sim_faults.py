@@ -3,6 +3,7 @@ schedules are reproducible from their seed."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -17,8 +18,9 @@ from sim_backend.network import LockStep
 
 @pytest.fixture
 def rig():
-    model = load_robot(CONFIG / "rowc.toml")
-    with LockStep(model) as ls:
+    model = load_robot(CONFIG / "rowc.toml")  # 500 Hz, torque mode: the drives' frames
+    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, mode="cst"))
+    with LockStep(model, period=0.002) as ls:
         ls.driver.configure()
         ls.driver.activate()
         yield ls

@@ -77,6 +77,6 @@ def test_the_loop_compiles_nothing():
     assert proc.returncode == 0, proc.stderr[-3000:]
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     for name, r in result.items():
-        assert r["cycles"] > 1000, (name, r)  # the loop ran
+        assert r["cycles"] > 500, (name, r)  # the loop ran (3 s: 750 cycles at 250 Hz)
         assert r["kernels"] > 20, (name, r)  # the kernels were found
         assert r["compiled"] == [], f"{name}: compiled in the loop: {r['compiled']}"

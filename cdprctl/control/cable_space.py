@@ -13,10 +13,18 @@ only corrects slowly on top (docs/control.md has the measurements).
   kinematics), less their stretch under the commanded tensions, ``l0 = l − t c(l0)`` (the cable
   law of ``numerics``), as motor angles ``θ = (l_home − l0)/(r/G)``. Out of the active states
   the target is where each motor is, so enabling starts without a step.
+* The pose feedback is off in this mode (``wrench.py`` says why): the estimator's stretch uses
+  the commanded tensions, the ones the targets were stretched by, so the estimate is the pose
+  the drives' lengths give (their tracking error shows; a force the controller does not know
+  deflects the platform by the cables' elasticity, unseen — as on the ARK 2020 prototype).
 * Measured tensions: from the drives' torques less friction and rotor inertia (the torque law
-  taken back, ``torques.applied_tension``), low-passed at ``MEASURED_TENSION_FILTER``: the
-  estimator's stretch, so the pose estimate sees the platform moved by a force the controller
-  does not know (in torque mode the feed-forward tensions are used: the cables get those).
+  taken back, ``torques.applied_tension``), low-passed at ``MEASURED_TENSION_FILTER``;
+  published (telemetry ``measured_tensions``), and compared with the commanded ones through
+  the same filter: the difference's part in the null space of W is what the cables pull
+  against each other beyond what was asked — a cable whose length is not what its encoder
+  says (encoder jump, slip, snap; the supervisor's ``CABLE_TENSION`` check), while a force
+  on the platform shows in the other part. Not fed to the estimate: on rowc 0.1 N of
+  tension error is millimetres of y (28 mm of estimated y during a move, lock-step).
 """
 
 from __future__ import annotations
@@ -58,14 +66,35 @@ def motor_target_kernel(
 
 @njit(cache=True)
 def measured_tension_kernel(
-    torque, velocity, accel_term, r, viscous, coulomb, alpha, out
+    torque, velocity, accel_term, r, viscous, coulomb, commanded, alpha, out, commanded_f, error
 ):  # pragma: no cover - compiled
     """``out`` (N) ← a first-order low-pass (gain ``alpha``) towards the tensions the drives'
-    measured ``torque`` (N·m) apply (``torques.applied_tension``)."""
+    measured ``torque`` (N·m) apply (``torques.applied_tension``); ``commanded_f`` the same
+    low-pass of the ``commanded`` tensions (N); ``error`` (N) ← ``out − commanded_f``: what
+    the cables carry beyond what was asked, both seen through the same filter."""
     for i in range(out.shape[0]):
         t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i])
         if math.isfinite(t):
             out[i] += alpha * (t - out[i])
+        commanded_f[i] += alpha * (commanded[i] - commanded_f[i])
+        error[i] = out[i] - commanded_f[i]
+
+
+@njit(cache=True)
+def internal_part_kernel(N, error, out):  # pragma: no cover - compiled
+    """``out`` ← ``N Nᵀ error``: the part of the tension ``error`` (N) in the null space of W
+    (``N`` an orthonormal basis, m × r): tensions the cables pull against each other with,
+    which no external wrench on the platform explains (an external force changes the tensions
+    along ``range(Wᵀ)``, by as much as the cables' stiffnesses are equal)."""
+    m, r = N.shape
+    for i in range(m):
+        out[i] = 0.0
+    for j in range(r):
+        s = 0.0
+        for i in range(m):
+            s += N[i, j] * error[i]
+        for i in range(m):
+            out[i] += N[i, j] * s
 
 
 class CableSpace:
@@ -88,6 +117,7 @@ class CableSpace:
         self._R = np.zeros((3, 3))
         self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
         self._J_over_r = winches.rotor_inertia / winches.r
+        self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
@@ -103,17 +133,24 @@ class CableSpace:
         )  # fmt: skip
 
     def start_measuring(self) -> None:
-        """The measured tensions start from the estimator's stretch tensions (enable)."""
-        self.data.measured_tensions[:] = self.data.stretch_tensions
+        """The measured and commanded tensions start from the holding ones (enable)."""
+        d = self.data
+        d.measured_tensions[:] = d.hold_tensions
+        self._commanded[:] = d.hold_tensions
+        d.tension_error[:] = 0.0
+        d.internal_tension_error[:] = 0.0
 
-    def measure(self, torque: FloatArray, velocity: FloatArray) -> None:
+    def measure(self, torque: FloatArray, velocity: FloatArray, N: FloatArray) -> None:
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
-        (rad/s), the rotor-inertia feed-forward of the trajectory's acceleration taken out."""
+        (rad/s), the rotor-inertia feed-forward of the trajectory's acceleration taken out;
+        ``data.tension_error`` and its ``internal_tension_error`` part in the null space
+        ``N`` (m × r, orthonormal) of the wrench matrix."""
         d, w = self.data, self.winches
         np.dot(self.estimator.kin.WT, self.trajectory.acceleration, out=self._accel_term)
         self._accel_term *= self._J_over_r
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
         measured_tension_kernel(
-            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, alpha,
-            d.measured_tensions,
+            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, d.tensions, alpha,
+            d.measured_tensions, self._commanded, d.tension_error,
         )  # fmt: skip
+        internal_part_kernel(N, d.tension_error, d.internal_tension_error)

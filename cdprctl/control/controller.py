@@ -67,7 +67,13 @@ class Controller:
         self.cable_space = CableSpace(model, d, tr, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.winches, self.distribution,
                                        self.ext_wrench)  # fmt: skip
-        self.supervisor = Supervisor(c, d, drives, tr.stop_here)
+        # position mode: the cables' internal tension error is supervised, per cable (N)
+        tension_limits = (
+            c.max_tension_disagreement * (model.tension_max - model.tension_min)
+            if model.drives.mode == "csp"
+            else None
+        )
+        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits)
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
@@ -190,9 +196,10 @@ class Controller:
         self._handle_commands(t)
         cs = self.cable_space
         if cs.enabled and d.state in OBSERVED_STATES:
-            # the drives hold the lengths: the cables carry what their torques say
-            cs.measure(st.torque, st.velocity)
-            d.stretch_tensions[:] = d.measured_tensions
+            # the drives hold the lengths stretched by the commanded tensions (no pose feedback
+            # in position mode, so no algebraic loop): the same tensions for the estimate
+            d.stretch_tensions[:] = d.tensions
+            cs.measure(st.torque, st.velocity, self.distribution.current.ns.N)
         elif d.cycle % self._stretch_every == 0:
             self._refresh_stretch_tensions()
         e = self.estimator

@@ -55,6 +55,11 @@ class ControlData:
         # N: what the drives' torques say the cables carry, low-passed (cable_space.py; in
         # position mode the estimator's stretch tensions while the drives are on)
         self.measured_tensions = np.zeros(m)
+        # N: measured − commanded tensions, both through that low-pass (the supervisor's
+        # check of the cables in position mode)
+        self.tension_error = np.zeros(m)
+        # N: its internal part (the null space of W: no external wrench explains it)
+        self.internal_tension_error = np.zeros(m)
         self.tda_status = TDAStatus.OK
         # winch torques (torques.py)
         self.torques = np.zeros(m)  # N·m, motor, commanded (the feed-forward in position mode)

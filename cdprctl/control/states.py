@@ -38,6 +38,7 @@ class FaultKind(enum.StrEnum):
     OVER_SPEED = "platform speed"
     FEEDBACK_AGE = "feedback age"
     TENSION_DISTRIBUTION = "tension distribution"
+    CABLE_TENSION = "cable tension"
     DURING_STOP = "during the stop"
     INTERNAL = "internal error"
 
@@ -60,6 +61,10 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.TENSION_DISTRIBUTION: "persistent: the feedback wrench saturated longer than "
     "[control.safety] max_saturation_time (the cables give what they can meanwhile), or 3 "
     "cycles in which even the feed-forward cannot be held (the last feasible tensions held)",
+    FaultKind.CABLE_TENSION: "persistent: 50 ms over the limit (position mode): the measured "
+    "tensions pull against each other in a way no external wrench explains — a cable longer or "
+    "shorter than its encoder says (an encoder jump, a slipped or a broken cable); the "
+    "measurement is low-passed and a move's transients pass through it",
     FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
     FaultKind.INTERNAL: "immediate: the cycle itself failed",
 }

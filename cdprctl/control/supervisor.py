@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from typing import Protocol
 
+import numpy as np
+
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import FaultKind, State
 from cdprctl.forward_kinematics import FKStatus
@@ -65,11 +67,19 @@ class Supervisor:
     # direction that is a short, false spike of estimated speed (seen across processes after
     # a restart: 2 of 10). A real runaway at the limit goes 30 mm further before the stop.
     OVER_SPEED_FOR = 0.03  # s
+    # The internal tension error must stay over its limit this long (position mode): the
+    # measurement is already low-passed at 5 Hz; this only keeps a single bad frame out
+    TENSION_FOR = 0.05  # s
     ENABLE_TIMEOUT = 2.0  # s
 
-    def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here):
-        """``stop_here()``: the trajectory's stop at the current pose (the controlled stop)."""
+    def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
+                 tension_limits: np.ndarray | None = None):  # fmt: skip
+        """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
+        ``tension_limits`` (N, per cable): the internal tension error that faults (position
+        mode), None: not checked."""
         self.config = config
+        self.tension_limits = tension_limits
+        self._tension_since = math.inf
         self.data = data
         self.drives = drives
         self._stop_here = stop_here
@@ -191,7 +201,30 @@ class Supervisor:
             return FaultKind.FEEDBACK_AGE, (
                 f"feedback {age * 1e3:.1f} ms old > {c.max_feedback_age * 1e3:.0f} ms"
             )
+        if self.tension_limits is not None:
+            return self._tension_disagreement(t)
         return None
+
+    def _tension_disagreement(self, t: float) -> tuple[FaultKind, str] | None:
+        """The cable whose internal tension error has been beyond its limit for
+        ``TENSION_FOR`` (position mode; ``FaultKind.CABLE_TENSION``)."""
+        err, lim = self.data.internal_tension_error, self.tension_limits
+        assert lim is not None
+        i = int(np.argmax(np.abs(err) / lim))
+        e = float(err[i])
+        if abs(e) <= lim[i]:
+            self._tension_since = math.inf
+            return None
+        self._tension_since = min(self._tension_since, t)
+        if t - self._tension_since < self.TENSION_FOR - 1e-9:
+            return None
+        limit = self.config.max_tension_disagreement
+        return FaultKind.CABLE_TENSION, (
+            f"the cables pull against each other beyond what was commanded: cable index {i} by "
+            f"{e:+.1f} N (> {lim[i]:.1f} N = max_tension_disagreement {limit:g} of its range, "
+            f"for {self.TENSION_FOR * 1e3:.0f} ms): a cable's length is not what its encoder "
+            "says (an encoder jump, a slipped or broken cable)"
+        )
 
     def _over_speed(self, t: float, speed: float, limit: float) -> bool:
         if speed <= limit:

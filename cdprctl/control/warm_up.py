@@ -82,9 +82,11 @@ def warm_up(controller: Controller) -> None:
                      d.torques)  # fmt: skip
     d.torques[:] = 0.0
     # the cable-space kernels (position mode), on throwaway outputs
-    target, measured = d.motor_target.copy(), d.measured_tensions.copy()
+    arrays = (d.motor_target, d.measured_tensions, d.tension_error, d.internal_tension_error)
+    saved = [a.copy() for a in arrays]
     c.cable_space.targets(True, zeros)
-    c.cable_space.measure(zeros, zeros)
-    d.motor_target[:], d.measured_tensions[:] = target, measured
+    c.cable_space.measure(zeros, zeros, ns.N)
+    for a, v in zip(arrays, saved, strict=True):
+        a[:] = v
     d.wrench[:] = 0.0
     d.pose_error[:] = 0.0

@@ -32,11 +32,21 @@ class PoseController:
         # to a steady force (the water jet): what remains is the cables' own elasticity, the
         # stiffness the SOTDA acts on (Picard et al. 2020). damping_ratio scales kd. Per axis
         # (x, y, z, roll, pitch, yaw) when [control] axis_bandwidth is given.
-        self.kp = 3.0 * wn * wn
-        self.kd = 3.0 * c.damping_ratio * wn
-        self.ki = wn**3
+        #
+        # With the drives in position mode (cable_space.py) the pose feedback is off: the
+        # drives' length loops are the feedback, and the pose the encoders give depends on the
+        # tensions assumed for the stretch — with the commanded ones (what the drives realise)
+        # a pose loop closes an algebraic loop (±40 mm of estimated y chattering on rowc at
+        # 0.5 Hz), with measured ones a 0.1 N error is millimetres of y (28 mm during a move),
+        # with the static feed-forward ones the internal forces differ (10-20 mm): each went
+        # unstable during moves at 0.3 Hz and more (lock-step, measured; docs/control.md).
+        on = 0.0 if model.drives.mode == "csp" else 1.0
+        self.kp = on * 3.0 * wn * wn
+        self.kd = on * 3.0 * c.damping_ratio * wn
+        self.ki = on * wn**3
         self.integral = np.zeros(6)  # m·s, rad·s
-        self.integral_limit = 10.0 / self.ki  # the integral term stays within 10 m/s² (rad/s²)
+        # the integral term stays within 10 m/s² (rad/s²)
+        self.integral_limit = on * 10.0 / np.maximum(wn**3, 1e-12)
         # contiguous float64 copies for the compiled kernel
         self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
         self._inertia = np.ascontiguousarray(model.platform.inertia, dtype=float)

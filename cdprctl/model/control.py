@@ -39,6 +39,7 @@ SAFETY_KEYS = (
     "max_saturation_time",
     "tension_margin",
     "max_fk_residual",
+    "max_tension_disagreement",
 )
 REALTIME_KEYS = ("sleep_margin", "sched_priority", "cpu", "lock_memory", "freeze_gc")
 METHODS = ("pinv", "closed-form", "barycenter", "min-2-norm", "min-1-norm", "sotda", "energy", "qp")
@@ -88,6 +89,11 @@ class ControlConfig:
     # m RMS: cable lengths no pose explains (an encoder fault). Soft cables stretch under forces
     # the controller does not know (Sensors 2019 springs: 30 N ≈ 10 mm), so they need more.
     max_fk_residual: float = 0.005
+    # of each cable's tension range (t_max − t_min): in position mode, the measured tensions'
+    # internal part (what no external wrench explains) beyond this is a cable whose length is
+    # not what its encoder says (control/cable_space.py). rowc: ≤ 3.3 N under a 50 N jet,
+    # 48-110 N after an encoder jump, a slip or a snapped cable (lock-step, measured)
+    max_tension_disagreement: float = 0.1
     sleep_margin: float = 0.0002  # s, spin (instead of sleep) this long before each deadline
     sched_priority: int = 80  # SCHED_FIFO priority when permitted
     cpu: int = -1  # CPU to pin the loop to; -1: the last one
@@ -209,6 +215,8 @@ def read_control(
             ("max_saturation_time", "s", {"positive": True}),
             ("tension_margin", "N", {"minimum": 0.0}),
             ("max_fk_residual", "m", {"positive": True}),
+            ("max_tension_disagreement", "of the tension range", {"positive": True,
+                                                                  "maximum": 1.0}),
         ):
             v = rd.number(safety, key, sp, unit, required=False, default=getattr(d, key), **rules)
             if v is not None:

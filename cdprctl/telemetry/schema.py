@@ -81,6 +81,8 @@ def state_payload(
         "tensions": _floats(snap["tensions"], 3),
         "torques": _floats(snap["torques"], 5),
         "motor_position": _floats(snap["motor_position"]),
+        "motor_target": _floats(snap["motor_target"]),
+        "measured_tensions": _floats(snap["measured_tensions"], 3),
         "tda": {
             "method": TDA_METHODS[int(snap["tda_method"][0])],
             "status": TDA_STATUSES[int(snap["tda_status"][0])],

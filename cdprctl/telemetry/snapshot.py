@@ -56,6 +56,8 @@ class Layout:
             ("tensions", m),  # N, commanded
             ("torques", m),  # N·m, motor, commanded
             ("motor_position", m),  # rad
+            ("motor_target", m),  # rad, position mode's targets (the motors' own otherwise)
+            ("measured_tensions", m),  # N, from the drives' torques (position mode)
             ("true_position", 3),  # m, the simulated plant's (NaN on a real robot)
             ("timing", len(TIMING)),
             # the reconfigurable end-effector, per gripper (docs/gripper.md)
@@ -144,6 +146,8 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "tensions": d.tensions,
         "torques": d.torques,
         "motor_position": d.motor_position,
+        "motor_target": d.motor_target,
+        "measured_tensions": d.measured_tensions,
     }
     if true_position is not None:
         out["true_position"] = true_position

@@ -196,17 +196,18 @@ class Cia402Drive:
             if self.mode == p.MODE_CSP:
                 theta = plant.theta[c]
                 if servo.kp[c] <= 0.0:  # just enabled: the loop starts where the motor is
-                    servo.target[c] = servo.end[c] = theta
+                    servo.target[c] = theta
+                    servo.rate[c] = 0.0
                 if self.target_counts is not None:
                     now = self._counts()
                     step = ((self.target_counts - now + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-                    servo.end[c] = theta + step * 2.0 * math.pi / self.cpr
-                # linear interpolation over one SYNC interval (a first or late SYNC: a step)
-                servo.rate[c] = (
-                    (servo.end[c] - servo.target[c]) / interval if 0.0 < interval < 0.1 else 0.0
-                )
-                if servo.rate[c] == 0.0:
-                    servo.target[c] = servo.end[c]
+                    end = theta + step * 2.0 * math.pi / self.cpr
+                    # reach it one SYNC interval from now (the last interval: the drive
+                    # measures the SYNC period); after a long gap, a step
+                    if 0.0 < interval < self.EXTRAPOLATE_FOR:
+                        servo.rate[c] = (end - servo.target[c]) / interval
+                    else:
+                        servo.target[c], servo.rate[c] = end, 0.0
                 servo.kp[c], servo.kd[c] = self.position_gains
             else:
                 servo.kp[c] = 0.0
@@ -223,10 +224,17 @@ class Cia402Drive:
         counts += self.encoder_offset
         return ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
 
+    # s: how long the position target goes on at its last rate without a SYNC (a late or lost
+    # one) before the drive holds it
+    EXTRAPOLATE_FOR = 0.05
+
     # -- time passing ---------------------------------------------------------------------------
     def tick(self, t: float) -> list[can.Message]:
-        """Heartbeat when due; the communication timeout (drive-side safety)."""
+        """Heartbeat when due; the position target held after ``EXTRAPOLATE_FOR`` without a
+        SYNC; the communication timeout (drive-side safety)."""
         out: list[can.Message] = []
+        if t - self.last_sync > self.EXTRAPOLATE_FOR:
+            self.plant.servo.rate[self.cable] = 0.0
         if self.state is p.PowerState.OPERATION_ENABLED and t - self.last_rx > self.comm_timeout:
             option = self.od[(p.OD_ABORT_CONNECTION, 0)]
             self.state = (
