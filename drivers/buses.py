@@ -12,18 +12,39 @@ from cdprctl.model.drives import BusConfig
 from drivers.errors import DriverInitializationError
 
 
-def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0) -> can.BusABC:
-    """A python-can bus for ``cfg`` (any interface: socketcan, virtual, udp_multicast, ...).
-
-    ``overrides`` may replace ``interface``, and ``channel`` (every bus on that one channel:
-    their node ids must then differ) or ``channels`` (one per bus, by ``index``), and add
-    python-can ``options``."""
+def bus_medium(
+    cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0
+) -> tuple[str, str, dict[str, Any]]:
+    """(interface, channel, python-can options) bus ``index`` of the config opens, after the
+    ``overrides``: ``interface``, and ``channel`` (every bus on that one channel: their node
+    ids must then differ) or ``channels`` (one per bus, by ``index``), and ``options``."""
     o = overrides or {}
     interface = o.get("interface") or cfg.interface
     channels = o.get("channels")
     channel = channels[index] if channels else (o.get("channel") or cfg.channel)
     kwargs: dict[str, Any] = dict(cfg.options)
     kwargs.update(o.get("options") or {})
+    return interface, str(channel), kwargs
+
+
+def media_of(
+    buses: tuple[BusConfig, ...], overrides: dict[str, Any] | None = None
+) -> list[int]:
+    """The index of the first bus on each distinct medium: buses that an override puts on one
+    channel share it, and a broadcast (SYNC, NMT, heartbeat) goes out once per medium — twice
+    would be two SYNCs a cycle to every drive."""
+    seen: dict[str, int] = {}
+    for b, cfg in enumerate(buses):
+        interface, channel, kwargs = bus_medium(cfg, overrides, b)
+        key = repr((interface, channel, sorted(kwargs.items())))
+        seen.setdefault(key, b)
+    return sorted(seen.values())
+
+
+def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0) -> can.BusABC:
+    """A python-can bus for ``cfg`` (any interface: socketcan, virtual, udp_multicast, ...)
+    on the medium ``bus_medium`` gives."""
+    interface, channel, kwargs = bus_medium(cfg, overrides, index)
     if interface not in ("virtual", "udp_multicast", "inprocess"):
         kwargs.setdefault("bitrate", cfg.bitrate)
     try:

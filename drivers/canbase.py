@@ -15,7 +15,7 @@ from numba import njit
 
 from cdprctl.numerics import plausible_step_py
 from drivers.base import WinchDriver
-from drivers.buses import TrafficLog, open_bus
+from drivers.buses import TrafficLog, media_of, open_bus
 from drivers.errors import DriverError, DriverTimeoutError
 
 
@@ -29,6 +29,7 @@ class CanWinchDriver(WinchDriver):
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         self.buses: list[can.BusABC] = []
+        self.media: list[int] = []  # the bus of each distinct medium: broadcasts go there
         self.log: TrafficLog | None = None
         self.node = np.zeros(self.m, dtype=np.int64)  # CAN node id of each cable's drive
         self.bus_of = np.zeros(self.m, dtype=np.int64)  # bus index of each cable's drive
@@ -113,6 +114,8 @@ class CanWinchDriver(WinchDriver):
     def _open(self) -> None:
         for b, bus_cfg in enumerate(self.config.buses):
             self.buses.append(open_bus(bus_cfg, self.bus_overrides, b))
+        # one bus per medium carries the broadcasts (drivers.buses.media_of)
+        self.media = media_of(self.config.buses, self.bus_overrides)
         if self.config.log_file:
             self.log = TrafficLog(self.config.log_file)
 

@@ -64,7 +64,7 @@ class FaultInjector:
         self.loss = 0.0
         self.delay = 0.0
         self.corruption = 0.0
-        self._delayed: list[tuple[float, can.Message]] = []
+        self._delayed: list[tuple[float, int, can.Message]] = []  # (due, bus, frame)
         self.counts: dict[str, int] = {"lost": 0, "delayed": 0, "corrupted": 0}
 
     @classmethod
@@ -106,7 +106,9 @@ class FaultInjector:
             return False
         return True
 
-    def tx_filter(self, msg: can.Message, t: float) -> list[can.Message]:
+    def tx_filter(self, msg: can.Message, t: float, bus: int = 0) -> list[can.Message]:
+        """The frames really sent for ``msg`` a drive sends on ``bus`` at ``t``: none (lost or
+        delayed: ``release`` gives it back on its bus later), it, or a corrupted copy."""
         if self.loss and self.rng.random() < self.loss:
             self.counts["lost"] += 1
             return []
@@ -124,14 +126,14 @@ class FaultInjector:
             )
         if self.delay > 0:
             self.counts["delayed"] += 1
-            self._delayed.append((t + self.delay, msg))
+            self._delayed.append((t + self.delay, bus, msg))
             return []
         return [msg]
 
-    def release(self, t: float) -> list[can.Message]:
-        """Delayed frames whose time has come."""
-        due = [m for when, m in self._delayed if when <= t]
-        self._delayed = [(when, m) for when, m in self._delayed if when > t]
+    def release(self, t: float) -> list[tuple[int, can.Message]]:
+        """Delayed frames whose time has come, each with the bus it was sent on."""
+        due = [(b, m) for when, b, m in self._delayed if when <= t]
+        self._delayed = [d for d in self._delayed if d[0] > t]
         return due
 
     # -- events ---------------------------------------------------------------------------------

@@ -75,7 +75,7 @@ class SimNetwork:
         self.frames_in = 0
         self.frames_out = 0
         # fault injection hooks (sim_backend.faults.FaultInjector.attach)
-        self.tx_filter: Any = None  # (msg, t) -> the frames really sent
+        self.tx_filter: Any = None  # (msg, t, bus) -> the frames really sent
         self.rx_filter: Any = None  # (msg, t) -> False: the frame is lost
         self.faults: Any = None
         self._bus_of = {c: b for b, bc in enumerate(self.cfg.buses) for c in bc.cables}
@@ -96,7 +96,7 @@ class SimNetwork:
 
     def _send(self, b: int, msgs: list[can.Message]) -> None:
         for msg in msgs:
-            out = [msg] if self.tx_filter is None else self.tx_filter(msg, self.time)
+            out = [msg] if self.tx_filter is None else self.tx_filter(msg, self.time, b)
             for m in out:
                 m.timestamp = self.time
                 self.buses[b].send(m)
@@ -166,9 +166,8 @@ class SimNetwork:
         """Frames at the current time, then ``dt`` seconds of physics."""
         if self.faults is not None:
             self.faults.apply(self, self.time, dt)
-            for b in range(len(self.buses)):
-                for msg in self.faults.release(self.time):
-                    self.buses[b].send(msg)
+            for b, msg in self.faults.release(self.time):
+                self.buses[b].send(msg)
         self.process(first)
         self.tick()
         if dt > 0:

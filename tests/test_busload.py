@@ -46,9 +46,10 @@ def test_two_buses_halve_the_load(seed000):
 def test_bus_load_cli(capsys):
     assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "250"]) == 0
     out = capsys.readouterr().out
-    # position mode: SYNC 55 + 8 x (8-byte RPDO 135 + 8-byte TPDO1 135) bits
-    assert "2215 bits per cycle" in out and "ok" in out
-    assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "500"]) == 1
+    # position mode, two buses of 4 drives: SYNC 55 + 4 x (8-byte RPDO 135 + TPDO1 135) bits
+    assert out.count("1135 bits per cycle") == 2 and "ok" in out
+    assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "500"]) == 0
+    assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "1000"]) == 1
     assert "REFUSED" in capsys.readouterr().out
 
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -22,17 +21,10 @@ from sim_backend.plant import CdprPlant
 
 
 def rowc_csp():
-    """rowc with its drives in position mode, at 250 Hz (8 drives with 8-byte RPDOs on one
-    1 Mbit/s bus: 55 % load; 111 % at 500 Hz) and a 0.1 Hz pose loop on top (0.3 Hz and more
-    went unstable during moves in position mode, lock-step, measured)."""
+    """rowc as shipped: drives in position mode on two buses, 250 Hz."""
     model = load_robot(CONFIG / "rowc.toml")
-    return dataclasses.replace(
-        model,
-        drives=dataclasses.replace(model.drives, mode="csp"),
-        control=dataclasses.replace(
-            model.control, rate=250.0, bandwidth=0.1, axis_bandwidth=None
-        ),
-    )
+    assert model.drives.mode == "csp" and model.control.rate == 250.0
+    return model
 
 
 @pytest.fixture
@@ -48,6 +40,7 @@ def test_position_mode_is_configured_by_sdo(rig):
         assert drive.od[(p.OD_MODES_OF_OPERATION, 0)] == p.MODE_CSP
         assert drive.od[(p.OD_MODES_DISPLAY, 0)] == p.MODE_CSP
     assert all(len(msg.data) == 8 for msg in rig.driver._rpdo)
+    assert rig.driver.media == [0, 1]  # two buses, two media: a SYNC on each
 
 
 def test_a_mode_the_drive_does_not_have_is_refused(rig):
@@ -203,3 +196,43 @@ def test_a_snapped_cable_is_caught_by_its_tension_and_a_jet_is_not():
         cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
         assert c.fault_kind is not None and c.fault_kind.value == "cable tension", c.fault_reason
         assert cl.net.time - t_snap < 0.3
+
+
+def test_two_buses_on_one_medium_get_one_sync_a_cycle():
+    """rowc's two buses put on one channel by an override (as ``--can-interface
+    udp_multicast --can-channel ...`` does across processes): the driver sends SYNC, NMT and
+    its heartbeat once per medium, so every drive sees one SYNC a cycle, not two — two would
+    make each drive latch and answer twice."""
+    from drivers import create_driver
+    from drivers.buses import media_of
+    from sim_backend.network import SimNetwork
+
+    model = rowc_csp()
+    shared = {"interface": "inprocess", "channel": f"shared-{id(model)}"}
+    apart = {"interface": "inprocess", "channels": ["a", "b"]}
+    assert media_of(model.drives.buses, shared) == [0]
+    assert media_of(model.drives.buses, apart) == [0, 1]
+    plant = CdprPlant(model)
+    net = SimNetwork(model, plant, shared)
+    syncs: list[float] = []
+    drive = net.drives[6]  # on the second bus
+    on_sync = drive.on_sync
+    drive.on_sync = lambda t: (syncs.append(t), on_sync(t))[1]
+    period = model.control.period
+    drv = create_driver(model, period=period, clock=lambda: net.time, wait=net.advance,
+                        bus_overrides=shared)  # fmt: skip
+    try:
+        drv.configure()
+        drv.activate()
+        for k in range(51):
+            if k == 1:
+                syncs.clear()  # from here on, one cycle's frames per advance
+            t = net.time
+            drv.read(t)
+            drv.write(t, plant.drum_ratio * plant.tension)
+            net.advance(period)
+        assert len(syncs) == 50  # one per cycle (a SYNC per bus would be 100)
+        assert drv.lifecycle.value == "active", drv.error
+    finally:
+        drv.shutdown()
+        net.close()

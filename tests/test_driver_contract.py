@@ -110,7 +110,7 @@ def test_drive_fault_then_recover(rig):
     d.activate()
     drive = rig.net.drives[4]
     frame = drive.inject_fault(0x2310 if d.name == "cia402" else 0x00001000)
-    rig.net._send(0, [frame])
+    rig.net._send(rig.model.drives.node_of(4)[0], [frame])  # on the drive's own bus
     for _ in range(3):
         rig.cycle(hold_torques(rig))
     assert d.lifecycle is Lifecycle.ERROR

@@ -98,7 +98,7 @@ class Cia402Driver(CanWinchDriver):
 
     # -- hooks: set-up ------------------------------------------------------------------------
     def _nmt_start_all(self) -> None:
-        for b in range(len(self.buses)):
+        for b in self.media:
             self._send(
                 b,
                 can.Message(
@@ -326,11 +326,11 @@ class Cia402Driver(CanWinchDriver):
                 msg = self._rpdo[c]
                 pack(msg.data, 0, cw, pm)
                 send(bus_of[c], msg)
-        for b in range(len(self.buses)):
+        for b in self.media:
             self._send(b, self._sync)
         self._last_sync = t
         if t - self._last_hb_sent >= self.config.heartbeat_period:
-            for b in range(len(self.buses)):
+            for b in self.media:
                 self._send(b, self._hb)
             self._last_hb_sent = t
         if self._send_fail_streak > 10:
