@@ -115,11 +115,11 @@ def rpy_to_rotvec(rpy):
 
 
 def test_water_jet_held_by_the_cables_at_250_hz():
-    """ARK 2020's 30 N lateral force on rowc, ramped in over 1 s like the demo's, at
-    250 Hz: no fault, the transient within the 15 mm the issue asks (55 mm with the
-    pose loop alone at 500 Hz, a fault at 250 Hz), then a move under the jet tracked. The
-    estimate is the pose the drives' lengths give: it does not see the elastic deflection
-    under a force the controller does not know (like the ARK 2020 prototype's encoders)."""
+    """ARK 2020's 30 N lateral force on rowc, ramped in over 1 s like the demo's, at 250 Hz:
+    no fault, the transient within the 15 mm the issue asks (55 mm with the pose loop alone
+    at 500 Hz, a fault at 250 Hz). What the cables exert beyond what was commanded is
+    integrated into the external wrench (``[control] disturbance_bandwidth``); fed forward,
+    the TDA holds the jet and the elastic deflection goes; then a move under the jet."""
     model = rowc_csp()
     with ClosedLoop(model) as cl:
         c = cl.controller
@@ -132,19 +132,22 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         def jet(cl):
             cl.plant.ext_force[1] = 30.0 * min(1.0, (cl.net.time - t0) / 1.0)
 
-        cl.run(3.0, each=jet)
+        cl.run(5.0, each=jet)
         a = cl.arrays()
         dy = a["p_true"][a["t"] >= t0, 1] - y0
         assert c.state.value == "enabled", c.fault_reason
-        assert np.max(np.abs(dy)) < 0.015
-        assert abs(c.estimator.position[1] - y0) < 0.003
+        assert np.max(np.abs(dy)) < 0.015  # the transient
+        assert abs(dy[-1]) < 0.001  # the deflection gone
+        est = c.data.ext_estimate
+        assert est[1] == pytest.approx(30.0, abs=1.5)  # N along y
+        assert np.abs(est[[0, 2]]).max() < 1.5 and np.abs(est[3:]).max() < 0.3
         pose = np.concatenate([np.add(model.home.position, [0.3, 0.0, -0.1]), model.home.rpy])
         cl.command("move", pose=pose)
         cl.run(3.0, each=jet)
         a = cl.arrays()
-        err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)[a["t"] >= t0 + 3.0]
+        err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)[a["t"] >= t0 + 5.0]
         assert c.state.value == "enabled", c.fault_reason
-        assert err.max() < 0.02
+        assert err.max() < 0.002  # m: the move under the jet (10 mm uncompensated)
         assert np.all(np.isfinite(a["torques"]))
 
 

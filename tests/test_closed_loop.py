@@ -11,13 +11,11 @@ import pytest
 from conftest import CONFIG
 
 from cdprctl.control.states import State
+from cdprctl.experiments.ark2020 import deflection_reference
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
-from cdprctl.stiffness import cable_stiffnesses, stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
 from sim_backend.faults import FaultEvent, FaultInjector
-from sim_backend.network import position_gains
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +31,16 @@ def rowc_torque(rowc):
         rowc,
         drives=dataclasses.replace(rowc.drives, mode="cst"),
         control=dataclasses.replace(rowc.control, rate=500.0),
+    )
+
+
+@pytest.fixture(scope="module")
+def rowc_uncompensated(rowc):
+    """rowc in position mode without the external-wrench estimate fed forward
+    (``disturbance_bandwidth = 0``): an unknown force is held by the cables' elasticity alone,
+    as on the ARK 2020 prototype — the stiffness the SOTDA acts on."""
+    return dataclasses.replace(
+        rowc, control=dataclasses.replace(rowc.control, disturbance_bandwidth=0.0)
     )
 
 
@@ -98,14 +106,18 @@ def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc_torque):
         assert np.all(a["tensions"] <= rowc.tension_max + 1e-9)
 
 
-def test_lateral_force_in_position_mode_is_the_cables_elasticity(rowc):
-    """Position mode (shipped): the same 30 N jet. The drives hold the cables' lengths, so the
-    platform deflects by the cables' (and drive loops') elasticity and stays there — K⁻¹ δw,
-    checked against the stiffness model (10.2 mm against 9.9 mm; the transient:
-    tests/test_cable_space.py)."""
-    y, tensions = deflection_under_lateral_force(rowc, TDAOptions(method=TDAMethod.BARYCENTER), 4.0)
-    assert y == pytest.approx(static_deflection(rowc, tensions), rel=0.05)
+def test_lateral_force_in_position_mode_is_the_cables_elasticity(rowc, rowc_uncompensated):
+    """Position mode: the same 30 N jet. Without the force estimate the drives hold the
+    cables' lengths and the platform deflects by the cables' (and drive loops') elasticity
+    and stays there — K⁻¹ δw, checked against the stiffness model (10.2 mm against 9.9 mm);
+    with it (shipped) the tensions take the force over and the deflection goes (the
+    transient and the estimate: tests/test_cable_space.py)."""
+    bary = TDAOptions(method=TDAMethod.BARYCENTER)
+    y, tensions = deflection_under_lateral_force(rowc_uncompensated, bary, 4.0)
+    assert y == pytest.approx(static_deflection(rowc_uncompensated, tensions), rel=0.05)
     assert 0.005 < y < 0.015
+    y, _ = deflection_under_lateral_force(rowc, bary, 6.0)
+    assert abs(y) < 0.001
 
 
 def test_a_tiny_encoder_step_mid_move_does_not_grow(rowc, rowc_torque):
@@ -293,29 +305,20 @@ def deflection_under_lateral_force(model, tda, seconds):
 
 
 def static_deflection(model, tensions):
-    """δy = (K⁻¹ δw)_y for δw = 30 N along y, K = Kp + Ka at the home pose (Picard et al.
-    2020, eq. (3)-(4)): the independent reference for the closed loop's final deflection. In
-    position mode each cable's spring is in series with its drive's position loop, a spring
-    of kp/(r/G)² along the cable (the simulated drive's PD has no integral)."""
-    kin = KinematicsData(model)
-    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
-    k = cable_stiffnesses(model, kin)
-    if model.drives.mode == "csp":
-        bw = model.drives.position_loop_bandwidth
-        for i, c in enumerate(model.cables):
-            r = c.winch.drum_radius / c.winch.gear_ratio
-            k[i] = 1.0 / (1.0 / k[i] + r * r / position_gains(c.winch.rotor_inertia, bw)[0])
-    dw = np.array([0.0, 30.0, 0.0, 0.0, 0.0, 0.0])
-    return float(np.linalg.solve(stiffness_matrix(model, kin, tensions, k), dw)[1])
+    """δy = (K⁻¹ δw)_y for δw = 30 N along y at the home pose (Picard et al. 2020, eq.
+    (3)-(4); the drives' loops in series in position mode): the independent reference for the
+    closed loop's final deflection."""
+    return deflection_reference(model, model.home.position, tensions, 30.0)
 
 
-def test_sotda_stiffens_against_the_lateral_force(rowc):
+def test_sotda_stiffens_against_the_lateral_force(rowc_uncompensated):
     """SOTDA with ν = 0.9 along y against the barycenter under the same 30 N (ARK 2020, §4:
     up to 24.8 % less displacement measured on its robot, ~10 % in its simulated estimate). On
     rowc in position mode the closed loop gives 9.19 mm against 10.17 mm (9.7 % less; torque
     mode 8.36 against 7.83 mm, the PID's integral doing the holding): the cables' elastic
     stiffness dominates, the tension-dependent Ka adds the rest. Each final deflection agrees
     with K⁻¹ δw at the commanded tensions (drive loops in series) within 5 %."""
+    rowc = rowc_uncompensated  # the paper's controller knew no external force
     y_bary, t_bary = deflection_under_lateral_force(
         rowc, TDAOptions(method=TDAMethod.BARYCENTER), 5.0
     )
@@ -328,10 +331,12 @@ def test_sotda_stiffens_against_the_lateral_force(rowc):
     assert y_sotda < 0.96 * y_bary
 
 
-def test_the_observer_estimates_the_water_jet(rowc):
-    """control/observer.py on rowc at 2 Hz: near zero at rest, ~the jet's 30 N along y once it
-    blows (the W of the estimated pose misses the y stretch under the unknown force: 25 N in
-    lock-step), nothing in the other directions; the estimate is published, not fed forward."""
+def test_the_observer_estimates_the_water_jet(rowc_torque):
+    """Torque mode: control/observer.py on rowc at 2 Hz: near zero at rest, ~the jet's 30 N
+    along y once it blows (the W of the estimated pose misses the y stretch under the unknown
+    force: 25 N in lock-step), nothing in the other directions; the estimate is published, not
+    fed forward (in position mode the measured tensions give it: tests/test_cable_space.py)."""
+    rowc = rowc_torque
     observed = dataclasses.replace(rowc.control, observer_bandwidth=2.0)
     model = dataclasses.replace(rowc, control=observed)
     with enabled(model) as cl:

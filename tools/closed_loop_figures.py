@@ -16,11 +16,10 @@ import numpy as np
 from cdprctl.control.commands import Command
 from cdprctl.control.controller import Controller
 from cdprctl.control.states import State
+from cdprctl.experiments.ark2020 import deflection_reference
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import RobotModel, load_robot
 from cdprctl.rotation import log_so3
-from cdprctl.stiffness import stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
 from sim_backend.faults import FaultEvent, FaultInjector
 
@@ -74,10 +73,7 @@ def lateral(model: RobotModel, tda: TDAOptions, seconds: float) -> str:
         c: Controller = cl.controller
         a = cl.arrays()
         y = (a["p_true"][n0:, 1] - y0) * 1e3
-        kin = KinematicsData(model)
-        inverse_kinematics(model, kin, model.home.position, model.home.rotation)
-        dw = np.array([0.0, 30.0, 0.0, 0.0, 0.0, 0.0])
-        pred = np.linalg.solve(stiffness_matrix(model, kin, c.tensions), dw)[1] * 1e3
+        pred = deflection_reference(model, model.home.position, c.tensions, 30.0) * 1e3
         t = a["tensions"][n0:]
         name = tda.method.value + (f" ν={tda.nu}" if tda.method is TDAMethod.SOTDA else "")
         ok = c.state is State.ENABLED

@@ -17,6 +17,12 @@ only corrects slowly on top (docs/control.md has the measurements).
   the commanded tensions, the ones the targets were stretched by, so the estimate is the pose
   the drives' lengths give (their tracking error shows; a force the controller does not know
   deflects the platform by the cables' elasticity, unseen — as on the ARK 2020 prototype).
+* The external wrench: what the cables exert beyond what was commanded, ``W (t_meas − t_cmd)``,
+  balances at rest the part of an unknown force not yet compensated; integrated at
+  ``[control] disturbance_bandwidth`` it converges to that force, which is fed forward (the
+  TDA distributes it: the SOTDA and the feasibility check see the real jet) and published
+  (``external_wrench_estimate``). The deflection it caused then goes as the targets' stretch
+  follows the new tensions.
 * Measured tensions: from the drives' torques less friction and rotor inertia (the torque law
   taken back, ``torques.applied_tension``), low-passed at ``MEASURED_TENSION_FILTER``;
   published (telemetry ``measured_tensions``), and compared with the commanded ones through
@@ -97,6 +103,19 @@ def internal_part_kernel(N, error, out):  # pragma: no cover - compiled
             out[i] += N[i, j] * s
 
 
+@njit(cache=True)
+def disturbance_kernel(W, error, gain_dt, w_hat):  # pragma: no cover - compiled
+    """``w_hat`` (6,) ← ``w_hat − gain_dt · W error``: the external wrench (N, N·m at P, base
+    frame) as the integral of what the cables exert beyond what was commanded (``W error``:
+    at rest it balances the part of the external wrench not yet fed forward, so the estimate
+    converges to it as a first-order lag of rate ``gain_dt / dt``)."""
+    for a in range(6):
+        s = 0.0
+        for i in range(error.shape[0]):
+            s += W[a, i] * error[i]
+        w_hat[a] -= gain_dt * s
+
+
 class CableSpace:
     """``targets`` → ``data.motor_target``; ``measure`` → ``data.measured_tensions``."""
 
@@ -118,6 +137,8 @@ class CableSpace:
         self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
         self._J_over_r = winches.rotor_inertia / winches.r
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
+        # rad/s: the external-wrench estimate's rate ([control] disturbance_bandwidth)
+        self.disturbance_gain = 2.0 * math.pi * model.control.disturbance_bandwidth
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
@@ -139,6 +160,17 @@ class CableSpace:
         self._commanded[:] = d.hold_tensions
         d.tension_error[:] = 0.0
         d.internal_tension_error[:] = 0.0
+        d.ext_estimate[:] = 0.0
+
+    def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
+        """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the
+        measured tensions (``disturbance_kernel``), while ``integrate`` — held while the
+        feedback or the distribution saturates, so that a force beyond what the cables can
+        hold is not wound up (the feed-forward then stays infeasible and the supervisor
+        stops: ``FaultKind.TENSION_DISTRIBUTION``)."""
+        d = self.data
+        if integrate and self.disturbance_gain > 0.0:
+            disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
 
     def measure(self, torque: FloatArray, velocity: FloatArray, N: FloatArray) -> None:
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``

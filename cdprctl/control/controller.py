@@ -200,6 +200,13 @@ class Controller:
             # in position mode, so no algebraic loop): the same tensions for the estimate
             d.stretch_tensions[:] = d.tensions
             cs.measure(st.torque, st.velocity, self.distribution.current.ns.N)
+            cs.estimate_disturbance(
+                self.estimator.kin.W,
+                d.state is not State.STOPPING
+                and d.saturation >= 1.0
+                and self.distribution.bad_cycles == 0,
+            )
+            d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
         elif d.cycle % self._stretch_every == 0:
             self._refresh_stretch_tensions()
         e = self.estimator

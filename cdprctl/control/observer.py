@@ -109,7 +109,8 @@ class WrenchObserver:
         self.data = data
         self.estimator = estimator
         self.gain = 2.0 * math.pi * c.observer_bandwidth  # rad/s
-        self.enabled = self.gain > 0.0
+        # in position mode the measured tensions give the external wrench (cable_space.py)
+        self.enabled = self.gain > 0.0 and model.drives.mode != "csp"
         pf = model.platform
         self._mass = float(pf.mass)
         self._inertia = np.ascontiguousarray(pf.inertia, dtype=float)

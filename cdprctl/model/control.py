@@ -17,6 +17,7 @@ CONTROL_KEYS = (
     "damping_ratio",
     "velocity_filter",
     "observer_bandwidth",
+    "disturbance_bandwidth",
     "max_velocity",
     "max_acceleration",
     "max_jerk",
@@ -64,6 +65,11 @@ class ControlConfig:
     velocity_filter: float = 40.0
     # Hz, the external-wrench observer's bandwidth (control/observer.py); 0: off
     observer_bandwidth: float = 0.0
+    # Hz, position mode: the external wrench estimated from the measured tensions, fed
+    # forward to the TDA (control/cable_space.py); 0: off. On rowc 0.5 Hz went unstable (its
+    # y mode, 3.4 Hz with 2 % damping, amplifies the loop 25-fold); 0.2 Hz converges on a
+    # 30 N jet in ~4 s (lock-step, measured)
+    disturbance_bandwidth: float = 0.2
     max_velocity: float = 0.3  # m/s
     max_acceleration: float = 1.0  # m/s²
     max_jerk: float = 10.0  # m/s³
@@ -134,6 +140,7 @@ def read_control(
     num("damping_ratio", "", positive=True)
     num("velocity_filter", "Hz", positive=True)
     num("observer_bandwidth", "Hz", minimum=0.0)
+    num("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0)
     for key, unit in (
         ("max_velocity", "m/s"),
         ("max_acceleration", "m/s²"),
