@@ -127,8 +127,8 @@ class PathRun:
 
 
 def path_under_force(model: RobotModel, nu: float, force: float) -> PathRun:
-    """Enable at the path's start, SOTDA with ``nu``, the force ramped in over 1 s, then the
-    path there and back at the robot's speed limits."""
+    """Enable at the path's start, SOTDA with ``nu``, the force ramped in over 1 s and 5 s
+    more, then the path there and back at the robot's speed limits."""
     start, end = (np.array(p) for p in PATH)
     rpy = np.asarray(model.home.rpy, float)
     home = dataclasses.replace(model.home, position=start)
@@ -137,7 +137,7 @@ def path_under_force(model: RobotModel, nu: float, force: float) -> PathRun:
         cl.command("enable")
         cl.run(1.0, record=False)
         _force(cl, force)
-        cl.run(2.0, record=False)
+        cl.run(6.0, record=False)  # the estimate of the force converges (~4 s at 0.2 Hz)
         for target in (end, start):
             cl.command("move", pose=np.concatenate([target, rpy]))
             cl.run(3.5)
