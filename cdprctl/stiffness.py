@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from cdprctl.kinematics import KinematicsData
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.rotation import FloatArray
 
 if TYPE_CHECKING:
@@ -153,3 +153,19 @@ def _skew_stack(v: FloatArray) -> FloatArray:
     S[:, 2, 0] = -v[:, 1]
     S[:, 2, 1] = v[:, 0]
     return S
+
+
+def lowest_mode(model: RobotModel) -> float:
+    """rad/s: the platform's lowest natural frequency on its cables' passive stiffness at the
+    home pose, ``√min eig(M⁻¹ Kp)`` with ``M = diag(m I, R I_c Rᵀ)`` about P (the COM's offset
+    neglected): on rowc the near-planar y mode, 3.4 Hz."""
+    from scipy.linalg import eigh
+
+    data = KinematicsData(model)
+    inverse_kinematics(model, data, model.home.position, model.home.rotation)
+    Kp = passive_stiffness(data, cable_stiffnesses(model, data))
+    R = model.home.rotation
+    M = np.zeros((6, 6))
+    M[:3, :3] = model.platform.mass * np.eye(3)
+    M[3:, 3:] = R @ np.asarray(model.platform.inertia) @ R.T
+    return float(np.sqrt(max(float(eigh(Kp, M, eigvals_only=True)[0]), 0.0)))

@@ -9,7 +9,7 @@ from conftest import CONFIG
 
 from cdprctl.cli import main
 from cdprctl.model import load_robot
-from cdprctl.model.drives import BusConfig
+from cdprctl.model.drives import BusConfig, default_drives
 from drivers.busload import bus_loads, check_bus_load, frame_bits
 
 
@@ -55,7 +55,10 @@ def test_bus_load_cli(capsys):
 
 @pytest.fixture
 def seed000():
-    return load_robot(CONFIG / "seed000.toml")
+    """seed000 with its eight drives on one bus (it ships with two buses of four)."""
+    model = load_robot(CONFIG / "seed000.toml")
+    one_bus = default_drives(model.name, model.n_cables, model.drives.rated_torque)
+    return dataclasses.replace(model, drives=one_bus)
 
 
 def test_driver_refuses_a_bus_beyond_capacity(seed000):

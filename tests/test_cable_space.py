@@ -102,7 +102,8 @@ def test_motor_targets_match_the_plants_cable_law():
         out = np.zeros(model.n_cables)
         motor_target_kernel(
             kin.arrays, ref, np.ascontiguousarray(model.home.rotation), tensions, est._law,
-            est.l_home, est.drum_ratio, np.zeros((3, 3)), np.zeros((3, 3)), out,
+            est.l_home, est.drum_ratio, np.zeros(model.n_cables), np.zeros((3, 3)),
+            np.zeros((3, 3)), out,
         )  # fmt: skip
         np.testing.assert_allclose(out, plant.theta, atol=1e-9)
 

@@ -11,7 +11,7 @@ import pytest
 from conftest import CONFIG
 
 from cdprctl.control.states import State
-from cdprctl.experiments.ark2020 import deflection_reference
+from cdprctl.experiments.ark2020 import deflection_reference, uncompensated
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model import load_robot
 from cdprctl.tda import TDAMethod, TDAOptions
@@ -36,12 +36,10 @@ def rowc_torque(rowc):
 
 @pytest.fixture(scope="module")
 def rowc_uncompensated(rowc):
-    """rowc in position mode without the external-wrench estimate fed forward
-    (``disturbance_bandwidth = 0``): an unknown force is held by the cables' elasticity alone,
-    as on the ARK 2020 prototype — the stiffness the SOTDA acts on."""
-    return dataclasses.replace(
-        rowc, control=dataclasses.replace(rowc.control, disturbance_bandwidth=0.0)
-    )
+    """rowc in position mode without the external-wrench estimate and the force feedback:
+    an unknown force is held by the cables' elasticity alone, as on the ARK 2020 prototype —
+    the stiffness the SOTDA acts on."""
+    return uncompensated(rowc)
 
 
 def enabled(model, tda=None):

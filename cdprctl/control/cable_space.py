@@ -23,6 +23,11 @@ only corrects slowly on top (docs/control.md has the measurements).
   TDA distributes it: the SOTDA and the feasibility check see the real jet) and published
   (``external_wrench_estimate``). The deflection it caused then goes as the targets' stretch
   follows the new tensions.
+* Damping: the cables' own is ~2 % (rowc's y mode, 3.1 Hz, rang for seconds after a force
+  switched off, and the external-wrench loop made it grow): each cable is paid out by the
+  integral of its tension error, leaking back (integral force feedback, Preumont, "Vibration
+  Control of Active Structures"): collocated per cable, it damps every mode whose energy is
+  in the cables, at gain = leak = the platform's lowest mode (``[control] force_feedback``).
 * Measured tensions: from the drives' torques less friction and rotor inertia (the torque law
   taken back, ``torques.applied_tension``), low-passed at ``MEASURED_TENSION_FILTER``;
   published (telemetry ``measured_tensions``), and compared with the commanded ones through
@@ -48,15 +53,17 @@ from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import compliance_at
 from cdprctl.rotation import FloatArray, exp_so3_kernel
+from cdprctl.stiffness import lowest_mode
 
 
 @njit(cache=True)
 def motor_target_kernel(
-    kin, ref_x, R_home, tensions, law, l_home, drum_ratio, E, R, out
+    kin, ref_x, R_home, tensions, law, l_home, drum_ratio, give, E, R, out
 ):  # pragma: no cover - compiled
     """``out`` (rad) ← each motor's angle that gives its cable the unstretched length which,
     stretched by ``tensions`` (N), spans the reference pose ``ref_x`` (m, rotation vector rad
-    from ``R_home``). ``E``, ``R``: (3, 3) scratch."""
+    from ``R_home``), plus ``give`` (m, paid out: the force feedback's). ``E``, ``R``: (3, 3)
+    scratch."""
     exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
     for i in range(3):
         for j in range(3):
@@ -67,7 +74,17 @@ def motor_target_kernel(
         l0 = length[i]
         for _ in range(3):  # l0 = l − t c(l0): the compliance depends on l0 weakly
             l0 = length[i] - tensions[i] * compliance_at(law, i, l0)
-        out[i] = (l_home[i] - l0) / drum_ratio[i]
+        out[i] = (l_home[i] - l0 - give[i]) / drum_ratio[i]
+
+
+@njit(cache=True)
+def force_feedback_kernel(error, k, gain_dt, leak_dt, give):  # pragma: no cover - compiled
+    """``give`` (m) per cable += ``gain_dt · error / k − leak_dt · give``: the cable paid out
+    in proportion to the integral of its tension ``error`` (N) over its stiffness ``k``
+    (N/m), leaking back (integral force feedback, Preumont: collocated, so it damps every
+    mode whose energy sits in the cables)."""
+    for i in range(give.shape[0]):
+        give[i] += gain_dt * error[i] / k[i] - leak_dt * give[i]
 
 
 @njit(cache=True)
@@ -137,6 +154,13 @@ class CableSpace:
         self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
         self._J_over_r = winches.rotor_inertia / winches.r
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
+        self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
+        # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
+        # (Preumont's integral force feedback damps a mode best near its own frequency; on
+        # rowc 10-20 rad/s took the y ring from 2 % damping to none left after 2 s, higher
+        # gains made the platform yield to the jet: lock-step, measured)
+        factor = model.control.force_feedback
+        self.iff = factor * lowest_mode(model) if self.enabled and factor > 0.0 else 0.0
         # rad/s: the external-wrench estimate's rate ([control] disturbance_bandwidth)
         self.disturbance_gain = 2.0 * math.pi * model.control.disturbance_bandwidth
 
@@ -150,7 +174,7 @@ class CableSpace:
         e = self.estimator
         motor_target_kernel(
             self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-            e.l_home, e.drum_ratio, self._E, self._R, d.motor_target,
+            e.l_home, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
         )  # fmt: skip
 
     def start_measuring(self) -> None:
@@ -161,6 +185,15 @@ class CableSpace:
         d.tension_error[:] = 0.0
         d.internal_tension_error[:] = 0.0
         d.ext_estimate[:] = 0.0
+        self.give[:] = 0.0
+
+    def force_feedback(self) -> None:
+        """``give`` (m): each cable paid out by the integral of its tension error, leaking
+        back (``force_feedback_kernel``), at the rate ``self.iff`` (rad/s)."""
+        d = self.data
+        if self.iff > 0.0:
+            g = self.iff * d.dt
+            force_feedback_kernel(d.tension_error, self.estimator.k, g, g, self.give)
 
     def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
         """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdprctl.control.cable_space import disturbance_kernel
+from cdprctl.control.cable_space import disturbance_kernel, force_feedback_kernel
 from cdprctl.control.estimator import Estimator
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
@@ -88,6 +88,7 @@ def warm_up(controller: Controller) -> None:
     c.cable_space.targets(True, zeros)
     c.cable_space.measure(zeros, zeros, ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
+    force_feedback_kernel(zeros, np.ones(m), 0.0, 0.0, np.zeros(m))
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
     d.wrench[:] = 0.0

@@ -38,9 +38,10 @@ def sotda(nu: float) -> TDAOptions:
 
 
 def uncompensated(model: RobotModel) -> RobotModel:
-    """The robot without the external-wrench estimate fed forward (position mode): an unknown
-    force is held by the cables' elasticity alone, as by the paper's controller."""
-    control = dataclasses.replace(model.control, disturbance_bandwidth=0.0)
+    """The robot without the external-wrench estimate fed forward and without the force
+    feedback's give (position mode): an unknown force is held by the cables' elasticity
+    alone, as by the paper's controller."""
+    control = dataclasses.replace(model.control, disturbance_bandwidth=0.0, force_feedback=0.0)
     return dataclasses.replace(model, control=control)
 
 

@@ -18,6 +18,7 @@ CONTROL_KEYS = (
     "velocity_filter",
     "observer_bandwidth",
     "disturbance_bandwidth",
+    "force_feedback",
     "max_velocity",
     "max_acceleration",
     "max_jerk",
@@ -66,10 +67,13 @@ class ControlConfig:
     # Hz, the external-wrench observer's bandwidth (control/observer.py); 0: off
     observer_bandwidth: float = 0.0
     # Hz, position mode: the external wrench estimated from the measured tensions, fed
-    # forward to the TDA (control/cable_space.py); 0: off. On rowc 0.5 Hz went unstable (its
-    # y mode, 3.4 Hz with 2 % damping, amplifies the loop 25-fold); 0.2 Hz converges on a
-    # 30 N jet in ~4 s (lock-step, measured)
-    disturbance_bandwidth: float = 0.2
+    # forward to the TDA (control/cable_space.py); 0: off. With the force feedback's damping
+    # 2 Hz went unstable on rowc, 1 Hz rang, 0.5 Hz holds a 30 N jet within 6.6 mm (without
+    # that damping even 0.2 Hz let the y mode grow: lock-step, measured)
+    disturbance_bandwidth: float = 0.5
+    # position mode: the integral force feedback's gain and leak, as a multiple of the
+    # platform's lowest mode on its cables (stiffness.lowest_mode; rowc 19.4 rad/s); 0: off
+    force_feedback: float = 1.0
     max_velocity: float = 0.3  # m/s
     max_acceleration: float = 1.0  # m/s²
     max_jerk: float = 10.0  # m/s³
@@ -141,6 +145,7 @@ def read_control(
     num("velocity_filter", "Hz", positive=True)
     num("observer_bandwidth", "Hz", minimum=0.0)
     num("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0)
+    num("force_feedback", "× the lowest mode", minimum=0.0, maximum=10.0)
     for key, unit in (
         ("max_velocity", "m/s"),
         ("max_acceleration", "m/s²"),
