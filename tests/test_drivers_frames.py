@@ -133,7 +133,7 @@ def test_cia402_configure_frames(seed):
         assert peer.sent(p.NMT)[0] == bytes([0x01, 0x00])  # NMT start, all nodes
         sdo = peer.sent(p.SDO_RX + 1)
         assert sdo[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
-        assert sdo[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0xA7, 0x00, 0, 0])  # 0x1017 := 167 ms
+        assert sdo[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0x64, 0x00, 0, 0])  # 0x1017 := 100 ms
         assert sdo[2] == bytes([0x2B, 0x07, 0x60, 0x00, 0x03, 0x00, 0, 0])  # 0x6007 := quick stop
         assert sdo[3] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
         # cyclic: 8 RPDOs then SYNC, disabled drives get "disable voltage" and zero torque

@@ -89,16 +89,22 @@ def force_feedback_kernel(error, k, gain_dt, leak_dt, give):  # pragma: no cover
 
 @njit(cache=True)
 def measured_tension_kernel(
-    torque, velocity, accel_term, r, viscous, coulomb, commanded, alpha, out, commanded_f, error
-):  # pragma: no cover - compiled
+    torque, velocity, accel_term, r, viscous, coulomb, limit, commanded, alpha, out,
+    commanded_f, error,
+):  # pragma: no cover - compiled  # fmt: skip
     """``out`` (N) ← a first-order low-pass (gain ``alpha``) towards the tensions the drives'
-    measured ``torque`` (N·m) apply (``torques.applied_tension``); ``commanded_f`` the same
-    low-pass of the ``commanded`` tensions (N); ``error`` (N) ← ``out − commanded_f``: what
-    the cables carry beyond what was asked, both seen through the same filter."""
+    measured ``torque`` (N·m) apply (``torques.applied_tension``); a torque beyond the
+    drive's ``limit`` (N·m), which no drive applies, is a corrupted frame: that cable's
+    sample is skipped. ``commanded_f`` the same low-pass of the ``commanded`` tensions (N);
+    ``error`` (N) ← ``out − commanded_f``: what the cables carry beyond what was asked, both
+    seen through the same filter."""
     for i in range(out.shape[0]):
-        t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i])
-        if math.isfinite(t):
-            out[i] += alpha * (t - out[i])
+        if abs(torque[i]) <= 1.05 * limit[i]:
+            t = applied_tension(
+                torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
+            )
+            if math.isfinite(t):
+                out[i] += alpha * (t - out[i])
         commanded_f[i] += alpha * (commanded[i] - commanded_f[i])
         error[i] = out[i] - commanded_f[i]
 
@@ -215,7 +221,7 @@ class CableSpace:
         self._accel_term *= self._J_over_r
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
         measured_tension_kernel(
-            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, d.tensions, alpha,
-            d.measured_tensions, self._commanded, d.tension_error,
+            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit, d.tensions,
+            alpha, d.measured_tensions, self._commanded, d.tension_error,
         )  # fmt: skip
         internal_part_kernel(N, d.tension_error, d.internal_tension_error)

@@ -138,7 +138,7 @@ def path_under_force(model: RobotModel, nu: float, force: float) -> PathRun:
         cl.command("enable")
         cl.run(1.0, record=False)
         _force(cl, force)
-        cl.run(6.0, record=False)  # the estimate of the force converges (~4 s at 0.2 Hz)
+        cl.run(6.0, record=False)  # the estimate of the force converges (~2 s at 0.5 Hz)
         for target in (end, start):
             cl.command("move", pose=np.concatenate([target, rpy]))
             cl.run(3.5)
