@@ -35,10 +35,14 @@ def media_of(
     would be two SYNCs a cycle to every drive."""
     seen: dict[str, int] = {}
     for b, cfg in enumerate(buses):
-        interface, channel, kwargs = bus_medium(cfg, overrides, b)
-        key = repr((interface, channel, sorted(kwargs.items())))
-        seen.setdefault(key, b)
+        seen.setdefault(media_key(cfg, overrides, b), b)
     return sorted(seen.values())
+
+
+def media_key(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0) -> str:
+    """What identifies the medium bus ``index`` opens: two buses with the same key share it."""
+    interface, channel, kwargs = bus_medium(cfg, overrides, index)
+    return repr((interface, channel, sorted(kwargs.items())))
 
 
 def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int = 0) -> can.BusABC:

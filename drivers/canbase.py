@@ -15,7 +15,7 @@ from numba import njit
 
 from cdprctl.numerics import plausible_step_py
 from drivers.base import WinchDriver
-from drivers.buses import TrafficLog, media_of, open_bus
+from drivers.buses import TrafficLog, media_key, media_of, open_bus
 from drivers.errors import DriverError, DriverTimeoutError
 
 
@@ -30,6 +30,7 @@ class CanWinchDriver(WinchDriver):
         super().__init__(model, **kwargs)
         self.buses: list[can.BusABC] = []
         self.media: list[int] = []  # the bus of each distinct medium: broadcasts go there
+        self._shared: dict[int, int] = {}  # bus → the first bus on its medium, when shared
         self.log: TrafficLog | None = None
         self.node = np.zeros(self.m, dtype=np.int64)  # CAN node id of each cable's drive
         self.bus_of = np.zeros(self.m, dtype=np.int64)  # bus index of each cable's drive
@@ -112,15 +113,32 @@ class CanWinchDriver(WinchDriver):
         )
 
     def _open(self) -> None:
-        for b, bus_cfg in enumerate(self.config.buses):
-            self.buses.append(open_bus(bus_cfg, self.bus_overrides, b))
-        # one bus per medium carries the broadcasts (drivers.buses.media_of)
+        # One socket per medium: buses an override puts on one channel share the first one's
+        # (two sockets on one udp_multicast group received every frame twice: the read phase
+        # cost 614 µs median across processes at 250 Hz); the broadcasts go once per medium
+        # and the dispatch table is keyed by the medium's bus (drivers.buses.media_of).
         self.media = media_of(self.config.buses, self.bus_overrides)
+        self._shared = {}
+        first: dict[str, int] = {}
+        for b, bus_cfg in enumerate(self.config.buses):
+            key = media_key(bus_cfg, self.bus_overrides, b)
+            if key in first:
+                self.buses.append(self.buses[first[key]])
+                self._shared[b] = first[key]
+            else:
+                first[key] = b
+                self.buses.append(open_bus(bus_cfg, self.bus_overrides, b))
+        if self._shared:
+            self._dispatch = {
+                (self._shared.get(b, b), arb): v for (b, arb), v in self._dispatch.items()
+            }
         if self.config.log_file:
             self.log = TrafficLog(self.config.log_file)
 
     def _close(self) -> None:
-        for bus in self.buses:
+        for b, bus in enumerate(self.buses):
+            if b in self._shared:
+                continue  # the medium's first bus closes it
             with contextlib.suppress(Exception):  # closing: nothing useful to do with it
                 bus.shutdown()
         self.buses = []
@@ -148,7 +166,8 @@ class CanWinchDriver(WinchDriver):
         ``(bus, arbitration id) → (kind, cable)``; foreign, extended and remote frames are
         counted as ignored."""
         dispatch = self._dispatch
-        for b, bus in enumerate(self.buses):
+        for b in self.media:
+            bus = self.buses[b]
             while True:
                 msg = bus.recv(0)
                 if msg is None:

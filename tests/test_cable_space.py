@@ -236,6 +236,7 @@ def test_two_buses_on_one_medium_get_one_sync_a_cycle():
             drv.write(t, plant.drum_ratio * plant.tension)
             net.advance(period)
         assert len(syncs) == 50  # one per cycle (a SYNC per bus would be 100)
+        assert drv.buses[0] is drv.buses[1]  # one socket: every frame received once
         assert drv.lifecycle.value == "active", drv.error
     finally:
         drv.shutdown()
