@@ -78,13 +78,15 @@ def motor_target_kernel(
 
 
 @njit(cache=True)
-def force_feedback_kernel(error, k, gain_dt, leak_dt, give):  # pragma: no cover - compiled
-    """``give`` (m) per cable += ``gain_dt · error / k − leak_dt · give``: the cable paid out
-    in proportion to the integral of its tension ``error`` (N) over its stiffness ``k``
-    (N/m), leaking back (integral force feedback, Preumont: collocated, so it damps every
-    mode whose energy sits in the cables)."""
+def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
+    """``give`` (m) per cable ← ``decay · give + (1 − decay) · error / k``: the cable paid out
+    by the leaky integral of its tension ``error`` (N) over its stiffness ``k`` (N/m), gain =
+    leak = β, ``decay = exp(−β dt)`` — the exact step, stable for any dt (forward Euler with
+    β dt > 1 after a 100 ms stall flipped and grew: a 10.6 mm forward-kinematics residual
+    fault in a 5-minute run at 500 Hz). Integral force feedback, Preumont: collocated, it
+    damps every mode whose energy sits in the cables."""
     for i in range(give.shape[0]):
-        give[i] += gain_dt * error[i] / k[i] - leak_dt * give[i]
+        give[i] = decay * give[i] + (1.0 - decay) * error[i] / k[i]
 
 
 @njit(cache=True)
@@ -198,8 +200,8 @@ class CableSpace:
         back (``force_feedback_kernel``), at the rate ``self.iff`` (rad/s)."""
         d = self.data
         if self.iff > 0.0:
-            g = self.iff * d.dt
-            force_feedback_kernel(d.tension_error, self.estimator.k, g, g, self.give)
+            decay = math.exp(-self.iff * d.dt)
+            force_feedback_kernel(d.tension_error, self.estimator.k, decay, self.give)
 
     def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
         """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the

@@ -88,7 +88,7 @@ def warm_up(controller: Controller) -> None:
     c.cable_space.targets(True, zeros)
     c.cable_space.measure(zeros, zeros, ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
-    force_feedback_kernel(zeros, np.ones(m), 0.0, 0.0, np.zeros(m))
+    force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
     d.wrench[:] = 0.0
