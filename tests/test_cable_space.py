@@ -241,3 +241,29 @@ def test_two_buses_on_one_medium_get_one_sync_a_cycle():
     finally:
         drv.shutdown()
         net.close()
+
+
+def test_beyond_capacity_the_brakes_close_at_once():
+    """400 N along y, far beyond what rowc's cables hold: in position mode the drives sit at
+    their torque limit; after 30 ms of that the supervisor disables them at once (the brakes
+    hold more than the motors) instead of a controlled stop the platform would drag — 540 mm
+    of excursion with the stop, 1,436 mm in torque mode (docs/reliability.md)."""
+    from sim_backend.faults import FaultEvent, FaultInjector
+
+    model = rowc_csp()
+    with ClosedLoop(model) as cl:
+        c = cl.controller
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5)
+        p0 = cl.plant.position.copy()
+        t0 = cl.net.time
+        FaultInjector([FaultEvent(t0, "external_wrench", value=(0, 400.0, 0, 0, 0, 0))]).attach(
+            cl.net
+        )
+        cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
+        assert c.fault_kind is not None and c.fault_kind.value == "beyond capacity"
+        assert cl.net.time - t0 < 0.2
+        assert c.state.value == "fault" and bool(np.all(cl.plant.brake))
+        cl.run(1.0)
+        assert np.linalg.norm(cl.plant.position - p0) < 0.2  # m: held by the brakes

@@ -73,7 +73,9 @@ class Controller:
             if model.drives.mode == "csp"
             else None
         )
-        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits)
+        # position mode: a drive sitting at its torque limit is a load beyond the cables
+        torque_limits = self.winches.limit if model.drives.mode == "csp" else None
+        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits)
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the

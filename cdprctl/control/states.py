@@ -39,6 +39,7 @@ class FaultKind(enum.StrEnum):
     FEEDBACK_AGE = "feedback age"
     TENSION_DISTRIBUTION = "tension distribution"
     CABLE_TENSION = "cable tension"
+    BEYOND_CAPACITY = "beyond capacity"
     DURING_STOP = "during the stop"
     INTERNAL = "internal error"
 
@@ -65,6 +66,9 @@ PERSISTENCE: dict[FaultKind, str] = {
     "tensions pull against each other in a way no external wrench explains — a cable longer or "
     "shorter than its encoder says (an encoder jump, a slipped or a broken cable); the "
     "measurement is low-passed and a move's transients pass through it",
+    FaultKind.BEYOND_CAPACITY: "persistent: 30 ms of a drive at its torque limit while the "
+    "drives hold the lengths (position mode): the cables cannot hold the platform, a stop on "
+    "the motors would be dragged; the brakes, which hold more than the motors, close at once",
     FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
     FaultKind.INTERNAL: "immediate: the cycle itself failed",
 }

@@ -70,16 +70,24 @@ class Supervisor:
     # The internal tension error must stay over its limit this long (position mode): the
     # measurement is already low-passed at 5 Hz; this only keeps a single bad frame out
     TENSION_FOR = 0.05  # s
+    # A drive at its torque limit this long (position mode): beyond what the cables hold
+    TORQUE_FOR = 0.03  # s
+    AT_LIMIT = 0.98  # of the torque limit
     ENABLE_TIMEOUT = 2.0  # s
 
     def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
-                 tension_limits: np.ndarray | None = None):  # fmt: skip
+                 tension_limits: np.ndarray | None = None,
+                 torque_limits: np.ndarray | None = None):  # fmt: skip
         """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
         ``tension_limits`` (N, per cable): the internal tension error that faults (position
         mode), None: not checked."""
         self.config = config
         self.tension_limits = tension_limits
         self._tension_since = math.inf
+        # N·m per winch: the limit a drive sitting at means the load is beyond the cables
+        # (position mode), None: not checked
+        self.torque_limits = torque_limits
+        self._torque_since = math.inf
         self.data = data
         self.drives = drives
         self._stop_here = stop_here
@@ -152,6 +160,13 @@ class Supervisor:
             drv.begin_deactivate()
             self.set_state(State.READY, t, "drives disabled, brakes closed")
             return
+        if self.torque_limits is not None and d.state in (
+            State.ENABLED, State.MOVING, State.STOPPING
+        ):
+            beyond = self._beyond_capacity(t)
+            if beyond is not None:
+                self._brake_now(t, beyond)
+                return
         if d.state is State.STOPPING:
             if t >= self._stop_until:
                 drv.begin_deactivate()
@@ -204,6 +219,35 @@ class Supervisor:
         if self.tension_limits is not None:
             return self._tension_disagreement(t)
         return None
+
+    def _beyond_capacity(self, t: float) -> str | None:
+        """Why the load is beyond what the cables hold: a drive at its torque limit for
+        ``TORQUE_FOR`` (``FaultKind.BEYOND_CAPACITY``), else None."""
+        tau, lim = self.drives.states.torque, self.torque_limits
+        assert lim is not None
+        i = int(np.argmax(np.abs(tau) / lim))
+        if abs(float(tau[i])) < self.AT_LIMIT * lim[i]:
+            self._torque_since = math.inf
+            return None
+        self._torque_since = min(self._torque_since, t)
+        if t - self._torque_since < self.TORQUE_FOR - 1e-9:
+            return None
+        return (
+            f"beyond capacity: the drive of cable index {i} at its torque limit "
+            f"({float(tau[i]):+.2f} of ±{lim[i]:.2f} N·m) for {self.TORQUE_FOR * 1e3:.0f} ms: "
+            "the cables cannot hold the platform; brakes closed at once"
+        )
+
+    def _brake_now(self, t: float, reason: str) -> None:
+        """Disable at once (the brakes hold more than the motors), also during a stop."""
+        d = self.data
+        if d.state is State.STOPPING:
+            d.events.append((t, f"FAULT during the stop: {reason}"))
+            d.faults.append((t, FaultKind.BEYOND_CAPACITY))
+            self.drives.begin_deactivate()
+            self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+        else:
+            self.fault(t, FaultKind.BEYOND_CAPACITY, reason, hold=False)
 
     def _tension_disagreement(self, t: float) -> tuple[FaultKind, str] | None:
         """The cable whose internal tension error has been beyond its limit for
