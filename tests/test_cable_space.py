@@ -27,6 +27,15 @@ def rowc_csp():
     return model
 
 
+def enabled(model, seconds: float) -> ClosedLoop:
+    """A lock-step closed loop started, enabled and run ``seconds``."""
+    cl = ClosedLoop(model)
+    cl.startup()
+    cl.command("enable")
+    cl.run(seconds)
+    return cl
+
+
 @pytest.fixture
 def rig():
     model = rowc_csp()
@@ -122,11 +131,8 @@ def test_water_jet_held_by_the_cables_at_250_hz():
     integrated into the external wrench (``[control] disturbance_bandwidth``); fed forward,
     the TDA holds the jet and the elastic deflection goes; then a move under the jet."""
     model = rowc_csp()
-    with ClosedLoop(model) as cl:
+    with enabled(model, 1.0) as cl:
         c = cl.controller
-        cl.startup()
-        cl.command("enable")
-        cl.run(1.0)
         y0 = cl.plant.position[1]
         t0 = cl.net.time
 
@@ -184,10 +190,7 @@ def test_a_snapped_cable_is_caught_by_its_tension_and_a_jet_is_not():
     from sim_backend.faults import FaultEvent, FaultInjector
 
     model = rowc_csp()
-    with ClosedLoop(model) as cl:
-        cl.startup()
-        cl.command("enable")
-        cl.run(0.5)
+    with enabled(model, 0.5) as cl:
         FaultInjector(
             [FaultEvent(cl.net.time, "external_wrench", value=(0, 50.0, 0, 0, 0, 0), ramp=1.0)]
         ).attach(cl.net)
@@ -251,11 +254,8 @@ def test_beyond_capacity_the_brakes_close_at_once():
     from sim_backend.faults import FaultEvent, FaultInjector
 
     model = rowc_csp()
-    with ClosedLoop(model) as cl:
+    with enabled(model, 0.5) as cl:
         c = cl.controller
-        cl.startup()
-        cl.command("enable")
-        cl.run(0.5)
         p0 = cl.plant.position.copy()
         t0 = cl.net.time
         FaultInjector([FaultEvent(t0, "external_wrench", value=(0, 400.0, 0, 0, 0, 0))]).attach(
