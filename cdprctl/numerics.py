@@ -103,3 +103,15 @@ def stiffness_kernel(lengths, law, out):  # pragma: no cover - compiled
     """``out`` ← the axial stiffness k_i (N/m) of each cable at ``lengths`` (m)."""
     for i in range(lengths.shape[0]):
         out[i] = 1.0 / compliance_at(law, i, lengths[i])
+
+
+@njit(cache=True)
+def worst_ratio(values, limits):  # pragma: no cover - compiled
+    """The index of the largest ``|values[i]| / limits[i]`` (limits > 0): the element nearest
+    or furthest beyond its limit, without the arrays a numpy expression would build."""
+    best, worst = -1.0, 0
+    for i in range(values.shape[0]):
+        ratio = abs(values[i]) / limits[i]
+        if ratio > best:
+            best, worst = ratio, i
+    return worst

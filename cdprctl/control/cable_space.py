@@ -150,7 +150,7 @@ class CableSpace:
 
     def __init__(self, model: RobotModel, data: ControlData, trajectory: Trajectory,
                  estimator: Estimator, winches: WinchTorques):  # fmt: skip
-        self.enabled = model.drives.mode == "csp"
+        self.enabled = model.drives.holds_lengths
         self.data = data
         self.trajectory = trajectory
         self.estimator = estimator
@@ -160,7 +160,6 @@ class CableSpace:
         self._E = np.zeros((3, 3))
         self._R = np.zeros((3, 3))
         self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
-        self._J_over_r = winches.rotor_inertia / winches.r
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
         self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
@@ -219,8 +218,7 @@ class CableSpace:
         ``data.tension_error`` and its ``internal_tension_error`` part in the null space
         ``N`` (m × r, orthonormal) of the wrench matrix."""
         d, w = self.data, self.winches
-        np.dot(self.estimator.kin.WT, self.trajectory.acceleration, out=self._accel_term)
-        self._accel_term *= self._J_over_r
+        w.rotor_term(self.estimator.kin.WT, self.trajectory.acceleration, self._accel_term)
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
         measured_tension_kernel(
             torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit, d.tensions,

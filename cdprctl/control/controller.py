@@ -70,11 +70,11 @@ class Controller:
         # position mode: the cables' internal tension error is supervised, per cable (N)
         tension_limits = (
             c.max_tension_disagreement * (model.tension_max - model.tension_min)
-            if model.drives.mode == "csp"
+            if model.drives.holds_lengths
             else None
         )
         # position mode: a drive sitting at its torque limit is a load beyond the cables
-        torque_limits = self.winches.limit if model.drives.mode == "csp" else None
+        torque_limits = self.winches.limit if model.drives.holds_lengths else None
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits)
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,

@@ -110,7 +110,7 @@ class WrenchObserver:
         self.estimator = estimator
         self.gain = 2.0 * math.pi * c.observer_bandwidth  # rad/s
         # in position mode the measured tensions give the external wrench (cable_space.py)
-        self.enabled = self.gain > 0.0 and model.drives.mode != "csp"
+        self.enabled = self.gain > 0.0 and not model.drives.holds_lengths
         pf = model.platform
         self._mass = float(pf.mass)
         self._inertia = np.ascontiguousarray(pf.inertia, dtype=float)
@@ -118,7 +118,7 @@ class WrenchObserver:
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
         self._winches = (winches.r, winches.viscous, winches.coulomb)
-        self._J_over_r = winches.rotor_inertia / winches.r
+        self._rotor_term = winches.rotor_term
         self._accel_term = np.zeros(m)  # N·m: J θ̈_d of the torques' feedforward
         self._state = kernel_args(ObserverState(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(m)))
         self._last_t = math.nan
@@ -157,8 +157,7 @@ class WrenchObserver:
         if not 0.0 < dt < 0.1:
             return  # the first step after reset, or a gap: the integral starts here
         e = self.estimator
-        np.dot(e.kin.WT, acceleration, out=self._accel_term)
-        self._accel_term *= self._J_over_r
+        self._rotor_term(e.kin.WT, acceleration, self._accel_term)
         observer_kernel(
             dt, self.gain, self._mass, self._inertia, self._gravity, self._com, e.rotation,
             e.velocity, e.omega, e.kin.W, torque, velocity, self._accel_term, self._winches,

@@ -23,6 +23,7 @@ from cdprctl.control.data import ControlData
 from cdprctl.control.states import FaultKind, State
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
+from cdprctl.numerics import worst_ratio
 from drivers.base import Lifecycle, WinchStates
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError
 
@@ -61,6 +62,22 @@ def driver_fault_kind(err: DriverError | None) -> FaultKind:
     return FaultKind.DRIVES
 
 
+class Persistence:
+    """How long a condition has held: ``held(t, on)`` is True once it has been on for
+    ``duration`` s without a break (the persistent faults of ``states.PERSISTENCE``)."""
+
+    def __init__(self, duration: float):
+        self.duration = duration  # s
+        self.since = math.inf  # s, when it came on
+
+    def held(self, t: float, on: bool) -> bool:
+        if not on:
+            self.since = math.inf
+            return False
+        self.since = min(self.since, t)
+        return t - self.since >= self.duration - 1e-9
+
+
 class Supervisor:
     # The estimated speed must stay over the limit this long: taking over from the brakes moves
     # the drums for a few ms while the cables find their tensions, and in a badly conditioned
@@ -83,17 +100,17 @@ class Supervisor:
         mode), None: not checked."""
         self.config = config
         self.tension_limits = tension_limits
-        self._tension_since = math.inf
+        self._tension_over = Persistence(self.TENSION_FOR)
         # N·m per winch: the limit a drive sitting at means the load is beyond the cables
         # (position mode), None: not checked
         self.torque_limits = torque_limits
-        self._torque_since = math.inf
+        self._torque_at_limit = Persistence(self.TORQUE_FOR)
         self.data = data
         self.drives = drives
         self._stop_here = stop_here
         self.t_state = 0.0  # s, when the state was entered
         self._stop_until = 0.0
-        self._over_speed_since = math.inf
+        self._speed_over = Persistence(self.OVER_SPEED_FOR)
 
     @property
     def state(self) -> State:
@@ -225,12 +242,8 @@ class Supervisor:
         ``TORQUE_FOR`` (``FaultKind.BEYOND_CAPACITY``), else None."""
         tau, lim = self.drives.states.torque, self.torque_limits
         assert lim is not None
-        i = int(np.argmax(np.abs(tau) / lim))
-        if abs(float(tau[i])) < self.AT_LIMIT * lim[i]:
-            self._torque_since = math.inf
-            return None
-        self._torque_since = min(self._torque_since, t)
-        if t - self._torque_since < self.TORQUE_FOR - 1e-9:
+        i = worst_ratio(tau, lim)
+        if not self._torque_at_limit.held(t, abs(float(tau[i])) >= self.AT_LIMIT * lim[i]):
             return None
         return (
             f"beyond capacity: the drive of cable index {i} at its torque limit "
@@ -254,13 +267,9 @@ class Supervisor:
         ``TENSION_FOR`` (position mode; ``FaultKind.CABLE_TENSION``)."""
         err, lim = self.data.internal_tension_error, self.tension_limits
         assert lim is not None
-        i = int(np.argmax(np.abs(err) / lim))
+        i = worst_ratio(err, lim)
         e = float(err[i])
-        if abs(e) <= lim[i]:
-            self._tension_since = math.inf
-            return None
-        self._tension_since = min(self._tension_since, t)
-        if t - self._tension_since < self.TENSION_FOR - 1e-9:
+        if not self._tension_over.held(t, abs(e) > lim[i]):
             return None
         limit = self.config.max_tension_disagreement
         return FaultKind.CABLE_TENSION, (
@@ -271,8 +280,4 @@ class Supervisor:
         )
 
     def _over_speed(self, t: float, speed: float, limit: float) -> bool:
-        if speed <= limit:
-            self._over_speed_since = math.inf
-            return False
-        self._over_speed_since = min(self._over_speed_since, t)
-        return t - self._over_speed_since >= self.OVER_SPEED_FOR - 1e-9
+        return self._speed_over.held(t, speed > limit)

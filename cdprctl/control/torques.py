@@ -73,6 +73,13 @@ class WinchTorques:
         self.coulomb = np.array([x.coulomb_friction for x in w])  # N·m
         self.limit = np.array([x.torque_limit for x in w])  # N·m
         self.friction_compensation = model.control.friction_compensation
+        self._J_over_r = self.rotor_inertia / self.r
+
+    def rotor_term(self, WT: FloatArray, acceleration: FloatArray, out: FloatArray) -> None:
+        """``out`` (N·m) ← the rotor-inertia feed-forward ``J θ̈_d = J Wᵀ a_d / r`` of the
+        torque law, for taking it back out of measured torques (observer, cable space)."""
+        np.dot(WT, acceleration, out=out)
+        out *= self._J_over_r
 
     def update(
         self,

@@ -18,6 +18,7 @@ import numpy as np
 
 from cdprctl.control.cable_space import disturbance_kernel, force_feedback_kernel
 from cdprctl.control.estimator import Estimator
+from cdprctl.numerics import worst_ratio
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.planar import feasible_scale_kernel
@@ -89,6 +90,7 @@ def warm_up(controller: Controller) -> None:
     c.cable_space.measure(zeros, zeros, ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
     force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
+    worst_ratio(zeros, np.ones(m))  # the supervisor's position-mode checks
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
     d.wrench[:] = 0.0

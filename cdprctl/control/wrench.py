@@ -40,7 +40,7 @@ class PoseController:
         # 0.5 Hz), with measured ones a 0.1 N error is millimetres of y (28 mm during a move),
         # with the static feed-forward ones the internal forces differ (10-20 mm): each went
         # unstable during moves at 0.3 Hz and more (lock-step, measured; docs/control.md).
-        on = 0.0 if model.drives.mode == "csp" else 1.0
+        on = 0.0 if model.drives.holds_lengths else 1.0
         self.kp = on * 3.0 * wn * wn
         self.kd = on * 3.0 * c.damping_ratio * wn
         self.ki = on * wn**3

@@ -59,7 +59,7 @@ def deflection_reference(model: RobotModel, position, tensions, force: float) ->
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, np.asarray(position, float), model.home.rotation)
     k = cable_stiffnesses(model, kin)
-    if model.drives.mode == "csp":
+    if model.drives.holds_lengths:
         bw = model.drives.position_loop_bandwidth
         for i, c in enumerate(model.cables):
             r = c.winch.drum_radius / c.winch.gear_ratio

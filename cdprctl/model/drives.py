@@ -66,6 +66,11 @@ class DrivesConfig:
     log_file: str | None = None  # python-can logger file (.log, .asc, .blf, .csv)
     buses: tuple[BusConfig, ...] = ()
 
+    @property
+    def holds_lengths(self) -> bool:
+        """True in position mode: the drives' own loops hold each cable's length."""
+        return self.mode == "csp"
+
     def node_of(self, cable: int) -> tuple[int, int]:
         """(bus index, node id) of a cable."""
         for b, bus in enumerate(self.buses):
