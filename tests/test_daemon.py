@@ -25,15 +25,16 @@ from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 
 def test_loop_skips_missed_periods_without_catching_up():
     """A step that stalls 3.5 periods once: the periods it covered are skipped (counted), the
-    deadlines stay on the grid, and the next cycles are not run back to back to catch up."""
+    deadlines stay on the grid, the next cycles are not run back to back to catch up, and each
+    step is given the time it runs at (a late cycle computes for when it sends)."""
     period = 0.005
     starts: list[float] = []
-    deadlines: list[float] = []
+    times: list[float] = []
     calls = {"n": 0}
 
     def step(t: float) -> None:
         starts.append(time.monotonic())
-        deadlines.append(t)
+        times.append(t)
         calls["n"] += 1
         if calls["n"] == 5:
             time.sleep(3.5 * period)
@@ -41,12 +42,17 @@ def test_loop_skips_missed_periods_without_catching_up():
     stats = run_loop(
         period, step, lambda: calls["n"] >= 12, sleep_margin=0.001, stats=LoopStats(size=100)
     )
+    deadlines = stats.deadline[: stats.count]
     assert stats.missed >= 2  # the deadlines 2.5 periods behind
     assert stats.overruns >= 1  # the stall (a loaded machine may add one)
     steps = np.diff(deadlines) / period
     assert np.allclose(steps, np.round(steps), atol=1e-6)  # on the grid
     assert steps.min() > 0.5  # every deadline used once
     assert np.round(steps).sum() == len(deadlines) - 1 + stats.missed  # skips all counted
+    # each step's time: its deadline plus its lateness, when it began (the stall's next cycle
+    # 2.5 periods late less the skipped ones: a deadline would be up to a period behind)
+    late = stats.lateness[: stats.count]
+    assert np.allclose(np.array(times) - deadlines, late, atol=1e-9) and late.max() > 1e-4
     # no burst: after the stall, no more cycles than the time elapsed allows
     assert len(starts) - 6 <= (starts[-1] - starts[5]) / period + 1
 

@@ -125,6 +125,29 @@ def test_over_speed_must_persist():
     assert d2.state is State.ENABLED
 
 
+def test_a_condition_from_before_a_fault_must_persist_anew():
+    """A drive at its torque limit when an other fault disabled the drives: after reset and
+    enable it must sit at the limit for TORQUE_FOR again (the persistence once carried over
+    and faulted 4 ms after the re-enable: frame loss 20 %, seed 0, lock-step)."""
+    d = ControlData(ROWC.n_cables, 0)
+    d.state = State.ENABLED
+    drives = FakeDrives(ROWC.n_cables, Lifecycle.ACTIVE)
+    limits = np.full(ROWC.n_cables, 2.6)
+    s = Supervisor(CFG, d, drives, lambda: None, torque_limits=limits)
+    drives.states.torque[1] = 2.6
+    healthy(s, 1.0)  # at the limit from 1.0 s
+    s.fault(1.01, FaultKind.DRIVE_FAULT, "another drive", hold=False)
+    s.set_state(State.READY, 3.0, "reset")
+    s.set_state(State.ENABLING, 3.0, "enable")
+    drives.lifecycle = Lifecycle.ACTIVE
+    healthy(s, 3.01)
+    assert d.state is State.ENABLED
+    healthy(s, 3.02)  # at the limit since 3.02 s only
+    assert d.state is State.ENABLED, d.events
+    healthy(s, 3.02 + Supervisor.TORQUE_FOR)
+    assert d.fault_kind is FaultKind.BEYOND_CAPACITY
+
+
 @pytest.mark.parametrize("start", list(State))
 def test_transition_table_is_enforced(start):
     for to in State:

@@ -92,14 +92,15 @@ def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
 @njit(cache=True)
 def measured_tension_kernel(
     torque, velocity, accel_term, r, viscous, coulomb, limit, commanded, alpha, out,
-    commanded_f, error,
+    commanded_f, error, alpha_fast, fast_error,
 ):  # pragma: no cover - compiled  # fmt: skip
     """``out`` (N) ← a first-order low-pass (gain ``alpha``) towards the tensions the drives'
     measured ``torque`` (N·m) apply (``torques.applied_tension``); a torque beyond the
     drive's ``limit`` (N·m), which no drive applies, is a corrupted frame: that cable's
     sample is skipped. ``commanded_f`` the same low-pass of the ``commanded`` tensions (N);
     ``error`` (N) ← ``out − commanded_f``: what the cables carry beyond what was asked, both
-    seen through the same filter."""
+    seen through the same filter; ``fast_error`` (N) the same difference through a faster
+    low-pass (gain ``alpha_fast``), for the supervision."""
     for i in range(out.shape[0]):
         if abs(torque[i]) <= 1.05 * limit[i]:
             t = applied_tension(
@@ -107,6 +108,7 @@ def measured_tension_kernel(
             )
             if math.isfinite(t):
                 out[i] += alpha * (t - out[i])
+                fast_error[i] += alpha_fast * (t - commanded[i] - fast_error[i])
         commanded_f[i] += alpha * (commanded[i] - commanded_f[i])
         error[i] = out[i] - commanded_f[i]
 
@@ -147,6 +149,8 @@ class CableSpace:
     # Hz: the measured tensions' low-pass; below the winch-on-cable modes (23-34 Hz on the
     # shipped robots), above the pose loop
     MEASURED_TENSION_FILTER = 5.0
+    # Hz: the same for the supervision's internal tension error
+    SUPERVISION_FILTER = 20.0
 
     def __init__(self, model: RobotModel, data: ControlData, trajectory: Trajectory,
                  estimator: Estimator, winches: WinchTorques):  # fmt: skip
@@ -161,6 +165,7 @@ class CableSpace:
         self._R = np.zeros((3, 3))
         self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
+        self._fast_error = np.zeros(model.n_cables)  # N, at SUPERVISION_FILTER
         self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
         # (Preumont's integral force feedback damps a mode best near its own frequency; on
@@ -191,6 +196,7 @@ class CableSpace:
         self._commanded[:] = d.hold_tensions
         d.tension_error[:] = 0.0
         d.internal_tension_error[:] = 0.0
+        self._fast_error[:] = 0.0
         d.ext_estimate[:] = 0.0
         self.give[:] = 0.0
 
@@ -220,8 +226,10 @@ class CableSpace:
         d, w = self.data, self.winches
         w.rotor_term(self.estimator.kin.WT, self.trajectory.acceleration, self._accel_term)
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
+        alpha_fast = 1.0 - math.exp(-2.0 * math.pi * self.SUPERVISION_FILTER * d.dt)
         measured_tension_kernel(
             torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit, d.tensions,
-            alpha, d.measured_tensions, self._commanded, d.tension_error,
+            alpha, d.measured_tensions, self._commanded, d.tension_error, alpha_fast,
+            self._fast_error,
         )  # fmt: skip
-        internal_part_kernel(N, d.tension_error, d.internal_tension_error)
+        internal_part_kernel(N, self._fast_error, d.internal_tension_error)

@@ -64,18 +64,23 @@ def driver_fault_kind(err: DriverError | None) -> FaultKind:
 
 class Persistence:
     """How long a condition has held: ``held(t, on)`` is True once it has been on for
-    ``duration`` s without a break (the persistent faults of ``states.PERSISTENCE``)."""
+    ``duration`` s without a break (the persistent faults of ``states.PERSISTENCE``).
+    ``weight`` (≥ 1) counts each interval that many times: the further beyond its limit, the
+    sooner (the inverse-time characteristic of protection relays); 1 is plain time."""
 
     def __init__(self, duration: float):
         self.duration = duration  # s
-        self.since = math.inf  # s, when it came on
+        self.dose = 0.0  # s, weighted time on
+        self.last = math.inf  # s, the last sample while on
 
-    def held(self, t: float, on: bool) -> bool:
+    def held(self, t: float, on: bool, weight: float = 1.0) -> bool:
         if not on:
-            self.since = math.inf
+            self.dose, self.last = 0.0, math.inf
             return False
-        self.since = min(self.since, t)
-        return t - self.since >= self.duration - 1e-9
+        if t > self.last:
+            self.dose += weight * (t - self.last)
+        self.last = t
+        return self.dose >= self.duration - 1e-9
 
 
 class Supervisor:
@@ -123,6 +128,11 @@ class Supervisor:
             return
         if s is not d.state:
             d.events.append((t, f"state {d.state.value} -> {s.value}: {why}"))
+        if s not in (State.ENABLED, State.MOVING, State.STOPPING):
+            # unsupervised from here on: what held before must persist anew once enabled (a
+            # drive at its limit before a fault tripped the check at the next enable at once)
+            for p in (self._tension_over, self._torque_at_limit, self._speed_over):
+                p.held(t, False)
         d.state = s
         self.t_state = t
 
@@ -269,7 +279,8 @@ class Supervisor:
         assert lim is not None
         i = worst_ratio(err, lim)
         e = float(err[i])
-        if not self._tension_over.held(t, abs(e) > lim[i]):
+        ratio = abs(e) / lim[i]
+        if not self._tension_over.held(t, ratio > 1.0, ratio):
             return None
         limit = self.config.max_tension_disagreement
         return FaultKind.CABLE_TENSION, (
