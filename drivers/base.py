@@ -379,8 +379,11 @@ class WinchDriver(ABC):
         """Drain and decode feedback into ``self.states``; return an error, never raise."""
 
     @abstractmethod
-    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
-        """Encode and send the torques (N·m); return an error, never raise."""
+    def _write_internal(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
+        """Encode and send the torques (N·m); return an error, never raise. ``setup``: a
+        write of the set-up's own cycling, not of the control loop."""
 
 
 @njit(cache=True)

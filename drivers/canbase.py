@@ -83,7 +83,7 @@ class CanWinchDriver(WinchDriver):
         while True:
             now = self.clock()
             self._read_internal(now)
-            self._write_internal(now, np.zeros(self.m))
+            self._write_internal(now, np.zeros(self.m), setup=True)
             if heard():
                 return
             if on_tick is not None:

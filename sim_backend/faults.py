@@ -173,7 +173,7 @@ class FaultInjector:
         elif ev.kind == "encoder_jump":
             d = net.drives[c]
             if hasattr(d, "cpr"):  # CiA 402: counts
-                d.encoder_offset += round(float(ev.value) * d.cpr / (2 * math.pi))
+                d.jump_encoder(round(float(ev.value) * d.cpr / (2 * math.pi)))
             else:  # ODrive: rad
                 d.encoder_offset += float(ev.value)
         elif ev.kind == "cable_snap":

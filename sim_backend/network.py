@@ -9,6 +9,7 @@ each of its cycles; in real time (``cdprctl sim``) a loop calls it against the w
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -18,17 +19,6 @@ from drivers.buses import open_bus
 from drivers.cia402 import protocol as p402
 from sim_backend.drives.cia402 import Cia402Drive
 from sim_backend.plant import CdprPlant
-
-#: the damping ratio of the simulated drives' position loops
-POSITION_LOOP_DAMPING = 0.7
-
-
-def position_gains(rotor_inertia: float, bandwidth: float) -> tuple[float, float]:
-    """(kp N·m/rad, kd N·m·s/rad) of a simulated drive's position loop: the rotor alone
-    placed at ``bandwidth`` Hz with damping ``POSITION_LOOP_DAMPING`` (kp = J ω², kd = 2 ζ J ω);
-    the cable adds its stiffness on top (physics.servo_torque)."""
-    w = 2.0 * math.pi * bandwidth
-    return rotor_inertia * w * w, 2.0 * POSITION_LOOP_DAMPING * rotor_inertia * w
 
 
 class SimNetwork:
@@ -67,7 +57,7 @@ class SimNetwork:
                         w.torque_limit,
                         self.cfg.comm_timeout,
                         self.cfg.velocity_source == "pdo",
-                        position_gains(w.rotor_inertia, self.cfg.position_loop_bandwidth),
+                        self.cfg.position_gains(w.rotor_inertia),
                     )
                 table[n] = drive
                 self.drives[c] = drive
@@ -105,9 +95,12 @@ class SimNetwork:
     def process(self, first: can.Message | None = None) -> None:
         """Handle every frame waiting on every bus, at the current time (``first``: a frame
         already taken from bus 0)."""
-        t = self.time
+        for b, msg in self._waiting(first):
+            self._handle(b, msg)
+
+    def _waiting(self, first: can.Message | None) -> list[tuple[int, can.Message]]:
+        out: list[tuple[int, can.Message]] = []
         for b, bus in enumerate(self.buses):
-            table = self.nodes[b]
             while True:
                 msg: can.Message | None
                 if first is not None and b == 0:
@@ -116,13 +109,17 @@ class SimNetwork:
                     msg = bus.recv(0)
                 if msg is None:
                     break
-                self.frames_in += 1
-                if self.rx_filter is not None and not self.rx_filter(msg, t):
-                    continue
-                if self.protocol == "odrive":
-                    self._send(b, self._odrive_frame(table, msg, t))
-                else:
-                    self._send(b, self._cia402_frame(table, msg, t))
+                out.append((b, msg))
+        return out
+
+    def _handle(self, b: int, msg: can.Message) -> None:
+        self.frames_in += 1
+        if self.rx_filter is not None and not self.rx_filter(msg, self.time):
+            return
+        if self.protocol == "odrive":
+            self._send(b, self._odrive_frame(self.nodes[b], msg, self.time))
+        else:
+            self._send(b, self._cia402_frame(self.nodes[b], msg, self.time))
 
     def _cia402_frame(self, table: dict[int, Any], msg: can.Message, t: float) -> list[can.Message]:
         if msg.is_extended_id or msg.is_remote_frame:
@@ -161,6 +158,34 @@ class SimNetwork:
             for d in table.values():
                 out += d.tick(self.time)
             self._send(b, out)
+
+    def advance_until(
+        self, t_end: float, arrival: Callable[[can.Message], float], first: can.Message | None
+    ) -> None:
+        """Real time: up to ``t_end`` (s), each waiting frame handled at the instant it
+        arrived (``arrival(msg)``, s of simulated time, kept within [now, ``t_end``]) with
+        the physics stepped up to it. A simulator woken late by a loaded machine still sees
+        the SYNCs a period apart: handling a burst at its wake-up, intervals of 0 and 11 ms
+        made the drives' interpolation step and fault on their following error mid-move."""
+        if self.faults is not None:
+            self.faults.apply(self, self.time, t_end - self.time)
+            for b, msg in self.faults.release(self.time):
+                self.buses[b].send(msg)
+        waiting = [(arrival(msg), b, msg) for b, msg in self._waiting(first)]
+        # frames stamped after t_end came while this process was held up after reading the
+        # clock: the time has passed (bunched at t_end they made SYNC intervals of 0)
+        t_end = max([t_end, self.time] + [a for a, _, _ in waiting if math.isfinite(a)])
+        frames = [(min(max(a, self.time), t_end), b, msg) for a, b, msg in waiting]
+        frames.sort(key=lambda f: f[0])
+        for t, b, msg in frames:
+            if t - self.time > 0.5 * self.plant.opt.physics_dt:
+                self.plant.step(t - self.time)
+                self.time = t
+            self._handle(b, msg)
+        self.tick()
+        if t_end > self.time:
+            self.plant.step(t_end - self.time)
+            self.time = t_end
 
     def advance(self, dt: float, first: can.Message | None = None) -> None:
         """Frames at the current time, then ``dt`` seconds of physics."""

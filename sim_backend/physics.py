@@ -69,7 +69,11 @@ class Inputs(NamedTuple):
 class Servo(NamedTuple):
     """The drives' own position loops (CiA 402 cyclic synchronous position, per winch): the
     interpolated target (rad) and its rate (rad/s), the gains (N·m/rad, 0 = torque mode;
-    N·m·s/rad), the torque limit (N·m) and the torque applied in the last step (N·m, out).
+    N·m·s/rad), the torque limit (N·m), the torque applied in the last step (N·m, out), the
+    following error window (rad, CiA 402 0x6065; inf: not monitored), its time-out (s, 0x6066)
+    and how long the error has been beyond the window without a break (s, out): past the
+    time-out the drive's firmware brakes within the physics step (``following_error``), its
+    state machine faults at its next tick.
     The torque offset is ``Inputs.motor_torque``."""
 
     target: np.ndarray
@@ -78,6 +82,9 @@ class Servo(NamedTuple):
     kd: np.ndarray
     limit: np.ndarray
     applied: np.ndarray
+    window: np.ndarray
+    timeout: np.ndarray
+    beyond: np.ndarray
 
 
 @njit(cache=True)
@@ -90,15 +97,29 @@ def servo_torque(servo, i, theta, theta_dot, offset, dt):  # pragma: no cover - 
     integral: with one on all eight winches of rowc the platform's y mode (~3 Hz) grew from
     0.5 to 9 mrad of motor error in 2 s at constant targets (lock-step, measured); the torque
     offset carries the load instead."""
-    target, rate, kp, kd, limit, applied = servo
+    target, rate, kp, kd, limit, applied, window, _, beyond = servo
     if kp[i] <= 0.0:
         applied[i] = offset
+        beyond[i] = 0.0
         return offset
     target[i] += rate[i] * dt
+    if abs(target[i] - theta) > window[i]:
+        beyond[i] += dt
+    else:
+        beyond[i] = 0.0
     tau = offset + kp[i] * (target[i] - theta) + kd[i] * (rate[i] - theta_dot)
     tau = min(limit[i], max(-limit[i], tau))
     applied[i] = tau
     return tau
+
+
+def _following_error(servo, i):
+    """True once winch ``i``'s position error has been beyond its window past the time-out."""
+    return servo[8][i] > servo[7][i]
+
+
+following_error = njit(cache=True)(_following_error)
+following_error_py = _following_error  # the same rule for the drives' Python side
 
 
 class Jaws(NamedTuple):
@@ -297,6 +318,8 @@ def physics_kernel(
                 theta[i] += theta_dot[i] * dt
             else:
                 tau = servo_torque(servo, i, theta[i], theta_dot[i], tau_m[i], dt)
+                if following_error(servo, i):
+                    brake[i] = True  # the drive's firmware: from the next step on
                 cap = 1.0
                 if mu_p > 0.0 and wrap[i] > 0.0:
                     cap = math.exp(mu_p * wrap[i] * math.tanh(theta_dot[i] / coul_v))

@@ -1,20 +1,27 @@
 """The simulated robot in real time, as its own process (``cdprctl sim``).
 
 Every ``step`` seconds of wall clock (default 0.5 ms) it handles the frames waiting on the
-buses, ticks the drives, and integrates the physics over the elapsed time; it sleeps until the
-next step, waking early when a frame arrives. Simulated time follows the monotonic clock.
+buses, each at the instant the kernel stamped its arrival (the physics stepped up to it),
+ticks the drives, and integrates the physics up to now; it sleeps until the next step, waking
+early when a frame arrives. Simulated time follows the monotonic clock (less the stalls of
+this process beyond ``MAX_CATCH_UP``).
 """
 
 from __future__ import annotations
 
+import math
 import signal
 import time
 from typing import Any
+
+import can
 
 from cdprctl.model.robot import RobotModel
 from sim_backend.faults import FaultInjector
 from sim_backend.network import SimNetwork
 from sim_backend.plant import CdprPlant
+
+MAX_CATCH_UP = 0.5  # s
 
 
 def run_realtime(
@@ -40,14 +47,28 @@ def run_realtime(
     t0 = time.monotonic()
     next_status = status_every
     woke_on: Any = None
+    # simulated time = monotonic − t0 − lag: a stall of this process up to MAX_CATCH_UP is
+    # simulated afterwards, frame by frame at their arrival instants (with 10 ms, the frames
+    # of a longer stall were bunched at one instant: SYNC intervals of 0, following-error
+    # faults); a longer one is lag
+    lag = 0.0
+    wall_minus_mono = time.time() - time.monotonic()
+
+    def arrival(msg: can.Message) -> float:
+        """s of simulated time a frame arrived at: its kernel receive stamp (wall clock)."""
+        if msg.timestamp <= 0.0:
+            return math.inf  # no stamp: handled now
+        return msg.timestamp - wall_minus_mono - t0 - lag
+
     try:
         last = t0
         while not stop["flag"]:
             now = time.monotonic()
             elapsed = now - last
             if elapsed > 0 or woke_on is not None:
-                # a stall never becomes a huge physics step
-                net.advance(min(elapsed, 0.01), first=woke_on)
+                lag += max(0.0, elapsed - MAX_CATCH_UP)
+                wall_minus_mono = time.time() - time.monotonic()
+                net.advance_until(now - t0 - lag, arrival, first=woke_on)
                 woke_on = None
                 last = now
             sim_t = now - t0

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -52,6 +53,20 @@ def test_position_mode_is_configured_by_sdo(rig):
     assert rig.driver.media == [0, 1]  # two buses, two media: a SYNC on each
 
 
+def test_the_following_error_is_configured_by_sdo(rig):
+    """0x6065 (counts) and 0x6066 (ms) from ``[drives] following_error_*``; the default window
+    is the error at which the drive's loop alone asks for the full torque: torque_limit / kp."""
+    rig.driver.configure()
+    model = rig.model
+    w = model.cables[0].winch
+    kp = model.drives.position_gains(w.rotor_inertia)[0]
+    assert kp == pytest.approx(w.rotor_inertia * (2 * math.pi * 50.0) ** 2)
+    counts = round(w.torque_limit / kp / (2 * math.pi) * w.encoder_counts_per_rev)
+    for drive in rig.net.drives:
+        assert drive.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] == counts  # 1,832 on rowc
+        assert drive.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] == 3
+
+
 def test_a_mode_the_drive_does_not_have_is_refused(rig):
     drive = rig.net.drives[0]
     reply = drive.on_sdo(p.sdo_download(p.OD_MODES_OF_OPERATION, 0, 3, 1))  # profile velocity
@@ -91,6 +106,84 @@ def test_the_drive_holds_its_position_target(rig):
     bad[2] = math.nan
     d.write(rig.net.time, hold, targets=bad)
     assert d.targets[2] == target[2]
+
+
+def test_the_loop_never_sends_two_syncs_within_half_a_period(rig):
+    """A late cycle followed at once by the next: the second one's RPDOs go out, its SYNC does
+    not (the drives' time base stays regular); the set-up's own cycling is not held back."""
+    d = rig.driver
+    d.configure()  # set-up writes: a SYNC each, whatever their spacing
+    syncs: list[float] = []
+    send = d._send
+
+    def counting(b, msg):
+        if msg.arbitration_id == p.SYNC:
+            syncs.append(rig.net.time)
+        return send(b, msg)
+
+    d._send = counting
+    zeros = np.zeros(rig.model.n_cables)
+    for gap in (rig.period, 0.0, rig.period, 0.4 * rig.period, 0.6 * rig.period):
+        rig.net.advance(gap)
+        d.read(rig.net.time)
+        d.write(rig.net.time, zeros)
+    assert len(syncs) == 3 * len(d.media), syncs  # the 0 and 0.4-period ones held back
+
+
+def test_a_lost_rpdo_the_drive_goes_on_at_the_targets_rate(rig):
+    """A SYNC without a new target (its RPDO lost): the drive's target goes on at its last
+    rate, as across a late SYNC, instead of stopping for a period and catching up after."""
+    d, plant = rig.driver, rig.plant
+    d.configure()
+    d.activate()
+    hold = plant.drum_ratio * plant.tension
+    target = d.states.position.copy()
+    speed = 1.0  # rad/s at the motor, cable 0 (1 mm of cable in the run: 40 N more)
+    drive = rig.net.drives[0]
+    for k in range(40):
+        t = rig.net.time
+        d.read(t)
+        target[0] += speed * rig.period
+        d.write(t, hold, targets=target)
+        if k == 30:  # this cycle's RPDO to cable 0 never arrives
+            rig.net.rx_filter = lambda msg, t: msg.arbitration_id != p.RPDO1 + drive.node_id
+        rig.net.advance(rig.period)
+        rig.net.rx_filter = None
+        if k == 30:
+            assert plant.servo.rate[0] == pytest.approx(speed, rel=0.05)
+    assert drive.sync_period == pytest.approx(rig.period, rel=1e-6)
+    assert drive.state is p.PowerState.OPERATION_ENABLED
+    assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
+
+
+def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
+    """Frames read in one burst (a simulator woken late) are handled at the instants they
+    arrived, the physics stepped up to each: the drives see SYNCs a period apart."""
+    d, net = rig.driver, rig.net
+    d.configure()
+    net.process()  # the set-up's last frames
+    sent: list[float] = []
+    drive = net.drives[0]
+    on_sync = drive.on_sync
+
+    def seen(t):
+        sent.append(t)
+        return on_sync(t)
+
+    drive.on_sync = seen
+    t0, wall0 = net.time, time.time()
+    zeros = np.zeros(rig.model.n_cables)
+    for k in range(3):  # three cycles' frames waiting, sent a period apart in wall time
+        d._write_internal(t0 + k * rig.period, zeros, setup=True)
+        time.sleep(rig.period)
+
+    def when(msg):  # the in-process bus stamps each frame with the wall clock when sent
+        return msg.timestamp - wall0 + t0
+
+    net.advance_until(t0 + 3 * rig.period, when, first=None)
+    # a period apart, give or take the wall clock's own jitter (sleeps on a shared VM)
+    assert len(sent) == 3 and np.all(np.abs(np.diff(sent) - rig.period) < 0.5 * rig.period)
+    assert net.time >= t0 + 2 * rig.period
 
 
 def test_motor_targets_match_the_plants_cable_law():
@@ -246,15 +339,24 @@ def test_two_buses_on_one_medium_get_one_sync_a_cycle():
         net.close()
 
 
-def test_beyond_capacity_the_brakes_close_at_once():
-    """400 N along y, far beyond what rowc's cables hold: in position mode the drives sit at
-    their torque limit; after 30 ms of that the supervisor disables them at once (the brakes
-    hold more than the motors) instead of a controlled stop the platform would drag — 540 mm
-    of excursion with the stop, 1,436 mm in torque mode (docs/reliability.md)."""
+@pytest.mark.parametrize("drives_watch", [True, False], ids=["following error", "torque limit"])
+def test_beyond_capacity_the_brakes_close_at_once(drives_watch):
+    """400 N along y, far beyond what rowc's cables hold: in position mode the drives cannot
+    follow their targets. Drives that watch their following error (CiA 402 0x6065/0x6066, set
+    by the driver) fault and brake on their own (EMCY 0x8611); drives that do not sit at their
+    torque limit, and after 30 ms of that the supervisor disables them at once (the brakes hold
+    more than the motors) instead of a controlled stop the platform would drag — 540 mm of
+    excursion with the stop, 1,436 mm in torque mode (docs/reliability.md)."""
     from sim_backend.faults import FaultEvent, FaultInjector
 
     model = rowc_csp()
-    with enabled(model, 0.5) as cl:
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        if not drives_watch:
+            for drive in cl.net.drives:
+                drive.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] = p.FOLLOWING_ERROR_OFF
+        cl.command("enable")
+        cl.run(0.5)
         c = cl.controller
         p0 = cl.plant.position.copy()
         t0 = cl.net.time
@@ -262,7 +364,11 @@ def test_beyond_capacity_the_brakes_close_at_once():
             cl.net
         )
         cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
-        assert c.fault_kind is not None and c.fault_kind.value == "beyond capacity"
+        assert c.fault_kind is not None
+        if drives_watch:
+            assert c.fault_kind.value == "drive fault" and "following error" in c.fault_reason
+        else:
+            assert c.fault_kind.value == "beyond capacity", c.fault_reason
         assert cl.net.time - t0 < 0.2
         assert c.state.value == "fault" and bool(np.all(cl.plant.brake))
         cl.run(1.0)

@@ -316,6 +316,10 @@ def test_drive_mode_keys(tmp_path):
     assert any("drives.mode" in e and "cia402" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + "\n[drives]\nposition_loop_bandwidth = -5\n")
     assert any("drives.position_loop_bandwidth" in e and "Hz" in e for e in errs), errs
+    errs = errors_of(tmp_path, BASE + "\n[drives]\nfollowing_error_window = 0\n")
+    assert any("drives.following_error_window" in e and " m" in e for e in errs), errs
+    errs = errors_of(tmp_path, BASE + "\n[drives]\nfollowing_error_timeout = 70\n")
+    assert any("drives.following_error_timeout" in e and "65.535" in e for e in errs), errs
     model = load_robot(write(tmp_path, BASE + '\n[drives]\nmode = "csp"\n', "ok.toml"))
     assert model.drives.mode == "csp" and len(model.drives.buses) == 1
     assert model.drives.buses[0].cables == tuple(range(model.n_cables))

@@ -44,6 +44,8 @@ def test_fault(rowc, scenario):
         assert r.recovered.startswith(("yes", "rode through")), r.recovered
     if name == "drive fault (0x2310)":
         assert r.detection_s < 0.01 and "0x2310" in r.reaction
+    if name == "encoder jump 0.5 rad":  # the drive's own following error stops it at once
+        assert "0x8611" in r.reaction and r.excursion_mm < 1.0, (r.reaction, r.excursion_mm)
     if name == "daemon SIGKILLed, restarted":
         assert r.detection_s is not None and r.detection_s <= 0.15  # the drives' timeout
         assert r.recovered.startswith("yes"), r.recovered

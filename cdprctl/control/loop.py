@@ -106,7 +106,11 @@ def run_loop(
             st.missed += skipped
             deadline += skipped * period
             late = now - deadline
-        step(deadline)
+        # the cycle's time is when it runs, not its deadline: a late cycle's position targets
+        # are for the instant its SYNC goes out (for its deadline, up to a period behind,
+        # the drives reversed out of their extrapolation and faulted on their following error
+        # across processes on a loaded machine)
+        step(now)
         compute = clock() - now
         if compute > period:
             st.overruns += 1

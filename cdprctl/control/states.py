@@ -46,7 +46,8 @@ class FaultKind(enum.StrEnum):
 
 PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.DRIVE_FAULT: "immediate: the drive itself reports a fault and has stopped "
-    "producing torque",
+    "producing torque (in position mode also its following error: 3 ms beyond the error at "
+    "which its loop asks for the full torque — an encoder that jumped, a load beyond the winch)",
     FaultKind.DRIVE_SILENT: "persistent: the driver's own time limits (heartbeat, feedback) "
     "have run out",
     FaultKind.DRIVES: "immediate: the driver cannot operate the drives",
@@ -62,10 +63,11 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.TENSION_DISTRIBUTION: "persistent: the feedback wrench saturated longer than "
     "[control.safety] max_saturation_time (the cables give what they can meanwhile), or 3 "
     "cycles in which even the feed-forward cannot be held (the last feasible tensions held)",
-    FaultKind.CABLE_TENSION: "persistent: 50 ms over the limit (position mode): the measured "
-    "tensions pull against each other in a way no external wrench explains — a cable longer or "
-    "shorter than its encoder says (an encoder jump, a slipped or a broken cable); the "
-    "measurement is low-passed and a move's transients pass through it",
+    FaultKind.CABLE_TENSION: "persistent: inverse-time, 50 ms at the limit, less the further "
+    "beyond it (position mode): the measured tensions pull against each other in a way no "
+    "external wrench explains — a cable longer or shorter than its encoder says (a slipped or "
+    "a broken cable); the measurement is low-passed at 20 Hz and a move's transients pass "
+    "through it",
     FaultKind.BEYOND_CAPACITY: "persistent: 30 ms of a drive at its torque limit while the "
     "drives hold the lengths (position mode): the cables cannot hold the platform, a stop on "
     "the motors would be dragged; the brakes, which hold more than the motors, close at once",

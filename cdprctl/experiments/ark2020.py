@@ -24,7 +24,6 @@ from cdprctl.model import RobotModel
 from cdprctl.stiffness import cable_stiffnesses, stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
 from sim_backend.faults import FaultEvent, FaultInjector
-from sim_backend.network import position_gains
 
 #: the lateral force's direction (the water jet, along y_b)
 DIRECTION = (0.0, 1.0, 0.0)
@@ -60,10 +59,10 @@ def deflection_reference(model: RobotModel, position, tensions, force: float) ->
     inverse_kinematics(model, kin, np.asarray(position, float), model.home.rotation)
     k = cable_stiffnesses(model, kin)
     if model.drives.holds_lengths:
-        bw = model.drives.position_loop_bandwidth
         for i, c in enumerate(model.cables):
             r = c.winch.drum_radius / c.winch.gear_ratio
-            k[i] = 1.0 / (1.0 / k[i] + r * r / position_gains(c.winch.rotor_inertia, bw)[0])
+            kp = model.drives.position_gains(c.winch.rotor_inertia)[0]
+            k[i] = 1.0 / (1.0 / k[i] + r * r / kp)
     dw = np.array([0.0, force, 0.0, 0.0, 0.0, 0.0])
     return float(np.linalg.solve(stiffness_matrix(model, kin, tensions, k), dw)[1])
 

@@ -7,6 +7,7 @@ Absent, every robot gets one simulated bus: CiA 402 drives with node ids 1..m on
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,6 +17,8 @@ DRIVES_KEYS = (
     "driver",
     "mode",
     "position_loop_bandwidth",
+    "following_error_window",
+    "following_error_timeout",
     "rated_torque",
     "feedback_timeout",
     "missed_feedback_limit",
@@ -51,6 +54,15 @@ class DrivesConfig:
     # Hz: the simulated drives' position loop in "csp" (kp = J ω², kd = 2 ζ J ω on the rotor
     # inertia, ζ = 0.7); a real drive is tuned with its vendor's tool and ignores this
     position_loop_bandwidth: float = 50.0
+    # position mode, drive-side supervision (CiA 402 0x6065, 0x6066): m of cable a winch may
+    # stay off its target, and for how long (s), before its drive faults (EMCY 0x8611) and
+    # brakes. None: the error at which the position loop alone asks for the full torque
+    # (``following_error_window_rad``), which only a load beyond the winch or an encoder that
+    # jumped reaches. 3 ms: rowc's drives bring a 0.5 rad encoder jump back under that window
+    # in 5-8 ms, moving the platform 8 mm; caught after 3 ms it moves 0.1 mm. 2 ms also
+    # stopped 1 of 3 runs at 5 % frame loss (a stale RPDO's catch-up; lock-step)
+    following_error_window: float | None = None
+    following_error_timeout: float = 0.003
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
     # s of running cycles without feedback from a drive before it is taken as lost: a time,
     # not a count of cycles, so the tolerance is the same at every rate (30 ms; the old count
@@ -71,6 +83,21 @@ class DrivesConfig:
         """True in position mode: the drives' own loops hold each cable's length."""
         return self.mode == "csp"
 
+    def position_gains(self, rotor_inertia: float) -> tuple[float, float]:
+        """(kp N·m/rad, kd N·m·s/rad) of a simulated drive's position loop: the rotor alone
+        placed at ``position_loop_bandwidth`` with damping ``POSITION_LOOP_DAMPING`` (kp = J ω²,
+        kd = 2 ζ J ω); the cable adds its stiffness on top (sim_backend physics.servo_torque)."""
+        w = 2.0 * math.pi * self.position_loop_bandwidth
+        return rotor_inertia * w * w, 2.0 * POSITION_LOOP_DAMPING * rotor_inertia * w
+
+    def following_error_window_rad(self, winch: Any) -> float:
+        """rad at the motor: ``following_error_window`` (m of cable) through the drum, or by
+        default the error at which the position loop alone asks for the winch's full torque
+        (``torque_limit / kp``; rowc: 0.18 rad, 1.6 mm of cable)."""
+        if self.following_error_window is not None:
+            return self.following_error_window * winch.gear_ratio / winch.drum_radius
+        return winch.torque_limit / self.position_gains(winch.rotor_inertia)[0]
+
     def node_of(self, cable: int) -> tuple[int, int]:
         """(bus index, node id) of a cable."""
         for b, bus in enumerate(self.buses):
@@ -80,6 +107,7 @@ class DrivesConfig:
 
 
 MODES = ("cst", "csp")
+POSITION_LOOP_DAMPING = 0.7  # of the simulated drives' position loop
 
 
 def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
@@ -118,6 +146,13 @@ def read_drives(
     pos_bw = rd.number(
         t, "position_loop_bandwidth", "drives", "Hz", required=False, default=50.0, positive=True
     )
+    fe_window = rd.number(
+        t, "following_error_window", "drives", "m", required=False, default=None, positive=True
+    )
+    fe_timeout = rd.number(
+        t, "following_error_timeout", "drives", "s", required=False, default=0.003,
+        positive=True, maximum=65.535,
+    )  # fmt: skip
     rated = rd.number(
         t, "rated_torque", "drives", "N·m", required=False, default=rated_default, positive=True
     )
@@ -261,6 +296,8 @@ def read_drives(
         driver=driver,
         mode=mode,
         position_loop_bandwidth=float(pos_bw or 50.0),
+        following_error_window=None if fe_window is None else float(fe_window),
+        following_error_timeout=float(fe_timeout or 0.003),
         rated_torque=float(rated if rated is not None else rated_default),
         feedback_timeout=float(fb_to or 0.03),
         heartbeat_timeout=float(hb_to or 0.5),

@@ -68,6 +68,16 @@ class Cia402Driver(CanWinchDriver):
             for c in range(m)
         ]
         self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
+        # CSP: 0x6065 of each drive (counts), at least one count
+        self._following_window = np.array(
+            [
+                max(1, min(p.FOLLOWING_ERROR_OFF - 1, round(
+                    cfg.following_error_window_rad(c.winch) / (2.0 * math.pi) * self.encoder_cpr[i]
+                )))
+                for i, c in enumerate(model.cables)
+            ],
+            dtype=np.int64,
+        )  # fmt: skip
         self._sync = can.Message(arbitration_id=p.SYNC, data=b"", is_extended_id=False)
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
@@ -92,7 +102,8 @@ class Cia402Driver(CanWinchDriver):
         self._sdo_reply: dict[int, bytes] = {}
         self._enable = False
         self._reset_request = 0  # cycles left sending the fault-reset edge
-        self._last_sync = -math.inf
+        self._last_sync = -math.inf  # s (clock): the last SYNC sent
+        self._last_cycle_sync = -math.inf  # s (clock): the last one the control loop sent
         self._last_hb_sent = -math.inf
         self._bus_of_list = [int(b) for b in self.bus_of]
 
@@ -113,10 +124,16 @@ class Cia402Driver(CanWinchDriver):
         # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
         # the bus-load budget counts
         hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
+        fe_ms = max(1, round(self.config.following_error_timeout * 1000))
         for c in range(self.m):
             self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, self.mode, 1, timeout)
             self._sdo_write(c, p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2, timeout)
             self._sdo_write(c, p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2, timeout)
+            if self._csp:  # the drive stops its winch when it cannot follow (docs/control.md)
+                self._sdo_write(
+                    c, p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4, timeout
+                )
+                self._sdo_write(c, p.OD_FOLLOWING_ERROR_TIMEOUT, 0, fe_ms, 2, timeout)
             mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
             if mode != self.mode:
                 raise DriverInitializationError(
@@ -299,7 +316,9 @@ class Cia402Driver(CanWinchDriver):
             )
         return None
 
-    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
+    def _write_internal(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
         reset = self._reset_request
         if reset:
             self._reset_request -= 1
@@ -330,9 +349,18 @@ class Cia402Driver(CanWinchDriver):
                 msg = self._rpdo[c]
                 pack(msg.data, 0, cw, pm)
                 send(bus_of[c], msg)
-        for b in self.media:
-            self._send(b, self._sync)
-        self._last_sync = t
+        # The SYNC is the drives' time base: the control loop never sends two within half a
+        # period (on the clock: a late cycle's time is not when it sends). A late cycle
+        # followed at once by the next one (a loaded machine) sent SYNCs 0 ms apart, then
+        # none for 16 ms: the drives' interpolation overshot and faulted on its following
+        # error (across processes, 2 busy loops on 2 cores). Its RPDOs wait for the next.
+        now = self.clock()
+        if setup or now - self._last_cycle_sync >= 0.5 * self.period:
+            for b in self.media:
+                self._send(b, self._sync)
+            self._last_sync = now
+            if not setup:
+                self._last_cycle_sync = now
         if t - self._last_hb_sent >= self.config.heartbeat_period:
             for b in self.media:
                 self._send(b, self._hb)

@@ -56,6 +56,12 @@ OD_ABORT_CONNECTION = 0x6007  # what the drive does when the communication is lo
 OD_PRODUCER_HEARTBEAT = 0x1017  # ms
 OD_TARGET_POSITION = 0x607A
 OD_TORQUE_OFFSET = 0x60B2
+# position mode: how far (counts, UNSIGNED32; 0xFFFFFFFF: not monitored) and how long (ms,
+# UNSIGNED16) the position actual may stay off the target before the drive faults (EMCY 0x8611)
+OD_FOLLOWING_ERROR_WINDOW = 0x6065
+OD_FOLLOWING_ERROR_TIMEOUT = 0x6066
+FOLLOWING_ERROR_OFF = 0xFFFFFFFF
+EMCY_FOLLOWING_ERROR = 0x8611
 MODE_CSP = 8  # cyclic synchronous position (CiA 402 §8)
 MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
 #: the modes of operation cdprctl drives a CiA 402 drive in, by the ``[drives] mode`` name

@@ -125,7 +125,9 @@ class ODriveDriver(CanWinchDriver):
             return DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
         return None
 
-    def _write_internal(self, t: float, torques: np.ndarray) -> DriverError | None:
+    def _write_internal(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
         if self._clear:
             for c in range(self.m):
                 self._send_cmd(c, p.CLEAR_ERRORS, b"")

@@ -7,7 +7,9 @@ between SYNCs, the drive's own position loop run at every physics step, ``physic
 (and TPDO2) sampled at the SYNC, the power state machine of CiA 402 (the transition table of
 ``drivers.cia402.protocol``), heartbeat production (0x1017), EMCY on faults, and drive-side
 safety: the communication timeout triggers the abort-connection option (0x6007: quick stop),
-the torque limit, and the brake that holds the drum whenever the drive is not enabled.
+the following error in position mode (beyond 0x6065 for longer than 0x6066: FAULT, EMCY
+0x8611), the torque limit, and the brake that holds the drum whenever the drive is not
+enabled.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import math
 import can
 
 from drivers.cia402 import protocol as p
+from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
 
@@ -44,6 +47,9 @@ class Cia402Drive:
         # the position loop's gains in mode 8 (N·m/rad, N·m·s/rad): the drive's own tuning
         self.position_gains = position_gains
         self.last_sync = -math.inf
+        self.last_target = -math.inf  # s, the SYNC that applied the last RPDO
+        self.sync_period = 0.0  # s, the drive's estimate (0: none yet)
+        self._intervals: list[float] = []  # s, the last SYNC intervals
         self.nmt = p.HB_PRE_OPERATIONAL
         self.state = p.PowerState.SWITCH_ON_DISABLED  # transitions 0 and 1 done at power-on
         self.od: dict[tuple[int, int], int] = {
@@ -52,6 +58,9 @@ class Cia402Drive:
             (p.OD_PRODUCER_HEARTBEAT, 0): 0,
             (p.OD_ABORT_CONNECTION, 0): 1,
             (p.OD_RATED_TORQUE, 0): round(rated_torque * 1000),
+            # not monitored until configured (the controller writes both in position mode)
+            (p.OD_FOLLOWING_ERROR_WINDOW, 0): p.FOLLOWING_ERROR_OFF,
+            (p.OD_FOLLOWING_ERROR_TIMEOUT, 0): 10,
         }
         # (controlword, target torque or position, torque offset per-mille)
         self.pending: tuple[int, int, int] | None = None
@@ -128,17 +137,19 @@ class Cia402Drive:
         """Apply the latched RPDO, then sample and send the TPDOs."""
         self.last_rx = t
         interval, self.last_sync = t - self.last_sync, t
+        self._measure_sync_period(interval)
         if self.nmt != p.HB_OPERATIONAL:
             return []
-        if self.pending is not None:
-            cw, value, offset = self.pending
-            self.pending = None
+        pending, self.pending = self.pending, None
+        if pending is not None:
+            self.last_target = t
+            cw, value, offset = pending
             self._apply_controlword(cw)
             if self.mode == p.MODE_CSP:
                 self.target_counts, self.torque_pm = value, offset
             else:
                 self.torque_pm = value
-        self._apply_to_plant(interval)
+        self._apply_to_plant(interval, pending is not None)
         if self.silent:
             return []
         counts = self._counts()
@@ -187,7 +198,11 @@ class Cia402Drive:
                 self.state, number = nxt
                 self.transitions.append(number)
 
-    def _apply_to_plant(self, interval: float = math.inf) -> None:
+    def _apply_to_plant(self, interval: float = math.inf, fresh: bool = True) -> None:
+        """``interval`` (s): since the last SYNC; ``fresh``: a new target came with this SYNC
+        (without one, position mode goes on at the target's last rate, as across a late SYNC:
+        stopping the target for a period and catching up after made a following error of
+        a period's travel at every lost frame)."""
         c, servo, plant = self.cable, self.plant.servo, self.plant
         if self.state is p.PowerState.OPERATION_ENABLED:
             tau = self.torque_pm * self.rated_torque / 1000.0
@@ -198,25 +213,55 @@ class Cia402Drive:
                 if servo.kp[c] <= 0.0:  # just enabled: the loop starts where the motor is
                     servo.target[c] = theta
                     servo.rate[c] = 0.0
-                if self.target_counts is not None:
+                if self.target_counts is not None and fresh:
                     now = self._counts()
                     step = ((self.target_counts - now + 0x80000000) & 0xFFFFFFFF) - 0x80000000
                     end = theta + step * 2.0 * math.pi / self.cpr
-                    # reach it one SYNC interval from now (the last interval: the drive
-                    # measures the SYNC period); after a long gap, a step
-                    if 0.0 < interval < self.EXTRAPOLATE_FOR:
-                        servo.rate[c] = (end - servo.target[c]) / interval
+                    # reach it one SYNC period from now (the drive's estimate of the period);
+                    # after a long gap, a step
+                    if 0.0 <= interval < self.EXTRAPOLATE_FOR and self.sync_period > 0.0:
+                        servo.rate[c] = (end - servo.target[c]) / self.sync_period
                     else:
                         servo.target[c], servo.rate[c] = end, 0.0
                 servo.kp[c], servo.kd[c] = self.position_gains
+                window = self.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] & 0xFFFFFFFF
+                servo.window[c] = (
+                    math.inf
+                    if window == p.FOLLOWING_ERROR_OFF
+                    else window * 2.0 * math.pi / self.cpr
+                )
+                servo.timeout[c] = self.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] / 1000.0
             else:
                 servo.kp[c] = 0.0
             plant.brake[c] = False
         else:  # disabled, quick stop, fault: no torque, the brake holds the drum
             plant.motor_torque[c] = 0.0
             servo.kp[c] = 0.0
+            servo.beyond[c] = 0.0
             self.target_counts = None
             plant.brake[c] = True
+
+    def _measure_sync_period(self, interval: float) -> None:
+        """``sync_period`` (s): the SYNC period as a drive locks to it, the median of the last
+        ``SYNC_WINDOW`` intervals: a late SYNC or two at once do not move it, a new rate (set-up
+        to cycling) takes half the window. Interpolating over the last interval instead, SYNCs
+        handled late by a loaded simulator (two in one step: an interval of 0) made a target
+        step and a following-error fault mid-move."""
+        if not 0.0 <= interval < self.EXTRAPOLATE_FOR:
+            return
+        self._intervals.append(interval)
+        del self._intervals[: -self.SYNC_WINDOW]
+        ordered = sorted(self._intervals)
+        self.sync_period = ordered[len(ordered) // 2]
+
+    SYNC_WINDOW = 9
+
+    def jump_encoder(self, counts: int) -> None:
+        """Fault injection: the encoder jumps by ``counts``. In position mode the drive's loop
+        sees it at once: its target, in the true motor angle, moves the other way."""
+        self.encoder_offset += counts
+        if self.state is p.PowerState.OPERATION_ENABLED and self.mode == p.MODE_CSP:
+            self.plant.servo.target[self.cable] -= counts * 2.0 * math.pi / self.cpr
 
     def _counts(self) -> int:
         """Position actual (counts, 32-bit): the encoder, with an injected jump."""
@@ -224,8 +269,8 @@ class Cia402Drive:
         counts += self.encoder_offset
         return ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
 
-    # s: how long the position target goes on at its last rate without a SYNC (a late or lost
-    # one) before the drive holds it
+    # s: how long the position target goes on at its last rate without a new one (a SYNC or an
+    # RPDO late or lost) before the drive holds it
     EXTRAPOLATE_FOR = 0.05
 
     # -- time passing ---------------------------------------------------------------------------
@@ -233,8 +278,13 @@ class Cia402Drive:
         """Heartbeat when due; the position target held after ``EXTRAPOLATE_FOR`` without a
         SYNC; the communication timeout (drive-side safety)."""
         out: list[can.Message] = []
-        if t - self.last_sync > self.EXTRAPOLATE_FOR:
-            self.plant.servo.rate[self.cable] = 0.0
+        servo = self.plant.servo
+        if t - self.last_target > self.EXTRAPOLATE_FOR:
+            servo.rate[self.cable] = 0.0
+        if self.state is p.PowerState.OPERATION_ENABLED and following_error_py(servo, self.cable):
+            emcy = self.inject_fault(p.EMCY_FOLLOWING_ERROR)
+            if not self.silent:
+                out.append(emcy)
         if self.state is p.PowerState.OPERATION_ENABLED and t - self.last_rx > self.comm_timeout:
             option = self.od[(p.OD_ABORT_CONNECTION, 0)]
             self.state = (
