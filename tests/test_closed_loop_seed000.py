@@ -85,3 +85,25 @@ def test_the_same_distribution_again_changes_nothing(seed000):
         cl.run(0.1)
         assert c.tda is tda and c.distribution.old is None
         assert "unchanged" in c.events[-1][1]
+
+
+def test_sotda_runs_in_the_loop_on_the_spring_robot(seed000):
+    """SOTDA ν = 0.9 (stiffest along z) drives the spring robot through a move: its tensions,
+    far from the barycenter's, are what the springs' stretch is estimated from, and the pose
+    estimate follows (the check of the encoders against the pose once tripped at 77 mm)."""
+    from cdprctl.tda import TDAMethod, TDAOptions
+
+    goal = seed000.home.position + np.array([0.1, 0.0, 0.05])
+    with enabled(seed000) as cl:
+        sotda = TDAOptions(method=TDAMethod.SOTDA, nu=0.9, direction=(0.0, 0.0, 1.0),
+                           period=cl.period)  # fmt: skip
+        cl.command("set_tda", tda=sotda)
+        cl.run(2.0)
+        cl.command("move", pose=np.concatenate([goal, log_so3(seed000.home.rotation)]))
+        cl.run(6.0)
+        c = cl.controller
+        assert c.state is State.ENABLED, c.fault_reason
+        assert c.tda.options.method is TDAMethod.SOTDA and c.tda_status.name == "OK"
+        a = cl.arrays()
+        assert np.linalg.norm(a["p_true"] - a["p_des"], axis=1).max() < 2e-3  # m
+        assert np.linalg.norm(cl.plant.position - goal) < 1e-3  # m

@@ -90,7 +90,10 @@ def main() -> None:
                 ):
                     kind = c.fault_kind
                     internal = kind is FaultKind.INTERNAL  # keep what failed
-                    faults[c.fault_reason if internal else kind.value if kind else "?"] += 1
+                    key = c.fault_reason if internal else kind.value if kind else "?"
+                    if kind is FaultKind.DRIVE_FAULT and "0x" in c.fault_reason:  # its EMCY code
+                        key += " " + c.fault_reason[c.fault_reason.index("0x") :][:6]
+                    faults[key] += 1
                 last_state = c.state
             if c.state is State.FAULT and i % 250 == 0:
                 c.submit(Command("reset"))
