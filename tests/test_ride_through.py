@@ -1,6 +1,7 @@
 """Timing hiccups ride through (issue 17), lock-step and deterministic: the loop stands still
-for a while mid-motion — three periods, one 20 ms stall, five of them, a burst of frames 6 ms
-late — and under the 30 N jet. Every time-dependent part steps by the real elapsed time
+for a while mid-motion — three periods, one 20 ms stall, five of them, one of 60 ms (beyond
+the 50 ms feedback age: one read with old feedback, then fresh), a burst of frames 6 ms late —
+and under the 30 N jet. Every time-dependent part steps by the real elapsed time
 (``ControlData.dt``): no fault, tensions within limits, the tracking error as without the
 hiccup, the integral not wound up."""
 
@@ -66,6 +67,7 @@ def smooth():
         ("three missed periods", [0.006], 0.0),
         ("a 20 ms stall", [0.02], 0.0),
         ("five 20 ms stalls", [0.02] * 5, 0.0),
+        ("a 60 ms stall", [0.06], 0.0),
         ("a burst of frames 6 ms late", [], 0.006),
     ],
 )

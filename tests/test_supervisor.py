@@ -74,7 +74,11 @@ CASES = [
      State.STOPPING, FaultKind.ORIENTATION),
     ("old feedback", State.ENABLED, Lifecycle.ACTIVE,
      lambda s, d, v: v.states.feedback_age.__setitem__(4, 1.01 * CFG.max_feedback_age)
-     or healthy(s), State.STOPPING, FaultKind.FEEDBACK_AGE),
+     or healthy(s) or healthy(s, 1.0 + CFG.period), State.STOPPING, FaultKind.FEEDBACK_AGE),
+    ("old feedback once (the loop stalled)", State.ENABLED, Lifecycle.ACTIVE,
+     lambda s, d, v: v.states.feedback_age.__setitem__(4, 1.01 * CFG.max_feedback_age)
+     or healthy(s) or v.states.feedback_age.__setitem__(4, 0.0)
+     or healthy(s, 1.0 + CFG.period), State.ENABLED, None),
     ("a fault with the drives off skips the stop", State.ENABLED, Lifecycle.INACTIVE,
      lambda s, d, v: healthy(s, fk_status=FKStatus.BAD_INPUT),
      State.FAULT, FaultKind.FORWARD_KINEMATICS),

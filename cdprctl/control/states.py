@@ -59,7 +59,8 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.ORIENTATION: "immediate: the error bound is the hazard itself",
     FaultKind.OVER_SPEED: "persistent: 30 ms over the limit (taking over from the brakes gives "
     "short false spikes)",
-    FaultKind.FEEDBACK_AGE: "persistent: the limit is itself a time ([control] max_feedback_age)",
+    FaultKind.FEEDBACK_AGE: "persistent: the limit is itself a time ([control] max_feedback_age), "
+    "at two reads in a row (a stall of the loop itself leaves one read with old feedback)",
     FaultKind.TENSION_DISTRIBUTION: "persistent: the feedback wrench saturated longer than "
     "[control.safety] max_saturation_time (the cables give what they can meanwhile), or 3 "
     "cycles in which even the feed-forward cannot be held (the last feasible tensions held)",

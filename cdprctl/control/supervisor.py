@@ -116,6 +116,11 @@ class Supervisor:
         self.t_state = 0.0  # s, when the state was entered
         self._stop_until = 0.0
         self._speed_over = Persistence(self.OVER_SPEED_FOR)
+        # old feedback at two reads in a row: after a stall of the loop itself (no SYNC went
+        # out, the drives could not answer) the first read finds it old and the next fresh —
+        # seed000_grippers at 500 Hz stopped once on 64 ms after such a stall; drives that
+        # really fall silent are the driver's (feedback_timeout, over running cycles)
+        self._feedback_old = Persistence(config.period)
 
     @property
     def state(self) -> State:
@@ -131,7 +136,8 @@ class Supervisor:
         if s not in (State.ENABLED, State.MOVING, State.STOPPING):
             # unsupervised from here on: what held before must persist anew once enabled (a
             # drive at its limit before a fault tripped the check at the next enable at once)
-            for p in (self._tension_over, self._torque_at_limit, self._speed_over):
+            for p in (self._tension_over, self._torque_at_limit, self._speed_over,
+                      self._feedback_old):  # fmt: skip
                 p.held(t, False)
         d.state = s
         self.t_state = t
@@ -239,7 +245,7 @@ class Supervisor:
                 f"platform speed {speed:.2f} m/s > {c.max_speed:.2f} m/s "
                 f"for {self.OVER_SPEED_FOR * 1e3:.0f} ms"
             )
-        if age > c.max_feedback_age:
+        if self._feedback_old.held(t, age > c.max_feedback_age):
             return FaultKind.FEEDBACK_AGE, (
                 f"feedback {age * 1e3:.1f} ms old > {c.max_feedback_age * 1e3:.0f} ms"
             )
