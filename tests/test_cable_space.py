@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -171,19 +170,22 @@ def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
         return on_sync(t)
 
     drive.on_sync = seen
-    t0, wall0 = net.time, time.time()
+    t0 = net.time
     zeros = np.zeros(rig.model.n_cables)
-    for k in range(3):  # three cycles' frames waiting, sent a period apart in wall time
+    for k in range(3):  # three cycles' frames waiting at once
         d._write_internal(t0 + k * rig.period, zeros, setup=True)
-        time.sleep(rig.period)
+    syncs_before: dict[str, int] = {}
 
-    def when(msg):  # the in-process bus stamps each frame with the wall clock when sent
-        return msg.timestamp - wall0 + t0
+    def when(msg):  # stamped a period apart: cycle k's frames at t0 + k period (per bus)
+        k = syncs_before.get(msg.channel, 0)
+        if msg.arbitration_id == p.SYNC:
+            syncs_before[msg.channel] = k + 1
+        return t0 + k * rig.period
 
     net.advance_until(t0 + 3 * rig.period, when, first=None)
-    # a period apart, give or take the wall clock's own jitter (sleeps on a shared VM)
-    assert len(sent) == 3 and np.all(np.abs(np.diff(sent) - rig.period) < 0.5 * rig.period)
-    assert net.time >= t0 + 2 * rig.period
+    assert len(sent) == 3
+    np.testing.assert_allclose(np.diff(sent), rig.period, atol=1e-12)
+    assert net.time == pytest.approx(t0 + 3 * rig.period)
 
 
 def test_motor_targets_match_the_plants_cable_law():
