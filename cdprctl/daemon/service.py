@@ -96,12 +96,17 @@ class Daemon:
 
     # -- the loop thread ---------------------------------------------------------------------------
     def _step(self, t: float) -> None:
-        self.manager.step(t)
         if self.sim is not None:
-            # the simulated robot follows the loop's clock, skipped periods included
-            dt = self.model.control.period if self._last_t is None else t - self._last_t
+            # the simulated robot follows the loop's clock, skipped periods included: the
+            # last cycle's frames handled at the time they were sent, then the physics up to
+            # this cycle. (Stepped after the cycle instead, every frame was handled a cycle's
+            # time late: after a late cycle the drives took a three-period target step at the
+            # last interval and faulted on their following error, `--sim --no-realtime` under
+            # load)
+            dt = 0.0 if self._last_t is None else t - self._last_t
             self._last_t = t
             self.sim.advance(min(max(dt, 0.0), 0.05))
+        self.manager.step(t)
 
     def run(self, duration: float | None, demo: bool, force: float = 0.0) -> int:
         c = self.controller
