@@ -167,10 +167,7 @@ class SimNetwork:
         the physics stepped up to it. A simulator woken late by a loaded machine still sees
         the SYNCs a period apart: handling a burst at its wake-up, intervals of 0 and 11 ms
         made the drives' interpolation step and fault on their following error mid-move."""
-        if self.faults is not None:
-            self.faults.apply(self, self.time, t_end - self.time)
-            for b, msg in self.faults.release(self.time):
-                self.buses[b].send(msg)
+        self._faults_for(t_end - self.time)
         waiting = [(arrival(msg), b, msg) for b, msg in self._waiting(first)]
         # frames stamped after t_end came while this process was held up after reading the
         # clock: the time has passed (bunched at t_end they made SYNC intervals of 0)
@@ -179,22 +176,26 @@ class SimNetwork:
         frames.sort(key=lambda f: f[0])
         for t, b, msg in frames:
             if t - self.time > 0.5 * self.plant.opt.physics_dt:
-                self.plant.step(t - self.time)
-                self.time = t
+                self._physics_for(t - self.time)
             self._handle(b, msg)
         self.tick()
-        if t_end > self.time:
-            self.plant.step(t_end - self.time)
-            self.time = t_end
+        self._physics_for(t_end - self.time)
 
     def advance(self, dt: float, first: can.Message | None = None) -> None:
         """Frames at the current time, then ``dt`` seconds of physics."""
+        self._faults_for(dt)
+        self.process(first)
+        self.tick()
+        self._physics_for(dt)
+
+    def _faults_for(self, dt: float) -> None:
+        """The injected faults over the next ``dt`` s; delayed frames due now sent again."""
         if self.faults is not None:
             self.faults.apply(self, self.time, dt)
             for b, msg in self.faults.release(self.time):
                 self.buses[b].send(msg)
-        self.process(first)
-        self.tick()
+
+    def _physics_for(self, dt: float) -> None:
         if dt > 0:
             self.plant.step(dt)
             self.time += dt

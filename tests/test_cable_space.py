@@ -356,7 +356,8 @@ def test_beyond_capacity_the_brakes_close_at_once(drives_watch):
         cl.startup()
         if not drives_watch:
             for drive in cl.net.drives:
-                drive.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] = p.FOLLOWING_ERROR_OFF
+                off = p.sdo_download(p.OD_FOLLOWING_ERROR_WINDOW, 0, p.FOLLOWING_ERROR_OFF, 4)
+                drive.on_sdo(off)
         cl.command("enable")
         cl.run(0.5)
         c = cl.controller

@@ -121,6 +121,9 @@ class Supervisor:
         # seed000_grippers at 500 Hz stopped once on 64 ms after such a stall; drives that
         # really fall silent are the driver's (feedback_timeout, over running cycles)
         self._feedback_old = Persistence(config.period)
+        self._persistences = (
+            self._tension_over, self._torque_at_limit, self._speed_over, self._feedback_old
+        )
 
     @property
     def state(self) -> State:
@@ -136,8 +139,7 @@ class Supervisor:
         if s not in (State.ENABLED, State.MOVING, State.STOPPING):
             # unsupervised from here on: what held before must persist anew once enabled (a
             # drive at its limit before a fault tripped the check at the next enable at once)
-            for p in (self._tension_over, self._torque_at_limit, self._speed_over,
-                      self._feedback_old):  # fmt: skip
+            for p in self._persistences:
                 p.held(t, False)
         d.state = s
         self.t_state = t

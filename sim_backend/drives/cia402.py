@@ -73,6 +73,7 @@ class Cia402Drive:
         self.silent = False  # fault injection: the drive stops talking
         self.encoder_offset = 0  # counts, fault injection: an encoder jump
         self.transitions: list[int] = []  # CiA 402 transition numbers taken (for tests)
+        self._set_following_error()
 
     # -- frames in ------------------------------------------------------------------------------
     def on_nmt(self, command: int) -> None:
@@ -117,6 +118,8 @@ class Cia402Drive:
             self.od[key] = value
             if key == (p.OD_MODES_OF_OPERATION, 0):
                 self.od[(p.OD_MODES_DISPLAY, 0)] = value
+            if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
+                self._set_following_error()
             return self._sdo_answer(p.SDO_STRUCT.pack(0x60, index, sub, b"\0\0\0\0"))
         if cmd & 0xE0 == 0x40:  # upload
             if key not in self.od:
@@ -126,6 +129,15 @@ class Cia402Drive:
                 p.SDO_STRUCT.pack(0x43, index, sub, (value & 0xFFFFFFFF).to_bytes(4, "little"))
             )
         return self._sdo_abort(index, sub, 0x05040001)
+
+    def _set_following_error(self) -> None:
+        """The position loop's following-error window (rad) and time-out (s) from 0x6065 and
+        0x6066: set when they are written, not at every SYNC."""
+        window = self.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] & 0xFFFFFFFF
+        servo, c = self.plant.servo, self.cable
+        off = window == p.FOLLOWING_ERROR_OFF
+        servo.window[c] = math.inf if off else window * 2.0 * math.pi / self.cpr
+        servo.timeout[c] = self.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] / 1000.0
 
     def _sdo_answer(self, data: bytes) -> can.Message:
         return can.Message(arbitration_id=p.SDO_TX + self.node_id, data=data, is_extended_id=False)
@@ -224,13 +236,6 @@ class Cia402Drive:
                     else:
                         servo.target[c], servo.rate[c] = end, 0.0
                 servo.kp[c], servo.kd[c] = self.position_gains
-                window = self.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] & 0xFFFFFFFF
-                servo.window[c] = (
-                    math.inf
-                    if window == p.FOLLOWING_ERROR_OFF
-                    else window * 2.0 * math.pi / self.cpr
-                )
-                servo.timeout[c] = self.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] / 1000.0
             else:
                 servo.kp[c] = 0.0
             plant.brake[c] = False
