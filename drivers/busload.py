@@ -2,8 +2,9 @@
 
 Classic CAN 2.0A frame with ``n`` data bytes, worst-case bit stuffing (Davis, Burns, Bril,
 Lukkien 2007, "Controller Area Network (CAN) schedulability analysis", eq. (1)):
-``bits = 8n + 47 + floor((34 + 8n − 1)/4)`` (the last term: stuff bits), so SYNC (0 bytes) is 55
-bits, a 4-byte PDO 95, an 8-byte PDO 135 (DESIGN.md: 8 CiA 402 drives → 1,895 bits per cycle).
+``bits = 8n + 47 + floor((34 + 8n − 1)/4)`` (the last term: stuff bits), so SYNC with its counter
+(1 byte) is 65 bits, a 4-byte PDO 95, an 8-byte PDO 135 (DESIGN.md, with an empty SYNC of 55: 8
+CiA 402 drives → 1,895 bits per cycle; 1,905 with the counter).
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ def cycle_frames(
         # Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and Get_Torques (8) in
         return [("Set_Input_Torque", n, 4), ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
     frames = [
-        ("SYNC", 1, 0),
+        ("SYNC with its counter", 1, 1),
         ("RPDO1 controlword+position+torque offset", n, 8)
         if mode == "csp"
         else ("RPDO1 controlword+torque", n, 4),

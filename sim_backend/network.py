@@ -133,7 +133,7 @@ class SimNetwork:
         if arb == p402.SYNC:
             out: list[can.Message] = []
             for d in table.values():
-                out += d.on_sync(t)
+                out += d.on_sync(t, data)
             return out
         if p402.RPDO1 < arb <= p402.RPDO1 + 127 and (arb - p402.RPDO1) in table:
             table[arb - p402.RPDO1].on_rpdo(data, t)

@@ -22,11 +22,13 @@ def test_frame_bits_worst_case_stuffing():
 
 def test_design_figure_eight_drives(seed000):
     """DESIGN.md: SYNC + 8 × 4-byte RPDO + 8 × 8-byte TPDO = 1,895 bit-times per cycle,
-    528 Hz at 100 % of 1 Mbit/s."""
+    528 Hz at 100 % of 1 Mbit/s, with an empty SYNC (55 bits); its counter byte (0x1019) adds
+    10: 1,905, 525 Hz."""
     (bl,) = bus_loads(seed000.drives, 500.0, heartbeat_rate=0.0)
-    assert bl.bits_per_cycle == 1895
-    assert 1e6 / bl.bits_per_cycle == pytest.approx(527.7, abs=0.1)
-    assert bl.load == pytest.approx(0.9475)
+    assert bl.bits_per_cycle - (frame_bits(1) - frame_bits(0)) == 1895
+    assert bl.bits_per_cycle == 1905
+    assert 1e6 / bl.bits_per_cycle == pytest.approx(524.9, abs=0.1)
+    assert bl.load == pytest.approx(0.9525)
 
 
 def test_two_buses_halve_the_load(seed000):
@@ -36,7 +38,7 @@ def test_two_buses_halve_the_load(seed000):
     )
     drives = dataclasses.replace(seed000.drives, buses=buses)
     loads = bus_loads(drives, 1000.0, heartbeat_rate=0.0)
-    assert [b.bits_per_cycle for b in loads] == [55 + 4 * 95 + 4 * 135] * 2
+    assert [b.bits_per_cycle for b in loads] == [65 + 4 * 95 + 4 * 135] * 2
     warnings, errors = check_bus_load(drives, 1000.0)
     assert errors == [] and len(warnings) == 2  # 98.5 %: warned, not refused
     warnings, errors = check_bus_load(drives, 1100.0)
@@ -46,8 +48,8 @@ def test_two_buses_halve_the_load(seed000):
 def test_bus_load_cli(capsys):
     assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "250"]) == 0
     out = capsys.readouterr().out
-    # position mode, two buses of 4 drives: SYNC 55 + 4 x (8-byte RPDO 135 + TPDO1 135) bits
-    assert out.count("1135 bits per cycle") == 2 and "ok" in out
+    # position mode, two buses of 4 drives: SYNC 65 + 4 x (8-byte RPDO 135 + TPDO1 135) bits
+    assert out.count("1145 bits per cycle") == 2 and "ok" in out
     assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "500"]) == 0
     assert main(["bus-load", "--config", str(CONFIG / "rowc.toml"), "--rate", "1000"]) == 1
     assert "REFUSED" in capsys.readouterr().out

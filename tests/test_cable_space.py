@@ -155,6 +155,43 @@ def test_a_lost_rpdo_the_drive_goes_on_at_the_targets_rate(rig):
     assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
 
 
+@pytest.mark.parametrize("next_rpdo_lost", [True, False], ids=["then its RPDO", "RPDO arrives"])
+def test_after_a_lost_sync_a_target_for_it_is_not_taken_late(rig, next_rpdo_lost):
+    """A SYNC lost (its RPDO arrived), then the next cycle's RPDO lost too: the target waiting
+    at the next SYNC was for the lost one. The SYNC counter (0x1019, set by the driver) tells
+    the drive it missed a SYNC and that fewer RPDOs came than were sent, so it does not take
+    it (it would run a period behind and its catch-up overshoot) and goes on at the targets'
+    rate. When the next RPDO does arrive, it is taken: one more RPDO than lost SYNCs."""
+    d, plant = rig.driver, rig.plant
+    d.configure()
+    d.activate()
+    drive = rig.net.drives[0]
+    assert drive.od[(p.OD_SYNC_COUNTER_OVERFLOW, 0)] == p.SYNC_COUNTER_OVERFLOW
+    hold = plant.drum_ratio * plant.tension
+    target = d.states.position.copy()
+    speed = 1.0  # rad/s at the motor, cable 0
+    lose = {
+        30: lambda msg, t: msg.arbitration_id != p.SYNC,
+        31: lambda msg, t: msg.arbitration_id != p.RPDO1 + drive.node_id or not next_rpdo_lost,
+    }
+    for k in range(40):
+        t = rig.net.time
+        d.read(t)
+        target[0] += speed * rig.period
+        d.write(t, hold, targets=target)
+        rig.net.rx_filter = lose.get(k)
+        rig.net.advance(rig.period)
+        rig.net.rx_filter = None
+        if k == 31:
+            assert drive.stale_targets == int(next_rpdo_lost)
+            assert plant.servo.rate[0] == pytest.approx(speed, rel=0.05)
+            # the motor's target goes on where the targets go (the one sent at k = 31,
+            # reached a period after its SYNC)
+            assert plant.servo.target[0] == pytest.approx(target[0] - speed * rig.period, abs=0.01)
+    assert drive.state is p.PowerState.OPERATION_ENABLED
+    assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
+
+
 def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
     """Frames read in one burst (a simulator woken late) are handled at the instants they
     arrived, the physics stepped up to each: the drives see SYNCs a period apart."""
@@ -165,9 +202,9 @@ def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
     drive = net.drives[0]
     on_sync = drive.on_sync
 
-    def seen(t):
+    def seen(t, data=b""):
         sent.append(t)
-        return on_sync(t)
+        return on_sync(t, data)
 
     drive.on_sync = seen
     t0 = net.time
@@ -319,7 +356,7 @@ def test_two_buses_on_one_medium_get_one_sync_a_cycle():
     syncs: list[float] = []
     drive = net.drives[6]  # on the second bus
     on_sync = drive.on_sync
-    drive.on_sync = lambda t: (syncs.append(t), on_sync(t))[1]
+    drive.on_sync = lambda t, data=b"": (syncs.append(t), on_sync(t, data))[1]
     period = model.control.period
     drv = create_driver(model, period=period, clock=lambda: net.time, wait=net.advance,
                         bus_overrides=shared)  # fmt: skip

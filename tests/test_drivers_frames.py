@@ -3,6 +3,7 @@ that records what the driver sends and answers from a table, in simulated time."
 
 from __future__ import annotations
 
+import itertools
 import math
 import struct
 import uuid
@@ -135,7 +136,8 @@ def test_cia402_configure_frames(seed):
         assert sdo[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
         assert sdo[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0x64, 0x00, 0, 0])  # 0x1017 := 100 ms
         assert sdo[2] == bytes([0x2B, 0x07, 0x60, 0x00, 0x03, 0x00, 0, 0])  # 0x6007 := quick stop
-        assert sdo[3] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
+        assert sdo[3] == bytes([0x2F, 0x19, 0x10, 0x00, 0xF0, 0, 0, 0])  # 0x1019 := 240
+        assert sdo[4] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
         # cyclic: 8 RPDOs then SYNC, disabled drives get "disable voltage" and zero torque
         assert peer.sent(p.RPDO1 + 3)[-1] == bytes([0x00, 0x00, 0x00, 0x00])
         order = [a for _, a, _ in peer.rx if a in (p.SYNC, p.RPDO1 + 8)]
@@ -165,6 +167,19 @@ def cycles(drv, peer, n: int = 1) -> None:
         drv.read(peer.t)
         drv.write(peer.t, np.zeros(8))
         peer.wait(0.002)
+
+
+def test_cia402_sync_counter_runs_to_its_overflow(seed):
+    """The SYNC carries its counter, 1 … 240 then 1 again (CiA 301, 0x1019 := 240)."""
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    with drv:
+        drv.configure()
+        cycles(drv, peer, 250)
+        counts = [d[0] for d in peer.sent(p.SYNC)]
+        assert all(len(d) == 1 for d in peer.sent(p.SYNC))
+        assert counts[:3] == [1, 2, 3]
+        assert counts[239:242] == [240, 1, 2]
+        assert all(b == a % 240 + 1 for a, b in itertools.pairwise(counts))
 
 
 def test_cia402_position_units_and_wrap(seed):

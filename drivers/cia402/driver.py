@@ -3,9 +3,11 @@
 Per cycle, ``read`` drains every bus with ``recv(0)`` and decodes TPDOs, EMCYs and heartbeats;
 ``write`` sends each drive's RPDO (controlword from the power-state table + target torque, or
 in position mode target position + torque offset) and then SYNC on each bus, and the
-controller's heartbeat when due. Set-up (NMT start, SDO: mode of operation 10 or 8 by
-``[drives] mode``, heartbeat producer time, abort-connection option quick stop) happens in
-``configure``, outside the loop.
+controller's heartbeat when due. The SYNC carries its counter (0x1019): a drive that missed a
+SYNC knows the target waiting for it was for the SYNC it missed. Set-up (NMT start, SDO: mode
+of operation 10 or 8 by ``[drives] mode``, heartbeat producer time, abort-connection option
+quick stop, SYNC counter, in position mode the following error) happens in ``configure``,
+outside the loop.
 """
 
 from __future__ import annotations
@@ -78,7 +80,8 @@ class Cia402Driver(CanWinchDriver):
             ],
             dtype=np.int64,
         )  # fmt: skip
-        self._sync = can.Message(arbitration_id=p.SYNC, data=b"", is_extended_id=False)
+        # its counter byte runs 1 … SYNC_COUNTER_OVERFLOW (CiA 301 0x1019)
+        self._sync = can.Message(arbitration_id=p.SYNC, data=bytearray(1), is_extended_id=False)
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
             data=bytes([p.HB_OPERATIONAL]),
@@ -129,6 +132,9 @@ class Cia402Driver(CanWinchDriver):
             self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, self.mode, 1, timeout)
             self._sdo_write(c, p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2, timeout)
             self._sdo_write(c, p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2, timeout)
+            self._sdo_write(
+                c, p.OD_SYNC_COUNTER_OVERFLOW, 0, p.SYNC_COUNTER_OVERFLOW, 1, timeout
+            )
             if self._csp:  # the drive stops its winch when it cannot follow (docs/control.md)
                 self._sdo_write(
                     c, p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4, timeout
@@ -356,6 +362,8 @@ class Cia402Driver(CanWinchDriver):
         # error (across processes, 2 busy loops on 2 cores). Its RPDOs wait for the next.
         now = self.clock()
         if setup or now - self._last_cycle_sync >= 0.5 * self.period:
+            sync = self._sync.data
+            sync[0] = sync[0] % p.SYNC_COUNTER_OVERFLOW + 1
             for b in self.media:
                 self._send(b, self._sync)
             self._last_sync = now

@@ -54,6 +54,10 @@ OD_RATED_TORQUE = 0x6076  # mN·m
 OD_TORQUE_ACTUAL = 0x6077
 OD_ABORT_CONNECTION = 0x6007  # what the drive does when the communication is lost
 OD_PRODUCER_HEARTBEAT = 0x1017  # ms
+# UNSIGNED8, CiA 301 §7.5.2.37: 0, the SYNC has no data; 2-240, it carries a counter that runs
+# 1 … this value, so a drive knows when it missed one
+OD_SYNC_COUNTER_OVERFLOW = 0x1019
+SYNC_COUNTER_OVERFLOW = 240
 OD_TARGET_POSITION = 0x607A
 OD_TORQUE_OFFSET = 0x60B2
 # position mode: how far (counts, UNSIGNED32; 0xFFFFFFFF: not monitored) and how long (ms,

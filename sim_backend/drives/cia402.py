@@ -47,6 +47,9 @@ class Cia402Drive:
         # the position loop's gains in mode 8 (N·m/rad, N·m·s/rad): the drive's own tuning
         self.position_gains = position_gains
         self.last_sync = -math.inf
+        self.sync_count = 0  # the last SYNC's counter (0: none, or SYNCs without one)
+        self.rpdos_since_sync = 0  # RPDOs received since the last SYNC this drive saw
+        self.stale_targets = 0  # RPDOs not taken: they were for a SYNC this drive missed
         self.last_target = -math.inf  # s, the SYNC that applied the last RPDO
         self.sync_period = 0.0  # s, the drive's estimate (0: none yet)
         self._intervals: list[float] = []  # s, the last SYNC intervals
@@ -61,6 +64,7 @@ class Cia402Drive:
             # not monitored until configured (the controller writes both in position mode)
             (p.OD_FOLLOWING_ERROR_WINDOW, 0): p.FOLLOWING_ERROR_OFF,
             (p.OD_FOLLOWING_ERROR_TIMEOUT, 0): 10,
+            (p.OD_SYNC_COUNTER_OVERFLOW, 0): 0,  # SYNC without a counter until configured
         }
         # (controlword, target torque or position, torque offset per-mille)
         self.pending: tuple[int, int, int] | None = None
@@ -101,6 +105,7 @@ class Cia402Drive:
             self.pending = (*p.RPDO1_STRUCT.unpack(data), 0)
         else:  # not this mode's mapping: ignored, like a real drive's length check
             return
+        self.rpdos_since_sync += 1
         self.last_rx = t
 
     def on_sdo(self, data: bytes) -> can.Message | None:
@@ -110,7 +115,7 @@ class Cia402Drive:
         key = (index, sub)
         if cmd & 0xE0 == 0x20:  # download (expedited)
             size = 4 - ((cmd >> 2) & 0x3) if cmd & 0x1 else 4
-            value = int.from_bytes(raw[:size], "little", signed=True)
+            value = int.from_bytes(raw[:size], "little", signed=index in self.SIGNED_OBJECTS)
             if key not in self.od or key == (p.OD_MODES_DISPLAY, 0):
                 return self._sdo_abort(index, sub, 0x06020000 if key not in self.od else 0x06010002)
             if key == (p.OD_MODES_OF_OPERATION, 0) and value not in (p.MODE_CSP, p.MODE_CST):
@@ -130,6 +135,10 @@ class Cia402Drive:
             )
         return self._sdo_abort(index, sub, 0x05040001)
 
+    # INTEGER objects (CiA 402: the modes, the abort-connection option); every other one here
+    # is UNSIGNED (0x1017 := 40,000 ms stored signed read back −25,536)
+    SIGNED_OBJECTS = frozenset({p.OD_MODES_OF_OPERATION, p.OD_MODES_DISPLAY, p.OD_ABORT_CONNECTION})
+
     def _set_following_error(self) -> None:
         """The position loop's following-error window (rad) and time-out (s) from 0x6065 and
         0x6066: set when they are written, not at every SYNC."""
@@ -145,14 +154,18 @@ class Cia402Drive:
     def _sdo_abort(self, index: int, sub: int, code: int) -> can.Message:
         return self._sdo_answer(p.SDO_STRUCT.pack(0x80, index, sub, code.to_bytes(4, "little")))
 
-    def on_sync(self, t: float) -> list[can.Message]:
+    def on_sync(self, t: float, data: bytes = b"") -> list[can.Message]:
         """Apply the latched RPDO, then sample and send the TPDOs."""
         self.last_rx = t
         interval, self.last_sync = t - self.last_sync, t
         self._measure_sync_period(interval)
+        stale = self._missed_sync_since_rpdo(data)
         if self.nmt != p.HB_OPERATIONAL:
             return []
         pending, self.pending = self.pending, None
+        if pending is not None and stale:
+            pending = None  # not taken: as across a lost RPDO, the target goes on
+            self.stale_targets += 1
         if pending is not None:
             self.last_target = t
             cw, value, offset = pending
@@ -190,6 +203,22 @@ class Cia402Drive:
                 )
             )
         return out
+
+    def _missed_sync_since_rpdo(self, data: bytes) -> bool:
+        """Counts this SYNC; True when its counter (0x1019) says SYNCs were lost since the
+        last one and fewer RPDOs came than were sent (one before each SYNC): the pending one
+        may be for a SYNC this drive missed. Applied now, its target is a period late: the
+        drive falls behind by a period and its catch-up over the next lost SYNC overshoots
+        (5 % frame loss, rowc: 0.37 rad, a following-error fault). One more RPDO than lost
+        SYNCs: the last one came after them, for this SYNC."""
+        overflow = self.od[(p.OD_SYNC_COUNTER_OVERFLOW, 0)]
+        received, self.rpdos_since_sync = self.rpdos_since_sync, 0
+        if overflow < 2 or len(data) != 1:
+            self.sync_count = 0
+            return False
+        previous, self.sync_count = self.sync_count, data[0]
+        missed = (self.sync_count - previous - 1) % overflow if previous else 0
+        return received <= missed
 
     def _apply_controlword(self, cw: int) -> None:
         cmd = p.command_of(cw)
