@@ -60,18 +60,19 @@ class ControllerManager:
         should_stop: Callable[[], bool],
         stats: LoopStats,
         after: Callable[[], None] | None = None,
-        step: Callable[[float], None] | None = None,
+        plant_step: Callable[[float], None] | None = None,
     ) -> LoopStats:
-        """The fixed-rate loop (``loop.run_loop``) until ``should_stop()``; ``step`` replaces
-        ``self.step`` (the daemon adds its simulated robot's step after the cycle)."""
+        """The fixed-rate loop (``loop.run_loop``) until ``should_stop()``; ``plant_step``
+        (the daemon's simulated robot) runs before each cycle, timed apart."""
         return run_loop(
             self.period,
-            step or self.step,
+            self.step,
             should_stop,
             self.model.control.sleep_margin,
             stats=stats,
             phases=self._phases,
             after=after,
+            plant_step=plant_step,
         )
 
     def _phases(self) -> np.ndarray:
