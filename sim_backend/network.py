@@ -126,10 +126,11 @@ class SimNetwork:
             return []
         arb, data = msg.arbitration_id, bytes(msg.data)
         if arb == p402.NMT and len(data) == 2:
+            booted: list[can.Message] = []
             for n, d in table.items():
                 if data[1] in (0, n):
-                    d.on_nmt(data[0])
-            return []
+                    booted += d.on_nmt(data[0])
+            return booted
         if arb == p402.SYNC:
             out: list[can.Message] = []
             for d in table.values():

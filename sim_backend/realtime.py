@@ -37,6 +37,9 @@ def run_realtime(
     net = SimNetwork(model, plant, bus_overrides)
     if faults is not None:
         faults.attach(net)
+    # one step before "ready": the physics kernels compile at their first call (seconds on a
+    # cold cache, when the drives stood deaf for ~15 s after "ready")
+    net.advance(step)
     print_fn("cdprctl sim: ready", flush=True)  # the buses are open: peers may start
     stop = {"flag": False}
 

@@ -1,12 +1,13 @@
 """A CiA 402 drive as the simulator's CAN node: it answers the frames a real drive answers.
 
-NMT (pre-operational → operational on "start"), SDO server (expedited) for the objects the
-driver configures, RPDO1 latched and applied at the next SYNC (CiA 301 synchronous PDO) in
+NMT (pre-operational → operational on "start", boot-up after a reset), the object dictionary
+of the shipped EDS served by canopen's SDO server (``dictionary.py``), RPDO1 latched and
+applied at the next SYNC (CiA 301 synchronous PDO) in
 cyclic synchronous torque (mode 10) or position (mode 8: the target interpolated linearly
 between SYNCs, the drive's own position loop run at every physics step, ``physics.Servo``), TPDO1
 (and TPDO2) sampled at the SYNC, the power state machine of CiA 402 (the transition table of
 ``drivers.cia402.protocol``), heartbeat production (0x1017), EMCY on faults, and drive-side
-safety: the communication timeout triggers the abort-connection option (0x6007: quick stop),
+safety: the communication timeout triggers the abort-connection option (0x6007),
 the following error in position mode (beyond 0x6065 for longer than 0x6066: FAULT, EMCY
 0x8611), the torque limit, and the brake that holds the drum whenever the drive is not
 enabled.
@@ -17,8 +18,10 @@ from __future__ import annotations
 import math
 
 import can
+from canopen import SdoAbortedError
 
 from drivers.cia402 import protocol as p
+from sim_backend.drives.dictionary import Dictionary
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
@@ -55,17 +58,16 @@ class Cia402Drive:
         self._intervals: list[float] = []  # s, the last SYNC intervals
         self.nmt = p.HB_PRE_OPERATIONAL
         self.state = p.PowerState.SWITCH_ON_DISABLED  # transitions 0 and 1 done at power-on
-        self.od: dict[tuple[int, int], int] = {
-            (p.OD_MODES_OF_OPERATION, 0): 0,
-            (p.OD_MODES_DISPLAY, 0): 0,
-            (p.OD_PRODUCER_HEARTBEAT, 0): 0,
-            (p.OD_ABORT_CONNECTION, 0): 1,
-            (p.OD_RATED_TORQUE, 0): round(rated_torque * 1000),
-            # not monitored until configured (the controller writes both in position mode)
-            (p.OD_FOLLOWING_ERROR_WINDOW, 0): p.FOLLOWING_ERROR_OFF,
-            (p.OD_FOLLOWING_ERROR_TIMEOUT, 0): 10,
-            (p.OD_SYNC_COUNTER_OVERFLOW, 0): 0,  # SYNC without a counter until configured
-        }
+        # the object dictionary of the shipped EDS; this drive's stored parameters over its
+        # defaults: its rated torque and its torque limit (per mille of rated)
+        limit_pm = min(0xFFFF, round(torque_limit / rated_torque * 1000.0))
+        self.dictionary = Dictionary(
+            node_id,
+            {(p.OD_RATED_TORQUE, 0): round(rated_torque * 1000.0), (p.OD_MAX_TORQUE, 0): limit_pm},
+            self._read_object,
+            self._write_object,
+        )
+        self.od = self.dictionary.values  # (index, sub) → value, typed by the dictionary
         # (controlword, target torque or position, torque offset per-mille)
         self.pending: tuple[int, int, int] | None = None
         self.torque_pm = 0  # applied: the target torque (mode 10), the offset (mode 8)
@@ -80,7 +82,10 @@ class Cia402Drive:
         self._set_following_error()
 
     # -- frames in ------------------------------------------------------------------------------
-    def on_nmt(self, command: int) -> None:
+    def on_nmt(self, command: int) -> list[can.Message]:
+        """NMT (CiA 301 §7.3.2): the state; a reset restores the objects (node: all of them,
+        the drive's state machine restarted; communication: 0x1000-0x1FFF) and ends with
+        the boot-up message, in PRE-OPERATIONAL."""
         if command == p.NMT_START:
             self.nmt = p.HB_OPERATIONAL
         elif command == p.NMT_STOP:
@@ -88,9 +93,21 @@ class Cia402Drive:
         elif command == p.NMT_PRE_OPERATIONAL:
             self.nmt = p.HB_PRE_OPERATIONAL
         elif command in (p.NMT_RESET_NODE, p.NMT_RESET_COMMUNICATION):
+            if command == p.NMT_RESET_NODE:
+                self.dictionary.reset(0x0000, 0x10000)
+                self.state = p.PowerState.SWITCH_ON_DISABLED
+                self.fault_code = 0
+                self._apply_to_plant()
+            else:
+                self.dictionary.reset(0x1000, 0x2000)
+            self._set_following_error()
             self.nmt = p.HB_PRE_OPERATIONAL
-            self.state = p.PowerState.SWITCH_ON_DISABLED
             self.pending = None
+            self.sync_count = 0
+            self.last_hb = -math.inf
+            if not self.silent:
+                return [self._heartbeat_frame(p.HB_BOOTUP)]
+        return []
 
     @property
     def mode(self) -> int:
@@ -109,35 +126,66 @@ class Cia402Drive:
         self.last_rx = t
 
     def on_sdo(self, data: bytes) -> can.Message | None:
-        if len(data) != 8 or self.silent:
+        """The SDO server's answer (CiA 301 §7.2.4; not in NMT STOPPED)."""
+        if len(data) != 8 or self.silent or self.nmt == p.HB_STOPPED:
             return None
-        cmd, index, sub, raw = p.SDO_STRUCT.unpack(data)
-        key = (index, sub)
-        if cmd & 0xE0 == 0x20:  # download (expedited)
-            size = 4 - ((cmd >> 2) & 0x3) if cmd & 0x1 else 4
-            value = int.from_bytes(raw[:size], "little", signed=index in self.SIGNED_OBJECTS)
-            if key not in self.od or key == (p.OD_MODES_DISPLAY, 0):
-                return self._sdo_abort(index, sub, 0x06020000 if key not in self.od else 0x06010002)
-            if key == (p.OD_MODES_OF_OPERATION, 0) and value not in (p.MODE_CSP, p.MODE_CST):
-                return self._sdo_abort(index, sub, 0x06090030)  # value range exceeded
-            self.od[key] = value
-            if key == (p.OD_MODES_OF_OPERATION, 0):
-                self.od[(p.OD_MODES_DISPLAY, 0)] = value
-            if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
-                self._set_following_error()
-            return self._sdo_answer(p.SDO_STRUCT.pack(0x60, index, sub, b"\0\0\0\0"))
-        if cmd & 0xE0 == 0x40:  # upload
-            if key not in self.od:
-                return self._sdo_abort(index, sub, 0x06020000)
-            value = self.od[key]
-            return self._sdo_answer(
-                p.SDO_STRUCT.pack(0x43, index, sub, (value & 0xFFFFFFFF).to_bytes(4, "little"))
-            )
-        return self._sdo_abort(index, sub, 0x05040001)
+        return self.dictionary.request(p.SDO_RX + self.node_id, data)
 
-    # INTEGER objects (CiA 402: the modes, the abort-connection option); every other one here
-    # is UNSIGNED (0x1017 := 40,000 ms stored signed read back −25,536)
-    SIGNED_OBJECTS = frozenset({p.OD_MODES_OF_OPERATION, p.OD_MODES_DISPLAY, p.OD_ABORT_CONNECTION})
+    def _write_object(self, index: int, sub: int, value: int) -> None:
+        """An SDO download, before it is stored: refused with CiA 301's abort code, or its
+        effect on the drive."""
+        if index == p.OD_MODES_OF_OPERATION and not self.supports_mode(value):
+            raise SdoAbortedError(0x06090030)  # value range exceeded: not in 0x6502
+        if index == p.OD_ABORT_CONNECTION and value > p.ABORT_CONNECTION_QUICK_STOP:
+            raise SdoAbortedError(0x06090031)  # value too high
+        self.od[(index, sub)] = value
+        if index == p.OD_MODES_OF_OPERATION:
+            self.od[(p.OD_MODES_DISPLAY, 0)] = value  # switched at once
+        if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
+            self._set_following_error()
+        if index == p.OD_RATED_TORQUE and value > 0:
+            self.rated_torque = value / 1000.0
+
+    def supports_mode(self, mode: int) -> bool:
+        """0x6502: bit 7 cyclic synchronous position, bit 9 torque (CiA 402 §6.4.7)."""
+        bit = {p.MODE_CSP: 7, p.MODE_CST: 9}.get(mode)
+        return bit is not None and bool(self.od[(p.OD_SUPPORTED_DRIVE_MODES, 0)] >> bit & 1)
+
+    def _read_object(self, index: int, sub: int) -> int | None:
+        """The live objects' values (an SDO upload), None for the stored ones."""
+        if index == p.OD_STATUSWORD:
+            return p.STATUSWORD_OF[self.state]
+        if index == p.OD_MODES_DISPLAY:
+            return self.mode
+        if index == p.OD_POSITION_ACTUAL:
+            return self._counts()
+        if index == p.OD_VELOCITY_ACTUAL:
+            return round(self.plant.theta_dot[self.cable] * self.cpr / (2.0 * math.pi))
+        if index == p.OD_TORQUE_ACTUAL:
+            return self._torque_actual_pm()
+        if index == p.OD_ERROR_REGISTER:
+            return 0x01 if self.state is p.PowerState.FAULT else 0x00  # bit 0: generic error
+        if index == p.OD_ERROR_CODE:
+            return self.fault_code
+        if index == p.OD_CONTROLWORD:
+            return self.last_controlword
+        return None
+
+    @property
+    def effective_torque_limit(self) -> float:
+        """N·m: the winch's limit, or 0x6072 (per mille of the rated torque) if lower."""
+        max_torque = self.od[(p.OD_MAX_TORQUE, 0)] * self.rated_torque / 1000.0
+        return min(self.torque_limit, max_torque)
+
+    def _torque_actual_pm(self) -> int:
+        """0x6077 (per mille of rated): the torque the drive applies, after its limit."""
+        if self.state is not p.PowerState.OPERATION_ENABLED:
+            return 0
+        c = self.cable
+        # in position mode, what its loop applies now
+        csp = self.mode == p.MODE_CSP
+        tau = self.plant.servo.applied[c] if csp else self.plant.motor_torque[c]
+        return max(-32767, min(32767, round(tau * 1000.0 / self.rated_torque)))
 
     def _set_following_error(self) -> None:
         """The position loop's following-error window (rad) and time-out (s) from 0x6065 and
@@ -147,12 +195,6 @@ class Cia402Drive:
         off = window == p.FOLLOWING_ERROR_OFF
         servo.window[c] = math.inf if off else window * 2.0 * math.pi / self.cpr
         servo.timeout[c] = self.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] / 1000.0
-
-    def _sdo_answer(self, data: bytes) -> can.Message:
-        return can.Message(arbitration_id=p.SDO_TX + self.node_id, data=data, is_extended_id=False)
-
-    def _sdo_abort(self, index: int, sub: int, code: int) -> can.Message:
-        return self._sdo_answer(p.SDO_STRUCT.pack(0x80, index, sub, code.to_bytes(4, "little")))
 
     def on_sync(self, t: float, data: bytes = b"") -> list[can.Message]:
         """Apply the latched RPDO, then sample and send the TPDOs."""
@@ -178,13 +220,7 @@ class Cia402Drive:
         if self.silent:
             return []
         counts = self._counts()
-        if self.state is not p.PowerState.OPERATION_ENABLED:
-            applied_pm = 0
-        elif self.mode == p.MODE_CSP:  # what the position loop applies now
-            applied_pm = round(self.plant.servo.applied[self.cable] * 1000.0 / self.rated_torque)
-            applied_pm = max(-32767, min(32767, applied_pm))
-        else:
-            applied_pm = self.torque_pm
+        applied_pm = self._torque_actual_pm()
         sw = p.STATUSWORD_OF[self.state]
         out = [
             can.Message(
@@ -247,8 +283,10 @@ class Cia402Drive:
         c, servo, plant = self.cable, self.plant.servo, self.plant
         if self.state is p.PowerState.OPERATION_ENABLED:
             tau = self.torque_pm * self.rated_torque / 1000.0
-            tau = max(-self.torque_limit, min(self.torque_limit, tau))
+            limit = self.effective_torque_limit
+            tau = max(-limit, min(limit, tau))
             plant.motor_torque[c] = tau
+            servo.limit[c] = limit
             if self.mode == p.MODE_CSP:
                 theta = plant.theta[c]
                 if servo.kp[c] <= 0.0:  # just enabled: the loop starts where the motor is
@@ -320,25 +358,37 @@ class Cia402Drive:
             if not self.silent:
                 out.append(emcy)
         if self.state is p.PowerState.OPERATION_ENABLED and t - self.last_rx > self.comm_timeout:
-            option = self.od[(p.OD_ABORT_CONNECTION, 0)]
-            self.state = (
-                p.PowerState.QUICK_STOP_ACTIVE if option == 3 else p.PowerState.SWITCH_ON_DISABLED
-            )
-            self.transitions.append(11 if option == 3 else 9)
-            self._apply_to_plant()
-            if not self.silent:
-                out.append(self._emcy(0x8130))
+            out += self._connection_lost()
         hb_ms = self.od[(p.OD_PRODUCER_HEARTBEAT, 0)]
         if hb_ms > 0 and not self.silent and t - self.last_hb >= hb_ms / 1000.0 - 1e-9:
-            out.append(
-                can.Message(
-                    arbitration_id=p.HEARTBEAT + self.node_id,
-                    data=bytes([self.nmt]),
-                    is_extended_id=False,
-                )
-            )
+            out.append(self._heartbeat_frame(self.nmt))
             self.last_hb = t
         return out
+
+    def _connection_lost(self) -> list[can.Message]:
+        """The abort-connection option code (0x6007, CiA 402 §6.4.1): 0 no action, 1 fault
+        signal (FAULT), 2 disable voltage, 3 quick stop; EMCY 0x8130 (life guard or
+        heartbeat error) whatever the reaction."""
+        option = self.od[(p.OD_ABORT_CONNECTION, 0)]
+        if option == 0:
+            return []
+        if option == 2:
+            self.state = p.PowerState.SWITCH_ON_DISABLED
+            self.transitions.append(9)
+        elif option == p.ABORT_CONNECTION_QUICK_STOP:
+            self.state = p.PowerState.QUICK_STOP_ACTIVE
+            self.transitions.append(11)
+        else:  # 1 and the manufacturer-specific negative codes: the fault reaction
+            self.state = p.PowerState.FAULT
+            self.transitions.append(13)
+            self.fault_code = 0x8130
+        self._apply_to_plant()
+        return [] if self.silent else [self._emcy(0x8130)]
+
+    def _heartbeat_frame(self, state: int) -> can.Message:
+        return can.Message(
+            arbitration_id=p.HEARTBEAT + self.node_id, data=bytes([state]), is_extended_id=False
+        )
 
     def inject_fault(self, code: int) -> can.Message:
         """A drive fault: FAULT state (brake), and its EMCY."""
