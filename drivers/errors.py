@@ -19,6 +19,14 @@ class DriverInitializationError(DriverError):
     """A bus could not be opened, or a drive did not answer during set-up."""
 
 
+class SdoAbortError(DriverInitializationError):
+    """A drive aborted an SDO transfer; ``code`` is CiA 301's abort code."""
+
+    def __init__(self, message: str, node_id: int, index: int, sub: int, code: int):
+        super().__init__(message)
+        self.node_id, self.index, self.sub, self.code = node_id, index, sub, code
+
+
 class DriverOperationError(DriverError):
     """An operation failed: a send error, a lifecycle call in the wrong state."""
 

@@ -39,8 +39,11 @@ class SimNetwork:
         self.protocol = self.cfg.driver
         self.nodes: list[dict[int, Any]] = []
         self.drives: list[Any] = [None] * model.n_cables
+        self.rpdo_owners: list[dict[int, Any]] = []  # per bus: RPDO COB-ID → drive
         for bcfg in self.cfg.buses:
             table: dict[int, Any] = {}
+            owners: dict[int, Any] = {}
+            self.rpdo_owners.append(owners)
             for c, n in zip(bcfg.cables, bcfg.node_ids, strict=True):
                 w = model.cables[c].winch
                 if self.protocol == "odrive":
@@ -56,8 +59,8 @@ class SimNetwork:
                         w.encoder_counts_per_rev,
                         w.torque_limit,
                         self.cfg.comm_timeout,
-                        self.cfg.velocity_source == "pdo",
                         self.cfg.position_gains(w.rotor_inertia),
+                        owners,
                     )
                 table[n] = drive
                 self.drives[c] = drive
@@ -119,11 +122,12 @@ class SimNetwork:
         if self.protocol == "odrive":
             self._send(b, self._odrive_frame(self.nodes[b], msg, self.time))
         else:
-            self._send(b, self._cia402_frame(self.nodes[b], msg, self.time))
+            self._send(b, self._cia402_frame(b, msg, self.time))
 
-    def _cia402_frame(self, table: dict[int, Any], msg: can.Message, t: float) -> list[can.Message]:
+    def _cia402_frame(self, b: int, msg: can.Message, t: float) -> list[can.Message]:
         if msg.is_extended_id or msg.is_remote_frame:
             return []
+        table = self.nodes[b]
         arb, data = msg.arbitration_id, bytes(msg.data)
         if arb == p402.NMT and len(data) == 2:
             booted: list[can.Message] = []
@@ -136,8 +140,9 @@ class SimNetwork:
             for d in table.values():
                 out += d.on_sync(t, data)
             return out
-        if p402.RPDO1 < arb <= p402.RPDO1 + 127 and (arb - p402.RPDO1) in table:
-            table[arb - p402.RPDO1].on_rpdo(data, t)
+        owner = self.rpdo_owners[b].get(arb)
+        if owner is not None:  # an RPDO, to the drive whose mapping has this COB-ID
+            owner.on_rpdo(data, t)
             return []
         if p402.SDO_RX < arb <= p402.SDO_RX + 127 and (arb - p402.SDO_RX) in table:
             reply = table[arb - p402.SDO_RX].on_sdo(data)

@@ -202,3 +202,74 @@ def test_the_bus_speaks_only_standard_frames(rig):
     ids = {m.arbitration_id for m in seen}
     assert p.HEARTBEAT + 8 in ids and p.SDO_TX + 8 in ids
     assert all(m.arbitration_id & ~0x7F in (0x080, 0x180, 0x280, 0x580, 0x700) for m in seen)
+
+
+def test_the_master_reads_and_changes_the_mapping(rig):
+    """``tpdo.read()`` returns the mapping; a remap by ``PdoMap.save()`` (TPDO1: position
+    actual alone) changes what the drive sends at the next SYNC."""
+    robot, network, nodes = rig
+    node = nodes[2]
+    node.tpdo.read()
+    node.rpdo.read()
+    assert [v.index for v in node.tpdo[1]] == [0x6041, 0x6077, 0x6064]
+    assert [v.index for v in node.rpdo[1]] == [0x6040, 0x6071]
+    assert node.tpdo[1].cob_id == p.TPDO1 + 2 and node.tpdo[1].trans_type == 1
+    assert not node.tpdo[2].enabled  # velocity: off until a master wants it
+    node.tpdo[1].clear()
+    node.tpdo[1].add_variable(0x6064)
+    node.tpdo[1].trans_type = 1
+    node.tpdo[1].enabled = True
+    node.tpdo[1].save()
+    node.nmt.state = "OPERATIONAL"
+    got: list[bytes] = []
+    network.subscribe(p.TPDO1 + 2, lambda cob, data, ts: got.append(bytes(data)))
+    network.sync.transmit()
+    deadline = time.monotonic() + 2.0
+    while not got and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with robot.lock:
+        counts = robot.drive(2)._counts()
+    assert len(got[0]) == 4  # position actual, nothing else
+    assert int.from_bytes(got[0], "little", signed=True) == pytest.approx(counts, abs=2)
+
+
+def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
+    """canopen's CiA 402 master (``BaseNode402``) against a simulated drive, given only the
+    EDS: cyclic synchronous torque, OPERATION ENABLED through its state machine, then a
+    target torque by RPDO and SYNC reaches the winch."""
+    robot, network, _ = rig
+    network.nodes.pop(5, None)
+    node = canopen.BaseNode402(5, str(EDS))
+    network.add_node(node)
+    node.sdo.RESPONSE_TIMEOUT = 1.0
+    node.nmt.state = "PRE-OPERATIONAL"
+    node.setup_402_state_machine()
+    node.op_mode = "CYCLIC SYNCHRONOUS TORQUE"
+    assert node.sdo[0x6061].raw == 10
+    node.nmt.state = "OPERATIONAL"
+    network.sync.start(0.01)
+    try:
+        node.tpdo[1].wait_for_reception(timeout=2.0)
+        with robot.lock:
+            cable = robot.drive(5).cable
+            hold = float(robot.plant.drum_ratio[cable] * robot.plant.tension[cable])
+        rated = robot.drive(5).rated_torque
+        node.rpdo[1]["Target torque"].raw = round(hold / rated * 1000)
+        node.rpdo[1].start(0.01)  # synchronous RPDO: sent every 10 ms, taken at each SYNC
+        for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
+            node.state = state
+        assert node.state == "OPERATION ENABLED"
+        node.rpdo[1]["Target torque"].raw = round(1.2 * hold / rated * 1000)
+        node.rpdo[1].update()
+        deadline = time.monotonic() + 2.0
+        while time.monotonic() < deadline:
+            with robot.lock:
+                applied = float(robot.plant.motor_torque[cable])
+            if applied > 1.1 * hold:
+                break
+            time.sleep(0.01)
+        assert applied == pytest.approx(1.2 * hold, rel=0.01)
+        assert robot.drive(5).state is p.PowerState.OPERATION_ENABLED
+    finally:
+        node.rpdo[1].stop()
+        network.sync.stop()

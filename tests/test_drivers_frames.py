@@ -55,16 +55,32 @@ def frame(arb: int, data: bytes) -> can.Message:
 
 
 class Cia402Script:
-    """A table-driven CiA 402 peer: SDO answers, statusword per controlword, heartbeats."""
+    """A table-driven CiA 402 peer: SDO answers from a table of objects (cdprctl's torque-mode
+    PDO mapping, rated torque 5 N·m, modes 8 and 10; no identity object: aborted), statusword
+    per controlword, heartbeats."""
 
-    def __init__(self, nodes, cpr=65536):
+    def __init__(self, nodes, cpr=65536, rated_mnm=5000):
         self.state = {n: p.PowerState.SWITCH_ON_DISABLED for n in nodes}
         self.position = {n: 0 for n in nodes}
         self.torque = {n: 0 for n in nodes}
         self.silent: set[int] = set()
         self.drop_tpdo: set[int] = set()
         self.emcy: dict[int, int] = {}
-        self.modes = {n: 0 for n in nodes}
+        self.objects = {n: self._table(n, rated_mnm) for n in nodes}
+
+    @staticmethod
+    def _table(n: int, rated_mnm: int) -> dict[tuple[int, int], int]:
+        table = {(p.OD_RATED_TORQUE, 0): rated_mnm, (p.OD_SUPPORTED_DRIVE_MODES, 0): 0x280,
+                 (p.OD_MODES_OF_OPERATION, 0): 0}  # fmt: skip
+        for comm, mapping, cob, entries in (
+            (p.RPDO1_COMM, p.RPDO1_MAP, p.RPDO1 + n, p.RPDO1_MAPPING[p.MODE_CST]),
+            (p.TPDO1_COMM, p.TPDO1_MAP, p.TPDO1 + n, p.TPDO1_MAPPING),
+        ):
+            table[(comm, 1)], table[(comm, 2)] = cob, 1
+            table[(mapping, 0)] = len(entries)
+            for k, e in enumerate(entries, 1):
+                table[(mapping, k)] = e
+        return table
 
     def __call__(self, msg, t):
         arb, data = msg.arbitration_id, bytes(msg.data)
@@ -72,15 +88,18 @@ class Cia402Script:
         if p.SDO_RX < arb <= p.SDO_RX + 127:
             n = arb - p.SDO_RX
             cmd, index, sub, raw = p.SDO_STRUCT.unpack(data)
+            objects = self.objects[n]
+            key = (p.OD_MODES_OF_OPERATION, 0) if index == p.OD_MODES_DISPLAY else (index, sub)
             if cmd & 0xE0 == 0x20:
-                if index == p.OD_MODES_OF_OPERATION:
-                    self.modes[n] = raw[0]
+                size = 4 - ((cmd >> 2) & 0x3) if cmd & 0x1 else 4
+                objects[(index, sub)] = int.from_bytes(raw[:size], "little")
                 out.append(frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x60, index, sub, b"\0" * 4)))
-            else:
-                val = self.modes[n] if index == p.OD_MODES_DISPLAY else 0
-                out.append(
-                    frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x4F, index, sub, bytes([val, 0, 0, 0])))
-                )
+            elif key in objects:
+                value = objects[key].to_bytes(4, "little")
+                out.append(frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x43, index, sub, value)))
+            else:  # no such object
+                code = (0x06020000).to_bytes(4, "little")
+                out.append(frame(p.SDO_TX + n, p.SDO_STRUCT.pack(0x80, index, sub, code)))
         elif p.RPDO1 < arb <= p.RPDO1 + 127:
             n = arb - p.RPDO1
             cw, tq = p.RPDO1_STRUCT.unpack(data)
@@ -131,13 +150,23 @@ def test_cia402_configure_frames(seed):
     with drv:
         drv.configure()
         assert drv.lifecycle is Lifecycle.INACTIVE
-        assert peer.sent(p.NMT)[0] == bytes([0x01, 0x00])  # NMT start, all nodes
+        # PRE-OPERATIONAL, set-up by SDO, then NMT start (all nodes)
+        assert peer.sent(p.NMT)[:2] == [bytes([0x80, 0x00]), bytes([0x01, 0x00])]
+        last_sdo = max(t for t, a, _ in peer.rx if a == p.SDO_RX + 8)
+        assert min(t for t, a, d in peer.rx if a == p.NMT and d[0] == 0x01) >= last_sdo
         sdo = peer.sent(p.SDO_RX + 1)
-        assert sdo[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
-        assert sdo[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0x64, 0x00, 0, 0])  # 0x1017 := 100 ms
-        assert sdo[2] == bytes([0x2B, 0x07, 0x60, 0x00, 0x03, 0x00, 0, 0])  # 0x6007 := quick stop
-        assert sdo[3] == bytes([0x2F, 0x19, 0x10, 0x00, 0xF0, 0, 0, 0])  # 0x1019 := 240
-        assert sdo[4] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
+        reads = [(d[2] << 8 | d[1], d[3]) for d in sdo if d[0] == 0x40]
+        assert reads[:5] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4), (0x6076, 0)]
+        assert (0x1600, 0) in reads and (0x1A00, 0) in reads and (0x6502, 0) in reads
+        writes = [d for d in sdo if d[0] & 0xE0 == 0x20]
+        assert writes[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
+        assert writes[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0x64, 0x00, 0, 0])  # 0x1017 := 100 ms
+        assert writes[2] == bytes([0x2B, 0x07, 0x60, 0x00, 0x03, 0x00, 0, 0])  # 0x6007 := 3
+        assert writes[3][:4] == bytes([0x2B, 0x72, 0x60, 0x00])  # 0x6072: the torque limit
+        assert writes[4] == bytes([0x2F, 0x19, 0x10, 0x00, 0xF0, 0, 0, 0])  # 0x1019 := 240
+        assert len(writes) == 5  # the PDO mapping was already as needed: not written
+        assert sdo[-1] == bytes([0x40, 0x61, 0x60, 0x00, 0, 0, 0, 0])  # read 0x6061
+        assert drv.identities[0] is None and drv.pdos_written == 0
         # cyclic: 8 RPDOs then SYNC, disabled drives get "disable voltage" and zero torque
         assert peer.sent(p.RPDO1 + 3)[-1] == bytes([0x00, 0x00, 0x00, 0x00])
         order = [a for _, a, _ in peer.rx if a in (p.SYNC, p.RPDO1 + 8)]

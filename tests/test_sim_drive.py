@@ -85,3 +85,75 @@ def test_an_abort_connection_option_beyond_the_standard_is_refused():
         reply = rig.net.drives[0].on_sdo(p.sdo_download(p.OD_ABORT_CONNECTION, 0, 7, 2))
         assert reply is not None and reply.data[0] == 0x80
         assert int.from_bytes(reply.data[4:8], "little") == 0x06090031
+
+
+def abort_code(reply) -> int | None:
+    assert reply is not None
+    return int.from_bytes(reply.data[4:8], "little") if reply.data[0] == 0x80 else None
+
+
+def test_the_mapping_changes_only_the_standard_way():
+    """CiA 301's procedure and its abort codes: not in OPERATIONAL; not while the PDO is
+    valid; entries only while the count is 0; an object that cannot be mapped (not writable
+    into an RPDO, or with another length); more than 64 bits."""
+    model = load_robot(CONFIG / "rowc.toml")
+    with LockStep(model, period=model.control.period) as rig:
+        d = rig.net.drives[0]
+
+        def write(index, sub, value, size):
+            return abort_code(d.on_sdo(p.sdo_download(index, sub, value, size)))
+
+        d.on_nmt(p.NMT_START)
+        assert write(0x1600, 0, 0, 1) == 0x08000022  # OPERATIONAL
+        d.on_nmt(p.NMT_PRE_OPERATIONAL)
+        assert write(0x1600, 0, 0, 1) == 0x06010000  # the PDO is still valid
+        assert write(0x1400, 1, 0x80000000 | (0x200 + d.node_id), 4) is None
+        assert write(0x1600, 1, 0x60400010, 4) == 0x06010000  # count not 0
+        assert write(0x1600, 0, 0, 1) is None
+        assert write(0x1600, 1, 0x60410010, 4) == 0x06040041  # statusword: not writable
+        assert write(0x1600, 1, 0x10170010, 4) == 0x06040041  # not mappable
+        assert write(0x1600, 1, 0x607A0010, 4) == 0x06040041  # 0x607A is 32 bits
+        for k, entry in enumerate((0x607A0020, 0x607A0020, 0x60400010), 1):
+            assert write(0x1600, k, entry, 4) is None
+        assert write(0x1600, 0, 3, 1) == 0x06040042  # 80 bits
+        assert write(0x1600, 0, 2, 1) is None
+        assert write(0x1400, 1, 0x200 + d.node_id, 4) is None  # valid again
+        assert d.rpdo_owners[0x200 + d.node_id] is d
+
+
+def test_static_mapping_refuses_a_drive_that_differs():
+    """``pdo_mapping = "static"``: position mode needs RPDO1 = controlword, target position,
+    torque offset; the simulated drive's default is the torque mode's. The driver refuses,
+    naming the drive, the object, what it expected and what it found."""
+    import dataclasses
+
+    from drivers.errors import DriverInitializationError
+
+    model = load_robot(CONFIG / "rowc.toml")
+    model = dataclasses.replace(
+        model, drives=dataclasses.replace(model.drives, pdo_mapping="static")
+    )
+    with LockStep(model, period=model.control.period) as rig:
+        with pytest.raises(DriverInitializationError) as err:
+            rig.driver.configure()
+        text = str(err.value)
+        assert "node 1" in text and "RPDO1" in text and "0x1600" in text
+        assert "expected [0x6040:00 controlword (16 bit), 0x607A:00 target position" in text
+        assert "found [0x6040:00 controlword (16 bit), 0x6071:00 target torque" in text
+
+
+def test_configure_writes_the_mapping_and_reads_it_back():
+    """The default ``pdo_mapping = "configure"``: rowc's drives in position mode get RPDO1
+    remapped (8 drives, one PDO each: TPDO1 already fits), read back, and the drives then
+    run in position mode; the identities are read."""
+    with enabled_rig("rowc.toml") as rig:
+        assert rig.driver.pdos_written == rig.model.n_cables
+        for c, d in enumerate(rig.net.drives):
+            assert d.od[(0x1600, 0)] == 3 and d.od[(0x1600, 2)] == 0x607A0020
+            assert rig.driver.identities[c] == {
+                "vendor_id": 0, "product_code": 0x402, "revision": 0x10000,
+                "serial": 0x53494D00 + d.node_id,
+            }  # fmt: skip
+        cycles(rig, rig.plant.drum_ratio * rig.plant.tension, 20)
+        assert all(d.state is p.PowerState.OPERATION_ENABLED for d in rig.net.drives)
+        assert rig.driver.lifecycle.value == "active"

@@ -325,6 +325,15 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     # a bench's explicit choice: said at start and in every state payload
     assert "unauthenticated" in s["warning"]
     assert any("warning: commands are accepted from unauthenticated" in x for x in robot.lines)
+    # status carries the drives' identities, read by SDO at set-up (0x1018)
+    status = [
+        json.loads(r.ok.payload.to_bytes())
+        for r in client.session.get(f"{client.prefix}/status", timeout=10.0)
+        if r.ok is not None
+    ]
+    drives = status[0]["config"]["drives"]
+    assert [d["node"] for d in drives] == list(range(1, 9))
+    assert drives[5]["serial"] == 0x53494D06 and drives[5]["product_code"] == 0x402
 
     client.put("enable", {"id": "e1"})
     assert client.wait(lambda: client.last()["state"] == "enabled"), client.replies

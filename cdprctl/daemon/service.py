@@ -14,6 +14,7 @@ through ``--can-interface/--can-channel``).
 from __future__ import annotations
 
 import collections
+import json
 import logging
 import signal
 import sys
@@ -153,6 +154,7 @@ class Daemon:
             return 1
         for w in self.driver.warnings:
             self._print(f"warning: {w}", err=True)
+        self._report_identities()
         p = c.estimator.position
         self._print(
             f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
@@ -386,6 +388,24 @@ class Daemon:
             f"max {self.summary['tracking_max_mm']:.2f} mm; final state "
             f"{c.state.value}" + (f" ({c.fault_reason})" if c.fault_reason else "")
         )
+
+    def _report_identities(self) -> None:
+        """The drives' identities (0x1018, read at set-up): printed, and in status."""
+        identities = getattr(self.driver, "identities", None)
+        nodes = getattr(self.driver, "node", None)
+        if not identities or nodes is None:
+            return
+        drives = []
+        for c, ident in enumerate(identities):
+            node = int(nodes[c])
+            drives.append({"cable": self.model.cables[c].name, "node": node, **(ident or {})})
+            if ident:
+                text = ", ".join(f"{k} 0x{v:08X}" for k, v in ident.items())
+            else:
+                text = "no identity object"
+            self._print(f"drive of cable index {c} (node {node}): {text}")
+        if self.link is not None:
+            self.link.event(self.controller.time, json.dumps(drives), "drives")
 
     def _config_summary(self) -> dict[str, Any]:
         import cdprctl

@@ -27,6 +27,7 @@ DRIVES_KEYS = (
     "controller_node_id",
     "comm_timeout",
     "velocity_source",
+    "pdo_mapping",
     "log_file",
     "buses",
 )
@@ -75,6 +76,9 @@ class DrivesConfig:
     controller_node_id: int = 127
     comm_timeout: float = 0.1  # s without RPDO/SYNC: the drive quick-stops (drive side)
     velocity_source: str = "derived"  # "derived" from positions, or "pdo" (TPDO2, 0x606C)
+    # "configure": the driver writes the PDO mapping it needs by SDO at every start (CiA 402
+    # drives); "static": it only reads it, and refuses a drive whose mapping differs
+    pdo_mapping: str = "configure"
     log_file: str | None = None  # python-can logger file (.log, .asc, .blf, .csv)
     buses: tuple[BusConfig, ...] = ()
 
@@ -188,6 +192,13 @@ def read_drives(
     vsrc = rd.string(t, "velocity_source", "drives", required=False, default="derived")
     if vsrc not in ("derived", "pdo"):
         rd.error("drives.velocity_source", vsrc, "", "must be 'derived' or 'pdo'")
+    pdo_mapping = rd.string(t, "pdo_mapping", "drives", required=False, default="configure")
+    if pdo_mapping not in ("configure", "static"):
+        rd.error(
+            "drives.pdo_mapping", pdo_mapping, "",
+            "must be 'configure' (the driver writes the PDO mapping by SDO) or 'static' (it "
+            "only checks it)",
+        )  # fmt: skip
     log_file = rd.string(t, "log_file", "drives", required=False, default=None)
     buses: list[BusConfig] = []
     seen_cable: dict[int, str] = {}
@@ -305,6 +316,7 @@ def read_drives(
         controller_node_id=int(ctrl_id or 127),
         comm_timeout=float(comm or 0.1),
         velocity_source=vsrc or "derived",
+        pdo_mapping=pdo_mapping or "configure",
         log_file=log_file,
         buses=tuple(buses),
     )

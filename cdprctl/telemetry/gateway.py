@@ -6,6 +6,7 @@ daemon through a bounded queue; each command gets a reply on ``<prefix>/reply/<k
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import sys
@@ -185,6 +186,8 @@ def gateway_main(
                     kind, t, text = evt_q.get_nowait()
                     if kind == "fault":
                         shared["fault"] = text
+                    if kind == "drives":  # their identities, read at set-up: in status too
+                        summary["drives"] = json.loads(text)
                     pub_events.put(encode(event_payload(t, text, kind)))
             except queue.Empty:
                 pass

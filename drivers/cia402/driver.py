@@ -20,7 +20,7 @@ import numpy as np
 
 from drivers.base import DriveState, register_driver
 from drivers.canbase import CanWinchDriver
-from drivers.cia402 import cyclic
+from drivers.cia402 import cyclic, pdo_setup
 from drivers.cia402 import protocol as p
 from drivers.errors import (
     DriveFaultError,
@@ -28,6 +28,7 @@ from drivers.errors import (
     DriverInitializationError,
     DriverOperationError,
     DriverTimeoutError,
+    SdoAbortError,
 )
 
 _GENERIC_STATE = {
@@ -81,6 +82,14 @@ class Cia402Driver(CanWinchDriver):
             dtype=np.int64,
         )  # fmt: skip
         # its counter byte runs 1 … SYNC_COUNTER_OVERFLOW (CiA 301 0x1019)
+        # 0x6072 of each drive: its winch's torque limit, per mille of the rated torque
+        self._max_torque_pm = np.array(
+            [min(0xFFFF, round(c.winch.torque_limit / cfg.rated_torque * 1000.0))
+             for c in model.cables],
+            dtype=np.int64,
+        )  # fmt: skip
+        self.identities: list[dict[str, int] | None] = [None] * m  # 0x1018, read at set-up
+        self.pdos_written = 0  # PDOs the set-up had to write (0: all were as needed)
         self._sync = can.Message(arbitration_id=p.SYNC, data=bytearray(1), is_extended_id=False)
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
@@ -112,41 +121,14 @@ class Cia402Driver(CanWinchDriver):
 
     # -- hooks: set-up ------------------------------------------------------------------------
     def _nmt_start_all(self) -> None:
-        for b in self.media:
-            self._send(
-                b,
-                can.Message(
-                    arbitration_id=p.NMT, data=bytes([p.NMT_START, 0]), is_extended_id=False
-                ),
-            )
+        self._nmt_all(p.NMT_START)
 
     def _configure_drives(self, timeout: float) -> None:
-        self._nmt_start_all()
-        # Five heartbeats per timeout: with three (167 ms of 0.5 s) the loop's 4 ms ticks left
-        # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
-        # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
-        # the bus-load budget counts
-        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
-        fe_ms = max(1, round(self.config.following_error_timeout * 1000))
+        """Each drive in PRE-OPERATIONAL by SDO (``_configure_drive``), then NMT start."""
+        self._nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
         for c in range(self.m):
-            self._sdo_write(c, p.OD_MODES_OF_OPERATION, 0, self.mode, 1, timeout)
-            self._sdo_write(c, p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2, timeout)
-            self._sdo_write(c, p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2, timeout)
-            self._sdo_write(
-                c, p.OD_SYNC_COUNTER_OVERFLOW, 0, p.SYNC_COUNTER_OVERFLOW, 1, timeout
-            )
-            if self._csp:  # the drive stops its winch when it cannot follow (docs/control.md)
-                self._sdo_write(
-                    c, p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4, timeout
-                )
-                self._sdo_write(c, p.OD_FOLLOWING_ERROR_TIMEOUT, 0, fe_ms, 2, timeout)
-            mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
-            if mode != self.mode:
-                raise DriverInitializationError(
-                    f"drive of cable index {c} (node {int(self.node[c])}) reports mode "
-                    f"{mode} in 0x6061, expected {self.mode} (cyclic synchronous "
-                    f"{'position' if self._csp else 'torque'}, [drives] mode)"
-                )
+            self._configure_drive(c, timeout)
+        self._nmt_start_all()
         self._started = True
 
         # cycle (zero torque, drives disabled) until every drive has sent feedback
@@ -162,6 +144,77 @@ class Cia402Driver(CanWinchDriver):
         )
 
     SDO_RETRY = 0.25  # s: a request (or its answer) lost on a lossy bus is sent again
+
+    def _configure_drive(self, c: int, timeout: float) -> None:
+        """Identity (0x1018, logged), rated torque (0x6076) against the config, the PDOs the
+        codec needs (``pdo_setup``), mode (0x6502 first), heartbeat, abort-connection option,
+        torque limit (0x6072), SYNC counter and, in position mode, the following error."""
+        n = int(self.node[c])
+        who = f"drive of cable index {c} (node {n})"
+
+        def read(index: int, sub: int) -> int:
+            return self._sdo_read(c, index, sub, timeout, signed=False)
+
+        def write(index: int, sub: int, value: int, size: int) -> None:
+            self._sdo_write(c, index, sub, value, size, timeout)
+
+        self.identities[c] = self._identity(read)
+        rated = self._optional(read, p.OD_RATED_TORQUE)
+        if rated is not None and abs(rated / 1000.0 - self.rated_torque) > 0.01 * self.rated_torque:
+            raise DriverInitializationError(
+                f"{who}: rated torque 0x6076 is {rated} mN·m, the config says "
+                f"{self.rated_torque * 1000:.0f} mN·m ([drives] rated_torque): the torques "
+                "would be scaled wrong"
+            )
+        configure = self.config.pdo_mapping == "configure"
+        velocity = self.config.velocity_source == "pdo"
+        for pdo in pdo_setup.wanted(self.mode, n, velocity):
+            self.pdos_written += pdo_setup.set_up(read, write, pdo, configure, who)
+        modes = self._optional(read, p.OD_SUPPORTED_DRIVE_MODES)
+        bit = 7 if self._csp else 9
+        if modes is not None and not modes >> bit & 1:
+            raise DriverInitializationError(
+                f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks cyclic synchronous "
+                f"{'position' if self._csp else 'torque'} (bit {bit}; [drives] mode)"
+            )
+        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
+        fe_ms = max(1, round(self.config.following_error_timeout * 1000))
+        write(p.OD_MODES_OF_OPERATION, 0, self.mode, 1)
+        write(p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2)
+        write(p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2)
+        write(p.OD_MAX_TORQUE, 0, int(self._max_torque_pm[c]), 2)
+        write(p.OD_SYNC_COUNTER_OVERFLOW, 0, p.SYNC_COUNTER_OVERFLOW, 1)
+        if self._csp:  # the drive stops its winch when it cannot follow (docs/control.md)
+            write(p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4)
+            write(p.OD_FOLLOWING_ERROR_TIMEOUT, 0, fe_ms, 2)
+        mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
+        if mode != self.mode:
+            raise DriverInitializationError(
+                f"{who} reports mode {mode} in 0x6061, expected {self.mode} (cyclic synchronous "
+                f"{'position' if self._csp else 'torque'}, [drives] mode)"
+            )
+
+    @staticmethod
+    def _optional(read: pdo_setup.Read, index: int, sub: int = 0) -> int | None:
+        """An object a drive may not have (CiA 402 optional): None when it aborts."""
+        try:
+            return read(index, sub)
+        except SdoAbortError:
+            return None
+
+    def _identity(self, read: pdo_setup.Read) -> dict[str, int] | None:
+        """0x1018 (CiA 301 mandatory, but sub-indices 2-4 optional): what the drive has."""
+        ident = {
+            name: self._optional(read, p.OD_IDENTITY, sub)
+            for sub, name in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial"))
+        }
+        return {k: v for k, v in ident.items() if v is not None} or None
+
+    def _nmt_all(self, command: int) -> None:
+        for b in self.media:
+            self._send(
+                b, can.Message(arbitration_id=p.NMT, data=bytes([command, 0]), is_extended_id=False)
+            )
 
     def _sdo_exchange(self, c: int, request: bytes, timeout: float) -> bytes:
         b, n = int(self.bus_of[c]), int(self.node[c])
@@ -184,9 +237,11 @@ class Cia402Driver(CanWinchDriver):
         reply = self._sdo_reply.pop(c)
         if reply[0] == 0x80:
             code = int.from_bytes(reply[4:8], "little")
-            raise DriverInitializationError(
-                f"node {n} aborted SDO to 0x{request[2]:02X}{request[1]:02X}: code 0x{code:08X}"
-            )
+            index = int.from_bytes(request[1:3], "little")
+            raise SdoAbortError(
+                f"node {n} aborted SDO to 0x{index:04X}:{request[3]:02X}: code 0x{code:08X}",
+                n, index, request[3], code,
+            )  # fmt: skip
         return reply
 
     def _sdo_write(
@@ -196,12 +251,17 @@ class Cia402Driver(CanWinchDriver):
         if reply[0] != 0x60:
             raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
 
-    def _sdo_read(self, c: int, index: int, sub: int, timeout: float) -> int:
+    def _sdo_read(
+        self, c: int, index: int, sub: int, timeout: float, signed: bool = True
+    ) -> int:
         reply = self._sdo_exchange(c, p.sdo_upload(index, sub), timeout)
-        if reply[0] & 0xE0 != 0x40:
-            raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
+        if reply[0] & 0xE0 != 0x40 or not reply[0] & 0x2:  # expedited uploads only
+            raise DriverInitializationError(
+                f"node {int(self.node[c])}: unexpected SDO answer {reply.hex()} reading "
+                f"0x{index:04X}:{sub:02X}"
+            )
         size = 4 - ((reply[0] >> 2) & 0x3) if reply[0] & 0x1 else 4
-        return int.from_bytes(reply[4 : 4 + size], "little", signed=True)
+        return int.from_bytes(reply[4 : 4 + size], "little", signed=signed)
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable

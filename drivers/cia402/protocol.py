@@ -66,6 +66,21 @@ OD_TARGET_POSITION = 0x607A
 OD_TORQUE_OFFSET = 0x60B2
 # position mode: how far (counts, UNSIGNED32; 0xFFFFFFFF: not monitored) and how long (ms,
 # UNSIGNED16) the position actual may stay off the target before the drive faults (EMCY 0x8611)
+# PDOs (CiA 301 §7.5.2.35-38): communication parameter (sub 1 COB-ID, bit 31 "not valid";
+# sub 2 transmission type, 1: every SYNC) and mapping (sub 0 count, then entries index << 16 |
+# sub << 8 | bits); the mappings cdprctl needs, by mode
+RPDO1_COMM, RPDO1_MAP = 0x1400, 0x1600
+TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
+TPDO2_COMM, TPDO2_MAP = 0x1801, 0x1A01
+PDO_NOT_VALID = 0x80000000
+TRANSMISSION_EVERY_SYNC = 1
+RPDO1_MAPPING = {
+    10: (0x60400010, 0x60710010),  # controlword, target torque
+    8: (0x60400010, 0x607A0020, 0x60B20010),  # controlword, target position, torque offset
+}
+TPDO1_MAPPING = (0x60410010, 0x60770010, 0x60640020)  # statusword, torque, position actual
+TPDO2_MAPPING = (0x606C0020,)  # velocity actual
+OD_IDENTITY = 0x1018  # 1 vendor-ID, 2 product code, 3 revision, 4 serial number
 OD_FOLLOWING_ERROR_WINDOW = 0x6065
 OD_FOLLOWING_ERROR_TIMEOUT = 0x6066
 FOLLOWING_ERROR_OFF = 0xFFFFFFFF

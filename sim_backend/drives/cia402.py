@@ -21,6 +21,7 @@ import can
 from canopen import SdoAbortedError
 
 from drivers.cia402 import protocol as p
+from sim_backend.drives import pdo
 from sim_backend.drives.dictionary import Dictionary
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
@@ -36,11 +37,13 @@ class Cia402Drive:
         counts_per_rev: int,
         torque_limit: float,
         comm_timeout: float,
-        velocity_pdo: bool = False,
         position_gains: tuple[float, float] = (0.0, 0.0),
+        rpdo_owners: dict[int, Cia402Drive] | None = None,
     ):
         self.node_id = node_id
-        self.velocity_pdo = velocity_pdo  # TPDO2 (0x606C) mapped and sent on SYNC
+        # COB-ID → drive, shared by the drives of one bus: who takes an RPDO (the network's
+        # dispatch; kept by each drive as its RPDO's COB-ID changes)
+        self.rpdo_owners: dict[int, Cia402Drive] = {} if rpdo_owners is None else rpdo_owners
         self.cable = cable
         self.plant = plant
         self.rated_torque = rated_torque  # N·m per 1000 per-mille
@@ -68,8 +71,13 @@ class Cia402Drive:
             self._write_object,
         )
         self.od = self.dictionary.values  # (index, sub) → value, typed by the dictionary
-        # (controlword, target torque or position, torque offset per-mille)
-        self.pending: tuple[int, int, int] | None = None
+        self._rx: pdo.Layout | None = None
+        self._tx: list[pdo.Layout] = []
+        self._tx_count = [0, 0]  # SYNCs since each TPDO was last sent
+        self._compile_pdos()
+        # the RPDO latched for the next SYNC: (controlword, target torque per mille, target
+        # position counts, torque offset per mille), None where not mapped
+        self.pending: tuple[int | None, int | None, int | None, int | None] | None = None
         self.torque_pm = 0  # applied: the target torque (mode 10), the offset (mode 8)
         self.target_counts: int | None = None  # mode 8: the last target position
         self.last_controlword = 0
@@ -79,6 +87,7 @@ class Cia402Drive:
         self.silent = False  # fault injection: the drive stops talking
         self.encoder_offset = 0  # counts, fault injection: an encoder jump
         self.transitions: list[int] = []  # CiA 402 transition numbers taken (for tests)
+        self.rpdo_length_errors = 0  # RPDOs shorter than their mapping: not processed
         self._set_following_error()
 
     # -- frames in ------------------------------------------------------------------------------
@@ -101,6 +110,7 @@ class Cia402Drive:
             else:
                 self.dictionary.reset(0x1000, 0x2000)
             self._set_following_error()
+            self._compile_pdos()
             self.nmt = p.HB_PRE_OPERATIONAL
             self.pending = None
             self.sync_count = 0
@@ -114,16 +124,63 @@ class Cia402Drive:
         return self.od[(p.OD_MODES_OF_OPERATION, 0)]
 
     def on_rpdo(self, data: bytes, t: float) -> None:
-        if self.nmt != p.HB_OPERATIONAL:
+        """An RPDO as its mapping says, latched for the next SYNC (transmission types 0-240;
+        254/255 would act at once: not used by cdprctl, not offered here). Shorter than its
+        mapping: not processed (CiA 301: a length error)."""
+        rx = self._rx
+        if self.nmt != p.HB_OPERATIONAL or rx is None or not rx.valid:
             return
-        if self.mode == p.MODE_CSP and len(data) == 8:
-            self.pending = p.RPDO1_CSP_STRUCT.unpack(data)
-        elif self.mode != p.MODE_CSP and len(data) == 4:
-            self.pending = (*p.RPDO1_STRUCT.unpack(data), 0)
-        else:  # not this mode's mapping: ignored, like a real drive's length check
+        if len(data) < rx.codec.size:
+            self.rpdo_length_errors += 1
             return
+        cw = torque = position = offset = None
+        for (index, _), value in zip(rx.entries, rx.codec.unpack_from(data), strict=True):
+            if index == p.OD_CONTROLWORD:
+                cw = value
+            elif index == p.OD_TARGET_TORQUE:
+                torque = value
+            elif index == p.OD_TARGET_POSITION:
+                position = value
+            elif index == p.OD_TORQUE_OFFSET:
+                offset = value
+        self.pending = (cw, torque, position, offset)
         self.rpdos_since_sync += 1
         self.last_rx = t
+
+    def _compile_pdos(self) -> None:
+        """The PDOs from the communication and mapping objects (after a write or a reset)."""
+        old = self._rx
+        self._rx = pdo.layout(self.dictionary.od, self.od, pdo.RPDO_COMM)
+        self._tx = [
+            pdo.layout(self.dictionary.od, self.od, comm)
+            for comm in (pdo.TPDO_COMM, pdo.TPDO_COMM + 1)
+        ]
+        if old is not None and self.rpdo_owners.get(old.cob_id) is self:
+            del self.rpdo_owners[old.cob_id]
+        if self._rx.valid:
+            self.rpdo_owners[self._rx.cob_id] = self
+
+    def _tpdos(self) -> list[can.Message]:
+        """The TPDOs due at this SYNC (transmission type n: every n-th SYNC), as mapped."""
+        out = []
+        for k, tx in enumerate(self._tx):
+            if not tx.valid or not 0 <= tx.transmission <= 240:
+                continue
+            self._tx_count[k] += 1
+            if self._tx_count[k] < max(1, tx.transmission):
+                continue
+            self._tx_count[k] = 0
+            values = [self._pdo_value(index, sub) for index, sub in tx.entries]
+            out.append(
+                can.Message(
+                    arbitration_id=tx.cob_id, data=tx.codec.pack(*values), is_extended_id=False
+                )
+            )
+        return out
+
+    def _pdo_value(self, index: int, sub: int) -> int:
+        live = self._read_object(index, sub)
+        return self.od[(index, sub)] if live is None else live
 
     def on_sdo(self, data: bytes) -> can.Message | None:
         """The SDO server's answer (CiA 301 §7.2.4; not in NMT STOPPED)."""
@@ -134,6 +191,12 @@ class Cia402Drive:
     def _write_object(self, index: int, sub: int, value: int) -> None:
         """An SDO download, before it is stored: refused with CiA 301's abort code, or its
         effect on the drive."""
+        if pdo.is_pdo_object(index):
+            operational = self.nmt == p.HB_OPERATIONAL
+            pdo.check_write(self.dictionary.od, self.od, operational, index, sub, value)
+            self.od[(index, sub)] = value
+            self._compile_pdos()
+            return
         if index == p.OD_MODES_OF_OPERATION and not self.supports_mode(value):
             raise SdoAbortedError(0x06090030)  # value range exceeded: not in 0x6502
         if index == p.OD_ABORT_CONNECTION and value > p.ABORT_CONNECTION_QUICK_STOP:
@@ -208,37 +271,23 @@ class Cia402Drive:
         if pending is not None and stale:
             pending = None  # not taken: as across a lost RPDO, the target goes on
             self.stale_targets += 1
+        fresh = False
         if pending is not None:
             self.last_target = t
-            cw, value, offset = pending
-            self._apply_controlword(cw)
+            cw, torque, position, offset = pending
+            if cw is not None:
+                self._apply_controlword(cw)
             if self.mode == p.MODE_CSP:
-                self.target_counts, self.torque_pm = value, offset
-            else:
-                self.torque_pm = value
-        self._apply_to_plant(interval, pending is not None)
+                fresh = position is not None
+                if fresh:
+                    self.target_counts = position
+                self.torque_pm = offset if offset is not None else 0
+            elif torque is not None:
+                self.torque_pm = torque
+        self._apply_to_plant(interval, fresh)
         if self.silent:
             return []
-        counts = self._counts()
-        applied_pm = self._torque_actual_pm()
-        sw = p.STATUSWORD_OF[self.state]
-        out = [
-            can.Message(
-                arbitration_id=p.TPDO1 + self.node_id,
-                data=p.TPDO1_STRUCT.pack(sw, applied_pm, counts),
-                is_extended_id=False,
-            )
-        ]
-        if self.velocity_pdo:
-            vel = round(self.plant.theta_dot[self.cable] * self.cpr / (2.0 * math.pi))
-            out.append(
-                can.Message(
-                    arbitration_id=p.TPDO2 + self.node_id,
-                    data=p.TPDO2_STRUCT.pack(vel),
-                    is_extended_id=False,
-                )
-            )
-        return out
+        return self._tpdos()
 
     def _missed_sync_since_rpdo(self, data: bytes) -> bool:
         """Counts this SYNC; True when its counter (0x1019) says SYNCs were lost since the

@@ -1,0 +1,122 @@
+"""The PDOs a CiA 402 drive must have for cdprctl's cyclic codec, checked and — with
+``[drives] pdo_mapping = "configure"`` (the default) — written by SDO in PRE-OPERATIONAL, the
+standard way (CiA 301 §7.5.2.35-38: PDO disabled by bit 31 of its COB-ID, mapping count 0,
+entries, count, transmission type 1 (every SYNC), enabled), then read back. With ``"static"``
+(a drive set up with its own tool) it is only read, and any difference refuses the start
+naming node, object, what was expected and what was found; so does a drive whose mapping is
+read-only and differs. Set-up only, never in the cycle.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from drivers.cia402 import protocol as p
+from drivers.errors import DriverInitializationError, SdoAbortError
+
+Read = Callable[[int, int], int]  # (index, sub) → value, unsigned
+Write = Callable[[int, int, int, int], None]  # (index, sub, value, size in bytes)
+
+
+@dataclass(frozen=True)
+class Pdo:
+    name: str
+    comm: int  # communication parameter index
+    mapping: int  # mapping parameter index
+    cob_id: int  # 11-bit
+    entries: tuple[int, ...]
+    enabled: bool = True
+
+
+def wanted(mode: int, node_id: int, velocity_pdo: bool) -> list[Pdo]:
+    """The PDOs cdprctl's codec expects of a drive at ``node_id`` in ``mode``."""
+    pdos = [
+        Pdo("RPDO1", p.RPDO1_COMM, p.RPDO1_MAP, p.RPDO1 + node_id, p.RPDO1_MAPPING[mode]),
+        Pdo("TPDO1", p.TPDO1_COMM, p.TPDO1_MAP, p.TPDO1 + node_id, p.TPDO1_MAPPING),
+    ]
+    if velocity_pdo:
+        pdos.append(Pdo("TPDO2", p.TPDO2_COMM, p.TPDO2_MAP, p.TPDO2 + node_id, p.TPDO2_MAPPING))
+    return pdos
+
+
+def found(read: Read, pdo: Pdo) -> tuple[int, int, tuple[int, ...]]:
+    """(COB-ID with its valid bit, transmission type, mapping entries) as the drive has them."""
+    cob = read(pdo.comm, 1)
+    transmission = read(pdo.comm, 2)
+    count = read(pdo.mapping, 0)
+    return cob, transmission, tuple(read(pdo.mapping, k) for k in range(1, count + 1))
+
+
+def differences(read: Read, pdo: Pdo) -> list[str]:
+    """What differs from ``pdo`` on the drive (empty: it is as wanted)."""
+    cob, transmission, entries = found(read, pdo)
+    out = []
+    want_cob = pdo.cob_id | (0 if pdo.enabled else p.PDO_NOT_VALID)
+    if cob & (p.PDO_NOT_VALID | 0x7FF) != want_cob:
+        out.append(f"0x{pdo.comm:04X}:01 COB-ID expected 0x{want_cob:08X}, found 0x{cob:08X}")
+    if transmission != p.TRANSMISSION_EVERY_SYNC:
+        out.append(
+            f"0x{pdo.comm:04X}:02 transmission type expected {p.TRANSMISSION_EVERY_SYNC} "
+            f"(every SYNC), found {transmission}"
+        )
+    if entries != pdo.entries:
+        out.append(
+            f"0x{pdo.mapping:04X} mapping expected {describe(pdo.entries)}, found "
+            f"{describe(entries)}"
+        )
+    return out
+
+
+def write(write_sdo: Write, pdo: Pdo) -> None:
+    """Writes ``pdo`` in CiA 301's order (raises ``SdoAbortError`` if the drive refuses)."""
+    write_sdo(pdo.comm, 1, pdo.cob_id | p.PDO_NOT_VALID, 4)
+    write_sdo(pdo.mapping, 0, 0, 1)
+    for k, entry in enumerate(pdo.entries, 1):
+        write_sdo(pdo.mapping, k, entry, 4)
+    write_sdo(pdo.mapping, 0, len(pdo.entries), 1)
+    write_sdo(pdo.comm, 2, p.TRANSMISSION_EVERY_SYNC, 1)
+    if pdo.enabled:
+        write_sdo(pdo.comm, 1, pdo.cob_id, 4)
+
+
+def set_up(read: Read, write_sdo: Write, pdo: Pdo, configure: bool, who: str) -> bool:
+    """``pdo`` on the drive ``who`` (for messages): checked, written if it differs and
+    ``configure``, checked again. Returns True when it was written. Raises
+    ``DriverInitializationError`` naming what differs."""
+    diff = differences(read, pdo)
+    if not diff:
+        return False
+    if not configure:
+        raise DriverInitializationError(
+            f"{who}: {pdo.name} is not what cdprctl's codec needs ([drives] pdo_mapping = "
+            f"\"static\": set it with the drive's tool, or use \"configure\"): " + "; ".join(diff)
+        )
+    try:
+        write(write_sdo, pdo)
+    except SdoAbortError as exc:
+        why = "read-only" if exc.code == 0x06010002 else f"SDO abort 0x{exc.code:08X}"
+        raise DriverInitializationError(
+            f"{who}: cannot set {pdo.name} (0x{exc.index:04X}:{exc.sub:02X} {why}) and it "
+            "differs: " + "; ".join(diff)
+        ) from exc
+    diff = differences(read, pdo)
+    if diff:
+        raise DriverInitializationError(
+            f"{who}: {pdo.name} written but reads back differently: " + "; ".join(diff)
+        )
+    return True
+
+
+def describe(entries: tuple[int, ...]) -> str:
+    names = {
+        0x6040: "controlword", 0x6041: "statusword", 0x6064: "position actual",
+        0x606C: "velocity actual", 0x6071: "target torque", 0x6077: "torque actual",
+        0x607A: "target position", 0x60B2: "torque offset",
+    }  # fmt: skip
+    if not entries:
+        return "nothing"
+    return "[" + ", ".join(
+        f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X} {names.get(e >> 16, '?')} ({e & 0xFF} bit)"
+        for e in entries
+    ) + "]"

@@ -1,0 +1,120 @@
+"""A simulated drive's PDOs from its own communication and mapping objects (CiA 301 §7.4.7-8,
+§7.5.2.35-38): what an RPDO carries and what a TPDO sends is what the mapping says, and a
+master may change it in PRE-OPERATIONAL the standard way (PDO disabled by bit 31 of its
+COB-ID, sub-index 0 set to 0, the entries, sub-index 0 set to their number, enabled again).
+
+Each write is checked as a drive would (CiA 301's abort codes): not in OPERATIONAL
+(0x08000022), an entry only while sub-index 0 is 0 and the PDO disabled (0x06010000), an
+object that cannot be mapped in that direction or with another length (0x06040041), more than
+64 bits (0x06040042), a new COB-ID for a valid PDO (0x06090030).
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+from canopen import SdoAbortedError
+from canopen.objectdictionary import ObjectDictionary, ODVariable
+
+# CiA 301 data types → struct formats (little endian)
+_FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x0007: "I"}
+
+PDO_NOT_VALID = 0x80000000
+RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
+TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One PDO as its objects say: 11-bit COB-ID, valid, transmission type, the mapped
+    objects (index, sub-index) in order, and the codec of its data."""
+
+    cob_id: int
+    valid: bool
+    transmission: int
+    entries: tuple[tuple[int, int], ...]
+    codec: struct.Struct
+
+
+def is_pdo_object(index: int) -> bool:
+    return 0x1400 <= index <= 0x1BFF
+
+
+def layout(od: ObjectDictionary, values: dict[tuple[int, int], int], comm: int) -> Layout:
+    """The PDO whose communication parameter is ``comm`` (its mapping is ``comm + 0x200``)."""
+    mapping = comm + 0x200
+    cob = values[(comm, 1)]
+    entries = []
+    fmt = "<"
+    for k in range(1, values[(mapping, 0)] + 1):
+        index, sub, _ = split(values[(mapping, k)])
+        entries.append((index, sub))
+        fmt += _FORMAT[int(_variable(od, index, sub).data_type or 0)]
+    return Layout(
+        cob & 0x7FF, not cob & PDO_NOT_VALID, values[(comm, 2)], tuple(entries), struct.Struct(fmt)
+    )
+
+
+def split(entry: int) -> tuple[int, int, int]:
+    """A mapping entry: (index, sub-index, length in bits)."""
+    return entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+
+
+def check_write(
+    od: ObjectDictionary,
+    values: dict[tuple[int, int], int],
+    operational: bool,
+    index: int,
+    sub: int,
+    value: int,
+) -> None:
+    """Raises ``SdoAbortedError`` when the write of ``value`` to PDO object ``index``:``sub``
+    is not one a drive takes now."""
+    if operational:
+        raise SdoAbortedError(0x08000022)  # not in the present device state
+    receive = index < 0x1800
+    comm = index if index & 0x0200 == 0 else index - 0x200
+    if (comm, 1) not in values:
+        raise SdoAbortedError(0x06020000)
+    valid = not values[(comm, 1)] & PDO_NOT_VALID
+    if index == comm:  # communication parameter
+        if sub == 1 and valid and not value & PDO_NOT_VALID and value & 0x7FF != (
+            values[(comm, 1)] & 0x7FF
+        ):
+            raise SdoAbortedError(0x06090030)  # a valid PDO's COB-ID changes only disabled
+        return
+    if valid:
+        raise SdoAbortedError(0x06010000)  # the mapping of a valid PDO
+    if sub == 0:
+        total = 0
+        for k in range(1, value + 1):
+            if (index, k) not in values:
+                raise SdoAbortedError(0x06090031)  # more entries than sub-indices
+            total += split(values[(index, k)])[2]
+        if total > 64:
+            raise SdoAbortedError(0x06040042)
+        return
+    if values[(index, 0)] != 0:
+        raise SdoAbortedError(0x06010000)  # entries only while sub-index 0 is 0
+    if value == 0:
+        return
+    obj_index, obj_sub, bits = split(value)
+    try:
+        var = _variable(od, obj_index, obj_sub)
+    except KeyError:
+        raise SdoAbortedError(0x06040041) from None
+    readable, writable = "r" in var.access_type, "w" in var.access_type
+    if (
+        not var.pdo_mappable
+        or var.data_type not in _FORMAT
+        or len(var) != bits
+        or (receive and not writable)
+        or (not receive and not readable)
+    ):
+        raise SdoAbortedError(0x06040041)
+
+
+def _variable(od: ObjectDictionary, index: int, sub: int) -> ODVariable:
+    obj = od[index]
+    return obj if isinstance(obj, ODVariable) else obj[sub]
