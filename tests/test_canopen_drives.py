@@ -1,0 +1,178 @@
+"""Our driver against drives of an independent stack: ``canopen`` ``LocalNode`` drives (its SDO
+server, NMT slave and PDO maps) whose default mapping differs from the one cdprctl's codec
+needs. The driver remaps them by SDO, reads the mapping back, enables them and runs cyclic
+torque; a drive whose differing mapping is read-only refuses the start with a clear error.
+Real time on an in-process bus (the drives answer from canopen's notifier thread)."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import threading
+import time
+import uuid
+
+import canopen
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.model import load_robot
+from cdprctl.model.drives import default_drives
+from drivers import DriverInitializationError, create_driver
+from drivers.cia402 import protocol as p
+from sim_backend.drives.dictionary import EDS
+
+RATED_MNM = 5000  # seed000's drives: 5 N·m rated
+
+
+def eds_variant(tmp_path, read_only: bool) -> str:
+    """The shipped EDS with another default mapping (TPDO1: position actual then statusword;
+    RPDO1: target torque then controlword) and the rated torque of seed000's drives;
+    ``read_only``: the mapping entries cannot be written."""
+    text = EDS.read_text()
+
+    def section(name: str, body: str) -> None:
+        nonlocal text
+        text = re.sub(rf"\[{name}\]\n(.*?)\n\n", f"[{name}]\n{body}\n\n", text, flags=re.S)
+
+    def entry(index: str, sub: int, value: int) -> None:
+        access = "ro" if read_only else "rw"
+        section(
+            f"{index}sub{sub}",
+            f"ParameterName=Application object {sub}\nObjectType=0x7\nDataType=0x0007\n"
+            f"AccessType={access}\nDefaultValue=0x{value:08X}\nPDOMapping=0",
+        )
+
+    variants = (("1A00", (0x60640020, 0x60410010, 0)), ("1600", (0x60710010, 0x60400010)))
+    for index, entries in variants:
+        for k, value in enumerate(entries, 1):
+            entry(index, k, value)
+        count_access = "ro" if read_only else "rw"
+        section(
+            f"{index}sub0",
+            "ParameterName=Number of mapped application objects in PDO\nObjectType=0x7\n"
+            f"DataType=0x0005\nAccessType={count_access}\nDefaultValue=2\nPDOMapping=0",
+        )
+    text = text.replace(
+        "ParameterName=Motor rated torque\nObjectType=0x7\nDataType=0x0007\nAccessType=rw\n"
+        "DefaultValue=1000",
+        "ParameterName=Motor rated torque\nObjectType=0x7\nDataType=0x0007\nAccessType=rw\n"
+        f"DefaultValue={RATED_MNM}",
+    )
+    path = tmp_path / ("ro.eds" if read_only else "rw.eds")
+    path.write_text(text)
+    return str(path)
+
+
+class LocalDrive:
+    """A ``LocalNode`` as a CiA 402 drive: at each SYNC in OPERATIONAL it takes its RPDO1 (as
+    mapped now), steps the power state machine, and sends TPDO1 (as mapped now)."""
+
+    def __init__(self, network: canopen.Network, node_id: int, eds: str):
+        self.node = canopen.LocalNode(node_id, eds)
+        network.add_node(self.node)
+        self.node.add_read_callback(self._read)
+        self.state = p.PowerState.SWITCH_ON_DISABLED
+        self.torque = 0
+        self.lock = threading.Lock()
+        self.mapped = False
+        network.subscribe(p.NMT, self._on_nmt)
+        network.subscribe(p.SYNC, self._on_sync)
+
+    def _read(self, index: int, subindex: int, od):
+        if index == p.OD_MODES_DISPLAY:  # the mode in effect: the one written
+            return self.node.sdo[p.OD_MODES_OF_OPERATION].raw
+        if index == p.OD_STATUSWORD:
+            return p.STATUSWORD_OF[self.state]
+        return None
+
+    def _on_nmt(self, can_id, data, timestamp) -> None:
+        if data[0] == p.NMT_START and data[1] in (0, self.node.id):
+            self.node.tpdo.read()  # the mapping as it is now, from its own dictionary
+            self.node.rpdo.read()
+            self.mapped = True
+
+    def _on_sync(self, can_id, data, timestamp) -> None:
+        if not self.mapped or self.node.nmt.state != "OPERATIONAL":
+            return
+        with self.lock:
+            rpdo = self.node.rpdo[1]
+            if rpdo.is_received:
+                rpdo.is_received = False
+                values = {var.index: var.raw for var in rpdo}
+                command = p.command_of(values.get(p.OD_CONTROLWORD, 0))
+                nxt = p.TRANSITIONS.get((self.state, command))
+                if nxt is not None:
+                    self.state = nxt[0]
+                self.torque = values.get(p.OD_TARGET_TORQUE, self.torque)
+            tpdo = self.node.tpdo[1]
+            enabled = self.state is p.PowerState.OPERATION_ENABLED
+            live = {
+                p.OD_STATUSWORD: p.STATUSWORD_OF[self.state],
+                p.OD_POSITION_ACTUAL: 1234,
+                p.OD_TORQUE_ACTUAL: self.torque if enabled else 0,
+            }
+            for var in tpdo:
+                var.raw = live[var.index]
+            tpdo.transmit()
+
+
+@pytest.fixture
+def seed000_one_bus():
+    model = load_robot(CONFIG / "seed000.toml")
+    drives = default_drives(model.name, model.n_cables, model.drives.rated_torque)
+    assert drives.rated_torque * 1000 == RATED_MNM and drives.mode == "cst"
+    return dataclasses.replace(model, drives=drives)
+
+
+def bring_up(model, tmp_path, read_only: bool):
+    channel = f"localnodes-{uuid.uuid4().hex}"
+    network = canopen.Network()
+    network.connect(interface="inprocess", channel=channel)
+    eds = eds_variant(tmp_path, read_only)
+    drives = [LocalDrive(network, n, eds) for n in range(1, model.n_cables + 1)]
+    overrides = {"interface": "inprocess", "channel": channel}
+    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
+    return network, drives, driver
+
+
+def test_our_driver_remaps_local_node_drives_and_runs_them(seed000_one_bus, tmp_path):
+    model = seed000_one_bus
+    network, drives, driver = bring_up(model, tmp_path, read_only=False)
+    try:
+        driver.configure()
+        assert driver.pdos_written == 2 * model.n_cables  # RPDO1 and TPDO1 of each
+        node = drives[0].node
+        assert [v.index for v in node.tpdo[1]] == [0x6041, 0x6077, 0x6064]
+        assert [v.index for v in node.rpdo[1]] == [0x6040, 0x6071]
+        assert driver.identities[2]["serial"] == 0x53494D03
+        driver.activate()
+        torques = np.full(model.n_cables, 1.3)  # N·m: 260 per mille of 5 N·m
+        for _ in range(30):
+            t = time.monotonic()
+            driver.read(t)
+            driver.write(t, torques)
+            time.sleep(model.control.period)
+        assert all(d.state is p.PowerState.OPERATION_ENABLED for d in drives)
+        assert all(d.torque == 260 for d in drives)
+        driver.read(time.monotonic())
+        np.testing.assert_allclose(driver.states.torque, 1.3, atol=0.01)
+    finally:
+        driver.shutdown()
+        network.disconnect()
+
+
+def test_a_read_only_mapping_that_differs_refuses_the_start(seed000_one_bus, tmp_path):
+    model = seed000_one_bus
+    network, _, driver = bring_up(model, tmp_path, read_only=True)
+    try:
+        with pytest.raises(DriverInitializationError) as err:
+            driver.configure()
+        text = str(err.value)
+        assert "node 1" in text and "cannot set RPDO1" in text and "read-only" in text
+        assert "0x1600 mapping expected [0x6040:00 controlword (16 bit), 0x6071:00" in text
+        assert "found [0x6071:00 target torque (16 bit), 0x6040:00 controlword" in text
+    finally:
+        driver.shutdown()
+        network.disconnect()
