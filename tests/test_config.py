@@ -288,6 +288,18 @@ def test_drives_section_two_buses(tmp_path):
             ("node_ids = [1, 2, 3, 4]\n[[drives", "node_ids = [1, 2, 3, 127]\n[[drives"),
             "contains the controller's node id 127",
         ),
+        (
+            ('channel = "can0"', 'channel = "can0"\ndcf = "winch.dcf"'),
+            "drives.buses[0].dcf = 'winch.dcf' no such file",
+        ),
+        (
+            ('channel = "can0"', 'channel = "can0"\ndcf = ["a.dcf", ""]'),
+            "must list one file per drive of the bus (4)",
+        ),
+        (
+            ('driver = "cia402"', 'driver = "cia402"\npdo_mapping = "auto"'),
+            "drives.pdo_mapping = 'auto' must be 'configure'",
+        ),
     ],
 )
 def test_drives_section_errors(tmp_path, change, expected):

@@ -157,3 +157,54 @@ def test_configure_writes_the_mapping_and_reads_it_back():
         cycles(rig, rig.plant.drum_ratio * rig.plant.tension, 20)
         assert all(d.state is p.PowerState.OPERATION_ENABLED for d in rig.net.drives)
         assert rig.driver.lifecycle.value == "active"
+
+
+def dcf_with(tmp_path, values: dict[str, int], extra: str = "") -> str:
+    """The shipped EDS as a DCF: ParameterValue lines in the sections named ("6065",
+    "1800sub3"), and ``extra`` sections."""
+    from sim_backend.drives.dictionary import EDS
+
+    text = EDS.read_text()
+    for section, value in values.items():
+        head = f"[{section}]\n"
+        assert head in text, section
+        text = text.replace(head, f"{head}ParameterValue=0x{value:X}\n")
+    path = tmp_path / "winch.dcf"
+    path.write_text(text + extra)
+    return str(path)
+
+
+def with_dcf(model, path):
+    import dataclasses
+
+    buses = tuple(
+        dataclasses.replace(b, dcf=(path,) * len(b.node_ids)) for b in model.drives.buses
+    )
+    return dataclasses.replace(model, drives=dataclasses.replace(model.drives, buses=buses))
+
+
+def test_a_dcfs_parameter_values_are_written_at_set_up(tmp_path):
+    """``[[drives.buses]] dcf``: its writable ParameterValues go to each drive by SDO before
+    cdprctl's own settings (a read-only one, 0x1000, is skipped; 0x1017, which cdprctl sets
+    too, ends as cdprctl's)."""
+    path = dcf_with(tmp_path, {"6065": 5000, "1800sub3": 7, "1000": 0x1234, "1017": 999})
+    model = with_dcf(load_robot(CONFIG / "seed000.toml"), path)
+    with LockStep(model, period=model.control.period) as rig:
+        rig.driver.configure()
+        for d in rig.net.drives:
+            assert d.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] == 5000
+            assert d.od[(0x1800, 3)] == 7
+            assert d.od[(0x1000, 0)] == 0x00020192
+            assert d.od[(p.OD_PRODUCER_HEARTBEAT, 0)] == 100  # cdprctl's: timeout / 5
+
+
+def test_a_dcf_value_the_drive_refuses_stops_the_set_up_by_name(tmp_path):
+    from drivers.errors import DriverInitializationError
+
+    path = dcf_with(tmp_path, {"6007": 9})  # beyond CiA 402's codes: the drive aborts
+    model = with_dcf(load_robot(CONFIG / "seed000.toml"), path)
+    with LockStep(model, period=model.control.period) as rig:
+        with pytest.raises(DriverInitializationError) as err:
+            rig.driver.configure()
+        assert "refused 0x6007:00 := 9 from" in str(err.value) and "winch.dcf" in str(err.value)
+        assert "0x06090031" in str(err.value)

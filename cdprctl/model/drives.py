@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from cdprctl.model.reader import TableReader
@@ -31,7 +32,7 @@ DRIVES_KEYS = (
     "log_file",
     "buses",
 )
-BUS_KEYS = ("interface", "channel", "bitrate", "cables", "node_ids", "options")
+BUS_KEYS = ("interface", "channel", "bitrate", "cables", "node_ids", "options", "dcf")
 DRIVERS = ("cia402", "odrive")
 
 
@@ -43,6 +44,12 @@ class BusConfig:
     cables: tuple[int, ...]  # 0-based cable indices on this bus
     node_ids: tuple[int, ...]  # drive node id of each of those cables
     options: dict[str, Any] = field(default_factory=dict)  # any other python-can argument
+    # per drive: a DCF/EDS whose ParameterValues the driver writes at set-up ("": none)
+    dcf: tuple[str, ...] = ()
+
+    def dcf_of(self, k: int) -> str:
+        """The DCF of the bus's ``k``-th drive ("": none)."""
+        return self.dcf[k] if k < len(self.dcf) else ""
 
 
 @dataclass(frozen=True)
@@ -284,6 +291,7 @@ def read_drives(
         if not isinstance(options, dict):
             rd.error(f"{path}.options", options, "", "must be a table of python-can arguments")
             options = {}
+        dcf = _read_dcf(rd, bt.get("dcf"), f"{path}.dcf", len(nodes) if nodes else 0)
         if iface and channel is not None and bitrate is not None:
             buses.append(
                 BusConfig(
@@ -293,6 +301,7 @@ def read_drives(
                     tuple(idx),
                     tuple(int(n) for n in nodes),
                     dict(options),
+                    dcf,
                 )
             )
     missing = [cable_names[i] for i in range(len(cable_names)) if i not in seen_cable]
@@ -320,3 +329,25 @@ def read_drives(
         log_file=log_file,
         buses=tuple(buses),
     )
+
+
+def _read_dcf(rd: TableReader, value: Any, path: str, n: int) -> tuple[str, ...]:
+    """``dcf``: one file for every drive of the bus, or a list of one per drive ("" for
+    none); relative paths from the config file's folder; each must exist (parsed at set-up)."""
+    if value is None:
+        return ()
+    files = [value] * n if isinstance(value, str) else value
+    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+        rd.error(path, value, "", "must be a file name, or a list of one per drive")
+        return ()
+    if len(files) != n:
+        rd.error(path, value, "", f"must list one file per drive of the bus ({n}), '' for none")
+        return ()
+    base = Path(rd.file).parent
+    out = []
+    for f in files:
+        full = "" if not f else str((base / f) if not Path(f).is_absolute() else Path(f))
+        if full and not Path(full).is_file():
+            rd.error(path, f, "", f"no such file ({full}; relative to the config file's folder)")
+        out.append(full)
+    return tuple(out)

@@ -22,6 +22,7 @@ from drivers.base import DriveState, register_driver
 from drivers.canbase import CanWinchDriver
 from drivers.cia402 import cyclic, pdo_setup
 from drivers.cia402 import protocol as p
+from drivers.cia402.dcf import parameter_values
 from drivers.errors import (
     DriveFaultError,
     DriverError,
@@ -89,6 +90,10 @@ class Cia402Driver(CanWinchDriver):
             dtype=np.int64,
         )  # fmt: skip
         self.identities: list[dict[str, int] | None] = [None] * m  # 0x1018, read at set-up
+        self._dcf = [""] * m  # each drive's DCF ([[drives.buses]] dcf)
+        for bus in cfg.buses:
+            for k, cable in enumerate(bus.cables):
+                self._dcf[cable] = bus.dcf_of(k)
         self.pdos_written = 0  # PDOs the set-up had to write (0: all were as needed)
         self._sync = can.Message(arbitration_id=p.SYNC, data=bytearray(1), is_extended_id=False)
         self._hb = can.Message(
@@ -159,6 +164,16 @@ class Cia402Driver(CanWinchDriver):
             self._sdo_write(c, index, sub, value, size, timeout)
 
         self.identities[c] = self._identity(read)
+        dcf = self._dcf[c]
+        if dcf:  # the integrator's parameters first; cdprctl's own settings below win
+            for index, sub, value, size in parameter_values(dcf, n):
+                try:
+                    write(index, sub, value, size)
+                except SdoAbortError as exc:
+                    raise DriverInitializationError(
+                        f"{who}: refused 0x{index:04X}:{sub:02X} := {value} from {dcf} "
+                        f"(SDO abort 0x{exc.code:08X})"
+                    ) from exc
         rated = self._optional(read, p.OD_RATED_TORQUE)
         if rated is not None and abs(rated / 1000.0 - self.rated_torque) > 0.01 * self.rated_torque:
             raise DriverInitializationError(
