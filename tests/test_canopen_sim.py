@@ -100,13 +100,17 @@ def test_mandatory_objects_and_identity(rig):
 
 def test_every_object_uploads_with_its_own_size(rig):
     """Each object of the EDS is readable, and an expedited upload says its true size (it
-    said 4 bytes for 1- and 2-byte objects)."""
+    said 4 bytes for 1- and 2-byte objects); the device name (0x1008, 29 bytes) comes by a
+    segmented upload."""
     _, _, nodes = rig
     node = nodes[3]
     for var in variables(node.object_dictionary):
         assert isinstance(var, ODVariable)
         data = node.sdo.upload(var.index, var.subindex)
-        assert 8 * len(data) == len(var), (hex(var.index), var.subindex, data)
+        if var.data_type == 0x0009:  # VISIBLE_STRING
+            assert data == b"cdprctl simulated winch drive"
+        else:
+            assert 8 * len(data) == len(var), (hex(var.index), var.subindex, data)
 
 
 def test_live_objects_read_by_sdo_follow_the_drive(rig):
@@ -259,6 +263,8 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
         for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
             node.state = state
         assert node.state == "OPERATION ENABLED"
+        with robot.lock:
+            theta0 = float(robot.plant.theta[cable])
         node.rpdo[1]["Target torque"].raw = round(1.2 * hold / rated * 1000)
         node.rpdo[1].update()
         deadline = time.monotonic() + 2.0
@@ -269,6 +275,10 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
                 break
             time.sleep(0.01)
         assert applied == pytest.approx(1.2 * hold, rel=0.01)
+        time.sleep(0.3)
+        with robot.lock:
+            moved = float(robot.plant.theta[cable]) - theta0
+        assert abs(moved) > 0.01  # rad: the winch turned under 20 % more than its holding torque
         assert robot.drive(5).state is p.PowerState.OPERATION_ENABLED
     finally:
         node.rpdo[1].stop()

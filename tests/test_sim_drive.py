@@ -208,3 +208,34 @@ def test_a_dcf_value_the_drive_refuses_stops_the_set_up_by_name(tmp_path):
             rig.driver.configure()
         assert "refused 0x6007:00 := 9 from" in str(err.value) and "winch.dcf" in str(err.value)
         assert "0x06090031" in str(err.value)
+
+
+def test_the_realtime_simulator_says_ready_after_its_first_physics_step(monkeypatch):
+    """``cdprctl sim`` prints "ready" only once its physics has stepped (its kernels compiled):
+    on a cold cache the drives stood deaf for ~15 s after "ready"."""
+    import uuid
+
+    from sim_backend import realtime
+    from sim_backend.network import SimNetwork
+
+    steps: list[float] = []
+    advance = SimNetwork.advance
+
+    def counting(self, dt, first=None):
+        steps.append(dt)
+        return advance(self, dt, first)
+
+    monkeypatch.setattr(SimNetwork, "advance", counting)
+    said: list[int] = []
+
+    def printed(text, **_):
+        if "ready" in text:
+            said.append(len(steps))
+
+    model = load_robot(CONFIG / "rowc.toml")
+    net = realtime.run_realtime(
+        model, {"interface": "inprocess", "channel": f"rt-{uuid.uuid4().hex}"},
+        duration=0.01, print_fn=printed,
+    )  # fmt: skip
+    net.close()
+    assert said and said[0] >= 1

@@ -3,7 +3,7 @@ object the drive implements and nothing else, served by the ``canopen`` package'
 (expedited and segmented transfers, sizes from the data types, CiA 301's abort codes, no
 answer to a client's abort).
 
-Values are typed by the dictionary. ``values`` holds the decoded value of every object with a
+Values are typed by the dictionary. ``values`` holds the decoded value of every number with a
 value (the EDS default, or what the drive stores, or what was written); the drive reads its
 configuration from it and answers live objects (statusword, position, torque) through
 ``read``. ``write`` sees every SDO download before it is stored: it may refuse it with an
@@ -75,7 +75,7 @@ class Dictionary:
         for index in [i for i in self.node.data_store if first <= i < end]:
             del self.node.data_store[index]
         for var in variables(self.od):
-            if first <= var.index < end and var.default is not None:
+            if first <= var.index < end and isinstance(var.default, int):  # numbers
                 key = (var.index, var.subindex)
                 self.values[key] = int(self._stored.get(key, var.default))
         for key, value in self._stored.items():
