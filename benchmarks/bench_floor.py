@@ -6,7 +6,12 @@ share of wake-ups later than 1 ms, and the daemon's missed periods (issue 17's g
 periods <= 0.1 % whenever the floor's worst wake-up stays under 1 ms, and never more than
 twice the floor's share later than 1 ms plus 0.05 %).
 
-Run: ``.venv/bin/python benchmarks/bench_floor.py [--seconds 20] [--rates 500,250]``. Needs
+Run: ``.venv/bin/python benchmarks/bench_floor.py [--seconds 20] [--rates 500,250] [--hog N]
+[--across] [--during]``: ``--hog N`` busy processes beside everything; ``--across`` the daemon
+against ``cdprctl sim`` in another process over udp_multicast (the README's example) instead of
+``--sim``; ``--during`` one more cyclictest while the daemon runs, on its CPU at a priority above
+it: the floor under the very same load (before and after, the machine is without the daemon's
+traffic). Needs
 ``cyclictest``: installed here from Debian's rt-tests when missing (as root), never by the tests.
 SCHED_FIFO needs root or CAP_SYS_NICE; without it both sides run at the normal scheduler (said).
 """
@@ -15,11 +20,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +36,8 @@ from _timing import machine_line
 
 ROOT = Path(__file__).resolve().parents[1]
 PRIORITY = 80  # [control.realtime] sched_priority's default: the loop's
+GROUP = "239.74.163.2"  # udp_multicast group of --across
+STARTUP = 6.0  # s: the daemon's start-up before the concurrent floor starts
 
 
 def ensure_cyclictest() -> str:
@@ -47,10 +57,12 @@ def ensure_cyclictest() -> str:
     return exe
 
 
-def floor(exe: str, period: float, seconds: float, cpu: int) -> dict[str, float]:
+def floor(
+    exe: str, period: float, seconds: float, cpu: int, priority: int = PRIORITY
+) -> dict[str, float]:
     """cyclictest at ``period`` (s) for ``seconds``: its wake-up latencies' histogram (µs)."""
     loops = max(100, round(seconds / period))
-    cmd = [exe, f"-p{PRIORITY}", "--policy=fifo", f"-i{round(period * 1e6)}", f"-l{loops}",
+    cmd = [exe, f"-p{priority}", "--policy=fifo", f"-i{round(period * 1e6)}", f"-l{loops}",
            "-m", "-q", f"-a{cpu}", "-h20000"]  # fmt: skip
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=seconds * 3 + 30)
     counts = np.zeros(20001)
@@ -73,14 +85,38 @@ def floor(exe: str, period: float, seconds: float, cpu: int) -> dict[str, float]
     return {"p99_us": p99, "max_us": worst, "late_1ms_pct": 100.0 * late, "n": float(total)}
 
 
-def daemon(rate: float, seconds: float) -> tuple[dict[str, float], str]:
+def daemon(
+    rate: float, seconds: float, across: bool = False, during: Any = None
+) -> tuple[dict[str, float], str]:
+    """The daemon's run (``--sim``, or ``--across`` against ``cdprctl sim``); ``during()``
+    runs while it does (after its start-up) and its result is returned in ``"during"``."""
+    config = str(ROOT / "config" / "rowc.toml")
+    cli = [sys.executable, "-m", "cdprctl.cli"]
+    bus = ["--can-interface", "udp_multicast", "--can-channel", GROUP, "--can-option",
+           f"port={random.randint(20000, 60000)}"]  # fmt: skip
+    sim = None
+    if across:
+        sim_cmd = [*cli, "sim", "--config", config, "--status", "0", *bus]
+        sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        assert sim.stdout is not None
+        while "ready" not in sim.stdout.readline():
+            if sim.poll() is not None:
+                sys.exit("bench_floor: cdprctl sim did not start")
     with tempfile.TemporaryDirectory() as tmp:
         f = Path(tmp) / "timing.npz"
-        cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config",
-               str(ROOT / "config" / "rowc.toml"), "--sim", "--rate", str(rate),
+        where = [*bus, "--demo"] if across else ["--sim"]
+        cmd = [*cli, "run", "--config", config, *where, "--rate", str(rate),
                "--duration", str(seconds), "--status", "0", "--timing-file", str(f)]  # fmt: skip
-        out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=seconds + 300)
-        text = out.stdout + out.stderr
+        run = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                               cwd=ROOT)  # fmt: skip
+        extra: dict[str, Any] = {}
+        if during is not None:
+            time.sleep(STARTUP)  # the daemon's start-up (kernels cached: a few seconds)
+            extra = during()
+        text = run.communicate(timeout=seconds + 300)[0]
+        if sim is not None:
+            sim.terminate()
+            sim.wait(timeout=10)
         if not f.is_file():
             sys.exit(f"bench_floor: the daemon saved no timing:\n{text[-2000:]}")
         z = np.load(f)
@@ -96,6 +132,7 @@ def daemon(rate: float, seconds: float) -> tuple[dict[str, float], str]:
         "compute_p50_us": float(np.median(z["compute"]) * 1e6),
         "compute_p99_us": float(np.percentile(z["compute"], 99) * 1e6),
         "faults": float(faults),
+        **({"during": extra} if extra else {}),
     }, final
 
 
@@ -106,6 +143,8 @@ def main() -> None:
     ap.add_argument(
         "--hog", type=int, default=0, help="busy processes at normal priority beside both sides"
     )
+    ap.add_argument("--across", action="store_true", help="against cdprctl sim, udp_multicast")
+    ap.add_argument("--during", action="store_true", help="cyclictest while the daemon runs too")
     args = ap.parse_args()
     exe = ensure_cyclictest()
     print(machine_line())
@@ -120,22 +159,33 @@ def main() -> None:
         print(f"{len(hogs)} CPU hogs (busy Python processes, normal priority) run throughout")
     try:
         for rate in (float(r) for r in args.rates.split(",")):
-            measure(exe, rate, args.seconds, cpu)
+            measure(exe, rate, args.seconds, cpu, args.across, args.during)
     finally:
         for h in hogs:
             h.kill()
             h.wait()
 
 
-def measure(exe: str, rate: float, seconds: float, cpu: int) -> None:
-    """Floor, daemon, floor at ``rate`` Hz; the comparison printed."""
+def measure(
+    exe: str, rate: float, seconds: float, cpu: int, across: bool = False, during: bool = False
+) -> None:
+    """Floor, daemon (with a floor during it), floor at ``rate`` Hz; the comparison printed."""
     period = 1.0 / rate
     before = floor(exe, period, seconds, cpu)
-    d, final = daemon(rate, seconds)
+    concurrent = (
+        (lambda: floor(exe, period, seconds - STARTUP - 2.0, cpu, PRIORITY + 10))
+        if during
+        else None
+    )
+    d, final = daemon(rate, seconds, across, concurrent)
     after = floor(exe, period, seconds, cpu)
-    fl = {k: max(before[k], after[k]) for k in ("p99_us", "max_us", "late_1ms_pct")}
-    print(f"\n--- {rate:g} Hz, {seconds:g} s each, CPU {cpu}, SCHED_FIFO {PRIORITY}")
-    for name, v in (("cyclictest before", before), ("cyclictest after", after)):
+    runs = [("cyclictest before", before), ("cyclictest after", after)]
+    if "during" in d:
+        runs.insert(1, (f"cyclictest during ({PRIORITY + 10})", d.pop("during")))
+    fl = {k: max(v[k] for _, v in runs) for k in ("p99_us", "max_us", "late_1ms_pct")}
+    how = "across processes (udp_multicast)" if across else "--sim"
+    print(f"\n--- {rate:g} Hz, {seconds:g} s each, CPU {cpu}, SCHED_FIFO {PRIORITY}, {how}")
+    for name, v in runs:
         print(f"{name:18s} p99 {v['p99_us']:7.0f} us  max {v['max_us']:7.0f} us  "
               f"> 1 ms {v['late_1ms_pct']:.3f} %")  # fmt: skip
     print(f"{'daemon':18s} p99 {d['p99_us']:7.0f} us  max {d['max_us']:7.0f} us  "
