@@ -23,7 +23,8 @@ from conftest import CONFIG
 from cdprctl.model import load_robot
 from cdprctl.model.drives import default_drives
 from drivers.cia402 import protocol as p
-from sim_backend.drives.dictionary import EDS, variables
+from drivers.cia402.objects import variables
+from sim_backend.drives.dictionary import EDS
 from sim_backend.network import SimNetwork
 from sim_backend.plant import CdprPlant
 

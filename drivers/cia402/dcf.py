@@ -7,6 +7,7 @@ transfer, which the driver's set-up does not do: refused by name.
 
 from __future__ import annotations
 
+from drivers.cia402.objects import variables
 from drivers.errors import DriverConfigurationError
 
 
@@ -14,7 +15,6 @@ def parameter_values(path: str, node_id: int) -> list[tuple[int, int, int, int]]
     """(index, sub-index, value, size in bytes) of every writable ParameterValue in ``path``,
     in index order."""
     import canopen
-    from canopen.objectdictionary import ODVariable
 
     try:
         od = canopen.import_od(path, node_id)
@@ -23,16 +23,14 @@ def parameter_values(path: str, node_id: int) -> list[tuple[int, int, int, int]]
             f"[drives.buses] dcf {path}: cannot read it: {type(exc).__name__}: {exc}"
         ) from exc
     out = []
-    for index in sorted(od.indices):
-        obj = od[index]
-        for var in [obj] if isinstance(obj, ODVariable) else [obj[s] for s in obj.subindices]:
-            if var.value is None or not var.writable or var.access_type == "const":
-                continue
-            size = len(var) // 8
-            if not isinstance(var.value, int) or not 1 <= size <= 4:
-                raise DriverConfigurationError(
-                    f"[drives.buses] dcf {path}: 0x{var.index:04X}:{var.subindex:02X} "
-                    f"({var.name}) is {size} bytes: the set-up writes up to 4 (expedited SDO)"
-                )
-            out.append((var.index, var.subindex, int(var.value), size))
+    for var in variables(od):
+        if var.value is None or not var.writable or var.access_type == "const":
+            continue
+        size = len(var) // 8
+        if not isinstance(var.value, int) or not 1 <= size <= 4:
+            raise DriverConfigurationError(
+                f"[drives.buses] dcf {path}: 0x{var.index:04X}:{var.subindex:02X} "
+                f"({var.name}) is {size} bytes: the set-up writes up to 4 (expedited SDO)"
+            )
+        out.append((var.index, var.subindex, int(var.value), size))
     return out

@@ -74,10 +74,6 @@ TPDO1_COMM, TPDO1_MAP = 0x1800, 0x1A00
 TPDO2_COMM, TPDO2_MAP = 0x1801, 0x1A01
 PDO_NOT_VALID = 0x80000000
 TRANSMISSION_EVERY_SYNC = 1
-RPDO1_MAPPING = {
-    10: (0x60400010, 0x60710010),  # controlword, target torque
-    8: (0x60400010, 0x607A0020, 0x60B20010),  # controlword, target position, torque offset
-}
 TPDO1_MAPPING = (0x60410010, 0x60770010, 0x60640020)  # statusword, torque, position actual
 TPDO2_MAPPING = (0x606C0020,)  # velocity actual
 OD_IDENTITY = 0x1018  # 1 vendor-ID, 2 product code, 3 revision, 4 serial number
@@ -89,6 +85,10 @@ MODE_CSP = 8  # cyclic synchronous position (CiA 402 §8)
 MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
 #: the modes of operation cdprctl drives a CiA 402 drive in, by the ``[drives] mode`` name
 MODES = {"cst": MODE_CST, "csp": MODE_CSP}
+RPDO1_MAPPING = {  # by mode, what the cyclic codec (RPDO1_STRUCT, RPDO1_CSP_STRUCT) packs
+    MODE_CST: (0x60400010, 0x60710010),  # controlword, target torque
+    MODE_CSP: (0x60400010, 0x607A0020, 0x60B20010),  # controlword, target position, offset
+}
 ABORT_CONNECTION_QUICK_STOP = 3
 
 # -- precompiled encoders/decoders of the cyclic path ------------------------------------------

@@ -16,6 +16,8 @@ enabled.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 
 import can
 from canopen import SdoAbortedError
@@ -25,6 +27,10 @@ from sim_backend.drives import pdo
 from sim_backend.drives.dictionary import Dictionary
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
+
+# what an RPDO carries, by object: its place in ``Cia402Drive.pending``
+_RPDO_SLOTS = {p.OD_CONTROLWORD: 0, p.OD_TARGET_TORQUE: 1, p.OD_TARGET_POSITION: 2,
+               p.OD_TORQUE_OFFSET: 3}  # fmt: skip
 
 
 class Cia402Drive:
@@ -64,16 +70,33 @@ class Cia402Drive:
         # the object dictionary of the shipped EDS; this drive's stored parameters over its
         # defaults: its rated torque and its torque limit (per mille of rated)
         limit_pm = min(0xFFFF, round(torque_limit / rated_torque * 1000.0))
+        # the objects whose value is the drive's state, read when asked (SDO) or sent (TPDO)
+        self._live: dict[int, Callable[[], int]] = {
+            p.OD_STATUSWORD: lambda: p.STATUSWORD_OF[self.state],
+            p.OD_MODES_DISPLAY: lambda: self.mode,
+            p.OD_POSITION_ACTUAL: self._counts,
+            p.OD_VELOCITY_ACTUAL: lambda: round(
+                self.plant.theta_dot[self.cable] * self.cpr / (2.0 * math.pi)
+            ),
+            p.OD_TORQUE_ACTUAL: self._torque_actual_pm,
+            # bit 0: generic error
+            p.OD_ERROR_REGISTER: lambda: int(self.state is p.PowerState.FAULT),
+            p.OD_ERROR_CODE: lambda: self.fault_code,
+            p.OD_CONTROLWORD: lambda: self.last_controlword,
+        }
         self.dictionary = Dictionary(
             node_id,
             {(p.OD_RATED_TORQUE, 0): round(rated_torque * 1000.0), (p.OD_MAX_TORQUE, 0): limit_pm},
             self._read_object,
-            self._write_object,
+            self._check_object,
+            self._object_written,
         )
         self.od = self.dictionary.values  # (index, sub) → value, typed by the dictionary
         self._rx: pdo.Layout | None = None
+        self._rx_slots: tuple[int, ...] = ()  # each RPDO entry's place in ``pending`` (-1: none)
         self._tx: list[pdo.Layout] = []
-        self._tx_count = [0, 0]  # SYNCs since each TPDO was last sent
+        self._tx_values: list[list[Callable[[], int]]] = []  # each TPDO entry's value, now
+        self._tx_count = [0] * len(pdo.TPDO_COMMS)  # SYNCs since each TPDO was last sent
         self._compile_pdos()
         # the RPDO latched for the next SYNC: (controlword, target torque per mille, target
         # position counts, torque offset per mille), None where not mapped
@@ -133,16 +156,11 @@ class Cia402Drive:
         if len(data) < rx.codec.size:
             self.rpdo_length_errors += 1
             return
-        cw = torque = position = offset = None
-        for (index, _), value in zip(rx.entries, rx.codec.unpack_from(data), strict=True):
-            if index == p.OD_CONTROLWORD:
-                cw = value
-            elif index == p.OD_TARGET_TORQUE:
-                torque = value
-            elif index == p.OD_TARGET_POSITION:
-                position = value
-            elif index == p.OD_TORQUE_OFFSET:
-                offset = value
+        latched: list[int | None] = [None, None, None, None]
+        for slot, value in zip(self._rx_slots, rx.codec.unpack_from(data), strict=True):
+            if slot >= 0:
+                latched[slot] = value
+        cw, torque, position, offset = latched
         self.pending = (cw, torque, position, offset)
         self.rpdos_since_sync += 1
         self.last_rx = t
@@ -151,10 +169,13 @@ class Cia402Drive:
         """The PDOs from the communication and mapping objects (after a write or a reset)."""
         old = self._rx
         self._rx = pdo.layout(self.dictionary.od, self.od, pdo.RPDO_COMM)
-        self._tx = [
-            pdo.layout(self.dictionary.od, self.od, comm)
-            for comm in (pdo.TPDO_COMM, pdo.TPDO_COMM + 1)
-        ]
+        self._rx_slots = tuple(_RPDO_SLOTS.get(index, -1) for index, _ in self._rx.entries)
+        self._tx = [pdo.layout(self.dictionary.od, self.od, comm) for comm in pdo.TPDO_COMMS]
+        self._tx_values = [
+            [self._live.get(index) or partial(self.od.__getitem__, (index, sub))
+             for index, sub in tx.entries]
+            for tx in self._tx
+        ]  # fmt: skip
         if old is not None and self.rpdo_owners.get(old.cob_id) is self:
             del self.rpdo_owners[old.cob_id]
         if self._rx.valid:
@@ -170,7 +191,7 @@ class Cia402Drive:
             if self._tx_count[k] < max(1, tx.transmission):
                 continue
             self._tx_count[k] = 0
-            values = [self._pdo_value(index, sub) for index, sub in tx.entries]
+            values = [value() for value in self._tx_values[k]]
             out.append(
                 can.Message(
                     arbitration_id=tx.cob_id, data=tx.codec.pack(*values), is_extended_id=False
@@ -178,30 +199,26 @@ class Cia402Drive:
             )
         return out
 
-    def _pdo_value(self, index: int, sub: int) -> int:
-        live = self._read_object(index, sub)
-        return self.od[(index, sub)] if live is None else live
-
     def on_sdo(self, data: bytes) -> can.Message | None:
         """The SDO server's answer (CiA 301 §7.2.4; not in NMT STOPPED)."""
         if len(data) != 8 or self.silent or self.nmt == p.HB_STOPPED:
             return None
         return self.dictionary.request(p.SDO_RX + self.node_id, data)
 
-    def _write_object(self, index: int, sub: int, value: int) -> None:
-        """An SDO download, before it is stored: refused with CiA 301's abort code, or its
-        effect on the drive."""
+    def _check_object(self, index: int, sub: int, value: int) -> None:
+        """An SDO download, before it is stored: refused with CiA 301's abort code."""
         if pdo.is_pdo_object(index):
             operational = self.nmt == p.HB_OPERATIONAL
             pdo.check_write(self.dictionary.od, self.od, operational, index, sub, value)
-            self.od[(index, sub)] = value
-            self._compile_pdos()
-            return
-        if index == p.OD_MODES_OF_OPERATION and not self.supports_mode(value):
+        elif index == p.OD_MODES_OF_OPERATION and not self.supports_mode(value):
             raise SdoAbortedError(0x06090030)  # value range exceeded: not in 0x6502
-        if index == p.OD_ABORT_CONNECTION and value > p.ABORT_CONNECTION_QUICK_STOP:
+        elif index == p.OD_ABORT_CONNECTION and value > p.ABORT_CONNECTION_QUICK_STOP:
             raise SdoAbortedError(0x06090031)  # value too high
-        self.od[(index, sub)] = value
+
+    def _object_written(self, index: int, sub: int, value: int) -> None:
+        """A stored download's effect on the drive."""
+        if pdo.is_pdo_object(index):
+            self._compile_pdos()
         if index == p.OD_MODES_OF_OPERATION:
             self.od[(p.OD_MODES_DISPLAY, 0)] = value  # switched at once
         if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
@@ -215,24 +232,9 @@ class Cia402Drive:
         return bit is not None and bool(self.od[(p.OD_SUPPORTED_DRIVE_MODES, 0)] >> bit & 1)
 
     def _read_object(self, index: int, sub: int) -> int | None:
-        """The live objects' values (an SDO upload), None for the stored ones."""
-        if index == p.OD_STATUSWORD:
-            return p.STATUSWORD_OF[self.state]
-        if index == p.OD_MODES_DISPLAY:
-            return self.mode
-        if index == p.OD_POSITION_ACTUAL:
-            return self._counts()
-        if index == p.OD_VELOCITY_ACTUAL:
-            return round(self.plant.theta_dot[self.cable] * self.cpr / (2.0 * math.pi))
-        if index == p.OD_TORQUE_ACTUAL:
-            return self._torque_actual_pm()
-        if index == p.OD_ERROR_REGISTER:
-            return 0x01 if self.state is p.PowerState.FAULT else 0x00  # bit 0: generic error
-        if index == p.OD_ERROR_CODE:
-            return self.fault_code
-        if index == p.OD_CONTROLWORD:
-            return self.last_controlword
-        return None
+        """A live object's value (an SDO upload), None for the stored ones."""
+        live = self._live.get(index)
+        return None if live is None else live()
 
     @property
     def effective_torque_limit(self) -> float:

@@ -3,11 +3,12 @@ object the drive implements and nothing else, served by the ``canopen`` package'
 (expedited and segmented transfers, sizes from the data types, CiA 301's abort codes, no
 answer to a client's abort).
 
-Values are typed by the dictionary. ``values`` holds the decoded value of every number with a
-value (the EDS default, or what the drive stores, or what was written); the drive reads its
+Values are typed by the dictionary. ``values`` holds the decoded value of every number (the
+EDS default, or what the drive stores, or what was written); the drive reads its
 configuration from it and answers live objects (statusword, position, torque) through
-``read``. ``write`` sees every SDO download before it is stored: it may refuse it with an
-``SdoAbortedError``. A reset restores a range of objects to the drive's stored values.
+``read``. A download goes through ``check`` (it may refuse it with an ``SdoAbortedError``),
+is stored, then ``written`` applies its effect. A reset restores a range of objects to the
+drive's stored values.
 """
 
 from __future__ import annotations
@@ -21,9 +22,12 @@ import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary, ODVariable
 
+from drivers.cia402.objects import variables
+
 EDS = Path(__file__).with_name("cdprctl_winch_drive.eds")
 
 Key = tuple[int, int]
+Hook = Callable[[int, int, int], None]  # (index, sub, value)
 
 
 @lru_cache(maxsize=128)
@@ -32,29 +36,18 @@ def _parsed(node_id: int) -> ObjectDictionary:
     return canopen.import_od(str(EDS), node_id)
 
 
-def variables(od: ObjectDictionary) -> list[ODVariable]:
-    """Every variable of ``od``, sub-indices of records and arrays included."""
-    out: list[ODVariable] = []
-    for index in od:
-        obj = od[index]
-        if isinstance(obj, ODVariable):
-            out.append(obj)
-        else:
-            out.extend(obj[sub] for sub in obj.subindices)
-    return out
-
-
 class Dictionary:
     def __init__(
         self,
         node_id: int,
         stored: dict[Key, int],
         read: Callable[[int, int], int | None],
-        write: Callable[[int, int, int], None],
+        check: Hook,
+        written: Hook,
     ):
         """``stored``: the drive's own values over the EDS defaults (its non-volatile
         memory: what a reset restores); ``read(index, sub)``: a live value or None;
-        ``write(index, sub, value)``: before a download is stored."""
+        ``check`` before a download is stored, ``written`` after."""
         self.od = _parsed(node_id)
         self.node = canopen.LocalNode(node_id, self.od)
         # canopen's NMT slave would start its own heartbeat timer when 0x1017 is written: the
@@ -63,7 +56,7 @@ class Dictionary:
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         self.node.sdo.network = self  # type: ignore[assignment]  # answers: send_message
-        self._read, self._write = read, write
+        self._read, self._check, self._written = read, check, written
         self._answer: can.Message | None = None
         self._stored = dict(stored)
         self.values: dict[Key, int] = {}
@@ -71,18 +64,20 @@ class Dictionary:
 
     def reset(self, first: int, end: int) -> None:
         """Objects ``first`` ≤ index < ``end`` back to the stored values (reset node: all;
-        reset communication: 0x1000-0x1FFF)."""
+        reset communication: 0x1000-0x1FFF). Numbers are read from ``values`` (``value``);
+        canopen's own store keeps nothing they need."""
         for index in [i for i in self.node.data_store if first <= i < end]:
             del self.node.data_store[index]
         for var in variables(self.od):
             if first <= var.index < end and isinstance(var.default, int):  # numbers
                 key = (var.index, var.subindex)
                 self.values[key] = int(self._stored.get(key, var.default))
-        for key, value in self._stored.items():
-            if first <= key[0] < end:
-                self.node.data_store.setdefault(key[0], {})[key[1]] = self._variable(
-                    *key
-                ).encode_raw(value)
+
+    def value(self, index: int, sub: int) -> int | None:
+        """An object's value now: live from the drive, else the stored number (None: not a
+        number, e.g. the device name, which canopen answers from the EDS)."""
+        live = self._read(index, sub)
+        return live if live is not None else self.values.get((index, sub))
 
     def request(self, cob_id: int, data: bytes) -> can.Message | None:
         """The answer to one SDO request frame (None: a client's abort is not answered)."""
@@ -93,17 +88,11 @@ class Dictionary:
     def send_message(self, can_id: int, data: Any, remote: bool = False) -> None:
         self._answer = can.Message(arbitration_id=can_id, data=bytes(data), is_extended_id=False)
 
-    def _variable(self, index: int, sub: int) -> ODVariable:
-        obj = self.od[index]
-        return obj if isinstance(obj, ODVariable) else obj[sub]
-
     def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
-        live = self._read(index, subindex)
-        if live is not None:
-            return live
-        return self.values.get((index, subindex))
+        return self.value(index, subindex)
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
         value = int(od.decode_raw(data))
-        self._write(index, subindex, value)
+        self._check(index, subindex, value)
         self.values[(index, subindex)] = value
+        self._written(index, subindex, value)

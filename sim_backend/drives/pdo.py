@@ -15,7 +15,9 @@ import struct
 from dataclasses import dataclass
 
 from canopen import SdoAbortedError
-from canopen.objectdictionary import ObjectDictionary, ODVariable
+from canopen.objectdictionary import ObjectDictionary
+
+from drivers.cia402.objects import variable
 
 # CiA 301 data types → struct formats (little endian)
 _FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x0007: "I"}
@@ -23,6 +25,7 @@ _FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x00
 PDO_NOT_VALID = 0x80000000
 RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
 TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
+TPDO_COMMS = (TPDO_COMM, TPDO_COMM + 1)  # the drive's TPDOs: 1 (status), 2 (velocity)
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,7 @@ def layout(od: ObjectDictionary, values: dict[tuple[int, int], int], comm: int) 
     for k in range(1, values[(mapping, 0)] + 1):
         index, sub, _ = split(values[(mapping, k)])
         entries.append((index, sub))
-        fmt += _FORMAT[int(_variable(od, index, sub).data_type or 0)]
+        fmt += _FORMAT[int(variable(od, index, sub).data_type or 0)]
     return Layout(
         cob & 0x7FF, not cob & PDO_NOT_VALID, values[(comm, 2)], tuple(entries), struct.Struct(fmt)
     )
@@ -101,7 +104,7 @@ def check_write(
         return
     obj_index, obj_sub, bits = split(value)
     try:
-        var = _variable(od, obj_index, obj_sub)
+        var = variable(od, obj_index, obj_sub)
     except KeyError:
         raise SdoAbortedError(0x06040041) from None
     readable, writable = "r" in var.access_type, "w" in var.access_type
@@ -113,8 +116,3 @@ def check_write(
         or (not receive and not readable)
     ):
         raise SdoAbortedError(0x06040041)
-
-
-def _variable(od: ObjectDictionary, index: int, sub: int) -> ODVariable:
-    obj = od[index]
-    return obj if isinstance(obj, ODVariable) else obj[sub]
