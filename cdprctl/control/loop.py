@@ -129,11 +129,11 @@ def run_loop(
         # are for the instant its SYNC goes out (for its deadline, up to a period behind,
         # the drives reversed out of their extrapolation and faulted on their following error
         # across processes on a loaded machine)
-        plant = 0.0
+        started = now
         if plant_step is not None:
             plant_step(now)
-            plant = clock() - now
-        started = clock() if plant_step is not None else now
+            started = clock()
+        plant = started - now
         step(now)
         compute = clock() - started
         if plant + compute > period:

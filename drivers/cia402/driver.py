@@ -125,21 +125,18 @@ class Cia402Driver(CanWinchDriver):
         self._bus_of_list = [int(b) for b in self.bus_of]
 
     # -- hooks: set-up ------------------------------------------------------------------------
-    def _nmt_start_all(self) -> None:
-        self._nmt_all(p.NMT_START)
-
     def _configure_drives(self, timeout: float) -> None:
         """Each drive in PRE-OPERATIONAL by SDO (``_configure_drive``), then NMT start."""
         self._nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
         for c in range(self.m):
             self._configure_drive(c, timeout)
-        self._nmt_start_all()
+        self._nmt_all(p.NMT_START)
         self._started = True
 
         # cycle (zero torque, drives disabled) until every drive has sent feedback
         def resend_start(now: float) -> None:
             if int(now / 0.5) != int((now - self.period) / 0.5):
-                self._nmt_start_all()  # a lost NMT start (lossy buses) is sent again
+                self._nmt_all(p.NMT_START)  # a lost NMT start (lossy buses) is sent again
 
         self._await_first_feedback(
             timeout,
@@ -186,12 +183,16 @@ class Cia402Driver(CanWinchDriver):
         for pdo in pdo_setup.wanted(self.mode, n, velocity):
             self.pdos_written += pdo_setup.set_up(read, write, pdo, configure, who)
         modes = self._optional(read, p.OD_SUPPORTED_DRIVE_MODES)
-        bit = 7 if self._csp else 9
+        bit = p.SUPPORTED_MODE_BIT[self.mode]
         if modes is not None and not modes >> bit & 1:
             raise DriverInitializationError(
-                f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks cyclic synchronous "
-                f"{'position' if self._csp else 'torque'} (bit {bit}; [drives] mode)"
+                f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks "
+                f"{p.MODE_NAMES[self.mode]} (bit {bit}; [drives] mode)"
             )
+        # Five heartbeats per timeout: with three (167 ms of 0.5 s) the loop's 4 ms ticks left
+        # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
+        # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
+        # the bus-load budget counts
         hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
         fe_ms = max(1, round(self.config.following_error_timeout * 1000))
         write(p.OD_MODES_OF_OPERATION, 0, self.mode, 1)
@@ -205,8 +206,8 @@ class Cia402Driver(CanWinchDriver):
         mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
         if mode != self.mode:
             raise DriverInitializationError(
-                f"{who} reports mode {mode} in 0x6061, expected {self.mode} (cyclic synchronous "
-                f"{'position' if self._csp else 'torque'}, [drives] mode)"
+                f"{who} reports mode {mode} in 0x6061, expected {self.mode} "
+                f"({p.MODE_NAMES[self.mode]}, [drives] mode)"
             )
 
     @staticmethod

@@ -85,6 +85,9 @@ MODE_CSP = 8  # cyclic synchronous position (CiA 402 §8)
 MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
 #: the modes of operation cdprctl drives a CiA 402 drive in, by the ``[drives] mode`` name
 MODES = {"cst": MODE_CST, "csp": MODE_CSP}
+# 0x6502 (supported drive modes, CiA 402 §6.4.7): the bit of each mode cdprctl drives
+SUPPORTED_MODE_BIT = {MODE_CSP: 7, MODE_CST: 9}
+MODE_NAMES = {MODE_CSP: "cyclic synchronous position", MODE_CST: "cyclic synchronous torque"}
 RPDO1_MAPPING = {  # by mode, what the cyclic codec (RPDO1_STRUCT, RPDO1_CSP_STRUCT) packs
     MODE_CST: (0x60400010, 0x60710010),  # controlword, target torque
     MODE_CSP: (0x60400010, 0x607A0020, 0x60B20010),  # controlword, target position, offset

@@ -228,7 +228,7 @@ class Cia402Drive:
 
     def supports_mode(self, mode: int) -> bool:
         """0x6502: bit 7 cyclic synchronous position, bit 9 torque (CiA 402 §6.4.7)."""
-        bit = {p.MODE_CSP: 7, p.MODE_CST: 9}.get(mode)
+        bit = p.SUPPORTED_MODE_BIT.get(mode)
         return bit is not None and bool(self.od[(p.OD_SUPPORTED_DRIVE_MODES, 0)] >> bit & 1)
 
     def _read_object(self, index: int, sub: int) -> int | None:
