@@ -67,6 +67,14 @@ def compliance_terms(cable: object) -> tuple[float, float, float, float]:
     )
 
 
+def unstretched_lengths(law: Compliance, lengths: np.ndarray, tensions: np.ndarray) -> np.ndarray:
+    """Each cable's unstretched length l0 (m) that, carrying ``tensions`` (N), spans the
+    geometric ``lengths`` (m): the cable law ``l = l0 + t (1/k + (l0 + l_w)/(E S) + 1/k_s)``
+    solved for l0 (exact: it is linear in l0)."""
+    c0 = law.inv_k_fixed + law.inv_es * law.l_winch + law.inv_spring
+    return (lengths - tensions * c0) / (1.0 + tensions * law.inv_es)
+
+
 def kernel_args(bundle: tuple) -> tuple:
     """A bundle (a ``NamedTuple`` of arrays and numbers) as the kernels take it: a plain tuple
     of the same objects, which they unpack in the bundle's field order. numba matches a plain

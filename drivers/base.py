@@ -124,6 +124,9 @@ class WinchDriver(ABC):
         # rad, motor side: each winch's position target, for drives in position mode
         # ([drives] mode = "csp"); ``write`` takes it with the torques (their feed-forward)
         self.targets = np.zeros(self.m)
+        # per drive: reset since cdprctl last set it up (an incremental encoder lost its
+        # zero); None: this protocol cannot tell
+        self.reset_since_setup: list[bool] | None = None
         self._activating = False
         self._recover_until = -math.inf
 

@@ -28,7 +28,11 @@ class SimNetwork:
         plant: CdprPlant,
         bus_overrides: dict[str, Any] | None = None,
         start_time: float = 0.0,
+        encoders: str = "absolute",
     ):
+        """``encoders``: "absolute" (each counter reads the plant's motor angle, zero at the
+        home pose) or "incremental" (each counter starts at zero wherever the motor stands
+        and restarts at a drive reset: docs/homing.md)."""
         self.model = model
         self.plant = plant
         self.cfg = model.drives
@@ -62,6 +66,9 @@ class SimNetwork:
                         self.cfg.position_gains(w.rotor_inertia),
                         owners,
                     )
+                if encoders == "incremental" and self.protocol != "odrive":
+                    drive.incremental = True
+                    drive.zero_counter()
                 table[n] = drive
                 self.drives[c] = drive
             self.nodes.append(table)
@@ -75,6 +82,11 @@ class SimNetwork:
 
     def bus_index_of(self, cable: int) -> int:
         return self._bus_of[cable]
+
+    def power_cycle(self, cable: int) -> None:
+        """Fault injection: the drive of ``cable`` loses power and boots (its boot-up message
+        on its bus)."""
+        self._send(self._bus_of[cable], self.drives[cable].power_cycle())
 
     def close(self) -> None:
         for bus in self.buses:
@@ -222,6 +234,7 @@ class LockStep:
         period: float | None = None,
         driver: str | None = None,
         plant: CdprPlant | None = None,
+        encoders: str = "absolute",
     ):
         from drivers import create_driver
 
@@ -234,7 +247,7 @@ class LockStep:
         self.model = model
         self.period = period = period if period is not None else model.control.period
         self.plant = plant or CdprPlant(model)
-        self.net = SimNetwork(model, self.plant, overrides)
+        self.net = SimNetwork(model, self.plant, overrides, encoders=encoders)
         self.driver = create_driver(
             model,
             driver,

@@ -34,8 +34,9 @@ from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.grippers import in_series
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args
+from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args, unstretched_lengths
 from cdprctl.rotation import FloatArray
+from cdprctl.tda.hold import equilibrium_tensions
 from sim_backend.physics import (
     Body,
     BodyState,
@@ -246,11 +247,7 @@ class CdprPlant:
             tensions = equilibrium_tensions(model, self.kin)
         t = np.asarray(tensions, float)
         length = self.kin.length
-        # unstretched length l0 giving tension t at geometric length l, the cable law solved
-        # for l0: l = l0 + t (1/k + (l0 + l_w)/(E S) + 1/k_s)
-        law = self.law
-        c0 = law.inv_k_fixed + law.inv_es * law.l_winch + law.inv_spring
-        l0 = (length - t * c0) / (1.0 + t * law.inv_es)
+        l0 = unstretched_lengths(self.law, length, t)
         self.R[:] = R
         self._settle_grippers(t, length, l0)
         self.theta[:] = (self.l_home - l0) / self.drum_ratio
@@ -345,25 +342,3 @@ class CdprPlant:
                 * (min(q, 0.0) ** 2 + max(q - self.g_travel_max[j], 0.0) ** 2)
             )
         return e
-
-
-def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
-    """Tensions (N) holding the platform's weight (and the jaws', eq. (46)) at the pose of
-    ``kin``: the barycenter (QP for r != 2; the minimum energy when the robot's TDA is the
-    energy one); the minimum tensions when the pose cannot be held."""
-    from cdprctl.gripper import GripperSet
-    from cdprctl.tda import TDAMethod, TDAOptions, TensionDistributor
-
-    method = TDAMethod.BARYCENTER if model.redundancy == 2 else TDAMethod.QP
-    if model.control.tda_method == "energy":  # the robot was parked by its own distribution
-        method = TDAMethod.ENERGY
-    gs = GripperSet(model)
-    R = kin.rotation
-    load = gs.parallel_load(R)
-    hold = -(model.gravity_wrench(R) + gs.weight_wrench(R))
-    out = TensionDistributor(model, TDAOptions(method=method)).solve(
-        kin.W, gs.spring_wrench(kin.W, hold, load), k=model.cable_stiffness(kin.length)
-    )
-    t = out.tensions.copy() if out.ok else model.tension_min.copy()
-    t[gs.cables] += load  # jB carries the jaws
-    return t

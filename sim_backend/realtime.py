@@ -32,9 +32,13 @@ def run_realtime(
     faults: FaultInjector | None = None,
     status_every: float = 0.0,
     print_fn: Any = print,
+    plant: CdprPlant | None = None,
+    encoders: str = "absolute",
 ) -> SimNetwork:
-    plant = CdprPlant(model)
-    net = SimNetwork(model, plant, bus_overrides)
+    """``plant``: the physics (default: the model's, at rest at home); ``encoders``:
+    ``SimNetwork``'s."""
+    plant = plant if plant is not None else CdprPlant(model)
+    net = SimNetwork(model, plant, bus_overrides, encoders=encoders)
     if faults is not None:
         faults.attach(net)
     # one step before "ready": the physics kernels compile at their first call (seconds on a

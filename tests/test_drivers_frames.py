@@ -156,7 +156,10 @@ def test_cia402_configure_frames(seed):
         assert min(t for t, a, d in peer.rx if a == p.NMT and d[0] == 0x01) >= last_sdo
         sdo = peer.sent(p.SDO_RX + 1)
         reads = [(d[2] << 8 | d[1], d[3]) for d in sdo if d[0] == 0x40]
-        assert reads[:5] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4), (0x6076, 0)]
+        # identity; the heartbeat time before anything is written (a reset drive has its
+        # default: docs/homing.md); the rated torque
+        assert reads[:6] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4), (0x1017, 0),
+                             (0x6076, 0)]  # fmt: skip
         assert (0x1600, 0) in reads and (0x1A00, 0) in reads and (0x6502, 0) in reads
         writes = [d for d in sdo if d[0] & 0xE0 == 0x20]
         assert writes[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)

@@ -95,6 +95,12 @@ class Cia402Driver(CanWinchDriver):
             for k, cable in enumerate(bus.cables):
                 self._dcf[cable] = bus.dcf_of(k)
         self.pdos_written = 0  # PDOs the set-up had to write (0: all were as needed)
+        # per drive: reset (power-up, reset node or communication) since cdprctl last set it
+        # up, seen at set-up: its producer heartbeat time 0x1017 is back at its default (the
+        # EDS's 0), never cdprctl's value. An incremental encoder's counter restarted with it
+        # (docs/homing.md)
+        self._reset_flags = [False] * m
+        self.reset_since_setup = self._reset_flags
         self._sync = can.Message(arbitration_id=p.SYNC, data=bytearray(1), is_extended_id=False)
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
@@ -161,6 +167,13 @@ class Cia402Driver(CanWinchDriver):
             self._sdo_write(c, index, sub, value, size, timeout)
 
         self.identities[c] = self._identity(read)
+        # Five heartbeats per timeout: with three (167 ms of 0.5 s) the loop's 4 ms ticks left
+        # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
+        # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
+        # the bus-load budget counts
+        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
+        # before a DCF can write it
+        self._reset_flags[c] = self._optional(read, p.OD_PRODUCER_HEARTBEAT) != hb_ms
         dcf = self._dcf[c]
         if dcf:  # the integrator's parameters first; cdprctl's own settings below win
             for index, sub, value, size in parameter_values(dcf, n):
@@ -189,11 +202,6 @@ class Cia402Driver(CanWinchDriver):
                 f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks "
                 f"{p.MODE_NAMES[self.mode]} (bit {bit}; [drives] mode)"
             )
-        # Five heartbeats per timeout: with three (167 ms of 0.5 s) the loop's 4 ms ticks left
-        # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
-        # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
-        # the bus-load budget counts
-        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
         fe_ms = max(1, round(self.config.following_error_timeout * 1000))
         write(p.OD_MODES_OF_OPERATION, 0, self.mode, 1)
         write(p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2)

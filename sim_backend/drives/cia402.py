@@ -109,6 +109,10 @@ class Cia402Drive:
         self.fault_code = 0
         self.silent = False  # fault injection: the drive stops talking
         self.encoder_offset = 0  # counts, fault injection: an encoder jump
+        # incremental encoder: the counter restarts at zero at power-up and at a reset node;
+        # ``encoder_zero`` is the motor angle (counts) it restarted at. Absolute: kept (0)
+        self.incremental = False
+        self.encoder_zero = 0
         self.transitions: list[int] = []  # CiA 402 transition numbers taken (for tests)
         self.rpdo_length_errors = 0  # RPDOs shorter than their mapping: not processed
         self._set_following_error()
@@ -130,6 +134,8 @@ class Cia402Drive:
                 self.state = p.PowerState.SWITCH_ON_DISABLED
                 self.fault_code = 0
                 self._apply_to_plant()
+                if self.incremental:
+                    self.zero_counter()
             else:
                 self.dictionary.reset(0x1000, 0x2000)
             self._set_following_error()
@@ -386,10 +392,21 @@ class Cia402Drive:
         if self.state is p.PowerState.OPERATION_ENABLED and self.mode == p.MODE_CSP:
             self.plant.servo.target[self.cable] -= counts * 2.0 * math.pi / self.cpr
 
+    def zero_counter(self) -> None:
+        """An incremental encoder's counter restarting (power-up, reset node): it reads zero
+        wherever the motor stands."""
+        self.encoder_zero = round(self.plant.theta[self.cable] * self.cpr / (2.0 * math.pi))
+
+    def power_cycle(self) -> list[can.Message]:
+        """Fault injection: the drive loses power and boots (brake on, objects to their
+        defaults, an incremental counter at zero, the boot-up message)."""
+        return self.on_nmt(p.NMT_RESET_NODE)
+
     def _counts(self) -> int:
-        """Position actual (counts, 32-bit): the encoder, with an injected jump."""
+        """Position actual (counts, 32-bit): the encoder from its zero, with an injected
+        jump."""
         counts = round(self.plant.theta[self.cable] * self.cpr / (2.0 * math.pi))
-        counts += self.encoder_offset
+        counts += self.encoder_offset - self.encoder_zero
         return ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
 
     # s: how long the position target goes on at its last rate without a new one (a SYNC or an
