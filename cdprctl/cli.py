@@ -42,12 +42,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_check_config(sub)
     p = sub.add_parser("demo", help="the offline TDA tools on the papers' robots (plots into out/)")
     p.set_defaults(func=_cmd_demo)
-    from cdprctl.commands import bus_load, sim
+    from cdprctl.commands import bus_load, calibrate, sim
     from cdprctl.commands import run as run_cmd
     from cdprctl.commands import tda as tda_cmd
 
     run_cmd.add_parser(sub)
     sim.add_parser(sub)
+    calibrate.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
     from cdprctl.commands import report, zenoh_tools

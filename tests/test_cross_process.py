@@ -5,6 +5,7 @@ and on a real vcan0 when the machine has one."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import random
 import signal
@@ -75,11 +76,14 @@ def sim_process(tmp_path):
             proc.wait()
 
 
-def write_config(tmp_path, model_file, driver, mode="cst"):
-    """The robot file with its drives on one udp_multicast bus, in ``mode``."""
+def write_config(tmp_path, model_file, driver, mode="cst", assume_home=True):
+    """The robot file with its drives on one udp_multicast bus, in ``mode``; the encoders
+    trusted to read zero at home (``cdprctl sim`` starts there) unless ``assume_home`` is
+    False."""
     text = without_table((CONFIG / model_file).read_text(), "drives")
     text += (
         f'\n[drives]\ndriver = "{driver}"\nmode = "{mode}"\n'
+        f"assume_home_at_start = {'true' if assume_home else 'false'}\n"
         "heartbeat_timeout = 2.0\nfeedback_timeout = 0.1\n"
         'comm_timeout = 1.0\n[[drives.buses]]\ninterface = "udp_multicast"\n'
         f'channel = "{GROUP}"\ncables = ["1", "2", "3", "4", "5", "6", "7", "8"]\n'
@@ -312,3 +316,46 @@ def test_daemon_sigkilled_mid_motion_then_restarted(tmp_path):
                 except subprocess.TimeoutExpired:
                     p.kill()
                     p.wait()
+
+
+def test_calibrate_then_run_across_processes(tmp_path, sim_process):
+    """`cdprctl sim --start-pose` (incremental encoders), `cdprctl calibrate ... self --json`,
+    `cdprctl run --demo` on CAROCA over udp_multicast: the pose `run` prints at ready within
+    2 mm of the simulator's start, and the demo's first move reaches its target."""
+    port = random.Random(os.getpid() * 13).randrange(40000, 50000)
+    config = write_config(tmp_path, "caroca.toml", "cia402", mode="csp", assume_home=False)
+    opts = ["--can-option", f"port={port}"]
+    start = [0.06, -0.04, 1.05, 0.03, -0.02, 0.04]
+    sim_process(config, [*opts, "--start-pose", ",".join(map(str, start))])
+    state = tmp_path / "state"
+    cli = [sys.executable, "-m", "cdprctl.cli"]
+    common = ["--config", str(config), "--state-dir", str(state), *opts]
+    cal = subprocess.run(
+        [*cli, "calibrate", *common, "self", "--json"],
+        capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    assert cal.returncode == 0, cal.stderr
+    found = json.loads(cal.stdout)
+    assert found["method"] == "self" and found["condition"] < 1e4
+    assert np.linalg.norm(np.array(found["pose"][:3]) - start[:3]) < 3e-3, found
+    daemon = subprocess.Popen(
+        [*cli, "run", *common, "--demo", "--rate", "250", "--status", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    out = Lines(daemon)
+    try:
+        ready = out.wait_for("ready: pose [", 120.0)
+        reached = ready and out.wait_for("moving -> enabled: target reached", 60.0)
+    finally:
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+            daemon.wait()
+    text = out.text()
+    assert ready is not None, text
+    pose = [float(v) for v in ready[1].split("[", 1)[1].split("]", 1)[0].split(",")]
+    assert np.linalg.norm(np.array(pose) - start[:3]) < 2e-3, (pose, text)
+    assert reached is not None or "stopping -> fault" in text, text
+    assert "Traceback" not in text, text

@@ -34,7 +34,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("tda", ("cdprctl.tda", "cdprctl.plots")),
     ("hardware", ("drivers", "sim_backend")),
     ("control", ("cdprctl.control",)),
-    ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon")),
+    ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon",
+                  "cdprctl.calibration")),
     ("commands", ("cdprctl.commands", "cdprctl.cli")),
 ]
 EXACT = {"cdprctl": 0}  # the package itself: its version string

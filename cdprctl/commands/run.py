@@ -34,6 +34,12 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--rate", type=float, help="loop rate in Hz, replacing [control] rate")
     p.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        help="where the calibration record is (default /var/lib/cdprctl/<robot>; "
+        "docs/homing.md)",
+    )
+    p.add_argument(
         "--status", type=float, default=0.5, help="status line every this many seconds (0: none)"
     )
     p.add_argument(
@@ -146,6 +152,7 @@ def run(args: argparse.Namespace) -> int:
             status_every=args.status,
             zenoh=args.zenoh or bool(zo),
             timing_file=args.timing_file,
+            state_dir=args.state_dir,
         )
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

@@ -65,6 +65,31 @@ def add_parser(sub: Any) -> None:
         "faults, silent drives, lateral pushes (sim_backend/faults.py)",
     )
     p.add_argument("--fault-seed", type=int, default=1, help="seed of --faults")
+    h = p.add_argument_group("start and errors (docs/homing.md)")
+    h.add_argument(
+        "--start-pose",
+        metavar="X,Y,Z,ROLL,PITCH,YAW",
+        help="the platform at rest there (m, rad), held with feasible tensions, brakes on "
+        "(default: the home pose)",
+    )
+    h.add_argument(
+        "--encoders",
+        choices=("incremental", "absolute"),
+        help="incremental: each counter reads zero at start and after a drive reset (the "
+        "default with --start-pose); absolute: zero where the cable has its home length "
+        "(the default otherwise)",
+    )
+    h.add_argument(
+        "--plant-errors",
+        type=int,
+        metavar="SEED",
+        help="the simulated robot differs from the config: anchors offset and drum radii "
+        "scaled at random (seeded)",
+    )
+    h.add_argument("--anchor-error", type=float, default=0.005, help="m, with --plant-errors")
+    h.add_argument(
+        "--drum-error", type=float, default=0.005, help="fraction, with --plant-errors"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,11 +122,51 @@ def run(args: argparse.Namespace) -> int:
             kinds=("frame_loss", "drive_fault", "silent_drive", "external_wrench"),
         )
         print(f"cdprctl sim: {len(faults.events)} faults scheduled (seed {args.fault_seed})")
+    plant, encoders = start_state(model, args)
     try:
-        net = run_realtime(model, overrides, args.duration, faults=faults, status_every=args.status)
+        net = run_realtime(
+            model,
+            overrides,
+            args.duration,
+            faults=faults,
+            status_every=args.status,
+            plant=plant,
+            encoders=encoders,
+        )
     except DriverError as exc:
         print(f"cdprctl sim: error: {exc}", file=sys.stderr)
         return 1
     net.close()
     print("cdprctl sim: stopped", flush=True)
     return 0
+
+
+def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:
+    """The plant (with ``--plant-errors``, of a robot that differs from the config) at rest at
+    ``--start-pose``, and the encoders' kind."""
+    import numpy as np
+
+    from cdprctl.commands.calibrate import parse_pose
+    from cdprctl.rotation import rpy_to_matrix
+    from sim_backend.plant import CdprPlant
+    from sim_backend.plant_errors import PlantErrors
+
+    plant_model = model
+    if args.plant_errors is not None:
+        errors = PlantErrors(args.plant_errors, args.anchor_error, args.drum_error)
+        plant_model, drawn = errors.apply(model)
+        scales = np.array(drawn["drum_scales"])
+        print(
+            f"cdprctl sim: plant errors (seed {args.plant_errors}): anchors up to "
+            f"{np.max(np.abs(drawn['anchor_offsets'])) * 1e3:.1f} mm off, drum radii "
+            f"x{scales.min():.4f}..{scales.max():.4f}",
+            flush=True,
+        )
+    plant = CdprPlant(plant_model)
+    encoders = args.encoders or "absolute"
+    if args.start_pose:
+        pose = parse_pose(args.start_pose, "--start-pose")
+        plant.set_pose(pose[:3], rpy_to_matrix(*pose[3:]), None)
+        encoders = args.encoders or "incremental"
+        print(f"cdprctl sim: start pose {args.start_pose}, {encoders} encoders", flush=True)
+    return plant, encoders

@@ -11,8 +11,9 @@ only corrects slowly on top (docs/control.md has the measurements).
 
 * Targets: the cables' geometric lengths at the trajectory's reference pose (inverse
   kinematics), less their stretch under the commanded tensions, ``l0 = l − t c(l0)`` (the cable
-  law of ``numerics``), as motor angles ``θ = (l_home − l0)/(r/G)``. Out of the active states
-  the target is where each motor is, so enabling starts without a step.
+  law of ``numerics``), as motor angles ``θ = (l_zero − l0)/(r/G)`` (``l_zero``: the
+  estimator's, where each encoder reads zero). Out of the active states the target is where
+  each motor is, so enabling starts without a step.
 * The pose feedback is off in this mode (``wrench.py`` says why): the estimator's stretch uses
   the commanded tensions, the ones the targets were stretched by, so the estimate is the pose
   the drives' lengths give (their tracking error shows; a force the controller does not know
@@ -58,7 +59,7 @@ from cdprctl.stiffness import lowest_mode
 
 @njit(cache=True)
 def motor_target_kernel(
-    kin, ref_x, R_home, tensions, law, l_home, drum_ratio, give, E, R, out
+    kin, ref_x, R_home, tensions, law, l_zero, drum_ratio, give, E, R, out
 ):  # pragma: no cover - compiled
     """``out`` (rad) ← each motor's angle that gives its cable the unstretched length which,
     stretched by ``tensions`` (N), spans the reference pose ``ref_x`` (m, rotation vector rad
@@ -74,7 +75,7 @@ def motor_target_kernel(
         l0 = length[i]
         for _ in range(3):  # l0 = l − t c(l0): the compliance depends on l0 weakly
             l0 = length[i] - tensions[i] * compliance_at(law, i, l0)
-        out[i] = (l_home[i] - l0 - give[i]) / drum_ratio[i]
+        out[i] = (l_zero[i] - l0 - give[i]) / drum_ratio[i]
 
 
 @njit(cache=True)
@@ -186,7 +187,7 @@ class CableSpace:
         e = self.estimator
         motor_target_kernel(
             self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-            e.l_home, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
+            e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
         )  # fmt: skip
 
     def start_measuring(self) -> None:

@@ -1,8 +1,10 @@
 """Platform state from the winch encoders.
 
-Motor angles → unstretched cable lengths (``l0 = l_home − (r/G) θ``: encoders calibrated at the
-home pose, docs/simulator.md) → stretched lengths under the tensions the caller gives (the
-controller passes feed-forward tensions, docs/control.md) → forward kinematics warm-started from
+Motor angles → unstretched cable lengths (``l0 = l_zero − (r/G) θ``, ``l_zero`` each cable's
+unstretched length where its encoder reads zero: the length at the home pose unless a
+calibration record says otherwise, ``apply_calibration`` and docs/homing.md) → stretched
+lengths under the tensions the caller gives (the controller passes feed-forward tensions,
+docs/control.md) → forward kinematics warm-started from
 the last pose → twist by finite differences of successive poses through a first-order low-pass
 filter (cut-off ``[control] velocity_filter`` Hz): ``v ← v + α (Δp/Δt − v)``,
 ``α = 1 − exp(−2π f_c Δt)``; the angular velocity from ``log(R_k R_(k−1)ᵀ)/Δt``. The poses
@@ -40,7 +42,11 @@ class Estimator:
         self.drum_ratio = np.array([x.winch.drum_radius / x.winch.gear_ratio for x in c])
         kin = KinematicsData(model)
         inverse_kinematics(model, kin, model.home.position, model.home.rotation)
-        self.l_home = kin.length.copy()
+        self.l_home = kin.length.copy()  # m, geometric lengths at the home pose
+        self.nominal_drum_ratio = self.drum_ratio.copy()  # m/rad, the config's r/G
+        # m: each cable's unstretched length where its encoder reads zero (written in place:
+        # the cable-space targets and the grippers read the same array)
+        self.l_zero = self.l_home.copy()
         self.law = compliance_of(c)  # the cable law's terms (cdprctl.numerics)
         self._law = kernel_args(self.law)
         # A gripper cable's length is the jaw's travel plus the pose (Sensors 2019 §2.4): the
@@ -78,6 +84,15 @@ class Estimator:
         # the FK result of the last update (its arrays are the estimator's: copy to keep)
         self._result = FKResult(self._fk_p, self._fk_R, 0.0, 0, FKStatus.CONVERGED)
 
+    def apply_calibration(self, theta_zero: FloatArray, drum_scale: FloatArray) -> None:
+        """A calibration record's offsets: cable i's unstretched length is ``l_home_i`` where
+        its motor reads ``theta_zero_i`` (rad), and its drum pays out ``drum_scale_i`` times
+        the config's r/G: ``l0 = l_zero − (r/G)·s·θ`` with ``l_zero = l_home + (r/G)·s·θ_zero``
+        (docs/homing.md)."""
+        np.multiply(self.nominal_drum_ratio, drum_scale, out=self.drum_ratio)
+        np.multiply(self.drum_ratio, theta_zero, out=self.l_zero)
+        self.l_zero += self.l_home
+
     def reset(self, position: FloatArray, rotation: FloatArray) -> None:
         self.position[:] = position
         self.rotation[:] = rotation
@@ -105,7 +120,7 @@ class Estimator:
             theta_rate if lag else theta,
             age if lag else theta,
             lag,
-            self.l_home,
+            self.l_zero,
             self.drum_ratio,
             self._law,
             self.fk_cables,
@@ -158,7 +173,7 @@ class EstimateState(NamedTuple):
 
 @njit(cache=True)
 def estimate_kernel(
-    t, theta, tensions, rate, age, lag, l_home, drum_ratio, law, fk_cables, fk_kin, limits,
+    t, theta, tensions, rate, age, lag, l_zero, drum_ratio, law, fk_cables, fk_kin, limits,
     scratch, kin, state,
 ):  # pragma: no cover - compiled  # fmt: skip
     """``Estimator.update`` (see the module docstring for the steps): angles brought to the
@@ -185,7 +200,7 @@ def estimate_kernel(
             shift = newest
     t = t - shift
     for i in range(m):
-        l0 = l_home[i] - drum_ratio[i] * th[i]
+        l0 = l_zero[i] - drum_ratio[i] * th[i]
         lengths[i] = l0 + tensions[i] * compliance_at(law, i, l0)
     for j in range(fk_cables.shape[0]):
         fk_lengths[j] = lengths[fk_cables[j]]

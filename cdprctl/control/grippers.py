@@ -78,7 +78,7 @@ class GripperControl:
             c, w = self._cables, self.winches
             friction_kernel(w.viscous, w.coulomb, st.velocity, c, self._friction)
             r = w.r[c]
-            l0 = e.l_home[c] - r * st.position[c]
+            l0 = e.l_zero[c] - r * st.position[c]
             self._torque[:] = st.torque[c] - self._friction
             self._delta[:] = e.kin.length[c] - l0
             self.grasp.update(self._torque / r, self._delta, f_par)

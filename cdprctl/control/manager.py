@@ -29,12 +29,21 @@ class ControllerManager:
         self.data: ControlData = self.controller.data
         self._clock_ns = time.perf_counter_ns
 
-    def startup(self, timeout: float = 5.0) -> None:
+    def startup(
+        self,
+        timeout: float = 5.0,
+        calibration: Callable[[WinchDriver], tuple[np.ndarray, np.ndarray] | None] | None = None,
+    ) -> None:
         """Compile every kernel, configure the drives, read them, estimate and check the pose
-        → READY. Raises on failure."""
+        → READY. ``calibration(driver)``, with the drives configured: the encoders' offsets
+        (``theta_zero`` rad, ``drum_scale``; None: zero at home), or it raises. Raises on
+        failure."""
         warm_up(self.controller)  # before the drives start (cdprctl/control/warm_up.py)
         d = self.driver
         d.configure(timeout)
+        found = calibration(d) if calibration is not None else None
+        if found is not None:
+            self.controller.estimator.apply_calibration(*found)
         now = d.clock()
         self.controller.initialise(now, d.read(now))
 

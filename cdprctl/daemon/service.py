@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 import uuid
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -35,6 +36,7 @@ from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 from cdprctl.model.robot import RobotModel
 
 LOG = logging.getLogger("cdprctl")
+NOT_CALIBRATED = 4  # exit code: no valid calibration record (systemd: no restart)
 
 
 class Daemon:
@@ -45,15 +47,25 @@ class Daemon:
         overrides: dict[str, Any],
         realtime: bool = True,
         status_every: float = 0.5,
-        out: Any = sys.stdout,
+        out: Any = None,
         zenoh: bool = False,
         timing_file: str | None = None,
+        state_dir: str | None = None,
     ):
+        """``state_dir``: where the calibration record is (default
+        ``/var/lib/cdprctl/<robot>``); not read when the encoders are trusted to read zero at
+        home (``[drives] assume_home_at_start``, or the simulated robot of ``sim``, which
+        starts there)."""
+        from cdprctl.calibration.record import default_state_dir
         from drivers import create_driver
+
+        self.state_dir = Path(state_dir) if state_dir else default_state_dir(model.name)
+        self.assume_home = sim or model.drives.assume_home_at_start
+        self.record: Any = None
 
         self.model = model
         self.sim = None
-        self.out = out
+        self.out = out if out is not None else sys.stdout
         self.status_every = status_every
         self.timing_file = timing_file  # the loop's per-cycle timing is saved there at exit
         self._cycle_done = threading.Event()  # set by the loop after each cycle
@@ -144,10 +156,29 @@ class Daemon:
             "start-up: loading the compiled kernels (the first run on a machine compiles "
             "them: about a minute), configuring the drives, estimating the pose"
         )
+        from cdprctl.calibration.record import CalibrationError
+        from cdprctl.calibration.startup import how_to_calibrate, load_record
+
+        if self.assume_home:
+            self._print(
+                "encoders: taken as zero at the home pose ("
+                + ("the simulated robot starts there" if self.sim else
+                   "[drives] assume_home_at_start = true") + ")"
+            )  # fmt: skip
+        else:
+            try:
+                self.record = load_record(self.model, self.state_dir)
+            except CalibrationError as exc:
+                return self._refuse(str(exc))
+            r = self.record
+            self._print(f"calibration: {r.method} of {r.time} ({self.state_dir})")
         try:
-            self.manager.startup()
+            self.manager.startup(calibration=None if self.assume_home else self._calibration)
+        except CalibrationError as exc:
+            return self._refuse(str(exc))
         except Exception as exc:  # start-up failures are reported, never a traceback
-            self._print(f"cdprctl run: start-up failed: {exc}", err=True)
+            hint = "" if self.assume_home else f" ({how_to_calibrate(self.model, self.state_dir)})"
+            self._print(f"cdprctl run: start-up failed: {exc}{hint}", err=True)
             self.driver.shutdown()
             if self.link is not None:
                 self.link.close()
@@ -197,6 +228,27 @@ class Daemon:
             self.link.close()
         self._report()
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
+
+    def _calibration(self, driver: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The record's offsets, once the configured drives match it (``Manager.startup``)."""
+        from cdprctl.calibration.startup import check_drives, offsets
+
+        check_drives(self.model, self.record, driver)
+        return offsets(self.record)
+
+    def _refuse(self, why: str) -> int:
+        """No enable without a valid calibration: the drives stay disabled (brakes on)."""
+        from cdprctl.calibration.startup import how_to_calibrate
+
+        self._print(
+            f"cdprctl run: refusing to enable the drives: {why}; "
+            f"{how_to_calibrate(self.model, self.state_dir)}",
+            err=True,
+        )
+        self.driver.shutdown()
+        if self.link is not None:
+            self.link.close()
+        return NOT_CALIBRATED
 
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
     # or hangs), the loop ends this long after the signal: the drives' communication timeout

@@ -29,6 +29,8 @@ DRIVES_KEYS = (
     "comm_timeout",
     "velocity_source",
     "pdo_mapping",
+    "encoders",
+    "assume_home_at_start",
     "log_file",
     "buses",
 )
@@ -86,6 +88,14 @@ class DrivesConfig:
     # "configure": the driver writes the PDO mapping it needs by SDO at every start (CiA 402
     # drives); "static": it only reads it, and refuses a drive whose mapping differs
     pdo_mapping: str = "configure"
+    # "incremental": a drive's position counter restarts at power-up (or a reset node), so a
+    # calibration record holds only until a drive is reset; "absolute": multi-turn encoders
+    # keep their count, the record holds until the robot's geometry changes (docs/homing.md)
+    encoders: str = "incremental"
+    # True: the encoders read zero where each cable's unstretched length is its length at the
+    # home pose, with no calibration record (the simulated robot started at home; a real robot
+    # only on a fixture that guarantees it): `cdprctl run` trusts it (docs/homing.md)
+    assume_home_at_start: bool = False
     log_file: str | None = None  # python-can logger file (.log, .asc, .blf, .csv)
     buses: tuple[BusConfig, ...] = ()
 
@@ -118,6 +128,7 @@ class DrivesConfig:
 
 
 MODES = ("cst", "csp")
+ENCODERS = ("incremental", "absolute")
 POSITION_LOOP_DAMPING = 0.7  # of the simulated drives' position loop
 
 
@@ -206,6 +217,16 @@ def read_drives(
             "must be 'configure' (the driver writes the PDO mapping by SDO) or 'static' (it "
             "only checks it)",
         )  # fmt: skip
+    encoders = rd.string(t, "encoders", "drives", required=False, default="incremental")
+    if encoders not in ENCODERS:
+        rd.error(
+            "drives.encoders", encoders, "",
+            "must be 'incremental' (the counter restarts at power-up) or 'absolute' (multi-turn, "
+            "kept across power-ups)",
+        )  # fmt: skip
+    assume_home = t.get("assume_home_at_start", False)
+    if not isinstance(assume_home, bool):
+        rd.error("drives.assume_home_at_start", assume_home, "", "must be true or false")
     log_file = rd.string(t, "log_file", "drives", required=False, default=None)
     buses: list[BusConfig] = []
     seen_cable: dict[int, str] = {}
@@ -326,6 +347,8 @@ def read_drives(
         comm_timeout=float(comm or 0.1),
         velocity_source=vsrc or "derived",
         pdo_mapping=pdo_mapping or "configure",
+        encoders=encoders or "incremental",
+        assume_home_at_start=bool(assume_home),
         log_file=log_file,
         buses=tuple(buses),
     )

@@ -1,0 +1,396 @@
+"""The calibration procedures on the drives (``cdprctl calibrate``): the driver is configured by
+the caller; these enable the drives, hold or move the platform, sample at rest, disable them
+(brakes) and identify. They run at the driver's period on its clock and ``wait``, so the same
+code runs in real time and in lock-step with the simulated robot.
+
+* ``known_pose``: the platform stands at a known pose (a home fixture); held where it stands,
+  the motor angles and tensions give each cable's offset directly.
+* ``self_calibrate``: from an unknown pose near home, with the drives only. The drives hold
+  their cables in position mode (CiA 402 CSP): m − r of them by position targets, the ``r``
+  redundant ones by their tension (an admittance loop on the measured torque), so the platform
+  moves through poses around its start without the cables fighting each other, held stiffly by
+  six cables. Pulling cables in turn in torque mode was the alternative: the platform then
+  rests where the commanded tensions balance gravity, on the cables' geometric stiffness alone
+  (rowc 37 N/m, CAROCA 25 N/m at home: settling takes tens of seconds per sample and friction
+  moves it); stepping through the null space moves nothing at all. At each pose, at rest:
+  motor angles and tensions; then ``identify`` (docs/homing.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from cdprctl.calibration.identify import Identification, Identified, Samples, Weights
+from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model.robot import RobotModel
+from cdprctl.numerics import compliance_of, unstretched_lengths
+from cdprctl.rotation import exp_so3, rpy_to_matrix
+from cdprctl.tda.hold import equilibrium_tensions
+from drivers.base import Lifecycle, WinchDriver, WinchStates
+
+
+class CalibrationFailedError(Exception):
+    """The procedure stopped (drives disabled, brakes on); the message says why. When the
+    identification ran but was refused, ``record`` and ``identified`` hold what it found."""
+
+    record: CalibrationRecord | None = None
+    identified: Identified | None = None
+
+    @classmethod
+    def with_result(
+        cls, record: CalibrationRecord, identified: Identified, message: str
+    ) -> CalibrationFailedError:
+        exc = cls(message)
+        exc.record, exc.identified = record, identified
+        return exc
+
+
+@dataclasses.dataclass(frozen=True)
+class SelfOptions:
+    travel: float = 0.05  # m: each translation from the start, ± along x, y, z
+    tilt: float = 0.05  # rad: each rotation, ± about x, y, z
+    move_time: float = 1.0  # s per move (cosine ramp)
+    settle_time: float = 1.0  # s at rest before sampling
+    sample_time: float = 0.3  # s averaged per sample
+    force_bandwidth: float = 2.0  # Hz: the redundant cables' tension loop
+    fit_drum_scales: bool = False
+    weights: Weights | None = None  # None: from the drives' resolution (Weights.of)
+    max_condition: float = 1.0e4  # refuse beyond: the samples do not decide the pose
+    max_std: tuple[float, float] = (0.002, 0.004)  # m, rad: refuse a predicted σ beyond
+
+
+class _Session:
+    """The drives held at the driver's period: position targets (rad), feed-forward torques
+    (N·m) and, for the ``force`` cables, a tension loop moving their targets."""
+
+    def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None]):
+        self.model, self.driver, self.log = model, driver, log
+        m = model.n_cables
+        self.ratio = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
+        self.csp = model.drives.holds_lengths
+        self.targets = np.zeros(m)  # rad: base + correction
+        self.base = np.zeros(m)  # rad: where the plan puts each motor
+        self.correction = np.zeros(m)  # rad: the force cables' tension loop
+        self.torques = np.zeros(m)
+        self.tension_goal = np.zeros(m)  # N, for the force cables
+        self.force = np.zeros(m, dtype=bool)
+        self.gain = 0.0  # per cycle, of the tension loop
+        self.k = np.ones(m)  # N/m, each cable's stiffness (the tension loop's scale)
+        self.t_low = 0.3 * model.tension_min  # N: below, a cable is going slack: stop
+        self.t_high = model.tension_max  # N
+        span = model.tension_max - model.tension_min
+        self.t_stop_low = model.tension_min + 0.1 * span  # N: a move stops here
+        self.t_stop_high = model.tension_max - 0.15 * span  # N
+        self.states: WinchStates = driver.states
+        self._outside = 0.0  # s a tension has been outside its bounds
+
+    # s: a tension outside its bounds this long stops the procedure (a transient, such as the
+    # first feedback after the enable, does not)
+    OUTSIDE_FOR = 0.1
+
+    def tensions(self) -> np.ndarray:
+        """N: the tensions the drives' torques hold (at rest, friction neglected)."""
+        return self.states.torque / self.ratio
+
+    def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
+        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle."""
+        d = self.driver
+        period = d.period
+        start = d.clock()
+        n = max(1, round(duration / period))
+        for i in range(n):
+            now = d.clock()
+            self.states = d.read(now)
+            if d.lifecycle is Lifecycle.ERROR:
+                raise CalibrationFailedError(f"the drives stopped: {d.error}")
+            if each is not None:
+                each((i + 1) / n)
+            if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
+                err = self.tension_goal - self.tensions()
+                step = self.gain * err / (self.k * self.ratio)
+                self.correction[self.force] += step[self.force]
+            np.add(self.base, self.correction, out=self.targets)
+            t = self.tensions()
+            outside = d.lifecycle is Lifecycle.ACTIVE and bool(
+                np.any(t > self.t_high) or np.any(t < self.t_low)
+            )
+            self._outside = self._outside + period if outside else 0.0
+            if self._outside > self.OUTSIDE_FOR:
+                worst = int(np.argmax(np.maximum(t - self.t_high, self.t_low - t)))
+                raise CalibrationFailedError(
+                    f"cable {self.model.cables[worst].name} at {t[worst]:.1f} N, outside "
+                    f"[{self.t_low[worst]:.1f}, {self.t_high[worst]:.1f}] N for "
+                    f"{self.OUTSIDE_FOR:g} s: stopped"
+                )
+            d.write(now, self.torques, targets=self.targets if self.csp else None)
+            d.wait(max(0.0, start + (i + 1) * period - d.clock()))
+
+    def enable(self, timeout: float = 3.0) -> None:
+        d = self.driver
+        self.states = d.read(d.clock())
+        self.base[:] = self.states.position
+        self.correction[:] = 0.0
+        d.begin_activate()
+        waited = 0.0
+        while d.lifecycle is not Lifecycle.ACTIVE:
+            self.run(d.period)
+            waited += d.period
+            if waited > timeout:
+                raise CalibrationFailedError(f"the drives did not enable in {timeout:g} s")
+
+    def average(self, duration: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """Motor angles (rad) and tensions (N) averaged over ``duration`` s of holding, and
+        the largest motor speed seen (rad/s)."""
+        m = self.model.n_cables
+        theta, tension, speed, n = np.zeros(m), np.zeros(m), [0.0], [0]
+
+        def add(_: float) -> None:
+            theta[:] += self.states.position
+            tension[:] += self.tensions()
+            speed[0] = max(speed[0], float(np.max(np.abs(self.states.velocity))))
+            n[0] += 1
+
+        self.run(duration, add)
+        return theta / n[0], tension / n[0], speed[0]
+
+    def move(self, goal: np.ndarray, tensions: np.ndarray, duration: float) -> float:
+        """Over ``duration`` s (a cosine ramp): the planned motor angles to ``goal`` (rad; the
+        force cables' tension loop corrects theirs), the force cables' tension and every
+        feed-forward to ``tensions`` (N). A tension beyond ``t_stop_low/high`` and moving
+        further that way stops the ramp where it is (the start is only near home: the real
+        tensions differ from the plan's). Returns the fraction of the ramp done."""
+        start = self.base.copy()
+        t_start = self.tension_goal.copy()
+        reached = [0.0, False]  # the ramp's fraction, stopped
+        before = self.tensions().copy()
+
+        def ramp(f: float) -> None:
+            if reached[1]:
+                return
+            t = self.tensions()
+            if np.any((t > self.t_stop_high) & (t > before + 1.0)) or np.any(
+                (t < self.t_stop_low) & (t < before - 1.0)
+            ):
+                reached[1] = True  # a tension near its limit: the pose goes no further
+                return
+            a = 0.5 - 0.5 * math.cos(math.pi * f)
+            reached[0] = a
+            self.base[:] = start + a * (goal - start)
+            self.tension_goal[:] = t_start + a * (tensions - t_start)
+            self.torques[:] = self.ratio * self.tension_goal
+
+        self.run(duration, ramp)
+        return reached[0]
+
+    def close(self) -> None:
+        self.driver.deactivate()
+
+
+def _hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
+    """N: the tensions holding the platform's weight at ``x`` (m; rotation vector from home)."""
+    inverse_kinematics(model, kin, x[:3], exp_so3(x[3:]) @ model.home.rotation)
+    return equilibrium_tensions(model, kin)
+
+
+def known_pose(
+    model: RobotModel,
+    driver: WinchDriver,
+    pose: np.ndarray,
+    log: Callable[[str], None] = print,
+    hold_time: float = 1.0,
+    sample_time: float = 0.5,
+) -> CalibrationRecord:
+    """The platform is at ``pose`` (x, y, z m, roll, pitch, yaw rad): held where it stands
+    with the tensions that hold it there as feed-forward (position mode) or as torques
+    (torque mode), sampled at rest, each cable's offset from its unstretched length there."""
+    ses = _Session(model, driver, log)
+    kin = KinematicsData(model)
+    R = rpy_to_matrix(*map(float, pose[3:]))
+    inverse_kinematics(model, kin, pose[:3], R)
+    hold = equilibrium_tensions(model, kin)
+    lengths = kin.length.copy()
+    ses.torques[:] = ses.ratio * hold
+    try:
+        ses.enable()
+        log(f"holding at the known pose with {hold.min():.1f}..{hold.max():.1f} N")
+        ses.run(hold_time)
+        theta, tension, speed = ses.average(sample_time)
+    finally:
+        ses.close()
+    law = compliance_of(model.cables)
+    l0 = unstretched_lengths(law, lengths, tension)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    theta_zero = theta - (kin.length - l0) / ses.ratio
+    return CalibrationRecord(
+        robot=model.name,
+        method="known-pose",
+        time=now_iso(),
+        geometry_hash=geometry_hash(model),
+        encoders=model.drives.encoders,
+        theta_zero=[float(x) for x in theta_zero],
+        drum_scale=[1.0] * model.n_cables,
+        pose=[float(x) for x in pose],
+        identities=list(getattr(driver, "identities", [None] * model.n_cables)),
+        notes={"tensions": [round(float(x), 2) for x in tension],
+               "max_motor_speed_while_sampled": speed},
+    )  # fmt: skip
+
+
+def force_cables(model: RobotModel) -> list[int]:
+    """The ``r`` cables held by their tension in ``self_calibrate``: those whose removal
+    leaves the best-conditioned 6 × 6 wrench matrix at home (the six others fix the pose)."""
+    r = model.n_cables - 6
+    if r <= 0:
+        return []
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    W = np.array(kin.W)
+    best, chosen = -1.0, ()  # type: tuple[float, tuple[int, ...]]
+    for combo in itertools.combinations(range(model.n_cables), r):
+        keep = [i for i in range(model.n_cables) if i not in combo]
+        s = np.linalg.svd(W[:, keep], compute_uv=False)
+        if s[-1] / s[0] > best:
+            best, chosen = s[-1] / s[0], combo
+    return list(chosen)
+
+
+def sample_poses(model: RobotModel, opt: SelfOptions) -> np.ndarray:
+    """K × 6: home, then ± ``travel`` along x, y, z and ± ``tilt`` about x, y, z, each kept
+    inside the workspace box and its largest angle, and halved (up to three times) until the
+    tensions holding it leave ``TENSION_MARGIN`` of the tension range below the upper limit
+    and above the lower one: the start is only near home, the real tensions differ (nominal:
+    the start is taken as home)."""
+    ws = model.workspace
+    home = np.asarray(model.home.position, float)
+    kin = KinematicsData(model)
+    span = model.tension_max - model.tension_min
+    low = model.tension_min + TENSION_MARGIN[0] * span
+    high = model.tension_max - TENSION_MARGIN[1] * span
+    out = [np.r_[home, 0.0, 0.0, 0.0]]
+    for j in range(6):
+        for sign in (1.0, -1.0):
+            x = np.zeros(6)
+            if j < 3:
+                x[j] = float(np.clip(home[j] + sign * opt.travel, ws.position_min[j],
+                                     ws.position_max[j]) - home[j])  # fmt: skip
+            else:
+                x[j] = sign * min(opt.tilt, ws.max_angle)
+            for _ in range(4):
+                pose = x + out[0]
+                t = _hold_tensions(model, kin, pose)
+                if np.all(t <= high) and np.all(t >= low):
+                    break
+                x *= 0.5
+            else:
+                continue
+            if np.any(x):
+                out.append(pose)
+    return np.array(out)
+
+
+# fractions of each cable's tension range kept free below and above the planned tensions
+TENSION_MARGIN = (0.0, 0.3)
+
+
+def self_calibrate(
+    model: RobotModel,
+    driver: WinchDriver,
+    opt: SelfOptions | None = None,
+    log: Callable[[str], None] = print,
+) -> tuple[CalibrationRecord, Identified]:
+    """From an unknown pose near home: the samples (module docstring), the identification,
+    the record. Raises :class:`CalibrationFailedError` (drives disabled) when the drives are not in
+    position mode, the platform cannot be held, or the data do not decide the pose."""
+    opt = opt or SelfOptions()
+    if not model.drives.holds_lengths:
+        raise CalibrationFailedError(
+            "self-calibration moves the platform with the drives' position loops: it needs "
+            "[drives] mode = \"csp\" (this robot's drives are in torque mode); use known-pose"
+        )
+    if model.grippers:
+        raise CalibrationFailedError("self-calibration of a robot with grippers is not supported")
+    ses = _Session(model, driver, log)
+    kin = KinematicsData(model)
+    poses = sample_poses(model, opt)
+    guess = poses.copy()
+    plan = np.array([_hold_tensions(model, kin, x) for x in guess])
+    lengths = []
+    for x in guess:
+        inverse_kinematics(model, kin, x[:3], exp_so3(x[3:]) @ model.home.rotation)
+        lengths.append(kin.length.copy())
+    k_axial = model.cable_stiffness(lengths[0])
+    force = force_cables(model)
+    ses.force[force] = True
+    ses.k[:] = k_axial
+    ses.gain = 1.0 - math.exp(-2.0 * math.pi * opt.force_bandwidth * driver.period)
+    names = ", ".join(model.cables[i].name for i in force)
+    log(f"self-calibration: {len(poses)} poses (± {opt.travel:g} m, ± {opt.tilt:g} rad); "
+        f"cables {names or '(none)'} held by tension, the others by position")  # fmt: skip
+    theta_all, tension_all = [], []
+    ses.torques[:] = ses.ratio * plan[0]
+    ses.tension_goal[:] = plan[0]
+    try:
+        ses.enable()
+        ses.run(1.5)  # the redundant cables to their tensions at the start
+        theta0, t0, _ = ses.average(opt.sample_time)
+        theta_all.append(theta0)
+        tension_all.append(t0)
+        start_targets = ses.base.copy()
+        comp = np.array([1.0 / k for k in model.cable_stiffness(lengths[0])])
+        for k in range(1, len(poses)):
+            # the position cables: unstretched length change from the nominal geometry and
+            # the planned tensions; the force cables: their planned tension
+            dl0 = (lengths[k] - lengths[0]) - (plan[k] - t0) * comp
+            goal = theta0 - dl0 / ses.ratio
+            done = ses.move(goal, plan[k], opt.move_time)
+            if done < 1.0:  # the guess: where the ramp stopped
+                guess[k] = guess[0] + done * (guess[k] - guess[0])
+            ses.run(opt.settle_time)
+            th, t, speed = ses.average(opt.sample_time)
+            theta_all.append(th)
+            tension_all.append(t)
+            log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
+                f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
+        ses.move(start_targets, plan[0], opt.move_time)
+        ses.run(opt.settle_time)
+    finally:
+        ses.close()
+    samples = Samples(np.array(theta_all), np.array(tension_all), guess)
+    ident = Identification(model, opt.fit_drum_scales, opt.weights).solve(samples)
+    worst = max(max(ident.std[:3]) / opt.max_std[0], max(ident.std[3:]) / opt.max_std[1])
+    record = CalibrationRecord(
+        robot=model.name,
+        method="self",
+        time=now_iso(),
+        geometry_hash=geometry_hash(model),
+        encoders=model.drives.encoders,
+        theta_zero=[float(x) for x in ident.theta_zero],
+        drum_scale=[float(x) for x in ident.drum_scale],
+        pose=ident.pose,
+        identities=list(getattr(driver, "identities", [None] * model.n_cables)),
+        residual_rms=ident.residual_rms,
+        condition=ident.condition,
+        std=ident.std,
+        samples=len(poses),
+        sample_residuals=ident.sample_residuals,
+        notes={"force_rms": ident.force_rms, "force_cables": [model.cables[i].name for i in force],
+               "travel": opt.travel, "tilt": opt.tilt, "fit_drum_scales": opt.fit_drum_scales},
+    )  # fmt: skip
+    weights = opt.weights or Weights.of(model)
+    if not ident.success and ident.residual_rms > 5 * weights.length:
+        raise CalibrationFailedError(f"the identification did not converge: {ident.message}")
+    if ident.condition > opt.max_condition or worst > 1.0:
+        raise CalibrationFailedError.with_result(record, ident,
+            f"ill-conditioned: condition {ident.condition:.3g} (limit {opt.max_condition:g}), "
+            f"predicted σ {np.round(np.array(ident.std[:3]) * 1e3, 2).tolist()} mm, "
+            f"{np.round(np.array(ident.std[3:]) * 1e3, 2).tolist()} mrad (limits "
+            f"{opt.max_std[0] * 1e3:g} mm, {opt.max_std[1] * 1e3:g} mrad): move further "
+            "(--travel, --tilt) or calibrate at a known pose"
+        )
+    return record, ident

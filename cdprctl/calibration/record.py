@@ -1,0 +1,140 @@
+"""The calibration record: per cable, the motor angle at which its unstretched length is its
+length at the home pose (``theta_zero``, rad) and its drum's pay-out scale, with where it came
+from. Kept as JSON in the robot's state directory, written atomically (docs/homing.md)."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from cdprctl.model.robot import RobotModel
+
+FILE_NAME = "calibration.json"
+FORMAT = 1
+
+
+class CalibrationError(Exception):
+    """A record that is missing, unreadable or does not fit the robot: the message says what
+    and how to calibrate."""
+
+
+def default_state_dir(robot: str) -> Path:
+    """``/var/lib/cdprctl/<robot>``: the systemd unit's ``StateDirectory=cdprctl``."""
+    return Path("/var/lib/cdprctl") / robot
+
+
+def geometry_hash(model: RobotModel) -> str:
+    """sha256 of what a calibration depends on: anchors, attachments, pulleys, drums, gears,
+    encoders, the cables' elasticity and the home pose. Gains, limits and buses may change
+    without invalidating a record."""
+    cables = [
+        {
+            "anchor": [round(float(x), 9) for x in c.anchor],
+            "attachment": [round(float(x), 9) for x in c.attachment],
+            "pulley": None if c.pulley is None else [c.pulley.radius, *map(float, c.pulley.axis)],
+            "drum_radius": c.winch.drum_radius,
+            "gear_ratio": c.winch.gear_ratio,
+            "counts_per_rev": c.winch.encoder_counts_per_rev,
+            "elastic": [c.stiffness, c.youngs_modulus, c.cross_section, c.spring_stiffness,
+                        c.length_to_winch],
+        }
+        for c in model.cables
+    ]  # fmt: skip
+    home = [*map(float, model.home.position), *map(float, model.home.rpy)]
+    text = json.dumps({"cables": cables, "home": home}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@dataclasses.dataclass
+class CalibrationRecord:
+    robot: str
+    method: str  # "known-pose" or "self"
+    time: str  # ISO 8601, UTC
+    geometry_hash: str
+    encoders: str  # "incremental" or "absolute", as the config declared at calibration
+    theta_zero: list[float]  # rad, motor side, per cable
+    drum_scale: list[float]  # per cable (1: the config's drum radius)
+    pose: list[float]  # x, y, z (m), roll, pitch, yaw (rad): the pose calibrated at
+    identities: list[dict[str, int] | None]  # each drive's 0x1018, where it has one
+    residual_rms: float | None = None  # m, of the identification's length residuals
+    condition: float | None = None  # of the identification Jacobian
+    std: list[float] | None = None  # m, rad: predicted standard deviation of the pose
+    samples: int = 1
+    sample_residuals: list[float] = dataclasses.field(default_factory=list)  # m, RMS each
+    notes: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def check(self, model: RobotModel) -> None:
+        """Raise :class:`CalibrationError` when the record does not fit ``model``."""
+        m = model.n_cables
+        if self.robot != model.name:
+            raise CalibrationError(f"the record is for robot {self.robot!r}, not {model.name!r}")
+        for name in ("theta_zero", "drum_scale"):
+            values = getattr(self, name)
+            if len(values) != m or not all(math.isfinite(v) for v in values):
+                raise CalibrationError(f"{name}: {values} is not {m} finite numbers")
+        if not all(0.9 < s < 1.1 for s in self.drum_scale):
+            raise CalibrationError(f"drum_scale: {self.drum_scale} outside (0.9, 1.1)")
+        if self.geometry_hash != geometry_hash(model):
+            raise CalibrationError(
+                f"the robot's geometry changed since the calibration of {self.time} (hash "
+                f"{self.geometry_hash}, now {geometry_hash(model)}: anchors, attachments, "
+                "drums, encoders, elasticity or home)"
+            )
+
+
+def record_path(state_dir: Path) -> Path:
+    return Path(state_dir) / FILE_NAME
+
+
+def now_iso() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def save(record: CalibrationRecord, state_dir: Path) -> Path:
+    """Write atomically: a temporary file in the same directory, fsync, rename, fsync of the
+    directory; a crash leaves the old record or the new one, never half of one."""
+    state_dir = Path(state_dir)
+    state_dir.mkdir(parents=True, exist_ok=True)
+    path = record_path(state_dir)
+    text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
+    fd, tmp = tempfile.mkstemp(prefix=".calibration-", suffix=".json", dir=state_dir)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(text + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    dfd = os.open(state_dir, os.O_RDONLY)
+    try:
+        os.fsync(dfd)
+    finally:
+        os.close(dfd)
+    return path
+
+
+def load(state_dir: Path) -> CalibrationRecord:
+    """The record in ``state_dir``; :class:`CalibrationError` saying what is wrong."""
+    path = record_path(state_dir)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CalibrationError(f"no calibration record at {path}") from None
+    except (OSError, ValueError) as exc:
+        raise CalibrationError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict) or data.pop("format", None) != FORMAT:
+        raise CalibrationError(f"{path}: not a calibration record of format {FORMAT}")
+    fields = {f.name for f in dataclasses.fields(CalibrationRecord)}
+    try:
+        return CalibrationRecord(**{k: v for k, v in data.items() if k in fields})
+    except TypeError as exc:
+        raise CalibrationError(f"{path}: {exc}") from None
