@@ -11,21 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.common import command_parser, load_or_report
+from cdprctl.commands.common import command_parser, load_or_report, parse_pose
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
-
-
-def parse_pose(text: str, what: str) -> np.ndarray:
-    """``x,y,z,roll,pitch,yaw`` (m, rad) → array; SystemExit naming the rule otherwise."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) != 6 or not all(np.isfinite(values)):
-        raise SystemExit(
-            f"{what} = {text!r}: expected six finite numbers x,y,z,roll,pitch,yaw (m, rad)"
-        )
-    return np.array(values)
 
 
 def add_parser(sub: Any) -> None:

@@ -7,6 +7,8 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from cdprctl.model import ConfigError, RobotModel, load_robot
 
 
@@ -37,3 +39,16 @@ def load_or_report(path: str) -> RobotModel | None:
         for e in exc.errors:
             print(e, file=sys.stderr)
         return None
+
+
+def parse_pose(text: str, what: str) -> np.ndarray:
+    """``x,y,z,roll,pitch,yaw`` (m, rad) → array; SystemExit naming the rule otherwise."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(np.isfinite(values)):
+        raise SystemExit(
+            f"{what} = {text!r}: expected six finite numbers x,y,z,roll,pitch,yaw (m, rad)"
+        )
+    return np.array(values)

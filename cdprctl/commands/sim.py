@@ -146,7 +146,7 @@ def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:
     ``--start-pose``, and the encoders' kind."""
     import numpy as np
 
-    from cdprctl.commands.calibrate import parse_pose
+    from cdprctl.commands.common import parse_pose
     from cdprctl.rotation import rpy_to_matrix
     from sim_backend.plant import CdprPlant
     from sim_backend.plant_errors import PlantErrors

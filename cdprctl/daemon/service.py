@@ -152,10 +152,6 @@ class Daemon:
             warnings = rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc)
         for w in warnings:
             self._print(f"warning: {w}", err=True)
-        self._print(
-            "start-up: loading the compiled kernels (the first run on a machine compiles "
-            "them: about a minute), configuring the drives, estimating the pose"
-        )
         from cdprctl.calibration.record import CalibrationError
         from cdprctl.calibration.startup import how_to_calibrate, load_record
 
@@ -172,6 +168,10 @@ class Daemon:
                 return self._refuse(str(exc))
             r = self.record
             self._print(f"calibration: {r.method} of {r.time} ({self.state_dir})")
+        self._print(
+            "start-up: loading the compiled kernels (the first run on a machine compiles "
+            "them: about a minute), configuring the drives, estimating the pose"
+        )
         try:
             self.manager.startup(calibration=None if self.assume_home else self._calibration)
         except CalibrationError as exc:
