@@ -63,7 +63,8 @@ def run(robot: str, seeds: int, errors: bool) -> list[str]:
              if len(s) else "–")  # fmt: skip
     return [
         f"| {robot} | {'±5 mm, ±0.5 %' if errors else 'none'} | {len(pos)}/{seeds} "
-        f"({refused - stopped} refused by the identification, {stopped} stopped on a tension) "
+        f"({refused - stopped} refused by the identification, {stopped} without a result: stopped "
+        f"on a tension or not converged) "
         f"| {stats(pos)} | {stats(rot)} | {sigma} | {stats(pos_refused)} / "
         f"{stats(rot_refused)} |"
     ]
