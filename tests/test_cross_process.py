@@ -322,7 +322,7 @@ def test_calibrate_then_run_across_processes(tmp_path, sim_process):
     """`cdprctl sim --start-pose` (incremental encoders), `cdprctl calibrate ... self --json`,
     `cdprctl run --demo` on CAROCA over udp_multicast: the pose `run` prints at ready within
     2 mm of the simulator's start, and the demo's first move reaches its target."""
-    port = random.Random(os.getpid() * 13).randrange(40000, 50000)
+    port = random.Random(os.getpid() * 17).randrange(40000, 50000)  # its own port
     config = write_config(tmp_path, "caroca.toml", "cia402", mode="csp", assume_home=False)
     opts = ["--can-option", f"port={port}"]
     start = [0.06, -0.04, 1.05, 0.03, -0.02, 0.04]
