@@ -32,7 +32,7 @@ from scipy.sparse import lil_matrix
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cable_compliance_py, compliance_of, unstretched_lengths
-from cdprctl.rotation import exp_so3, log_so3, matrix_to_rpy, rpy_to_matrix
+from cdprctl.rotation import exp_so3, matrix_to_rpy
 
 
 @dataclasses.dataclass
@@ -113,7 +113,7 @@ class Identification:
         return poses, scales
 
     def residuals(self, z: np.ndarray, s: Samples) -> np.ndarray:
-        K, m = s.theta.shape
+        K = s.theta.shape[0]
         poses, scales = self._unpack(z, K)
         out = []
         L0, W0, R0 = self._at(poses[0])
@@ -124,17 +124,11 @@ class Identification:
             else:
                 L, W, R = self._at(poses[k])
                 l0 = l0_start - self.ratio * scales * (s.theta[k] - s.theta[0])
-                c = np.array(
-                    [cable_compliance_py(*self._terms(i), float(l0[i])) for i in range(m)]
-                )
+                # the cable law, on every cable at once (the rule is plain arithmetic)
+                c = cable_compliance_py(*self.law, l0)  # type: ignore[arg-type]
                 out.append((L - (l0 + s.tension[k] * c)) / self.w.length)
             out.append((W @ s.tension[k] + self.model.gravity_wrench(R)) * self.force_weight)
         return np.concatenate(out)
-
-    def _terms(self, i: int) -> tuple[float, float, float, float]:
-        law = self.law
-        return (float(law.inv_k_fixed[i]), float(law.inv_es[i]), float(law.l_winch[i]),
-                float(law.inv_spring[i]))  # fmt: skip
 
     def _sparsity(self, K: int) -> lil_matrix:
         """Sample k's residuals depend on x_0, x_k and the scales only."""
@@ -204,7 +198,3 @@ class Identification:
             message=str(res.message),
         )
 
-
-def rotation_vector(rpy: np.ndarray, R_home: np.ndarray) -> np.ndarray:
-    """The rotation vector (rad, base frame) from ``R_home`` to the orientation ``rpy``."""
-    return log_so3(rpy_to_matrix(*map(float, rpy)) @ R_home.T)

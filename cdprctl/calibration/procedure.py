@@ -319,10 +319,9 @@ def self_calibrate(
     kin = KinematicsData(model)
     poses = sample_poses(model, opt)
     guess = poses.copy()
-    plan = np.array([_hold_tensions(model, kin, x) for x in guess])
-    lengths = []
+    plan, lengths = [], []
     for x in guess:
-        inverse_kinematics(model, kin, x[:3], exp_so3(x[3:]) @ model.home.rotation)
+        plan.append(_hold_tensions(model, kin, x))  # leaves kin at x
         lengths.append(kin.length.copy())
     k_axial = model.cable_stiffness(lengths[0])
     force = force_cables(model)
@@ -342,7 +341,7 @@ def self_calibrate(
         theta_all.append(theta0)
         tension_all.append(t0)
         start_targets = ses.base.copy()
-        comp = np.array([1.0 / k for k in model.cable_stiffness(lengths[0])])
+        comp = 1.0 / k_axial  # m/N
         for k in range(1, len(poses)):
             # the position cables: unstretched length change from the nominal geometry and
             # the planned tensions; the force cables: their planned tension
