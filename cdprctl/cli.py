@@ -52,9 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
     from cdprctl.commands import report, zenoh_tools
+    from cdprctl.commands import workspace as workspace_cmd
 
     zenoh_tools.add_parsers(sub)
     report.add_parser(sub)
+    workspace_cmd.add_parser(sub)
     return parser
 
 

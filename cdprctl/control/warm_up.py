@@ -22,6 +22,7 @@ from cdprctl.numerics import worst_ratio
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.planar import feasible_scale_kernel
+from cdprctl.tda.polygon import least_violating
 
 if TYPE_CHECKING:
     from cdprctl.control.controller import Controller
@@ -77,6 +78,7 @@ def warm_up(controller: Controller) -> None:
         feasible_scale_kernel(
             ns.N, t_ff, t_ff.copy(), t_min, t_max, verts, verts.copy(), zeros.copy()
         )
+        least_violating(ns.N, ns.t0, t_min, t_max)  # a wrench no tensions can produce
     c.observer.warm_up()
     c.pose.update(True)
     c.pose.reset()

@@ -286,38 +286,51 @@ def least_violating(
 ) -> tuple[FloatArray, float]:
     """``λ`` minimising the largest bound violation ``max_i max(lo_i − t_i, t_i − hi_i)``.
 
-    For an infeasible wrench (empty polygon). The objective is the maximum of 2m affine
-    functions of λ; its minimum is where three of them are equal (a 2-D linear programme):
-    every triple is solved by Cramer's rule, vectorised, and the best kept. Returns
-    ``(λ, s)`` with ``s`` (N) the largest violation there.
+    For an infeasible wrench (empty polygon), and, negated, the tension margin of a feasible
+    one (``cdprctl.tda.workspace``). Returns ``(λ, s)`` with ``s`` (N) the largest violation
+    there (:func:`least_violating_kernel`).
     """
+    lx, ly, s = least_violating_kernel(np.ascontiguousarray(N), t0, t_lo, t_hi)
+    return np.array([lx, ly]), float(s)
+
+
+@njit(cache=True)
+def least_violating_kernel(N, t0, lo, hi):  # pragma: no cover - compiled
+    """``(λx, λy, s)``: the minimum over λ of ``s(λ) = max_k g_k(λ)``, the 2m affine functions
+    ``lo_i − t0_i − N_i λ`` and ``t0_i + N_i λ − hi_i``. A 2-D linear programme: its minimum
+    is where three of them are equal (a vertex of the epigraph), so every triple is solved by
+    Cramer's rule and the best kept; a triple is dropped as soon as one function exceeds the
+    best so far. ``s = inf`` when every triple is singular (``N`` of rank < 2)."""
     m = N.shape[0]
-    # g_k(λ) = G[k,0] λx + G[k,1] λy + G[k,2]
-    G = np.empty((2 * m, 3))
-    G[:m, :2] = -N
-    G[:m, 2] = t_lo - t0
-    G[m:, :2] = N
-    G[m:, 2] = t0 - t_hi
-    idx = _triples(2 * m)
-    A = G[idx]  # (T, 3, 3): rows [a, b, c] of the three functions
-    # a λx + b λy − s = −c for each of the three rows
-    M = np.concatenate([A[:, :, :2], -np.ones((len(idx), 3, 1))], axis=2)
-    rhs = -A[:, :, 2]
-    det = np.linalg.det(M)
-    ok = np.abs(det) > 1e-12 * np.abs(M).max()
-    sol = np.linalg.solve(M[ok], rhs[ok][:, :, None])[:, :, 0]  # (T', 3)
-    values = sol[:, :2] @ G[:, :2].T + G[:, 2]  # (T', 2m)
-    worst = values.max(axis=1)
-    k = int(np.argmin(worst))
-    return sol[k, :2].copy(), float(worst[k])
-
-
-_TRIPLES: dict[int, np.ndarray] = {}
-
-
-def _triples(n: int) -> np.ndarray:
-    if n not in _TRIPLES:
-        i, j, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(n), indexing="ij")
-        mask = (i < j) & (j < k)
-        _TRIPLES[n] = np.stack([i[mask], j[mask], k[mask]], axis=1)
-    return _TRIPLES[n]
+    n = 2 * m
+    ga = np.empty(n)
+    gb = np.empty(n)
+    gc = np.empty(n)
+    for i in range(m):
+        ga[i], gb[i], gc[i] = -N[i, 0], -N[i, 1], lo[i] - t0[i]
+        ga[m + i], gb[m + i], gc[m + i] = N[i, 0], N[i, 1], t0[i] - hi[i]
+    scale = 0.0
+    for k in range(n):
+        scale = max(scale, abs(ga[k]), abs(gb[k]))
+    best, bx, by = math.inf, 0.0, 0.0
+    for i in range(n):
+        for j in range(i + 1, n):
+            for k in range(j + 1, n):
+                # a λx + b λy − s = −c on rows i, j, k; subtracting row i leaves 2×2 in λ
+                a1, b1, c1 = ga[j] - ga[i], gb[j] - gb[i], gc[i] - gc[j]
+                a2, b2, c2 = ga[k] - ga[i], gb[k] - gb[i], gc[i] - gc[k]
+                det = a1 * b2 - a2 * b1
+                if abs(det) <= 1e-12 * scale * scale:
+                    continue
+                x = (c1 * b2 - c2 * b1) / det
+                y = (a1 * c2 - a2 * c1) / det
+                s = -math.inf
+                for q in range(n):
+                    v = ga[q] * x + gb[q] * y + gc[q]
+                    if v > s:
+                        s = v
+                        if s >= best:
+                            break
+                if s < best:
+                    best, bx, by = s, x, y
+    return bx, by, best

@@ -1,0 +1,128 @@
+"""``cdprctl workspace``: the wrench-feasible workspace on a grid (``cdprctl.tda.workspace``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+import numpy as np
+
+from cdprctl.commands.common import load_or_report
+
+DESCRIPTION = """\
+For every point of a grid, whether the cables can hold the platform there, at the given
+orientation, against its weight plus the given external wrench, within their tension limits —
+and the tension margin: how far (N) the best tension distribution stays from the nearest limit
+(negative: by how much the least-violating one exceeds a limit). Redundancy 2: an exact 2-D
+linear programme per point (compiled); otherwise scipy's linprog (HiGHS) per point.
+--json prints {"points": [[x, y, z], ...], "feasible": [...], "margin": [N, ...],
+"volume": m³, ...} with x varying fastest, then y, then z."""
+
+EPILOG = """\
+examples:
+  cdprctl workspace --config config/rowc.toml --wrench 0,30,0,0,0,0 --plot out/ws_rowc
+  cdprctl workspace --config config/seed000.toml --grid 0:14:40,0:8:40,0:3:40 --json"""
+
+
+def add_parser(sub: Any) -> None:
+    p = sub.add_parser(
+        "workspace",
+        help="the wrench-feasible workspace on a grid (JSON, slice plots)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p.add_argument("--rpy", help="orientation roll,pitch,yaw (rad; default: the home one)")
+    p.add_argument(
+        "--wrench",
+        default="0,0,0,0,0,0",
+        help="external wrench fx,fy,fz,mx,my,mz (N, N·m at the platform's reference point, "
+        "base frame), added to the weight (default 0)",
+    )
+    p.add_argument(
+        "--grid",
+        help="x0:x1:nx,y0:y1:ny,z0:z1:nz (m, counts); default: the box of the anchors and "
+        "the configured workspace, 20 points per axis",
+    )
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--plot", metavar="DIR", help="write slice plots (PNG) into DIR")
+    p.set_defaults(func=run, cmd="workspace")
+
+
+def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        v = np.array([])
+    if v.shape != (n,) or not np.all(np.isfinite(v)):
+        print(f"cdprctl workspace: error: {what} = {text!r} must be {n} finite numbers "
+              f"({unit})", file=sys.stderr)  # fmt: skip
+        return None
+    return v
+
+
+def run(args: argparse.Namespace) -> int:
+    from cdprctl.rotation import rpy_to_matrix
+    from cdprctl.tda.workspace import Grid, wrench_feasible_workspace
+
+    model = load_or_report(args.config)
+    if model is None:
+        return 1
+    rpy = np.array(model.home.rpy, dtype=float)
+    if args.rpy is not None:
+        given = _floats(args.rpy, 3, "--rpy", "rad")
+        if given is None:
+            return 2
+        rpy = given
+    wrench = _floats(args.wrench, 6, "--wrench", "N, N·m")
+    if wrench is None:
+        return 2
+    try:
+        grid = Grid.parse(args.grid) if args.grid else Grid.around(model)
+    except ValueError as exc:
+        print(f"cdprctl workspace: error: {exc}", file=sys.stderr)
+        return 2
+    res = wrench_feasible_workspace(model, grid, rpy_to_matrix(*rpy), wrench)
+    feasible = res.feasible
+    n_ok = int(feasible.sum())
+    if args.plot:
+        from cdprctl.plots.workspace_plot import plot_workspace
+
+        title = (f"{model.name}: rpy {np.round(rpy, 3).tolist()} rad, external wrench "
+                 f"{np.round(wrench, 2).tolist()}")  # fmt: skip
+        for path in plot_workspace(args.plot, model, res, title):
+            print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
+    if args.json:
+        margin = [round(float(x), 4) if np.isfinite(x) else None for x in res.margin]
+        json.dump(
+            {
+                "robot": model.name,
+                "rpy": rpy.tolist(),
+                "wrench": wrench.tolist(),
+                "grid": {"lo": grid.lo, "hi": grid.hi, "n": grid.n, "order": "x fastest"},
+                "points": np.round(res.points, 6).tolist(),
+                "feasible": feasible.tolist(),
+                "margin": margin,
+                "volume": res.volume,
+                "method": res.method,
+                "seconds": res.seconds,
+            },
+            sys.stdout,
+        )
+        print()
+        return 0
+    print(
+        f"{model.name}: {n_ok} of {len(feasible)} points wrench-feasible "
+        f"({res.volume:.4g} m³ at {grid.cell_volume():.3g} m³ per point); "
+        f"{res.method} in {res.seconds:.2f} s"
+    )
+    if n_ok:
+        p = res.points[feasible]
+        print(f"  feasible x {p[:, 0].min():.3f}..{p[:, 0].max():.3f} m, "
+              f"y {p[:, 1].min():.3f}..{p[:, 1].max():.3f} m, "
+              f"z {p[:, 2].min():.3f}..{p[:, 2].max():.3f} m; "
+              f"largest margin {res.margin.max():.1f} N")  # fmt: skip
+    return 0
