@@ -57,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
     zenoh_tools.add_parsers(sub)
     report.add_parser(sub)
     workspace_cmd.add_parser(sub)
+    from cdprctl.commands import jog
+
+    jog.add_parser(sub)
     return parser
 
 

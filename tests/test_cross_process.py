@@ -359,3 +359,24 @@ def test_calibrate_then_run_across_processes(tmp_path, sim_process):
     assert np.linalg.norm(np.array(pose) - start[:3]) < 2e-3, (pose, text)
     assert reached is not None or "stopping -> fault" in text, text
     assert "Traceback" not in text, text
+
+
+def test_run_path_across_processes(tmp_path, sim_process):
+    """`cdprctl sim` and `cdprctl run --path` (rowc over udp_multicast, real time): the path
+    is checked, played to its end, the drives disabled, exit 0."""
+    port = random.Random(os.getpid() * 23).randrange(40000, 50000)  # its own port
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")
+    opts = ["--can-option", f"port={port}"]
+    sim_process(config, opts)
+    path = tmp_path / "triangle.ngc"
+    path.write_text("G21 G90\nG1 X1600 Z640 F12000\nG4 P0.2\nG1 X1400 Z640\nG1 X1500 Z590\nM2\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(config), "--path",
+         str(path), "--rate", "250", "--status", "0", *opts],
+        capture_output=True, text=True, timeout=180,
+    )  # fmt: skip
+    text = proc.stdout + proc.stderr
+    assert proc.returncode == 0, text
+    assert f"path {path}: 3 segments" in text and "checked at" in text, text
+    assert "enabled -> moving: path" in text and f"path {path}: done" in text, text
+    assert "drives disabled" in text and "Traceback" not in text, text

@@ -32,6 +32,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         ),
     ),
     ("tda", ("cdprctl.tda", "cdprctl.plots")),
+    ("motion", ("cdprctl.motion",)),
     ("hardware", ("drivers", "sim_backend")),
     ("control", ("cdprctl.control",)),
     ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon",

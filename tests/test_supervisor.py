@@ -174,6 +174,10 @@ def command_of(kind: CommandKind) -> Command:
         return Command(kind, pose=np.array([1.6, 0.35, 0.55, 0.0, 0.0, 0.0]))
     if kind is CommandKind.SET_TDA:
         return Command(kind, tda=TDAOptions(method=TDAMethod.ENERGY, period=CFG.period))
+    if kind is CommandKind.JOG:
+        return Command(kind, velocity=np.array([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    if kind is CommandKind.PATH:
+        return Command(kind, text="x, y, z\n1.6, 0.35, 0.55\n")
     return Command(kind)
 
 

@@ -1,4 +1,4 @@
-"""The jerk-limited trajectory (control/trajectory.py, ruckig), table-driven: every move ends on
+"""The jerk-limited trajectory (motion/trajectory.py, ruckig), table-driven: every move ends on
 its (clamped) target, and the finite differences of the sampled reference respect the velocity,
 acceleration and jerk limits (scaled by the command's fractions), including a new target taken
 mid-motion and a stop."""
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cdprctl.control.trajectory import Trajectory
 from cdprctl.model import load_robot
+from cdprctl.motion.trajectory import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWC = load_robot(ROOT / "config" / "rowc.toml")

@@ -5,6 +5,7 @@ scouting off); and the pieces alone: command validation, the [zenoh] section, th
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import socket
@@ -53,6 +54,17 @@ def validator(rowc):
         ("gripper", b'{"travel": 0.1}', "enabled", ["no gripper"]),
         ("launch", b"", "enabled", ["unknown"]),
         ("move", b'{"position": [1.8, 0.35, 0.5], "id": [1]}', "enabled", ["id"]),
+        ("jog", b'{"velocity": [0.5, 0, 0, 0, 0, 0]}', "enabled",
+         ["velocity[0] = 0.5 m/s exceeds [control] max_velocity = 0.3 m/s"]),
+        ("jog", b'{"velocity": [0, 0, 0, 0, 0, 0.9]}', "enabled",
+         ["velocity[5] = 0.9 rad/s exceeds [control] max_angular_velocity"]),
+        ("jog", b'{"velocity": [0.1, 0, 0]}', "enabled", ["velocity", "6 numbers"]),
+        ("jog", b'{"velocity": [0.1, 0, 0, 0, 0, 0], "frame": "tool"}', "enabled",
+         ['frame = "tool" must be "base" or "platform"']),
+        ("jog", b'{"velocity": [0.1, 0, 0, 0, 0, 0]}', "ready", ["state ready"]),
+        ("path", b'{"text": ""}', "enabled", ["text", "required"]),
+        ("path", b'{"text": "G1 X1"}', "moving", ["not accepted in state moving"]),
+        ("resume", b"", "moving", ["only in: enabled"]),
     ],
 )
 def test_bad_commands_are_rejected_with_the_field_and_the_rule(
@@ -78,8 +90,11 @@ def test_a_target_that_cannot_be_held_is_rejected(rowc):
     from cdprctl.kinematics import wrench_matrix
 
     force = np.array([0.0, 70.0, 0.0, 0.0, 0.0, 0.0])
+    shipped = rowc
     rowc = dataclasses.replace(
-        rowc, control=dataclasses.replace(rowc.control, external_wrench=tuple(force))
+        rowc,
+        control=dataclasses.replace(rowc.control, external_wrench=tuple(force)),
+        workspace=dataclasses.replace(rowc.workspace, wrench_margin=0.0),  # feasible or not
     )
     v = CommandValidator(rowc, commands_enabled=True)
     ws = rowc.workspace
@@ -103,6 +118,11 @@ def test_a_target_that_cannot_be_held_is_rejected(rowc):
         assert accepted == (lp.status == 0), p
         verdicts[accepted] += 1
     assert verdicts[True] > 5 and verdicts[False] > 5  # both sides of the boundary sampled
+    # the soft limit: held, but closer to a limit than [workspace] wrench_margin
+    strict = CommandValidator(dataclasses.replace(
+        shipped, workspace=dataclasses.replace(shipped.workspace, wrench_margin=1000.0)), True)
+    with pytest.raises(CommandError, match=r"tension margin is .* N < 1000\.00 N required"):
+        strict.check("move", {"position": [1.5, 0.35, 0.59]}, "enabled")
 
 
 def test_commands_are_refused_unless_enabled_in_the_config(rowc):
@@ -633,3 +653,64 @@ def test_check_config_names_open_commands(tmp_path, capsys):
     f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[zenoh]\ncommands = true\n'
                  "allow_unauthenticated_commands = true\n")  # fmt: skip
     assert check(str(f)) == 0
+
+
+def test_path_and_pause_resume_over_zenoh(robot_and_client, tmp_path):
+    """cmd/path with a path file's text: a bad one rejected in the reply naming the line; a
+    good one played with its progress in state, paused and resumed, to its end."""
+    robot, client = robot_and_client(["--accept-commands", "--allow-unauthenticated-commands"])
+    assert client.wait(lambda: client.states and client.last()["state"] == "ready")
+    client.put("enable", {"id": "e"})
+    assert client.wait(lambda: client.last()["state"] == "enabled"), "\n".join(robot.lines)
+    client.put("path", {"id": "bad", "name": "bad.ngc", "text": "G21\nG2 X1 Y1 F100\n"})
+    assert client.wait(lambda: client.reply("bad") is not None)
+    assert client.reply("bad")["reason"] == (
+        "path bad.ngc: line 2, column 1: G2 is not supported (supported: G0 G1 G4 G20 G21 "
+        "G61 G64 G90 G91)")
+    text = (ROOT / "paths" / "rowc_wipe.csv").read_text()
+    client.put("path", {"id": "p", "name": "wipe", "text": text})
+    assert client.wait(lambda: (client.reply("p") or {}).get("ok")), client.replies
+    assert client.wait(lambda: (client.last().get("path") or {}).get("segment", 0) >= 2)
+    s = client.last()
+    assert s["motion"] == "path" and s["path"]["segments"] == 6
+    client.put("pause", {"id": "pa"})
+    assert client.wait(lambda: (client.last()["path"] or {}).get("state") == "paused"
+                       and client.last()["state"] == "enabled")  # fmt: skip
+    client.put("resume", {"id": "r"})
+    assert client.wait(lambda: client.last()["path"]["state"] == "done", timeout=40.0), (
+        client.last(), "\n".join(robot.lines[-20:]))
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
+def test_the_jog_tool_in_tmux_moves_the_platform(robot_and_client):
+    """`cdprctl jog` in a real terminal (a tmux pane): E enables, a held d (repeated every
+    50 ms, as a terminal repeats a held key) jogs +x, letting go stops it, x quits."""
+    robot, client = robot_and_client(["--accept-commands", "--allow-unauthenticated-commands"])
+    assert client.wait(lambda: client.states and client.last()["state"] == "ready")
+    name = f"cdprctl-jog-{os.getpid()}"
+    tool = (f"{sys.executable} -m cdprctl.cli jog --robot rowc --connect {robot.endpoint} "
+            "--no-multicast-scouting --speed 4")  # fmt: skip
+
+    def tmux(*a: str) -> str:
+        return subprocess.run(["tmux", *a], capture_output=True, text=True, timeout=10).stdout
+
+    tmux("new-session", "-d", "-s", name, "-x", "160", "-y", "24", tool)
+    try:
+        assert client.wait(lambda: "state ready" in tmux("capture-pane", "-p", "-t", name))
+        tmux("send-keys", "-t", name, "E")
+        assert client.wait(lambda: client.last()["state"] == "enabled")
+        x0 = client.last()["pose"]["position"][0]
+        for _ in range(30):
+            tmux("send-keys", "-t", name, "d")
+            time.sleep(0.05)
+        screen = tmux("capture-pane", "-p", "-t", name)
+        assert "jogging +x" in screen and "motion jog" in screen, screen
+        assert client.wait(lambda: client.last()["state"] == "enabled", timeout=5.0)
+        x1 = client.last()["pose"]["position"][0]
+        assert x1 - x0 > 0.05, (x0, x1)  # 50 % of 0.3 m/s for ~1.5 s
+        time.sleep(0.5)
+        assert abs(client.last()["pose"]["position"][0] - x1) < 1e-3  # it stays stopped
+        tmux("send-keys", "-t", name, "x")
+        assert client.wait(lambda: name not in tmux("ls"), timeout=10.0)
+    finally:
+        tmux("kill-session", "-t", name)

@@ -32,6 +32,12 @@ def add_parser(sub: Any) -> None:
         type=float,
         help="stop after this many seconds (the demo plays again while a round fits)",
     )
+    p.add_argument(
+        "--path",
+        metavar="FILE",
+        help="play this path once (CSV or G-code, docs/operating.md): checked whole before "
+        "the drives are enabled, then enable, path, disable; exit 0 when it finished",
+    )
     p.add_argument("--rate", type=float, help="loop rate in Hz, replacing [control] rate")
     p.add_argument(
         "--state-dir",
@@ -141,6 +147,15 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         print(f"cdprctl run: error: --duration = {args.duration} s must be > 0", file=sys.stderr)
         return 2
+    path = None
+    if args.path is not None:
+        from pathlib import Path
+
+        try:
+            path = (args.path, Path(args.path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError) as exc:
+            print(f"cdprctl run: error: --path = {args.path}: {exc}", file=sys.stderr)
+            return 2
     from drivers.errors import DriverError
 
     try:
@@ -157,5 +172,5 @@ def run(args: argparse.Namespace) -> int:
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)
         return 1
-    demo = (args.sim or args.demo) and not args.no_demo
-    return daemon.run(args.duration, demo, args.disturbance)
+    demo = (args.sim or args.demo) and not args.no_demo and path is None
+    return daemon.run(args.duration, demo, args.disturbance, path)

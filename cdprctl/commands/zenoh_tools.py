@@ -53,6 +53,11 @@ def add_parsers(sub: Any) -> None:
     p.add_argument("kind", help="command: enable, disable, stop, reset, move, set_tda, ...")
     p.add_argument("fields", nargs="*", metavar="KEY=VALUE")
     p.add_argument("--json", default="", help="the payload as one JSON object")
+    p.add_argument(
+        "--file",
+        metavar="FILE",
+        help="path: the path file (CSV or G-code) as the payload's text, its name as name",
+    )
     p.add_argument("--timeout", type=float, default=5.0, help="s to wait for the reply")
     add_zenoh_arguments(p)
 
@@ -94,8 +99,10 @@ def send(args: argparse.Namespace) -> int:
     position=1.8,0.35,0.5) or as one JSON object with --json. Commands: enable, disable,
     stop, reset, move (position m, rpy rad, max_velocity m/s, max_acceleration m/s²),
     set_tda (method, nu, direction), impose (cable, quantity energy|tension|deformation,
-    value J|N|m), gripper (gripper = its cable, and travel m, force N or release=true). Exit
-    0 accepted, 1 rejected, 2 no reply."""
+    value J|N|m), gripper (gripper = its cable, and travel m, force N or release=true), jog
+    (velocity m/s and rad/s, frame base|platform; repeat it, or use ``cdprctl jog``), path
+    (--file FILE: checked whole before it is accepted), pause, resume, abort. Exit 0
+    accepted, 1 rejected, 2 no reply."""
     prefix = _prefix(args)
     if prefix is None:
         return 2
@@ -116,6 +123,13 @@ def send(args: argparse.Namespace) -> int:
                 return 2
             k, v = f.split("=", 1)
             payload[k] = _value(v)
+    if args.file:
+        try:
+            payload["text"] = Path(args.file).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            print(f"cdprctl send: error: --file = {args.file}: {exc}", file=sys.stderr)
+            return 2
+        payload.setdefault("name", Path(args.file).name)
     payload.setdefault("id", uuid.uuid4().hex[:12])
     got: dict[str, Any] = {}
     done = threading.Event()

@@ -49,9 +49,9 @@ from numba import njit
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.torques import WinchTorques, applied_tension
-from cdprctl.control.trajectory import Trajectory
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import compliance_at
 from cdprctl.rotation import FloatArray, exp_so3_kernel
 from cdprctl.stiffness import lowest_mode

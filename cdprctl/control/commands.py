@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import Any
 
 from cdprctl.control.states import State
 from cdprctl.rotation import FloatArray
@@ -19,6 +20,11 @@ class CommandKind(enum.StrEnum):
     MOVE = "move"
     SET_TDA = "set_tda"
     GRIPPER = "gripper"
+    JOG = "jog"
+    PATH = "path"
+    PAUSE = "pause"
+    RESUME = "resume"
+    ABORT = "abort"
 
 
 class GripKind(enum.StrEnum):
@@ -37,8 +43,16 @@ class Command:
     gripper: int = 0  # gripper: index in [[grippers]]
     grip: GripKind = GripKind.TRAVEL
     value: float = 0.0  # gripper: travel (m) or squeeze force (N)
-    # move: x, y, z (m) and the rotation vector from home (rad), set by Controller.submit
+    # jog: velocity vx, vy, vz (m/s), ωx, ωy, ωz (rad/s) in ``frame`` ("base" or "platform")
+    velocity: FloatArray | None = None
+    frame: str = "base"
+    text: str = ""  # path: the file's content (CSV or G-code, motion/path_file.py)
+    name: str = ""  # path: where it came from, for the messages
+    # move, jog: x, y, z (m) and the rotation vector from home (rad), set by Controller.submit
     target: FloatArray | None = None
+    # jog: the segment's per-coordinate limits; path, resume: the checked plan (submit)
+    limits: tuple[list[float], list[float]] | None = None
+    plan: Any = None
 
     def __post_init__(self) -> None:
         # built outside the loop (the gateway, the daemon, a test): the kinds are checked
@@ -58,6 +72,11 @@ ACCEPTED_IN: dict[CommandKind, frozenset[State]] = {
     CommandKind.MOVE: _MOTION,
     CommandKind.GRIPPER: _MOTION,
     CommandKind.SET_TDA: frozenset(State),
+    CommandKind.JOG: _MOTION,
+    CommandKind.PATH: frozenset({State.ENABLED}),  # from rest: the plan starts where it stands
+    CommandKind.PAUSE: frozenset({State.MOVING}),
+    CommandKind.RESUME: frozenset({State.ENABLED}),
+    CommandKind.ABORT: _MOTION,
 }
 
 

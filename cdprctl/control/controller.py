@@ -27,16 +27,21 @@ from cdprctl.control.data import ControlData
 from cdprctl.control.distribution import Distribution
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.grippers import GripperControl
+from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
+from cdprctl.control.path_follower import PathFollower
 from cdprctl.control.states import ACTIVE_STATES, HEALTHY_STATES, FaultKind, State
 from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
-from cdprctl.control.trajectory import Trajectory
 from cdprctl.control.wrench import PoseController
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, rpy_to_matrix
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_plan import FLOOR, PathRejectedError, plan_path
+from cdprctl.motion.trajectory import Trajectory, coordinates_pose
+from cdprctl.rotation import FloatArray, exp_so3, rpy_to_matrix
 from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.base import Lifecycle, WinchStates
 
@@ -77,6 +82,13 @@ class Controller:
         torque_limits = self.winches.limit if model.drives.holds_lengths else None
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits)
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
+        # targets set by commands (submit, outside the loop) keep the soft limits
+        self.limits = SoftLimits(model, self.ext_wrench)
+        self.jog = Jog(d, tr, c.jog_deadman)
+        self.path = PathFollower(d, tr)
+        self._jog_bound: FloatArray | None = None  # where the last jog's limits end it
+        self._v_limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
+        self._a_list = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
         # commanded ones) at the estimated pose. The commanded tensions, PD feedback included,
@@ -97,6 +109,11 @@ class Controller:
             CommandKind.MOVE: self._move,
             CommandKind.SET_TDA: self._set_tda,
             CommandKind.GRIPPER: self.grippers.command,
+            CommandKind.JOG: self._jog,
+            CommandKind.PATH: self._path,
+            CommandKind.PAUSE: self._pause,
+            CommandKind.RESUME: self._resume,
+            CommandKind.ABORT: self._abort,
         }
         # what outside readers see, bound once
         d.position, d.rotation = e.position, e.rotation
@@ -169,6 +186,19 @@ class Controller:
                 d.events.append((d.time, "move ignored: pose or speed not finite/in range"))
                 return True
             cmd.target = self.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
+            why = self._line_leaves_limits(cmd.target)
+            if why:
+                d.events.append((d.time, f"move ignored: {why}"))
+                return True
+        elif cmd.kind is CommandKind.JOG:
+            if not self._plan_jog(cmd):
+                return True
+        elif cmd.kind is CommandKind.PATH:
+            if not self._plan_path(cmd):
+                return True
+        elif cmd.kind is CommandKind.RESUME:
+            if not self._plan_resume(cmd):
+                return True
         elif cmd.kind is CommandKind.SET_TDA:
             errors = ["no options"] if cmd.tda is None else cmd.tda.validate(self.model)
             if errors:
@@ -177,6 +207,87 @@ class Controller:
         if len(self.mailbox) >= (self.mailbox.maxlen or 0):
             return False
         self.mailbox.append(cmd)
+        return True
+
+    def _line_leaves_limits(self, target: FloatArray) -> str:
+        """Where the straight line from the reference to ``target`` (coordinates) leaves the
+        soft limits, or "" (``SoftLimits.ray_end``, sampled every 2 cm)."""
+        start = self.trajectory.position.copy()
+        end, why = self.limits.ray_end(start, target - start, 1.0, step=0.02)
+        if not why:
+            return ""
+        where = np.round(end[:3], 4).tolist()
+        return f"the line to the target leaves the soft limits after {where} m: {why}"
+
+    def _plan_jog(self, cmd: Command) -> bool:
+        """The jog's segment: along its velocity to where the soft limits end it (ruckig
+        brakes to stop there). False (with an event) when the command is unusable."""
+        d = self.data
+        v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
+        if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
+            np.abs(v) > self._v_limits * (1 + 1e-9)
+        ) or cmd.frame not in ("base", "platform"):  # fmt: skip
+            d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
+                             "configured limits, or frame not base/platform"))  # fmt: skip
+            return False
+        if not np.any(v):
+            cmd.target = None  # a stop
+            return True
+        start = self.trajectory.position.copy()
+        if cmd.frame == "platform":
+            R = exp_so3(start[3:]) @ self.model.home.rotation
+            v = np.concatenate([R @ v[:3], R @ v[3:]])
+        ws = self.model.workspace
+        speed, turn = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
+        reach = float(np.linalg.norm(ws.position_max - ws.position_min))
+        horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
+        end, why = self.limits.ray_end(start, v, horizon, step=0.02)
+        cmd.target = end
+        vmax = np.maximum(np.abs(v), FLOOR * self._v_limits)
+        cmd.limits = (vmax.tolist(), self._a_list)
+        # one event per bound met, not one per repeated command (the end moves by a bisection
+        # step as the reference approaches it)
+        bound = end if why else None
+        if bound is not None and (
+            self._jog_bound is None or float(np.max(np.abs(bound - self._jog_bound))) > 2e-3
+        ):
+            d.events.append((d.time, f"jog: stops at {np.round(end[:3], 4).tolist()} m: {why}"))
+        self._jog_bound = bound
+        return True
+
+    def _plan_path(self, cmd: Command) -> bool:
+        """Parse and check the whole path from where the reference is (motion/path_plan.py);
+        False (an event naming the line and the rule) when it is refused. The loop starts it
+        only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
+        d = self.data
+        name = cmd.name or "(payload)"
+        if cmd.plan is not None:  # checked already (the gateway, --path) from where it rests
+            plan, _ = cmd.plan
+            if float(np.max(np.abs(self.trajectory.position - plan.start))) <= 1e-9:
+                return True
+        try:
+            waypoints = parse_path(cmd.text, coordinates_pose(self.model, self.trajectory.position))
+            cmd.plan = (plan_path(self.model, waypoints, self.trajectory.position.copy(),
+                                  self.period, self.limits, name), 0)  # fmt: skip
+        except (PathFileError, PathRejectedError) as exc:
+            d.events.append((d.time, f"path {name} rejected: {exc}"))
+            return False
+        return True
+
+    def _plan_resume(self, cmd: Command) -> bool:
+        d, fol = self.data, self.path
+        if fol.plan is None or not fol.paused:
+            return True  # the loop says so (_resume)
+        k, offset = fol.remaining()
+        plan = fol.plan
+        durations = [None, *plan.durations[k + 1 :]]
+        try:
+            here = self.trajectory.position.copy()
+            cmd.plan = (plan_path(self.model, plan.waypoints[k:], here, self.period, self.limits,
+                                  plan.name, durations), offset)  # fmt: skip
+        except PathRejectedError as exc:
+            d.events.append((d.time, f"resume refused: {exc}"))
+            return False
         return True
 
     # -- the cycle ---------------------------------------------------------------------------------
@@ -221,13 +332,17 @@ class Controller:
         t2 = clock()
         ph[1] = (t2 - t1) / 1e3
         last = e.last_fk
+        self.jog.update(t)
+        self.path.update(t)
         self.supervisor.supervise(
             t,
             fk.status,
             last.residual if last is not None else 0.0,
             math.hypot(*e.velocity.tolist()),
-            self.trajectory.finished,
+            self.trajectory.finished and not self.path.holds_motion,
         )
+        if d.motion and self.trajectory.finished and not self.path.holds_motion:
+            d.motion = "" if self.path.plan is None else d.motion
         self.trajectory.update(d.dt)
         t3 = clock()
         ph[2] = (t3 - t2) / 1e3
@@ -339,6 +454,8 @@ class Controller:
         self.supervisor.set_state(State.DISABLING, t, "disable requested")
 
     def _stop(self, t: float, cmd: Command) -> None:
+        self.path.abort(t)
+        self.jog.active = False
         self.trajectory.stop_here()
         self.supervisor.set_state(State.ENABLED, t, "stop: decelerating, then holding")
 
@@ -351,8 +468,50 @@ class Controller:
     def _move(self, t: float, cmd: Command) -> None:
         if cmd.target is None or cmd.pose is None:  # not through submit(): nothing to act on
             return
+        self.path.abort(t)
+        self.jog.active = False
         self.trajectory.set_target(cmd.target, cmd.speed, cmd.accel)
+        self.data.motion = "move"
         self.supervisor.set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
+
+    def _jog(self, t: float, cmd: Command) -> None:
+        d = self.data
+        if self.path.plan is not None:
+            d.events.append((t, "jog ignored: a path is running (pause or abort it first)"))
+            return
+        self.jog.command(t, cmd)
+        if self.jog.active and d.state is not State.MOVING:
+            self.supervisor.set_state(State.MOVING, t, "jog")
+
+    def _path(self, t: float, cmd: Command) -> None:
+        d = self.data
+        plan, offset = cmd.plan
+        moved = float(np.max(np.abs(self.trajectory.position - plan.start)))
+        if not self.trajectory.finished or moved > 1e-9:
+            d.events.append((t, f"path {plan.name} not started: the robot moved since it was "
+                             "checked"))  # fmt: skip
+            return
+        self.path.start(t, plan, offset)
+        self.supervisor.set_state(State.MOVING, t, f"path {plan.name}: {plan.summary()}")
+
+    def _pause(self, t: float, cmd: Command) -> None:
+        if self.path.plan is None or self.path.paused:
+            self.data.events.append((t, "pause ignored: no running path"))
+            return
+        self.path.pause(t)
+
+    def _resume(self, t: float, cmd: Command) -> None:
+        if not self.path.paused or cmd.plan is None:
+            self.data.events.append((t, "resume ignored: no paused path"))
+            return
+        plan, offset = cmd.plan
+        self.path.start(t, plan, offset)
+        self.supervisor.set_state(State.MOVING, t, f"path {plan.name} resumed at segment "
+                                  f"{offset + 1}")  # fmt: skip
+
+    def _abort(self, t: float, cmd: Command) -> None:
+        self.path.abort(t)
+        self.jog.stop()
 
     def _set_tda(self, t: float, cmd: Command) -> None:
         d, opts = self.data, cmd.tda

@@ -18,6 +18,8 @@ from cdprctl.control.states import FaultKind, State
 from cdprctl.tda import TDAStatus
 
 PHASES = ("read", "estimate", "trajectory", "control", "tda", "torques", "write")
+MOTIONS = ("", "move", "jog", "path")  # what moves the reference ("": holding)
+PATH_STATES = ("", "running", "dwell", "paused", "done", "aborted", "stopped")
 
 
 class ControlData:
@@ -82,3 +84,9 @@ class ControlData:
         self.motor_position: np.ndarray = np.zeros(m)  # rad
         self.grasp: Any = None  # GraspSensor, with grippers
         self.tda_method = ""
+        # what moves the reference (MOTIONS), and a path's progress (path_follower.py)
+        self.motion = ""
+        self.path_state = ""  # PATH_STATES
+        self.path_segment = 0  # 1-based, 0: no path
+        self.path_segments = 0
+        self.path_fraction = 0.0  # of the segment's distance covered

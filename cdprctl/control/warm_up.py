@@ -79,6 +79,9 @@ def warm_up(controller: Controller) -> None:
             ns.N, t_ff, t_ff.copy(), t_min, t_max, verts, verts.copy(), zeros.copy()
         )
         least_violating(ns.N, ns.t0, t_min, t_max)  # a wrench no tensions can produce
+    # not the cycle's but beside it: a jog's or a path's soft limits, checked by submit() in
+    # the daemon's I/O thread while the loop runs (a compile there would hold the GIL)
+    c.limits.check(np.tile(c.trajectory.position, (2, 1)))
     c.observer.warm_up()
     c.pose.update(True)
     c.pose.reset()

@@ -11,8 +11,8 @@ import numpy as np
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd_wrench_kernel
-from cdprctl.control.trajectory import Trajectory
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 

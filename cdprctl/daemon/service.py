@@ -99,6 +99,10 @@ class Daemon:
         self._errors: list[float] = []
         self._true_errors: list[float] = []  # m, the simulated platform against the reference
         self._last_t: float | None = None
+        self._path: tuple[str, str] | None = None  # --path: (name, text)
+        self._path_sent = self._enable_sent = False
+        self._path_cycle = 0
+        self._plan: Any = None  # --path's, checked before the drives were enabled
         self._stop_deadline = float("inf")
         self.faults: collections.Counter[str] = collections.Counter()
         self.link: Any = None
@@ -120,8 +124,17 @@ class Daemon:
             self._last_t = t
             self.sim.advance(min(max(dt, 0.0), 0.05))
 
-    def run(self, duration: float | None, demo: bool, force: float = 0.0) -> int:
+    def run(
+        self,
+        duration: float | None,
+        demo: bool,
+        force: float = 0.0,
+        path: tuple[str, str] | None = None,
+    ) -> int:
+        """``path``: (name, text) of a path file to play once (enable, the path, disable);
+        checked whole before the drives are enabled (exit 2 when rejected)."""
         c = self.controller
+        self._path = path
         self._print(
             f"cdprctl run: {self.model.name}, {self.model.n_cables} "
             f"{self.model.drives.driver} drives, {self.model.control.rate:g} Hz, TDA "
@@ -186,6 +199,13 @@ class Daemon:
         for w in self.driver.warnings:
             self._print(f"warning: {w}", err=True)
         self._report_identities()
+        if path is not None and not self._check_path(*path):
+            self.driver.shutdown()
+            if self.sim is not None:
+                self.sim.close()
+            if self.link is not None:
+                self.link.close()
+            return 2
         p = c.estimator.position
         self._print(
             f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
@@ -227,7 +247,51 @@ class Daemon:
         if self.link is not None:
             self.link.close()
         self._report()
+        if path is not None and not self.stop_requested.is_set():
+            self._print(f"path {path[0]}: {c.data.path_state or 'not run'}")
+            return 0 if c.data.path_state == "done" else 3
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
+
+    def _check_path(self, name: str, text: str) -> bool:
+        """The whole path from the pose start-up found, before any motion."""
+        from cdprctl.motion.path_file import PathFileError, parse_path
+        from cdprctl.motion.path_plan import PathRejectedError, plan_path
+        from cdprctl.motion.trajectory import coordinates_pose
+
+        c = self.controller
+        start = c.trajectory.position.copy()
+        try:
+            plan = plan_path(self.model, parse_path(text, coordinates_pose(self.model, start)),
+                             start, self.model.control.period, c.limits, name)  # fmt: skip
+        except (PathFileError, PathRejectedError) as exc:
+            self._print(f"cdprctl run: path {name} rejected: {exc}", err=True)
+            return False
+        self._print(f"path {name}: {plan.summary()}")
+        self._plan = plan
+        return True
+
+    def _path_step(self) -> bool:
+        """Plays ``--path``: enable, send it, and True once it ended (done, or stopped)."""
+        c, d = self.controller, self.controller.data
+        assert self._path is not None
+        if not self._path_sent:
+            if c.state is State.READY:
+                if not self._enable_sent:
+                    c.submit(Command(CommandKind.ENABLE))
+                    self._enable_sent = True
+            elif c.state is State.ENABLED and c.trajectory.finished:
+                name, text = self._path
+                c.submit(Command(CommandKind.PATH, text=text, name=name, plan=(self._plan, 0)))
+                self._path_sent = True
+                self._path_cycle = c.cycle
+            elif c.state is State.FAULT:
+                return True
+            return False
+        if c.state is State.FAULT:
+            return True
+        if c.cycle < self._path_cycle + 3:  # the loop has not taken it yet
+            return False
+        return d.path_state in ("done", "aborted", "stopped", "") and c.state is State.ENABLED
 
     def _calibration(self, driver: Any) -> tuple[np.ndarray, np.ndarray]:
         """The record's offsets, once the configured drives match it (``Manager.startup``)."""
@@ -287,6 +351,8 @@ class Daemon:
         script = demo_script(self.model, force) if demo else []
         next_status = 0.0
         stopping_since: float | None = None
+        self._enable_sent = False
+        path_over = False
         link = self.link
         tick = 0.05 if link is None else min(0.05, 1.0 / self.model.zenoh.state_rate)
         next_tick = time.monotonic()
@@ -319,7 +385,9 @@ class Daemon:
                 again = demo_script(self.model, force)
                 if now + again[-1][0] < duration:
                     script = [(now + at, action) for at, action in again]
-            end = (duration is not None and now >= duration) or (
+            if self._path is not None and not path_over:
+                path_over = self._path_step()
+            end = path_over or (duration is not None and now >= duration) or (
                 demo and not script and duration is None and c.state in (State.READY, State.FAULT)
             )
             if (end or self.stop_requested.is_set()) and stopping_since is None:
@@ -364,6 +432,8 @@ class Daemon:
             f"{e.position[2]:.3f}] m{sim} err {np.linalg.norm(c.pose_error[:3]) * 1e3:5.2f} mm "
             f"t {c.tensions.min():5.1f}..{c.tensions.max():5.1f} N tda {c.tda_status.name}"
             + (f" sat {c.data.saturation:.2f}" if c.data.saturation < 1.0 else "")
+            + (f" path {c.data.path_segment}/{c.data.path_segments} "
+               f"{c.data.path_fraction:.0%} {c.data.path_state}" if c.data.path_segments else "")
             + " "
             f"late p99 {s.get('lateness_p99_us', 0):6.0f} us missed {int(s.get('missed', 0))}"
         )
@@ -472,6 +542,11 @@ class Daemon:
             "torque_limit": [w.winch.torque_limit for w in m.cables],
             "rate_hz": c.rate,
             "tda": c.tda_method,
+            "limits": {  # what a jog may ask (control/jog.py)
+                "max_velocity": c.max_velocity,
+                "max_angular_velocity": c.max_angular_velocity,
+                "jog_deadman": c.jog_deadman,
+            },
             "workspace": {
                 "position_min": m.workspace.position_min.tolist(),
                 "position_max": m.workspace.position_max.tolist(),

@@ -25,6 +25,7 @@ CONTROL_KEYS = (
     "max_angular_velocity",
     "max_angular_acceleration",
     "max_angular_jerk",
+    "jog_deadman",
     "tda",
     "safety",
     "realtime",
@@ -80,6 +81,7 @@ class ControlConfig:
     max_angular_velocity: float = 0.3  # rad/s
     max_angular_acceleration: float = 1.0  # rad/s²
     max_angular_jerk: float = 10.0  # rad/s³
+    jog_deadman: float = 0.2  # s without a jog command before the jog stops (control/jog.py)
     friction_compensation: bool = True  # winch viscous + Coulomb friction feedforward
     external_wrench: tuple[float, ...] = (0.0,) * 6  # N, N·m at P, base frame: known, fed forward
     tda_method: str = "barycenter"
@@ -146,6 +148,7 @@ def read_control(
     num("observer_bandwidth", "Hz", minimum=0.0)
     num("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0)
     num("force_feedback", "× the lowest mode", minimum=0.0, maximum=10.0)
+    num("jog_deadman", "s", positive=True, maximum=5.0)
     for key, unit in (
         ("max_velocity", "m/s"),
         ("max_acceleration", "m/s²"),

@@ -37,7 +37,7 @@ TOP_KEYS = (
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
-WORKSPACE_KEYS = ("position_min", "position_max", "max_angle")
+WORKSPACE_KEYS = ("position_min", "position_max", "max_angle", "wrench_margin")
 WINCH_KEYS = (
     "drum_radius",
     "gear_ratio",
@@ -398,6 +398,8 @@ def _read_workspace(rd: TableReader, data: dict[str, Any]) -> Workspace | None:
     lo = rd.vector(t, "position_min", "workspace", "m")
     hi = rd.vector(t, "position_max", "workspace", "m")
     max_angle = rd.number(t, "max_angle", "workspace", "rad", positive=True, maximum=math.pi)
+    margin = rd.number(t, "wrench_margin", "workspace", "N", required=False, default=None,
+                       minimum=0.0)  # fmt: skip
     if lo is not None and hi is not None:
         for k, axis in enumerate("xyz"):
             if lo[k] >= hi[k]:
@@ -411,4 +413,4 @@ def _read_workspace(rd: TableReader, data: dict[str, Any]) -> Workspace | None:
                 break
     if lo is None or hi is None or max_angle is None:
         return None
-    return Workspace(position_min=lo, position_max=hi, max_angle=max_angle)
+    return Workspace(position_min=lo, position_max=hi, max_angle=max_angle, wrench_margin=margin)

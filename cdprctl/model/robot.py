@@ -108,6 +108,9 @@ class Workspace:
     position_min: FloatArray  # m, base frame
     position_max: FloatArray  # m, base frame
     max_angle: float  # rad, largest rotation angle away from the home orientation
+    # N: a target (a move's, a jog's, a path's) must be held with the best distribution this
+    # far from every tension limit; None: the TDA's tension_margin + 1 % of the smallest range
+    wrench_margin: float | None = None
 
 
 @dataclass(frozen=True)
@@ -168,6 +171,14 @@ class RobotModel:
     def cable_stiffness(self, lengths: FloatArray) -> FloatArray:
         """Axial stiffness k_i (N/m) of every cable at geometric lengths ``lengths`` (m)."""
         return np.array([c.axial_stiffness(float(lengths[i])) for i, c in enumerate(self.cables)])
+
+    @property
+    def soft_margin(self) -> float:
+        """N: the tension margin every target keeps (``[workspace] wrench_margin``)."""
+        if self.workspace.wrench_margin is not None:
+            return self.workspace.wrench_margin
+        span = float(np.min(self.tension_max - self.tension_min))
+        return self.control.tension_margin + 0.01 * span
 
     def gravity_wrench(self, R: FloatArray) -> FloatArray:
         """Wrench of gravity on the platform (N, N·m), base frame, moments about ``P``.

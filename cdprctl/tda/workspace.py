@@ -65,7 +65,7 @@ class Margins:
         return float(self.of(position[None], R[None], wrench[None])[0])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # a jog's or a path's check runs beside the loop's thread
 def _margins_r2(k, P, R, w, lo, hi, out):  # pragma: no cover - compiled
     W = k[10]
     length = k[9]

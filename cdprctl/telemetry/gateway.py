@@ -7,6 +7,7 @@ daemon through a bounded queue; each command gets a reply on ``<prefix>/reply/<k
 from __future__ import annotations
 
 import json
+import math
 import os
 import queue
 import sys
@@ -72,11 +73,17 @@ def gateway_main(
     shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
     counts = {"accepted": 0, "rejected": 0}
     limiter = {"last": -1.0, "suppressed": 0}
-    log_limit = {"second": -1, "lines": 0, "suppressed": 0}
+    log_limit = {"second": -1, "lines": 0, "suppressed": 0, "jog": -math.inf}
 
     def log(kind: str, request_id: Any, ok: bool, text: str) -> None:
-        """One line per command on stderr (journald): every accepted one; rejected ones at
-        most 20 a second, then how many more, so a flood cannot flood the journal."""
+        """One line per command on stderr (journald): every accepted one but a held jog's
+        repeats (the first of a run, then none while they keep coming within 1 s); rejected
+        ones at most 20 a second, then how many more, so a flood cannot flood the journal."""
+        if kind == "jog" and ok:
+            now, last = time.monotonic(), log_limit["jog"]
+            log_limit["jog"] = now
+            if now - last < 1.0:
+                return
         second = int(time.monotonic())
         if second != log_limit["second"]:
             if log_limit["suppressed"]:
@@ -115,7 +122,7 @@ def gateway_main(
         kind = str(sample.key_expr).rsplit("/", 1)[-1]
         request_id = None
         try:
-            d = validator.parse(sample.payload.to_bytes())
+            d = validator.parse(sample.payload.to_bytes(), kind)
             request_id = d.get("id")
             if request_id is not None and (
                 not isinstance(request_id, (str, int)) or len(str(request_id)) > 64

@@ -96,6 +96,13 @@ class TelemetryLink:
                 )
             elif kind == "set_tda":
                 out.append(Command(CommandKind.SET_TDA, tda=params["tda"]))
+            elif kind == "jog":
+                out.append(Command(CommandKind.JOG, velocity=np.array(params["velocity"]),
+                                   frame=params["frame"]))  # fmt: skip
+            elif kind == "path":
+                plan = params.get("plan")
+                out.append(Command(CommandKind.PATH, text=params["text"], name=params["name"],
+                                   plan=None if plan is None else (plan, 0)))  # fmt: skip
             else:
                 out.append(Command(CommandKind(kind)))
         return out

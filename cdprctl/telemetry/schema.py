@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.control.data import MOTIONS, PATH_STATES
 from cdprctl.gripper import GraspState
 from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES, TDA_METHODS, TDA_STATUSES, TIMING
 
@@ -83,6 +84,7 @@ def state_payload(
         "motor_position": _floats(snap["motor_position"]),
         "motor_target": _floats(snap["motor_target"]),
         "measured_tensions": _floats(snap["measured_tensions"], 3),
+        **_motion(snap),
         "tda": {
             "method": TDA_METHODS[int(snap["tda_method"][0])],
             "status": TDA_STATUSES[int(snap["tda_status"][0])],
@@ -94,6 +96,18 @@ def state_payload(
         **({"true_position": _floats(true)} if np.all(np.isfinite(true)) else {}),
         **({"grippers": grip} if grip else {}),
     }
+
+
+def _motion(snap: dict[str, np.ndarray]) -> dict[str, Any]:
+    """What moves the reference, and a path's progress (segment 1-based, fraction of it)."""
+    m, p = snap["motion"][0], snap["path"]
+    if not (math.isfinite(m) and np.all(np.isfinite(p))):
+        return {"motion": "", "path": None}
+    path = None
+    if p[1] > 0:
+        path = {"segment": int(p[0]), "segments": int(p[1]), "fraction": round(float(p[2]), 4),
+                "state": PATH_STATES[int(p[3])]}  # fmt: skip
+    return {"motion": MOTIONS[int(m)], "path": path}
 
 
 def timing_payload(snap: dict[str, np.ndarray]) -> dict[str, Any]:

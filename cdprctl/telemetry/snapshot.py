@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.data import ControlData
+from cdprctl.control.data import MOTIONS, PATH_STATES, ControlData
 from cdprctl.control.states import FaultKind, State
 from cdprctl.tda import TDAMethod, TDAStatus
 
@@ -45,6 +45,8 @@ class Layout:
             ("saturation", 1),  # the fraction of the feedback wrench the cables give (1: all)
             ("saturated_cycles", 1),
             ("cycle", 1),
+            ("motion", 1),  # index in MOTIONS
+            ("path", 4),  # segment (1-based), segments, fraction of the segment, PATH_STATES index
             ("position", 3),  # m, P in the base frame
             ("rpy", 3),  # rad, roll-pitch-yaw of the platform in the base frame
             ("velocity", 3),  # m/s
@@ -135,6 +137,8 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "saturation": d.saturation,
         "saturated_cycles": d.saturated_cycles,
         "cycle": d.cycle,
+        "motion": MOTIONS.index(d.motion),
+        "path": (d.path_segment, d.path_segments, d.path_fraction, PATH_STATES.index(d.path_state)),
         "position": d.position,
         "rpy": matrix_to_rpy(d.rotation),
         "velocity": d.velocity,

@@ -16,6 +16,8 @@ from cdprctl.gripper import GripperSet
 from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model.control import METHODS
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.trajectory import pose_coordinates
 from cdprctl.rotation import log_so3, rpy_to_matrix
 from cdprctl.stiffness import cable_stiffnesses
 from cdprctl.tda import (
@@ -45,7 +47,14 @@ FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is alway
     "set_tda": {"method": "", "nu": "", "direction": ""},
     "impose": {"cable": "", "quantity": "", "value": "J, N or m"},
     "gripper": {"gripper": "", "travel": "m", "force": "N", "release": ""},
+    "jog": {"velocity": "m/s, rad/s", "frame": ""},
+    "path": {"text": "", "name": ""},
+    "pause": {},
+    "resume": {},
+    "abort": {},
 }
+MAX_PAYLOAD = 4096  # bytes
+MAX_PATH_PAYLOAD = 1 << 20  # bytes: a path file travels in its command
 
 
 class CommandError(Exception):
@@ -87,12 +96,14 @@ class CommandValidator:
         self.enabled = commands_enabled
         self.kin = KinematicsData(model)
         self.tda = TensionDistributor(model, tda_options_of(model))
+        self.limits = SoftLimits(model)
         self._grip: GripperSet | None = None
         self._range_tda: TensionDistributor | None = None
 
-    def parse(self, payload: bytes) -> dict[str, Any]:
-        if len(payload) > 4096:
-            raise CommandError(f"payload of {len(payload)} bytes exceeds 4096 bytes")
+    def parse(self, payload: bytes, kind: str = "") -> dict[str, Any]:
+        limit = MAX_PATH_PAYLOAD if kind == "path" else MAX_PAYLOAD
+        if len(payload) > limit:
+            raise CommandError(f"payload of {len(payload)} bytes exceeds {limit} bytes")
         if not payload.strip():
             return {}
         try:
@@ -130,7 +141,57 @@ class CommandValidator:
             return "set_tda", {"tda": self._impose(d)}
         if kind == "gripper":
             return "gripper", self._gripper(d, snap)
+        if kind == "jog":
+            return "jog", self._jog(d)
+        if kind == "path":
+            return "path", self._path(d, snap)
         return kind, {}
+
+    def _jog(self, d: dict[str, Any]) -> dict[str, Any]:
+        """``{"velocity": [vx, vy, vz, ωx, ωy, ωz] (m/s, rad/s), "frame": "base"|"platform"}``;
+        repeat it at least every ``[control] jog_deadman`` s to keep moving."""
+        c = self.model.control
+        if "velocity" not in d:
+            raise CommandError("jog: velocity [vx, vy, vz, wx, wy, wz] (m/s, rad/s) is required")
+        v = _vector(d, "velocity", "m/s, rad/s", 6)
+        for k in range(6):
+            if k < 3:
+                lim, unit, name = c.max_velocity, "m/s", "max_velocity"
+            else:
+                lim, unit, name = c.max_angular_velocity, "rad/s", "max_angular_velocity"
+            if abs(v[k]) > lim:
+                raise CommandError(f"velocity[{k}] = {v[k]:g} {unit} exceeds [control] {name} "
+                                   f"= {lim:g} {unit}")  # fmt: skip
+        frame = d.get("frame", "base")
+        if frame not in ("base", "platform"):
+            raise CommandError(f"frame = {json.dumps(frame)} must be \"base\" or \"platform\"")
+        return {"velocity": v.tolist(), "frame": frame}
+
+    def _path(self, d: dict[str, Any], snap: dict[str, Any] | None) -> dict[str, Any]:
+        """``{"text": the CSV or G-code file, "name": where it came from}``: parsed and the
+        whole path checked from where the robot rests now (the controller checks again from
+        the reference it holds when the command arrives; a refusal there is an event)."""
+        from cdprctl.motion.path_file import PathFileError, parse_path
+        from cdprctl.motion.path_plan import PathRejectedError, plan_path
+        from cdprctl.motion.trajectory import coordinates_pose
+
+        text, name = d.get("text"), d.get("name", "")
+        if not isinstance(text, str) or not text.strip():
+            raise CommandError("path: text (the path file's content, CSV or G-code) is required")
+        if not isinstance(name, str) or len(name) > 200:
+            raise CommandError("path: name must be a string of at most 200 characters")
+        plan = None
+        if snap is not None and np.all(np.isfinite(snap["reference"])):
+            start = np.asarray(snap["reference"], dtype=float)
+            pose = coordinates_pose(self.model, start)
+            try:
+                plan = plan_path(self.model, parse_path(text, pose), start,
+                                 self.model.control.period, name=name)  # fmt: skip
+            except (PathFileError, PathRejectedError) as exc:
+                raise CommandError(f"path {name}: {exc}") from None
+        # the plan travels with the text: the daemon uses it when the robot still rests where
+        # it was made (no second planning beside the loop), and plans again otherwise
+        return {"text": text, "name": name, "plan": plan}
 
     def _move(self, d: dict[str, Any]) -> dict[str, Any]:
         m, c, ws = self.model, self.model.control, self.model.workspace
@@ -168,6 +229,13 @@ class CommandValidator:
             raise CommandError(
                 f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad "
                 f"cannot be held within the tension limits ({out.status.name}: {out.message})"
+            )
+        target = pose_coordinates(m, p, R)
+        margin, ok = self.limits.check(target[None])
+        if not ok[0]:
+            raise CommandError(
+                f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad: "
+                f"{self.limits.why(target, float(margin[0]))}"
             )
         return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
 

@@ -6,6 +6,13 @@ for the small tilts of a CDPR (``workspace.max_angle``) ``φ̇`` is taken as the
 ruckig ignores position limits in its community edition: targets are clamped to the workspace
 box and the largest angle here, before ruckig sees them. Targets may change mid-motion: the
 next update starts from the current state. The call never raises.
+
+A segment (``set_segment``, a path's or a jog's) may end moving (a nonzero target velocity:
+the path passes through its waypoint) and have its own per-coordinate limits, each no larger
+than the configured ones, and a minimum duration (a timed waypoint). Every profile ruckig
+returns keeps its velocity, acceleration and jerk limits; a segment starts from the state the
+last one ended in (position, velocity, acceleration continuous), so the jerk limits hold
+across the switch as well.
 """
 
 from __future__ import annotations
@@ -22,12 +29,24 @@ from ruckig import (
 )
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, log_so3
+from cdprctl.rotation import FloatArray, exp_so3, log_so3, matrix_to_rpy
 
 # Phase synchronisation: a straight line in the 6-D pose space, what a point-to-point move of
 # a CDPR should be; ruckig (0.19) raises RuckigError on some inputs ("error in step 1"), then
 # time synchronisation, then none, are tried.
 _SYNC_ORDER = (Synchronization.Phase, Synchronization.Time, Synchronization.No)
+
+
+def pose_coordinates(model: RobotModel, position: FloatArray, rotation: FloatArray) -> FloatArray:
+    """The trajectory's 6 coordinates of a pose: ``position`` (m) and the rotation vector
+    (rad) of ``rotation`` from the home orientation."""
+    return np.concatenate([position, log_so3(rotation @ model.home.rotation.T)])
+
+
+def coordinates_pose(model: RobotModel, x: FloatArray) -> FloatArray:
+    """x, y, z, roll, pitch, yaw (m, rad) of the trajectory coordinates ``x``."""
+    R = exp_so3(np.asarray(x[3:], dtype=float)) @ model.home.rotation
+    return np.concatenate([x[:3], matrix_to_rpy(R)])
 
 
 class Trajectory:
@@ -50,14 +69,17 @@ class Trajectory:
         self.finished = True
         self.result = Result.Finished
         self._velocity_mode = False  # braking: ruckig's velocity interface to zero velocity
+        self._zero6 = [0.0] * 6
+        self._full_acceleration = self.acc_limits.tolist()  # a stop brakes with all there is
+        self._target_velocity = self._zero6  # ruckig's target velocity (a list: the binding's)
 
     def coordinates(self, position: FloatArray, rotation: FloatArray) -> FloatArray:
-        """The trajectory's 6 coordinates of a pose: ``position`` (m) and the rotation vector
-        (rad) of ``rotation`` from the home orientation."""
-        return np.concatenate([position, log_so3(rotation @ self.model.home.rotation.T)])
+        return pose_coordinates(self.model, position, rotation)
 
     def reset(self, x: FloatArray) -> None:
         """Hold still at ``x`` (no motion, no jump)."""
+        self._target_velocity = self._zero6
+        self.inp.minimum_duration = None
         self.position[:] = x
         self.velocity[:] = 0.0
         self.acceleration[:] = 0.0
@@ -82,9 +104,31 @@ class Trajectory:
         self.target[:] = y
         self.inp.max_velocity = (self.limits * min(1.0, max(1e-3, speed_scale))).tolist()
         self.inp.max_acceleration = (self.acc_limits * min(1.0, max(1e-3, accel_scale))).tolist()
+        self._target_velocity = self._zero6
+        self.inp.minimum_duration = None
         self.finished = False
         self._velocity_mode = False
         return True
+
+    def set_segment(
+        self,
+        x: FloatArray,
+        velocity: list[float],
+        max_velocity: list[float],
+        max_acceleration: list[float],
+        minimum_duration: float | None = None,
+    ) -> None:
+        """A segment to ``x`` (clamped), reached at ``velocity``, with these per-coordinate
+        limits (lists built outside the loop, each within the configured limits) and at least
+        ``minimum_duration`` s long."""
+        y, _ = self.clamp(x)
+        self.target[:] = y
+        self._target_velocity = velocity
+        self.inp.max_velocity = max_velocity
+        self.inp.max_acceleration = max_acceleration
+        self.inp.minimum_duration = minimum_duration
+        self.finished = False
+        self._velocity_mode = False
 
     def stop_here(self) -> None:
         """Decelerate to rest (jerk-limited) wherever that ends."""
@@ -92,8 +136,11 @@ class Trajectory:
         self.inp.current_velocity = self.velocity.tolist()
         self.inp.current_acceleration = self.acceleration.tolist()
         self.inp.control_interface = ControlInterface.Velocity
-        self.inp.target_velocity = [0.0] * 6
-        self.inp.target_acceleration = [0.0] * 6
+        self.inp.max_acceleration = self._full_acceleration
+        self.inp.target_velocity = self._zero6
+        self.inp.target_acceleration = self._zero6
+        self.inp.minimum_duration = None
+        self._target_velocity = self._zero6
         self.finished = False
         self._velocity_mode = True
 
@@ -111,8 +158,8 @@ class Trajectory:
         if not self._velocity_mode:
             inp.control_interface = ControlInterface.Position
             inp.target_position = self.target.tolist()
-            inp.target_velocity = [0.0] * 6
-            inp.target_acceleration = [0.0] * 6
+            inp.target_velocity = self._target_velocity
+            inp.target_acceleration = self._zero6
         res = Result.Error
         for sync in _SYNC_ORDER:
             inp.synchronization = sync

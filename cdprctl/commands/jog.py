@@ -1,0 +1,212 @@
+"""``cdprctl jog``: move a robot by hand from a terminal, over Zenoh (``cmd/jog``)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import select
+import sys
+import termios
+import threading
+import time
+import tty
+from typing import Any
+
+from cdprctl.commands.common import command_parser
+from cdprctl.commands.zenoh_tools import _prefix, _session, _status, add_zenoh_arguments
+
+# key → (coordinate, sign): x y z (m/s), roll pitch yaw (rad/s about the frame's axes)
+KEYS = {
+    "d": (0, 1), "a": (0, -1),
+    "w": (1, 1), "s": (1, -1),
+    "e": (2, 1), "q": (2, -1),
+    "l": (3, 1), "j": (3, -1),
+    "i": (4, 1), "k": (4, -1),
+    "o": (5, 1), "u": (5, -1),
+}  # fmt: skip
+SPEEDS = (0.01, 0.05, 0.1, 0.25, 0.5, 1.0)  # fractions of the configured velocity limits
+# A terminal sends no key-up: a held key repeats after ~0.25-0.66 s, then 25-30 times/s. A
+# first press holds for HOLD_FIRST (the repeat delay); once repeats come, a key counts as held
+# while they keep coming within HOLD: let go, and the jog ends (a zero jog) that soon.
+HOLD_FIRST = 0.7  # s
+HOLD = 0.15  # s
+REPEAT = 0.1  # s: key events closer than this are a held key's repeats
+SEND_EVERY = 0.05  # s: well inside the daemon's deadman (default 0.2 s)
+
+HELP = """\
+keys (hold to move; a terminal repeats a held key after ~0.5 s, so a tap moves a bit):
+  d/a +x/-x   w/s +y/-y   e/q +z/-z   l/j +roll/-roll   i/k +pitch/-pitch   o/u +yaw/-yaw
+  +/- speed step   f frame base/platform   space stop   E enable   D disable   R reset   x quit"""
+
+
+def add_parser(sub: Any) -> None:
+    p = command_parser(sub, "jog", "move a robot by hand from this terminal", jog, config=False)
+    p.add_argument("--speed", type=int, default=2, choices=range(len(SPEEDS)),
+                   help="start at this step of " + ", ".join(f"{s * 100:g}%%" for s in SPEEDS)
+                   + " of the configured limits (default 2)")  # fmt: skip
+    p.add_argument("--frame", choices=("base", "platform"), default="base")
+    add_zenoh_arguments(p)
+
+
+class Jogger:
+    """The tool's state; ``key`` takes a key, ``tick`` sends what is due."""
+
+    def __init__(self, session: Any, prefix: str, limits: dict[str, float], speed: int,
+                 frame: str):  # fmt: skip
+        self.session, self.prefix = session, prefix
+        self.vmax = float(limits.get("max_velocity", 0.1))
+        self.wmax = float(limits.get("max_angular_velocity", 0.1))
+        self.speed, self.frame = speed, frame
+        self.axis: tuple[int, int] | None = None
+        self.last_key = 0.0
+        self.repeating = False
+        self.last_send = 0.0
+        self.moving = False
+        self.note = ""
+        self.quit = False
+
+    def put(self, kind: str, payload: dict[str, Any] | None = None) -> None:
+        self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(payload or {}))
+
+    def velocity(self) -> list[float]:
+        v = [0.0] * 6
+        if self.axis is not None:
+            k, sign = self.axis
+            v[k] = sign * SPEEDS[self.speed] * (self.vmax if k < 3 else self.wmax)
+        return v
+
+    def key(self, ch: str, now: float) -> None:
+        if ch in KEYS:
+            if self.axis != KEYS[ch]:
+                self.axis = KEYS[ch]
+                self.last_send = 0.0  # a new direction goes out at once
+                self.repeating = False
+            else:
+                self.repeating = now - self.last_key < REPEAT
+            self.last_key = now
+        elif ch == " ":
+            self.axis = None
+            self.put("jog", {"velocity": [0.0] * 6, "frame": self.frame})
+            self.put("stop")
+            self.moving = False
+            self.note = "stop"
+        elif ch in "+=":
+            self.speed = min(len(SPEEDS) - 1, self.speed + 1)
+        elif ch == "-":
+            self.speed = max(0, self.speed - 1)
+        elif ch == "f":
+            self.frame = "platform" if self.frame == "base" else "base"
+        elif ch in "EDR":
+            kind = {"E": "enable", "D": "disable", "R": "reset"}[ch]
+            self.put(kind)
+            self.note = kind
+        elif ch in ("x", "\x03", "\x04"):
+            self.quit = True
+
+    def tick(self, now: float) -> None:
+        hold = HOLD if self.repeating else HOLD_FIRST
+        held = self.axis is not None and now - self.last_key < hold
+        if held and now - self.last_send >= SEND_EVERY:
+            self.put("jog", {"velocity": self.velocity(), "frame": self.frame})
+            self.last_send, self.moving = now, True
+        elif not held and self.moving:  # let go: stop now, not at the deadman
+            self.axis = None
+            self.put("jog", {"velocity": [0.0] * 6, "frame": self.frame})
+            self.moving = False
+
+
+def _view(j: Jogger, state: dict[str, Any] | None, prefix: str) -> str:
+    names = ("+x", "+y", "+z", "+roll", "+pitch", "+yaw")
+    moving = "-"
+    if j.axis is not None and j.moving:
+        k, sign = j.axis
+        moving = ("-" if sign < 0 else "+") + names[k][1:]
+    lines = [f"cdprctl jog {prefix}   speed {SPEEDS[j.speed]:.0%} of the limits "
+             f"({SPEEDS[j.speed] * j.vmax:.3g} m/s, {SPEEDS[j.speed] * j.wmax:.3g} rad/s)   "
+             f"frame {j.frame}   jogging {moving}"]  # fmt: skip
+    if state is None:
+        lines.append("waiting for the robot's state ...")
+    else:
+        p, rpy = state["pose"]["position"], state["pose"]["rpy"]
+        lines.append(f"state {state['state']:<9} position [{p[0]:.4f} {p[1]:.4f} {p[2]:.4f}] m"
+                     f"  rpy [{rpy[0]:.4f} {rpy[1]:.4f} {rpy[2]:.4f}] rad"
+                     f"  motion {state.get('motion') or '-'}")  # fmt: skip
+        if state.get("fault"):
+            lines.append(f"fault: {state['fault']}")
+    if j.note:
+        lines.append(j.note)
+    lines.append(HELP)
+    return "\x1b[H\x1b[2J" + "\r\n".join(x.replace("\n", "\r\n") for x in lines)
+
+
+def jog(args: argparse.Namespace) -> int:
+    """Move the robot with the keyboard: each held key is a velocity (a fraction of the
+    configured limits) sent as cmd/jog every 50 ms; the daemon stops at the soft limits and
+    when the jogs stop coming (its deadman). Needs the daemon to accept commands
+    (docs/telemetry.md) and a terminal."""
+    prefix = _prefix(args)
+    if prefix is None:
+        return 2
+    if not os.isatty(sys.stdin.fileno()):
+        print("cdprctl jog: error: needs a terminal (stdin is not a tty)", file=sys.stderr)
+        return 2
+    session = _session(args)
+    latest: dict[str, Any] = {}
+    lock = threading.Lock()
+
+    def on_state(sample: Any) -> None:
+        try:
+            with lock:
+                latest["state"] = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            pass
+
+    def on_reply(sample: Any) -> None:
+        try:
+            body = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        if not body.get("ok"):
+            kind = str(sample.key_expr).rsplit("/", 1)[-1]
+            with lock:
+                latest["note"] = f"{kind} rejected: {body.get('reason')}"
+
+    subs = [session.declare_subscriber(f"{prefix}/state", on_state),
+            session.declare_subscriber(f"{prefix}/reply/*", on_reply)]  # fmt: skip
+    limits = _status(session, prefix).get("config", {}).get("limits", {})
+    j = Jogger(session, prefix, limits, args.speed, args.frame)
+    if not limits:
+        j.note = f"no status from {prefix}: the limits are guesses (0.1 m/s, 0.1 rad/s)"
+    fd = sys.stdin.fileno()
+    saved = termios.tcgetattr(fd)
+    next_draw = 0.0
+    try:
+        tty.setcbreak(fd)
+        while not j.quit:
+            ready, _, _ = select.select([fd], [], [], 0.02)
+            now = time.monotonic()
+            if ready:
+                for ch in os.read(fd, 64).decode(errors="ignore"):
+                    j.key(ch, now)
+            j.tick(now)
+            if now >= next_draw:
+                with lock:
+                    if "note" in latest:
+                        j.note = latest.pop("note")
+                    state = latest.get("state")
+                sys.stdout.write(_view(j, state, prefix))
+                sys.stdout.flush()
+                next_draw = now + 0.1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        try:
+            j.put("jog", {"velocity": [0.0] * 6, "frame": j.frame})
+        finally:
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+            for s in subs:
+                s.undeclare()
+            session.close()
+            print()
+    return 0

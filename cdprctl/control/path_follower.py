@@ -1,0 +1,107 @@
+"""Plays a checked path plan (``motion.path_plan``) in the loop: each segment handed to the
+trajectory when the last one ends (or its dwell has passed), the progress written into
+``ControlData`` (``path_segment``, ``path_fraction``, ``path_state``). Pause brakes onto the
+path and holds; resume continues with a plan ``Controller.submit`` made from where it stands;
+abort brakes and forgets the path; a fault or a stop ends it ("stopped")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import State
+from cdprctl.motion.path_plan import PathPlan
+from cdprctl.motion.trajectory import Trajectory
+
+
+class PathFollower:
+    def __init__(self, data: ControlData, trajectory: Trajectory):
+        self.data = data
+        self.trajectory = trajectory
+        self.plan: PathPlan | None = None
+        self.k = 0  # the segment under way (0-based, in ``plan``)
+        self.offset = 0  # segments of the original path before ``plan`` (after a resume)
+        self.paused = False
+        self._dwell_until = math.nan
+        self._seg_start = np.zeros(6)
+
+    @property
+    def holds_motion(self) -> bool:
+        """True while the path runs (in a dwell too): its state stays MOVING."""
+        return self.plan is not None and not self.paused
+
+    def start(self, t: float, plan: PathPlan, offset: int = 0) -> None:
+        d = self.data
+        self.plan, self.offset, self.paused = plan, offset, False
+        self.k = -1
+        d.motion = "path"
+        d.path_segments = offset + len(plan.segments)
+        self._next(t)
+
+    def _next(self, t: float) -> None:
+        d, plan = self.data, self.plan
+        assert plan is not None
+        self.k += 1
+        if self.k >= len(plan.segments):
+            self._end(t, "done", f"path {plan.name}: done".replace("  ", " "))
+            return
+        s = plan.segments[self.k]
+        self._seg_start[:] = self.trajectory.position
+        self._dwell_until = math.nan
+        self.trajectory.set_segment(s.target, s.velocity, s.max_velocity, s.max_acceleration,
+                                    s.minimum_duration)  # fmt: skip
+        d.path_state = "running"
+        d.path_segment = self.offset + self.k + 1
+        d.path_fraction = 0.0
+
+    def _end(self, t: float, state: str, why: str) -> None:
+        d = self.data
+        self.plan = None
+        self.paused = False
+        d.path_state = state
+        d.events.append((t, why))
+
+    def update(self, t: float) -> None:
+        """Before the supervisor looks at the trajectory: the next segment when one ends."""
+        d, plan = self.data, self.plan
+        if plan is None or self.paused:
+            return
+        if d.state is not State.MOVING:  # a fault, a disable: the supervisor stops the robot
+            self._end(t, "stopped", f"path stopped at segment {d.path_segment} "
+                                    f"(state {d.state.value})")  # fmt: skip
+            return
+        tr = self.trajectory
+        s = plan.segments[self.k]
+        total = float(np.linalg.norm(s.target - self._seg_start))
+        left = float(np.linalg.norm(s.target - tr.position))
+        d.path_fraction = 1.0 if total <= 1e-12 else min(1.0, max(0.0, 1.0 - left / total))
+        if not tr.finished:
+            return
+        if s.dwell > 0.0:
+            if math.isnan(self._dwell_until):
+                self._dwell_until = t + s.dwell
+                d.path_state = "dwell"
+            if t < self._dwell_until:
+                return
+        self._next(t)
+
+    def pause(self, t: float) -> None:
+        if self.plan is None:
+            return
+        self.paused = True
+        self.trajectory.stop_here()
+        self.data.path_state = "paused"
+        self.data.events.append((t, f"path paused in segment {self.data.path_segment}"))
+
+    def abort(self, t: float) -> None:
+        if self.plan is None and not self.paused:
+            return
+        self.trajectory.stop_here()
+        self._end(t, "aborted", f"path aborted in segment {self.data.path_segment}")
+
+    def remaining(self) -> tuple[int, int]:
+        """(index in the plan, index in the original path) of the segment a resume starts
+        with."""
+        return self.k, self.offset + self.k

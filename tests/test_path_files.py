@@ -1,0 +1,148 @@
+"""Path files (motion/path_file.py) and their plans (motion/path_plan.py): what is read, what
+is refused with its line and column, what the plan guarantees (limits, blends, times)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdprctl.cli import main
+from cdprctl.model import load_robot
+from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_plan import PathRejectedError, plan_path
+from cdprctl.motion.trajectory import Trajectory, pose_coordinates
+
+ROOT = Path(__file__).resolve().parents[1]
+START = np.array([1.5, 0.35, 0.59, 0.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def rowc():
+    return load_robot(ROOT / "config" / "rowc.toml")
+
+
+def test_gcode_units_modes_and_comments():
+    text = """%
+N10 G21 G90 (mm) ; a comment
+G0 X1000 Z500
+G4 P1.5
+G91 G1 Y10 F600 A5.7296
+G20 G1 X1 F60
+G90 G64 G1 X1200 Z600
+G1 X1300
+G61 G1 X1400
+M30
+G1 X9999
+"""
+    w = parse_path(text, START)
+    assert len(w) == 6  # nothing after M30
+    assert w[0].pose[:3] == pytest.approx((1.0, 0.35, 0.5)) and w[0].speed is None
+    assert w[0].dwell == 1.5 and not w[0].blend
+    assert w[1].pose[1] == pytest.approx(0.36) and w[1].speed == pytest.approx(0.01)
+    assert w[1].pose[3] == pytest.approx(0.1, abs=1e-6)  # A: degrees → roll (rad)
+    assert w[2].pose[0] == pytest.approx(1.0254) and w[2].speed == pytest.approx(0.0254)
+    assert w[3].pose[:3] == pytest.approx((0.0254 * 1200, 0.36, 0.0254 * 600))  # still G20
+    assert w[3].blend and w[4].pose[0] == pytest.approx(0.0254 * 1300) and w[4].blend
+    assert not w[5].blend and w[5].where == "line 9"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("G21\nG2 X1 Y1 I1 J0 F100\n", "line 2, column 1: G2 is not supported"),
+        ("G1 X1 F100 Q5\n", "line 1, column 12: word Q5 is not supported"),
+        ("G1 X10\n", "line 1: G1 needs a feed rate F"),
+        ("G0 X1 X2\n", "line 1, column 7: X given twice"),
+        ("X10\n", "line 1: axis words need G0 or G1"),
+        ("G4\n", "line 1: G4 needs P"),
+        ("G1 X1 F-5\n", "line 1, column 7: F-5 must be > 0"),
+        ("G0 X1 (open\n", "line 1, column 7: comment not closed"),
+        ("G0 X1 M3\n", "line 1, column 7: M3 is not supported"),
+        ("G0 X1 $\n", "line 1, column 7: '$' is not a G-code word"),
+        ("G21\n", "no motion"),
+        ("x, y, z, speed\n1, 2\n", "line 2: 2 values for 4 columns"),
+        ("x, y, z\n1, 0.3, abc\n", "line 2, column 3: z = 'abc' must be a finite number (m)"),
+        ("x, y, w\n", "line 1, column 3: 'w' is not a column"),
+        ("x, y, z, speed, time\n", "give speed or time, not both"),
+        ("x, y, z, time\n1, 2, 3, 2\n1, 2, 3, 1\n", "line 3: time = 1 s must be later"),
+        ("x, y, z, speed\n1, 2, 3, 0\n", "line 2: speed = 0 m/s must be > 0"),
+        ("x, y, z, blend\n1, 2, 3, 2\n", "line 2: blend = 2 must be 0 or 1"),
+        ("x, y, z\n", "a header but no waypoint"),
+    ],
+)
+def test_refusals_name_line_and_column(text, message):
+    with pytest.raises(PathFileError) as exc:
+        parse_path(text, START)
+    assert message in str(exc.value)
+
+
+def play(model, plan):
+    """The plan through a fresh trajectory at the loop's period: positions, velocities,
+    accelerations, jerks (finite differences) and the times each segment ended."""
+    tr = Trajectory(model, model.control.period)
+    tr.reset(plan.start)
+    p, v, a, ends = [], [], [], []
+    for s in plan.segments:
+        tr.set_segment(s.target, s.velocity, s.max_velocity, s.max_acceleration,
+                       s.minimum_duration)  # fmt: skip
+        while not tr.finished:
+            tr.update(model.control.period)
+            p.append(tr.position.copy())
+            v.append(tr.velocity.copy())
+            a.append(tr.acceleration.copy())
+        ends.append(len(p) * model.control.period)
+    return np.array(p), np.array(v), np.array(a), ends
+
+
+def test_blended_circle_keeps_the_limits_and_saves_time(rowc):
+    """rowc_circle.ngc with G64: passed moving (faster than with exact stops), every
+    coordinate within its velocity, acceleration and jerk limits (jerk by finite differences
+    of ruckig's accelerations), close to the chords."""
+    text = (ROOT / "paths" / "rowc_circle.ngc").read_text()
+    start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
+    blended = plan_path(rowc, parse_path(text, START), start, rowc.control.period)
+    exact = plan_path(rowc, parse_path(text.replace("G64", "G61"), START), start,
+                      rowc.control.period)  # fmt: skip
+    assert blended.duration < 0.75 * exact.duration
+    c = rowc.control
+    p, v, a, ends = play(rowc, blended)
+    dt = c.period
+    assert np.abs(v[:, :3]).max() <= 0.15 + 1e-9  # F9000 mm/min, per axis where it blends
+    assert np.abs(a[:, :3]).max() <= c.max_acceleration + 1e-9
+    jerk = np.diff(a[:, :3], axis=0) / dt
+    assert np.abs(jerk).max() <= c.max_jerk * (1 + 1e-6)
+    # the rounded corners stay near the circle (radius 0.1 m about (1.5, 0.59) in x-z)
+    circle = p[round(ends[0] / dt):round(ends[-2] / dt)]  # the 24 chords
+    r = np.hypot(circle[:, 0] - 1.5, circle[:, 2] - 0.59)
+    assert np.abs(r - 0.1).max() < 5e-3  # measured 4.2 mm (the chords alone: 0.86 mm)
+
+
+def test_timed_rows_are_reached_on_time_or_refused(rowc):
+    start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
+    text = "x, y, z, time\n1.6, 0.35, 0.59, 2.0\n1.6, 0.35, 0.64, 3.5\n"
+    plan = plan_path(rowc, parse_path(text, START), start, rowc.control.period)
+    _, _, _, ends = play(rowc, plan)
+    assert ends == pytest.approx([2.0, 3.5], abs=2 * rowc.control.period)
+    with pytest.raises(PathRejectedError, match=r"line 3: its time cannot be met: the "
+                       r"segment needs .* s at the velocity and acceleration limits, 0.100"):
+        plan_path(rowc, parse_path("x, y, z, time\n1.6, 0.35, 0.59, 2\n1.9, 0.35, 0.59, 2.1\n",
+                                   START), start, rowc.control.period)  # fmt: skip
+    with pytest.raises(PathRejectedError, match=r"speed 0\.5 m/s exceeds the configured"):
+        plan_path(rowc, parse_path("x, y, z, speed\n1.6, 0.35, 0.59, 0.5\n", START), start,
+                  rowc.control.period)  # fmt: skip
+
+
+def test_run_path_rejects_before_enabling(tmp_path, capsys):
+    bad = tmp_path / "bad.ngc"
+    bad.write_text("G21 G90\nG0 X1500 Z590\nG1 X2900 F6000\n")
+    rc = main(["run", "--config", str(ROOT / "config" / "rowc.toml"), "--sim", "--no-realtime",
+               "--status", "0", "--path", str(bad)])  # fmt: skip
+    out = capsys.readouterr()
+    assert rc == 2
+    assert (f"cdprctl run: path {bad} rejected: line 3: waypoint [2.9, 0.35, 0.59, 0.0, 0.0, "
+            "0.0]: x = 2.9000 m is outside the workspace box [0.5, 2.5] m") in out.err
+    assert "enabling" not in out.out
+    assert math.isfinite(1.0)
