@@ -242,11 +242,17 @@ def test_commands_in_the_wrong_state_are_ignored(rowc):
 
 
 def test_workspace_clamp(rowc):
-    """ruckig ignores position limits: targets are clamped to the workspace box first."""
+    """A move beyond the workspace box is refused by the soft limits (docs/operating.md), with
+    the rule; the trajectory still clamps whatever target reaches it (ruckig ignores position
+    limits), the last guard."""
     with enabled(rowc) as cl:
+        c = cl.controller
         cl.command("move", pose=np.array([5.0, 0.35, 0.59, 0.0, 0.0, 0.0]))
-        cl.run(0.05)
-        assert cl.controller.trajectory.target[0] == pytest.approx(rowc.workspace.position_max[0])
+        assert not c.mailbox
+        assert "x = 2.5" in c.events[-1][1] and "outside the workspace box [0.5, 2.5] m" in (
+            c.events[-1][1])
+        c.trajectory.set_target(np.array([5.0, 0.35, 0.59, 0.0, 0.0, 0.0]))
+        assert c.trajectory.target[0] == pytest.approx(rowc.workspace.position_max[0])
 
 
 def test_lower_rate_config(rowc):

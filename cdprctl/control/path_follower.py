@@ -26,6 +26,7 @@ class PathFollower:
         self.paused = False
         self._dwell_until = math.nan
         self._seg_start = np.zeros(6)
+        self._seg_length = 0.0
 
     @property
     def holds_motion(self) -> bool:
@@ -49,6 +50,7 @@ class PathFollower:
             return
         s = plan.segments[self.k]
         self._seg_start[:] = self.trajectory.position
+        self._seg_length = math.dist(s.target, self._seg_start)  # in the 6 coordinates
         self._dwell_until = math.nan
         self.trajectory.set_segment(s.target, s.velocity, s.max_velocity, s.max_acceleration,
                                     s.minimum_duration)  # fmt: skip
@@ -74,8 +76,8 @@ class PathFollower:
             return
         tr = self.trajectory
         s = plan.segments[self.k]
-        total = float(np.linalg.norm(s.target - self._seg_start))
-        left = float(np.linalg.norm(s.target - tr.position))
+        total = self._seg_length
+        left = math.dist(s.target, tr.position)
         d.path_fraction = 1.0 if total <= 1e-12 else min(1.0, max(0.0, 1.0 - left / total))
         if not tr.finished:
             return

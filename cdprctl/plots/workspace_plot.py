@@ -50,8 +50,8 @@ def _slices(d: Path, model: RobotModel, res: WorkspaceResult, margin: np.ndarray
     picks = np.unique(np.linspace(0, count - 1, min(count, 9)).round().astype(int))
     cols = min(3, len(picks))
     rows = math.ceil(len(picks) / cols)
-    finite = margin[np.isfinite(margin)]
-    top = float(np.max(np.abs(finite))) if finite.size else 1.0
+    feasible = margin[np.isfinite(margin) & (margin >= 0.0)]  # the colours are theirs
+    top = float(feasible.max()) if feasible.size else 1.0
     top = top or 1.0
     fig, axs = plt.subplots(rows, cols, figsize=(4.2 * cols + 1.2, 3.6 * rows + 0.6), squeeze=False,
                             layout="constrained")  # fmt: skip
