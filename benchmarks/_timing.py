@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gc
 import os
+import socket
 import time
 from collections.abc import Callable
 
@@ -72,3 +73,10 @@ def machine_line() -> str:
         f"{os.cpu_count()} cores, load average {load[0]:.2f}; numpy ufunc call "
         f"{ufunc_overhead():.2f} µs (0.6-0.7 µs when the VM is quiet)"
     )
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now, for a daemon the benchmark starts."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])

@@ -27,7 +27,7 @@ The arithmetic runs in a numba-compiled kernel: at 8 cables, numpy's per-call ov
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numba import njit
@@ -35,8 +35,21 @@ from numba import njit
 from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 
-if TYPE_CHECKING:
-    from cdprctl.model.robot import RobotModel
+
+class CableLayout(Protocol):
+    """What the kinematics needs of a robot: a ``RobotModel``, or the layout a telemetry
+    client got from the daemon's status (``cdprctl.telemetry.scene``)."""
+
+    @property
+    def n_cables(self) -> int: ...
+    @property
+    def anchors(self) -> FloatArray: ...
+    @property
+    def attachments(self) -> FloatArray: ...
+    @property
+    def pulley_radius(self) -> FloatArray: ...
+    @property
+    def pulley_axis(self) -> FloatArray: ...
 
 
 class KinArrays(NamedTuple):
@@ -64,7 +77,7 @@ class KinematicsData:
     Per-cable vectors are stored coordinate-major, (3, m), and ``W`` (6, m) in C order.
     """
 
-    def __init__(self, model: RobotModel):
+    def __init__(self, model: CableLayout):
         m = model.n_cables
         self.n_cables = m
         self.position = np.zeros(3)  # m, base frame
@@ -126,7 +139,7 @@ class KinematicsData:
 
 
 def inverse_kinematics(
-    model: RobotModel, data: KinematicsData, position: FloatArray, rotation: FloatArray
+    model: CableLayout, data: KinematicsData, position: FloatArray, rotation: FloatArray
 ) -> None:
     """Cable lengths, unit vectors and wrench matrix at the pose ``(position, rotation)``.
 
@@ -213,14 +226,14 @@ def kinematics_ok(data: KinematicsData, min_length: float = 1e-6) -> bool:
     )
 
 
-def cable_lengths(model: RobotModel, position: FloatArray, rotation: FloatArray) -> FloatArray:
+def cable_lengths(model: CableLayout, position: FloatArray, rotation: FloatArray) -> FloatArray:
     """Convenience (allocating) form: total cable lengths (m) at a pose."""
     data = KinematicsData(model)
     inverse_kinematics(model, data, position, rotation)
     return data.length.copy()
 
 
-def wrench_matrix(model: RobotModel, position: FloatArray, rotation: FloatArray) -> FloatArray:
+def wrench_matrix(model: CableLayout, position: FloatArray, rotation: FloatArray) -> FloatArray:
     """Convenience (allocating) form: the wrench matrix W (6×m) at a pose."""
     data = KinematicsData(model)
     inverse_kinematics(model, data, position, rotation)

@@ -412,6 +412,16 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
         assert len(messages) == sum(1 for _ in f) - 1 > 100
     targets = {tuple(json.loads(m.data)["target"][:3]) for _, _, m in messages}
     assert (1.6, 0.35, 0.55) in targets
+    # and as the live view's typed scene (docs/foxglove.md), at its 30 Hz
+    with open(run_dir / "telemetry.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert {"foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.Log"} <= {
+        x.name for x in summary.schemas.values()}
+    counts = {summary.channels[c].topic: n
+              for c, n in summary.statistics.channel_message_counts.items()}  # fmt: skip
+    span = (messages[-1][2].log_time - messages[0][2].log_time) / 1e9
+    assert abs(counts["/scene"] - 30.0 * span) <= 0.1 * 30.0 * span + 2, (counts, span)
+    assert (run_dir / "scene.png").stat().st_size > 20_000
     assert robot.stop() == 0
 
 

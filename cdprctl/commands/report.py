@@ -33,8 +33,10 @@ def _column(head: list[str], rows: list[list[str]], name: str) -> np.ndarray:
 def report(args: argparse.Namespace) -> int:
     """Reads RUN/state.csv, timing.csv, meta.json (from `cdprctl record`) and writes
     RUN/pose.png (pose and reference), tracking.png, tensions.png (with the limits, like the
-    ARK 2020 paper's Fig. 5), torques.png, timing.png and, with grippers, grippers.png
-    (travel, squeeze and state as sensed from the drives)."""
+    ARK 2020 paper's Fig. 5), torques.png, timing.png, with grippers grippers.png (travel,
+    squeeze and state as sensed from the drives), and scene.png: the robot in 3-D (cables
+    coloured by tension, platform, frame) at four instants, as the live Foxglove view draws
+    it."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,5 +146,39 @@ def report(args: argparse.Namespace) -> int:
             ax2.set_ylabel("reports")
             fig.suptitle("loop timing")
             save(fig, "timing.png")
+    if meta.get("layout"):
+        _stills(run, head, rows, t, meta)
+        written.append("scene.png")
     print(f"cdprctl report: {', '.join(written)} in {run}")
     return 0
+
+
+def _stills(run: Path, head: list[str], rows: list[list[str]], t: np.ndarray,
+            meta: dict[str, Any]) -> None:  # fmt: skip
+    """scene.png: the robot in 3-D at four instants spread over the run (the live view's
+    scene, docs/foxglove.md)."""
+    from cdprctl.telemetry.scene import SceneLayout
+    from cdprctl.telemetry.scene_plot import scene_stills
+
+    layout = SceneLayout.from_dict(meta["layout"])
+    grips = [h[len("grip_travel_") :] for h in head if h.startswith("grip_travel_")]
+    state_col = head.index("state")
+    picks = sorted({round(k * (len(rows) - 1) / 3) for k in range(4)})
+
+    def value(r: list[str], name: str) -> float:
+        x = r[head.index(name)]
+        return float(x) if x not in ("", "None") else float("nan")
+
+    states = []
+    for i in picks:
+        r = rows[i]
+        state = {
+            "pose": {"position": [value(r, a) for a in "xyz"],
+                     "rpy": [value(r, a) for a in ("roll", "pitch", "yaw")]},
+            "target": [value(r, f"ref_{a}") for a in ("x", "y", "z", "rx", "ry", "rz")],
+            "tensions": [value(r, f"t_{c}") for c in layout.names],
+            "grippers": [{"travel": value(r, f"grip_travel_{g}")} for g in grips],
+        }  # fmt: skip
+        states.append((f"t = {t[i]:.1f} s, {r[state_col]}", state))
+    scene_stills(str(run / "scene.png"), layout, states,
+                 f"{meta.get('robot', '')}: the robot at four instants of the run")  # fmt: skip

@@ -60,6 +60,12 @@ def add_parser(sub: Any) -> None:
         help="at exit, save the loop's per-cycle timing (deadline, wake lateness, compute, "
         "per phase; numpy .npz) to FILE",
     )
+    p.add_argument(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="serve the live 3D view to Foxglove on this WebSocket (host default 127.0.0.1; "
+        "[foxglove] listen in the config sets the same; docs/foxglove.md)",
+    )
     z = p.add_argument_group("Zenoh (see docs/telemetry.md; [zenoh] in the config sets the same)")
     z.add_argument("--zenoh", action="store_true", help="start the Zenoh gateway")
     z.add_argument(
@@ -156,6 +162,14 @@ def run(args: argparse.Namespace) -> int:
         except (OSError, UnicodeDecodeError) as exc:
             print(f"cdprctl run: error: --path = {args.path}: {exc}", file=sys.stderr)
             return 2
+    if args.foxglove is not None:
+        from cdprctl.model.foxglove import parse_listen
+
+        try:
+            parse_listen(args.foxglove)
+        except ValueError as exc:
+            print(f"cdprctl run: error: --foxglove = {exc}", file=sys.stderr)
+            return 2
     from drivers.errors import DriverError
 
     try:
@@ -168,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
             zenoh=args.zenoh or bool(zo),
             timing_file=args.timing_file,
             state_dir=args.state_dir,
+            foxglove=args.foxglove,
         )
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

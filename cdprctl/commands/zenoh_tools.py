@@ -75,7 +75,8 @@ def add_parsers(sub: Any) -> None:
     p.add_argument(
         "--mcap",
         action="store_true",
-        help="also write DIR/telemetry.mcap: every payload as received, for Foxglove",
+        help="also write DIR/telemetry.mcap: every payload as received and the typed 3D "
+        "scene (frames, cables coloured by tension, platform, log), for Foxglove",
     )
     p.add_argument("--duration", type=float, help="s; default: until Ctrl-C")
     add_zenoh_arguments(p)
@@ -321,7 +322,8 @@ def record(args: argparse.Namespace) -> int:
         if args.mcap:
             from cdprctl.telemetry.mcap_log import write_mcap
 
-            write_mcap(out / "telemetry.mcap", prefix, raw)
+            layout = status.get("config", {}).get("layout")
+            write_mcap(out / "telemetry.mcap", prefix, raw, layout)
     print(
         f"cdprctl record: {n['state']} states, {n['timing']} timing, {n['events']} events → {out}"
         + (" (CSV, telemetry.mcap)" if args.mcap else "")

@@ -51,11 +51,13 @@ class Daemon:
         zenoh: bool = False,
         timing_file: str | None = None,
         state_dir: str | None = None,
+        foxglove: str | None = None,
     ):
         """``state_dir``: where the calibration record is (default
         ``/var/lib/cdprctl/<robot>``); not read when the encoders are trusted to read zero at
         home (``[drives] assume_home_at_start``, or the simulated robot of ``sim``, which
-        starts there)."""
+        starts there). ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove]
+        listen`` in the config)."""
         from cdprctl.calibration.record import default_state_dir
         from drivers import create_driver
 
@@ -110,6 +112,13 @@ class Daemon:
             from cdprctl.telemetry.link import TelemetryLink
 
             self.link = TelemetryLink(model, self._config_summary())
+        self.view: Any = None
+        listen = foxglove or model.foxglove.listen
+        if listen:
+            from cdprctl.model.foxglove import parse_listen
+            from cdprctl.telemetry.foxglove_view import FoxgloveLink
+
+            self.view = FoxgloveLink(model, *parse_listen(listen))
 
     # -- the loop thread ---------------------------------------------------------------------------
     def _step_sim(self, t: float) -> None:
@@ -143,7 +152,7 @@ class Daemon:
         if self.link is not None:
             if not self.link.start():
                 self._print("cdprctl run: the Zenoh gateway did not start in 20 s", err=True)
-                self.link.close()
+                self._close_links()
                 self.driver.shutdown()
                 return 1
             zc = self.model.zenoh
@@ -155,6 +164,17 @@ class Daemon:
                 f"zenoh: {zc.key_prefix(self.model.name)}/{{state,timing,events,status}}, "
                 f"commands {'on' if zc.commands else 'off'}"
                 + (f", listening on {', '.join(zc.listen)}" if zc.listen else "")
+            )
+        if self.view is not None:
+            if not self.view.start():
+                self._print(f"cdprctl run: the Foxglove view did not start on "
+                            f"{self.view.host}:{self.view.port} in 20 s", err=True)  # fmt: skip
+                self._close_links()
+                self.driver.shutdown()
+                return 1
+            self._print(
+                f"foxglove: ws://{self.view.host}:{self.view.port} — the live 3D view "
+                "(open it in Foxglove: docs/foxglove.md)"
             )
         # real-time settings next (the gateway, started before, keeps its own CPU affinity);
         # locking memory and freezing the collector take a while,
@@ -193,8 +213,7 @@ class Daemon:
             hint = "" if self.assume_home else f" ({how_to_calibrate(self.model, self.state_dir)})"
             self._print(f"cdprctl run: start-up failed: {exc}{hint}", err=True)
             self.driver.shutdown()
-            if self.link is not None:
-                self.link.close()
+            self._close_links()
             return 1
         for w in self.driver.warnings:
             self._print(f"warning: {w}", err=True)
@@ -203,8 +222,7 @@ class Daemon:
             self.driver.shutdown()
             if self.sim is not None:
                 self.sim.close()
-            if self.link is not None:
-                self.link.close()
+            self._close_links()
             return 2
         p = c.estimator.position
         self._print(
@@ -244,13 +262,18 @@ class Daemon:
             if self.sim is not None:
                 self.sim.close()
         self._drain_events()
-        if self.link is not None:
-            self.link.close()
+        self._close_links()
         self._report()
         if path is not None and not self.stop_requested.is_set():
             self._print(f"path {path[0]}: {c.data.path_state or 'not run'}")
             return 0 if c.data.path_state == "done" else 3
         return 0 if c.state is not State.FAULT or self.stop_requested.is_set() else 3
+
+    def _close_links(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.view is not None:
+            self.view.close()
 
     def _check_path(self, name: str, text: str) -> bool:
         """The whole path from the pose start-up found, before any motion."""
@@ -310,8 +333,7 @@ class Daemon:
             err=True,
         )
         self.driver.shutdown()
-        if self.link is not None:
-            self.link.close()
+        self._close_links()
         return NOT_CALIBRATED
 
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -355,12 +377,17 @@ class Daemon:
         path_over = False
         link = self.link
         tick = 0.05 if link is None else min(0.05, 1.0 / self.model.zenoh.state_rate)
+        view = self.view
+        if view is not None:
+            tick = min(tick, 1.0 / self.model.foxglove.rate)
         next_tick = time.monotonic()
         while True:
             now = time.monotonic() - t0
             self._drain_events()
+            true = self.plant.position if self.sim is not None else None
+            if view is not None:
+                view.publish(c.data, true)
             if link is not None:
-                true = self.plant.position if self.sim is not None else None
                 link.publish(c.data, self.stats, true)
                 for cmd in link.take_commands():
                     if not c.submit(cmd):
@@ -415,6 +442,8 @@ class Daemon:
             self._print(f"[t={t:9.3f}] {text}")
             if self.link is not None:
                 self.link.event(t, text)
+            if self.view is not None:
+                self.view.event("event", t, text)
         while d.faults:
             self.faults[d.faults.popleft()[1].value] += 1
 
@@ -531,6 +560,7 @@ class Daemon:
 
     def _config_summary(self) -> dict[str, Any]:
         import cdprctl
+        from cdprctl.telemetry.scene import SceneLayout
 
         m, c = self.model, self.model.control
         return {
@@ -552,6 +582,8 @@ class Daemon:
                 "position_max": m.workspace.position_max.tolist(),
                 "max_angle": m.workspace.max_angle,
             },
+            # what a client needs to draw the robot (cdprctl record --mcap's scene)
+            "layout": SceneLayout.from_model(m).to_dict(),
             "simulated": self.sim is not None,
             "versions": {"cdprctl": getattr(cdprctl, "__version__", "?"), **_versions()},
         }

@@ -16,6 +16,7 @@ import numpy as np
 from cdprctl.model.control import read_control
 from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
+from cdprctl.model.foxglove import read_foxglove
 from cdprctl.model.grippers import read_grippers
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Cable, Platform, Pose, Pulley, RobotModel, Winch, Workspace
@@ -33,6 +34,7 @@ TOP_KEYS = (
     "drives",
     "control",
     "zenoh",
+    "foxglove",
     "grippers",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
@@ -144,6 +146,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
     zenoh = read_zenoh(rd, data, name or "robot")
+    foxglove = read_foxglove(rd, data)
     grippers = read_grippers(rd, data, cables)
 
     if (
@@ -157,6 +160,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or drives is None
         or control is None
         or zenoh is None
+        or foxglove is None
         or grippers is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
@@ -173,6 +177,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         drives=drives,
         control=control,
         zenoh=zenoh,
+        foxglove=foxglove,
         grippers=grippers,
     )
     # Checks that need the assembled geometry.

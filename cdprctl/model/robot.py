@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
+from cdprctl.model.foxglove import FoxgloveConfig
 from cdprctl.model.grippers import Gripper
 from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.numerics import cable_compliance_py, compliance_terms
@@ -128,6 +129,7 @@ class RobotModel:
     drives: DrivesConfig
     control: ControlConfig
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
+    foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
     grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame

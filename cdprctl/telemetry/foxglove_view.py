@@ -1,0 +1,154 @@
+"""The live 3D view: a process beside the loop's (like the Zenoh gateway) serving Foxglove's
+WebSocket protocol with ``foxglove-sdk``. It reads the loop's shared snapshot at
+``[foxglove] rate`` and logs the scene (``foxglove_messages.py``); events arrive on a queue
+and become ``Log`` messages. It takes no commands. The daemon's side is ``FoxgloveLink``."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import multiprocessing as mp
+import queue
+import sys
+import time
+from typing import Any
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values
+
+
+def foxglove_main(
+    model: RobotModel,
+    snapshot_name: str,
+    events: Any,
+    stop: Any,
+    ready: Any,
+    host: str,
+    port: int,
+) -> None:
+    import foxglove
+    from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
+
+    from cdprctl.telemetry.foxglove_messages import (
+        SIGNALS_SCHEMA,
+        TOPICS,
+        SceneMessages,
+        log_message,
+        signals,
+        transforms,
+    )
+    from cdprctl.telemetry.scene import SceneBuilder, SceneLayout
+    from cdprctl.telemetry.schema import state_payload
+
+    try:
+        from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
+
+        yield_to_the_loop(loop_cpu(model.control.cpu))
+    except Exception:  # best effort, as the gateway's
+        pass
+    snap = SharedSnapshot(model.n_cables, snapshot_name, g=len(model.grippers))
+    ctx = foxglove.Context()
+    try:
+        server = foxglove.start_server(name=f"cdprctl {model.name}", host=host, port=port,
+                                       context=ctx)  # fmt: skip
+    except Exception as exc:
+        print(f"cdprctl-foxglove: cannot serve on {host}:{port}: {exc}", file=sys.stderr,
+              flush=True)  # fmt: skip
+        snap.close()
+        return
+    tf = FrameTransformsChannel(TOPICS["tf"], context=ctx)
+    scene_ch = SceneUpdateChannel(TOPICS["scene"], context=ctx)
+    log_ch = LogChannel(TOPICS["log"], context=ctx)
+    sig_ch = foxglove.Channel(
+        TOPICS["signals"],
+        message_encoding="json",
+        schema=foxglove.Schema(name="cdprctl.signals", encoding="jsonschema",
+                               data=json.dumps(SIGNALS_SCHEMA).encode()),
+        context=ctx,
+    )  # fmt: skip
+    layout = SceneLayout.from_model(model)
+    builder, messages = SceneBuilder(layout), SceneMessages(layout)
+    names = list(layout.names)
+    grippers = [g.name for g in model.grippers]
+    period = 1.0 / model.foxglove.rate
+    ready.set()
+    next_t = time.monotonic()
+    last_seq = -1.0
+    try:
+        while not stop.is_set():
+            now_ns = time.time_ns()
+            while True:
+                try:
+                    kind, _t, text = events.get_nowait()
+                except queue.Empty:
+                    break
+                log_ch.log(log_message(now_ns, kind, text), log_time=now_ns)
+            s = snap.read()
+            if s is not None and s["seq"][0] != last_seq:
+                last_seq = s["seq"][0]
+                state = state_payload(s, names, "", grippers)
+                sc = builder.build(state)
+                tf.log(transforms(sc, now_ns), log_time=now_ns)
+                scene_ch.log(messages.update(sc, now_ns), log_time=now_ns)
+                sig_ch.log(signals(state), log_time=now_ns)
+            next_t = max(next_t + period, time.monotonic())
+            time.sleep(max(0.0, next_t - time.monotonic()))
+    finally:
+        server.stop()
+        snap.close()
+
+
+class FoxgloveLink:
+    """The daemon's side: starts the view process, writes its snapshot, forwards events.
+    Used by the daemon's I/O thread only — never by the loop."""
+
+    def __init__(self, model: RobotModel, host: str, port: int):
+        ctx = mp.get_context("spawn")  # never fork a process that has threads
+        self.model = model
+        self.host, self.port = host, port
+        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
+        self.events: Any = ctx.Queue(maxsize=1000)
+        self.stop = ctx.Event()
+        self.ready = ctx.Event()
+        self.process = ctx.Process(
+            target=foxglove_main,
+            args=(model, self.snapshot.name, self.events, self.stop, self.ready, host, port),
+            name="cdprctl-foxglove",
+            daemon=True,
+        )
+        self._next = 0.0
+        self._period = 1.0 / model.foxglove.rate
+        self._last_fault = ""
+
+    def start(self, timeout: float = 20.0) -> bool:
+        self.process.start()
+        return bool(self.ready.wait(timeout))
+
+    def publish(self, data: Any, true_position: Any = None) -> None:
+        """The loop's data into the snapshot, at the view's rate; a new fault as an error."""
+        if data.fault_reason != self._last_fault:
+            self._last_fault = data.fault_reason
+            if data.fault_reason:
+                self.event("fault", data.time, data.fault_reason)
+        now = time.monotonic()
+        # the I/O thread's ticks jitter around the period: a tick a little early still counts
+        slack = 0.3 * self._period
+        if now < self._next - slack:
+            return
+        self._next = max(self._next + self._period, now - slack)
+        self.snapshot.write(controller_values(data, true_position))
+
+    def event(self, kind: str, t: float, text: str) -> None:
+        with contextlib.suppress(queue.Full):
+            self.events.put_nowait((kind, t, text))
+
+    def close(self) -> None:
+        self.stop.set()
+        if self.process.pid is not None:  # started
+            self.process.join(timeout=5.0)
+            if self.process.is_alive():
+                self.process.terminate()
+                self.process.join(timeout=2.0)
+        self.events.cancel_join_thread()
+        self.events.close()
+        self.snapshot.close()
