@@ -224,3 +224,19 @@ def test_foxglove_section_errors(tmp_path):
     f.write_text(text + '\n[foxglove]\nlisten = "8765"\nrate = 20\n')
     m = load_robot(f)
     assert m.foxglove.enabled and m.foxglove.rate == 20.0
+
+
+def test_jaws_at_their_travel():
+    """Sensors 2019's jaws: attachment + L1 + travel along the guide, in the platform frame."""
+    model = load_robot(CONFIG / "seed000_grippers.toml")
+    lay = SceneLayout.from_model(model)
+    rpy = np.array([0.5235987755982988, 0.0, 0.0])
+    p = model.home.position
+    state = {"pose": {"position": p.tolist(), "rpy": rpy.tolist()}, "target": [0.0] * 6,
+             "tensions": [100.0] * model.n_cables,
+             "grippers": [{"travel": 0.02}, {"travel": 0.07}]}  # fmt: skip
+    sc = SceneBuilder(lay).build(state)
+    R = rpy_to_matrix(*rpy)
+    for j, (g, travel) in enumerate(zip(model.grippers, (0.02, 0.07), strict=True)):
+        local = model.attachments[g.cable] + g.jaw_offset + travel * np.asarray(g.guide_axis)
+        assert np.allclose(sc.jaws[j], p + R @ local)
