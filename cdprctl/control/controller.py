@@ -38,10 +38,8 @@ from cdprctl.forward_kinematics import FKStatus
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import PathFileError, parse_path
-from cdprctl.motion.path_plan import FLOOR, PathRejectedError, plan_path
-from cdprctl.motion.trajectory import Trajectory, coordinates_pose
-from cdprctl.rotation import FloatArray, exp_so3, rpy_to_matrix
+from cdprctl.motion.trajectory import Trajectory
+from cdprctl.rotation import FloatArray, rpy_to_matrix
 from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.base import Lifecycle, WinchStates
 
@@ -84,11 +82,8 @@ class Controller:
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=64)
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
-        self.jog = Jog(d, tr, c.jog_deadman)
-        self.path = PathFollower(d, tr)
-        self._jog_bound: FloatArray | None = None  # where the last jog's limits end it
-        self._v_limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
-        self._a_list = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
+        self.jog = Jog(model, d, tr, self.limits)
+        self.path = PathFollower(model, d, tr, self.limits)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
         # commanded ones) at the estimated pose. The commanded tensions, PD feedback included,
@@ -191,13 +186,13 @@ class Controller:
                 d.events.append((d.time, f"move ignored: {why}"))
                 return True
         elif cmd.kind is CommandKind.JOG:
-            if not self._plan_jog(cmd):
+            if not self.jog.plan(cmd):
                 return True
         elif cmd.kind is CommandKind.PATH:
-            if not self._plan_path(cmd):
+            if not self.path.plan_path(cmd):
                 return True
         elif cmd.kind is CommandKind.RESUME:
-            if not self._plan_resume(cmd):
+            if not self.path.plan_resume(cmd):
                 return True
         elif cmd.kind is CommandKind.SET_TDA:
             errors = ["no options"] if cmd.tda is None else cmd.tda.validate(self.model)
@@ -218,77 +213,6 @@ class Controller:
             return ""
         where = np.round(end[:3], 4).tolist()
         return f"the line to the target leaves the soft limits after {where} m: {why}"
-
-    def _plan_jog(self, cmd: Command) -> bool:
-        """The jog's segment: along its velocity to where the soft limits end it (ruckig
-        brakes to stop there). False (with an event) when the command is unusable."""
-        d = self.data
-        v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
-        if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
-            np.abs(v) > self._v_limits * (1 + 1e-9)
-        ) or cmd.frame not in ("base", "platform"):  # fmt: skip
-            d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
-                             "configured limits, or frame not base/platform"))  # fmt: skip
-            return False
-        if not np.any(v):
-            cmd.target = None  # a stop
-            return True
-        start = self.trajectory.position.copy()
-        if cmd.frame == "platform":
-            R = exp_so3(start[3:]) @ self.model.home.rotation
-            v = np.concatenate([R @ v[:3], R @ v[3:]])
-        ws = self.model.workspace
-        speed, turn = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
-        reach = float(np.linalg.norm(ws.position_max - ws.position_min))
-        horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
-        end, why = self.limits.ray_end(start, v, horizon, step=0.02)
-        cmd.target = end
-        vmax = np.maximum(np.abs(v), FLOOR * self._v_limits)
-        cmd.limits = (vmax.tolist(), self._a_list)
-        # one event per bound met, not one per repeated command (the end moves by a bisection
-        # step as the reference approaches it)
-        bound = end if why else None
-        if bound is not None and (
-            self._jog_bound is None or float(np.max(np.abs(bound - self._jog_bound))) > 2e-3
-        ):
-            d.events.append((d.time, f"jog: stops at {np.round(end[:3], 4).tolist()} m: {why}"))
-        self._jog_bound = bound
-        return True
-
-    def _plan_path(self, cmd: Command) -> bool:
-        """Parse and check the whole path from where the reference is (motion/path_plan.py);
-        False (an event naming the line and the rule) when it is refused. The loop starts it
-        only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
-        d = self.data
-        name = cmd.name or "(payload)"
-        if cmd.plan is not None:  # checked already (the gateway, --path) from where it rests
-            plan, _ = cmd.plan
-            if float(np.max(np.abs(self.trajectory.position - plan.start))) <= 1e-9:
-                return True
-        try:
-            waypoints = parse_path(cmd.text, coordinates_pose(self.model, self.trajectory.position))
-            cmd.plan = (plan_path(self.model, waypoints, self.trajectory.position.copy(),
-                                  self.period, self.limits, name), 0)  # fmt: skip
-        except (PathFileError, PathRejectedError) as exc:
-            d.events.append((d.time, f"path {name} rejected: {exc}"))
-            return False
-        return True
-
-    def _plan_resume(self, cmd: Command) -> bool:
-        d, fol = self.data, self.path
-        if fol.plan is None or not fol.paused:
-            return True  # the loop says so (_resume)
-        k, offset = fol.remaining()
-        plan = fol.plan
-        durations = [None, *plan.durations[k + 1 :]]
-        try:
-            here = self.trajectory.position.copy()
-            cmd.plan = (plan_path(self.model, plan.waypoints[k:], here, self.period, self.limits,
-                                  plan.name, durations), offset)  # fmt: skip
-        except PathRejectedError as exc:
-            d.events.append((d.time, f"resume refused: {exc}"))
-            return False
-        return True
 
     # -- the cycle ---------------------------------------------------------------------------------
     def update(self, t: float, st: WinchStates) -> None:

@@ -12,17 +12,66 @@ import numpy as np
 
 from cdprctl.control.commands import Command
 from cdprctl.control.data import ControlData
+from cdprctl.model.robot import RobotModel
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.path_plan import FLOOR
 from cdprctl.motion.trajectory import Trajectory
+from cdprctl.rotation import FloatArray, exp_so3
 
 
 class Jog:
-    def __init__(self, data: ControlData, trajectory: Trajectory, deadman: float):
+    def __init__(
+        self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
+    ):
+        c = model.control
+        self.model = model
         self.data = data
         self.trajectory = trajectory
-        self.deadman = deadman  # s
+        self.limits = limits
+        self.deadman = c.jog_deadman  # s
+        self._v_limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
+        self._a_list = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
+        self._bound: FloatArray | None = None  # where the last jog's limits ended it
         self.active = False
         self.last = 0.0  # s, loop time of the last jog command
         self._rest = [0.0] * 6  # the segment ends at rest (ruckig's target velocity)
+
+    def plan(self, cmd: Command) -> bool:
+        """Outside the loop (``Controller.submit``): the jog's segment, along its velocity to
+        where the soft limits end it (ruckig brakes to stop there). False (with an event)
+        when the command is unusable."""
+        d = self.data
+        v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
+        if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
+            np.abs(v) > self._v_limits * (1 + 1e-9)
+        ) or cmd.frame not in ("base", "platform"):  # fmt: skip
+            d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
+                             "configured limits, or frame not base/platform"))  # fmt: skip
+            return False
+        if not np.any(v):
+            cmd.target = None  # a stop
+            return True
+        start = self.trajectory.position.copy()
+        if cmd.frame == "platform":
+            R = exp_so3(start[3:]) @ self.model.home.rotation
+            v = np.concatenate([R @ v[:3], R @ v[3:]])
+        ws = self.model.workspace
+        speed, turn = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
+        reach = float(np.linalg.norm(ws.position_max - ws.position_min))
+        horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
+        end, why = self.limits.ray_end(start, v, horizon, step=0.02)
+        cmd.target = end
+        vmax = np.maximum(np.abs(v), FLOOR * self._v_limits)
+        cmd.limits = (vmax.tolist(), self._a_list)
+        # one event per bound met, not one per repeated command (the end moves by a bisection
+        # step as the reference approaches it)
+        bound = end if why else None
+        if bound is not None and (
+            self._bound is None or float(np.max(np.abs(bound - self._bound))) > 2e-3
+        ):
+            d.events.append((d.time, f"jog: stops at {np.round(end[:3], 4).tolist()} m: {why}"))
+        self._bound = bound
+        return True
 
     def command(self, t: float, cmd: Command) -> None:
         """Follow ``cmd`` (checked and planned by ``Controller.submit``)."""

@@ -10,16 +10,24 @@ import math
 
 import numpy as np
 
+from cdprctl.control.commands import Command
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import State
-from cdprctl.motion.path_plan import PathPlan
-from cdprctl.motion.trajectory import Trajectory
+from cdprctl.model.robot import RobotModel
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path
+from cdprctl.motion.trajectory import Trajectory, coordinates_pose
 
 
 class PathFollower:
-    def __init__(self, data: ControlData, trajectory: Trajectory):
+    def __init__(
+        self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
+    ):
+        self.model = model
         self.data = data
         self.trajectory = trajectory
+        self.limits = limits
         self.plan: PathPlan | None = None
         self.k = 0  # the segment under way (0-based, in ``plan``)
         self.offset = 0  # segments of the original path before ``plan`` (after a resume)
@@ -28,6 +36,44 @@ class PathFollower:
         self._seg_start = np.zeros(6)
         self._seg_length = 0.0
 
+    # -- outside the loop (Controller.submit) ----------------------------------------------------
+    def plan_path(self, cmd: Command) -> bool:
+        """Parse and check the whole path from where the reference is (motion/path_plan.py);
+        False (an event naming the line and the rule) when it is refused. The loop starts it
+        only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
+        d, tr = self.data, self.trajectory
+        name = cmd.name or "(payload)"
+        if cmd.plan is not None:  # checked already (the gateway, --path) from where it rests
+            plan, _ = cmd.plan
+            if float(np.max(np.abs(tr.position - plan.start))) <= 1e-9:
+                return True
+        try:
+            start = tr.position.copy()
+            waypoints = parse_path(cmd.text, coordinates_pose(self.model, start))
+            period = self.model.control.period
+            cmd.plan = (plan_path(self.model, waypoints, start, period, self.limits, name), 0)
+        except (PathFileError, PathRejectedError) as exc:
+            d.events.append((d.time, f"path {name} rejected: {exc}"))
+            return False
+        return True
+
+    def plan_resume(self, cmd: Command) -> bool:
+        """The rest of a paused path from where it stands, checked again."""
+        if self.plan is None or not self.paused:
+            return True  # the loop says so (Controller._resume)
+        k, offset = self.remaining()
+        plan = self.plan
+        durations = [None, *plan.durations[k + 1 :]]
+        try:
+            here = self.trajectory.position.copy()
+            cmd.plan = (plan_path(self.model, plan.waypoints[k:], here, self.model.control.period,
+                                  self.limits, plan.name, durations), offset)  # fmt: skip
+        except PathRejectedError as exc:
+            self.data.events.append((self.data.time, f"resume refused: {exc}"))
+            return False
+        return True
+
+    # -- in the loop -------------------------------------------------------------------------------
     @property
     def holds_motion(self) -> bool:
         """True while the path runs (in a dwell too): its state stays MOVING."""
@@ -46,7 +92,7 @@ class PathFollower:
         assert plan is not None
         self.k += 1
         if self.k >= len(plan.segments):
-            self._end(t, "done", f"path {plan.name}: done".replace("  ", " "))
+            self._end(t, "done", f"path {plan.name}: done")
             return
         s = plan.segments[self.k]
         self._seg_start[:] = self.trajectory.position
