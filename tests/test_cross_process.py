@@ -366,20 +366,22 @@ def test_run_path_across_processes(tmp_path, sim_process):
     is checked, played to its end, the drives disabled, exit 0. On this shared 2-core VM a run
     can still meet the drives' following-error fault (late cycles over udp_multicast, issue
     17's known cost, docs/control.md): such a run must have stopped the controlled way (the
-    path "stopped", drives disabled, exit 3), and a second run must finish."""
-    port = random.Random(os.getpid() * 23).randrange(40000, 50000)  # its own port
+    path "stopped", drives disabled, exit 3), and a second run, against a fresh simulated
+    robot (the first one keeps its faulted drive and its displaced platform), must finish."""
     config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")
-    opts = ["--can-option", f"port={port}"]
-    sim_process(config, opts)
     path = tmp_path / "triangle.ngc"
     path.write_text("G21 G90\nG1 X1600 Z640 F6000\nG4 P0.2\nG1 X1400 Z640\nG1 X1500 Z590\nM2\n")
     texts = []
-    for _ in range(2):
+    for attempt in range(2):
+        port = random.Random(os.getpid() * 23 + attempt).randrange(40000, 50000)  # its own
+        opts = ["--can-option", f"port={port}"]
+        sim = sim_process(config, opts)
         proc = subprocess.run(
             [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(config), "--path",
              str(path), "--rate", "250", "--status", "0", *opts],
             capture_output=True, text=True, timeout=180,
         )  # fmt: skip
+        sim.terminate()
         text = proc.stdout + proc.stderr
         texts.append(text)
         assert f"path {path}: 3 segments" in text and "checked at" in text, text
