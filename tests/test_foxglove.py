@@ -240,3 +240,20 @@ def test_jaws_at_their_travel():
     for j, (g, travel) in enumerate(zip(model.grippers, (0.02, 0.07), strict=True)):
         local = model.attachments[g.cable] + g.jaw_offset + travel * np.asarray(g.guide_axis)
         assert np.allclose(sc.jaws[j], p + R @ local)
+
+
+def test_no_pose_yet_is_no_scene(tmp_path):
+    """Before the first estimate the payload's pose is null: no scene (not a crash) in the
+    builder and in a recording, the signals still written."""
+    model = load_robot(CONFIG / "rowc.toml")
+    lay = SceneLayout.from_model(model)
+    state = {"time": 1.0, "state": "init",
+             "pose": {"position": [None] * 3, "rpy": [None] * 3}, "target": [None] * 6,
+             "tensions": [None] * 8, "torques": [None] * 8,
+             "tracking_error": [None] * 6}  # fmt: skip
+    assert SceneBuilder(lay).build(state) is None
+    path = tmp_path / "t.mcap"
+    write_mcap(path, "cdpr/rowc", [(1, "state", json.dumps(state).encode())], lay.to_dict())
+    with open(path, "rb") as f:
+        topics = [c.topic for _, c, _ in make_reader(f).iter_messages()]
+    assert topics == ["cdpr/rowc/state", "/signals"]

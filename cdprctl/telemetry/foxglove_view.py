@@ -74,6 +74,7 @@ def foxglove_main(
     ready.set()
     next_t = time.monotonic()
     last_seq = -1.0
+    failed = False  # said once
     try:
         while not stop.is_set():
             now_ns = time.time_ns()
@@ -86,11 +87,18 @@ def foxglove_main(
             s = snap.read()
             if s is not None and s["seq"][0] != last_seq:
                 last_seq = s["seq"][0]
-                state = state_payload(s, names, "", grippers)
-                sc = builder.build(state)
-                tf.log(transforms(sc, now_ns), log_time=now_ns)
-                scene_ch.log(messages.update(sc, now_ns), log_time=now_ns)
-                sig_ch.log(signals(state), log_time=now_ns)
+                try:
+                    state = state_payload(s, names, "", grippers)
+                    sc = builder.build(state)
+                    if sc is not None:
+                        tf.log(transforms(sc, now_ns), log_time=now_ns)
+                        scene_ch.log(messages.update(sc, now_ns), log_time=now_ns)
+                    sig_ch.log(signals(state), log_time=now_ns)
+                except Exception as exc:  # a bad frame must not end the view
+                    if not failed:
+                        print(f"cdprctl-foxglove: a frame failed: {type(exc).__name__}: {exc}",
+                              file=sys.stderr, flush=True)  # fmt: skip
+                    failed = True
             next_t = max(next_t + period, time.monotonic())
             time.sleep(max(0.0, next_t - time.monotonic()))
     finally:

@@ -132,9 +132,9 @@ class _Typed:
         if key != "state" or "pose" not in body:
             return []
         out = [(TOPICS["signals"], "json", self.signals_schema, signals_bytes(body))]
-        if ns >= self.next:
+        sc = self.builder.build(body) if ns >= self.next else None
+        if sc is not None:
             self.next = max(self.next + self.every, ns - self.every // 2)
-            sc = self.builder.build(body)
             out.append((TOPICS["tf"], "protobuf", FrameTransforms.get_schema(),
                         transforms(sc, ns).encode()))  # fmt: skip
             out.append((TOPICS["scene"], "protobuf", SceneUpdate.get_schema(),

@@ -146,10 +146,13 @@ class SceneBuilder:
         size = np.maximum(hi - lo, 0.01)  # a flat platform still shows as a slab
         self.box = (0.5 * (lo + hi), size)
 
-    def build(self, state: dict[str, Any]) -> Scene:
-        """The scene of a ``state`` payload (``pose``, ``target``, ``tensions``, ``grippers``)."""
+    def build(self, state: dict[str, Any]) -> Scene | None:
+        """The scene of a ``state`` payload (``pose``, ``target``, ``tensions``, ``grippers``);
+        None while the pose is unknown (``null`` before the first estimate)."""
         lay = self.layout
-        p = np.array(state["pose"]["position"], dtype=float)
+        p = np.array([math.nan if x is None else x for x in state["pose"]["position"]], float)
+        if not np.all(np.isfinite(p)):
+            return None
         rpy = [x if x is not None else 0.0 for x in state["pose"]["rpy"]]
         R = rpy_to_matrix(*rpy)
         target = np.array([x if x is not None else 0.0 for x in state["target"]], dtype=float)

@@ -83,7 +83,9 @@ def scene_stills(path: str, layout: SceneLayout, states: list[tuple[str, dict[st
     axes = []
     for k, (title, state) in enumerate(states):
         ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
-        draw_scene(ax, layout, builder.build(state), title)
+        scene = builder.build(state)
+        if scene is not None:  # a row without a pose stays an empty frame
+            draw_scene(ax, layout, scene, title)
         axes.append(ax)
     cmap = LinearSegmentedColormap.from_list("tension", [(s, c) for s, c in TENSION_STOPS])
     sm = plt.cm.ScalarMappable(norm=Normalize(0.0, 1.0), cmap=cmap)
