@@ -29,8 +29,9 @@ from cdprctl.calibration.identify import Identification, Identified, Samples, We
 from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.numerics import compliance_of, unstretched_lengths
-from cdprctl.rotation import exp_so3, rpy_to_matrix
+from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import Lifecycle, WinchDriver, WinchStates
 
@@ -194,7 +195,7 @@ class _Session:
 
 def _hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
     """N: the tensions holding the platform's weight at ``x`` (m; rotation vector from home)."""
-    inverse_kinematics(model, kin, x[:3], exp_so3(x[3:]) @ model.home.rotation)
+    inverse_kinematics(model, kin, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
     return equilibrium_tensions(model, kin)
 
 

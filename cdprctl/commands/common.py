@@ -19,11 +19,16 @@ def command_parser(
     func: Callable[[argparse.Namespace], int],
     config: bool = True,
     description: str | None = None,
+    epilog: str | None = None,
 ) -> argparse.ArgumentParser:
     """The parser of sub-command ``name``, run by ``func``, described by ``func``'s docstring
-    (or ``description``); with ``config`` its ``--config FILE`` (the robot description)."""
+    (or ``description``); with ``config`` its ``--config FILE`` (the robot description). An
+    ``epilog`` (examples) is printed as written, and so is the description then."""
+    extra: dict[str, Any] = {}
+    if epilog is not None:
+        extra = {"epilog": epilog, "formatter_class": argparse.RawDescriptionHelpFormatter}
     p: argparse.ArgumentParser = sub.add_parser(
-        name, help=help, description=description or func.__doc__
+        name, help=help, description=description or func.__doc__, **extra
     )
     if config:
         p.add_argument("--config", required=True, help="robot description (TOML)")

@@ -14,7 +14,12 @@ import tty
 from typing import Any
 
 from cdprctl.commands.common import command_parser
-from cdprctl.commands.zenoh_tools import _prefix, _session, _status, add_zenoh_arguments
+from cdprctl.commands.zenoh_tools import (
+    add_zenoh_arguments,
+    key_prefix,
+    robot_status,
+    tool_session,
+)
 
 # key → (coordinate, sign): x y z (m/s), roll pitch yaw (rad/s about the frame's axes)
 KEYS = {
@@ -145,13 +150,13 @@ def jog(args: argparse.Namespace) -> int:
     configured limits) sent as cmd/jog every 50 ms; the daemon stops at the soft limits and
     when the jogs stop coming (its deadman). Needs the daemon to accept commands
     (docs/telemetry.md) and a terminal."""
-    prefix = _prefix(args)
+    prefix = key_prefix(args)
     if prefix is None:
         return 2
     if not os.isatty(sys.stdin.fileno()):
         print("cdprctl jog: error: needs a terminal (stdin is not a tty)", file=sys.stderr)
         return 2
-    session = _session(args)
+    session = tool_session(args)
     latest: dict[str, Any] = {}
     lock = threading.Lock()
 
@@ -174,7 +179,7 @@ def jog(args: argparse.Namespace) -> int:
 
     subs = [session.declare_subscriber(f"{prefix}/state", on_state),
             session.declare_subscriber(f"{prefix}/reply/*", on_reply)]  # fmt: skip
-    limits = _status(session, prefix).get("config", {}).get("limits", {})
+    limits = robot_status(session, prefix).get("config", {}).get("limits", {})
     j = Jogger(session, prefix, limits, args.speed, args.frame)
     if not limits:
         j.note = f"no status from {prefix}: the limits are guesses (0.1 m/s, 0.1 rad/s)"

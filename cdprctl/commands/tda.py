@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.common import load_or_report
+from cdprctl.commands.common import command_parser, load_or_report
 from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model import RobotModel
 from cdprctl.rotation import rpy_to_matrix
@@ -40,14 +40,8 @@ examples (Sensors 2019 §3; the printed moment -500 is N·mm, i.e. -0.5 N·m):
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "tda",
-        help="compute cable tensions for one pose and wrench (offline)",
-        description=DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p = command_parser(sub, "tda", "compute cable tensions for one pose and wrench (offline)",
+                       run, description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
     p.add_argument(
         "--pose", help="x,y,z,roll,pitch,yaw in m and rad, base frame (default: the home pose)"
     )
@@ -90,7 +84,6 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--plot", metavar="FILE.png", help="draw the feasible polygon / energy line")
-    p.set_defaults(func=run)
 
 
 class UsageError(Exception):

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.common import load_or_report
+from cdprctl.commands.common import command_parser, load_or_report
 
 DESCRIPTION = """\
 For every point of a grid, whether the cables can hold the platform there, at the given
@@ -27,14 +27,8 @@ examples:
 
 
 def add_parser(sub: Any) -> None:
-    p = sub.add_parser(
-        "workspace",
-        help="the wrench-feasible workspace on a grid (JSON, slice plots)",
-        description=DESCRIPTION,
-        epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--config", required=True, help="robot description (TOML)")
+    p = command_parser(sub, "workspace", "the wrench-feasible workspace on a grid (JSON, slice "
+                       "plots)", run, description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
     p.add_argument("--rpy", help="orientation roll,pitch,yaw (rad; default: the home one)")
     p.add_argument(
         "--wrench",
@@ -49,7 +43,6 @@ def add_parser(sub: Any) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--plot", metavar="DIR", help="write slice plots (PNG) into DIR")
-    p.set_defaults(func=run, cmd="workspace")
 
 
 def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:

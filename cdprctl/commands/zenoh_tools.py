@@ -27,7 +27,7 @@ def add_zenoh_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-multicast-scouting", action="store_true")
 
 
-def _prefix(args: argparse.Namespace) -> str | None:
+def key_prefix(args: argparse.Namespace) -> str | None:
     if args.prefix:
         return str(args.prefix).rstrip("/")
     if args.robot:
@@ -36,7 +36,7 @@ def _prefix(args: argparse.Namespace) -> str | None:
     return None
 
 
-def _session(args: argparse.Namespace) -> Any:
+def tool_session(args: argparse.Namespace) -> Any:
     from cdprctl.telemetry.session import open_session
 
     return open_session(
@@ -104,7 +104,7 @@ def send(args: argparse.Namespace) -> int:
     (velocity m/s and rad/s, frame base|platform; repeat it, or use ``cdprctl jog``), path
     (--file FILE: checked whole before it is accepted), pause, resume, abort. Exit 0
     accepted, 1 rejected, 2 no reply."""
-    prefix = _prefix(args)
+    prefix = key_prefix(args)
     if prefix is None:
         return 2
     if args.json:
@@ -144,7 +144,7 @@ def send(args: argparse.Namespace) -> int:
             got.update(body)
             done.set()
 
-    session = _session(args)
+    session = tool_session(args)
     try:
         sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
         time.sleep(0.3)  # let the subscription reach the gateway before asking
@@ -217,7 +217,7 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
     return "\n".join(lines)
 
 
-def _status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
+def robot_status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
     for r in session.get(f"{prefix}/status", timeout=timeout):
         if r.ok is not None:
             try:
@@ -230,7 +230,7 @@ def _status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
 def monitor(args: argparse.Namespace) -> int:
     """Pose, tensions as bars against their limits, state and loop timing, refreshed as `state`
     arrives. Ctrl-C ends it."""
-    prefix = _prefix(args)
+    prefix = key_prefix(args)
     if prefix is None:
         return 2
     latest: dict[str, Any] = {}
@@ -245,10 +245,10 @@ def monitor(args: argparse.Namespace) -> int:
         if key == "state":
             new.set()
 
-    session = _session(args)
+    session = tool_session(args)
     try:
         subs = [session.declare_subscriber(f"{prefix}/{k}", on_sample) for k in ("state", "timing")]
-        meta = _status(session, prefix).get("config", {})
+        meta = robot_status(session, prefix).get("config", {})
         start = time.monotonic()
         while True:
             if not new.wait(0.5):
@@ -278,7 +278,7 @@ def record(args: argparse.Namespace) -> int:
     """Writes DIR/state.csv, DIR/timing.csv, DIR/events.csv and DIR/meta.json (the robot's
     status: limits, cables) until --duration or Ctrl-C, and with --mcap DIR/telemetry.mcap
     (Foxglove); `cdprctl report DIR` draws them."""
-    prefix = _prefix(args)
+    prefix = key_prefix(args)
     if prefix is None:
         return 2
     out = Path(args.output)
@@ -299,13 +299,13 @@ def record(args: argparse.Namespace) -> int:
             if args.mcap:
                 raw.append((time.time_ns(), key, data))
 
-    session = _session(args)
+    session = tool_session(args)
     try:
         subs = [
             session.declare_subscriber(f"{prefix}/{k}", on_sample)
             for k in ("state", "timing", "events")
         ]
-        status = _status(session, prefix)
+        status = robot_status(session, prefix)
         (out / "meta.json").write_text(json.dumps(status, indent=1))
         end = time.monotonic() + args.duration if args.duration else float("inf")
         try:

@@ -15,22 +15,19 @@ from cdprctl.control.data import ControlData
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_plan import FLOOR
-from cdprctl.motion.trajectory import Trajectory
-from cdprctl.rotation import FloatArray, exp_so3
+from cdprctl.motion.trajectory import Trajectory, coordinates_rotation
+from cdprctl.rotation import FloatArray
 
 
 class Jog:
     def __init__(
         self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
     ):
-        c = model.control
         self.model = model
         self.data = data
         self.trajectory = trajectory
         self.limits = limits
-        self.deadman = c.jog_deadman  # s
-        self._v_limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
-        self._a_list = [c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3
+        self.deadman = model.control.jog_deadman  # s
         self._bound: FloatArray | None = None  # where the last jog's limits ended it
         self.active = False
         self.last = 0.0  # s, loop time of the last jog command
@@ -43,7 +40,7 @@ class Jog:
         d = self.data
         v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
         if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
-            np.abs(v) > self._v_limits * (1 + 1e-9)
+            np.abs(v) > self.trajectory.limits * (1 + 1e-9)
         ) or cmd.frame not in ("base", "platform"):  # fmt: skip
             d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
                              "configured limits, or frame not base/platform"))  # fmt: skip
@@ -53,7 +50,7 @@ class Jog:
             return True
         start = self.trajectory.position.copy()
         if cmd.frame == "platform":
-            R = exp_so3(start[3:]) @ self.model.home.rotation
+            R = coordinates_rotation(self.model.home.rotation, start[3:])
             v = np.concatenate([R @ v[:3], R @ v[3:]])
         ws = self.model.workspace
         speed, turn = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
@@ -61,8 +58,8 @@ class Jog:
         horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
         end, why = self.limits.ray_end(start, v, horizon, step=0.02)
         cmd.target = end
-        vmax = np.maximum(np.abs(v), FLOOR * self._v_limits)
-        cmd.limits = (vmax.tolist(), self._a_list)
+        vmax = np.maximum(np.abs(v), FLOOR * self.trajectory.limits)
+        cmd.limits = (vmax.tolist(), self.trajectory.full_acceleration)
         # one event per bound met, not one per repeated command (the end moves by a bisection
         # step as the reference approaches it)
         bound = end if why else None

@@ -15,9 +15,9 @@ from cdprctl.control.data import ControlData
 from cdprctl.control.states import State
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import PathFileError, parse_path
-from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path
-from cdprctl.motion.trajectory import Trajectory, coordinates_pose
+from cdprctl.motion.path_file import PathFileError
+from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path, plan_text
+from cdprctl.motion.trajectory import Trajectory
 
 
 class PathFollower:
@@ -48,10 +48,9 @@ class PathFollower:
             if float(np.max(np.abs(tr.position - plan.start))) <= 1e-9:
                 return True
         try:
-            start = tr.position.copy()
-            waypoints = parse_path(cmd.text, coordinates_pose(self.model, start))
-            period = self.model.control.period
-            cmd.plan = (plan_path(self.model, waypoints, start, period, self.limits, name), 0)
+            plan = plan_text(self.model, cmd.text, tr.position.copy(), self.model.control.period,
+                             self.limits, name)  # fmt: skip
+            cmd.plan = (plan, 0)
         except (PathFileError, PathRejectedError) as exc:
             d.events.append((d.time, f"path {name} rejected: {exc}"))
             return False

@@ -101,6 +101,7 @@ class Daemon:
         self._errors: list[float] = []
         self._true_errors: list[float] = []  # m, the simulated platform against the reference
         self._last_t: float | None = None
+        self._last_fault = ""  # the fault the links were last told of
         self._path: tuple[str, str] | None = None  # --path: (name, text)
         self._path_sent = self._enable_sent = False
         self._path_cycle = 0
@@ -277,15 +278,13 @@ class Daemon:
 
     def _check_path(self, name: str, text: str) -> bool:
         """The whole path from the pose start-up found, before any motion."""
-        from cdprctl.motion.path_file import PathFileError, parse_path
-        from cdprctl.motion.path_plan import PathRejectedError, plan_path
-        from cdprctl.motion.trajectory import coordinates_pose
+        from cdprctl.motion.path_file import PathFileError
+        from cdprctl.motion.path_plan import PathRejectedError, plan_text
 
         c = self.controller
-        start = c.trajectory.position.copy()
         try:
-            plan = plan_path(self.model, parse_path(text, coordinates_pose(self.model, start)),
-                             start, self.model.control.period, c.limits, name)  # fmt: skip
+            plan = plan_text(self.model, text, c.trajectory.position.copy(),
+                             self.model.control.period, c.limits, name)  # fmt: skip
         except (PathFileError, PathRejectedError) as exc:
             self._print(f"cdprctl run: path {name} rejected: {exc}", err=True)
             return False
@@ -380,15 +379,20 @@ class Daemon:
         view = self.view
         if view is not None:
             tick = min(tick, 1.0 / self.model.foxglove.rate)
+        from cdprctl.telemetry.snapshot import controller_values
         next_tick = time.monotonic()
         while True:
             now = time.monotonic() - t0
             self._drain_events()
-            true = self.plant.position if self.sim is not None else None
-            if view is not None:
-                view.publish(c.data, true)
+            due = view is not None and view.due()
+            if link is not None or due:  # the loop's values, once for both
+                true = self.plant.position if self.sim is not None else None
+                values = controller_values(c.data, true)
+                if due:
+                    view.write(values)
+                if link is not None:
+                    link.publish(values, self.stats)
             if link is not None:
-                link.publish(c.data, self.stats, true)
                 for cmd in link.take_commands():
                     if not c.submit(cmd):
                         link.event(c.time, f"command {cmd.kind} dropped: mailbox full", "reject")
@@ -443,9 +447,15 @@ class Daemon:
             if self.link is not None:
                 self.link.event(t, text)
             if self.view is not None:
-                self.view.event("event", t, text)
+                self.view.event(t, text)
         while d.faults:
             self.faults[d.faults.popleft()[1].value] += 1
+        if d.fault_reason != self._last_fault:  # a fault, or its reset (telemetry only)
+            self._last_fault = d.fault_reason
+            if self.link is not None:
+                self.link.event(d.time, d.fault_reason, "fault")
+            if self.view is not None and d.fault_reason:
+                self.view.event(d.time, d.fault_reason, "fault")
 
     def _status_line(self, now: float) -> None:
         c = self.controller

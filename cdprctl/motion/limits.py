@@ -12,8 +12,9 @@ import numpy as np
 
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, exp_so3
-from cdprctl.tda.workspace import Margins
+from cdprctl.motion.trajectory import coordinates_rotation
+from cdprctl.rotation import FloatArray
+from cdprctl.tda.workspace import Margins, hold_wrench
 
 
 class SoftLimits:
@@ -30,7 +31,7 @@ class SoftLimits:
         """(n, 3, 3): the orientations of trajectory coordinates ``[p, φ]`` (φ: rotation
         vector from home, ``motion.trajectory``)."""
         home = self.model.home.rotation
-        return np.array([exp_so3(c[3:]) @ home for c in coords])
+        return np.array([coordinates_rotation(home, c[3:]) for c in coords])
 
     def wrenches(self, R: FloatArray, acceleration: FloatArray | None) -> FloatArray:
         """(n, 6) N, N·m at P: what the cables must exert at orientations ``R`` with the
@@ -38,7 +39,7 @@ class SoftLimits:
         m, pf = self.model, self.model.platform
         out = np.empty((len(R), 6))
         for i, Ri in enumerate(R):
-            out[i] = -(m.gravity_wrench(Ri) + self.grippers.weight_wrench(Ri) + self.external)
+            out[i] = hold_wrench(m, Ri, self.external, self.grippers)
             if acceleration is not None:
                 out[i, :3] += pf.mass * acceleration[i, :3]
                 out[i, 3:] += Ri @ pf.inertia @ Ri.T @ acceleration[i, 3:]

@@ -23,8 +23,14 @@ import numpy as np
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import Waypoint
-from cdprctl.motion.trajectory import Trajectory, pose_coordinates
+from cdprctl.motion.path_file import Waypoint, parse_path
+from cdprctl.motion.trajectory import (
+    Trajectory,
+    acceleration_limits,
+    coordinates_pose,
+    pose_coordinates,
+    velocity_limits,
+)
 from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 CHECK_SPACING = 0.002  # m (or rad) between checked samples at most
@@ -56,7 +62,6 @@ class PathPlan:
     min_margin: float  # N: the smallest tension margin met
     min_margin_at: str
     name: str = ""
-    arrival: list[float] = field(default_factory=list)  # s: when each segment ends (planned)
     start: FloatArray = field(default_factory=lambda: np.zeros(6))  # coordinates, at rest
     waypoints: list[Waypoint] = field(default_factory=list)
     durations: list[float | None] = field(default_factory=list)  # s, each segment's least
@@ -88,8 +93,7 @@ def _limits(
     starts or ends moving (a blend) has the speed per axis instead: its velocity turns from
     one line's direction to the next on the way."""
     c = model.control
-    v_lim = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
-    a_lim = np.array([c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3)
+    v_lim, a_lim = velocity_limits(c), acceleration_limits(c)
     frac = 1.0 if speed is None else speed / c.max_velocity
     vmax = v_lim * FLOOR
     for part in (slice(0, 3), slice(3, 6)):
@@ -146,9 +150,23 @@ def plan_path(
             vel = _blend_velocity(deltas[i], deltas[i + 1], bounds[i], bounds[i + 1])
         segments.append(Segment(targets[i], vel.tolist(), vmax.tolist(), amax.tolist(),
                                 durations[i], w.dwell, w.where))  # fmt: skip
-    plan = _play_and_check(model, segments, waypoints, start, period, lim, name)
-    plan.start, plan.waypoints, plan.durations = start.copy(), list(waypoints), list(durations)
-    return plan
+    return _play_and_check(model, segments, waypoints, durations, start, period, lim, name)
+
+
+def plan_text(
+    model: RobotModel,
+    text: str,
+    start: FloatArray,
+    period: float,
+    limits: SoftLimits | None = None,
+    name: str = "",
+) -> PathPlan:
+    """A path file's content planned and checked from the trajectory coordinates ``start``
+    (at rest; the axes a file leaves out keep its values). Raises PathFileError or
+    PathRejectedError."""
+    start = np.asarray(start, dtype=float)
+    waypoints = parse_path(text, coordinates_pose(model, start))
+    return plan_path(model, waypoints, start, period, limits, name)
 
 
 def _blend_velocity(d_in: FloatArray, d_out: FloatArray, b_in: tuple, b_out: tuple) -> FloatArray:
@@ -170,6 +188,7 @@ def _play_and_check(
     model: RobotModel,
     segments: list[Segment],
     waypoints: list[Waypoint],
+    durations: list[float | None],
     start: FloatArray,
     period: float,
     lim: SoftLimits,
@@ -182,7 +201,6 @@ def _play_and_check(
     every = max(1, int(CHECK_SPACING / (fastest * period)))
     pos, acc, seg_of, times = [start.copy()], [np.zeros(6)], [0], [0.0]
     t = 0.0
-    arrival = []
     max_steps = int(MAX_DURATION / period)
     steps = 0
     for k, s in enumerate(segments):
@@ -211,7 +229,6 @@ def _play_and_check(
                     f"{s.minimum_duration:.3f} s were given"
                 )
         t += s.dwell
-        arrival.append(t)
     P = np.array(pos)
     margin, ok, floor = lim.along(P, np.array(acc))
     if not ok.all():
@@ -233,5 +250,7 @@ def _play_and_check(
         min_margin=float(margin[j]),
         min_margin_at=f"{segments[seg_of[j]].where}, t = {times[j]:.2f} s",
         name=name,
-        arrival=arrival,
+        start=start.copy(),
+        waypoints=list(waypoints),
+        durations=list(durations),
     )

@@ -28,6 +28,7 @@ from ruckig import (
     Synchronization,
 )
 
+from cdprctl.model.control import ControlConfig
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray, exp_so3, log_so3, matrix_to_rpy
 
@@ -43,10 +44,26 @@ def pose_coordinates(model: RobotModel, position: FloatArray, rotation: FloatArr
     return np.concatenate([position, log_so3(rotation @ model.home.rotation.T)])
 
 
+def coordinates_rotation(home: FloatArray, phi: FloatArray) -> FloatArray:
+    """The orientation (platform → base) of the rotation vector ``phi`` (rad) from the home
+    orientation ``home``: ``R = exp([φ]×) R_home``."""
+    return exp_so3(np.asarray(phi, dtype=float)) @ home
+
+
 def coordinates_pose(model: RobotModel, x: FloatArray) -> FloatArray:
     """x, y, z, roll, pitch, yaw (m, rad) of the trajectory coordinates ``x``."""
-    R = exp_so3(np.asarray(x[3:], dtype=float)) @ model.home.rotation
+    R = coordinates_rotation(model.home.rotation, x[3:])
     return np.concatenate([x[:3], matrix_to_rpy(R)])
+
+
+def velocity_limits(c: ControlConfig) -> FloatArray:
+    """The configured limits per coordinate: m/s for the position, rad/s for the rotation."""
+    return np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
+
+
+def acceleration_limits(c: ControlConfig) -> FloatArray:
+    """The configured limits per coordinate: m/s², rad/s²."""
+    return np.array([c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3)
 
 
 class Trajectory:
@@ -57,9 +74,9 @@ class Trajectory:
         self._dt = period  # s, ruckig's step (read from Python: the binding's costs ~µs)
         self.inp = InputParameter(6)
         self.out = OutputParameter(6)
-        self.limits = np.array([c.max_velocity] * 3 + [c.max_angular_velocity] * 3)
+        self.limits = velocity_limits(c)
         self.inp.max_velocity = self.limits.tolist()
-        self.acc_limits = np.array([c.max_acceleration] * 3 + [c.max_angular_acceleration] * 3)
+        self.acc_limits = acceleration_limits(c)
         self.inp.max_acceleration = self.acc_limits.tolist()
         self.inp.max_jerk = [c.max_jerk] * 3 + [c.max_angular_jerk] * 3
         self.position = np.zeros(6)  # desired [p, φ]
@@ -70,7 +87,8 @@ class Trajectory:
         self.result = Result.Finished
         self._velocity_mode = False  # braking: ruckig's velocity interface to zero velocity
         self._zero6 = [0.0] * 6
-        self._full_acceleration = self.acc_limits.tolist()  # a stop brakes with all there is
+        # the configured accelerations as ruckig takes them (a stop brakes with all there is)
+        self.full_acceleration = self.acc_limits.tolist()
         self._target_velocity = self._zero6  # ruckig's target velocity (a list: the binding's)
 
     def coordinates(self, position: FloatArray, rotation: FloatArray) -> FloatArray:
@@ -136,7 +154,7 @@ class Trajectory:
         self.inp.current_velocity = self.velocity.tolist()
         self.inp.current_acceleration = self.acceleration.tolist()
         self.inp.control_interface = ControlInterface.Velocity
-        self.inp.max_acceleration = self._full_acceleration
+        self.inp.max_acceleration = self.full_acceleration
         self.inp.target_velocity = self._zero6
         self.inp.target_acceleration = self._zero6
         self.inp.minimum_duration = None

@@ -26,11 +26,13 @@ from cdprctl.rotation import FloatArray
 from cdprctl.tda.polygon import least_violating_kernel
 
 
-def hold_wrench(model: RobotModel, R: FloatArray, external: FloatArray) -> FloatArray:
+def hold_wrench(
+    model: RobotModel, R: FloatArray, external: FloatArray, grippers: GripperSet | None = None
+) -> FloatArray:
     """The wrench (N, N·m at P, base frame) the cables must exert to hold the platform at rest
     at orientation ``R``: minus its weight, the jaws' weight and ``external`` (Picard et al.
-    2020, eq. (1))."""
-    gs = GripperSet(model)
+    2020, eq. (1)). ``grippers``: the robot's, when the caller holds them already."""
+    gs = grippers if grippers is not None else GripperSet(model)
     return -(model.gravity_wrench(R) + gs.weight_wrench(R) + np.asarray(external, dtype=float))
 
 

@@ -127,16 +127,15 @@ class SceneMessages:
                           color=_color(scene.colours[i]))
             for i in range(len(scene.exits))
         ]  # fmt: skip
-        labels = [
-            TextPrimitive(pose=Pose(position=Vector3(x=float(m[0]), y=float(m[1]),
-                                                     z=float(m[2]))),
-                          billboard=True, font_size=2.0 * s, scale_invariant=False,
-                          color=_color(scene.colours[i]),
-                          text=f"{self.layout.names[i]}: {scene.status[i]} "
-                               f"({scene.tensions[i]:.0f} N)")
-            for i in range(len(scene.exits)) if scene.status[i]
-            for m in [0.5 * (scene.exits[i] + scene.attach[i])]
-        ]  # fmt: skip
+        labels = []  # the slack and over-limit cables, named at their middle
+        for i in (i for i, status in enumerate(scene.status) if status):
+            m = 0.5 * (scene.exits[i] + scene.attach[i])
+            text = f"{self.layout.names[i]}: {scene.status[i]} ({scene.tensions[i]:.0f} N)"
+            labels.append(TextPrimitive(
+                pose=Pose(position=Vector3(x=float(m[0]), y=float(m[1]), z=float(m[2]))),
+                billboard=True, font_size=2.0 * s, scale_invariant=False,
+                color=_color(scene.colours[i]),
+                text=text))  # fmt: skip
         pulleys = [LinePrimitive(type=LinePrimitiveLineType.LineStrip,
                                  points=[_pt(q) for q in circle], thickness=0.3 * s,
                                  color=Color(r=0.3, g=0.3, b=0.35, a=1.0))

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values
+from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
 def foxglove_main(
@@ -29,6 +29,7 @@ def foxglove_main(
     import foxglove
     from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
 
+    from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
     from cdprctl.telemetry.foxglove_messages import (
         SIGNALS_SCHEMA,
         TOPICS,
@@ -40,12 +41,7 @@ def foxglove_main(
     from cdprctl.telemetry.scene import SceneBuilder, SceneLayout
     from cdprctl.telemetry.schema import state_payload
 
-    try:
-        from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
-
-        yield_to_the_loop(loop_cpu(model.control.cpu))
-    except Exception:  # best effort, as the gateway's
-        pass
+    yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort, as the gateway's
     snap = SharedSnapshot(model.n_cables, snapshot_name, g=len(model.grippers))
     ctx = foxglove.Context()
     try:
@@ -126,27 +122,26 @@ class FoxgloveLink:
         )
         self._next = 0.0
         self._period = 1.0 / model.foxglove.rate
-        self._last_fault = ""
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
-    def publish(self, data: Any, true_position: Any = None) -> None:
-        """The loop's data into the snapshot, at the view's rate; a new fault as an error."""
-        if data.fault_reason != self._last_fault:
-            self._last_fault = data.fault_reason
-            if data.fault_reason:
-                self.event("fault", data.time, data.fault_reason)
+    def due(self) -> bool:
+        """Whether the view's period has come (then the caller ``write``s)."""
         now = time.monotonic()
         # the I/O thread's ticks jitter around the period: a tick a little early still counts
         slack = 0.3 * self._period
         if now < self._next - slack:
-            return
+            return False
         self._next = max(self._next + self._period, now - slack)
-        self.snapshot.write(controller_values(data, true_position))
+        return True
 
-    def event(self, kind: str, t: float, text: str) -> None:
+    def write(self, values: dict[str, Any]) -> None:
+        """The loop's values (``snapshot.controller_values``) into the view's snapshot."""
+        self.snapshot.write(values)
+
+    def event(self, t: float, text: str, kind: str = "event") -> None:
         with contextlib.suppress(queue.Full):
             self.events.put_nowait((kind, t, text))
 

@@ -12,9 +12,8 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, GripKind
-from cdprctl.control.data import ControlData
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values, timing_values
+from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
 
 
 class TelemetryLink:
@@ -44,14 +43,14 @@ class TelemetryLink:
             daemon=True,
         )
         self._next_timing = 0.0
-        self._last_fault = ""
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
-    def publish(self, data: ControlData, stats: Any, true_position: Any = None) -> None:
-        values = controller_values(data, true_position)
+    def publish(self, values: dict[str, Any], stats: Any) -> None:
+        """The loop's values (``snapshot.controller_values``) into the snapshot, the loop's
+        timing with them at ``zenoh.timing_rate``."""
         now = time.monotonic()
         if now >= self._next_timing:
             # percentiles over the cycles since the last report (docs/telemetry.md)
@@ -59,9 +58,6 @@ class TelemetryLink:
             values["timing"] = timing_values(stats, round(dt / self.model.control.period))
             self._next_timing = now + dt
         self.snapshot.write(values)
-        if data.fault_reason != self._last_fault:
-            self._last_fault = data.fault_reason
-            self.event(data.time, data.fault_reason, "fault")
 
     def event(self, t: float, text: str, kind: str = "event") -> None:
         try:

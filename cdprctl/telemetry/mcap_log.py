@@ -101,9 +101,15 @@ class _Typed:
 
     def __init__(self, layout: dict[str, Any], scene_rate: float):
         import foxglove
+        from foxglove.messages import FrameTransforms, Log, SceneUpdate
 
-        from cdprctl.telemetry.foxglove_messages import SIGNALS_SCHEMA, SceneMessages
+        from cdprctl.telemetry import foxglove_messages as fm
         from cdprctl.telemetry.scene import SceneBuilder, SceneLayout
+
+        self.fm = fm
+        self.schemas = {"tf": FrameTransforms.get_schema(), "scene": SceneUpdate.get_schema(),
+                        "log": Log.get_schema()}  # fmt: skip
+        SIGNALS_SCHEMA, SceneMessages = fm.SIGNALS_SCHEMA, fm.SceneMessages
 
         lay = SceneLayout.from_dict(layout)
         self.builder, self.scene = SceneBuilder(lay), SceneMessages(lay)
@@ -117,26 +123,18 @@ class _Typed:
     ) -> list[tuple[str, str, Any, bytes]]:
         """(topic, message encoding, schema, payload) of what ``body`` (a ``key`` payload
         received at ``ns``) becomes."""
-        from foxglove.messages import FrameTransforms, Log, SceneUpdate
-
-        from cdprctl.telemetry.foxglove_messages import (
-            TOPICS,
-            log_message,
-            signals_bytes,
-            transforms,
-        )
-
+        fm, schemas, topics = self.fm, self.schemas, self.fm.TOPICS
         if key == "events":
-            msg = log_message(ns, str(body.get("kind", "event")), str(body.get("text", "")))
-            return [(TOPICS["log"], "protobuf", Log.get_schema(), msg.encode())]
+            msg = fm.log_message(ns, str(body.get("kind", "event")), str(body.get("text", "")))
+            return [(topics["log"], "protobuf", schemas["log"], msg.encode())]
         if key != "state" or "pose" not in body:
             return []
-        out = [(TOPICS["signals"], "json", self.signals_schema, signals_bytes(body))]
+        out = [(topics["signals"], "json", self.signals_schema, fm.signals_bytes(body))]
         sc = self.builder.build(body) if ns >= self.next else None
         if sc is not None:
             self.next = max(self.next + self.every, ns - self.every // 2)
-            out.append((TOPICS["tf"], "protobuf", FrameTransforms.get_schema(),
-                        transforms(sc, ns).encode()))  # fmt: skip
-            out.append((TOPICS["scene"], "protobuf", SceneUpdate.get_schema(),
+            out.append((topics["tf"], "protobuf", schemas["tf"],
+                        fm.transforms(sc, ns).encode()))  # fmt: skip
+            out.append((topics["scene"], "protobuf", schemas["scene"],
                         self.scene.update(sc, ns).encode()))  # fmt: skip
         return out

@@ -18,7 +18,8 @@ import numpy as np
 
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, exp_so3, rpy_to_matrix
+from cdprctl.motion.trajectory import coordinates_rotation
+from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 SLACK_FRACTION = 0.005  # of the tension range below t_min: a cable drawn as slack
 
@@ -156,7 +157,7 @@ class SceneBuilder:
         rpy = [x if x is not None else 0.0 for x in state["pose"]["rpy"]]
         R = rpy_to_matrix(*rpy)
         target = np.array([x if x is not None else 0.0 for x in state["target"]], dtype=float)
-        Rt = exp_so3(target[3:]) @ lay.home_rotation
+        Rt = coordinates_rotation(lay.home_rotation, target[3:])
         inverse_kinematics(lay, self.kin, p, R)
         exits = np.array(self.kin.exit_points)
         attach = self.kin.rb + p

@@ -171,9 +171,8 @@ class CommandValidator:
         """``{"text": the CSV or G-code file, "name": where it came from}``: parsed and the
         whole path checked from where the robot rests now (the controller checks again from
         the reference it holds when the command arrives; a refusal there is an event)."""
-        from cdprctl.motion.path_file import PathFileError, parse_path
-        from cdprctl.motion.path_plan import PathRejectedError, plan_path
-        from cdprctl.motion.trajectory import coordinates_pose
+        from cdprctl.motion.path_file import PathFileError
+        from cdprctl.motion.path_plan import PathRejectedError, plan_text
 
         text, name = d.get("text"), d.get("name", "")
         if not isinstance(text, str) or not text.strip():
@@ -182,11 +181,9 @@ class CommandValidator:
             raise CommandError("path: name must be a string of at most 200 characters")
         plan = None
         if snap is not None and np.all(np.isfinite(snap["reference"])):
-            start = np.asarray(snap["reference"], dtype=float)
-            pose = coordinates_pose(self.model, start)
             try:
-                plan = plan_path(self.model, parse_path(text, pose), start,
-                                 self.model.control.period, name=name)  # fmt: skip
+                plan = plan_text(self.model, text, np.asarray(snap["reference"], dtype=float),
+                                 self.model.control.period, self.limits, name)  # fmt: skip
             except (PathFileError, PathRejectedError) as exc:
                 raise CommandError(f"path {name}: {exc}") from None
         # the plan travels with the text: the daemon uses it when the robot still rests where
