@@ -410,8 +410,7 @@ class Controller:
     def _path(self, t: float, cmd: Command) -> None:
         d = self.data
         plan, offset = cmd.plan
-        moved = float(np.max(np.abs(self.trajectory.position - plan.start)))
-        if not self.trajectory.finished or moved > 1e-9:
+        if not self.trajectory.finished or not plan.starts_at(self.trajectory.position):
             d.events.append((t, f"path {plan.name} not started: the robot moved since it was "
                              "checked"))  # fmt: skip
             return

@@ -43,10 +43,8 @@ class PathFollower:
         only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
         d, tr = self.data, self.trajectory
         name = cmd.name or "(payload)"
-        if cmd.plan is not None:  # checked already (the gateway, --path) from where it rests
-            plan, _ = cmd.plan
-            if float(np.max(np.abs(tr.position - plan.start))) <= 1e-9:
-                return True
+        if cmd.plan is not None and cmd.plan[0].starts_at(tr.position):
+            return True  # checked already (the gateway, --path) from where it rests
         try:
             plan = plan_text(self.model, cmd.text, tr.position.copy(), self.model.control.period,
                              self.limits, name)  # fmt: skip

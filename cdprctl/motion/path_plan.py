@@ -34,6 +34,9 @@ from cdprctl.motion.trajectory import (
 from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 CHECK_SPACING = 0.002  # m (or rad) between checked samples at most
+# m (or rad): a plan made where the reference rested still holds from a reference this close
+# (enabling resets the reference to the estimate: nanometres away, across processes ~2e-9 m)
+START_TOLERANCE = 1e-5
 MAX_DURATION = 3600.0  # s: a path file is a job, not a program that runs forever
 FLOOR = 1e-3  # of a limit: ruckig needs every coordinate's limits positive
 
@@ -65,6 +68,10 @@ class PathPlan:
     start: FloatArray = field(default_factory=lambda: np.zeros(6))  # coordinates, at rest
     waypoints: list[Waypoint] = field(default_factory=list)
     durations: list[float | None] = field(default_factory=list)  # s, each segment's least
+
+    def starts_at(self, x: FloatArray) -> bool:
+        """Whether the plan holds from the trajectory coordinates ``x`` (``START_TOLERANCE``)."""
+        return float(np.max(np.abs(np.asarray(x) - self.start))) <= START_TOLERANCE
 
     def summary(self) -> str:
         return (f"{len(self.segments)} segments, {self.duration:.2f} s; checked at "
