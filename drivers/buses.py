@@ -10,6 +10,7 @@ import can
 
 from cdprctl.model.drives import BusConfig
 from drivers.errors import DriverInitializationError
+from drivers.udp_bus import CyclicUdpMulticastBus
 
 
 def bus_medium(
@@ -52,6 +53,8 @@ def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int
     if interface not in ("virtual", "udp_multicast", "inprocess"):
         kwargs.setdefault("bitrate", cfg.bitrate)
     try:
+        if interface == "udp_multicast":  # python-can's, with a cyclic path (udp_bus.py)
+            return CyclicUdpMulticastBus(channel, **kwargs)
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except Exception as exc:  # python-can raises CanError, OSError, ImportError, ValueError...
         raise DriverInitializationError(

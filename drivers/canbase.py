@@ -168,6 +168,16 @@ class CanWinchDriver(WinchDriver):
         dispatch = self._dispatch
         for b in self.media:
             bus = self.buses[b]
+            drain = getattr(bus, "drain_frames", None)
+            if drain is not None and self.log is None:  # no Message per frame (udp_bus.py)
+                for arb, plain, data in drain():
+                    self.stats.frames_received += 1
+                    key = dispatch.get((b, arb))
+                    if key is None or not plain:
+                        self.stats.frames_ignored += 1
+                        continue
+                    yield key[0], key[1], data
+                continue
             while True:
                 msg = bus.recv(0)
                 if msg is None:

@@ -1,0 +1,147 @@
+"""The cyclic udp_multicast bus against python-can's own UdpMulticastBus on the same group: the
+same frames both ways, and a datagram that is no frame dropped and counted, never raised."""
+
+from __future__ import annotations
+
+import os
+import random
+import socket
+import threading
+import time
+
+import can
+import msgpack
+import pytest
+from can.interfaces.udp_multicast import UdpMulticastBus
+
+from cdprctl.model.drives import BusConfig
+from drivers.buses import open_bus
+from drivers.udp_bus import CyclicUdpMulticastBus
+
+GROUP = "239.74.163.2"
+
+
+@pytest.fixture
+def pair():
+    port = random.Random(os.getpid() * 13).randrange(40000, 50000)
+    ours = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
+    theirs = UdpMulticastBus(GROUP, port=port, fd=True)
+    try:
+        yield ours, theirs, port
+    finally:
+        ours.shutdown()
+        theirs.shutdown()
+
+
+def drained(bus: CyclicUdpMulticastBus, n: int, timeout: float = 5.0) -> list:
+    """The first ``n`` frames ``drain_frames`` gives (multicast loopback is delivered within the
+    sender's syscall; the deadline is only for a loaded machine)."""
+    got: list = []
+    deadline = time.monotonic() + timeout
+    while len(got) < n and time.monotonic() < deadline:
+        got.extend(bus.drain_frames())
+    return got
+
+
+def test_frames_from_python_can_arrive_decoded(pair):
+    ours, theirs, _ = pair
+    sent = [
+        can.Message(arbitration_id=0x181, data=bytes(range(8)), is_extended_id=False),
+        can.Message(arbitration_id=0x80, data=b"\x07", is_extended_id=False),
+        can.Message(arbitration_id=0x701, data=b"", is_extended_id=False),
+        can.Message(arbitration_id=0x181, data=b"\x01\x02", is_extended_id=True),
+        can.Message(arbitration_id=0x181, is_remote_frame=True, dlc=8, is_extended_id=False),
+        can.Message(arbitration_id=0x1234567, data=b"\x05", is_extended_id=True),
+    ]
+    for msg in sent:
+        theirs.send(msg)
+    got = drained(ours, len(sent))
+    assert got == [
+        (0x181, True, bytes(range(8))),
+        (0x80, True, b"\x07"),
+        (0x701, True, b""),
+        (0x181, False, b"\x01\x02"),  # extended: not one of a CANopen drive's ids
+        (0x181, False, b""),  # remote
+        (0x1234567, False, b"\x05"),
+    ]
+    assert list(ours.drain_frames()) == []  # drained: the next call finds nothing
+
+
+def test_frames_we_send_reach_python_can(pair):
+    ours, theirs, _ = pair
+    msg = can.Message(arbitration_id=0x201, data=bytearray(b"\x0f\x00\x10\x27\x00\x00\x00\x00"))
+    msg.is_extended_id = False
+    ours.send(msg, timeout=0)
+    got = theirs.recv(5.0)
+    assert got is not None
+    assert got.arbitration_id == 0x201 and not got.is_extended_id
+    assert bytes(got.data) == bytes(msg.data) and got.dlc == 8
+    # the set-up path (SDO, NMT, canopen) still reads through python-can's recv
+    theirs.send(can.Message(arbitration_id=0x581, data=b"\x60\x40\x60\x00\x00\x00\x00\x00"))
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        back = ours.recv(0.5)
+        if back is not None and back.arbitration_id == 0x581:
+            break
+    else:
+        pytest.fail("python-can's frame never reached the cyclic bus's recv")
+    assert bytes(back.data) == b"\x60\x40\x60\x00\x00\x00\x00\x00"
+
+
+def test_datagrams_that_are_no_frame_are_dropped_and_counted(pair):
+    ours, theirs, port = pair
+    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        junk = [
+            b"\xc1not msgpack",  # 0xc1 is never used by msgpack
+            msgpack.packb({"arbitration_id": 0x181}),  # fields missing
+            msgpack.packb(
+                {
+                    "arbitration_id": "0x181",  # a string id
+                    "data": b"12345678",
+                    "is_extended_id": False,
+                    "is_remote_frame": False,
+                    "is_error_frame": False,
+                }
+            ),
+            msgpack.packb([1, 2, 3]),  # not a map
+        ]
+        for d in junk:
+            raw.sendto(d, (GROUP, port))
+    finally:
+        raw.close()
+    theirs.send(can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False))
+    got = drained(ours, 1)
+    assert got == [(0x181, True, b"\x01")]
+    assert ours.malformed == len(junk)
+
+
+def test_fd_frames_are_dropped_on_a_classic_bus(pair):
+    ours, theirs, _ = pair
+    theirs.send(can.Message(arbitration_id=0x181, data=bytes(12), is_fd=True))
+    theirs.send(can.Message(arbitration_id=0x182, data=b"\x02", is_extended_id=False))
+    assert drained(ours, 1) == [(0x182, True, b"\x02")]
+
+
+def test_drain_never_blocks_even_on_a_blocking_socket(pair):
+    ours, _, _ = pair
+    socket.socket(fileno=os.dup(ours.fileno())).settimeout(None)  # shared file: blocking
+    done = threading.Event()
+
+    def drain() -> None:
+        list(ours.drain_frames())
+        done.set()
+
+    th = threading.Thread(target=drain, daemon=True)
+    th.start()
+    assert done.wait(10.0), "drain_frames blocked on an empty socket"
+
+
+def test_open_bus_gives_the_cyclic_bus_for_udp_multicast():
+    port = random.Random(os.getpid() * 17).randrange(40000, 50000)
+    cfg = BusConfig("udp_multicast", GROUP, 1_000_000, (0,), (1,))
+    bus = open_bus(cfg, {"options": {"port": port}})
+    try:
+        assert isinstance(bus, CyclicUdpMulticastBus)
+    finally:
+        bus.shutdown()
