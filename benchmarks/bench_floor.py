@@ -7,13 +7,14 @@ periods <= 0.1 % whenever the floor's worst wake-up stays under 1 ms, and never 
 twice the floor's share later than 1 ms plus 0.05 %).
 
 Run: ``.venv/bin/python benchmarks/bench_floor.py [--seconds 20] [--rates 500,250] [--hog N]
-[--across] [--during]``: ``--hog N`` busy processes beside everything; ``--across`` the daemon
-against ``cdprctl sim`` in another process over udp_multicast (the README's example) instead of
-``--sim``; ``--during`` one more cyclictest while the daemon runs, on its CPU at a priority above
-it: the floor under the very same load (before and after, the machine is without the daemon's
-traffic). Needs
-``cyclictest``: installed here from Debian's rt-tests when missing (as root), never by the tests.
-SCHED_FIFO needs root or CAP_SYS_NICE; without it both sides run at the normal scheduler (said).
+[--across] [--during] [--config FILE]``: ``--hog N`` busy processes beside everything;
+``--across`` the daemon against ``cdprctl sim`` in another process over udp_multicast (the
+README's example) instead of ``--sim``; ``--during`` one more cyclictest while the daemon runs,
+on its CPU at a priority above it: the floor under the very same load (before and after, the
+machine is without the daemon's traffic); ``--config`` another robot (1 kHz:
+``config/rowc_1khz.toml``, four buses of two drives). Needs ``cyclictest``: installed here from
+Debian's rt-tests when missing (as root), never by the tests. SCHED_FIFO needs root or
+CAP_SYS_NICE; without it both sides run at the normal scheduler (said).
 """
 
 from __future__ import annotations
@@ -86,11 +87,12 @@ def floor(
 
 
 def daemon(
-    rate: float, seconds: float, across: bool = False, during: Any = None
+    rate: float, seconds: float, across: bool = False, during: Any = None, config: str = ""
 ) -> tuple[dict[str, float], str]:
-    """The daemon's run (``--sim``, or ``--across`` against ``cdprctl sim``); ``during()``
-    runs while it does (after its start-up) and its result is returned in ``"during"``."""
-    config = str(ROOT / "config" / "rowc.toml")
+    """The daemon's run (``--sim``, or ``--across`` against ``cdprctl sim``) on the robot of
+    ``config`` (rowc by default); ``during()`` runs while it does (after its start-up) and its
+    result is returned in ``"during"``."""
+    config = config or str(ROOT / "config" / "rowc.toml")
     cli = [sys.executable, "-m", "cdprctl.cli"]
     bus = ["--can-interface", "udp_multicast", "--can-channel", GROUP, "--can-option",
            f"port={random.randint(20000, 60000)}"]  # fmt: skip
@@ -145,6 +147,9 @@ def main() -> None:
     )
     ap.add_argument("--across", action="store_true", help="against cdprctl sim, udp_multicast")
     ap.add_argument("--during", action="store_true", help="cyclictest while the daemon runs too")
+    ap.add_argument(
+        "--config", default="", help="robot file (default config/rowc.toml; 1 kHz: rowc_1khz)"
+    )
     args = ap.parse_args()
     exe = ensure_cyclictest()
     print(machine_line())
@@ -159,7 +164,7 @@ def main() -> None:
         print(f"{len(hogs)} CPU hogs (busy Python processes, normal priority) run throughout")
     try:
         for rate in (float(r) for r in args.rates.split(",")):
-            measure(exe, rate, args.seconds, cpu, args.across, args.during)
+            measure(exe, rate, args.seconds, cpu, args.across, args.during, args.config)
     finally:
         for h in hogs:
             h.kill()
@@ -167,7 +172,13 @@ def main() -> None:
 
 
 def measure(
-    exe: str, rate: float, seconds: float, cpu: int, across: bool = False, during: bool = False
+    exe: str,
+    rate: float,
+    seconds: float,
+    cpu: int,
+    across: bool = False,
+    during: bool = False,
+    config: str = "",
 ) -> None:
     """Floor, daemon (with a floor during it), floor at ``rate`` Hz; the comparison printed."""
     period = 1.0 / rate
@@ -177,13 +188,14 @@ def measure(
         if during
         else None
     )
-    d, final = daemon(rate, seconds, across, concurrent)
+    d, final = daemon(rate, seconds, across, concurrent, config)
     after = floor(exe, period, seconds, cpu)
     runs = [("cyclictest before", before), ("cyclictest after", after)]
     if "during" in d:
         runs.insert(1, (f"cyclictest during ({PRIORITY + 10})", d.pop("during")))
     fl = {k: max(v[k] for _, v in runs) for k in ("p99_us", "max_us", "late_1ms_pct")}
     how = "across processes (udp_multicast)" if across else "--sim"
+    how += f", {Path(config).name}" if config else ""
     print(f"\n--- {rate:g} Hz, {seconds:g} s each, CPU {cpu}, SCHED_FIFO {PRIORITY}, {how}")
     for name, v in runs:
         print(f"{name:18s} p99 {v['p99_us']:7.0f} us  max {v['max_us']:7.0f} us  "

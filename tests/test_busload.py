@@ -55,6 +55,20 @@ def test_bus_load_cli(capsys):
     assert "REFUSED" in capsys.readouterr().out
 
 
+def test_rowc_at_1khz_ships_within_the_budget(capsys):
+    """At 1 kHz four drives per bus cannot fit 70 % in any mapping that closes the loop; the
+    shipped 1 kHz robot has four buses of two, each at its configured rate by default."""
+    lean = frame_bits(1) + 4 * (frame_bits(2) + frame_bits(4))  # 2-byte torque, 4-byte position
+    assert lean * 1000 / 1e6 == pytest.approx(0.745)  # > 70 % even so
+    assert main(["bus-load", "--config", str(CONFIG / "rowc_1khz.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "control rate 1000 Hz" in out and out.count("605 bits per cycle") == 4
+    model = load_robot(CONFIG / "rowc_1khz.toml")
+    warnings, errors = check_bus_load(model.drives, model.control.rate)
+    assert warnings == [] and errors == []
+    assert max(b.load for b in bus_loads(model.drives, 1000.0)) < 0.70
+
+
 @pytest.fixture
 def seed000():
     """seed000 with its eight drives on one bus (it ships with two buses of four)."""

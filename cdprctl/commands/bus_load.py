@@ -15,7 +15,9 @@ def add_parser(sub: Any) -> None:
     description = (run.__doc__ or "").format(**limits)
     help = "CAN bus load per bus at a control rate"
     p = command_parser(sub, "bus-load", help, run, description=description)
-    p.add_argument("--rate", type=float, default=500.0, help="control rate in Hz (default 500)")
+    p.add_argument(
+        "--rate", type=float, default=None, help="control rate in Hz (default: the config's)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -25,12 +27,13 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.config)
     if model is None:
         return 1
-    if not (args.rate > 0):
-        print(f"cdprctl bus-load: error: --rate = {args.rate} Hz must be > 0", file=sys.stderr)
+    rate = model.control.rate if args.rate is None else args.rate
+    if not (rate > 0):
+        print(f"cdprctl bus-load: error: --rate = {rate} Hz must be > 0", file=sys.stderr)
         return 2
     refused = False
-    print(f"{model.name}: driver {model.drives.driver}, control rate {args.rate:g} Hz")
-    for bl in bus_loads(model.drives, args.rate):
+    print(f"{model.name}: driver {model.drives.driver}, control rate {rate:g} Hz")
+    for bl in bus_loads(model.drives, rate):
         print(f"bus {bl.bus}: {bl.interface} {bl.channel}, {bl.bitrate} bit/s, {bl.drives} drives")
         print(f"  per cycle: {bl.frames}")
         print(f"  {bl.bits_per_cycle} bits per cycle, load {bl.load * 100:.1f} %  {bl.verdict}")

@@ -1,0 +1,193 @@
+"""Benchmark: what the udp_multicast medium itself costs a control cycle on this machine — the
+floor under the daemon's read and write phases across processes, without any of its code.
+
+Each round sleeps one period first (the loop's caches are as cold), then times:
+- write: the cycle's 9 frames (rowc on one medium: 8 RPDOs and a SYNC) by python-can's
+  ``send`` (the driver's path), by bare ``sendto`` (the kernel alone) and by one ``sendmmsg``
+  (Linux, through ctypes: what batching the cycle's frames could buy at most);
+- read: 20 waiting frames (8 TPDOs, our own 9 echoed back, heartbeats) by python-can's
+  ``recv(0)`` and by the cyclic bus's ``drain_frames`` (drivers/udp_bus.py), per frame.
+A second process reads the group like ``cdprctl sim`` does (blocked in python-can's ``recv``),
+so every send wakes a peer as in the real run.
+
+Run: ``.venv/bin/python benchmarks/bench_udp_medium.py [--rounds 400] [--period 0.002]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import os
+import random
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import can
+import numpy as np
+from can.interfaces.udp_multicast.utils import pack_message
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from _timing import machine_line
+
+from drivers.udp_bus import CyclicUdpMulticastBus
+
+GROUP = "239.74.163.2"
+FRAMES_OUT = 9
+FRAMES_IN = 20
+
+PEER = """
+import sys, can
+bus = can.Bus(interface="udp_multicast", channel=sys.argv[1], port=int(sys.argv[2]))
+print("up", flush=True)
+while True:
+    bus.recv(1.0)
+"""
+
+
+class _Iovec(ctypes.Structure):
+    _fields_ = [("base", ctypes.c_void_p), ("len", ctypes.c_size_t)]
+
+
+class _SockaddrIn(ctypes.Structure):
+    _fields_ = [
+        ("family", ctypes.c_ushort),
+        ("port", ctypes.c_uint16),
+        ("addr", ctypes.c_uint32),
+        ("zero", ctypes.c_char * 8),
+    ]
+
+
+class _Msghdr(ctypes.Structure):
+    _fields_ = [
+        ("name", ctypes.c_void_p),
+        ("namelen", ctypes.c_uint32),
+        ("iov", ctypes.POINTER(_Iovec)),
+        ("iovlen", ctypes.c_size_t),
+        ("control", ctypes.c_void_p),
+        ("controllen", ctypes.c_size_t),
+        ("flags", ctypes.c_int),
+    ]
+
+
+class _Mmsghdr(ctypes.Structure):
+    _fields_ = [("hdr", _Msghdr), ("len", ctypes.c_uint)]
+
+
+def batch_sender(fd: int, port: int, datagram: bytes, n: int):
+    """A call that sends ``n`` copies of ``datagram`` to the group in one ``sendmmsg``, or None
+    where libc has none."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if not hasattr(libc, "sendmmsg"):
+        return None
+    addr = _SockaddrIn(
+        socket.AF_INET, socket.htons(port), int.from_bytes(socket.inet_aton(GROUP), "little")
+    )
+    bufs = [ctypes.create_string_buffer(datagram, len(datagram)) for _ in range(n)]
+    iovs = (_Iovec * n)(*[_Iovec(ctypes.addressof(b), len(datagram)) for b in bufs])
+    msgs = (_Mmsghdr * n)()
+    for i in range(n):
+        msgs[i].hdr.name = ctypes.addressof(addr)
+        msgs[i].hdr.namelen = ctypes.sizeof(addr)
+        msgs[i].hdr.iov = ctypes.pointer(iovs[i])
+        msgs[i].hdr.iovlen = 1
+    fn = libc.sendmmsg
+    fn.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_uint, ctypes.c_int]
+    keep = (addr, bufs, iovs, msgs)
+
+    def send() -> int:
+        return int(fn(fd, ctypes.addressof(keep[3]), n, 0))
+
+    return send
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=400)
+    ap.add_argument("--period", type=float, default=0.002, help="s slept before each round")
+    args = ap.parse_args()
+    print(machine_line())
+    port = random.Random(os.getpid()).randrange(40000, 50000)
+    ours = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
+    other = CyclicUdpMulticastBus(GROUP, port=port, fd=False)  # fills our queue for the reads
+    peer = subprocess.Popen([sys.executable, "-c", PEER, GROUP, str(port)], stdout=subprocess.PIPE)
+    try:
+        assert peer.stdout is not None
+        peer.stdout.readline()
+        msg = can.Message(arbitration_id=0x201, data=bytearray(8), is_extended_id=False)
+        datagram = pack_message(msg)
+        dest = (GROUP, port)
+        raw = socket.socket(fileno=os.dup(ours.fileno()))
+        batch = batch_sender(raw.fileno(), port, datagram, FRAMES_OUT)
+        times: dict[str, list[float]] = {
+            k: [] for k in ("send", "sendto", "sendmmsg", "recv", "drain")
+        }
+
+        def settle() -> None:
+            time.sleep(args.period)
+            list(ours.drain_frames())
+            list(other.drain_frames())
+            time.sleep(args.period)
+
+        for _ in range(args.rounds):
+            settle()
+            t0 = time.perf_counter()
+            for _ in range(FRAMES_OUT):
+                ours.send(msg, timeout=0)
+            times["send"].append(time.perf_counter() - t0)
+            settle()
+            t0 = time.perf_counter()
+            for _ in range(FRAMES_OUT):
+                raw.sendto(datagram, dest)
+            times["sendto"].append(time.perf_counter() - t0)
+            if batch is not None:
+                settle()
+                t0 = time.perf_counter()
+                batch()
+                times["sendmmsg"].append(time.perf_counter() - t0)
+            for how in ("recv", "drain"):
+                settle()
+                for _ in range(FRAMES_IN):
+                    other.send(msg, timeout=0)
+                list(other.drain_frames())
+                time.sleep(args.period)
+                t0 = time.perf_counter()
+                if how == "recv":
+                    n = 0
+                    while ours.recv(0) is not None:
+                        n += 1
+                else:
+                    n = sum(1 for _ in ours.drain_frames())
+                if n:
+                    times[how].append((time.perf_counter() - t0) / n)
+        raw.close()
+    finally:
+        peer.kill()
+        peer.wait()
+        ours.shutdown()
+        other.shutdown()
+
+    def line(name: str, xs: list[float], what: str) -> None:
+        if xs:
+            a = np.asarray(xs) * 1e6
+            p50, p99 = np.median(a), np.percentile(a, 99)
+            print(f"  {name:34s} median {p50:6.1f} us  p99 {p99:6.1f} us  ({what})")
+
+    print(
+        f"{args.rounds} rounds, each after {args.period * 1e3:g} ms asleep, a peer process reading:"
+    )
+    line(f"write {FRAMES_OUT} frames, python-can send", times["send"], "the driver's path")
+    line(f"write {FRAMES_OUT} frames, bare sendto", times["sendto"], "the kernel alone")
+    line(f"write {FRAMES_OUT} frames, one sendmmsg", times["sendmmsg"], "batched")
+    line("read a frame, python-can recv(0)", times["recv"], "per frame")
+    line("read a frame, drain_frames", times["drain"], "per frame, the driver's path")
+    if times["drain"]:
+        floor = np.median(times["sendto"]) + FRAMES_IN * np.median(times["drain"])
+        print(f"the medium's floor of a rowc cycle (9 sent, 20 read): {floor * 1e6:.0f} us")
+
+
+if __name__ == "__main__":
+    main()
