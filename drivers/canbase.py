@@ -38,6 +38,9 @@ class CanWinchDriver(WinchDriver):
             for c, n in zip(bus.cables, bus.node_ids, strict=True):
                 self.node[c], self.bus_of[c] = n, b
         self._send_fail_streak = 0
+        self._batching = False  # the cycle's frames are being staged (_write_internal)
+        self._stage_of: list[Any] = []  # per bus: its medium's stage(msg), or None
+        self._staged: list[int] = []  # per medium's first bus: frames staged this cycle
         self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}  # filled by protocols
         # liveness bookkeeping, per cable
         self._fresh = np.zeros(self.m, dtype=bool)  # feedback arrived during this read
@@ -134,6 +137,8 @@ class CanWinchDriver(WinchDriver):
             }
         if self.config.log_file:
             self.log = TrafficLog(self.config.log_file)
+        self._stage_of = [getattr(bus, "stage", None) for bus in self.buses]
+        self._staged = [0] * len(self.buses)
 
     def _close(self) -> None:
         for b, bus in enumerate(self.buses):
@@ -146,8 +151,55 @@ class CanWinchDriver(WinchDriver):
             self.log.close()
             self.log = None
 
+    def _write_internal(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
+        """The cycle's frames (``_write_frames``); on a medium that can batch them
+        (``drivers/udp_bus.py``) staged and sent together at the end, in their order — one
+        system call instead of one per frame, each of which woke the peers again. The set-up's
+        frames go one by one: each waits for an answer."""
+        self._batching = not setup and any(s is not None for s in self._stage_of)
+        err = self._write_frames(t, torques, setup)
+        if self._batching:
+            self._batching = False
+            self._flush_staged()
+        return err
+
+    def _write_frames(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
+        """Send the cycle's frames with ``_send``; an error when sending keeps failing."""
+        raise NotImplementedError
+
+    def _flush_staged(self) -> None:
+        for b in self.media:
+            n = self._staged[b]
+            if n == 0:
+                continue
+            self._staged[b] = 0
+            bus: Any = self.buses[b]  # one with stage/flush (udp_bus.CyclicUdpMulticastBus)
+            sent = bus.flush()
+            self.stats.frames_sent += sent
+            if sent < n:
+                self.stats.send_errors += n - sent
+                self._send_fail_streak += n - sent
+            else:
+                self._send_fail_streak = 0
+
     def _send(self, b: int, msg: can.Message) -> bool:
-        """Send on bus ``b`` without blocking; a failure is counted, never raised."""
+        """Send on bus ``b`` without blocking (staged while batching: counted at the flush); a
+        failure is counted, never raised."""
+        if self._batching:
+            stage = self._stage_of[b]
+            if stage is not None and not stage(msg):
+                self._flush_staged()  # the batch is full: what came first goes first
+                if not stage(msg):  # still no room: the frame goes alone, after them
+                    stage = None
+            if stage is not None:
+                self._staged[self._shared.get(b, b)] += 1
+                if self.log is not None:
+                    self.log(msg)
+                return True
         try:
             self.buses[b].send(msg, timeout=0)
         except can.CanError:

@@ -1,27 +1,68 @@
-"""python-can's ``udp_multicast`` bus with a cyclic path that builds no ``can.Message``.
+"""python-can's ``udp_multicast`` bus with a cyclic path: reads that build no ``can.Message``,
+a cycle's frames sent in one system call.
 
 python-can's ``recv(0)`` costs a ``select``, a ``recvmsg``, a msgpack decode and a checked
 ``Message`` per frame, and ``udp_multicast`` loops every frame we send back to us: across
-processes the driver's read phase spent most of its ~400 µs there (rowc, 250 Hz). This bus is
+processes the driver's read phase spent most of its time there. Its ``send`` is one ``sendto``
+per frame, and each wakes the peer blocked on the group again (on this VM a cycle's 9 frames
+cost ~4x one ``sendmmsg`` of them: ``benchmarks/bench_udp_medium.py``). This bus is
 python-can's own (same socket, same wire format: any python-can peer talks to it) plus
-``drain_frames``: every waiting datagram by non-blocking ``recv`` on the same socket until
-none is left, decoded to ``(arbitration id, plain, data)`` — no select, no ``Message``. The set-up
-(SDO, NMT, the ``canopen`` package) keeps python-can's path through ``recv``/``send``.
+``drain_frames`` — every waiting datagram by non-blocking ``recv`` on the same socket until
+none is left, decoded to ``(arbitration id, plain, data)`` — and ``stage``/``flush``: frames
+packed as python-can packs them, sent together by ``sendmmsg`` (Linux; elsewhere one
+``sendto`` each) from a send socket connected to the group. The set-up (SDO, NMT, the
+``canopen`` package) keeps python-can's path through ``recv``/``send``.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import socket
+import struct
 from collections.abc import Iterator
 from typing import Any
 
 import can
 import msgpack
 from can.interfaces.udp_multicast import UdpMulticastBus
+from can.interfaces.udp_multicast.utils import pack_message
 
 MAX_DATAGRAM = 4096  # bytes: python-can's own receive buffer
 MAX_STANDARD_ID = 0x7FF
+MAX_STAGED = 64  # frames a flush sends at most in one call (a cycle of rowc: 9-17)
+SLOT_BYTES = 512  # a packed frame: 162 bytes classic, 218 CAN FD
+
+
+class _Iovec(ctypes.Structure):
+    _fields_ = [("base", ctypes.c_void_p), ("len", ctypes.c_size_t)]
+
+
+class _Msghdr(ctypes.Structure):  # struct msghdr (Linux)
+    _fields_ = [
+        ("name", ctypes.c_void_p),
+        ("namelen", ctypes.c_uint32),
+        ("iov", ctypes.POINTER(_Iovec)),
+        ("iovlen", ctypes.c_size_t),
+        ("control", ctypes.c_void_p),
+        ("controllen", ctypes.c_size_t),
+        ("flags", ctypes.c_int),
+    ]
+
+
+class _Mmsghdr(ctypes.Structure):
+    _fields_ = [("hdr", _Msghdr), ("len", ctypes.c_uint)]
+
+
+def _libc_sendmmsg() -> Any:
+    """libc's ``sendmmsg(fd, msgvec, vlen, flags)``, or None where there is none."""
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).sendmmsg
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_uint, ctypes.c_int]
+    fn.restype = ctypes.c_int
+    return fn
 
 
 class CyclicUdpMulticastBus(UdpMulticastBus):
@@ -37,6 +78,66 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
         #: datagrams that were no python-can frame (not msgpack, a field missing or of the wrong
         #: type): dropped like a frame with a bad CRC on a wire, never raised in the cycle
         self.malformed = 0
+        self._open_sender(channel, int(kwargs.get("port", 43113)), int(kwargs.get("hop_limit", 1)))
+
+    def _open_sender(self, group: str, port: int, hop_limit: int) -> None:
+        """A socket connected to the group for ``flush`` (no address per datagram; the group's
+        members, this bus's own socket included, receive as from python-can's ``send``), and
+        the preallocated batch: one buffer and one header per slot."""
+        family = socket.getaddrinfo(group, port, type=socket.SOCK_DGRAM)[0][0]
+        self._tx = socket.socket(family, socket.SOCK_DGRAM)
+        hops = struct.pack("@I", hop_limit)
+        if family == socket.AF_INET:
+            self._tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, hops)
+        else:
+            self._tx.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, hops)
+        self._tx.connect((group, port))
+        self._sendmmsg = _libc_sendmmsg()
+        self._slots = [ctypes.create_string_buffer(SLOT_BYTES) for _ in range(MAX_STAGED)]
+        self._iov = (_Iovec * MAX_STAGED)()
+        self._hdrs = (_Mmsghdr * MAX_STAGED)()
+        for i, buf in enumerate(self._slots):
+            self._iov[i].base = ctypes.addressof(buf)
+            self._hdrs[i].hdr.iov = ctypes.pointer(self._iov[i])
+            self._hdrs[i].hdr.iovlen = 1
+        self._staged = 0
+        self._datagrams: list[bytes] = []  # without sendmmsg: sent one by one
+
+    def stage(self, msg: can.Message) -> bool:
+        """Pack ``msg`` now (as python-can's ``send`` would) for the next ``flush``; False if
+        the batch is full or the frame does not fit a slot (then nothing is staged)."""
+        data = pack_message(msg)
+        if self._staged >= MAX_STAGED or len(data) > SLOT_BYTES:
+            return False
+        if self._sendmmsg is None:
+            self._datagrams.append(data)
+        else:
+            ctypes.memmove(self._slots[self._staged], data, len(data))
+            self._iov[self._staged].len = len(data)
+        self._staged += 1
+        return True
+
+    def flush(self) -> int:
+        """Send every staged frame, in order, in one ``sendmmsg``; the number sent (the rest,
+        after a send that failed — a full socket buffer, like a full TX queue — are dropped).
+        Never raises."""
+        n, self._staged = self._staged, 0
+        if n == 0:
+            return 0
+        if self._sendmmsg is None:
+            sent = 0
+            try:
+                for d in self._datagrams:
+                    self._tx.send(d, socket.MSG_DONTWAIT)
+                    sent += 1
+            except OSError:
+                pass
+            self._datagrams.clear()
+            return sent
+        sent = self._sendmmsg(
+            self._tx.fileno(), ctypes.addressof(self._hdrs), n, socket.MSG_DONTWAIT
+        )
+        return max(0, sent)
 
     def drain_frames(self) -> Iterator[tuple[int, bool, bytes]]:
         """Every frame waiting now, oldest first, as ``(arbitration id, plain, data)``; ``plain``
@@ -66,5 +167,6 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
     def shutdown(self) -> None:
         try:
             self._raw.close()
+            self._tx.close()
         finally:
             super().shutdown()

@@ -13,6 +13,7 @@ import can
 import msgpack
 import pytest
 from can.interfaces.udp_multicast import UdpMulticastBus
+from conftest import CONFIG
 
 from cdprctl.model.drives import BusConfig
 from drivers.buses import open_bus
@@ -145,3 +146,80 @@ def test_open_bus_gives_the_cyclic_bus_for_udp_multicast():
         assert isinstance(bus, CyclicUdpMulticastBus)
     finally:
         bus.shutdown()
+
+
+def received(bus: UdpMulticastBus, n: int, timeout: float = 5.0) -> list[can.Message]:
+    got: list[can.Message] = []
+    deadline = time.monotonic() + timeout
+    while len(got) < n and time.monotonic() < deadline:
+        msg = bus.recv(0.2)
+        if msg is not None:
+            got.append(msg)
+    return got
+
+
+@pytest.mark.parametrize("batched", [True, False], ids=["sendmmsg", "one-by-one"])
+def test_staged_frames_reach_python_can_in_order(pair, batched):
+    ours, theirs, _ = pair
+    if not batched:
+        ours._sendmmsg = None  # a libc without sendmmsg: one send per frame
+    frames = [
+        can.Message(arbitration_id=0x201 + k, data=bytes([k] * 8), is_extended_id=False)
+        for k in range(8)
+    ] + [can.Message(arbitration_id=0x80, data=b"\x05", is_extended_id=False)]
+    for msg in frames:
+        assert ours.stage(msg)
+        msg.data[0:1] = b"\xff"  # packed when staged: changing the object later changes nothing
+    assert list(received(theirs, 1, timeout=0.3)) == []  # nothing sent before the flush
+    assert ours.flush() == len(frames)
+    got = received(theirs, len(frames))
+    assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
+        (0x201 + k, bytes([k] * 8)) for k in range(8)
+    ] + [(0x80, b"\x05")]
+    # our own socket receives them too, as python-can's send would have it
+    assert [f[0] for f in drained(ours, len(frames))] == [m.arbitration_id for m in frames]
+    assert ours.flush() == 0  # nothing staged
+
+
+def test_a_full_batch_refuses_more_and_stays_whole(pair):
+    from drivers.udp_bus import MAX_STAGED
+
+    ours, theirs, _ = pair
+    msg = can.Message(arbitration_id=0x201, data=bytes(8), is_extended_id=False)
+    assert all(ours.stage(msg) for _ in range(MAX_STAGED))
+    assert not ours.stage(msg)
+    assert ours.flush() == MAX_STAGED
+    assert len(received(theirs, MAX_STAGED)) == MAX_STAGED
+
+
+def test_the_driver_keeps_the_cycles_order_when_a_batch_fills(monkeypatch):
+    """More frames in a cycle than a batch holds: what was staged goes first, so a SYNC never
+    overtakes the RPDOs before it."""
+    import drivers.udp_bus
+    from cdprctl.model import load_robot
+    from drivers import create_driver
+
+    monkeypatch.setattr(drivers.udp_bus, "MAX_STAGED", 3)
+    port = random.Random(os.getpid() * 19).randrange(40000, 50000)
+    model = load_robot(CONFIG / "rowc.toml")
+    overrides = {"interface": "udp_multicast", "channel": GROUP, "options": {"port": port}}
+    drv = create_driver(model, period=0.004, bus_overrides=overrides)
+    peer = UdpMulticastBus(GROUP, port=port, fd=False)
+    try:
+        drv._open()
+        assert drv.buses[0] is drv.buses[1]  # both buses on the one medium
+        frames = [
+            can.Message(arbitration_id=0x201 + k, data=bytes([k]), is_extended_id=False)
+            for k in range(7)
+        ]
+        drv._batching = True
+        for k, msg in enumerate(frames):
+            assert drv._send(k % 2, msg)
+        drv._batching = False
+        drv._flush_staged()
+        got = received(peer, len(frames))
+        assert [m.arbitration_id for m in got] == [m.arbitration_id for m in frames]
+        assert drv.stats.frames_sent == len(frames) and drv.stats.send_errors == 0
+    finally:
+        peer.shutdown()
+        drv._close()

@@ -406,7 +406,7 @@ class Cia402Driver(CanWinchDriver):
             )
         return None
 
-    def _write_internal(
+    def _write_frames(
         self, t: float, torques: np.ndarray, setup: bool = False
     ) -> DriverError | None:
         reset = self._reset_request

@@ -125,7 +125,7 @@ class ODriveDriver(CanWinchDriver):
             return DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
         return None
 
-    def _write_internal(
+    def _write_frames(
         self, t: float, torques: np.ndarray, setup: bool = False
     ) -> DriverError | None:
         if self._clear:
