@@ -3,8 +3,8 @@ floor under the daemon's read and write phases across processes, without any of 
 
 Each round sleeps one period first (the loop's caches are as cold), then times:
 - write: the cycle's 9 frames (rowc on one medium: 8 RPDOs and a SYNC) by python-can's
-  ``send`` (the driver's path), by bare ``sendto`` (the kernel alone) and by one ``sendmmsg``
-  (Linux, through ctypes: what batching the cycle's frames could buy at most);
+  ``send`` (one ``sendto`` each), by bare ``sendto`` (the kernel alone) and staged and flushed
+  in one ``sendmmsg`` (the driver's path, drivers/udp_bus.py);
 - read: 20 waiting frames (8 TPDOs, our own 9 echoed back, heartbeats) by python-can's
   ``recv(0)`` and by the cyclic bus's ``drain_frames`` (drivers/udp_bus.py), per frame.
 A second process reads the group like ``cdprctl sim`` does (blocked in python-can's ``recv``),
@@ -16,7 +16,6 @@ Run: ``.venv/bin/python benchmarks/bench_udp_medium.py [--rounds 400] [--period 
 from __future__ import annotations
 
 import argparse
-import ctypes
 import os
 import random
 import socket
@@ -48,62 +47,6 @@ while True:
 """
 
 
-class _Iovec(ctypes.Structure):
-    _fields_ = [("base", ctypes.c_void_p), ("len", ctypes.c_size_t)]
-
-
-class _SockaddrIn(ctypes.Structure):
-    _fields_ = [
-        ("family", ctypes.c_ushort),
-        ("port", ctypes.c_uint16),
-        ("addr", ctypes.c_uint32),
-        ("zero", ctypes.c_char * 8),
-    ]
-
-
-class _Msghdr(ctypes.Structure):
-    _fields_ = [
-        ("name", ctypes.c_void_p),
-        ("namelen", ctypes.c_uint32),
-        ("iov", ctypes.POINTER(_Iovec)),
-        ("iovlen", ctypes.c_size_t),
-        ("control", ctypes.c_void_p),
-        ("controllen", ctypes.c_size_t),
-        ("flags", ctypes.c_int),
-    ]
-
-
-class _Mmsghdr(ctypes.Structure):
-    _fields_ = [("hdr", _Msghdr), ("len", ctypes.c_uint)]
-
-
-def batch_sender(fd: int, port: int, datagram: bytes, n: int):
-    """A call that sends ``n`` copies of ``datagram`` to the group in one ``sendmmsg``, or None
-    where libc has none."""
-    libc = ctypes.CDLL(None, use_errno=True)
-    if not hasattr(libc, "sendmmsg"):
-        return None
-    addr = _SockaddrIn(
-        socket.AF_INET, socket.htons(port), int.from_bytes(socket.inet_aton(GROUP), "little")
-    )
-    bufs = [ctypes.create_string_buffer(datagram, len(datagram)) for _ in range(n)]
-    iovs = (_Iovec * n)(*[_Iovec(ctypes.addressof(b), len(datagram)) for b in bufs])
-    msgs = (_Mmsghdr * n)()
-    for i in range(n):
-        msgs[i].hdr.name = ctypes.addressof(addr)
-        msgs[i].hdr.namelen = ctypes.sizeof(addr)
-        msgs[i].hdr.iov = ctypes.pointer(iovs[i])
-        msgs[i].hdr.iovlen = 1
-    fn = libc.sendmmsg
-    fn.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_uint, ctypes.c_int]
-    keep = (addr, bufs, iovs, msgs)
-
-    def send() -> int:
-        return int(fn(fd, ctypes.addressof(keep[3]), n, 0))
-
-    return send
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=400)
@@ -121,7 +64,6 @@ def main() -> None:
         datagram = pack_message(msg)
         dest = (GROUP, port)
         raw = socket.socket(fileno=os.dup(ours.fileno()))
-        batch = batch_sender(raw.fileno(), port, datagram, FRAMES_OUT)
         times: dict[str, list[float]] = {
             k: [] for k in ("send", "sendto", "sendmmsg", "recv", "drain")
         }
@@ -143,11 +85,12 @@ def main() -> None:
             for _ in range(FRAMES_OUT):
                 raw.sendto(datagram, dest)
             times["sendto"].append(time.perf_counter() - t0)
-            if batch is not None:
-                settle()
-                t0 = time.perf_counter()
-                batch()
-                times["sendmmsg"].append(time.perf_counter() - t0)
+            settle()
+            t0 = time.perf_counter()
+            for _ in range(FRAMES_OUT):
+                ours.stage(msg)
+            ours.flush()
+            times["sendmmsg"].append(time.perf_counter() - t0)
             for how in ("recv", "drain"):
                 settle()
                 for _ in range(FRAMES_IN):
@@ -179,13 +122,13 @@ def main() -> None:
     print(
         f"{args.rounds} rounds, each after {args.period * 1e3:g} ms asleep, a peer process reading:"
     )
-    line(f"write {FRAMES_OUT} frames, python-can send", times["send"], "the driver's path")
+    line(f"write {FRAMES_OUT} frames, python-can send", times["send"], "one sendto each")
     line(f"write {FRAMES_OUT} frames, bare sendto", times["sendto"], "the kernel alone")
-    line(f"write {FRAMES_OUT} frames, one sendmmsg", times["sendmmsg"], "batched")
+    line(f"write {FRAMES_OUT} frames, stage + flush", times["sendmmsg"], "the driver's path")
     line("read a frame, python-can recv(0)", times["recv"], "per frame")
     line("read a frame, drain_frames", times["drain"], "per frame, the driver's path")
     if times["drain"]:
-        floor = np.median(times["sendto"]) + FRAMES_IN * np.median(times["drain"])
+        floor = np.median(times["sendmmsg"]) + FRAMES_IN * np.median(times["drain"])
         print(f"the medium's floor of a rowc cycle (9 sent, 20 read): {floor * 1e6:.0f} us")
 
 

@@ -100,21 +100,26 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
             self._iov[i].base = ctypes.addressof(buf)
             self._hdrs[i].hdr.iov = ctypes.pointer(self._iov[i])
             self._hdrs[i].hdr.iovlen = 1
+        self._iov_of = [self._iov[i] for i in range(MAX_STAGED)]  # views, made once
         self._staged = 0
         self._datagrams: list[bytes] = []  # without sendmmsg: sent one by one
 
     def stage(self, msg: can.Message) -> bool:
-        """Pack ``msg`` now (as python-can's ``send`` would) for the next ``flush``; False if
-        the batch is full or the frame does not fit a slot (then nothing is staged)."""
+        """Pack ``msg`` now (as python-can's ``send`` does) for the next
+        ``flush``; False if the batch is full or the frame does not fit a slot (then nothing
+        is staged)."""
+        k = self._staged
+        if k >= MAX_STAGED:
+            return False
         data = pack_message(msg)
-        if self._staged >= MAX_STAGED or len(data) > SLOT_BYTES:
+        if len(data) > SLOT_BYTES:
             return False
         if self._sendmmsg is None:
             self._datagrams.append(data)
         else:
-            ctypes.memmove(self._slots[self._staged], data, len(data))
-            self._iov[self._staged].len = len(data)
-        self._staged += 1
+            ctypes.memmove(self._slots[k], data, len(data))
+            self._iov_of[k].len = len(data)
+        self._staged = k + 1
         return True
 
     def flush(self) -> int:
