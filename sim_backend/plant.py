@@ -240,7 +240,8 @@ class CdprPlant:
     def set_pose(self, position: FloatArray, R: FloatArray, tensions: FloatArray | None) -> None:
         """Platform at rest at ``(position, R)``; cables pre-tensioned to ``tensions`` (N) by
         choosing the motor angles; brakes closed. Default tensions: the equilibrium the
-        controller will find (the barycenter TDA under gravity), so a start is not a fall."""
+        controller will find (the robot's own TDA under gravity, ``equilibrium_tensions``), so
+        a start is neither a fall nor a step of the drives' targets."""
         model = self.model
         inverse_kinematics(model, self.kin, position, R)
         if tensions is None:

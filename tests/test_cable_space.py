@@ -413,3 +413,29 @@ def test_beyond_capacity_the_brakes_close_at_once(drives_watch):
         assert c.state.value == "fault" and bool(np.all(cl.plant.brake))
         cl.run(1.0)
         assert np.linalg.norm(cl.plant.position - p0) < 0.2  # m: held by the brakes
+
+
+@pytest.mark.parametrize("config", ["rowc.toml", "rowc_1khz.toml"])
+def test_a_robot_parked_by_its_own_distribution_enables_without_a_step(config):
+    """The simulated robot is parked by the robot's own TDA (the brakes hold what it last
+    commanded): with SOTDA ν = 0.9 configured, the controller's holding tensions are the ones
+    the cables carry, so enabling does not step the drives' targets. Parked by the barycenter
+    it stepped them by 0.24 rad, and at 1 kHz the drive faulted on its following error."""
+    import dataclasses
+
+    model = load_robot(CONFIG / config)
+    control = dataclasses.replace(model.control, tda_method="sotda", tda_nu=0.9)
+    model = dataclasses.replace(model, control=control)
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        plant = cl.net.plant
+        np.testing.assert_allclose(plant.tension, cl.controller.data.hold_tensions, atol=0.1)
+        cl.command("enable")
+        worst = 0.0
+        for _ in range(round(0.05 / cl.period)):
+            cl.manager.step(cl.net.time)
+            cl.net.advance(cl.period)
+            if plant.servo.kp[0] > 0.0:  # the drives hold their targets
+                worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
+        assert cl.controller.state.value == "enabled", cl.manager.driver.error
+        assert worst < 0.01  # rad (it was 0.24)
