@@ -66,7 +66,8 @@ def _libc_sendmmsg() -> Any:
 
 
 class CyclicUdpMulticastBus(UdpMulticastBus):
-    """``UdpMulticastBus`` (same arguments) with ``drain_frames`` for the control cycle."""
+    """``UdpMulticastBus`` (same arguments) with the control cycle's path: ``drain_frames``
+    to read, ``stage`` and ``flush`` to send."""
 
     def __init__(self, channel: str = UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs: Any):
         super().__init__(channel, **kwargs)
@@ -160,9 +161,9 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
                 data = d["data"]
                 plain = not (d["is_extended_id"] or d["is_remote_frame"] or d["is_error_frame"])
                 fd = d.get("is_fd", False)
-                if type(arb) is not int or type(data) is not bytes or arb < 0:
-                    raise ValueError(arb)
             except Exception:  # anything on the group that is not a frame: dropped, counted
+                arb = data = None
+            if type(arb) is not int or type(data) is not bytes or arb < 0:
                 self.malformed += 1
                 continue
             if fd and not self._fd_frames:
