@@ -40,7 +40,8 @@ class CanWinchDriver(WinchDriver):
         self._send_fail_streak = 0
         self._batching = False  # the cycle's frames are being staged (_write_internal)
         self._stage_of: list[Any] = []  # per bus: its medium's stage(msg), or None
-        self._staged: list[int] = []  # per medium's first bus: frames staged this cycle
+        self._can_batch = False  # some medium stages (drivers/udp_bus.py)
+        self._drain_of: list[Any] = []  # per bus: its medium's drain_frames, or None
         self._dispatch: dict[tuple[int, int], tuple[int, int]] = {}  # filled by protocols
         # liveness bookkeeping, per cable
         self._fresh = np.zeros(self.m, dtype=bool)  # feedback arrived during this read
@@ -138,7 +139,8 @@ class CanWinchDriver(WinchDriver):
         if self.config.log_file:
             self.log = TrafficLog(self.config.log_file)
         self._stage_of = [getattr(bus, "stage", None) for bus in self.buses]
-        self._staged = [0] * len(self.buses)
+        self._can_batch = any(s is not None for s in self._stage_of)
+        self._drain_of = [getattr(bus, "drain_frames", None) for bus in self.buses]
 
     def _close(self) -> None:
         for b, bus in enumerate(self.buses):
@@ -158,7 +160,7 @@ class CanWinchDriver(WinchDriver):
         (``drivers/udp_bus.py``) staged and sent together at the end, in their order — one
         system call instead of one per frame, each of which woke the peers again. The set-up's
         frames go one by one: each waits for an answer."""
-        self._batching = not setup and any(s is not None for s in self._stage_of)
+        self._batching = not setup and self._can_batch
         err = self._write_frames(t, torques, setup)
         if self._batching:
             self._batching = False
@@ -173,11 +175,12 @@ class CanWinchDriver(WinchDriver):
 
     def _flush_staged(self) -> None:
         for b in self.media:
-            n = self._staged[b]
+            if self._stage_of[b] is None:
+                continue
+            bus: Any = self.buses[b]  # one with stage/flush (udp_bus.CyclicUdpMulticastBus)
+            n = bus.staged
             if n == 0:
                 continue
-            self._staged[b] = 0
-            bus: Any = self.buses[b]  # one with stage/flush (udp_bus.CyclicUdpMulticastBus)
             sent = bus.flush()
             self.stats.frames_sent += sent
             if sent < n:
@@ -196,7 +199,6 @@ class CanWinchDriver(WinchDriver):
                 if not stage(msg):  # still no room: the frame goes alone, after them
                     stage = None
             if stage is not None:
-                self._staged[self._shared.get(b, b)] += 1
                 if self.log is not None:
                     self.log(msg)
                 return True
@@ -220,7 +222,7 @@ class CanWinchDriver(WinchDriver):
         dispatch = self._dispatch
         for b in self.media:
             bus = self.buses[b]
-            drain = getattr(bus, "drain_frames", None)
+            drain = self._drain_of[b]
             if drain is not None and self.log is None:  # no Message per frame (udp_bus.py)
                 for arb, plain, data in drain():
                     self.stats.frames_received += 1

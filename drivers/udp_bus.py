@@ -123,6 +123,11 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
         self._staged = k + 1
         return True
 
+    @property
+    def staged(self) -> int:
+        """Frames staged for the next ``flush``."""
+        return self._staged
+
     def flush(self) -> int:
         """Send every staged frame, in order, in one ``sendmmsg``; the number sent (the rest,
         after a send that failed — a full socket buffer, like a full TX queue — are dropped).
