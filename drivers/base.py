@@ -117,6 +117,7 @@ class WinchDriver(ABC):
         self.warnings: list[str] = []
         self.states = WinchStates(self.m)
         self.stats = DriverStats()
+        self.sent_at = -math.inf  # s (clock): when the last write's frames went out
         self.torque_limit = np.array([c.winch.torque_limit for c in model.cables])
         self.encoder_cpr = np.array([c.winch.encoder_counts_per_rev for c in model.cables])
         self._last_command = np.zeros(self.m)
@@ -328,6 +329,7 @@ class WinchDriver(ABC):
             err = self._write_internal(now, cmd)
         except Exception as exc:
             err = DriverOperationError(f"write failed: {type(exc).__name__}: {exc}")
+        self.sent_at = self.clock()
         self.stats.cycles += 1
         if err is not None:
             self._fail(err)

@@ -367,7 +367,7 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
             and client.last()["state"] == "enabled"
         ),
         timeout=30.0,
-    ), (client.last(), robot.lines[-5:])
+    ), (client.last(), [x for x in robot.lines if "fault" in x.lower()], robot.lines[-5:])
     assert client.reply("m1")["ok"] is True
 
     before = client.last()["target"]

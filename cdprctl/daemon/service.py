@@ -130,9 +130,12 @@ class Daemon:
             # time late: after a late cycle the drives took a three-period target step at the
             # last interval and faulted on their following error, `--sim --no-realtime` under
             # load)
+            # The frames were sent when the last cycle's computation ended (the targets are
+            # for that instant: drivers/cia402 carries them to it), not when it started.
             dt = 0.0 if self._last_t is None else t - self._last_t
+            sent = 0.0 if self._last_t is None else self.driver.sent_at - self._last_t
             self._last_t = t
-            self.sim.advance(min(max(dt, 0.0), 0.05))
+            self.sim.advance_sent(min(max(dt, 0.0), 0.05), sent)
 
     def run(
         self,

@@ -142,6 +142,23 @@ def controlword_kernel(
 
 
 @njit(cache=True)
+def carry_targets_kernel(
+    targets, t, last, last_t, late, max_speed, out
+):  # pragma: no cover - compiled
+    """``out`` (rad) ← each position target carried ``late`` s on at its rate since the last
+    cycle's (``last`` at ``last_t``; each rate within ``max_speed``, rad/s): the target for the
+    instant its SYNC leaves, not the instant the cycle started. ``last`` ← ``targets``."""
+    gap = t - last_t
+    for c in range(len(targets)):
+        rate = 0.0
+        if 0.0 < gap < 1.0:
+            rate = (targets[c] - last[c]) / gap
+            rate = min(max(rate, -max_speed[c]), max_speed[c])
+        out[c] = targets[c] + rate * late
+        last[c] = targets[c]
+
+
+@njit(cache=True)
 def target_counts_kernel(targets, rad_per_count, out):  # pragma: no cover - compiled
     """``out[c]`` ← the position target (rad) of each drive in encoder counts, as the 32-bit
     signed value of 0x607A (the drive unwraps it against its own position actual)."""

@@ -18,7 +18,7 @@ from typing import Any
 import can
 import numpy as np
 
-from drivers.base import DriveState, register_driver
+from drivers.base import DriveState, Lifecycle, register_driver
 from drivers.canbase import CanWinchDriver
 from drivers.cia402 import cyclic, pdo_setup
 from drivers.cia402 import protocol as p
@@ -72,6 +72,15 @@ class Cia402Driver(CanWinchDriver):
             for c in range(m)
         ]
         self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
+        self._last_targets = np.zeros(m)  # rad: the last cycle's targets, for their rate
+        self._last_targets_t = -math.inf  # s: its time
+        self._ran_last = False  # the drives ran (ACTIVE) at the last cycle's write
+        self._carried = np.zeros(m)  # rad: the targets carried to the send (carry_targets)
+        # s: the most a cycle's targets are carried on to their send — as long as the feedback
+        # they came from is trusted ([control] max_feedback_age; beyond it the supervisor
+        # stops). Capped at 20 ms, holds of 20-40 ms still reversed the drives and faulted
+        # (rowc, lock-step, random holds; with the cap at 50 ms they stayed within 0.09 rad)
+        self.max_carry = model.control.max_feedback_age
         # CSP: 0x6065 of each drive (counts), at least one count
         self._following_window = np.array(
             [
@@ -323,6 +332,10 @@ class Cia402Driver(CanWinchDriver):
             cyclic.CONTROLWORD_TOWARDS_ENABLED,
             self._rpdo_fields.copy(),
         )
+        cyclic.carry_targets_kernel(
+            self.targets, 0.0, self._last_targets.copy(), -1.0, 0.0, self._max_motor_speed,
+            self._carried.copy(),
+        )  # fmt: skip
         cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
 
     def _drain(self, t: float) -> None:
@@ -425,7 +438,20 @@ class Cia402Driver(CanWinchDriver):
         )
         send, bus_of = self._send, self._bus_of_list
         if self._csp:
-            cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts)
+            # A cycle held up between its start and this send (the VM taking the CPU for
+            # 4-10 ms mid-cycle, across processes) sent targets for an instant long past with
+            # a SYNC of now: the drives, which had gone on at the targets' rate, reversed and
+            # faulted on their following error. The targets go out for the SYNC's instant.
+            # Only between two cycles of running drives: the step at an enable is no rate.
+            late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
+            running = self.lifecycle is Lifecycle.ACTIVE
+            since = self._last_targets_t if running and self._ran_last else -math.inf
+            cyclic.carry_targets_kernel(
+                self.targets, t, self._last_targets, since, late, self._max_motor_speed,
+                self._carried,
+            )  # fmt: skip
+            self._last_targets_t, self._ran_last = t, running
+            cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
             pack = p.RPDO1_CSP_STRUCT.pack_into
             for c, ((cw, pm), n) in enumerate(
                 zip(fields.tolist(), self._target_counts.tolist(), strict=True)
