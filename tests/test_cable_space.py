@@ -12,7 +12,7 @@ from conftest import CONFIG
 from cdprctl.control.cable_space import motor_target_kernel
 from cdprctl.control.estimator import Estimator
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.kinematics import KinematicsData
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
 from cdprctl.rotation import rpy_to_matrix
 from drivers.cia402 import protocol as p
@@ -439,3 +439,42 @@ def test_a_robot_parked_by_its_own_distribution_enables_without_a_step(config):
                 worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
         assert cl.controller.state.value == "enabled", cl.manager.driver.error
         assert worst < 0.01  # rad (it was 0.24)
+
+
+@pytest.mark.parametrize("config", ["rowc.toml", "rowc_1khz.toml"])
+def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
+    """A real robot parked by another distribution than the one now configured (the brakes
+    hold the barycenter's tensions, the daemon restarted with SOTDA ν = 0.9): the controller's
+    tensions differ from the cables' by up to 87 N of internal force, which no pose explains.
+    Enabling starts the drives where the motors are and takes the cables to the commanded
+    tensions over ``ENABLE_SETTLE``: no step of the targets (it was 0.24 rad and, at 1 kHz, a
+    following-error fault), no tension-disagreement fault on the way, and the cables carry
+    the commanded tensions after it."""
+    import dataclasses
+
+    from cdprctl.control.cable_space import CableSpace
+    from cdprctl.tda.hold import equilibrium_tensions
+
+    model = load_robot(CONFIG / config)
+    control = dataclasses.replace(model.control, tda_method="sotda", tda_nu=0.9)
+    sotda = dataclasses.replace(model, control=control)
+    with ClosedLoop(sotda) as cl:
+        plant = cl.net.plant
+        kin = KinematicsData(model)
+        inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+        parked = equilibrium_tensions(model, kin)  # the barycenter's, as shipped
+        plant.set_pose(plant.position.copy(), plant.R.copy(), parked)
+        cl.startup()
+        c = cl.controller
+        assert np.max(np.abs(parked - c.data.hold_tensions)) > 50.0  # N: a real difference
+        cl.command("enable")
+        worst = 0.0
+        for _ in range(round((CableSpace.ENABLE_SETTLE + 0.5) / cl.period)):
+            cl.manager.step(cl.net.time)
+            cl.net.advance(cl.period)
+            if plant.servo.kp[0] > 0.0:  # the drives hold their targets
+                worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
+        assert c.state.value == "enabled", (cl.manager.driver.error, list(c.data.events)[-3:])
+        assert worst < 0.02  # rad: the drives' largest error on the way (0.0016; 0.16 without)
+        # the cables now carry what the controller commands (SOTDA's)
+        np.testing.assert_allclose(plant.tension, c.data.tensions, atol=5.0)

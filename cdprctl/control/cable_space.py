@@ -152,6 +152,13 @@ class CableSpace:
     MEASURED_TENSION_FILTER = 5.0
     # Hz: the same for the supervision's internal tension error
     SUPERVISION_FILTER = 20.0
+    # s: enabling takes the cables from the tensions they carry (what the brakes held) to the
+    # commanded ones in this time, the drives starting where the motors are. Parked by another
+    # distribution (a config changed since), the difference is internal force no pose
+    # explains (rowc, barycenter against SOTDA ν = 0.9: up to 87 N, 0.24 rad at the motor):
+    # taken in one step it faulted a drive on its following error at 1 kHz. Slow beside the
+    # winch-on-cable modes (23-34 Hz), short beside anything a user commands.
+    ENABLE_SETTLE = 0.5
 
     def __init__(self, model: RobotModel, data: ControlData, trajectory: Trajectory,
                  estimator: Estimator, winches: WinchTorques):  # fmt: skip
@@ -168,6 +175,17 @@ class CableSpace:
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
         self._fast_error = np.zeros(model.n_cables)  # N, at SUPERVISION_FILTER
         self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
+        m = model.n_cables
+        # m, paid out at enable so the targets start where the motors are, to none over
+        # ENABLE_SETTLE (smoothstep: no velocity step at either end)
+        self.settle = np.zeros(m)
+        self._settle0 = np.zeros(m)  # m: at enable
+        self._settle_time = math.inf  # s since enable (nan: the first active cycle takes it)
+        self._paid = np.zeros(m)  # m: give + settle
+        # N: the tensions the cables should carry, the commanded ones less what the settle
+        # still pays out: the drives' torque feed-forward, and what the measured ones are
+        # compared with (the tensions the brakes left are no disagreement)
+        self.expected = np.zeros(m)
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
         # (Preumont's integral force feedback damps a mode best near its own frequency; on
         # rowc 10-20 rad/s took the y ring from 2 % damping to none left after 2 s, higher
@@ -179,15 +197,31 @@ class CableSpace:
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
-        when ``active``, else the motors' own ``motor_position`` (rad)."""
+        when ``active``, else the motors' own ``motor_position`` (rad); ``expected`` (N)."""
         d = self.data
         if not active:
             d.motor_target[:] = motor_position
+            self.expected[:] = d.tensions
             return
         e = self.estimator
+        if math.isnan(self._settle_time):  # the first active cycle: what the motors lack
+            motor_target_kernel(
+                self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
+                e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
+            )  # fmt: skip
+            np.subtract(d.motor_target, motor_position, out=self._settle0)
+            np.multiply(self._settle0, e.drum_ratio, out=self._settle0)
+            self._settle_time = 0.0
+        else:
+            self._settle_time += d.dt
+        x = min(self._settle_time / self.ENABLE_SETTLE, 1.0)
+        np.multiply(self._settle0, 1.0 - x * x * (3.0 - 2.0 * x), out=self.settle)
+        np.add(self.give, self.settle, out=self._paid)
+        np.multiply(e.k, self.settle, out=self.expected)
+        np.subtract(d.tensions, self.expected, out=self.expected)
         motor_target_kernel(
             self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-            e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
+            e.l_zero, e.drum_ratio, self._paid, self._E, self._R, d.motor_target,
         )  # fmt: skip
 
     def start_measuring(self) -> None:
@@ -200,6 +234,8 @@ class CableSpace:
         self._fast_error[:] = 0.0
         d.ext_estimate[:] = 0.0
         self.give[:] = 0.0
+        self.settle[:] = 0.0
+        self._settle_time = math.nan
 
     def force_feedback(self) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
@@ -229,8 +265,8 @@ class CableSpace:
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
         alpha_fast = 1.0 - math.exp(-2.0 * math.pi * self.SUPERVISION_FILTER * d.dt)
         measured_tension_kernel(
-            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit, d.tensions,
-            alpha, d.measured_tensions, self._commanded, d.tension_error, alpha_fast,
+            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit,
+            self.expected, alpha, d.measured_tensions, self._commanded, d.tension_error, alpha_fast,
             self._fast_error,
         )  # fmt: skip
         internal_part_kernel(N, self._fast_error, d.internal_tension_error)
