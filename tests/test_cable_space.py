@@ -478,3 +478,27 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
         assert worst < 0.02  # rad: the drives' largest error on the way (0.0016; 0.16 without)
         # the cables now carry what the controller commands (SOTDA's)
         np.testing.assert_allclose(plant.tension, c.data.tensions, atol=5.0)
+
+
+@pytest.mark.parametrize("error", [-0.004, 0.004])
+def test_a_length_the_model_has_wrong_settles_within_the_tension_range(error):
+    """A cable whose zero length the controller has 4 mm wrong (40 kN/m: 160 N of stretch):
+    the settle at enable would expect the cable to carry 67 N below its minimum or 65 N above
+    its maximum, and feed that torque forward; the expected tensions stay within [t_min,
+    t_max], and the supervisor stops on the disagreement (a length not what its encoder says)
+    instead of riding it."""
+    model = rowc_csp()
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        c = cl.controller
+        c.estimator.l_zero[0] += error
+        cl.command("enable")
+        lo, hi = np.inf, -np.inf
+        for _ in range(round(0.8 / cl.period)):
+            cl.manager.step(cl.net.time)
+            cl.net.advance(cl.period)
+            lo = min(lo, float(np.min(c.cable_space.expected - model.tension_min)))
+            hi = max(hi, float(np.max(c.cable_space.expected - model.tension_max)))
+        assert lo >= 0.0 and hi <= 0.0, (lo, hi)
+        assert c.state.value == "fault"
+        assert "pull against each other" in str(list(c.data.events)), list(c.data.events)

@@ -186,6 +186,7 @@ class CableSpace:
         # still pays out: the drives' torque feed-forward, and what the measured ones are
         # compared with (the tensions the brakes left are no disagreement)
         self.expected = np.zeros(m)
+        self._t_lo, self._t_hi = model.tension_min.copy(), model.tension_max.copy()  # N
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
         # (Preumont's integral force feedback damps a mode best near its own frequency; on
         # rowc 10-20 rad/s took the y ring from 2 % damping to none left after 2 s, higher
@@ -219,6 +220,9 @@ class CableSpace:
         np.add(self.give, self.settle, out=self._paid)
         np.multiply(e.k, self.settle, out=self.expected)
         np.subtract(d.tensions, self.expected, out=self.expected)
+        # within the cables' range: a length the model has wrong by millimetres would make
+        # hundreds of newtons of a stiff cable, a torque feed-forward no cable may ask for
+        np.clip(self.expected, self._t_lo, self._t_hi, out=self.expected)
         motor_target_kernel(
             self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
             e.l_zero, e.drum_ratio, self._paid, self._E, self._R, d.motor_target,
