@@ -447,7 +447,7 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
     hold the barycenter's tensions, the daemon restarted with SOTDA ν = 0.9): the controller's
     tensions differ from the cables' by up to 87 N of internal force, which no pose explains.
     Enabling starts the drives where the motors are and takes the cables to the commanded
-    tensions over ``ENABLE_SETTLE``: no step of the targets (it was 0.24 rad and, at 1 kHz, a
+    tensions over ``ENABLE_SETTLE``: no step of the targets (0.24 rad and, at 1 kHz, a
     following-error fault), no tension-disagreement fault on the way, and the cables carry
     the commanded tensions after it."""
     import dataclasses
@@ -475,7 +475,10 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
             if plant.servo.kp[0] > 0.0:  # the drives hold their targets
                 worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
         assert c.state.value == "enabled", (cl.manager.driver.error, list(c.data.events)[-3:])
-        assert worst < 0.02  # rad: the drives' largest error on the way (0.0016; 0.16 without)
+        # rad: the drives' largest error on the way, 0.045: their loops carry the internal
+        # force the torque feed-forward (the commanded tensions) lacks until the settle has
+        # gone (87 N through kp); stepped, 0.155 at 250 Hz and a fault at 1 kHz
+        assert worst < 0.06
         # the cables now carry what the controller commands (SOTDA's)
         np.testing.assert_allclose(plant.tension, c.data.tensions, atol=5.0)
 
@@ -484,9 +487,8 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
 def test_a_length_the_model_has_wrong_settles_within_the_tension_range(error):
     """A cable whose zero length the controller has 4 mm wrong (40 kN/m: 160 N of stretch):
     the settle at enable would expect the cable to carry 67 N below its minimum or 65 N above
-    its maximum, and feed that torque forward; the expected tensions stay within [t_min,
-    t_max], and the supervisor stops on the disagreement (a length not what its encoder says)
-    instead of riding it."""
+    its maximum; the expected tensions stay within [t_min, t_max], and the supervisor stops on
+    the disagreement (a length not what its encoder says) instead of riding it."""
     model = rowc_csp()
     with ClosedLoop(model) as cl:
         cl.startup()

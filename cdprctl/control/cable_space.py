@@ -183,8 +183,10 @@ class CableSpace:
         self._settle_time = math.inf  # s since enable (nan: the first active cycle takes it)
         self._paid = np.zeros(m)  # m: give + settle
         # N: the tensions the cables should carry, the commanded ones less what the settle
-        # still pays out: the drives' torque feed-forward, and what the measured ones are
-        # compared with (the tensions the brakes left are no disagreement)
+        # still pays out: what the measured ones are compared with (the tensions the brakes
+        # left are no disagreement). Not the torque feed-forward: after a slipped winch the
+        # forward kinematics spreads its 25 mm over the other cables, and their 40 kN/m made
+        # that 200 N (1.84 N·m, 1.09 from the commanded tensions) where they carried 117 N
         self.expected = np.zeros(m)
         self._t_lo, self._t_hi = model.tension_min.copy(), model.tension_max.copy()  # N
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
@@ -221,7 +223,7 @@ class CableSpace:
         np.multiply(e.k, self.settle, out=self.expected)
         np.subtract(d.tensions, self.expected, out=self.expected)
         # within the cables' range: a length the model has wrong by millimetres would make
-        # hundreds of newtons of a stiff cable, a torque feed-forward no cable may ask for
+        # hundreds of newtons of a stiff cable
         np.clip(self.expected, self._t_lo, self._t_hi, out=self.expected)
         motor_target_kernel(
             self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,

@@ -300,12 +300,11 @@ class Controller:
                 )
         t5 = clock()
         ph[4] = (t5 - t4) / 1e3
-        if cs.enabled:  # the targets, and the tensions they leave the cables (enable settle)
-            cs.targets(active, st.position)
         self.winches.update(
-            cs.expected if cs.enabled else d.tensions, e.kin.WT, self.trajectory.acceleration,
-            st.velocity, active, d.torques,
-        )  # fmt: skip
+            d.tensions, e.kin.WT, self.trajectory.acceleration, st.velocity, active, d.torques
+        )
+        if cs.enabled:
+            cs.targets(active, st.position)
         ph[5] = (clock() - t5) / 1e3
 
     # s: a longer gap between cycles (the first one, or after the loop stood still) steps by a
