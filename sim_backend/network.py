@@ -199,23 +199,18 @@ class SimNetwork:
         self.tick()
         self._physics_for(t_end - self.time)
 
-    def advance_sent(self, dt: float, sent_after: float) -> None:
-        """``dt`` s, the frames waiting handled ``sent_after`` s into it (when they were sent:
-        the daemon's ``--sim`` robot, whose frames from a cycle go out when its computation
-        ends, not when it starts)."""
+    def advance(
+        self, dt: float, first: can.Message | None = None, sent_after: float = 0.0
+    ) -> None:
+        """``dt`` seconds, the frames waiting handled ``sent_after`` s into them (default at
+        once; the daemon's ``--sim`` robot: when the last cycle sent them, at the end of its
+        computation, not at its start)."""
         self._faults_for(dt)
         sent_after = min(max(sent_after, 0.0), dt)
         self._physics_for(sent_after)
-        self.process()
-        self.tick()
-        self._physics_for(dt - sent_after)
-
-    def advance(self, dt: float, first: can.Message | None = None) -> None:
-        """Frames at the current time, then ``dt`` seconds of physics."""
-        self._faults_for(dt)
         self.process(first)
         self.tick()
-        self._physics_for(dt)
+        self._physics_for(dt - sent_after)
 
     def _faults_for(self, dt: float) -> None:
         """The injected faults over the next ``dt`` s; delayed frames due now sent again."""

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -25,6 +26,12 @@ def rowc_csp():
     model = load_robot(CONFIG / "rowc.toml")
     assert model.drives.mode == "csp" and model.control.rate == 250.0
     return model
+
+
+def sotda(model):
+    """``model`` with SOTDA ν = 0.9 as its configured distribution."""
+    control = dataclasses.replace(model.control, tda_method="sotda", tda_nu=0.9)
+    return dataclasses.replace(model, control=control)
 
 
 def enabled(model, seconds: float) -> ClosedLoop:
@@ -421,12 +428,7 @@ def test_a_robot_parked_by_its_own_distribution_enables_without_a_step(config):
     commanded): with SOTDA ν = 0.9 configured, the controller's holding tensions are the ones
     the cables carry, so enabling does not step the drives' targets. Parked by the barycenter
     it stepped them by 0.24 rad, and at 1 kHz the drive faulted on its following error."""
-    import dataclasses
-
-    model = load_robot(CONFIG / config)
-    control = dataclasses.replace(model.control, tda_method="sotda", tda_nu=0.9)
-    model = dataclasses.replace(model, control=control)
-    with ClosedLoop(model) as cl:
+    with ClosedLoop(sotda(load_robot(CONFIG / config))) as cl:
         cl.startup()
         plant = cl.net.plant
         np.testing.assert_allclose(plant.tension, cl.controller.data.hold_tensions, atol=0.1)
@@ -450,15 +452,11 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
     tensions over ``ENABLE_SETTLE``: no step of the targets (0.24 rad and, at 1 kHz, a
     following-error fault), no tension-disagreement fault on the way, and the cables carry
     the commanded tensions after it."""
-    import dataclasses
-
     from cdprctl.control.cable_space import CableSpace
     from cdprctl.tda.hold import equilibrium_tensions
 
     model = load_robot(CONFIG / config)
-    control = dataclasses.replace(model.control, tda_method="sotda", tda_nu=0.9)
-    sotda = dataclasses.replace(model, control=control)
-    with ClosedLoop(sotda) as cl:
+    with ClosedLoop(sotda(model)) as cl:
         plant = cl.net.plant
         kin = KinematicsData(model)
         inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())

@@ -181,7 +181,7 @@ class CableSpace:
         self.settle = np.zeros(m)
         self._settle0 = np.zeros(m)  # m: at enable
         self._settle_time = math.inf  # s since enable (nan: the first active cycle takes it)
-        self._paid = np.zeros(m)  # m: give + settle
+        self._settle_rad = np.zeros(m)  # rad: the settle at the motor
         # N: the tensions the cables should carry, the commanded ones less what the settle
         # still pays out: what the measured ones are compared with (the tensions the brakes
         # left are no disagreement). Not the torque feed-forward: after a slipped winch the
@@ -207,11 +207,11 @@ class CableSpace:
             self.expected[:] = d.tensions
             return
         e = self.estimator
+        motor_target_kernel(
+            self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
+            e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
+        )  # fmt: skip
         if math.isnan(self._settle_time):  # the first active cycle: what the motors lack
-            motor_target_kernel(
-                self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-                e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
-            )  # fmt: skip
             np.subtract(d.motor_target, motor_position, out=self._settle0)
             np.multiply(self._settle0, e.drum_ratio, out=self._settle0)
             self._settle_time = 0.0
@@ -219,16 +219,14 @@ class CableSpace:
             self._settle_time += d.dt
         x = min(self._settle_time / self.ENABLE_SETTLE, 1.0)
         np.multiply(self._settle0, 1.0 - x * x * (3.0 - 2.0 * x), out=self.settle)
-        np.add(self.give, self.settle, out=self._paid)
+        # paid out like the force feedback's give: the motor angle less settle / (r/G)
+        np.divide(self.settle, e.drum_ratio, out=self._settle_rad)
+        np.subtract(d.motor_target, self._settle_rad, out=d.motor_target)
         np.multiply(e.k, self.settle, out=self.expected)
         np.subtract(d.tensions, self.expected, out=self.expected)
         # within the cables' range: a length the model has wrong by millimetres would make
         # hundreds of newtons of a stiff cable
         np.clip(self.expected, self._t_lo, self._t_hi, out=self.expected)
-        motor_target_kernel(
-            self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-            e.l_zero, e.drum_ratio, self._paid, self._E, self._R, d.motor_target,
-        )  # fmt: skip
 
     def start_measuring(self) -> None:
         """The measured and commanded tensions start from the holding ones (enable)."""

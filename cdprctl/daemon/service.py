@@ -135,7 +135,7 @@ class Daemon:
             dt = 0.0 if self._last_t is None else t - self._last_t
             sent = 0.0 if self._last_t is None else self.driver.sent_at - self._last_t
             self._last_t = t
-            self.sim.advance_sent(min(max(dt, 0.0), 0.05), sent)
+            self.sim.advance(min(max(dt, 0.0), 0.05), sent_after=sent)
 
     def run(
         self,

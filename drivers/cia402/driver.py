@@ -73,8 +73,7 @@ class Cia402Driver(CanWinchDriver):
         ]
         self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
         self._last_targets = np.zeros(m)  # rad: the last cycle's targets, for their rate
-        self._last_targets_t = -math.inf  # s: its time
-        self._ran_last = False  # the drives ran (ACTIVE) at the last cycle's write
+        self._last_targets_t = -math.inf  # s: its time, -inf unless the drives ran (ACTIVE)
         self._carried = np.zeros(m)  # rad: the targets carried to the send (carry_targets)
         # s: the most a cycle's targets are carried on to their send — as long as the feedback
         # they came from is trusted ([control] max_feedback_age; beyond it the supervisor
@@ -445,12 +444,12 @@ class Cia402Driver(CanWinchDriver):
             # Only between two cycles of running drives: the step at an enable is no rate.
             late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
             running = self.lifecycle is Lifecycle.ACTIVE
-            since = self._last_targets_t if running and self._ran_last else -math.inf
+            since = self._last_targets_t if running else -math.inf
             cyclic.carry_targets_kernel(
                 self.targets, t, self._last_targets, since, late, self._max_motor_speed,
                 self._carried,
             )  # fmt: skip
-            self._last_targets_t, self._ran_last = t, running
+            self._last_targets_t = t if running else -math.inf
             cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
             pack = p.RPDO1_CSP_STRUCT.pack_into
             for c, ((cw, pm), n) in enumerate(
