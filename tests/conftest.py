@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,6 +15,12 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
 ROBOT_FILES = sorted(p.name for p in CONFIG.glob("*.toml"))
 SHARED_ROBOTS = ROOT.parent / "shared" / "robots"
+
+
+def in_torque_mode(model: RobotModel) -> RobotModel:
+    """``model`` with its drives in cyclic synchronous torque (``[drives] mode = "cst"``): the
+    tests of the torque-mode drive and frames, on a robot that ships in position mode."""
+    return dataclasses.replace(model, drives=dataclasses.replace(model.drives, mode="cst"))
 
 
 @pytest.fixture(scope="session", params=ROBOT_FILES)

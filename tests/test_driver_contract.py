@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.model import load_robot
 from drivers import DriveFaultError, DriverTimeoutError, DriveState, Lifecycle, driver_names
@@ -165,7 +165,7 @@ def test_two_buses_of_four_drives():
     """The same driver over two buses (same node ids on each), lock-step."""
     from cdprctl.model.drives import BusConfig
 
-    model = load_robot(CONFIG / "seed000.toml")
+    model = in_torque_mode(load_robot(CONFIG / "seed000.toml"))
     buses = (
         BusConfig("socketcan", "can0", 1_000_000, (0, 1, 2, 3), (1, 2, 3, 4)),
         BusConfig("socketcan", "can1", 1_000_000, (4, 5, 6, 7), (1, 2, 3, 4)),

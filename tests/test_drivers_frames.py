@@ -11,7 +11,7 @@ import uuid
 import can
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.model import load_robot
 from drivers import (
@@ -127,7 +127,7 @@ class Cia402Script:
 
 @pytest.fixture
 def seed():
-    return load_robot(CONFIG / "seed000.toml")
+    return in_torque_mode(load_robot(CONFIG / "seed000.toml"))
 
 
 def make(model, script, name="cia402"):

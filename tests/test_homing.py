@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.calibration.identify import Identification, Samples
 from cdprctl.calibration.procedure import (
@@ -196,7 +196,7 @@ def test_identification_against_synthetic_samples():
 
 
 def test_self_calibration_refuses_torque_mode():
-    model = load_robot(CONFIG / "cogiro.toml")
+    model = in_torque_mode(load_robot(CONFIG / "cogiro.toml"))
     with LockStep(model) as ls:
         ls.driver.configure()
         with pytest.raises(CalibrationFailedError, match="csp"):

@@ -6,15 +6,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.model import load_robot
 from drivers.cia402 import protocol as p
 from sim_backend.network import LockStep
 
 
-def enabled_rig(config: str) -> LockStep:
+def enabled_rig(config: str, torque_mode: bool = False) -> LockStep:
     model = load_robot(CONFIG / config)
+    if torque_mode:
+        model = in_torque_mode(model)
     rig = LockStep(model, period=model.control.period)
     rig.driver.configure()
     rig.driver.activate()
@@ -33,7 +35,7 @@ def cycles(rig: LockStep, torques: np.ndarray, n: int) -> None:
 def test_torque_actual_is_the_torque_applied_after_0x6072():
     """Torque mode (seed000): 0x6072 := half the winch's limit on drive 1, the full limit
     commanded: the drive applies half and reports half (it reported the target)."""
-    with enabled_rig("seed000.toml") as rig:
+    with enabled_rig("seed000.toml", torque_mode=True) as rig:
         drive = rig.net.drives[0]
         limit = rig.model.cables[0].winch.torque_limit
         half_pm = round(0.5 * limit / drive.rated_torque * 1000)
@@ -188,7 +190,7 @@ def test_a_dcfs_parameter_values_are_written_at_set_up(tmp_path):
     cdprctl's own settings (a read-only one, 0x1000, is skipped; 0x1017, which cdprctl sets
     too, ends as cdprctl's)."""
     path = dcf_with(tmp_path, {"6065": 5000, "1800sub3": 7, "1000": 0x1234, "1017": 999})
-    model = with_dcf(load_robot(CONFIG / "seed000.toml"), path)
+    model = with_dcf(in_torque_mode(load_robot(CONFIG / "seed000.toml")), path)
     with LockStep(model, period=model.control.period) as rig:
         rig.driver.configure()
         for d in rig.net.drives:
@@ -202,7 +204,7 @@ def test_a_dcf_value_the_drive_refuses_stops_the_set_up_by_name(tmp_path):
     from drivers.errors import DriverInitializationError
 
     path = dcf_with(tmp_path, {"6007": 9})  # beyond CiA 402's codes: the drive aborts
-    model = with_dcf(load_robot(CONFIG / "seed000.toml"), path)
+    model = with_dcf(in_torque_mode(load_robot(CONFIG / "seed000.toml")), path)
     with LockStep(model, period=model.control.period) as rig:
         with pytest.raises(DriverInitializationError) as err:
             rig.driver.configure()

@@ -19,6 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from cdprctl.control.cable_space import disturbance_bandwidth  # noqa: E402
 from cdprctl.experiments.ark2020 import (  # noqa: E402
     PATH,
     path_under_force,
@@ -93,7 +94,7 @@ def main() -> None:
         "deflection is the cables' (and drive loops') elasticity, which is what the SOTDA acts "
         "on.",
         "",
-        f"With the estimate fed forward (shipped, {model.control.disturbance_bandwidth:g} Hz) "
+        f"With the estimate fed forward (shipped, {disturbance_bandwidth(model):.2f} Hz) "
         "and the force feedback, ν = 0.9: "
         f"{shipped.deflection * 1e3:.2f} mm after 6 s — the tensions take the force over and "
         "the deflection goes.",

@@ -56,6 +56,24 @@ from cdprctl.numerics import compliance_at
 from cdprctl.rotation import FloatArray, exp_so3_kernel
 from cdprctl.stiffness import lowest_mode
 
+#: the external-wrench estimate's bandwidth: the platform's lowest mode over this
+DISTURBANCE_BELOW_MODE = 6.0
+
+
+def disturbance_bandwidth(model: RobotModel) -> float:
+    """Hz: ``[control] disturbance_bandwidth``, or from the model where not set: the
+    platform's lowest mode on its cables (``stiffness.lowest_mode``) over
+    ``DISTURBANCE_BELOW_MODE``. The estimate reads the force from the cables' stretch, which
+    is quasi-static only well below that mode. Measured in lock-step (30 N ramped in over
+    1 s, with the force feedback's damping): rowc (3.08 Hz) rang at 1 Hz and went unstable at
+    2 Hz; the Sensors 2019 springs (0.39 Hz) kept swinging at a third of the mode and grew at
+    two thirds (74 mm), at a sixth both brought the jet back (rowc 6.5 mm peak, 0.51 Hz: the
+    0.5 Hz it was tuned to by hand; seed000 0.09 mm after 20 s)."""
+    c = model.control.disturbance_bandwidth
+    if c is not None:
+        return c
+    return lowest_mode(model) / (2.0 * math.pi) / DISTURBANCE_BELOW_MODE
+
 
 @njit(cache=True)
 def motor_target_kernel(
@@ -195,8 +213,8 @@ class CableSpace:
         # gains made the platform yield to the jet: lock-step, measured)
         factor = model.control.force_feedback
         self.iff = factor * lowest_mode(model) if self.enabled and factor > 0.0 else 0.0
-        # rad/s: the external-wrench estimate's rate ([control] disturbance_bandwidth)
-        self.disturbance_gain = 2.0 * math.pi * model.control.disturbance_bandwidth
+        # rad/s: the external-wrench estimate's rate
+        self.disturbance_gain = 2.0 * math.pi * disturbance_bandwidth(model)
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions

@@ -16,6 +16,7 @@ from __future__ import annotations
 import collections
 import json
 import logging
+import math
 import signal
 import sys
 import threading
@@ -153,6 +154,7 @@ class Daemon:
             f"{self.model.drives.driver} drives, {self.model.control.rate:g} Hz, TDA "
             f"{c.tda.options.method.value}" + (", simulated robot" if self.sim else "")
         )
+        self._print(self._gains_line())
         if self.link is not None:
             if not self.link.start():
                 self._print("cdprctl run: the Zenoh gateway did not start in 20 s", err=True)
@@ -551,6 +553,25 @@ class Daemon:
             f"  tracking error (estimated) RMS {self.summary['tracking_rms_mm']:.2f} mm, "
             f"max {self.summary['tracking_max_mm']:.2f} mm; final state "
             f"{c.state.value}" + (f" ({c.fault_reason})" if c.fault_reason else "")
+        )
+
+    def _gains_line(self) -> str:
+        """Where the loop's gains come from: in position mode all from the model."""
+        c, m = self.controller, self.model
+        if m.drives.holds_lengths:
+            cs = c.cable_space
+            return (
+                f"gains from the model: drives hold the lengths (csp, position loops "
+                f"{m.drives.position_loop_bandwidth:g} Hz on each rotor's inertia), force "
+                f"feedback {cs.iff:.1f} rad/s (the lowest mode × {m.control.force_feedback:g}), "
+                f"external-wrench estimate {cs.disturbance_gain / (2.0 * math.pi):.3g} Hz"
+            )
+        bw = c.pose.kd / (3.0 * m.control.damping_ratio * 2.0 * math.pi)
+        return (
+            "gains: torque mode, the pose loop at [control] bandwidth "
+            + "/".join(f"{x:.2g}" for x in bw)
+            + " Hz (x y z roll pitch yaw; set by hand: "
+            'docs/control.md, "Gains from the model")'
         )
 
     def _report_identities(self) -> None:

@@ -68,10 +68,9 @@ class ControlConfig:
     # Hz, the external-wrench observer's bandwidth (control/observer.py); 0: off
     observer_bandwidth: float = 0.0
     # Hz, position mode: the external wrench estimated from the measured tensions, fed
-    # forward to the TDA (control/cable_space.py); 0: off. With the force feedback's damping
-    # 2 Hz went unstable on rowc, 1 Hz rang, 0.5 Hz holds a 30 N jet within 6.6 mm (without
-    # that damping even 0.2 Hz let the y mode grow: lock-step, measured)
-    disturbance_bandwidth: float = 0.5
+    # forward to the TDA (control/cable_space.py); 0: off; None (default): from the model,
+    # the platform's lowest mode over 6 (cable_space.disturbance_bandwidth says why)
+    disturbance_bandwidth: float | None = None
     # position mode: the integral force feedback's gain and leak, as a multiple of the
     # platform's lowest mode on its cables (stiffness.lowest_mode; rowc 19.4 rad/s); 0: off
     force_feedback: float = 1.0
