@@ -96,7 +96,8 @@ def main() -> None:
         "",
         f"With the estimate fed forward (shipped, {disturbance_bandwidth(model):.2f} Hz) "
         "and the force feedback, ν = 0.9: "
-        f"{shipped.deflection * 1e3:.2f} mm after 6 s — the tensions take the force over and "
+        f"{round(shipped.deflection * 1e3, 2) + 0.0:.2f} mm after 6 s — the tensions take the "
+        "force over and "
         "the deflection goes.",
         "",
         "![displacement against ν](figures/ark2020_nu.png)",

@@ -26,7 +26,8 @@ class PoseController:
         self.data = data
         self.period = c.period
         bw = c.axis_bandwidth if c.axis_bandwidth is not None else (c.bandwidth,) * 6
-        wn = 2.0 * math.pi * np.array(bw, dtype=float)  # rad/s per axis
+        self.bandwidth = np.array(bw, dtype=float)  # Hz per axis (torque mode: set by hand)
+        wn = 2.0 * math.pi * self.bandwidth  # rad/s per axis
         # PID by pole placement, a triple pole at −ω_n (s + ω)³: kp = 3ω², kd = 3ω, ki = ω³
         # (accelerations per m, per m/s, per m·s). The integral removes the PD's compliance
         # to a steady force (the water jet): what remains is the cables' own elasticity, the

@@ -566,10 +566,9 @@ class Daemon:
                 f"feedback {cs.iff:.1f} rad/s (the lowest mode × {m.control.force_feedback:g}), "
                 f"external-wrench estimate {cs.disturbance_gain / (2.0 * math.pi):.3g} Hz"
             )
-        bw = c.pose.kd / (3.0 * m.control.damping_ratio * 2.0 * math.pi)
         return (
             "gains: torque mode, the pose loop at [control] bandwidth "
-            + "/".join(f"{x:.2g}" for x in bw)
+            + "/".join(f"{x:.2g}" for x in c.pose.bandwidth)
             + " Hz (x y z roll pitch yaw; set by hand: "
             'docs/control.md, "Gains from the model")'
         )
