@@ -526,3 +526,40 @@ def test_the_estimate_rate_comes_from_the_lowest_mode(name):
         assert disturbance_bandwidth(model) == pytest.approx(0.514, abs=0.001)
     given = dataclasses.replace(model.control, disturbance_bandwidth=0.3)
     assert disturbance_bandwidth(dataclasses.replace(model, control=given)) == 0.3
+
+
+@pytest.mark.parametrize(
+    ("name", "mass_factor", "stiffness_factor"), [("cogiro", 2.0, 0.5), ("caroca", 0.5, 3.0)]
+)
+def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_factor):
+    """A user's robot: a shipped one with its platform's mass and inertia and its cables'
+    stiffness changed, nothing else — the gains follow from the model (the lowest mode moves
+    by √(stiffness/mass)) and the demo's moves track within a millimetre, without a fault."""
+    from cdprctl.control.states import State
+    from cdprctl.stiffness import lowest_mode
+
+    base = load_robot(CONFIG / f"{name}.toml")
+    platform = dataclasses.replace(
+        base.platform,
+        mass=base.platform.mass * mass_factor,
+        inertia=np.asarray(base.platform.inertia) * mass_factor,
+    )
+    cables = tuple(
+        dataclasses.replace(c, cross_section=c.cross_section * stiffness_factor)
+        if c.cross_section is not None
+        else dataclasses.replace(c, stiffness=c.stiffness * stiffness_factor)
+        for c in base.cables
+    )
+    model = dataclasses.replace(base, platform=platform, cables=cables)
+    ratio = lowest_mode(model) / lowest_mode(base)
+    assert ratio == pytest.approx(math.sqrt(stiffness_factor / mass_factor), rel=0.02)
+    home = model.home.position
+    lo, hi = model.workspace.position_min, model.workspace.position_max
+    moves = [np.clip(home + d, lo, hi) for d in ([0.3, 0.0, -0.1], [0, 0, 0], [-0.2, 0, 0])]
+    with enabled(model, 0.5) as cl:
+        for p in moves:
+            cl.command("move", pose=np.concatenate([p, model.home.rpy]))
+            cl.run(3.0)
+            assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+        a = cl.arrays()
+        assert np.linalg.norm(a["p_true"] - a["p_des"][:, :3], axis=1).max() < 1e-3  # m
