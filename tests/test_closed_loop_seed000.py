@@ -1,7 +1,7 @@
 """The controller against the simulated Sensors 2019 robot (soft springs, k = 1000 N/m, 150 kg)
 in lock-step: start without a jump, point-to-point motions, a 30 N lateral force. Its
 suspension modes sit near 1 Hz; config/seed000.toml has the drives hold the lengths with every
-gain from the model and gentle motions; the springs' stretch is taken from the commanded
+gain from the model, moving at up to 0.2 m/s; the springs' stretch is taken from the commanded
 tensions (docs/control.md)."""
 
 from __future__ import annotations
