@@ -133,18 +133,21 @@ def measured_tension_kernel(
 
 
 @njit(cache=True)
-def internal_part_kernel(N, error, out):  # pragma: no cover - compiled
+def internal_part_kernel(N, error, out, leverage):  # pragma: no cover - compiled
     """``out`` ← ``N Nᵀ error``: the part of the tension ``error`` (N) in the null space of W
     (``N`` an orthonormal basis, m × r): tensions the cables pull against each other with,
     which no external wrench on the platform explains (an external force changes the tensions
-    along ``range(Wᵀ)``, by as much as the cables' stiffnesses are equal)."""
+    along ``range(Wᵀ)``, by as much as the cables' stiffnesses are equal). ``leverage`` ←
+    ``diag(N Nᵀ)``: the share of a cable's own error that shows there (for naming it)."""
     m, r = N.shape
     for i in range(m):
         out[i] = 0.0
+        leverage[i] = 0.0
     for j in range(r):
         s = 0.0
         for i in range(m):
             s += N[i, j] * error[i]
+            leverage[i] += N[i, j] * N[i, j]
         for i in range(m):
             out[i] += N[i, j] * s
 
@@ -291,4 +294,4 @@ class CableSpace:
             self.expected, alpha, d.measured_tensions, self._commanded, d.tension_error, alpha_fast,
             self._fast_error,
         )  # fmt: skip
-        internal_part_kernel(N, self._fast_error, d.internal_tension_error)
+        internal_part_kernel(N, self._fast_error, d.internal_tension_error, d.internal_leverage)

@@ -62,6 +62,8 @@ class ControlData:
         self.tension_error = np.zeros(m)
         # N: its internal part (the null space of W: no external wrench explains it)
         self.internal_tension_error = np.zeros(m)
+        # diag(N Nᵀ): how much of a cable's own tension error shows in that part (0..1)
+        self.internal_leverage = np.ones(m)
         self.tda_status = TDAStatus.OK
         # winch torques (torques.py)
         self.torques = np.zeros(m)  # N·m, motor, commanded (the feed-forward in position mode)

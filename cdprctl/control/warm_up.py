@@ -89,7 +89,8 @@ def warm_up(controller: Controller) -> None:
                      d.torques)  # fmt: skip
     d.torques[:] = 0.0
     # the cable-space kernels (position mode), on throwaway outputs
-    arrays = (d.motor_target, d.measured_tensions, d.tension_error, d.internal_tension_error)
+    arrays = (d.motor_target, d.measured_tensions, d.tension_error, d.internal_tension_error,
+              d.internal_leverage)  # fmt: skip
     saved = [a.copy() for a in arrays]
     c.cable_space.targets(True, zeros)
     c.cable_space.measure(zeros, zeros, ns.N)
