@@ -537,6 +537,7 @@ def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_f
     stiffness changed, nothing else — the gains follow from the model (the lowest mode moves
     by √(stiffness/mass)) and the demo's moves track within a millimetre, without a fault."""
     from cdprctl.control.states import State
+    from cdprctl.daemon.service import demo_targets
     from cdprctl.stiffness import lowest_mode
 
     base = load_robot(CONFIG / f"{name}.toml")
@@ -554,11 +555,9 @@ def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_f
     model = dataclasses.replace(base, platform=platform, cables=cables)
     ratio = lowest_mode(model) / lowest_mode(base)
     assert ratio == pytest.approx(math.sqrt(stiffness_factor / mass_factor), rel=0.02)
-    home = model.home.position
-    lo, hi = model.workspace.position_min, model.workspace.position_max
-    moves = [np.clip(home + d, lo, hi) for d in ([0.3, 0.0, -0.1], [0, 0, 0], [-0.2, 0, 0])]
+    a, b = demo_targets(model)
     with enabled(model, 0.5) as cl:
-        for p in moves:
+        for p in (a, model.home.position, b):
             cl.command("move", pose=np.concatenate([p, model.home.rpy]))
             cl.run(3.0)
             assert cl.controller.state is State.ENABLED, cl.controller.fault_reason

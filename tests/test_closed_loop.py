@@ -8,7 +8,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.control.states import State
 from cdprctl.experiments.ark2020 import deflection_reference, uncompensated
@@ -28,9 +28,7 @@ def rowc_torque(rowc):
     """rowc with its drives in torque mode at 500 Hz, as shipped before position mode: the
     pose loop alone holds the platform (the tests that document that loop)."""
     return dataclasses.replace(
-        rowc,
-        drives=dataclasses.replace(rowc.drives, mode="cst"),
-        control=dataclasses.replace(rowc.control, rate=500.0),
+        in_torque_mode(rowc), control=dataclasses.replace(rowc.control, rate=500.0)
     )
 
 
@@ -297,6 +295,16 @@ def test_one_period_of_feedback_delay_is_tolerated(rowc):
         move_without_slack(cl, rowc, seconds=3.0)
 
 
+def push_sideways(cl, seconds):
+    """Ramp 30 N along y in over 1 s (unknown to the controller), then ``seconds`` of the
+    closed loop ``cl``; returns the platform's y (m) over the run's last 250 cycles."""
+    FaultInjector(
+        [FaultEvent(cl.net.time, "external_wrench", value=(0.0, 30.0, 0, 0, 0, 0), ramp=1.0)]
+    ).attach(cl.net)
+    cl.run(seconds)
+    return cl.arrays()["p_true"][-250:, 1]
+
+
 def deflection_under_lateral_force(model, tda, seconds):
     """Enable, switch to ``tda``, settle, ramp 30 N along y in over 1 s (unknown to the
     controller); returns (the platform's final y deflection in m, the final commanded tensions)."""
@@ -304,12 +312,8 @@ def deflection_under_lateral_force(model, tda, seconds):
         cl.command("set_tda", tda=tda)
         cl.run(2.0)
         y0 = cl.plant.position[1]
-        FaultInjector(
-            [FaultEvent(cl.net.time, "external_wrench", value=(0.0, 30.0, 0, 0, 0, 0), ramp=1.0)]
-        ).attach(cl.net)
-        cl.run(seconds)
+        y = push_sideways(cl, seconds) - y0
         assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
-        y = cl.arrays()["p_true"][-250:, 1] - y0
         return float(np.mean(y)), cl.controller.tensions.copy()
 
 

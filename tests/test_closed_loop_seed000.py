@@ -11,12 +11,11 @@ import dataclasses
 import numpy as np
 import pytest
 from conftest import in_torque_mode
-from test_closed_loop import enabled, static_deflection
+from test_closed_loop import enabled, push_sideways, static_deflection
 
 from cdprctl.control.cable_space import disturbance_bandwidth
 from cdprctl.control.states import State
 from cdprctl.rotation import log_so3
-from sim_backend.faults import FaultEvent, FaultInjector
 
 
 def test_start_holds_the_pose_without_a_jump(seed000):
@@ -43,18 +42,6 @@ def test_point_to_point(seed000, offset):
         assert np.all(a["tensions"] <= seed000.tension_max + 1e-9)
 
 
-def _under_lateral_force(model, seconds):
-    """30 N along y, ramped in over 1 s, unknown to the controller: (the controller, the
-    platform's y offsets from home over the run's last 0.5 s, m)."""
-    with enabled(model) as cl:
-        FaultInjector(
-            [FaultEvent(cl.net.time, "external_wrench", value=(0.0, 30.0, 0, 0, 0, 0), ramp=1.0)]
-        ).attach(cl.net)
-        cl.run(seconds)
-        y = cl.arrays()["p_true"][-250:, 1] - model.home.position[1]
-        return cl.controller, y
-
-
 def test_lateral_force_deflects_the_springs_as_the_stiffness_predicts(seed000):
     """In torque mode (as seed000_grippers runs, its 0.3 Hz pose loop) the encoders hold their
     pose and the springs stretch unseen: the platform settles where K⁻¹ δw says (23 mm),
@@ -62,7 +49,9 @@ def test_lateral_force_deflects_the_springs_as_the_stiffness_predicts(seed000):
     swing the springs barely damp: 10-38 mm over 16 s.)"""
     control = dataclasses.replace(seed000.control, bandwidth=0.3)
     torque = dataclasses.replace(in_torque_mode(seed000), control=control)
-    c, y = _under_lateral_force(torque, 12.0)
+    with enabled(torque) as cl:
+        y = push_sideways(cl, 12.0) - seed000.home.position[1]
+        c = cl.controller
     assert c.state is State.ENABLED, c.fault_reason
     assert float(np.mean(y)) == pytest.approx(static_deflection(seed000, c.tensions), rel=0.1)
 
@@ -73,7 +62,9 @@ def test_the_estimate_takes_a_lateral_force_over_at_the_rate_the_model_gives(see
     in torque mode it stayed as 23 mm. At two thirds of that mode the estimate grew the swing
     instead (74 mm and rising after 8 s: measured, lock-step)."""
     assert disturbance_bandwidth(seed000) == pytest.approx(0.064, abs=0.001)
-    c, y = _under_lateral_force(seed000, 20.0)
+    with enabled(seed000) as cl:
+        y = push_sideways(cl, 20.0) - seed000.home.position[1]
+        c = cl.controller
     assert c.state is State.ENABLED, c.fault_reason
     assert np.abs(y).max() < 1e-3  # m, from 23 mm
     assert c.data.ext_estimate[1] == pytest.approx(30.0, abs=1.0)  # N

@@ -3,12 +3,11 @@ schedules are reproducible from their seed."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, in_torque_mode
 
 from cdprctl.model import load_robot
 from drivers import DriveFaultError, DriverTimeoutError, Lifecycle
@@ -18,8 +17,7 @@ from sim_backend.network import LockStep
 
 @pytest.fixture
 def rig():
-    model = load_robot(CONFIG / "rowc.toml")  # 500 Hz, torque mode: the drives' frames
-    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, mode="cst"))
+    model = in_torque_mode(load_robot(CONFIG / "rowc.toml"))  # torque mode: the drives' frames
     with LockStep(model, period=0.002) as ls:
         ls.driver.configure()
         ls.driver.activate()

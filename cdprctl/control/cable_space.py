@@ -216,8 +216,8 @@ class CableSpace:
         # gains made the platform yield to the jet: lock-step, measured)
         factor = model.control.force_feedback
         self.iff = factor * lowest_mode(model) if self.enabled and factor > 0.0 else 0.0
-        # rad/s: the external-wrench estimate's rate
-        self.disturbance_gain = 2.0 * math.pi * disturbance_bandwidth(model)
+        self.disturbance_bandwidth = disturbance_bandwidth(model)  # Hz
+        self.disturbance_gain = 2.0 * math.pi * self.disturbance_bandwidth  # rad/s
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
@@ -238,7 +238,11 @@ class CableSpace:
             self._settle_time = 0.0
         else:
             self._settle_time += d.dt
-        x = min(self._settle_time / self.ENABLE_SETTLE, 1.0)
+        x = self._settle_time / self.ENABLE_SETTLE
+        if x >= 1.0:  # settled: the targets as they are, the commanded tensions expected
+            self.settle[:] = 0.0
+            self.expected[:] = d.tensions
+            return
         np.multiply(self._settle0, 1.0 - x * x * (3.0 - 2.0 * x), out=self.settle)
         # paid out like the force feedback's give: the motor angle less settle / (r/G)
         np.divide(self.settle, e.drum_ratio, out=self._settle_rad)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import collections
 import json
 import logging
-import math
 import signal
 import sys
 import threading
@@ -564,7 +563,7 @@ class Daemon:
                 f"gains from the model: drives hold the lengths (csp, position loops "
                 f"{m.drives.position_loop_bandwidth:g} Hz on each rotor's inertia), force "
                 f"feedback {cs.iff:.1f} rad/s (the lowest mode × {m.control.force_feedback:g}), "
-                f"external-wrench estimate {cs.disturbance_gain / (2.0 * math.pi):.3g} Hz"
+                f"external-wrench estimate {cs.disturbance_bandwidth:.3g} Hz"
             )
         return (
             "gains: torque mode, the pose loop at [control] bandwidth "
@@ -637,14 +636,22 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def demo_targets(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """The demo's two move targets (m, base frame): 0.3 m along x and 0.1 m down, 0.2 m back
+    along x, from home, within the workspace."""
+    home = model.home.position
+    lo, hi = model.workspace.position_min, model.workspace.position_max
+    a = np.clip(home + np.array([0.3, 0.0, -0.1]), lo, hi)
+    b = np.clip(home + np.array([-0.2, 0.0, 0.0]), lo, hi)
+    return a, b
+
+
 def demo_script(model: RobotModel, force: float = 0.0) -> list[tuple[float, Any]]:
     """Enable, a move and back, optionally a lateral disturbance at home (``force`` N along y,
     ramped in over 1 s like the ARK 2020 water jet; simulated robot only), a move, home,
     disable."""
     home = model.home.position
-    lo, hi = model.workspace.position_min, model.workspace.position_max
-    a = np.clip(home + np.array([0.3, 0.0, -0.1]), lo, hi)
-    b = np.clip(home + np.array([-0.2, 0.0, 0.0]), lo, hi)
+    a, b = demo_targets(model)
     rpy = model.home.rpy
 
     def move(p: np.ndarray) -> Any:
