@@ -65,6 +65,7 @@ class SimNetwork:
                         self.cfg.comm_timeout,
                         self.cfg.position_gains(w.rotor_inertia),
                         owners,
+                        self.cfg.target_extrapolation,
                     )
                 if encoders == "incremental" and self.protocol != "odrive":
                     drive.incremental = True
@@ -220,6 +221,25 @@ class SimNetwork:
                 self.buses[b].send(msg)
 
     def _physics_for(self, dt: float) -> None:
+        """``dt`` s of physics, the drives ticked at each instant one of them stops its
+        position target within it (a step longer than their extrapolation — a stalled loop in
+        lock-step, a simulator catching up — went on extrapolating to its end: the drives of
+        a real robot hold)."""
+        end = self.time + dt
+        while (hold := self._next_hold(end)) < end:
+            self._step(hold - self.time)
+            self.tick()
+        self._step(end - self.time)
+
+    def _next_hold(self, end: float) -> float:
+        """s: the earliest instant before ``end`` a drive stops extrapolating, else ``end``."""
+        first = end
+        if self.protocol == "cia402":
+            for d in self.drives:
+                first = min(first, d.holds_at())
+        return max(first, self.time)
+
+    def _step(self, dt: float) -> None:
         if dt > 0:
             self.plant.step(dt)
             self.time += dt

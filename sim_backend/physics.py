@@ -93,7 +93,7 @@ def servo_torque(servo, i, theta, theta_dot, offset, dt):  # pragma: no cover - 
     ``offset + kp (θ_t − θ) + kd (θ̇_t − θ̇)`` within its limit, the target moving at the
     interpolation rate (set at each SYNC to reach the new target one SYNC later, and kept
     beyond it while a SYNC is late: linear interpolation and extrapolation, as CSP drives
-    do; ``Cia402Drive`` holds it after ``EXTRAPOLATE_FOR``); in torque mode ``offset``. No
+    do; ``Cia402Drive`` holds it after ``extrapolate_for``); in torque mode ``offset``. No
     integral: with one on all eight winches of rowc the platform's y mode (~3 Hz) grew from
     0.5 to 9 mrad of motor error in 2 s at constant targets (lock-step, measured); the torque
     offset carries the load instead."""

@@ -96,6 +96,8 @@ class Controller:
         self._stretch_every = max(1, round(self.STRETCH_PERIOD / self.period))
         self._clock_ns = time.perf_counter_ns
         self._last_t = -math.inf  # s, the last cycle's time
+        # s: position mode, the most the reference moves on across a stall of the loop
+        self._extrapolation = model.drives.target_extrapolation
         self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
             CommandKind.ENABLE: self._enable,
             CommandKind.DISABLE: self._disable,
@@ -267,7 +269,7 @@ class Controller:
         )
         if d.motion and self.trajectory.finished and not self.path.holds_motion:
             d.motion = "" if self.path.plan is None else d.motion
-        self.trajectory.update(d.dt)
+        self.trajectory.update(self._reference_step(gap))
         t3 = clock()
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES
@@ -306,6 +308,15 @@ class Controller:
         if cs.enabled:
             cs.targets(active, st.position)
         ph[5] = (clock() - t5) / 1e3
+
+    def _reference_step(self, gap: float) -> float:
+        """s the reference moves on this cycle, ``gap`` s after the last. Position mode: as
+        long as the drives went on at their targets' rate, then held; it waits out the rest of
+        a longer stall (by all of it, the next targets stepped ahead of the held drives: a
+        following-error fault, 78 ms at 0.2 m/s on rowc). Torque mode: ``data.dt``."""
+        if self.cable_space.enabled and 0.0 < gap < math.inf:
+            return min(gap, self._extrapolation)
+        return self.data.dt
 
     # s: a longer gap between cycles (the first one, or after the loop stood still) steps by a
     # period: what happened meanwhile is not the controller's to integrate

@@ -76,6 +76,7 @@ class Daemon:
         if sim:
             from sim_backend.network import SimNetwork
             from sim_backend.plant import CdprPlant
+            from sim_backend.realtime import MAX_CATCH_UP
 
             channels = [
                 f"cdprctl-sim-{uuid.uuid4().hex[:8]}-{b}" for b in range(len(model.drives.buses))
@@ -84,6 +85,7 @@ class Daemon:
             self.plant = CdprPlant(model)
             sim_net = SimNetwork(model, self.plant, overrides)
             self.sim = sim_net
+            self._sim_catch_up = MAX_CATCH_UP
 
             def wait(dt: float) -> None:  # start-up calls: the simulated robot keeps time
                 sim_net.advance(dt)
@@ -135,7 +137,9 @@ class Daemon:
             dt = 0.0 if self._last_t is None else t - self._last_t
             sent = 0.0 if self._last_t is None else self.driver.sent_at - self._last_t
             self._last_t = t
-            self.sim.advance(min(max(dt, 0.0), 0.05), sent_after=sent)
+            # all of a stall (capped at 0.05 s, the simulated robot fell behind the loop by the
+            # rest of a longer one, and its drives saw the next SYNC as a target step)
+            self.sim.advance(min(max(dt, 0.0), self._sim_catch_up), sent_after=sent)
 
     def run(
         self,

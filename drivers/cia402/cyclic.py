@@ -142,20 +142,25 @@ def controlword_kernel(
 
 
 @njit(cache=True)
-def carry_targets_kernel(
-    targets, t, last, last_t, late, max_speed, out
-):  # pragma: no cover - compiled
-    """``out`` (rad) ← each position target carried ``late`` s on at its rate since the last
-    cycle's (``last`` at ``last_t``; each rate within ``max_speed``, rad/s): the target for the
-    instant its SYNC leaves, not the instant the cycle started. ``last`` ← ``targets``."""
+def target_rates_kernel(targets, t, last, last_t, max_speed, rate):  # pragma: no cover - compiled
+    """``rate`` (rad/s) ← each position target's rate since the last cycle's (``last`` at
+    ``last_t``; within ``max_speed``, rad/s; 0 without a last cycle). ``last`` ← ``targets``."""
     gap = t - last_t
     for c in range(len(targets)):
-        rate = 0.0
+        r = 0.0
         if 0.0 < gap < 1.0:
-            rate = (targets[c] - last[c]) / gap
-            rate = min(max(rate, -max_speed[c]), max_speed[c])
-        out[c] = targets[c] + rate * late
+            r = (targets[c] - last[c]) / gap
+            r = min(max(r, -max_speed[c]), max_speed[c])
+        rate[c] = r
         last[c] = targets[c]
+
+
+@njit(cache=True)
+def carry_targets_kernel(targets, rate, late, out):  # pragma: no cover - compiled
+    """``out`` (rad) ← each position target carried ``late`` s on at its ``rate``: the target
+    for the instant its SYNC leaves, not the instant the cycle started."""
+    for c in range(len(targets)):
+        out[c] = targets[c] + rate[c] * late
 
 
 @njit(cache=True)

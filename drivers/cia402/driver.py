@@ -75,6 +75,8 @@ class Cia402Driver(CanWinchDriver):
         self._last_targets = np.zeros(m)  # rad: the last cycle's targets, for their rate
         self._last_targets_t = -math.inf  # s: its time, -inf unless the drives ran (ACTIVE)
         self._carried = np.zeros(m)  # rad: the targets carried to the send (carry_targets)
+        self._target_rate = np.zeros(m)  # rad/s: each target's rate since the last cycle's
+        self.resent_targets = 0  # cycles whose targets went out again for a late SYNC
         # s: the most a cycle's targets are carried on to their send — as long as the feedback
         # they came from is trusted ([control] max_feedback_age; beyond it the supervisor
         # stops). Capped at 20 ms, holds of 20-40 ms still reversed the drives and faulted
@@ -331,11 +333,28 @@ class Cia402Driver(CanWinchDriver):
             cyclic.CONTROLWORD_TOWARDS_ENABLED,
             self._rpdo_fields.copy(),
         )
-        cyclic.carry_targets_kernel(
-            self.targets, 0.0, self._last_targets.copy(), -1.0, 0.0, self._max_motor_speed,
-            self._carried.copy(),
+        cyclic.target_rates_kernel(
+            self.targets, 0.0, self._last_targets.copy(), -1.0, self._max_motor_speed,
+            self._target_rate.copy(),
         )  # fmt: skip
+        cyclic.carry_targets_kernel(self.targets, self._target_rate, 0.0, self._carried.copy())
         cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
+
+    # of a period: targets this much older than their SYNC are sent again (``_write_internal``)
+    RESEND_AFTER = 0.25
+
+    def _send_targets(self, late: float, fields: np.ndarray) -> None:
+        """Position mode: each drive's RPDO (controlword, the target carried ``late`` s on at
+        its rate, the torque offset)."""
+        cyclic.carry_targets_kernel(self.targets, self._target_rate, late, self._carried)
+        cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
+        pack, send, bus_of = p.RPDO1_CSP_STRUCT.pack_into, self._send, self._bus_of_list
+        for c, ((cw, pm), n) in enumerate(
+            zip(fields.tolist(), self._target_counts.tolist(), strict=True)
+        ):
+            msg = self._rpdo[c]
+            pack(msg.data, 0, cw, n, pm)
+            send(bus_of[c], msg)
 
     def _drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
@@ -445,19 +464,12 @@ class Cia402Driver(CanWinchDriver):
             late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
             running = self.lifecycle is Lifecycle.ACTIVE
             since = self._last_targets_t if running else -math.inf
-            cyclic.carry_targets_kernel(
-                self.targets, t, self._last_targets, since, late, self._max_motor_speed,
-                self._carried,
+            cyclic.target_rates_kernel(
+                self.targets, t, self._last_targets, since, self._max_motor_speed,
+                self._target_rate,
             )  # fmt: skip
             self._last_targets_t = t if running else -math.inf
-            cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
-            pack = p.RPDO1_CSP_STRUCT.pack_into
-            for c, ((cw, pm), n) in enumerate(
-                zip(fields.tolist(), self._target_counts.tolist(), strict=True)
-            ):
-                msg = self._rpdo[c]
-                pack(msg.data, 0, cw, n, pm)
-                send(bus_of[c], msg)
+            self._send_targets(late, fields)
         else:
             pack = p.RPDO1_STRUCT.pack_into
             for c, (cw, pm) in enumerate(fields.tolist()):
@@ -471,6 +483,16 @@ class Cia402Driver(CanWinchDriver):
         # error (across processes, 2 busy loops on 2 cores). Its RPDOs wait for the next.
         now = self.clock()
         if setup or now - self._last_cycle_sync >= 0.5 * self.period:
+            if self._csp and not setup:
+                # held up within its sends (the VM taking the CPU between the RPDOs and the
+                # SYNC, 5 ms under a CPU hog with --sim), the targets went out for an instant
+                # well before their SYNC: the drives saw them behind, reversed, and over the
+                # next late SYNCs overshot into a following-error fault. Sent again for now.
+                again = min(max(now - t, 0.0), self.max_carry)
+                if again - late > self.RESEND_AFTER * self.period:
+                    self._send_targets(again, fields)
+                    self.resent_targets += 1
+                    now = self.clock()
             sync = self._sync.data
             sync[0] = sync[0] % p.SYNC_COUNTER_OVERFLOW + 1
             for b in self.media:

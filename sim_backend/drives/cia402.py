@@ -45,6 +45,7 @@ class Cia402Drive:
         comm_timeout: float,
         position_gains: tuple[float, float] = (0.0, 0.0),
         rpdo_owners: dict[int, Cia402Drive] | None = None,
+        target_extrapolation: float = 0.05,
     ):
         self.node_id = node_id
         # COB-ID → drive, shared by the drives of one bus: who takes an RPDO (the network's
@@ -58,6 +59,9 @@ class Cia402Drive:
         self.comm_timeout = comm_timeout
         # the position loop's gains in mode 8 (N·m/rad, N·m·s/rad): the drive's own tuning
         self.position_gains = position_gains
+        # s: how long the position target goes on at its last rate without a new one (a SYNC or
+        # an RPDO late or lost) before the drive holds it ([drives] target_extrapolation)
+        self.extrapolate_for = target_extrapolation
         self.last_sync = -math.inf
         self.sync_count = 0  # the last SYNC's counter (0: none, or SYNCs without one)
         self.rpdos_since_sync = 0  # RPDOs received since the last SYNC this drive saw
@@ -355,7 +359,7 @@ class Cia402Drive:
                     end = theta + step * 2.0 * math.pi / self.cpr
                     # reach it one SYNC period from now (the drive's estimate of the period);
                     # after a long gap, a step
-                    if 0.0 <= interval < self.EXTRAPOLATE_FOR and self.sync_period > 0.0:
+                    if 0.0 <= interval < self.extrapolate_for and self.sync_period > 0.0:
                         servo.rate[c] = (end - servo.target[c]) / self.sync_period
                     else:
                         servo.target[c], servo.rate[c] = end, 0.0
@@ -376,7 +380,7 @@ class Cia402Drive:
         to cycling) takes half the window. Interpolating over the last interval instead, SYNCs
         handled late by a loaded simulator (two in one step: an interval of 0) made a target
         step and a following-error fault mid-move."""
-        if not 0.0 <= interval < self.EXTRAPOLATE_FOR:
+        if not 0.0 <= interval < self.extrapolate_for:
             return
         self._intervals.append(interval)
         del self._intervals[: -self.SYNC_WINDOW]
@@ -409,17 +413,20 @@ class Cia402Drive:
         counts += self.encoder_offset - self.encoder_zero
         return ((counts + 0x80000000) & 0xFFFFFFFF) - 0x80000000
 
-    # s: how long the position target goes on at its last rate without a new one (a SYNC or an
-    # RPDO late or lost) before the drive holds it
-    EXTRAPOLATE_FOR = 0.05
-
     # -- time passing ---------------------------------------------------------------------------
+    def holds_at(self) -> float:
+        """s: when the position target stops going on at its last rate, ``extrapolate_for``
+        after the last new one (inf: it is not moving)."""
+        if self.plant.servo.rate[self.cable] == 0.0:
+            return math.inf
+        return self.last_target + self.extrapolate_for
+
     def tick(self, t: float) -> list[can.Message]:
-        """Heartbeat when due; the position target held after ``EXTRAPOLATE_FOR`` without a
-        SYNC; the communication timeout (drive-side safety)."""
+        """Heartbeat when due; the position target held after ``extrapolate_for`` without a
+        new one (``holds_at``); the communication timeout (drive-side safety)."""
         out: list[can.Message] = []
         servo = self.plant.servo
-        if t - self.last_target > self.EXTRAPOLATE_FOR:
+        if t >= self.holds_at():
             servo.rate[self.cable] = 0.0
         if self.state is p.PowerState.OPERATION_ENABLED and following_error_py(servo, self.cable):
             emcy = self.inject_fault(p.EMCY_FOLLOWING_ERROR)
