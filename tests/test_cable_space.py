@@ -611,3 +611,18 @@ def test_a_struck_cable_is_named_among_those_that_explain_it(kind, cable, group)
         assert m, c.fault_reason
         named = {int(x) for x in re.findall(r"\d+", m.group(1))}
         assert named == group and cable in named
+
+
+def test_the_stop_reels_in_only_what_a_cable_lost():
+    """tension_hold_kernel against hand arithmetic: a cable short of its tension reeled in by
+    gain·dt·deficit/k, no more than the step allowed; one beyond it never paid out; a slack
+    or broken one left alone."""
+    from cdprctl.control.cable_space import tension_hold_kernel
+
+    error = np.array([-40.0, 25.0, -40.0, 0.0, -40.0])  # N, measured − expected
+    k = np.array([4e4, 4e4, 2e4, 4e4, 400.0])  # N/m: cable 4 a spring
+    tension = np.array([60.0, 125.0, 3.0, 100.0, 60.0])  # N: cable 2 below slack
+    slack = np.full(5, 10.0)
+    give = np.array([0.0, 0.001, 0.0, 0.0, 0.0])  # m
+    tension_hold_kernel(error, k, 0.5, 0.002, tension, slack, give)
+    np.testing.assert_allclose(give, [-0.5 * 40.0 / 4e4, 0.001, 0.0, 0.0, -0.002])

@@ -46,6 +46,10 @@ def test_fault(rowc, scenario):
         assert r.detection_s < 0.01 and "0x2310" in r.reaction
     if name == "encoder jump 0.5 rad":  # the drive's own following error stops it at once
         assert "0x8611" in r.reaction and r.excursion_mm < 1.0, (r.reaction, r.excursion_mm)
+    if name == "winch slips 0.05 m/s":  # the stop reels the slipping cable in to its tension
+        assert r.excursion_mm < 10.3, r.excursion_mm  # torque mode's; 25.4 held, 8.5 reeled in
+    if name == "cable snaps":
+        assert r.excursion_mm < 40.0, r.excursion_mm  # 34.0 measured (torque mode 163)
     if name == "daemon SIGKILLed, restarted":
         assert r.detection_s is not None and r.detection_s <= 0.15  # the drives' timeout
         assert r.recovered.startswith("yes"), r.recovered

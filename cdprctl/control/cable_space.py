@@ -109,6 +109,20 @@ def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def tension_hold_kernel(
+    error, k, gain_dt, step_max, tension, slack, give
+):  # pragma: no cover - compiled
+    """``give`` (m) per cable ← ``give + gain_dt · min(error, 0) / k``, by at most ``step_max``
+    (m): a cable carrying less than it should (``error`` N, measured − expected; ``k`` N/m)
+    reeled in by the integral of its deficit, never paid out (a ratchet: it only takes back
+    length a cable lost); not while its measured ``tension`` (N) is below ``slack`` (N):
+    broken, or gone slack."""
+    for i in range(give.shape[0]):
+        if error[i] < 0.0 and tension[i] >= slack[i]:
+            give[i] += max(gain_dt * error[i] / k[i], -step_max)
+
+
+@njit(cache=True)
 def measured_tension_kernel(
     torque, velocity, accel_term, r, viscous, coulomb, limit, commanded, alpha, out,
     commanded_f, error, alpha_fast, fast_error,
@@ -173,6 +187,14 @@ class CableSpace:
     MEASURED_TENSION_FILTER = 5.0
     # Hz: the same for the supervision's internal tension error
     SUPERVISION_FILTER = 20.0
+    # rad/s: a controlled stop reels in every cable that lost tension (a winch that slipped:
+    # the cable lengthened where the encoder cannot see it) at the rate of the error it acts
+    # on, the supervision's filter. The leaky force feedback gives back at most its tension
+    # over its stiffness (2.4 mm on rowc) while the stop held the motors: the slipping cable
+    # went slack and rowc swung 25.4 mm along its elastic y; reeled in, 8.5 mm (torque mode,
+    # which keeps tensions by itself, 10.3; at half this rate 10.3, a quarter 13.4; lock-step,
+    # the reliability table's slip). Never paid out: a ratchet that takes back only lost length
+    TENSION_HOLD = 2.0 * math.pi * SUPERVISION_FILTER
     # s: enabling takes the cables from the tensions they carry (what the brakes held) to the
     # commanded ones in this time, the drives starting where the motors are. Parked by another
     # distribution (a config changed since), the difference is internal force no pose
@@ -210,6 +232,9 @@ class CableSpace:
         # that 200 N (1.84 N·m, 1.09 from the commanded tensions) where they carried 117 N
         self.expected = np.zeros(m)
         self._t_lo, self._t_hi = model.tension_min.copy(), model.tension_max.copy()  # N
+        # m/s: a stop reels a cable in no faster than the platform may move (a spring's few
+        # hundred N/m would make a few newtons metres per second)
+        self._reel_speed = model.control.max_velocity
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
         # (Preumont's integral force feedback damps a mode best near its own frequency; on
         # rowc 10-20 rad/s took the y ring from 2 % damping to none left after 2 s, higher
@@ -266,11 +291,19 @@ class CableSpace:
         self.settle[:] = 0.0
         self._settle_time = math.nan
 
-    def force_feedback(self) -> None:
+    def force_feedback(self, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
-        back (``force_feedback_kernel``), at the rate ``self.iff`` (rad/s)."""
+        back (``force_feedback_kernel``), at the rate ``self.iff`` (rad/s). ``stopping`` (a
+        controlled stop): instead, each cable that carries less than it should is reeled in
+        to its tension at ``TENSION_HOLD`` rad/s, no faster than ``[control] max_velocity``
+        (``tension_hold_kernel``)."""
         d = self.data
-        if self.iff > 0.0:
+        if stopping:
+            tension_hold_kernel(
+                self._fast_error, self.estimator.k, self.TENSION_HOLD * d.dt,
+                self._reel_speed * d.dt, d.measured_tensions, self._t_lo, self.give,
+            )  # fmt: skip
+        elif self.iff > 0.0:
             decay = math.exp(-self.iff * d.dt)
             force_feedback_kernel(d.tension_error, self.estimator.k, decay, self.give)
 

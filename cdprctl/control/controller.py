@@ -246,7 +246,7 @@ class Controller:
                 and self.distribution.bad_cycles == 0,
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
-            cs.force_feedback()
+            cs.force_feedback(stopping=d.state is State.STOPPING)
         elif d.cycle % self._stretch_every == 0:
             self._refresh_stretch_tensions()
         e = self.estimator

@@ -16,7 +16,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdprctl.control.cable_space import disturbance_kernel, force_feedback_kernel
+from cdprctl.control.cable_space import (
+    disturbance_kernel,
+    force_feedback_kernel,
+    tension_hold_kernel,
+)
 from cdprctl.control.estimator import Estimator
 from cdprctl.numerics import worst_ratio
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
@@ -96,6 +100,7 @@ def warm_up(controller: Controller) -> None:
     c.cable_space.measure(zeros, zeros, ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
     force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
+    tension_hold_kernel(zeros, np.ones(m), 0.5, 0.0, zeros, zeros, np.zeros(m))
     worst_ratio(zeros, np.ones(m))  # the supervisor's position-mode checks
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
