@@ -228,6 +228,7 @@ class SimNetwork:
         end = self.time + dt
         while (hold := self._next_hold(end)) < end:
             self._step(hold - self.time)
+            self.time = hold  # exactly: the drive compares it with the same sum
             self.tick()
         self._step(end - self.time)
 
