@@ -12,7 +12,8 @@ Kinds (``FaultEvent.kind``) and their ``value``:
 * ``cable_snap`` — ``cable`` breaks;
 * ``winch_slip`` — ``cable`` slips on its drum at ``value`` m/s (unseen by the encoder);
 * ``external_wrench`` — ``value`` = (fx, fy, fz, mx, my, mz) N, N·m at P, base frame,
-  ramped in over ``ramp`` s (0: a step).
+  ramped over ``ramp`` s (0: a step) from the wrench acting when the event starts: an event
+  of zeros with a ramp takes a force off as gradually as one put it on.
 
 Each event starts at ``time`` (s, simulated) and lasts ``duration`` (s; inf: for good).
 """
@@ -49,6 +50,8 @@ class FaultEvent:
     ramp: float = 0.0
     started: bool = field(default=False, compare=False)
     ended: bool = field(default=False, compare=False)
+    # external_wrench: the wrench acting when it started, where its ramp starts from
+    wrench_before: tuple[float, ...] = field(default=(0.0,) * 6, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -154,11 +157,15 @@ class FaultInjector:
                 plant.drum_slip[ev.cable] += float(ev.value) * dt
             elif ev.kind == "external_wrench":
                 s = 1.0 if ev.ramp <= 0 else min(1.0, (t - ev.time) / ev.ramp)
-                plant.ext_force[:] = [s * x for x in ev.value[:3]]
-                plant.ext_moment[:] = [s * x for x in ev.value[3:]]
+                w = [a + s * (x - a) for a, x in zip(ev.wrench_before, ev.value, strict=True)]
+                plant.ext_force[:] = w[:3]
+                plant.ext_moment[:] = w[3:]
 
     def _start(self, net: Any, ev: FaultEvent) -> None:
         c = ev.cable
+        if ev.kind == "external_wrench":
+            p = net.plant
+            ev.wrench_before = (*p.ext_force.tolist(), *p.ext_moment.tolist())
         if ev.kind == "frame_loss":
             self.loss = float(ev.value)
         elif ev.kind == "frame_delay":

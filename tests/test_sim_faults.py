@@ -109,6 +109,21 @@ def test_cable_snap_and_winch_slip_and_external_wrench(rig):
     assert math.isfinite(theta1)
 
 
+def test_a_force_ramped_off_goes_as_gradually_as_it_came(rig):
+    """An external_wrench event ramps from the wrench acting when it starts: zeros with a 1 s
+    ramp take a 30 N force off over 1 s (it went at once, and the demo's "jet off" was a step:
+    23 mm of transient on rowc where the ramp gives 6.5)."""
+    on = FaultEvent(rig.net.time, "external_wrench", value=(0, 30.0, 0, 0, 0, 0), ramp=0.1)
+    inject(rig, on)
+    run(rig, 0.2)
+    off = FaultEvent(rig.net.time, "external_wrench", value=(0.0,) * 6, ramp=1.0)
+    inject(rig, off)
+    run(rig, 0.25)
+    assert rig.plant.ext_force[1] == pytest.approx(30.0 * 0.75, abs=0.1)
+    run(rig, 1.0)
+    assert rig.plant.ext_force[1] == 0.0
+
+
 def test_random_schedule_is_reproducible():
     a = FaultInjector.random_faults(60.0, 8, rate=0.5, seed=42).events
     b = FaultInjector.random_faults(60.0, 8, rate=0.5, seed=42).events
