@@ -192,8 +192,9 @@ class CableSpace:
     # on, the supervision's filter. The leaky force feedback gives back at most its tension
     # over its stiffness (2.4 mm on rowc) while the stop held the motors: the slipping cable
     # went slack and rowc swung 25.4 mm along its elastic y; reeled in, 8.5 mm (torque mode,
-    # which keeps tensions by itself, 10.3; at half this rate 10.3, a quarter 13.4; lock-step,
-    # the reliability table's slip). Never paid out: a ratchet that takes back only lost length
+    # which keeps tensions by itself, 10.3; at half this rate 10.4, a quarter 13.4, twice 7.5
+    # with a snapped cable's 34.8 mm going to 35.6; lock-step, the reliability table's runs).
+    # Never paid out: a ratchet that takes back only lost length
     TENSION_HOLD = 2.0 * math.pi * SUPERVISION_FILTER
     # s: enabling takes the cables from the tensions they carry (what the brakes held) to the
     # commanded ones in this time, the drives starting where the motors are. Parked by another
@@ -232,8 +233,8 @@ class CableSpace:
         # that 200 N (1.84 N·m, 1.09 from the commanded tensions) where they carried 117 N
         self.expected = np.zeros(m)
         self._t_lo, self._t_hi = model.tension_min.copy(), model.tension_max.copy()  # N
-        # m/s: a stop reels a cable in no faster than the platform may move (a spring's few
-        # hundred N/m would make a few newtons metres per second)
+        # m/s: a stop reels a cable in no faster than the platform may move (on a spring of
+        # a few hundred N/m, a deficit of a few newtons would reel metres per second)
         self._reel_speed = model.control.max_velocity
         # rad/s: its gain and leak, the platform's lowest mode times [control] force_feedback
         # (Preumont's integral force feedback damps a mode best near its own frequency; on
