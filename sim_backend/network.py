@@ -220,6 +220,10 @@ class SimNetwork:
             for b, msg in self.faults.release(self.time):
                 self.buses[b].send(msg)
 
+    # s: the most of a stall of whoever steps it that the simulated robot catches up on
+    # (``cdprctl sim``, ``cdprctl run --sim``); a longer one is lost time
+    MAX_CATCH_UP = 0.5
+
     def _physics_for(self, dt: float) -> None:
         """``dt`` s of physics, the drives ticked at each instant one of them stops its
         position target within it (a step longer than their extrapolation — a stalled loop in

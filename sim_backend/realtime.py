@@ -4,7 +4,7 @@ Every ``step`` seconds of wall clock (default 0.5 ms) it handles the frames wait
 buses, each at the instant the kernel stamped its arrival (the physics stepped up to it),
 ticks the drives, and integrates the physics up to now; it sleeps until the next step, waking
 early when a frame arrives. Simulated time follows the monotonic clock (less the stalls of
-this process beyond ``MAX_CATCH_UP``).
+this process beyond ``SimNetwork.MAX_CATCH_UP``).
 """
 
 from __future__ import annotations
@@ -20,8 +20,6 @@ from cdprctl.model.robot import RobotModel
 from sim_backend.faults import FaultInjector
 from sim_backend.network import SimNetwork
 from sim_backend.plant import CdprPlant
-
-MAX_CATCH_UP = 0.5  # s
 
 
 def run_realtime(
@@ -54,10 +52,10 @@ def run_realtime(
     t0 = time.monotonic()
     next_status = status_every
     woke_on: Any = None
-    # simulated time = monotonic − t0 − lag: a stall of this process up to MAX_CATCH_UP is
-    # simulated afterwards, frame by frame at their arrival instants (with 10 ms, the frames
-    # of a longer stall were bunched at one instant: SYNC intervals of 0, following-error
-    # faults); a longer one is lag
+    # simulated time = monotonic − t0 − lag: a stall of this process up to the network's
+    # MAX_CATCH_UP is simulated afterwards, frame by frame at their arrival instants (with
+    # 10 ms, the frames of a longer stall were bunched at one instant: SYNC intervals of 0,
+    # following-error faults); a longer one is lag
     lag = 0.0
     wall_minus_mono = time.time() - time.monotonic()
 
@@ -73,7 +71,7 @@ def run_realtime(
             now = time.monotonic()
             elapsed = now - last
             if elapsed > 0 or woke_on is not None:
-                lag += max(0.0, elapsed - MAX_CATCH_UP)
+                lag += max(0.0, elapsed - net.MAX_CATCH_UP)
                 wall_minus_mono = time.time() - time.monotonic()
                 net.advance_until(now - t0 - lag, arrival, first=woke_on)
                 woke_on = None

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, ROOT
+from test_closed_loop import enabled
 
 from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
@@ -96,10 +97,7 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True) -> dict:
     (between its RPDOs and its SYNC). ``resend=False``: targets never sent again. The final
     state, the worst following error (rad at the motor), the cycles held, the targets sent
     again, the driver's error."""
-    with ClosedLoop(ROWC) as cl:
-        cl.startup()
-        cl.command("enable")
-        cl.run(0.3)
+    with enabled(ROWC) as cl:
         net, drv, period = cl.net, cl.manager.driver, cl.period
         if not resend:
             drv.RESEND_AFTER = np.inf
@@ -198,16 +196,10 @@ def stalled_at_full_speed(stall: float, wait: bool = True) -> tuple[State, float
     """The wipe path on rowc (0.2 m/s), the loop standing still ``stall`` s 1 s in: (the state
     1 s after, the worst following error (rad at the motor) in it). ``wait=False``: the
     reference moves on by all of the stall."""
-    from pathlib import Path
-
-    with ClosedLoop(ROWC) as cl:
+    with enabled(ROWC) as cl:
         if not wait:
             cl.controller._extrapolation = np.inf
-        cl.startup()
-        cl.command("enable")
-        cl.run(0.3)
-        cl.command("path", name="wipe", text=(Path(CONFIG).parent / "paths" / "rowc_wipe.csv")
-                   .read_text())  # fmt: skip
+        cl.command("path", name="wipe", text=(ROOT / "paths" / "rowc_wipe.csv").read_text())
         cl.run(1.0)
         assert np.abs(cl.controller.trajectory.velocity[:3]).max() > 0.19  # m/s: at full speed
         worst = [0.0]

@@ -76,7 +76,6 @@ class Daemon:
         if sim:
             from sim_backend.network import SimNetwork
             from sim_backend.plant import CdprPlant
-            from sim_backend.realtime import MAX_CATCH_UP
 
             channels = [
                 f"cdprctl-sim-{uuid.uuid4().hex[:8]}-{b}" for b in range(len(model.drives.buses))
@@ -85,7 +84,6 @@ class Daemon:
             self.plant = CdprPlant(model)
             sim_net = SimNetwork(model, self.plant, overrides)
             self.sim = sim_net
-            self._sim_catch_up = MAX_CATCH_UP
 
             def wait(dt: float) -> None:  # start-up calls: the simulated robot keeps time
                 sim_net.advance(dt)
@@ -139,7 +137,7 @@ class Daemon:
             self._last_t = t
             # all of a stall (capped at 0.05 s, the simulated robot fell behind the loop by the
             # rest of a longer one, and its drives saw the next SYNC as a target step)
-            self.sim.advance(min(max(dt, 0.0), self._sim_catch_up), sent_after=sent)
+            self.sim.advance(min(max(dt, 0.0), self.sim.MAX_CATCH_UP), sent_after=sent)
 
     def run(
         self,

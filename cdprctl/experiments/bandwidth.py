@@ -44,8 +44,7 @@ def response(model: RobotModel, axis: int, frequency: float) -> Response:
     along ``axis``, from the robot held at home."""
     w = 2.0 * math.pi * frequency
     amp = AMPLITUDE[axis]
-    cl = ClosedLoop(model)
-    try:
+    with ClosedLoop(model) as cl:
         cl.startup()
         cl.command("enable")
         cl.run(1.0, record=False)
@@ -82,8 +81,6 @@ def response(model: RobotModel, axis: int, frequency: float) -> Response:
         phase = math.remainder(float(np.angle(r) - np.angle(y)), 2.0 * math.pi)
         ok = state in (State.ENABLED, State.MOVING)
         return Response(axis, frequency, gain if ok else math.nan, phase, state.value)
-    finally:
-        cl.close()
 
 
 def bandwidth(responses: list[Response]) -> float:
