@@ -71,10 +71,11 @@ def test_rowc_at_1khz_ships_within_the_budget(capsys):
 
 @pytest.fixture
 def seed000():
-    """seed000 with its eight drives on one bus (it ships with two buses of four)."""
+    """seed000 with its eight drives on one bus (it ships with two buses of four), in torque
+    mode: DESIGN.md's frames (a 4-byte RPDO; position mode's is 8)."""
     model = load_robot(CONFIG / "seed000.toml")
     one_bus = default_drives(model.name, model.n_cables, model.drives.rated_torque)
-    return dataclasses.replace(model, drives=one_bus)
+    return dataclasses.replace(model, drives=dataclasses.replace(one_bus, mode="cst"))
 
 
 def test_driver_refuses_a_bus_beyond_capacity(seed000):

@@ -121,7 +121,9 @@ class LocalDrive:
 @pytest.fixture
 def seed000_one_bus():
     model = load_robot(CONFIG / "seed000.toml")
-    drives = default_drives(model.name, model.n_cables, model.drives.rated_torque)
+    drives = dataclasses.replace(  # torque mode: the frames these drives' PDOs map
+        default_drives(model.name, model.n_cables, model.drives.rated_torque), mode="cst"
+    )
     assert drives.rated_torque * 1000 == RATED_MNM and drives.mode == "cst"
     return dataclasses.replace(model, drives=drives)
 

@@ -335,3 +335,19 @@ def test_drive_mode_keys(tmp_path):
     model = load_robot(write(tmp_path, BASE + '\n[drives]\nmode = "csp"\n', "ok.toml"))
     assert model.drives.mode == "csp" and len(model.drives.buses) == 1
     assert model.drives.buses[0].cables == tuple(range(model.n_cables))
+
+
+def test_drive_mode_by_default(tmp_path):
+    """Where the file does not say, position mode (every gain from the model) wherever the
+    drives can do it; torque mode with the ODrive driver (no position mode) and with grippers
+    (their jaws are squeezed by tensions, which position mode would hold as lengths)."""
+    assert load_robot(write(tmp_path, BASE, "plain.toml")).drives.mode == "csp"
+    odrive = load_robot(write(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\n', "od.toml"))
+    assert odrive.drives.mode == "cst"
+    grippers = (CONFIG / "seed000_grippers.toml").read_text()
+    grippers = grippers[grippers.index("[[grippers]]") : grippers.index("[drives]")]
+    seed000 = without_table((CONFIG / "seed000.toml").read_text(), "drives")
+    model = load_robot(write(tmp_path, seed000 + "\n" + grippers, "grip.toml"))
+    assert len(model.grippers) == 2 and model.drives.mode == "cst"
+    model = load_robot(write(tmp_path, seed000 + "\n[drives]\n" + grippers, "grip2.toml"))
+    assert model.drives.mode == "cst"

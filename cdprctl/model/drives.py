@@ -152,22 +152,46 @@ def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
     )
 
 
-def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
-    return DrivesConfig(rated_torque=rated_torque, buses=default_buses(name, n_cables))
+def default_mode(driver: str, grippers: bool) -> str:
+    """``[drives] mode`` where the file does not say: position mode (``csp``), whose gains all
+    come from the robot's model (docs/control.md, "Gains from the model"), wherever the drives
+    can do it; torque mode (``cst``) with the ODrive driver, which has no position mode, and
+    with grippers, whose jaws are squeezed by their cables' tensions, which position mode
+    would hold as lengths instead (seed000_grippers: 64 mm of tracking error in its demo)."""
+    return "csp" if driver == "cia402" and not grippers else "cst"
+
+
+def default_drives(
+    name: str, n_cables: int, rated_torque: float, grippers: bool = False
+) -> DrivesConfig:
+    """One bus of all the drives, node ids 1..m, in the mode ``default_mode`` gives."""
+    return DrivesConfig(
+        mode=default_mode("cia402", grippers),
+        rated_torque=rated_torque,
+        buses=default_buses(name, n_cables),
+    )
 
 
 def read_drives(
-    rd: TableReader, data: dict[str, Any], cable_names: list[str], name: str, rated_default: float
+    rd: TableReader,
+    data: dict[str, Any],
+    cable_names: list[str],
+    name: str,
+    rated_default: float,
+    grippers: bool,
 ) -> DrivesConfig | None:
+    """The ``[drives]`` section; ``grippers``: the robot has any (the default mode)."""
     t = rd.table(data, "drives", "", required=False)
     if t is None:
-        return default_drives(name, len(cable_names), rated_default)
+        return default_drives(name, len(cable_names), rated_default, grippers)
     n0 = len(rd.errors)
     rd.check_keys(t, DRIVES_KEYS, "drives")
     driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
     if driver not in DRIVERS:
         rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
-    mode = rd.string(t, "mode", "drives", required=False, default="cst") or "cst"
+    mode = rd.string(t, "mode", "drives", required=False, default=None) or default_mode(
+        driver or "cia402", grippers
+    )
     if mode not in MODES:
         rd.error("drives.mode", mode, "", f"must be one of {', '.join(MODES)}")
     elif mode == "csp" and driver != "cia402":
