@@ -44,19 +44,19 @@ class BusLoad:
 
 
 def cycle_frames(
-    driver: str, n: int, velocity_pdo: bool, mode: str = "cst"
+    driver: str, n: int, velocity_pdo: bool, n_position: int = 0
 ) -> list[tuple[str, int, int]]:
-    """(what, count, data bytes) of one control cycle on a bus with ``n`` drives."""
+    """(what, count, data bytes) of one control cycle on a bus with ``n`` drives, of which
+    ``n_position`` in position mode."""
     if driver == "odrive":
         # Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and Get_Torques (8) in
         return [("Set_Input_Torque", n, 4), ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
-    frames = [
-        ("SYNC with its counter", 1, 1),
-        ("RPDO1 controlword+position+torque offset", n, 8)
-        if mode == "csp"
-        else ("RPDO1 controlword+torque", n, 4),
-        ("TPDO1 status+torque+position", n, 8),
-    ]
+    frames = [("SYNC with its counter", 1, 1)]
+    if n_position:
+        frames.append(("RPDO1 controlword+position+torque offset", n_position, 8))
+    if n - n_position:
+        frames.append(("RPDO1 controlword+torque", n - n_position, 4))
+    frames.append(("TPDO1 status+torque+position", n, 8))
     if velocity_pdo:
         frames.append(("TPDO2 velocity", n, 4))
     return frames
@@ -68,7 +68,8 @@ def bus_loads(drives: DrivesConfig, rate: float, heartbeat_rate: float = 10.0) -
     out = []
     for b, bus in enumerate(drives.buses):
         n = len(bus.cables)
-        frames = cycle_frames(drives.driver, n, drives.velocity_source == "pdo", drives.mode)
+        n_position = sum(drives.mode_of(c) == "csp" for c in bus.cables)
+        frames = cycle_frames(drives.driver, n, drives.velocity_source == "pdo", n_position)
         bits = sum(count * frame_bits(nb) for _, count, nb in frames)
         hb_bits_per_s = (n + 1) * frame_bits(1 if drives.driver == "cia402" else 8) * heartbeat_rate
         load = (bits * rate + hb_bits_per_s) / bus.bitrate

@@ -7,6 +7,7 @@ Real time on an in-process bus (the drives answer from canopen's notifier thread
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import threading
 import time
@@ -74,7 +75,9 @@ class LocalDrive:
         network.add_node(self.node)
         self.node.add_read_callback(self._read)
         self.state = p.PowerState.SWITCH_ON_DISABLED
-        self.torque = 0
+        self.torque = 0  # per mille: cyclic synchronous torque's target
+        self.target = None  # counts, position mode's target (None: none came)
+        self.offset = None  # per mille, position mode's torque offset
         self.lock = threading.Lock()
         self.mapped = False
         network.subscribe(p.NMT, self._on_nmt)
@@ -106,6 +109,8 @@ class LocalDrive:
                 if nxt is not None:
                     self.state = nxt[0]
                 self.torque = values.get(p.OD_TARGET_TORQUE, self.torque)
+                self.target = values.get(p.OD_TARGET_POSITION, self.target)
+                self.offset = values.get(p.OD_TORQUE_OFFSET, self.offset)
             tpdo = self.node.tpdo[1]
             enabled = self.state is p.PowerState.OPERATION_ENABLED
             live = {
@@ -160,6 +165,46 @@ def test_our_driver_remaps_local_node_drives_and_runs_them(seed000_one_bus, tmp_
         assert all(d.torque == 260 for d in drives)
         driver.read(time.monotonic())
         np.testing.assert_allclose(driver.states.torque, 1.3, atol=0.01)
+    finally:
+        driver.shutdown()
+        network.disconnect()
+
+
+def test_gripper_drives_stay_in_torque_mode_among_drives_in_position_mode(tmp_path):
+    """seed000_grippers: the grippers' drives (nodes 1 and 8) get cyclic synchronous torque
+    (0x6060 = 10) and an RPDO1 of controlword and torque, the six others position mode
+    (8), an RPDO1 of controlword, target and torque offset, and their following error; each
+    frame as the ``canopen`` package decodes it by its own mapping."""
+    model = load_robot(CONFIG / "seed000_grippers.toml")  # its two buses on one channel
+    network, nodes, driver = bring_up(model, tmp_path, read_only=False)
+    torque_nodes = (1, 8)
+    try:
+        driver.configure()
+        for n, d in enumerate(nodes, 1):
+            sdo = d.node.sdo
+            mapped = [v.index for v in d.node.rpdo[1]]
+            if n in torque_nodes:
+                assert sdo[p.OD_MODES_OF_OPERATION].raw == p.MODE_CST
+                assert mapped == [p.OD_CONTROLWORD, p.OD_TARGET_TORQUE]
+            else:
+                assert sdo[p.OD_MODES_OF_OPERATION].raw == p.MODE_CSP
+                assert mapped == [p.OD_CONTROLWORD, p.OD_TARGET_POSITION, p.OD_TORQUE_OFFSET]
+                assert sdo[p.OD_FOLLOWING_ERROR_WINDOW].raw > 0
+        driver.activate()
+        torques = np.full(model.n_cables, 1.3)  # N·m: 260 per mille of 5 N·m
+        targets = np.full(model.n_cables, 2.0 * math.pi)  # rad: a turn
+        for _ in range(30):
+            t = time.monotonic()
+            driver.read(t)
+            driver.write(t, torques, targets=targets)
+            time.sleep(model.control.period)
+        assert all(d.state is p.PowerState.OPERATION_ENABLED for d in nodes)
+        for n, d in enumerate(nodes, 1):
+            if n in torque_nodes:
+                assert (d.torque, d.target, d.offset) == (260, None, None)
+            else:
+                assert (d.torque, d.offset) == (0, 260)
+                assert d.target == driver.encoder_cpr[n - 1]  # a turn, in counts
     finally:
         driver.shutdown()
         network.disconnect()

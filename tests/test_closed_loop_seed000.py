@@ -43,8 +43,8 @@ def test_point_to_point(seed000, offset):
 
 
 def test_lateral_force_deflects_the_springs_as_the_stiffness_predicts(seed000):
-    """In torque mode (as seed000_grippers runs, its 0.3 Hz pose loop) the encoders hold their
-    pose and the springs stretch unseen: the platform settles where K⁻¹ δw says (23 mm),
+    """In torque mode (as seed000_grippers ran, its 0.3 Hz pose loop set by hand) the encoders
+    hold their pose and the springs stretch unseen: the platform settles where K⁻¹ δw says (23 mm),
     without a fault. (In position mode without the estimate the same 23 mm is the middle of a
     swing the springs barely damp: 10-38 mm over 16 s.)"""
     control = dataclasses.replace(seed000.control, bandwidth=0.3)

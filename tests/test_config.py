@@ -3,6 +3,7 @@ the value, the unit and the rule; all errors of a file are reported; no model es
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -339,15 +340,14 @@ def test_drive_mode_keys(tmp_path):
 
 def test_drive_mode_by_default(tmp_path):
     """Where the file does not say, position mode (every gain from the model) wherever the
-    drives can do it; torque mode with the ODrive driver (no position mode) and with grippers
-    (their jaws are squeezed by tensions, which position mode would hold as lengths)."""
+    drives can do it; torque mode with the ODrive driver (no position mode). A gripper's
+    drive stays in torque mode either way (its cable's tension squeezes the jaw)."""
     assert load_robot(write(tmp_path, BASE, "plain.toml")).drives.mode == "csp"
     odrive = load_robot(write(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\n', "od.toml"))
     assert odrive.drives.mode == "cst"
-    grippers = (CONFIG / "seed000_grippers.toml").read_text()
-    grippers = grippers[grippers.index("[[grippers]]") : grippers.index("[drives]")]
-    seed000 = without_table((CONFIG / "seed000.toml").read_text(), "drives")
-    model = load_robot(write(tmp_path, seed000 + "\n" + grippers, "grip.toml"))
-    assert len(model.grippers) == 2 and model.drives.mode == "cst"
-    model = load_robot(write(tmp_path, seed000 + "\n[drives]\n" + grippers, "grip2.toml"))
-    assert model.drives.mode == "cst"
+    grippers = load_robot(CONFIG / "seed000_grippers.toml")
+    d = grippers.drives
+    assert d.mode == "csp" and d.torque_cables == (0, 7)
+    assert [d.mode_of(c) for c in range(8)] == ["cst"] + ["csp"] * 6 + ["cst"]
+    torque = dataclasses.replace(d, mode="cst")
+    assert [torque.mode_of(c) for c in range(8)] == ["cst"] * 8

@@ -561,11 +561,14 @@ class Daemon:
         c, m = self.controller, self.model
         if m.drives.holds_lengths:
             cs = c.cable_space
+            torque = ", ".join(m.cables[i].name for i in m.drives.torque_cables)
             return (
                 f"gains from the model: drives hold the lengths (csp, position loops "
-                f"{m.drives.position_loop_bandwidth:g} Hz on each rotor's inertia), force "
-                f"feedback {cs.iff:.1f} rad/s (the lowest mode × {m.control.force_feedback:g}), "
-                f"external-wrench estimate {cs.disturbance_bandwidth:.3g} Hz"
+                f"{m.drives.position_loop_bandwidth:g} Hz on each rotor's inertia"
+                + (f"; cables {torque} in torque mode, their grippers'" if torque else "")
+                + f"), force feedback {cs.iff:.1f} rad/s (the lowest mode × "
+                f"{m.control.force_feedback:g}), external-wrench estimate "
+                f"{cs.disturbance_bandwidth:.3g} Hz"
             )
         return (
             "gains: torque mode, the pose loop at [control] bandwidth "

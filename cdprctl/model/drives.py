@@ -105,11 +105,20 @@ class DrivesConfig:
     assume_home_at_start: bool = False
     log_file: str | None = None  # python-can logger file (.log, .asc, .blf, .csv)
     buses: tuple[BusConfig, ...] = ()
+    # cable indices whose drives stay in torque mode in position mode: the grippers' cables
+    # (set from [[grippers]] by the loader), whose tensions squeeze the jaws
+    torque_cables: tuple[int, ...] = ()
 
     @property
     def holds_lengths(self) -> bool:
-        """True in position mode: the drives' own loops hold each cable's length."""
+        """True in position mode: the drives' own loops hold the cables' lengths (all but
+        ``torque_cables``)."""
         return self.mode == "csp"
+
+    def mode_of(self, cable: int) -> str:
+        """The mode of cable index ``cable``'s drive: ``mode``, but torque mode (``cst``) for
+        the ``torque_cables``."""
+        return "cst" if self.mode == "cst" or cable in self.torque_cables else "csp"
 
     def position_gains(self, rotor_inertia: float) -> tuple[float, float]:
         """(kp N·m/rad, kd N·m·s/rad) of a simulated drive's position loop: the rotor alone
@@ -152,23 +161,17 @@ def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
     )
 
 
-def default_mode(driver: str, grippers: bool) -> str:
+def default_mode(driver: str) -> str:
     """``[drives] mode`` where the file does not say: position mode (``csp``), whose gains all
     come from the robot's model (docs/control.md, "Gains from the model"), wherever the drives
-    can do it; torque mode (``cst``) with the ODrive driver, which has no position mode, and
-    with grippers, whose jaws are squeezed by their cables' tensions, which position mode
-    would hold as lengths instead (seed000_grippers: 64 mm of tracking error in its demo)."""
-    return "csp" if driver == "cia402" and not grippers else "cst"
+    can do it; torque mode (``cst``) with the ODrive driver, which has no position mode."""
+    return "csp" if driver == "cia402" else "cst"
 
 
-def default_drives(
-    name: str, n_cables: int, rated_torque: float, grippers: bool = False
-) -> DrivesConfig:
+def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
     """One bus of all the drives, node ids 1..m, in the mode ``default_mode`` gives."""
     return DrivesConfig(
-        mode=default_mode("cia402", grippers),
-        rated_torque=rated_torque,
-        buses=default_buses(name, n_cables),
+        mode=default_mode("cia402"), rated_torque=rated_torque, buses=default_buses(name, n_cables)
     )
 
 
@@ -178,19 +181,17 @@ def read_drives(
     cable_names: list[str],
     name: str,
     rated_default: float,
-    grippers: bool,
 ) -> DrivesConfig | None:
-    """The ``[drives]`` section; ``grippers``: the robot has any (the default mode)."""
     t = rd.table(data, "drives", "", required=False)
     if t is None:
-        return default_drives(name, len(cable_names), rated_default, grippers)
+        return default_drives(name, len(cable_names), rated_default)
     n0 = len(rd.errors)
     rd.check_keys(t, DRIVES_KEYS, "drives")
     driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
     if driver not in DRIVERS:
         rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
     mode = rd.string(t, "mode", "drives", required=False, default=None) or default_mode(
-        driver or "cia402", grippers
+        driver or "cia402"
     )
     if mode not in MODES:
         rd.error("drives.mode", mode, "", f"must be one of {', '.join(MODES)}")

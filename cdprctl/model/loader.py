@@ -6,6 +6,7 @@ returned only when the file is entirely valid. See ``docs/config.md`` for the ke
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -143,8 +144,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     drives = None
     if cables is not None:
         rated = max(c.winch.torque_limit for c in cables)
-        names = [c.name for c in cables]
-        drives = read_drives(rd, data, names, name or "robot", rated, bool(data.get("grippers")))
+        drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
     zenoh = read_zenoh(rd, data, name or "robot")
     foxglove = read_foxglove(rd, data)
@@ -166,6 +166,10 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
 
+    # the grippers' drives stay in torque mode: their cables' tensions squeeze the jaws,
+    # which position mode would hold as lengths instead (64 mm of tracking error in
+    # seed000_grippers' demo, all eight drives in position mode; lock-step)
+    drives = dataclasses.replace(drives, torque_cables=tuple(sorted(g.cable for g in grippers)))
     model = RobotModel(
         name=name,
         source=source,

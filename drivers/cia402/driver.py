@@ -60,13 +60,16 @@ class Cia402Driver(CanWinchDriver):
             self._dispatch[(b, p.EMCY + n)] = (3, c)
             self._dispatch[(b, p.HEARTBEAT + n)] = (4, c)
             self._dispatch[(b, p.SDO_TX + n)] = (5, c)
-        self.mode = p.MODES[cfg.mode]
-        self._csp = self.mode == p.MODE_CSP
-        size = p.RPDO1_CSP_STRUCT.size if self._csp else p.RPDO1_STRUCT.size
+        # each drive's mode (0x6060): [drives] mode, but torque mode for its torque_cables
+        self.modes = [p.MODES[cfg.mode_of(c)] for c in range(m)]
+        self._position = [mode == p.MODE_CSP for mode in self.modes]  # per drive
+        self._csp = any(self._position)
         self._rpdo = [
             can.Message(
                 arbitration_id=p.RPDO1 + int(self.node[c]),
-                data=bytearray(size),
+                data=bytearray(
+                    p.RPDO1_CSP_STRUCT.size if self._position[c] else p.RPDO1_STRUCT.size
+                ),
                 is_extended_id=False,
             )
             for c in range(m)
@@ -169,6 +172,7 @@ class Cia402Driver(CanWinchDriver):
         torque limit (0x6072), SYNC counter and, in position mode, the following error."""
         n = int(self.node[c])
         who = f"drive of cable index {c} (node {n})"
+        mode = self.modes[c]
 
         def read(index: int, sub: int) -> int:
             return self._sdo_read(c, index, sub, timeout, signed=False)
@@ -203,29 +207,29 @@ class Cia402Driver(CanWinchDriver):
             )
         configure = self.config.pdo_mapping == "configure"
         velocity = self.config.velocity_source == "pdo"
-        for pdo in pdo_setup.wanted(self.mode, n, velocity):
+        for pdo in pdo_setup.wanted(mode, n, velocity):
             self.pdos_written += pdo_setup.set_up(read, write, pdo, configure, who)
         modes = self._optional(read, p.OD_SUPPORTED_DRIVE_MODES)
-        bit = p.SUPPORTED_MODE_BIT[self.mode]
+        bit = p.SUPPORTED_MODE_BIT[mode]
         if modes is not None and not modes >> bit & 1:
             raise DriverInitializationError(
                 f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks "
-                f"{p.MODE_NAMES[self.mode]} (bit {bit}; [drives] mode)"
+                f"{p.MODE_NAMES[mode]} (bit {bit}; [drives] mode)"
             )
         fe_ms = max(1, round(self.config.following_error_timeout * 1000))
-        write(p.OD_MODES_OF_OPERATION, 0, self.mode, 1)
+        write(p.OD_MODES_OF_OPERATION, 0, mode, 1)
         write(p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2)
         write(p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2)
         write(p.OD_MAX_TORQUE, 0, int(self._max_torque_pm[c]), 2)
         write(p.OD_SYNC_COUNTER_OVERFLOW, 0, p.SYNC_COUNTER_OVERFLOW, 1)
-        if self._csp:  # the drive stops its winch when it cannot follow (docs/control.md)
+        if self._position[c]:  # the drive stops its winch when it cannot follow (docs/control.md)
             write(p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4)
             write(p.OD_FOLLOWING_ERROR_TIMEOUT, 0, fe_ms, 2)
-        mode = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
-        if mode != self.mode:
+        shown = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
+        if shown != mode:
             raise DriverInitializationError(
-                f"{who} reports mode {mode} in 0x6061, expected {self.mode} "
-                f"({p.MODE_NAMES[self.mode]}, [drives] mode)"
+                f"{who} reports mode {shown} in 0x6061, expected {mode} "
+                f"({p.MODE_NAMES[mode]}, [drives] mode)"
             )
 
     @staticmethod
@@ -285,9 +289,7 @@ class Cia402Driver(CanWinchDriver):
         if reply[0] != 0x60:
             raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
 
-    def _sdo_read(
-        self, c: int, index: int, sub: int, timeout: float, signed: bool = True
-    ) -> int:
+    def _sdo_read(self, c: int, index: int, sub: int, timeout: float, signed: bool = True) -> int:
         reply = self._sdo_exchange(c, p.sdo_upload(index, sub), timeout)
         if reply[0] & 0xE0 != 0x40 or not reply[0] & 0x2:  # expedited uploads only
             raise DriverInitializationError(
@@ -345,15 +347,20 @@ class Cia402Driver(CanWinchDriver):
 
     def _send_targets(self, late: float, fields: np.ndarray) -> None:
         """Position mode: each drive's RPDO (controlword, the target carried ``late`` s on at
-        its rate, the torque offset)."""
+        its rate, the torque offset); a drive in torque mode among them (a gripper's) gets
+        its controlword and torque."""
         cyclic.carry_targets_kernel(self.targets, self._target_rate, late, self._carried)
         cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
         pack, send, bus_of = p.RPDO1_CSP_STRUCT.pack_into, self._send, self._bus_of_list
+        pack_torque, position = p.RPDO1_STRUCT.pack_into, self._position
         for c, ((cw, pm), n) in enumerate(
             zip(fields.tolist(), self._target_counts.tolist(), strict=True)
         ):
             msg = self._rpdo[c]
-            pack(msg.data, 0, cw, n, pm)
+            if position[c]:
+                pack(msg.data, 0, cw, n, pm)
+            else:
+                pack_torque(msg.data, 0, cw, pm)
             send(bus_of[c], msg)
 
     def _drain(self, t: float) -> None:
