@@ -145,24 +145,50 @@ def sense_grasp(g: GripperParams, energy: float, contact_band: float = 1e-3) -> 
 
 
 @njit(cache=True)
-def _weight_wrench_kernel(p_b, L1_b, k_b, weight, up, R, w):  # pragma: no cover - compiled
-    """Σ_j F_jBW [−k̂; p_j × (−k̂) + L1_j × (−k̂ − Ω_j)] with p, L1, k̂_M turned by R
-    (Sensors 2019, eq. (27), (35))."""
+def _turn(R, v, i, out):  # pragma: no cover - compiled
+    """``out`` ← ``R v[i]`` (3,): a platform-frame row of ``v`` in the base frame."""
+    for a in range(3):
+        out[a] = R[a, 0] * v[i, 0] + R[a, 1] * v[i, 1] + R[a, 2] * v[i, 2]
+
+
+@njit(cache=True)
+def _jaw_loads_kernel(
+    p_b, L1_b, k_b, mass, g, R, acc, vel, w, par, p, L1, k, f
+):  # pragma: no cover - compiled
+    """``w`` (6,) ← the jaws' loads on the main body (N, N·m about P, base frame) and ``par``
+    (N) ← the part along each guide that ``jB`` carries: each jaw's weight under the
+    effective gravity ``g − a_j`` (d'Alembert), ``a_j = a + α × r + ω × (ω × r)`` the
+    acceleration of the jaw at ``r = R (p_j + L1_j)`` moving with the platform (``acc``,
+    ``vel``: linear then angular, base frame), as a weight splits (Sensors 2019, eq. (26),
+    (27), (35)): all of it through ``p``, the part across the guide through ``L1`` too.
+    ``p``, ``L1``, ``k``, ``f``: (3,) scratch."""
+    for a in range(6):
+        w[a] = 0.0
+    ox, oy, oz = vel[3], vel[4], vel[5]
+    ax, ay, az = acc[3], acc[4], acc[5]
     for j in range(p_b.shape[0]):
-        p = R @ p_b[j]
-        L1 = R @ L1_b[j]
-        k = R @ k_b[j]
-        c = k[0] * up[0] + k[1] * up[1] + k[2] * up[2]
-        f = weight[j]
-        # −k̂ − Ω = −up + (up·k) k
-        q0, q1, q2 = -up[0] + c * k[0], -up[1] + c * k[1], -up[2] + c * k[2]
-        d0, d1, d2 = -up[0], -up[1], -up[2]
-        w[0] += f * d0
-        w[1] += f * d1
-        w[2] += f * d2
-        w[3] += f * (p[1] * d2 - p[2] * d1 + L1[1] * q2 - L1[2] * q1)
-        w[4] += f * (p[2] * d0 - p[0] * d2 + L1[2] * q0 - L1[0] * q2)
-        w[5] += f * (p[0] * d1 - p[1] * d0 + L1[0] * q1 - L1[1] * q0)
+        _turn(R, p_b, j, p)
+        _turn(R, L1_b, j, L1)
+        _turn(R, k_b, j, k)
+        rx, ry, rz = p[0] + L1[0], p[1] + L1[1], p[2] + L1[2]
+        # ω × r, then ω × (ω × r)
+        vx, vy, vz = oy * rz - oz * ry, oz * rx - ox * rz, ox * ry - oy * rx
+        cx, cy, cz = oy * vz - oz * vy, oz * vx - ox * vz, ox * vy - oy * vx
+        f[0] = mass[j] * (g[0] - acc[0] - (ay * rz - az * ry) - cx)
+        f[1] = mass[j] * (g[1] - acc[1] - (az * rx - ax * rz) - cy)
+        f[2] = mass[j] * (g[2] - acc[2] - (ax * ry - ay * rx) - cz)
+        fk = f[0] * k[0] + f[1] * k[1] + f[2] * k[2]
+        q0, q1, q2 = f[0] - fk * k[0], f[1] - fk * k[1], f[2] - fk * k[2]  # across the guide
+        par[j] = -fk
+        w[0] += f[0]
+        w[1] += f[1]
+        w[2] += f[2]
+        w[3] += p[1] * f[2] - p[2] * f[1] + L1[1] * q2 - L1[2] * q1
+        w[4] += p[2] * f[0] - p[0] * f[2] + L1[2] * q0 - L1[0] * q2
+        w[5] += p[0] * f[1] - p[1] * f[0] + L1[0] * q1 - L1[1] * q0
+
+
+_AT_REST = np.zeros(6)  # the platform's acceleration and velocity at rest
 
 
 class GripperSet:
@@ -181,23 +207,47 @@ class GripperSet:
         self._k = np.array([g.guide_axis for g in gs], float).reshape(self.n, 3)
         self.k_a = np.array([model.cables[g.cable].stiffness or 0.0 for g in gs])
         self.k_b = np.array([g.k_b for g in gs])
-        self.up = -np.asarray(model.gravity, float) / max(
-            float(np.linalg.norm(model.gravity)), 1e-12
-        )
+        self.mass = np.array([g.jaw_mass for g in gs], float)  # kg
+        self._g = np.asarray(model.gravity, float).copy()  # m/s², base frame
+        # (3,) scratch of the jaws' kernel: p, L1, k̂ turned into the base frame, a jaw's force
+        self._sp, self._sL1, self._sk, self._sf = (np.zeros(3) for _ in range(4))
 
     def weight_wrench(self, R: FloatArray) -> FloatArray:
         """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the
-        grippers' weights on the main body (Sensors 2019, eq. (35), (46)); the columns of
-        :func:`weight_column`, compiled (it runs every control cycle)."""
+        grippers' weights on the main body (Sensors 2019, eq. (35), (46)); :meth:`jaw_loads`
+        at rest."""
         w = np.zeros(6)
-        if self.n:
-            _weight_wrench_kernel(self._p, self._L1, self._k, self.weight, self.up, R, w)
+        self.jaw_loads(R, _AT_REST, _AT_REST, w, np.zeros(self.n))
         return w
+
+    def jaw_loads(
+        self,
+        R: FloatArray,
+        acceleration: FloatArray,
+        velocity: FloatArray,
+        wrench: FloatArray,
+        parallel: FloatArray,
+    ) -> None:
+        """The jaws moving with the platform at orientation ``R``, desired ``acceleration`` and
+        ``velocity`` (6,: m/s², rad/s², m/s, rad/s, base frame): ``wrench`` (6,) ← their
+        weight and inertia on the main body (N, N·m about ``P``, base frame; at rest
+        :meth:`weight_wrench`), ``parallel`` (n,) ← the part along each guide, which ``jB``
+        carries (N; at rest :meth:`parallel_load`). Compiled, into the given arrays: the
+        control cycle's feed-forward (``_jaw_loads_kernel``)."""
+        if not self.n:
+            wrench[:] = 0.0
+            return
+        _jaw_loads_kernel(
+            self._p, self._L1, self._k, self.mass, self._g, R, acceleration, velocity, wrench,
+            parallel, self._sp, self._sL1, self._sk, self._sf,
+        )  # fmt: skip
 
     def parallel_load(self, R: FloatArray) -> FloatArray:
         """``‖F∥_jBW‖`` (N) per gripper: the part of the jaw's weight along its guide, which
-        ``jB`` holds (eq. (26)-(27))."""
-        return self.weight * ((self._k @ R.T) @ self.up)
+        ``jB`` holds (eq. (26)-(27)); :meth:`jaw_loads` at rest."""
+        par = np.zeros(self.n)
+        self.jaw_loads(R, _AT_REST, _AT_REST, np.zeros(6), par)
+        return par
 
     def spring_wrench(self, W: FloatArray, wrench: FloatArray, jb_load: FloatArray) -> FloatArray:
         """The wrench the springs ``jA`` must give when the cables give ``wrench`` and each

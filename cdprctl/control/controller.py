@@ -69,7 +69,7 @@ class Controller:
         self.observer = WrenchObserver(model, d, e, self.winches)
         self.cable_space = CableSpace(model, d, tr, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.winches, self.distribution,
-                                       self.ext_wrench)  # fmt: skip
+                                       self.ext_wrench, tr)  # fmt: skip
         # position mode: the cables' internal tension error is supervised, per cable (N)
         tension_limits = (
             c.max_tension_disagreement * (model.tension_max - model.tension_min)
