@@ -241,33 +241,3 @@ def test_the_realtime_simulator_says_ready_after_its_first_physics_step(monkeypa
     )  # fmt: skip
     net.close()
     assert said and said[0] >= 1
-
-
-def test_a_late_sync_does_not_swing_the_interpolated_target():
-    """Position targets on a ramp (1, then 2 rad/s at each motor) sent with SYNCs at irregular
-    intervals — three periods late, then early, as a loaded machine sends them: the drive's
-    interpolated target stays within the ramp's travel over the late interval of the targets
-    it was sent. Going on at the rate that reached the last target (its correction of where
-    the interpolation stood included), each SYNC over two periods late multiplied that error
-    by (Δ/T − 1): it swung by growing amounts (with seed000's springs in real time: a
-    following-error fault)."""
-    rig = enabled_rig("rowc.toml")
-    try:
-        drv, net, T = rig.driver, rig.net, rig.period
-        cycles(rig, np.zeros(8), 50)
-        start, t0 = drv.states.position.copy(), net.time  # rad, s
-
-        def ramp(t: float) -> np.ndarray:  # rad: 1 rad/s, then 2 from 0.05 s on
-            return start + (t - t0) + max(t - t0 - 0.05, 0.0)
-
-        worst = 0.0
-        for dt in [T] * 10 + [3.0 * T, 0.4 * T] * 14:
-            t = net.time
-            drv.read(t)
-            drv.write(t, np.zeros(8), targets=ramp(t))
-            net.advance(dt)
-            worst = max(worst, float(np.max(np.abs(net.plant.servo.target - ramp(net.time)))))
-        assert rig.driver.error is None
-        assert worst < 2.0 * 4.0 * T  # rad: the travel over one late interval and a period
-    finally:
-        rig.close()

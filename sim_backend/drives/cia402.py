@@ -67,11 +67,6 @@ class Cia402Drive:
         self.rpdos_since_sync = 0  # RPDOs received since the last SYNC this drive saw
         self.stale_targets = 0  # RPDOs not taken: they were for a SYNC this drive missed
         self.last_target = -math.inf  # s, the SYNC that applied the last RPDO
-        # position mode: the last target (rad) and the SYNC (s) it came with; the targets' own
-        # rate (rad/s) the interpolation goes on at once it has reached the last one, and when
-        # (s; inf: not pending)
-        self._end, self._end_time = math.nan, -math.inf
-        self._own_rate, self._reached_at = 0.0, math.inf
         self.sync_period = 0.0  # s, the drive's estimate (0: none yet)
         self._intervals: list[float] = []  # s, the last SYNC intervals
         self.nmt = p.HB_PRE_OPERATIONAL
@@ -358,44 +353,26 @@ class Cia402Drive:
                 if servo.kp[c] <= 0.0:  # just enabled: the loop starts where the motor is
                     servo.target[c] = theta
                     servo.rate[c] = 0.0
-                    self._end, self._reached_at = math.nan, math.inf
                 if self.target_counts is not None and fresh:
                     now = self._counts()
                     step = ((self.target_counts - now + 0x80000000) & 0xFFFFFFFF) - 0x80000000
                     end = theta + step * 2.0 * math.pi / self.cpr
-                    self._interpolate_to(end, interval)
+                    # reach it one SYNC period from now (the drive's estimate of the period);
+                    # after a long gap, a step
+                    if 0.0 <= interval < self.extrapolate_for and self.sync_period > 0.0:
+                        servo.rate[c] = (end - servo.target[c]) / self.sync_period
+                    else:
+                        servo.target[c], servo.rate[c] = end, 0.0
                 servo.kp[c], servo.kd[c] = self.position_gains
             else:
                 servo.kp[c] = 0.0
             plant.brake[c] = False
         else:  # disabled, quick stop, fault: no torque, the brake holds the drum
             plant.motor_torque[c] = 0.0
-            self._reached_at = math.inf
             servo.kp[c] = 0.0
             servo.beyond[c] = 0.0
             self.target_counts = None
             plant.brake[c] = True
-
-    def _interpolate_to(self, end: float, interval: float) -> None:
-        """A new position target ``end`` (rad), ``interval`` s after the last SYNC: reached
-        one SYNC period from now (the drive's estimate of the period), then gone on from at
-        the targets' own rate (the last two targets over the time between their SYNCs) until
-        the next one; after a gap of ``extrapolate_for`` or more, a step. Going on at the
-        rate that reached it instead — the correction of where the interpolation stood
-        included — multiplied that error by (Δ/T − 1) at every SYNC more than two periods
-        late: under the VM's jitter the spring robot's targets (10-25 rad/s) swung into a
-        following-error fault within 25 ms at 500 Hz (seed000, real time, 1 run in 5)."""
-        c, servo, t = self.cable, self.plant.servo, self.last_sync
-        span = t - self._end_time
-        own = (end - self._end) / span if 0.0 < span < self.extrapolate_for else 0.0
-        if 0.0 <= interval < self.extrapolate_for and self.sync_period > 0.0:
-            servo.rate[c] = (end - servo.target[c]) / self.sync_period
-            self._own_rate = own if math.isfinite(own) else 0.0
-            self._reached_at = t + self.sync_period
-        else:
-            servo.target[c], servo.rate[c] = end, 0.0
-            self._reached_at = math.inf
-        self._end, self._end_time = end, t
 
     def _measure_sync_period(self, interval: float) -> None:
         """``sync_period`` (s): the SYNC period as a drive locks to it, the median of the last
@@ -438,23 +415,18 @@ class Cia402Drive:
 
     # -- time passing ---------------------------------------------------------------------------
     def holds_at(self) -> float:
-        """s: the next instant the position target's rate changes: the last new target
-        reached (then the targets' own rate), or ``extrapolate_for`` after it (then held)
-        while it moves; inf: neither."""
-        nxt = self._reached_at
-        if self.plant.servo.rate[self.cable] != 0.0:
-            nxt = min(nxt, self.last_target + self.extrapolate_for)
-        return nxt
+        """s: when the position target stops going on at its last rate, ``extrapolate_for``
+        after the last new one (inf: it is not moving)."""
+        if self.plant.servo.rate[self.cable] == 0.0:
+            return math.inf
+        return self.last_target + self.extrapolate_for
 
     def tick(self, t: float) -> list[can.Message]:
         """Heartbeat when due; the position target held after ``extrapolate_for`` without a
         new one (``holds_at``); the communication timeout (drive-side safety)."""
         out: list[can.Message] = []
         servo = self.plant.servo
-        if t >= self._reached_at:  # the last target reached: on at the targets' own rate
-            servo.rate[self.cable] = self._own_rate
-            self._reached_at = math.inf
-        if t >= self.last_target + self.extrapolate_for:
+        if t >= self.holds_at():
             servo.rate[self.cable] = 0.0
         if self.state is p.PowerState.OPERATION_ENABLED and following_error_py(servo, self.cable):
             emcy = self.inject_fault(p.EMCY_FOLLOWING_ERROR)
