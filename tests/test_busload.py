@@ -105,11 +105,12 @@ def test_traffic_log_candump(tmp_path):
 
 
 def test_grippers_drives_in_torque_mode_send_the_shorter_rpdo():
-    """seed000_grippers on one bus: six drives in position mode (8-byte RPDO1), the grippers'
-    two in torque mode (4 bytes)."""
+    """seed000_grippers in position mode on one bus: six drives in position mode (8-byte
+    RPDO1), the grippers' two in torque mode (4 bytes)."""
     model = load_robot(CONFIG / "seed000_grippers.toml")
     one_bus = default_drives(model.name, model.n_cables, model.drives.rated_torque).buses
-    (bl,) = bus_loads(dataclasses.replace(model.drives, buses=one_bus), 500.0, heartbeat_rate=0)
+    drives = dataclasses.replace(model.drives, mode="csp", buses=one_bus)
+    (bl,) = bus_loads(drives, 500.0, heartbeat_rate=0)
     assert bl.bits_per_cycle == frame_bits(1) + 6 * frame_bits(8) + 2 * frame_bits(4) + 8 * 135
     assert "6 x RPDO1 controlword+position+torque offset (8 B)" in bl.frames
     assert "2 x RPDO1 controlword+torque (4 B)" in bl.frames

@@ -171,11 +171,13 @@ def test_our_driver_remaps_local_node_drives_and_runs_them(seed000_one_bus, tmp_
 
 
 def test_gripper_drives_stay_in_torque_mode_among_drives_in_position_mode(tmp_path):
-    """seed000_grippers: the grippers' drives (nodes 1 and 8) get cyclic synchronous torque
-    (0x6060 = 10) and an RPDO1 of controlword and torque, the six others position mode
-    (8), an RPDO1 of controlword, target and torque offset, and their following error; each
+    """seed000_grippers in position mode: the grippers' drives (nodes 1 and 8) get cyclic
+    synchronous torque (0x6060 = 10) and an RPDO1 of controlword and torque, the six others
+    position mode (8), an RPDO1 of controlword, target and torque offset, and their following
+    error; each
     frame as the ``canopen`` package decodes it by its own mapping."""
     model = load_robot(CONFIG / "seed000_grippers.toml")  # its two buses on one channel
+    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, mode="csp"))
     network, nodes, driver = bring_up(model, tmp_path, read_only=False)
     torque_nodes = (1, 8)
     try:
