@@ -329,12 +329,17 @@ class WinchDriver(ABC):
             err = self._write_internal(now, cmd)
         except Exception as exc:
             err = DriverOperationError(f"write failed: {type(exc).__name__}: {exc}")
-        self.sent_at = self.clock()
+        self.sent_at = self._sent_instant()
         self.stats.cycles += 1
         if err is not None:
             self._fail(err)
 
     # -- helpers ------------------------------------------------------------------------------
+    def _sent_instant(self) -> float:
+        """s (clock): when the drives take the last write's frames: by default now, after
+        them (``sent_at``)."""
+        return self.clock()
+
     def _fail(self, err: DriverError) -> None:
         self._activating = False
         if self.error is None:

@@ -214,6 +214,37 @@ def test_cia402_sync_counter_runs_to_its_overflow(seed):
         assert all(b == a % 240 + 1 for a, b in itertools.pairwise(counts))
 
 
+def test_cia402_write_is_stamped_at_its_sync(seed):
+    """The drives take a write's frames at its SYNC: ``sent_at`` (where ``cdprctl run --sim``
+    handles them) is the SYNC's instant even when the process is held up after it (here 1 ms
+    while it sends its heartbeat). Stamped when the write returned, the simulated SYNC came
+    that much after the instant its targets were carried to."""
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    heartbeat = p.HEARTBEAT + seed.drives.controller_node_id
+    with drv:
+        drv.configure()
+        send, held = drv._send, []
+
+        def held_up(b, msg):
+            sent = send(b, msg)
+            if msg.arbitration_id == heartbeat:
+                peer.t += 0.001
+                held.append(peer.t)
+            return sent
+
+        drv._send = held_up
+        for _ in range(120):
+            drv.read(peer.t)
+            n = len(held)
+            drv.write(peer.t, np.zeros(8))
+            if len(held) > n:
+                assert drv.sent_at == drv._last_sync == pytest.approx(peer.t - 0.001)
+            else:
+                assert drv.sent_at == drv._last_sync == peer.t
+            peer.wait(0.002)
+        assert len(held) >= 2
+
+
 def test_cia402_position_units_and_wrap(seed):
     script = Cia402Script(range(1, 9))
     drv, peer = make(seed, script)
