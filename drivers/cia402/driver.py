@@ -353,8 +353,8 @@ class Cia402Driver(CanWinchDriver):
         write returned instead, the VM holding the process up past the SYNC put the
         simulated SYNC that much after the instant its targets were carried to: a reversal
         the next late SYNC doubled, a following-error fault at 500 Hz on the spring robot
-        (seed000 and seed000_grippers in position mode, real time: 6 runs of 35; since, none
-        in 14)."""
+        (seed000 and seed000_grippers in position mode, real time: 6 runs of 35; since, 1 of
+        16 — not the whole cause, docs/control.md "Known limits")."""
         s = self._write_sync
         return s if math.isfinite(s) else self.clock()
 
