@@ -200,7 +200,6 @@ class GripperSet:
         gs = model.grippers
         self.n = len(gs)
         self.cables = np.array([g.cable for g in gs], dtype=np.int64)
-        self.weight = np.array([g.jaw_mass for g in gs]) * float(np.linalg.norm(model.gravity))
         # platform frame, (n, 3): attachment p_j^M, jaw offset L1^M, guide k̂_M
         self._p = np.array([model.attachments[g.cable] for g in gs], float).reshape(self.n, 3)
         self._L1 = np.array([g.jaw_offset for g in gs], float).reshape(self.n, 3)
@@ -211,6 +210,11 @@ class GripperSet:
         self._g = np.asarray(model.gravity, float).copy()  # m/s², base frame
         # (3,) scratch of the jaws' kernel: p, L1, k̂ turned into the base frame, a jaw's force
         self._sp, self._sL1, self._sk, self._sf = (np.zeros(3) for _ in range(4))
+
+    @property
+    def weight(self) -> FloatArray:
+        """N per jaw: ``F_BW``, its mass times the gravity's magnitude."""
+        return self.mass * float(np.linalg.norm(self._g))
 
     def weight_wrench(self, R: FloatArray) -> FloatArray:
         """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the

@@ -144,6 +144,16 @@ def bring_up(model, tmp_path, read_only: bool):
     return network, drives, driver
 
 
+def run_cycles(driver, model, targets=None) -> None:
+    """30 control cycles in real time, every motor at 1.3 N·m (260 per mille of 5 N·m)."""
+    torques = np.full(model.n_cables, 1.3)
+    for _ in range(30):
+        t = time.monotonic()
+        driver.read(t)
+        driver.write(t, torques, targets=targets)
+        time.sleep(model.control.period)
+
+
 def test_our_driver_remaps_local_node_drives_and_runs_them(seed000_one_bus, tmp_path):
     model = seed000_one_bus
     network, drives, driver = bring_up(model, tmp_path, read_only=False)
@@ -155,12 +165,7 @@ def test_our_driver_remaps_local_node_drives_and_runs_them(seed000_one_bus, tmp_
         assert [v.index for v in node.rpdo[1]] == [0x6040, 0x6071]
         assert driver.identities[2]["serial"] == 0x53494D03
         driver.activate()
-        torques = np.full(model.n_cables, 1.3)  # N·m: 260 per mille of 5 N·m
-        for _ in range(30):
-            t = time.monotonic()
-            driver.read(t)
-            driver.write(t, torques)
-            time.sleep(model.control.period)
+        run_cycles(driver, model)
         assert all(d.state is p.PowerState.OPERATION_ENABLED for d in drives)
         assert all(d.torque == 260 for d in drives)
         driver.read(time.monotonic())
@@ -193,13 +198,7 @@ def test_gripper_drives_stay_in_torque_mode_among_drives_in_position_mode(tmp_pa
                 assert mapped == [p.OD_CONTROLWORD, p.OD_TARGET_POSITION, p.OD_TORQUE_OFFSET]
                 assert sdo[p.OD_FOLLOWING_ERROR_WINDOW].raw > 0
         driver.activate()
-        torques = np.full(model.n_cables, 1.3)  # N·m: 260 per mille of 5 N·m
-        targets = np.full(model.n_cables, 2.0 * math.pi)  # rad: a turn
-        for _ in range(30):
-            t = time.monotonic()
-            driver.read(t)
-            driver.write(t, torques, targets=targets)
-            time.sleep(model.control.period)
+        run_cycles(driver, model, targets=np.full(model.n_cables, 2.0 * math.pi))  # a turn
         assert all(d.state is p.PowerState.OPERATION_ENABLED for d in nodes)
         for n, d in enumerate(nodes, 1):
             if n in torque_nodes:

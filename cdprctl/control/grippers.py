@@ -82,7 +82,6 @@ class GripperControl:
         tr = self.trajectory
         gs.jaw_loads(R, tr.acceleration, tr.velocity, self._jaw_wrench, d.jb_load)
         np.add(self.ext_wrench, self._jaw_wrench, out=d.ext_total)
-        f_par = d.jb_load
         if sense and st is not None:
             c, w = self._cables, self.winches
             friction_kernel(w.viscous, w.coulomb, st.velocity, c, self._friction)
@@ -90,7 +89,7 @@ class GripperControl:
             l0 = e.l_zero[c] - r * st.position[c]
             self._torque[:] = st.torque[c] - self._friction
             self._delta[:] = e.kin.length[c] - l0
-            self.grasp.update(self._torque / r, self._delta, f_par)
+            self.grasp.update(self._torque / r, self._delta, d.jb_load)
         # jB's load as the open model has it: the sensed squeeze is not fed back here (a loop
         # through the sensor's own estimate drifted into an infeasible wrench in lock-step);
         # a squeeze command puts the force into the imposition instead (command())

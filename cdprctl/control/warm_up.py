@@ -61,9 +61,8 @@ def warm_up(controller: Controller) -> None:
     # θ = 0: the home lengths. Writable arrays, as in the loop: numba compiles a read-only
     # array (the model's) as another type
     est.update(0.0, zeros, t_min.copy(), zeros, zeros)
-    c.grippers.set.weight_wrench(est.rotation)
     if c.grippers.n:
-        c.grippers.warm_up()
+        c.grippers.warm_up()  # the jaws' loads: the weight wrench's kernel too
     hold = c.pose.gravity_hold(est.rotation)  # any wrench: a kernel compiles whole
     prev = 0.5 * (t_min + t_max)
     for opts in _tda_variants(c.distribution.options, model.redundancy, prev):
