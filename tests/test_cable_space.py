@@ -505,6 +505,45 @@ def test_a_length_the_model_has_wrong_settles_within_the_tension_range(error):
         assert "pull against each other" in str(list(c.data.events)), list(c.data.events)
 
 
+@pytest.mark.parametrize("release, faults", [(0.0, True), (None, False)])
+def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, release, faults):
+    """Enabled, each drive reports no torque for its first four SYNCs (the torque before it
+    applied any: across processes on a loaded machine the simulated drives did, the read that
+    found them enabled and the three after). Taken as the cables' tensions that is up to 98 N
+    of internal tension error, and the supervisor stops 20 ms after enabling; for
+    ``[drives] brake_release_time`` (default 0.05 s) after enabling the torques are not taken
+    as tensions, and the robot holds."""
+    from sim_backend.drives.cia402 import Cia402Drive
+
+    actual = Cia402Drive._torque_actual_pm
+    sent: dict[int, int] = {}
+
+    def late_torque(drive):
+        if drive.state is not p.PowerState.OPERATION_ENABLED:
+            return actual(drive)
+        sent[drive.cable] = sent.get(drive.cable, 0) + 1
+        return 0 if sent[drive.cable] <= 4 else actual(drive)
+
+    monkeypatch.setattr(Cia402Drive, "_torque_actual_pm", late_torque)
+    model = rowc_csp()
+    if release is not None:
+        drives = dataclasses.replace(model.drives, brake_release_time=release)
+        model = dataclasses.replace(model, drives=drives)
+    assert model.drives.brake_release_time == (0.05 if release is None else release)
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5)
+        c = cl.controller
+        events = str(list(c.data.events))
+        assert min(sent.values()) > 4  # every drive answered with no torque at first
+        if faults:
+            assert c.state.value != "enabled" and "pull against each other" in events, events
+        else:
+            assert c.state.value == "enabled", events
+            assert float(np.max(np.abs(c.data.internal_tension_error))) < 5.0  # N
+
+
 @pytest.mark.parametrize("name", ["rowc", "caroca", "cogiro", "seed000"])
 def test_the_estimate_rate_comes_from_the_lowest_mode(name):
     """Unset, ``[control] disturbance_bandwidth`` is the platform's lowest mode on its cables

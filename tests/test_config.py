@@ -333,7 +333,13 @@ def test_drive_mode_keys(tmp_path):
     assert any("drives.following_error_window" in e and " m" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + "\n[drives]\nfollowing_error_timeout = 70\n")
     assert any("drives.following_error_timeout" in e and "65.535" in e for e in errs), errs
+    for bad, rule in (("-0.01", ">= 0"), ("2", "<= 1")):
+        errs = errors_of(tmp_path, BASE + f"\n[drives]\nbrake_release_time = {bad}\n")
+        assert any("drives.brake_release_time" in e and " s" in e and rule in e for e in errs)
+    model = load_robot(write(tmp_path, BASE + '\n[drives]\nbrake_release_time = 0\n', "z.toml"))
+    assert model.drives.brake_release_time == 0.0
     model = load_robot(write(tmp_path, BASE + '\n[drives]\nmode = "csp"\n', "ok.toml"))
+    assert model.drives.brake_release_time == 0.05
     assert model.drives.mode == "csp" and len(model.drives.buses) == 1
     assert model.drives.buses[0].cables == tuple(range(model.n_cables))
 

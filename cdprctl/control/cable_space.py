@@ -233,6 +233,9 @@ class CableSpace:
         # that 200 N (1.84 N·m, 1.09 from the commanded tensions) where they carried 117 N
         self.expected = np.zeros(m)
         self._t_lo, self._t_hi = model.tension_min.copy(), model.tension_max.copy()  # N
+        # s: the drives' torque is taken as the tensions once this long enabled
+        self._release = model.drives.brake_release_time
+        self._measured_for = 0.0  # s since the first measured cycle after enabling
         # m/s: a stop reels a cable in no faster than the platform may move (on a spring of
         # a few hundred N/m, a deficit of a few newtons would reel metres per second)
         self._reel_speed = model.control.max_velocity
@@ -291,6 +294,15 @@ class CableSpace:
         self.give[:] = 0.0
         self.settle[:] = 0.0
         self._settle_time = math.nan
+        self._measured_for = 0.0
+
+    def warm_up(self, N: FloatArray) -> None:
+        """``measure``'s kernels compiled, past the brake-release window (on throwaway
+        outputs: the caller keeps what it needs; enabling starts the measurement afresh)."""
+        zeros = np.zeros(self.data.measured_tensions.shape[0])
+        self._measured_for = math.inf
+        self.measure(zeros, zeros, N)
+        self._measured_for = 0.0
 
     def force_feedback(self, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
@@ -322,8 +334,12 @@ class CableSpace:
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
         (rad/s), the rotor-inertia feed-forward of the trajectory's acceleration taken out;
         ``data.tension_error`` and its ``internal_tension_error`` part in the null space
-        ``N`` (m × r, orthonormal) of the wrench matrix."""
+        ``N`` (m × r, orthonormal) of the wrench matrix. For ``[drives] brake_release_time``
+        after enabling nothing is measured: the tensions stay the holding ones, no error."""
         d, w = self.data, self.winches
+        self._measured_for += d.dt
+        if self._measured_for <= self._release:
+            return
         w.rotor_term(self.estimator.kin.WT, self.trajectory.acceleration, self._accel_term)
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
         alpha_fast = 1.0 - math.exp(-2.0 * math.pi * self.SUPERVISION_FILTER * d.dt)

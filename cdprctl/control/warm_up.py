@@ -96,7 +96,7 @@ def warm_up(controller: Controller) -> None:
               d.internal_leverage)  # fmt: skip
     saved = [a.copy() for a in arrays]
     c.cable_space.targets(True, zeros)
-    c.cable_space.measure(zeros, zeros, ns.N)
+    c.cable_space.warm_up(ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
     force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
     tension_hold_kernel(zeros, np.ones(m), 0.5, 0.0, zeros, zeros, np.zeros(m))
