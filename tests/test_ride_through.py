@@ -91,20 +91,21 @@ def test_a_stall_under_the_water_jet_rides_through():
     assert abs(stalled["integral_change"] - calm["integral_change"]) < 2e-3
 
 
-def two_moves_held_up(hold: float, where: str, resend: bool = True) -> dict:
+def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int = 1) -> dict:
     """rowc's two moves, the machine taking the CPU for ``hold`` s inside a cycle every 0.3 s:
     ``where`` "before its sends" (after the cycle computed its targets) or "before its SYNC"
-    (between its RPDOs and its SYNC). ``resend=False``: targets never sent again. The final
-    state, the worst following error (rad at the motor), the cycles held, the targets sent
-    again, the driver's error."""
+    (between its RPDOs and its SYNC; ``times`` 2: again after the RPDOs sent again).
+    ``resend=False``: targets never sent again. The final state, the worst following error
+    (rad at the motor), the cycles held, the targets sent again, the driver's error."""
     with enabled(ROWC) as cl:
         net, drv, period = cl.net, cl.manager.driver, cl.period
         if not resend:
             drv.RESEND_AFTER = np.inf
-        held = {"now": False, "count": 0}
+        held = {"now": False, "count": 0, "left": 0}
 
         def stall() -> None:  # the physics goes on, the cycle does not
-            held["now"] = False
+            held["left"] -= 1
+            held["now"] = held["left"] > 0
             held["count"] += 1
             net._physics_for(hold)
             net.tick()
@@ -137,6 +138,7 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True) -> dict:
                 held["now"] = start >= next_hold
                 if held["now"]:
                     next_hold = start + 0.3
+                    held["left"] = times
                 cl.manager.step(start)
                 spent = net.time - start
                 net.advance(period * (int(spent / period) + 1) - spent)  # the missed ones skipped
@@ -170,6 +172,23 @@ def test_targets_held_up_before_their_sync_go_out_again():
     assert r["worst"] < 0.05  # rad at the motor; the following-error window is 0.176
     r = two_moves_held_up(0.006, "before its SYNC", resend=False)
     assert r["resent"] == 0 and r["state"] is State.FAULT
+
+
+def test_targets_held_up_again_while_sent_again_go_out_once_more(monkeypatch):
+    """Held up 10 ms between the RPDOs and the SYNC, and 10 ms again while the targets went
+    out again: sent for the first hold's end, they were the second hold behind their SYNC —
+    the drives reversed (0.37 rad) and faulted on their following error, as seed000 did now
+    and then at 500 Hz in real time. The driver checks again after each resend (at most
+    ``RESEND_TRIES`` resends before one SYNC): 0.013 rad."""
+    from drivers.cia402.driver import Cia402Driver
+
+    r = two_moves_held_up(0.010, "before its SYNC", times=2)
+    assert r["state"] is State.ENABLED, r["error"]
+    assert r["held"] >= 30 and r["resent"] == r["held"]  # each hold, sent again
+    assert r["worst"] < 0.05  # rad at the motor; the following-error window is 0.176
+    monkeypatch.setattr(Cia402Driver, "RESEND_TRIES", 1)
+    r = two_moves_held_up(0.010, "before its SYNC", times=2)
+    assert r["state"] is State.FAULT and "0x8611" in str(r["error"])
 
 
 def test_carrying_the_targets_on_to_their_send():

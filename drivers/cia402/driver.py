@@ -345,6 +345,8 @@ class Cia402Driver(CanWinchDriver):
 
     # of a period: targets this much older than their SYNC are sent again (``_write_internal``)
     RESEND_AFTER = 0.25
+    # times the targets may go out again before one SYNC (each check costs a clock read)
+    RESEND_TRIES = 3
 
     def _sent_instant(self) -> float:
         """The write's SYNC, when it sent one: the drives take their targets at it, sample
@@ -508,12 +510,16 @@ class Cia402Driver(CanWinchDriver):
                 # held up within its sends (the VM taking the CPU between the RPDOs and the
                 # SYNC, 5 ms under a CPU hog with --sim), the targets went out for an instant
                 # well before their SYNC: the drives saw them behind, reversed, and over the
-                # next late SYNCs overshot into a following-error fault. Sent again for now.
-                again = min(max(now - t, 0.0), self.max_carry)
-                if again - late > self.RESEND_AFTER * self.period:
+                # next late SYNCs overshot into a following-error fault. Sent again for now,
+                # and checked again: held up once more while they went out again, they were
+                # that much behind (rowc, two 10 ms holds: 0.37 rad, a fault; lock-step)
+                for _ in range(self.RESEND_TRIES):
+                    again = min(max(now - t, 0.0), self.max_carry)
+                    if again - late <= self.RESEND_AFTER * self.period:
+                        break
                     self._send_targets(again, fields)
                     self.resent_targets += 1
-                    now = self.clock()
+                    late, now = again, self.clock()
             sync = self._sync.data
             sync[0] = sync[0] % p.SYNC_COUNTER_OVERFLOW + 1
             for b in self.media:
