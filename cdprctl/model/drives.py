@@ -85,9 +85,10 @@ class DrivesConfig:
     # cables' tensions (the tension supervision, the force feedback, the disturbance
     # estimate): a brake still opening holds part of the load, and the first samples a drive
     # sends once enabled are the torque before it applied any. Across processes on a loaded
-    # machine three reads of zero torque after enabling made 79 N of internal tension error
-    # and a fault within 20 ms (1 of 8 runs with two CPU hogs). Set it to the brakes' opening
-    # time from their datasheet, if longer
+    # machine (two CPU hogs) the read that found the drives enabled and the two after it gave
+    # zero torque: up to 79 N of internal tension error, past the limit in 4 runs of 20, and
+    # the tests' CI stopped on it 20 ms after enabling. Set it to the brakes' opening time
+    # from their datasheet, if longer
     brake_release_time: float = 0.05
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
     # s of running cycles without feedback from a drive before it is taken as lost: a time,
