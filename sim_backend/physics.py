@@ -102,13 +102,16 @@ def servo_torque(servo, i, theta, theta_dot, offset, dt):  # pragma: no cover - 
         applied[i] = offset
         beyond[i] = 0.0
         return offset
+    # the loop on the step's starting state: with the target moved on first, the torque
+    # carried kp · rate · dt, a term of the step's length (0.2 N·m at 50 rad/s), and the
+    # torque actual sampled from a short last step before a SYNC read tens of newtons less
+    tau = offset + kp[i] * (target[i] - theta) + kd[i] * (rate[i] - theta_dot)
+    tau = min(limit[i], max(-limit[i], tau))
     target[i] += rate[i] * dt
     if abs(target[i] - theta) > window[i]:
         beyond[i] += dt
     else:
         beyond[i] = 0.0
-    tau = offset + kp[i] * (target[i] - theta) + kd[i] * (rate[i] - theta_dot)
-    tau = min(limit[i], max(-limit[i], tau))
     applied[i] = tau
     return tau
 
