@@ -216,13 +216,18 @@ class GripperSet:
         """N per jaw: ``F_BW``, its mass times the gravity's magnitude."""
         return self.mass * float(np.linalg.norm(self._g))
 
+    def at_rest(self, R: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(``J_weight F_BW`` (6,: N, N·m, base frame, about ``P``), ``‖F∥_jBW‖`` (n,: N)) at
+        orientation ``R``: the grippers' weights on the main body (Sensors 2019, eq. (35),
+        (46)) and the part along each guide, which ``jB`` holds (eq. (26)-(27)); one call of
+        :meth:`jaw_loads` at rest."""
+        w, par = np.zeros(6), np.zeros(self.n)
+        self.jaw_loads(R, _AT_REST, _AT_REST, w, par)
+        return w, par
+
     def weight_wrench(self, R: FloatArray) -> FloatArray:
-        """``J_weight F_BW`` (N, N·m, base frame, about ``P``) at orientation ``R``: the
-        grippers' weights on the main body (Sensors 2019, eq. (35), (46)); :meth:`jaw_loads`
-        at rest."""
-        w = np.zeros(6)
-        self.jaw_loads(R, _AT_REST, _AT_REST, w, np.zeros(self.n))
-        return w
+        """``J_weight F_BW`` of :meth:`at_rest`."""
+        return self.at_rest(R)[0]
 
     def jaw_loads(
         self,
@@ -247,11 +252,8 @@ class GripperSet:
         )  # fmt: skip
 
     def parallel_load(self, R: FloatArray) -> FloatArray:
-        """``‖F∥_jBW‖`` (N) per gripper: the part of the jaw's weight along its guide, which
-        ``jB`` holds (eq. (26)-(27)); :meth:`jaw_loads` at rest."""
-        par = np.zeros(self.n)
-        self.jaw_loads(R, _AT_REST, _AT_REST, np.zeros(6), par)
-        return par
+        """``‖F∥_jBW‖`` of :meth:`at_rest`."""
+        return self.at_rest(R)[1]
 
     def spring_wrench(self, W: FloatArray, wrench: FloatArray, jb_load: FloatArray) -> FloatArray:
         """The wrench the springs ``jA`` must give when the cables give ``wrench`` and each

@@ -101,11 +101,10 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int =
         net, drv, period = cl.net, cl.manager.driver, cl.period
         if not resend:
             drv.RESEND_AFTER = np.inf
-        held = {"now": False, "count": 0, "left": 0}
+        held = {"count": 0, "left": 0}  # "left": holds still to come in this cycle
 
         def stall() -> None:  # the physics goes on, the cycle does not
             held["left"] -= 1
-            held["now"] = held["left"] > 0
             held["count"] += 1
             net._physics_for(hold)
             net.tick()
@@ -114,7 +113,7 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int =
             write = drv.write
 
             def held_write(t, torques, targets=None, force=False):
-                if held["now"]:
+                if held["left"] > 0:
                     stall()
                 return write(t, torques, force=force, targets=targets)
 
@@ -124,7 +123,7 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int =
 
             def held_send(b, msg):
                 sent = send(b, msg)
-                if held["now"] and msg is last_rpdo:
+                if held["left"] > 0 and msg is last_rpdo:
                     stall()
                 return sent
 
@@ -135,10 +134,9 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int =
             next_hold = net.time + 0.2
             for _ in range(round(3.0 / period)):
                 start = net.time
-                held["now"] = start >= next_hold
-                if held["now"]:
+                held["left"] = times if start >= next_hold else 0
+                if held["left"]:
                     next_hold = start + 0.3
-                    held["left"] = times
                 cl.manager.step(start)
                 spent = net.time - start
                 net.advance(period * (int(spent / period) + 1) - spent)  # the missed ones skipped

@@ -42,8 +42,9 @@ def travel_range(
     tda.options = dataclasses.replace(
         tda.options, method=TDAMethod.ENERGY, impositions=others, max_tension_rate=None
     )
-    hold = -(model.gravity_wrench(R) + ext_wrench + gs.weight_wrench(R))
-    wrench = gs.spring_wrench(W, hold, gs.parallel_load(R))
+    weight, load = gs.at_rest(R)
+    hold = -(model.gravity_wrench(R) + ext_wrench + weight)
+    wrench = gs.spring_wrench(W, hold, load)
     out = tda.solve(W, wrench, t_min, t_max, k=k)
     if not out.ok:
         return math.nan, math.nan

@@ -23,8 +23,8 @@ def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
     minimum tensions when nothing can."""
     gs = GripperSet(model)
     R = kin.rotation
-    load = gs.parallel_load(R)
-    hold = -(model.gravity_wrench(R) + gs.weight_wrench(R))
+    weight, load = gs.at_rest(R)
+    hold = -(model.gravity_wrench(R) + weight)
     wrench = gs.spring_wrench(kin.W, hold, load)
     k = model.cable_stiffness(kin.length)
     own = dataclasses.replace(tda_options_of(model), max_tension_rate=None)  # no history
