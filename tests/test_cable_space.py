@@ -10,7 +10,11 @@ import numpy as np
 import pytest
 from conftest import CONFIG
 
-from cdprctl.control.cable_space import disturbance_bandwidth, motor_target_kernel
+from cdprctl.control.cable_space import (
+    disturbance_bandwidth,
+    measured_tension_kernel,
+    motor_target_kernel,
+)
 from cdprctl.control.estimator import Estimator
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
@@ -507,10 +511,11 @@ def test_a_length_the_model_has_wrong_settles_within_the_tension_range(error):
 
 @pytest.mark.parametrize("release, faults", [(0.0, True), (None, False)])
 def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, release, faults):
-    """Enabled, each drive reports no torque for its first four SYNCs (the torque before it
+    """Enabled, each drive reports no torque for its first five SYNCs (the torque before it
     applied any: across processes on a loaded machine the simulated drives did, the read that
-    found them enabled and the three after). Taken as the cables' tensions that is up to 98 N
-    of internal tension error, and the supervisor stops 20 ms after enabling; for
+    found them enabled and the three after; here one more, as a cable's first sample only
+    starts the count of its samples). Taken as the cables' tensions that is up to 98 N of
+    internal tension error, and the supervisor stops 20 ms after enabling; for
     ``[drives] brake_release_time`` (default 0.05 s) after enabling the torques are not taken
     as tensions, and the robot holds."""
     from sim_backend.drives.cia402 import Cia402Drive
@@ -522,7 +527,7 @@ def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, rel
         if drive.state is not p.PowerState.OPERATION_ENABLED:
             return actual(drive)
         sent[drive.cable] = sent.get(drive.cable, 0) + 1
-        return 0 if sent[drive.cable] <= 4 else actual(drive)
+        return 0 if sent[drive.cable] <= 5 else actual(drive)
 
     monkeypatch.setattr(Cia402Drive, "_torque_actual_pm", late_torque)
     model = rowc_csp()
@@ -536,7 +541,7 @@ def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, rel
         cl.run(0.5)
         c = cl.controller
         events = str(list(c.data.events))
-        assert min(sent.values()) > 4  # every drive answered with no torque at first
+        assert min(sent.values()) > 5  # every drive answered with no torque at first
         if faults:
             assert c.state.value != "enabled" and "pull against each other" in events, events
         else:
@@ -665,3 +670,51 @@ def test_the_stop_reels_in_only_what_a_cable_lost():
     give = np.array([0.0, 0.001, 0.0, 0.0, 0.0])  # m
     tension_hold_kernel(error, k, 0.5, 0.002, tension, slack, give)
     np.testing.assert_allclose(give, [-0.5 * 40.0 / 4e4, 0.001, 0.0, 0.0, -0.002])
+
+
+def test_measured_tensions_take_the_rotor_out_at_the_samples_own_times():
+    """``measured_tension_kernel`` against the torque law run forward here: each motor
+    accelerates at a constant rate between its samples (so the rate the samples show is the
+    one at the sample), its torque ``r t + J θ̈ + b θ̇``. The tensions come back exactly, and
+    the low-pass steps by the samples' own intervals — irregular, one sample repeated (a lost
+    frame: nothing changes), one with a corrupted speed (skipped; the next is measured against
+    the last good one) — to the closed form ``t + (t0 − t) exp(−2π f (s − s0))``. A cable's
+    first sample only starts the count."""
+    m, f = 2, 5.0
+    J, r = np.array([2e-4, 5e-4]), np.array([0.005, 0.02])  # kg·m², m/rad
+    b = np.array([0.0, 0.01])  # N·m·s/rad, viscous friction
+    limit = np.array([10.0, 10.0])  # N·m
+    t_true = np.array([100.0, 150.0])  # N, from the second sample on
+    t0 = np.array([80.0, 80.0])  # N, where the filter starts
+    out, cmd_f = t0.copy(), t0.copy()
+    error, fast = np.zeros(m), np.zeros(m)
+    last_s, last_v = np.full(m, -math.inf), np.zeros(m)
+    s, v = 1.0, np.array([3.0, -2.0])
+    steps = [  # (interval s, acceleration rad/s² per cable, speed reported)
+        (0.0, (0.0, 0.0), None), (0.002, (2.0e4, -5.0e3), None), (0.0005, (-3.0e4, 1.0e4), None),
+        (0.0, (0.0, 0.0), None), (0.008, (1.0e3, 0.0), None), (0.002, (4.0e3, 2.0e3), 1.0e6),
+        (0.002, (4.0e3, 2.0e3), None), (0.004, (-1.0e4, 0.0), None),
+    ]  # fmt: skip
+    first_s, taken = None, 0
+    for h, acc, corrupted in steps:
+        a = np.array(acc)
+        s, v = s + h, v + a * h
+        torque = r * t_true + J * a + b * v
+        shown = v.copy() if corrupted is None else np.full(m, corrupted)
+        sampled = np.full(m, s)
+        measured_tension_kernel(
+            torque, shown, sampled, last_s, last_v, J, r, b, np.zeros(m), limit, t_true,
+            f, 20.0, out, cmd_f, error, fast,
+        )  # fmt: skip
+        if first_s is None:
+            first_s = s
+            np.testing.assert_array_equal(out, t0)  # the first sample starts the count
+            continue
+        if corrupted is None and h > 0.0:
+            taken += 1
+        expected = t_true + (t0 - t_true) * np.exp(-2.0 * math.pi * f * (s - first_s))
+        if corrupted is not None:  # skipped: as after the sample before
+            expected = t_true + (t0 - t_true) * np.exp(-2.0 * math.pi * f * (s - h - first_s))
+        np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(error, out - cmd_f, rtol=0, atol=1e-12)
+    assert taken == 5

@@ -124,25 +124,38 @@ def tension_hold_kernel(
 
 @njit(cache=True)
 def measured_tension_kernel(
-    torque, velocity, accel_term, r, viscous, coulomb, limit, commanded, alpha, out,
-    commanded_f, error, alpha_fast, fast_error,
+    torque, velocity, sampled, last_sampled, last_velocity, J, r, viscous, coulomb, limit,
+    commanded, f_slow, f_fast, out, commanded_f, error, fast_error,
 ):  # pragma: no cover - compiled  # fmt: skip
-    """``out`` (N) ← a first-order low-pass (gain ``alpha``) towards the tensions the drives'
-    measured ``torque`` (N·m) apply (``torques.applied_tension``); a torque beyond the
-    drive's ``limit`` (N·m), which no drive applies, is a corrupted frame: that cable's
-    sample is skipped. ``commanded_f`` the same low-pass of the ``commanded`` tensions (N);
-    ``error`` (N) ← ``out − commanded_f``: what the cables carry beyond what was asked, both
-    seen through the same filter; ``fast_error`` (N) the same difference through a faster
-    low-pass (gain ``alpha_fast``), for the supervision."""
+    """Per cable with a new sample (taken at ``sampled`` s, after ``last_sampled``): the
+    tension its drive's measured ``torque`` (N·m) applies (``torques.applied_tension``), less
+    the rotor's inertia ``J`` (kg·m²) at the acceleration its measured ``velocity`` (rad/s)
+    shows since its last sample; ``out`` (N) ← a first-order low-pass at ``f_slow`` (Hz),
+    stepped by the time between the samples, towards it. ``commanded_f`` the same low-pass
+    of the ``commanded`` tensions (N); ``error`` (N) ← ``out − commanded_f``: what the cables
+    carry beyond what was asked, both seen through the same filter; ``fast_error`` (N) the
+    same difference through a low-pass at ``f_fast``, for the supervision.
+    A torque beyond the drive's ``limit`` (N·m), or a rotor inertia term beyond twice it
+    (motor and cable together cannot accelerate the rotor more), is a corrupted frame: that
+    sample is skipped, the next one measured against the last good one. A cable's first
+    sample only starts its count; a cable without a new one keeps its values."""
     for i in range(out.shape[0]):
-        if abs(torque[i]) <= 1.05 * limit[i]:
-            t = applied_tension(
-                torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
-            )
-            if math.isfinite(t):
+        h = sampled[i] - last_sampled[i]
+        if h > 0.0 and math.isfinite(h):
+            rotor = J[i] * (velocity[i] - last_velocity[i]) / h
+            t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], rotor, r[i])
+            plausible = abs(torque[i]) <= 1.05 * limit[i] and abs(rotor) <= 2.0 * limit[i]
+            if plausible and math.isfinite(t):
+                alpha = 1.0 - math.exp(-2.0 * math.pi * f_slow * h)
+                alpha_fast = 1.0 - math.exp(-2.0 * math.pi * f_fast * h)
                 out[i] += alpha * (t - out[i])
                 fast_error[i] += alpha_fast * (t - commanded[i] - fast_error[i])
-        commanded_f[i] += alpha * (commanded[i] - commanded_f[i])
+                commanded_f[i] += alpha * (commanded[i] - commanded_f[i])
+                last_sampled[i] = sampled[i]
+                last_velocity[i] = velocity[i]
+        elif not math.isfinite(last_sampled[i]) and math.isfinite(sampled[i] + velocity[i]):
+            last_sampled[i] = sampled[i]
+            last_velocity[i] = velocity[i]
         error[i] = out[i] - commanded_f[i]
 
 
@@ -215,7 +228,11 @@ class CableSpace:
         self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
         self._E = np.zeros((3, 3))
         self._R = np.zeros((3, 3))
-        self._accel_term = np.zeros(model.n_cables)  # N·m: J θ̈_d of the feed-forward
+        # s: the instant each drive sampled its last feedback taken, and that sample's motor
+        # speed (rad/s): the measured tensions step by the samples' own interval
+        self._sampled = np.zeros(model.n_cables)
+        self._last_sampled = np.full(model.n_cables, -math.inf)
+        self._last_velocity = np.zeros(model.n_cables)
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
         self._fast_error = np.zeros(model.n_cables)  # N, at SUPERVISION_FILTER
         self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
@@ -295,14 +312,16 @@ class CableSpace:
         self.settle[:] = 0.0
         self._settle_time = math.nan
         self._measured_for = 0.0
+        self._last_sampled[:] = -math.inf  # the first sample after enabling starts the count
 
     def warm_up(self, N: FloatArray) -> None:
         """``measure``'s kernels compiled, past the brake-release window (on throwaway
         outputs: the caller keeps what it needs; enabling starts the measurement afresh)."""
         zeros = np.zeros(self.data.measured_tensions.shape[0])
         self._measured_for = math.inf
-        self.measure(zeros, zeros, N)
+        self.measure(zeros, zeros, 0.0, zeros, N)
         self._measured_for = 0.0
+        self._last_sampled[:] = -math.inf
 
     def force_feedback(self, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
@@ -330,22 +349,32 @@ class CableSpace:
         if integrate and self.disturbance_gain > 0.0:
             disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
 
-    def measure(self, torque: FloatArray, velocity: FloatArray, N: FloatArray) -> None:
+    def measure(
+        self, torque: FloatArray, velocity: FloatArray, stamp: float, age: FloatArray,
+        N: FloatArray,
+    ) -> None:  # fmt: skip
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
-        (rad/s), the rotor-inertia feed-forward of the trajectory's acceleration taken out;
-        ``data.tension_error`` and its ``internal_tension_error`` part in the null space
-        ``N`` (m × r, orthonormal) of the wrench matrix. For ``[drives] brake_release_time``
-        after enabling nothing is measured: the tensions stay the holding ones, no error."""
+        (rad/s), sampled ``age`` (s) before ``stamp`` (s), the rotor's inertia taken out at
+        the acceleration the samples show (``measured_tension_kernel``); ``data.tension_error``
+        and its ``internal_tension_error`` part in the null space ``N`` (m × r, orthonormal)
+        of the wrench matrix. For ``[drives] brake_release_time`` after enabling nothing is
+        measured: the tensions stay the holding ones, no error.
+        Why the samples' own times and accelerations: on the spring robot each motor's target
+        speed steps ~50 rad/s as a move starts (the stretch follows the tensions' rate), and
+        the rotor's inertia torque was read as 30-40 N of tension (the trajectory's
+        acceleration has no stretch in it); one cycle held up 6 ms there weighted that sample
+        by the cycle's 8 ms instead of the 2 ms it covered: 136 N, the force feedback paid
+        out 0.52 rad, the drive reversed and faulted on its following error (seed000, 500 Hz,
+        lock-step; docs/control.md "Measured tensions")."""
         d, w = self.data, self.winches
         self._measured_for += d.dt
         if self._measured_for <= self._release:
             return
-        w.rotor_term(self.estimator.kin.WT, self.trajectory.acceleration, self._accel_term)
-        alpha = 1.0 - math.exp(-2.0 * math.pi * self.MEASURED_TENSION_FILTER * d.dt)
-        alpha_fast = 1.0 - math.exp(-2.0 * math.pi * self.SUPERVISION_FILTER * d.dt)
+        np.subtract(stamp, age, out=self._sampled)
         measured_tension_kernel(
-            torque, velocity, self._accel_term, w.r, w.viscous, w.coulomb, w.limit,
-            self.expected, alpha, d.measured_tensions, self._commanded, d.tension_error, alpha_fast,
-            self._fast_error,
+            torque, velocity, self._sampled, self._last_sampled, self._last_velocity,
+            w.rotor_inertia, w.r, w.viscous, w.coulomb, w.limit, self.expected,
+            self.MEASURED_TENSION_FILTER, self.SUPERVISION_FILTER, d.measured_tensions,
+            self._commanded, d.tension_error, self._fast_error,
         )  # fmt: skip
         internal_part_kernel(N, self._fast_error, d.internal_tension_error, d.internal_leverage)

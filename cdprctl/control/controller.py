@@ -238,7 +238,8 @@ class Controller:
             # the drives hold the lengths stretched by the commanded tensions (no pose feedback
             # in position mode, so no algebraic loop): the same tensions for the estimate
             d.stretch_tensions[:] = d.tensions
-            cs.measure(st.torque, st.velocity, self.distribution.current.ns.N)
+            N = self.distribution.current.ns.N
+            cs.measure(st.torque, st.velocity, st.stamp, st.feedback_age, N)
             cs.estimate_disturbance(
                 self.estimator.kin.W,
                 d.state is not State.STOPPING
