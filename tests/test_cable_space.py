@@ -11,6 +11,7 @@ import pytest
 from conftest import CONFIG
 
 from cdprctl.control.cable_space import (
+    after_stall_kernel,
     disturbance_bandwidth,
     measured_tension_kernel,
     motor_target_kernel,
@@ -718,3 +719,45 @@ def test_measured_tensions_take_the_rotor_out_at_the_samples_own_times():
         np.testing.assert_allclose(out, expected, rtol=0, atol=1e-9)
         np.testing.assert_allclose(error, out - cmd_f, rtol=0, atol=1e-12)
     assert taken == 5
+
+
+def test_after_a_stall_the_targets_go_on_from_where_the_drives_went():
+    """``after_stall_kernel`` against the drives' interpolation run here (each reaches its
+    target one period after its SYNC, then goes on at that rate) and the closed form of a
+    critically damped return: on time it changes nothing; after a late cycle the drives keep
+    their rate (no reversal), and the deviation they went into goes back as
+    ``x₀ (1 + t/τ) e^(−t/τ)`` over cycles of any length, its rate starting from zero."""
+    m, T, tau, extrapolation = 2, 0.002, 0.01, 0.05
+    ref_rate = np.array([30.0, -10.0])  # rad/s: the reference before the stall
+    sent, drive_rate = np.zeros(m), np.zeros(m)
+    dev, dev_rate = np.zeros(m), np.zeros(m)
+    t, ref = 0.0, np.zeros(m)
+
+    def cycle(dt, reference):
+        target = reference.copy()
+        reach = min(dt, extrapolation)
+        after_stall_kernel(target, sent, drive_rate, dev, dev_rate, dt, T, reach, dt > 1.5 * T, tau)
+        return target
+
+    for _ in range(5):  # on time: the targets as given, the drives at the reference's rate
+        t += T
+        ref = ref_rate * t
+        np.testing.assert_allclose(cycle(T, ref), ref, atol=1e-12)
+    np.testing.assert_allclose(drive_rate, ref_rate, rtol=1e-9)
+    stands = sent + drive_rate * (0.008 - T)  # the drives' interpolation after 8 ms
+    t += 0.008
+    ref = ref_rate * t - np.array([0.4, -0.1])  # the reference turned back meanwhile
+    out = cycle(0.008, ref)
+    np.testing.assert_allclose(out, stands + ref_rate * T, atol=1e-12)  # they go on
+    np.testing.assert_allclose(drive_rate, ref_rate, rtol=1e-9)  # at the same rate
+    x0 = out - ref
+    elapsed = 0.0
+    for dt in (0.002, 0.0015, 0.0025, 0.002, 0.0028, 0.001):  # none late
+        elapsed += dt
+        out = cycle(dt, ref)  # the reference holds still: only the deviation moves
+        expected = x0 * (1.0 + elapsed / tau) * math.exp(-elapsed / tau)
+        np.testing.assert_allclose(out - ref, expected, rtol=1e-9, atol=1e-12)
+    # the first step back is the closed form's, whose speed starts at zero: a fraction of
+    # what sending the reference at once asked (x₀ in one period)
+    first = x0 * (1.0 - (1.0 + T / tau) * math.exp(-T / tau))
+    assert np.all(np.abs(first) < 0.02 * np.abs(x0))

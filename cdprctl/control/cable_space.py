@@ -97,6 +97,34 @@ def motor_target_kernel(
 
 
 @njit(cache=True)
+def after_stall_kernel(
+    target, sent, drive_rate, dev, dev_rate, dt, period, reach, late, tau
+):  # pragma: no cover - compiled
+    """``target`` (rad) ← the reference's targets plus the deviation ``dev`` (rad) the drives
+    went into: after a ``late`` cycle where their interpolation went on at ``drive_rate``
+    (rad/s) from ``sent`` for ``reach`` s (the stall, up to their extrapolation), else the
+    last deviation taken back critically damped with time constant ``tau`` (s), its rate
+    ``dev_rate`` (rad/s), over ``dt`` s: ``x(t) = (x₀ + B t) e^(−t/τ)``, ``B = v₀ + x₀/τ``.
+    ``sent`` ← the targets; ``drive_rate`` ← the rate each drive takes to reach its target
+    one ``period`` (s) after this SYNC, from where its interpolation stands at it."""
+    decay = math.exp(-dt / tau)
+    for i in range(target.shape[0]):
+        if late:
+            dev[i] = sent[i] + drive_rate[i] * reach - target[i]
+            dev_rate[i] = 0.0
+        else:
+            b = dev_rate[i] + dev[i] / tau
+            x = dev[i] + b * dt
+            dev[i] = x * decay
+            dev_rate[i] = (b - x / tau) * decay
+        out = target[i] + dev[i]
+        stands = sent[i] + drive_rate[i] * (reach - period)
+        drive_rate[i] = (out - stands) / period
+        sent[i] = out
+        target[i] = out
+
+
+@njit(cache=True)
 def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
     """``give`` (m) per cable ← ``decay · give + (1 − decay) · error / k``: the cable paid out
     by the leaky integral of its tension ``error`` (N) over its stiffness ``k`` (N/m), gain =
@@ -195,6 +223,12 @@ def disturbance_kernel(W, error, gain_dt, w_hat):  # pragma: no cover - compiled
 class CableSpace:
     """``targets`` → ``data.motor_target``; ``measure`` → ``data.measured_tensions``."""
 
+    # a cycle this many periods after the last is a stall the drives went on through
+    LATE = 1.5
+    # s: the time constant over which a deviation the drives went into during a stall is
+    # taken back (critically damped); on the spring robot, 0.5 rad peak at 18 rad/s
+    CATCH_UP = 0.01
+
     # Hz: the measured tensions' low-pass; below the winch-on-cable modes (23-34 Hz on the
     # shipped robots), above the pose loop
     MEASURED_TENSION_FILTER = 5.0
@@ -264,10 +298,48 @@ class CableSpace:
         self.iff = factor * lowest_mode(model) if self.enabled and factor > 0.0 else 0.0
         self.disturbance_bandwidth = disturbance_bandwidth(model)  # Hz
         self.disturbance_gain = 2.0 * math.pi * self.disturbance_bandwidth  # rad/s
+        # after a stall (``_after_stall``): the targets last sent (rad), the rate each drive
+        # took for them (rad/s), the deviation carried on (rad) and its rate (rad/s)
+        self._period = model.control.period  # s
+        self._extrapolation = model.drives.target_extrapolation  # s
+        self._sent = np.zeros(m)
+        self._sent_valid = False
+        self._drive_rate = np.zeros(m)
+        self._deviation = np.zeros(m)
+        self._deviation_rate = np.zeros(m)
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
-        when ``active``, else the motors' own ``motor_position`` (rad); ``expected`` (N)."""
+        when ``active``, carried on from where the drives went during a stall
+        (``_after_stall``), else the motors' own ``motor_position`` (rad); ``expected`` (N)."""
+        self._targets(active, motor_position)
+        self._after_stall(active)
+
+    def _after_stall(self, active: bool) -> None:
+        """After a cycle later than ``LATE`` periods the drives have gone on at their last
+        rate (``[drives] target_extrapolation``) past where the reference now is — on the
+        spring robot by up to half a radian when the stall spans a jerk step of the
+        trajectory (the stretch's speed steps with it: ~60 rad/s at the motor). The next
+        target there made the drive reverse, a following-error fault. Instead the targets
+        carry that deviation on and take it back critically damped over ``CATCH_UP``
+        (``x(t) = x₀ (1 + t/τ) e^(−t/τ)``: no step of speed at its start, at most
+        ``x₀ / (e τ)``); between two cycles the drives' position loops see no reversal."""
+        d = self.data
+        if not active or not self._sent_valid:
+            self._deviation[:] = 0.0
+            self._deviation_rate[:] = 0.0
+            self._drive_rate[:] = 0.0
+            self._sent[:] = d.motor_target
+            self._sent_valid = active
+            return
+        dt = d.dt
+        after_stall_kernel(
+            d.motor_target, self._sent, self._drive_rate, self._deviation, self._deviation_rate,
+            dt, self._period, min(dt, self._extrapolation), dt > self.LATE * self._period,
+            self.CATCH_UP,
+        )  # fmt: skip
+
+    def _targets(self, active: bool, motor_position: FloatArray) -> None:
         d = self.data
         if not active:
             d.motor_target[:] = motor_position
@@ -315,13 +387,16 @@ class CableSpace:
         self._last_sampled[:] = -math.inf  # the first sample after enabling starts the count
 
     def warm_up(self, N: FloatArray) -> None:
-        """``measure``'s kernels compiled, past the brake-release window (on throwaway
-        outputs: the caller keeps what it needs; enabling starts the measurement afresh)."""
+        """``measure``'s and ``_after_stall``'s kernels compiled, past the brake-release
+        window (on throwaway outputs: the caller keeps what it needs; enabling starts the
+        measurement afresh)."""
         zeros = np.zeros(self.data.measured_tensions.shape[0])
         self._measured_for = math.inf
         self.measure(zeros, zeros, 0.0, zeros, N)
         self._measured_for = 0.0
         self._last_sampled[:] = -math.inf
+        T, a, b, c, e = self._period, zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy()
+        after_stall_kernel(zeros.copy(), a, b, c, e, 2.0 * T, T, 2.0 * T, True, self.CATCH_UP)
 
     def force_feedback(self, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
