@@ -129,20 +129,20 @@ def test_sotda_runs_in_the_loop_on_the_spring_robot(seed000):
 
 @pytest.mark.parametrize(
     ("rate", "stall", "at"),
-    [(500.0, 0.006, 1), (500.0, 0.012, 2), (250.0, 0.012, 1), (500.0, 0.008, 48)],
+    [(500.0, 0.006, 1), (500.0, 0.012, 2), (250.0, 0.012, 1), (500.0, 0.012, 99)],
 )
 def test_a_stall_at_a_jerk_step_rides_through_on_the_springs(seed000, rate, stall, at):
     """The springs' stretch makes each motor's target speed step with the trajectory's jerk
-    (~50 rad/s as a move starts, back as its first acceleration ramp ends at 0.1 s) and the
+    (as a move starts, and back as its first acceleration ramp ends, at 0.2 s) and the
     rotors' inertia torque shows in the measured torques. The loop stands still ``stall`` s
     after its cycle ``at`` of the demo's first move (what the VM does now and then). As a
     move starts, measured tensions weighted by the cycle's length instead of the samples'
     and without the rotors' acceleration read 136 N low, the force feedback paid out 0.52 rad
-    and the drive reversed into a following-error fault (0.34 rad of its 0.25 window at
-    500 Hz, 6 ms; 250 Hz, 12 ms faulted too). Across the ramp's end the drives went on at the
-    old speed for the 8 ms, 0.5 rad past the reference, and the next target reversed them
-    (cycle 48: a fault). Now the drives stay within 0.4 of their window, as without a stall
-    (0.08 rad)."""
+    and the drive reversed into a following-error fault (at the former 4 m/s³: 0.34 rad of
+    its 0.25 window at 500 Hz, 6 ms; 250 Hz, 12 ms). Across the ramp's end the drives went
+    on at the old speed through the stall, past the reference, and the next target reversed
+    them (cycle 99, 12 ms: a fault without ``CableSpace._after_stall``, 1.00 of the window
+    for 8 ms). Now the drives stay within 0.4 of their window (0.15-0.19 measured)."""
     from cdprctl.daemon.service import demo_targets
 
     model = dataclasses.replace(seed000, control=dataclasses.replace(seed000.control, rate=rate))

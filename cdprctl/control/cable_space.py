@@ -319,7 +319,7 @@ class CableSpace:
         """After a cycle later than ``LATE`` periods the drives have gone on at their last
         rate (``[drives] target_extrapolation``) past where the reference now is — on the
         spring robot by up to half a radian when the stall spans a jerk step of the
-        trajectory (the stretch's speed steps with it: ~60 rad/s at the motor). The next
+        trajectory (the stretch's speed steps with it: ~60 rad/s at the motor, 4 m/s³). The next
         target there made the drive reverse, a following-error fault. Instead the targets
         carry that deviation on and take it back critically damped over ``CATCH_UP``
         (``x(t) = x₀ (1 + t/τ) e^(−t/τ)``: no step of speed at its start, at most
@@ -435,8 +435,8 @@ class CableSpace:
         of the wrench matrix. For ``[drives] brake_release_time`` after enabling nothing is
         measured: the tensions stay the holding ones, no error.
         Why the samples' own times and accelerations: on the spring robot each motor's target
-        speed steps ~50 rad/s as a move starts (the stretch follows the tensions' rate), and
-        the rotor's inertia torque was read as 30-40 N of tension (the trajectory's
+        speed stepped ~50 rad/s as a move started at 4 m/s³ (the stretch follows the tensions'
+        rate), and the rotor's inertia torque was read as 30-40 N of tension (the trajectory's
         acceleration has no stretch in it); one cycle held up 6 ms there weighted that sample
         by the cycle's 8 ms instead of the 2 ms it covered: 136 N, the force feedback paid
         out 0.52 rad, the drive reversed and faulted on its following error (seed000, 500 Hz,
