@@ -65,6 +65,7 @@ class WinchStates:
         self.torque = np.zeros(m)  # N·m
         self.state = np.zeros(m, dtype=np.int64)  # DriveState
         self.feedback_age = np.full(m, math.inf)  # s since the last feedback
+        self.sampled_at = np.full(m, -math.inf)  # s: when the last feedback was taken (its SYNC)
         self.fault_code = np.zeros(m, dtype=np.int64)  # drive error code, 0 when none
         self.stamp = 0.0  # s, the time given to read()
 

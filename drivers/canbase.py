@@ -114,6 +114,7 @@ class CanWinchDriver(WinchDriver):
             self.config.feedback_timeout,
             self.config.heartbeat_timeout,
             self.states.feedback_age.copy(),
+            self.states.sampled_at.copy(),
         )
 
     def _open(self) -> None:
@@ -265,6 +266,7 @@ class CanWinchDriver(WinchDriver):
             self.config.feedback_timeout,
             self.config.heartbeat_timeout,
             self.states.feedback_age,
+            self.states.sampled_at,
         )
         self.stats.missed_feedback += missed
         if not (fault or late):
@@ -330,13 +332,14 @@ class CanWinchDriver(WinchDriver):
 
 @njit(cache=True)
 def liveness_kernel(
-    fresh, fb_stamp, missed, silent, last_hb, t, gap, started, fb_timeout, hb_timeout, age
-):  # pragma: no cover - compiled
+    fresh, fb_stamp, missed, silent, last_hb, t, gap, started, fb_timeout, hb_timeout, age,
+    sampled,
+):  # pragma: no cover - compiled  # fmt: skip
     """Per cable: the count of consecutive reads without feedback and their time ``silent``
     (s; each read adds ``gap``, the capped time since the last read; silence counts once the
-    drives were started and have spoken), the feedback age (s). Returns the cable-reads missed
-    now and whether a cable was silent over ``fb_timeout`` s or ``hb_timeout`` s without
-    heartbeat."""
+    drives were started and have spoken), the feedback age (s) and instant (``sampled``, s).
+    Returns the cable-reads missed now and whether a cable was silent over ``fb_timeout`` s or
+    ``hb_timeout`` s without heartbeat."""
     n_missed = 0
     late = False
     for c in range(len(fresh)):
@@ -348,6 +351,7 @@ def liveness_kernel(
             silent[c] += gap
             n_missed += 1
         age[c] = t - fb_stamp[c]
+        sampled[c] = fb_stamp[c]
         if silent[c] > fb_timeout:
             late = True
         if started and np.isfinite(last_hb[c]) and t - last_hb[c] > hb_timeout:

@@ -73,6 +73,7 @@ class FakeDrives:
         self.error = None
         self.states = WinchStates(m)
         self.states.feedback_age[:] = 0.0
+        self.states.sampled_at[:] = 0.0
         self.calls: list[str] = []
 
     def begin_activate(self) -> None:

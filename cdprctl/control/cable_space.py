@@ -264,7 +264,6 @@ class CableSpace:
         self._R = np.zeros((3, 3))
         # s: the instant each drive sampled its last feedback taken, and that sample's motor
         # speed (rad/s): the measured tensions step by the samples' own interval
-        self._sampled = np.zeros(model.n_cables)
         self._last_sampled = np.full(model.n_cables, -math.inf)
         self._last_velocity = np.zeros(model.n_cables)
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
@@ -392,11 +391,11 @@ class CableSpace:
         measurement afresh)."""
         zeros = np.zeros(self.data.measured_tensions.shape[0])
         self._measured_for = math.inf
-        self.measure(zeros, zeros, 0.0, zeros, N)
+        self.measure(zeros, zeros, zeros, N)
         self._measured_for = 0.0
         self._last_sampled[:] = -math.inf
-        T, a, b, c, e = self._period, zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy()
-        after_stall_kernel(zeros.copy(), a, b, c, e, 2.0 * T, T, 2.0 * T, True, self.CATCH_UP)
+        s, T = np.zeros((5, zeros.shape[0])), self._period
+        after_stall_kernel(s[0], s[1], s[2], s[3], s[4], 2.0 * T, T, 2.0 * T, True, self.CATCH_UP)
 
     def force_feedback(self, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
@@ -425,11 +424,10 @@ class CableSpace:
             disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
 
     def measure(
-        self, torque: FloatArray, velocity: FloatArray, stamp: float, age: FloatArray,
-        N: FloatArray,
-    ) -> None:  # fmt: skip
+        self, torque: FloatArray, velocity: FloatArray, sampled_at: FloatArray, N: FloatArray
+    ) -> None:
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
-        (rad/s), sampled ``age`` (s) before ``stamp`` (s), the rotor's inertia taken out at
+        (rad/s), sampled at ``sampled_at`` (s, each drive's SYNC), the rotor's inertia taken out at
         the acceleration the samples show (``measured_tension_kernel``); ``data.tension_error``
         and its ``internal_tension_error`` part in the null space ``N`` (m × r, orthonormal)
         of the wrench matrix. For ``[drives] brake_release_time`` after enabling nothing is
@@ -445,9 +443,8 @@ class CableSpace:
         self._measured_for += d.dt
         if self._measured_for <= self._release:
             return
-        np.subtract(stamp, age, out=self._sampled)
         measured_tension_kernel(
-            torque, velocity, self._sampled, self._last_sampled, self._last_velocity,
+            torque, velocity, sampled_at, self._last_sampled, self._last_velocity,
             w.rotor_inertia, w.r, w.viscous, w.coulomb, w.limit, self.expected,
             self.MEASURED_TENSION_FILTER, self.SUPERVISION_FILTER, d.measured_tensions,
             self._commanded, d.tension_error, self._fast_error,

@@ -238,8 +238,7 @@ class Controller:
             # the drives hold the lengths stretched by the commanded tensions (no pose feedback
             # in position mode, so no algebraic loop): the same tensions for the estimate
             d.stretch_tensions[:] = d.tensions
-            N = self.distribution.current.ns.N
-            cs.measure(st.torque, st.velocity, st.stamp, st.feedback_age, N)
+            cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
             cs.estimate_disturbance(
                 self.estimator.kin.W,
                 d.state is not State.STOPPING
