@@ -36,9 +36,10 @@ def test_bandwidth_interpolates_where_the_gain_falls():
 def test_every_axis_follows_1_5_hz(rowc):
     """Position mode: the drives' loops (50 Hz) hold the lengths the reference asks for, so
     every axis — y too, which rowc's cables hold only through their elasticity — follows a
-    1.5 Hz reference within ±3 dB (measured 1.00-1.02, lag under 6°; the first axis to fall
+    1.5 Hz reference within ±3 dB (measured 1.00-1.01, lag under 6°; the first axis to fall
     below −3 dB does so at 11.5 Hz). With the drives' loops at 1 Hz none does: the bandwidth
-    is theirs."""
+    is theirs (the translations fall to 0.04-0.33, the rotations, held by little more than
+    the feed-forward tensions, ring at 1.56-1.70)."""
     for axis in range(6):
         r = response(rowc, axis, 1.5)
         assert r.state == "enabled", AXES[axis]
@@ -47,4 +48,5 @@ def test_every_axis_follows_1_5_hz(rowc):
     slow = dataclasses.replace(rowc.drives, position_loop_bandwidth=1.0)
     slow_rowc = dataclasses.replace(rowc, drives=slow)
     for axis in range(6):
-        assert response(slow_rowc, axis, 1.5).gain < 1.0 / math.sqrt(2.0), AXES[axis]
+        gain = response(slow_rowc, axis, 1.5).gain
+        assert not 1.0 / math.sqrt(2.0) < gain < math.sqrt(2.0), (AXES[axis], gain)

@@ -17,10 +17,14 @@ from cdprctl.control.cable_space import (
     motor_target_kernel,
 )
 from cdprctl.control.estimator import Estimator
+from cdprctl.control.reference_pose import ReferencePose
+from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
+from cdprctl.motion.trajectory import Trajectory
 from cdprctl.rotation import rpy_to_matrix
+from cdprctl.stiffness import cable_stiffnesses
 from drivers.cia402 import protocol as p
 from sim_backend.network import LockStep
 from sim_backend.plant import CdprPlant
@@ -238,34 +242,47 @@ def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
 
 
 def test_motor_targets_match_the_plants_cable_law():
-    """The targets for a pose and tensions are the motor angles at which the simulator, which
-    solves its cable law its own way (``CdprPlant.set_pose``), holds that pose with those
-    tensions."""
+    """The targets for a reference pose and tensions are the motor angles at which the
+    simulator, which solves its cable law its own way (``CdprPlant.set_pose``), holds that
+    pose with those tensions; the reference pose's rotation, wrench matrix and stiffnesses
+    are those of the pose as roll-pitch-yaw (``inverse_kinematics``, ``cable_stiffnesses``)
+    where the estimate agrees with it."""
+    from types import SimpleNamespace
+
     model = rowc_csp()
     plant = CdprPlant(model)
     rng = np.random.default_rng(7)
     est = Estimator(model)
+    tr = Trajectory(model, model.control.period)
+    reference = ReferencePose(model, tr, est._law)
     kin = KinematicsData(model)
     for _ in range(5):
         pos = model.home.position + rng.uniform(-0.2, 0.2, 3) * [1, 0.1, 1]
         rpy = rng.uniform(-0.05, 0.05, 3)
         tensions = rng.uniform(20.0, 180.0, model.n_cables)
-        plant.set_pose(pos, rpy_to_matrix(*rpy), tensions)
-        ref = np.concatenate([pos, rpy_to_rotvec(rpy)])
+        R = rpy_to_matrix(*rpy)
+        plant.set_pose(pos, R, tensions)
+        tr.reset(np.concatenate([pos, rpy_to_rotvec(rpy, model.home.rotation)]))
+        reference.update(SimpleNamespace(position=pos, rotation=R), 0.004)  # no deviation
         out = np.zeros(model.n_cables)
         motor_target_kernel(
-            kin.arrays, ref, np.ascontiguousarray(model.home.rotation), tensions, est._law,
-            est.l_home, est.drum_ratio, np.zeros(model.n_cables), np.zeros((3, 3)),
-            np.zeros((3, 3)), out,
+            reference.reference_kin.length, tensions, est._law, est.l_home, est.drum_ratio,
+            np.zeros(model.n_cables), out,
         )  # fmt: skip
         np.testing.assert_allclose(out, plant.theta, atol=1e-9)
+        inverse_kinematics(model, kin, pos, R)
+        np.testing.assert_allclose(reference.rotation, R, atol=1e-12)
+        np.testing.assert_allclose(reference.kin.W, kin.W, atol=1e-12)
+        np.testing.assert_allclose(reference.k, cable_stiffnesses(model, kin), rtol=1e-12)
 
 
-def rpy_to_rotvec(rpy):
+def rpy_to_rotvec(rpy, R_home):
+    """The trajectory's rotation coordinates of ``rpy``: the rotation vector from ``R_home``
+    (scipy's, independent of ours)."""
     from scipy.spatial.transform import Rotation
 
     R = rpy_to_matrix(*rpy)
-    return Rotation.from_matrix(R).as_rotvec()
+    return Rotation.from_matrix(R @ np.asarray(R_home).T).as_rotvec()
 
 
 def test_water_jet_held_by_the_cables_at_250_hz():
@@ -761,3 +778,52 @@ def test_after_a_stall_the_targets_go_on_from_where_the_drives_went():
     # what sending the reference at once asked (x₀ in one period)
     first = x0 * (1.0 - (1.0 + T / tau) * math.exp(-T / tau))
     assert np.all(np.abs(first) < 0.02 * np.abs(x0))
+
+
+def test_the_working_pose_follows_the_estimate_through_its_low_pass():
+    """Position mode works at the reference moved by the estimate's deviation from it through
+    a first-order low-pass a decade below the drives' loops (``reference_pose.py``): a step of
+    the deviation comes in as ``1 − e^(−2π f t)``, in position and rotation (scipy's rotation
+    vectors as the reference), and the wrench matrix is the one at that pose; the targets'
+    lengths stay the reference's. A deviation alternating every cycle — how drives 3 and 5
+    of seed000 with its grippers rang after a stall when the distribution worked at the
+    estimate itself — comes in as ``α / (2 − α)`` of it (500 Hz: 3 %)."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    model = load_robot(CONFIG / "seed000_grippers.toml")
+    est = Estimator(model)
+    tr = Trajectory(model, model.control.period)
+    ref = ReferencePose(model, tr, est._law)
+    f = model.drives.position_loop_bandwidth / 10.0
+    assert ref.bandwidth == pytest.approx(f)  # 5 Hz as shipped
+    x = np.array([7.1, 4.05, 1.45, 0.02, -0.01, 0.03])  # m, rad from the home rotation
+    tr.reset(x)
+    R_ref = Rotation.from_rotvec(x[3:]).as_matrix() @ model.home.rotation
+    dp, dphi = np.array([3e-3, -2e-3, 1e-3]), np.array([2e-3, 1e-3, -3e-3])  # m, rad
+    estimate = SimpleNamespace(
+        position=x[:3] + dp, rotation=Rotation.from_rotvec(dphi).as_matrix() @ R_ref
+    )
+    kin = KinematicsData(model)
+    dt = 0.002
+    for n in range(1, 41):
+        ref.update(estimate, dt)
+        share = 1.0 - math.exp(-2.0 * math.pi * f * n * dt)
+        np.testing.assert_allclose(ref.position, x[:3] + share * dp, rtol=0.0, atol=1e-12)
+        R = Rotation.from_rotvec(share * dphi).as_matrix() @ R_ref
+        np.testing.assert_allclose(ref.rotation, R, rtol=0.0, atol=1e-12)
+    inverse_kinematics(model, kin, ref.position, ref.rotation)
+    np.testing.assert_allclose(ref.kin.W, kin.W, atol=1e-12)
+    inverse_kinematics(model, kin, x[:3], R_ref)
+    np.testing.assert_allclose(ref.reference_kin.length, kin.length, atol=1e-12)
+    # alternating: the steady amplitude of a first-order low-pass at the Nyquist frequency
+    ref.restart()
+    alpha = 1.0 - math.exp(-2.0 * math.pi * f * dt)
+    for k in range(400):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        estimate.position = x[:3] + sign * dp
+        ref.update(estimate, dt)
+    np.testing.assert_allclose(
+        np.abs(ref.position - x[:3]), alpha / (2.0 - alpha) * np.abs(dp), rtol=1e-9
+    )

@@ -23,17 +23,19 @@ ROWC = load_robot(ROOT / "config" / "rowc.toml")
 
 @pytest.fixture()
 def at_home():
-    """A controller whose estimate is the home pose (θ = 0: the home lengths)."""
+    """A controller whose estimate is the home pose (θ = 0: the home lengths); rowc is in
+    position mode, so its distribution works at the reference, the home pose too."""
     c = Controller(ROWC, FakeDrives(ROWC.n_cables, Lifecycle.INACTIVE))
     m = ROWC.n_cables
     c.estimator.update(0.0, np.zeros(m), ROWC.tension_min.copy())
-    c.data.wrench[:] = c.pose.gravity_hold(c.estimator.rotation)
+    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation)
     return c
 
 
 def reference(options: TDAOptions, c: Controller) -> np.ndarray:
-    """The tensions a fresh distributor gives (independent of the loop's objects)."""
-    e, dist = c.estimator, c.distribution
+    """The tensions a fresh distributor gives at the loop's working pose (independent of the
+    loop's distributors)."""
+    e, dist = c.at, c.distribution
     out = TensionDistributor(ROWC, options).solve(
         e.kin.W, c.data.wrench, dist.t_min, dist.t_max, k=e.k, kin=e.kin
     )
@@ -51,7 +53,7 @@ def test_every_method_the_robot_can_use_is_built_at_start_up(at_home):
 
 def test_switching_builds_nothing_and_blends(at_home):
     c = at_home
-    d, dist, W = c.data, c.distribution, c.estimator.kin.W
+    d, dist, W = c.data, c.distribution, c.at.kin.W
     bary = TDAOptions(method=TDAMethod.BARYCENTER, period=ROWC.control.period)
     energy = TDAOptions(method=TDAMethod.ENERGY, period=ROWC.control.period)
     dist.switch(bary, 0.0, blend=False)
@@ -118,8 +120,8 @@ def test_an_infeasible_wrench_is_saturated_not_dropped(at_home, push):
     largest fraction that stays feasible (scipy's LP agrees at s, and disagrees 1e-3 beyond),
     the feed-forward kept whole, the tensions inside their limits."""
     c = at_home
-    d, dist, W = c.data, c.distribution, c.estimator.kin.W
-    ff = c.pose.gravity_hold(c.estimator.rotation)
+    d, dist, W = c.data, c.distribution, c.at.kin.W
+    ff = c.pose.gravity_hold(c.at.rotation)
     fb = np.array([*push, 0.0, 0.0, 0.0])
     assert not feasible_lp(W, ff + fb, dist.t_min, dist.t_max)
     d.wrench[:] = ff + fb

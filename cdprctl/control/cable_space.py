@@ -48,12 +48,11 @@ from numba import njit
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
+from cdprctl.control.reference_pose import ReferencePose
 from cdprctl.control.torques import WinchTorques, applied_tension
-from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
-from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import compliance_at
-from cdprctl.rotation import FloatArray, exp_so3_kernel
+from cdprctl.rotation import FloatArray
 from cdprctl.stiffness import lowest_mode
 
 #: the external-wrench estimate's bandwidth: the platform's lowest mode over this
@@ -77,18 +76,11 @@ def disturbance_bandwidth(model: RobotModel) -> float:
 
 @njit(cache=True)
 def motor_target_kernel(
-    kin, ref_x, R_home, tensions, law, l_zero, drum_ratio, give, E, R, out
+    length, tensions, law, l_zero, drum_ratio, give, out
 ):  # pragma: no cover - compiled
     """``out`` (rad) ← each motor's angle that gives its cable the unstretched length which,
-    stretched by ``tensions`` (N), spans the reference pose ``ref_x`` (m, rotation vector rad
-    from ``R_home``), plus ``give`` (m, paid out: the force feedback's). ``E``, ``R``: (3, 3)
-    scratch."""
-    exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
-    for i in range(3):
-        for j in range(3):
-            R[i, j] = E[i, 0] * R_home[0, j] + E[i, 1] * R_home[1, j] + E[i, 2] * R_home[2, j]
-    ik_kernel(kin, ref_x[:3], R)
-    length = kin[9]  # KinArrays.length
+    stretched by ``tensions`` (N), spans its geometric ``length`` (m: at the reference pose,
+    ``ReferencePose``), plus ``give`` (m, paid out: the force feedback's)."""
     for i in range(out.shape[0]):
         l0 = length[i]
         for _ in range(3):  # l0 = l − t c(l0): the compliance depends on l0 weakly
@@ -251,17 +243,13 @@ class CableSpace:
     # winch-on-cable modes (23-34 Hz), short beside anything a user commands.
     ENABLE_SETTLE = 0.5
 
-    def __init__(self, model: RobotModel, data: ControlData, trajectory: Trajectory,
+    def __init__(self, model: RobotModel, data: ControlData, reference: ReferencePose,
                  estimator: Estimator, winches: WinchTorques):  # fmt: skip
         self.enabled = model.drives.holds_lengths
         self.data = data
-        self.trajectory = trajectory
+        self.reference = reference  # the lengths at the reference: the targets'
         self.estimator = estimator
         self.winches = winches
-        self.kin = KinematicsData(model)  # at the reference pose
-        self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
-        self._E = np.zeros((3, 3))
-        self._R = np.zeros((3, 3))
         # s: the instant each drive sampled its last feedback taken, and that sample's motor
         # speed (rad/s): the measured tensions step by the samples' own interval
         self._last_sampled = np.full(model.n_cables, -math.inf)
@@ -346,8 +334,8 @@ class CableSpace:
             return
         e = self.estimator
         motor_target_kernel(
-            self.kin.arrays, self.trajectory.position, self._R_home, d.tensions, e._law,
-            e.l_zero, e.drum_ratio, self.give, self._E, self._R, d.motor_target,
+            self.reference.reference_kin.length, d.tensions, e._law, e.l_zero, e.drum_ratio,
+            self.give, d.motor_target,
         )  # fmt: skip
         if math.isnan(self._settle_time):  # the first active cycle: what the motors lack
             np.subtract(d.motor_target, motor_position, out=self._settle0)
@@ -364,7 +352,7 @@ class CableSpace:
         # paid out like the force feedback's give: the motor angle less settle / (r/G)
         np.divide(self.settle, e.drum_ratio, out=self._settle_rad)
         np.subtract(d.motor_target, self._settle_rad, out=d.motor_target)
-        np.multiply(e.k, self.settle, out=self.expected)
+        np.multiply(self.reference.k, self.settle, out=self.expected)
         np.subtract(d.tensions, self.expected, out=self.expected)
         # within the cables' range: a length the model has wrong by millimetres would make
         # hundreds of newtons of a stiff cable
@@ -406,12 +394,12 @@ class CableSpace:
         d = self.data
         if stopping:
             tension_hold_kernel(
-                self._fast_error, self.estimator.k, self.TENSION_HOLD * d.dt,
+                self._fast_error, self.reference.k, self.TENSION_HOLD * d.dt,
                 self._reel_speed * d.dt, d.measured_tensions, self._t_lo, self.give,
             )  # fmt: skip
         elif self.iff > 0.0:
             decay = math.exp(-self.iff * d.dt)
-            force_feedback_kernel(d.tension_error, self.estimator.k, decay, self.give)
+            force_feedback_kernel(d.tension_error, self.reference.k, decay, self.give)
 
     def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
         """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the

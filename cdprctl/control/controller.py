@@ -30,6 +30,7 @@ from cdprctl.control.grippers import GripperControl
 from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.path_follower import PathFollower
+from cdprctl.control.reference_pose import ReferencePose, WorkingPose
 from cdprctl.control.states import ACTIVE_STATES, HEALTHY_STATES, FaultKind, State
 from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
@@ -61,15 +62,19 @@ class Controller:
         self.data = d = ControlData(model.n_cables, gs.n)
         self.estimator = e = Estimator(model)
         self.trajectory = tr = Trajectory(model, self.period)
-        self.pose = PoseController(model, d, tr, e)
+        # the pose the feed-forward, the distribution and the jaws' loads are computed at:
+        # the estimate, or in position mode the reference (reference_pose.py says why)
+        self.reference = ReferencePose(model, tr, e._law)
+        self.at: WorkingPose = self.reference if model.drives.holds_lengths else e
+        self.pose = PoseController(model, d, tr, self.at)
         self.winches = WinchTorques(model)
-        self.distribution = Distribution(model, d, e, gs, tda or tda_options_of(model))
+        self.distribution = Distribution(model, d, self.at, gs, tda or tda_options_of(model))
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
         self.observer = WrenchObserver(model, d, e, self.winches)
-        self.cable_space = CableSpace(model, d, tr, e, self.winches)
-        self.grippers = GripperControl(model, d, gs, e, self.winches, self.distribution,
-                                       self.ext_wrench, tr)  # fmt: skip
+        self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
+        self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
+                                       self.distribution, self.ext_wrench, tr)  # fmt: skip
         # position mode: the cables' internal tension error is supervised, per cable (N)
         tension_limits = (
             c.max_tension_disagreement * (model.tension_max - model.tension_min)
@@ -132,6 +137,8 @@ class Controller:
             fk = e.update(now, st.position, d.stretch_tensions)
             if fk.status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
                 raise RuntimeError(f"start-up: forward kinematics failed ({fk.status.name})")
+            if self.at is self.reference:  # no reference yet: the estimate is the pose
+                self.reference.hold(e.position, e.rotation)
             if self.grippers.n:
                 self.grippers.update(st, sense=False)
             out = dist.solve(dist.current, self.pose.gravity_hold(e.rotation), None)
@@ -163,6 +170,7 @@ class Controller:
         e.velocity[:] = 0.0
         e.omega[:] = 0.0
         self.trajectory.reset(self._pose6())
+        self.reference.update(e, self.period)
         self.supervisor.set_state(
             State.READY, now, "drives inactive, feedback live, pose estimated"
         )
@@ -240,7 +248,7 @@ class Controller:
             d.stretch_tensions[:] = d.tensions
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
             cs.estimate_disturbance(
-                self.estimator.kin.W,
+                self.at.kin.W,
                 d.state is not State.STOPPING
                 and d.saturation >= 1.0
                 and self.distribution.bad_cycles == 0,
@@ -270,6 +278,8 @@ class Controller:
         if d.motion and self.trajectory.finished and not self.path.holds_motion:
             d.motion = "" if self.path.plan is None else d.motion
         self.trajectory.update(self._reference_step(gap))
+        if cs.enabled:
+            self.reference.update(e, self.period)
         t3 = clock()
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES
@@ -303,8 +313,9 @@ class Controller:
         t5 = clock()
         ph[4] = (t5 - t4) / 1e3
         self.winches.update(
-            d.tensions, e.kin.WT, self.trajectory.acceleration, st.velocity, active, d.torques
-        )
+            d.tensions, self.at.kin.WT, self.trajectory.acceleration, st.velocity, active,
+            d.torques,
+        )  # fmt: skip
         if cs.enabled:
             cs.targets(active, st.position)
         ph[5] = (clock() - t5) / 1e3
@@ -375,6 +386,7 @@ class Controller:
             d.events.append((t, f"enable refused: drives {drv.lifecycle.value} {drv.error}"))
             return
         self.trajectory.reset(self._pose6())
+        self.reference.restart()
         d.tensions[:] = d.hold_tensions
         self.pose.reset()
         self.observer.reset()

@@ -17,7 +17,7 @@ import dataclasses
 import numpy as np
 
 from cdprctl.control.data import ControlData
-from cdprctl.control.estimator import Estimator
+from cdprctl.control.reference_pose import WorkingPose
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
@@ -52,7 +52,7 @@ class Distribution:
         self,
         model: RobotModel,
         data: ControlData,
-        estimator: Estimator,
+        at: WorkingPose,
         grippers: GripperSet,
         options: TDAOptions,
     ):
@@ -60,7 +60,7 @@ class Distribution:
         m = model.n_cables
         self.model = model
         self.data = data
-        self.estimator = estimator
+        self.at = at  # the pose the TDA works at: the estimate, or the reference (csp)
         self.grippers = grippers
         self.t_min = model.tension_min + c.tension_margin  # N
         self.t_max = model.tension_max - c.tension_margin  # N
@@ -139,8 +139,9 @@ class Distribution:
     def solve(
         self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None
     ) -> TDAOutput:
-        """The TDA at the estimated pose, on the springs' tensions when there are grippers."""
-        e, gs = self.estimator, self.grippers
+        """The TDA at the working pose (``reference_pose.py``), on the springs' tensions when
+        there are grippers."""
+        e, gs = self.at, self.grippers
         if gs.n:
             jb = self.data.jb_load
             wrench = gs.spring_wrench(e.kin.W, wrench, jb)
@@ -218,7 +219,7 @@ class Distribution:
         r = 2 exactly, by bisection on the feasible polygon's emptiness (``planar.
         feasible_scale_kernel``, ~20 polygons of a few µs); for other r by bisection on the
         distributor's own solve (8 solves)."""
-        d, e, gs, dist = self.data, self.estimator, self.grippers, self.current
+        d, e, gs, dist = self.data, self.at, self.grippers, self.current
         ff = self._w_ff
         np.subtract(d.wrench, d.feedback_wrench, out=ff)
         if self.r == 2:

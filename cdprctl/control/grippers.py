@@ -15,6 +15,7 @@ from cdprctl.control.data import ControlData
 from cdprctl.control.distribution import Distribution
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.grasp import GraspSensor
+from cdprctl.control.reference_pose import WorkingPose
 from cdprctl.control.torques import WinchTorques, friction_kernel
 from cdprctl.gripper import GraspState, GripperSet
 from cdprctl.model.robot import RobotModel
@@ -35,6 +36,7 @@ class GripperControl:
         data: ControlData,
         grippers: GripperSet,
         estimator: Estimator,
+        at: WorkingPose,
         winches: WinchTorques,
         distribution: Distribution,
         ext_wrench: np.ndarray,
@@ -44,7 +46,8 @@ class GripperControl:
         self.trajectory = trajectory  # its acceleration: the jaws' inertia
         self.data = data
         self.set = grippers
-        self.estimator = estimator
+        self.estimator = estimator  # the grasp is sensed at the estimated pose
+        self.at = at  # the jaws' loads and the range at the working pose (reference_pose.py)
         self.winches = winches
         self.distribution = distribution
         self.ext_wrench = ext_wrench  # N, N·m: the known external wrench without the jaws
@@ -75,7 +78,7 @@ class GripperControl:
         """The jaws' weight wrench and jB's load at the estimated orientation; the grasp state
         from the drives' torque and position (``sense``); the imposed travels ramped."""
         gs, e, d = self.set, self.estimator, self.data
-        R = e.rotation
+        R = self.at.rotation
         # the jaws' weight and inertia at the trajectory's acceleration: 20 kg swinging on
         # seed000's springs unfed moved the platform 6.4 mm in its demo (position mode; torque
         # mode's pose loop held it to 5.2), fed forward 1.8 (lock-step, 250 Hz)
@@ -101,14 +104,14 @@ class GripperControl:
         friction_kernel(w.viscous, w.coulomb, np.zeros(len(w.r)), self._cables, self._friction)
         tr = self.trajectory
         self.set.jaw_loads(
-            self.estimator.rotation, tr.acceleration, tr.velocity, self._jaw_wrench,
+            self.at.rotation, tr.acceleration, tr.velocity, self._jaw_wrench,
             np.zeros(self.set.n),
         )  # fmt: skip
 
     def travel_range(self, j: int) -> tuple[float, float]:
         """Travel (m) the redundancy can give gripper ``j`` here, the other grippers held
         where they are imposed (``grip_range.travel_range``). NaN when none."""
-        e, dist = self.estimator, self.distribution
+        e, dist = self.at, self.distribution
         if self._range_tda is None:  # no grippers
             return math.nan, math.nan
         return travel_range(

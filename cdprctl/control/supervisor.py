@@ -110,6 +110,7 @@ class Supervisor:
         # (position mode), None: not checked
         self.torque_limits = torque_limits
         self._torque_at_limit = Persistence(self.TORQUE_FOR)
+        self._at_limit = False  # a drive at its torque limit this cycle
         self.data = data
         self.drives = drives
         self._stop_here = stop_here
@@ -261,7 +262,8 @@ class Supervisor:
         tau, lim = self.drives.states.torque, self.torque_limits
         assert lim is not None
         i = worst_ratio(tau, lim)
-        if not self._torque_at_limit.held(t, abs(float(tau[i])) >= self.AT_LIMIT * lim[i]):
+        self._at_limit = abs(float(tau[i])) >= self.AT_LIMIT * lim[i]
+        if not self._torque_at_limit.held(t, self._at_limit):
             return None
         return (
             f"beyond capacity: the drive of cable index {i} at its torque limit "
@@ -288,7 +290,11 @@ class Supervisor:
         i = worst_ratio(err, lim)
         e = float(err[i])
         ratio = abs(e) / lim[i]
-        if not self._tension_over.held(t, ratio > 1.0, ratio):
+        # a drive at its torque limit does not apply its commanded tension: the disagreement
+        # says nothing of a cable's length then, and the beyond-capacity check owns the case
+        # (400 N on rowc, the reference's tensions on a platform pushed off it: the tension
+        # check blamed cable 5 before the drives had been at their limit 30 ms)
+        if not self._tension_over.held(t, ratio > 1.0 and not self._at_limit, ratio):
             return None
         limit = self.config.max_tension_disagreement
         suspects = self._suspects(err, self.data.internal_leverage)

@@ -88,13 +88,16 @@ def warm_up(controller: Controller) -> None:
     c.observer.warm_up()
     c.pose.update(True)
     c.pose.reset()
-    c.winches.update(d.tensions, c.estimator.kin.WT, c.trajectory.acceleration, zeros, True,
+    c.winches.update(d.tensions, c.at.kin.WT, c.trajectory.acceleration, zeros, True,
                      d.torques)  # fmt: skip
     d.torques[:] = 0.0
     # the cable-space kernels (position mode), on throwaway outputs
     arrays = (d.motor_target, d.measured_tensions, d.tension_error, d.internal_tension_error,
               d.internal_leverage)  # fmt: skip
     saved = [a.copy() for a in arrays]
+    offset = c.reference.offset.copy()
+    c.reference.update(c.estimator, c.period)  # the next cycle computes it afresh
+    c.reference.offset[:] = offset
     c.cable_space.targets(True, zeros)
     c.cable_space.warm_up(ns.N)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))

@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from cdprctl.control.data import ControlData
-from cdprctl.control.estimator import Estimator
 from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd_wrench_kernel
+from cdprctl.control.reference_pose import WorkingPose
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import kernel_args
@@ -19,7 +19,7 @@ from cdprctl.rotation import FloatArray
 
 class PoseController:
     def __init__(
-        self, model: RobotModel, data: ControlData, trajectory: Trajectory, estimator: Estimator
+        self, model: RobotModel, data: ControlData, trajectory: Trajectory, at: WorkingPose
     ):
         c = model.control
         self.model = model
@@ -55,7 +55,9 @@ class PoseController:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._Rd = np.zeros((3, 3))
         self._E = np.zeros((3, 3))
-        tr, e = trajectory, estimator
+        # the pose the feed-forward is computed at and the feedback closed on (position mode:
+        # the reference, reference_pose.py says why; the feedback is off there)
+        tr, e = trajectory, at
         self._ref = kernel_args(Reference(tr.position, tr.velocity, tr.acceleration))
         self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
         self._pid = kernel_args(Pid(self.kp, self.kd, self.ki, self.integral, self.integral_limit))
