@@ -598,7 +598,6 @@ def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_f
     """A user's robot: a shipped one with its platform's mass and inertia and its cables'
     stiffness changed, nothing else — the gains follow from the model (the lowest mode moves
     by √(stiffness/mass)) and the demo's moves track within a millimetre, without a fault."""
-    from cdprctl.control.states import State
     from cdprctl.daemon.service import demo_targets
     from cdprctl.stiffness import lowest_mode
 
@@ -655,7 +654,6 @@ def test_a_struck_cable_is_named_among_those_that_explain_it(kind, cable, group)
     cable 5 before)."""
     import re
 
-    from cdprctl.control.states import State
     from sim_backend.faults import FaultEvent, FaultInjector
 
     model = rowc_csp()

@@ -160,36 +160,38 @@ def test_a_stall_at_a_jerk_step_rides_through_on_the_springs(seed000, rate, stal
         assert worst < 0.4 * window  # rad
 
 
-@pytest.mark.parametrize(("every", "count", "after"), [(10, 6, 0), (3, 8, 10)])
-def test_stalls_through_a_reversal_ride_through_with_the_grippers(every, count, after):
-    """seed000 with its grippers in position mode (their two drives in torque mode): 3 s into
-    the demo's first move the target turns home (a jerk step mid-move), and the loop stands
-    still 20 ms in every ``every``-th cycle, ``count`` times, from ``after`` cycles on. With
-    the feed-forward and the distribution at the estimated pose the encoders reached the
-    targets within the cycle (0.2 rad of target per newton on these springs): after the
-    stalls drives 3 and 5 rang in opposition until one faulted on its following error (1.18 /
-    1.49 of its window). At the working pose (``reference_pose.py``) they stay within half of
-    it (0.34 / 0.22 measured; with its low-pass at twice the cut-off, 0.79 in the second)."""
+@pytest.mark.parametrize(
+    ("stall", "every", "count", "after"), [(0.02, 3, 8, 0), (0.02, 3, 8, 10), (0.03, 5, 6, 0)]
+)
+def test_stalls_through_a_reversal_ride_through_with_the_grippers(stall, every, count, after):
+    """seed000 with its grippers as shipped (position mode, their two drives in torque mode):
+    1 s into the demo's first move the target turns home (a jerk step mid-move), and the loop
+    stands still ``stall`` s in every ``every``-th cycle, ``count`` times, from ``after``
+    cycles on. With the feed-forward and the distribution at the estimated pose the encoders
+    reached the targets within the cycle (0.2 rad of target per newton on these springs):
+    drives 3 and 5 rang in opposition until one faulted on its following error (2.14 / 3.61
+    of its window; the third: beyond capacity at 1.75). At the working pose
+    (``reference_pose.py``) they stay within 0.6 of it (0.34 / 0.30 / 0.49 measured)."""
     from cdprctl.daemon.service import demo_targets
     from cdprctl.model import load_robot
 
     model = load_robot(CONFIG / "seed000_grippers.toml")
-    model = dataclasses.replace(model, drives=dataclasses.replace(model.drives, mode="csp"))
+    assert model.drives.mode == "csp"  # as shipped
     window = model.drives.following_error_window_rad(model.cables[0].winch)
     a, _ = demo_targets(model)
     rpy = log_so3(model.home.rotation)
     with enabled(model) as cl:
         cl.command("move", pose=np.concatenate([a, rpy]))
-        cl.run(3.0, record=False)
+        cl.run(1.0, record=False)
         cl.command("move", pose=np.concatenate([model.home.position, rpy]))
         net, servo, worst = cl.net, cl.net.plant.servo, 0.0
         held = [i for i in range(model.n_cables) if model.drives.mode_of(i) == "csp"]
         for k in range(round(0.8 / cl.period)):
             cl.manager.step(net.time)
             j = k - after
-            stall = 0.02 if j >= 0 and j % every == 0 and j // every < count else 0.0
-            net.advance(cl.period + stall)
+            late = stall if j >= 0 and j % every == 0 and j // every < count else 0.0
+            net.advance(cl.period + late)
             worst = max(worst, float(np.abs(servo.target - net.plant.theta)[held].max()))
         c = cl.controller
         assert c.state is not State.FAULT, c.fault_reason
-        assert worst < 0.5 * window  # rad
+        assert worst < 0.6 * window  # rad

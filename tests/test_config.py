@@ -351,8 +351,8 @@ def test_drive_mode_by_default(tmp_path):
     assert load_robot(write(tmp_path, BASE, "plain.toml")).drives.mode == "csp"
     odrive = load_robot(write(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\n', "od.toml"))
     assert odrive.drives.mode == "cst"
-    d = load_robot(CONFIG / "seed000_grippers.toml").drives  # it says cst
-    assert d.mode == "cst" and d.torque_cables == (0, 7)
-    assert [d.mode_of(c) for c in range(8)] == ["cst"] * 8
-    position = dataclasses.replace(d, mode="csp")
-    assert [position.mode_of(c) for c in range(8)] == ["cst"] + ["csp"] * 6 + ["cst"]
+    d = load_robot(CONFIG / "seed000_grippers.toml").drives  # it does not say
+    assert d.mode == "csp" and d.torque_cables == (0, 7)
+    assert [d.mode_of(c) for c in range(8)] == ["cst"] + ["csp"] * 6 + ["cst"]
+    torque = dataclasses.replace(d, mode="cst")
+    assert [torque.mode_of(c) for c in range(8)] == ["cst"] * 8
