@@ -263,7 +263,7 @@ def test_motor_targets_match_the_plants_cable_law():
         R = rpy_to_matrix(*rpy)
         plant.set_pose(pos, R, tensions)
         tr.reset(np.concatenate([pos, rpy_to_rotvec(rpy, model.home.rotation)]))
-        reference.update(SimpleNamespace(position=pos, rotation=R), 0.004)  # no deviation
+        reference.update(SimpleNamespace(position=pos, rotation=R))  # no deviation
         out = np.zeros(model.n_cables)
         motor_target_kernel(
             reference.reference_kin.length, tensions, est._law, est.l_home, est.drum_ratio,
@@ -804,9 +804,9 @@ def test_the_working_pose_follows_the_estimate_through_its_low_pass():
         position=x[:3] + dp, rotation=Rotation.from_rotvec(dphi).as_matrix() @ R_ref
     )
     kin = KinematicsData(model)
-    dt = 0.002
+    dt = model.control.period  # s: one step a cycle
     for n in range(1, 41):
-        ref.update(estimate, dt)
+        ref.update(estimate)
         share = 1.0 - math.exp(-2.0 * math.pi * f * n * dt)
         np.testing.assert_allclose(ref.position, x[:3] + share * dp, rtol=0.0, atol=1e-12)
         R = Rotation.from_rotvec(share * dphi).as_matrix() @ R_ref
@@ -821,7 +821,7 @@ def test_the_working_pose_follows_the_estimate_through_its_low_pass():
     for k in range(400):
         sign = 1.0 if k % 2 == 0 else -1.0
         estimate.position = x[:3] + sign * dp
-        ref.update(estimate, dt)
+        ref.update(estimate)
     np.testing.assert_allclose(
         np.abs(ref.position - x[:3]), alpha / (2.0 - alpha) * np.abs(dp), rtol=1e-9
     )

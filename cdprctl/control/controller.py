@@ -170,7 +170,7 @@ class Controller:
         e.velocity[:] = 0.0
         e.omega[:] = 0.0
         self.trajectory.reset(self._pose6())
-        self.reference.update(e, self.period)
+        self.reference.update(e)
         self.supervisor.set_state(
             State.READY, now, "drives inactive, feedback live, pose estimated"
         )
@@ -279,7 +279,7 @@ class Controller:
             d.motion = "" if self.path.plan is None else d.motion
         self.trajectory.update(self._reference_step(gap))
         if cs.enabled:
-            self.reference.update(e, self.period)
+            self.reference.update(e)
         t3 = clock()
         ph[2] = (t3 - t2) / 1e3
         active = d.state in ACTIVE_STATES

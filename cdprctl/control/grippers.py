@@ -75,7 +75,8 @@ class GripperControl:
         return self.set.n
 
     def update(self, st: WinchStates | None, sense: bool) -> None:
-        """The jaws' weight wrench and jB's load at the estimated orientation; the grasp state
+        """The jaws' weight wrench and jB's load at the working pose's orientation (in
+        position mode the reference's, ``reference_pose.py``); the grasp state
         from the drives' torque and position (``sense``); the imposed travels ramped."""
         gs, e, d = self.set, self.estimator, self.data
         R = self.at.rotation

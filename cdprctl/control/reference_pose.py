@@ -115,8 +115,10 @@ class ReferencePose:
         self.kin = KinematicsData(model)
         self.k = np.zeros(model.n_cables)
         self.reference_kin = KinematicsData(model)
-        # Hz: the low-pass from the estimate's deviation to the working pose
+        # Hz: the low-pass from the estimate's deviation to the working pose, stepped once a
+        # cycle (the module's docstring says why not by a late cycle's length)
         self.bandwidth = model.drives.position_loop_bandwidth / BELOW_DRIVE_LOOPS
+        self._alpha = 1.0 - math.exp(-2.0 * math.pi * self.bandwidth * model.control.period)
         self.offset = np.zeros(6)  # m, rad (base frame): the deviation low-passed
         self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
         self._law = law  # the cable law's kernel arguments (Estimator's)
@@ -125,14 +127,13 @@ class ReferencePose:
         self._dev = np.zeros(6)
         self.hold(self.position, self.rotation)
 
-    def update(self, estimate: WorkingPose, dt: float) -> None:
+    def update(self, estimate: WorkingPose) -> None:
         """At the trajectory's reference now, moved by the ``estimate``'s deviation from it
-        through the low-pass stepped by ``dt`` s (each cycle, after the trajectory's step,
-        by the loop's period)."""
+        through the low-pass, one period's step (each cycle, after the trajectory's)."""
         tr = self.trajectory
-        alpha = 1.0 - math.exp(-2.0 * math.pi * self.bandwidth * dt)
         reference_pose_kernel(
-            tr.position, tr.velocity, self._R_home, estimate.position, estimate.rotation, alpha,
+            tr.position, tr.velocity, self._R_home, estimate.position, estimate.rotation,
+            self._alpha,
             self.offset, self._law, self.reference_kin.arrays, self.kin.arrays, self.position,
             self.rotation, self.velocity, self.omega, self.k, self._R_ref, self._E, self._dev,
         )  # fmt: skip

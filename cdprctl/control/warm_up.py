@@ -96,7 +96,7 @@ def warm_up(controller: Controller) -> None:
               d.internal_leverage)  # fmt: skip
     saved = [a.copy() for a in arrays]
     offset = c.reference.offset.copy()
-    c.reference.update(c.estimator, c.period)  # the next cycle computes it afresh
+    c.reference.update(c.estimator)  # the next cycle computes it afresh
     c.reference.offset[:] = offset
     c.cable_space.targets(True, zeros)
     c.cable_space.warm_up(ns.N)
