@@ -147,10 +147,9 @@ def test_jaw_loads_are_their_weight_under_the_effective_gravity(grippers):
 def test_the_jaws_inertia_fed_forward_keeps_the_platform_on_its_path(grippers):
     """seed000_grippers' demo moves (lock-step, the second move turning back half-way as the
     daemon's demo does): with the jaws' 20 kg fed forward the platform stays within 2.5 mm
-    (2.26 mm as shipped: position mode at seed000's speed, 500 Hz). Measured at 250 Hz when
-    it shipped in torque mode at a quarter of that speed: 2.21 mm, 5.20 without (they swung
-    it on the springs, which the 0.3 Hz pose loop corrected only slowly); in position mode
-    1.80 against 6.40."""
+    (1.57 mm as shipped: position mode, 500 Hz; at seed000's speed 2.26). Measured at 250 Hz
+    when it shipped in torque mode: 2.21 mm, 5.20 without (they swung it on the springs,
+    which the 0.3 Hz pose loop corrected only slowly); in position mode 1.80 against 6.40."""
     from cdprctl.control.states import State
     from cdprctl.daemon.service import demo_targets
     from cdprctl.experiments.closed_loop import ClosedLoop
