@@ -154,6 +154,27 @@ def log_so3_into(R: FloatArray, out: FloatArray) -> None:
 log_so3_kernel = njit(cache=True)(log_so3_into)
 
 
+@njit(cache=True)
+def rotated_kernel(phi, R_base, E, out):  # pragma: no cover - compiled
+    """``out`` (3×3) ← ``exp([φ]×) R_base``: the rotation vector ``phi`` (rad, base frame)
+    applied to ``R_base`` — a pose's rotation from its coordinates about the home rotation.
+    ``E``: (3, 3) scratch."""
+    exp_so3_kernel(phi[0], phi[1], phi[2], E)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = E[i, 0] * R_base[0, j] + E[i, 1] * R_base[1, j] + E[i, 2] * R_base[2, j]
+
+
+@njit(cache=True)
+def log_relative_kernel(A, B, E, out):  # pragma: no cover - compiled
+    """``out[0:3]`` ← ``log(A Bᵀ)``: the rotation vector (rad, base frame) that takes ``B`` to
+    ``A`` — an orientation error. ``E``: (3, 3) scratch."""
+    for i in range(3):
+        for j in range(3):
+            E[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
+    log_so3_kernel(E, out)
+
+
 def log_so3(R: FloatArray) -> FloatArray:
     """Rotation vector (rad) of the rotation matrix ``R`` (:func:`log_so3_into`)."""
     out = np.empty(3)

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cdprctl.rotation import exp_so3_kernel, log_so3_kernel
+from cdprctl.rotation import log_relative_kernel, rotated_kernel
 
 
 class Reference(NamedTuple):
@@ -68,16 +68,10 @@ def pd_wrench_kernel(
     p, R, v, w = est
     kp, kd, ki, integral, integral_limit = pid
     R_home, mass, inertia, com, gravity = platform
-    exp_so3_kernel(ref_x[3], ref_x[4], ref_x[5], E)
-    for i in range(3):
-        for j in range(3):
-            Rd[i, j] = E[i, 0] * R_home[0, j] + E[i, 1] * R_home[1, j] + E[i, 2] * R_home[2, j]
-    for i in range(3):  # E = Rd Rᵀ
-        for j in range(3):
-            E[i, j] = Rd[i, 0] * R[j, 0] + Rd[i, 1] * R[j, 1] + Rd[i, 2] * R[j, 2]
+    rotated_kernel(ref_x[3:], R_home, E, Rd)
     for i in range(3):
         err[i] = ref_x[i] - p[i]
-    log_so3_kernel(E, err[3:])
+    log_relative_kernel(Rd, R, E, err[3:])
     if integrate:
         for i in range(6):
             lim = integral_limit[i]

@@ -37,7 +37,7 @@ from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import stiffness_kernel
-from cdprctl.rotation import FloatArray, exp_so3_kernel, log_so3_kernel
+from cdprctl.rotation import FloatArray, log_relative_kernel, rotated_kernel
 
 # the working pose's low-pass, below the drives' position loops by this factor (a decade)
 BELOW_DRIVE_LOOPS = 10.0
@@ -67,27 +67,18 @@ def reference_pose_kernel(
     kinematics into ``kin`` and each cable's stiffness ``k`` (N/m) at its length; ``v``
     (m/s), ``w`` (rad/s: the rotation vector's rate, the angular velocity to first order, as
     the trajectory's acceleration is taken) the reference's. ``E``: (3, 3) scratch."""
-    exp_so3_kernel(x[3], x[4], x[5], E)
+    rotated_kernel(x[3:], R_home, E, R_ref)
     for i in range(3):
         v[i] = xd[i]
         w[i] = xd[3 + i]
         dev[i] = est_p[i] - x[i]
-        for j in range(3):
-            R_ref[i, j] = E[i, 0] * R_home[0, j] + E[i, 1] * R_home[1, j] + E[i, 2] * R_home[2, j]
     ik_kernel(ref_kin, x[:3], R_ref)
-    for i in range(3):  # E = est_R R_refᵀ
-        for j in range(3):
-            E[i, j] = (
-                est_R[i, 0] * R_ref[j, 0] + est_R[i, 1] * R_ref[j, 1] + est_R[i, 2] * R_ref[j, 2]
-            )
-    log_so3_kernel(E, dev[3:])
+    log_relative_kernel(est_R, R_ref, E, dev[3:])
     for i in range(6):
         offset[i] += alpha * (dev[i] - offset[i])
-    exp_so3_kernel(offset[3], offset[4], offset[5], E)
     for i in range(3):
         p[i] = x[i] + offset[i]
-        for j in range(3):
-            R[i, j] = E[i, 0] * R_ref[0, j] + E[i, 1] * R_ref[1, j] + E[i, 2] * R_ref[2, j]
+    rotated_kernel(offset[3:], R_ref, E, R)
     ik_kernel(kin, p, R)
     stiffness_kernel(kin[9], law, k)  # KinArrays.length
 
