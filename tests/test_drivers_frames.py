@@ -356,6 +356,16 @@ class ODriveScript:
         self.mode = {n: 0 for n in nodes}
         self.torque = {n: 0.0 for n in nodes}
 
+    @staticmethod
+    def velocity(n: int) -> float:
+        """turns/s axis ``n`` reports: signed, a different value per axis"""
+        return 0.5 * n - 2.25
+
+    @staticmethod
+    def torque_estimate(n: int) -> float:
+        """N·m axis ``n`` reports applying"""
+        return 0.03 * n - 0.1
+
     def __call__(self, msg, t):
         node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
         data = bytes(msg.data)
@@ -368,10 +378,18 @@ class ODriveScript:
             if node == 8:  # the last axis of the cycle: stream everyone's feedback
                 out = []
                 for n in self.state:
+                    # ODrive's CAN Simple layouts, written out: position (turns) and
+                    # velocity (turns/s) as two float32; torque target and estimate (N·m)
                     out.append(
                         frame(
                             po.arbitration_id(n, po.GET_ENCODER_ESTIMATES),
-                            po.ENCODER_STRUCT.pack(0.25 * n, 0.0),
+                            struct.pack("<ff", 0.25 * n, self.velocity(n)),
+                        )
+                    )
+                    out.append(
+                        frame(
+                            po.arbitration_id(n, po.GET_TORQUES),
+                            struct.pack("<ff", self.torque[n], self.torque_estimate(n)),
                         )
                     )
                     out.append(
@@ -397,6 +415,13 @@ def test_odrive_frames(seed):
         drv.activate()
         assert peer.sent(po.arbitration_id(3, po.SET_AXIS_STATE))[-1] == struct.pack("<I", 8)
         assert drv.states.position[2] == pytest.approx(0.75 * 2 * math.pi)  # turns → rad
+        drv.write(peer.t, np.zeros(8))  # a cycle: every axis streams its estimates
+        peer.wait(0.002)
+        drv.read(peer.t)
+        for c, n in enumerate(range(1, 9)):
+            # turns/s → rad/s; N·m as sent (the estimate, not the target)
+            assert drv.states.velocity[c] == pytest.approx(script.velocity(n) * 2 * math.pi)
+            assert drv.states.torque[c] == pytest.approx(script.torque_estimate(n), abs=1e-6)
         drv.write(peer.t, np.full(8, 0.5))
         peer.pump()
         assert peer.sent(po.arbitration_id(2, po.SET_INPUT_TORQUE))[-1] == struct.pack("<f", 0.5)

@@ -195,6 +195,40 @@ def test_identification_against_synthetic_samples():
             assert got.residual_rms > 1e-5
 
 
+@pytest.mark.parametrize("robot_file", ["rowc.toml", "caroca.toml", "cogiro.toml"])
+def test_the_weights_are_the_residuals_inverse_standard_deviations(robot_file):
+    """Least squares is only as good as its weights: each weighted residual should have about
+    unit spread under the noise the weights assume. A tension error of σ_t on every cable
+    moves the equilibrium residual ``W δt`` by σ_t·√((W Wᵀ)_jj) in component j (computed
+    here from W at home); weighted, that is at most 1 (Cauchy-Schwarz: forces ≤ √m σ_t,
+    moments ≤ √m σ_t times the largest attachment radius) and, for a weight of the right
+    scale, not far below — a moment weighted 1/σ·reach instead of 1/(σ·reach) is off by
+    reach² (rowc: 44×). A length closure's noise is its σ exactly."""
+    model = load_robot(CONFIG / robot_file)
+    ident = Identification(model, fit_drum_scales=True)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    W = np.array(kin.W)
+    spread = ident.w.tension * np.sqrt(np.diag(W @ W.T))  # N, N·m
+    weighted = ident.force_weight * spread
+    assert np.all(weighted <= 1.0 + 1e-12), weighted
+    assert np.all(weighted >= 0.05), weighted
+    # the same through the residuals: tensions off by seeded noise of σ_t, at the true poses
+    rng = np.random.default_rng(39)
+    theta = np.zeros((2, model.n_cables))
+    t0 = equilibrium_tensions(model, kin)
+    draws = []
+    for _ in range(400):
+        noisy = t0 + rng.normal(scale=ident.w.tension, size=(2, model.n_cables))
+        guess = np.zeros((2, 6))
+        guess[:, :3] = model.home.position
+        z = np.concatenate([guess.ravel(), np.ones(model.n_cables)])  # poses, drum scales
+        r = ident.residuals(z, Samples(theta, noisy, guess))
+        draws.append(r[-6:])  # sample 1's equilibrium residual, weighted
+    rms = np.sqrt(np.mean(np.square(draws), axis=0))
+    np.testing.assert_allclose(rms, weighted, rtol=0.15)
+
+
 def test_self_calibration_refuses_torque_mode():
     model = in_torque_mode(load_robot(CONFIG / "cogiro.toml"))
     with LockStep(model) as ls:

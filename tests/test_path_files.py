@@ -11,8 +11,9 @@ import pytest
 
 from cdprctl.cli import main
 from cdprctl.model import load_robot
+from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_file import PathFileError, parse_path
-from cdprctl.motion.path_plan import PathRejectedError, plan_path
+from cdprctl.motion.path_plan import CHECK_SPACING, PathRejectedError, plan_path
 from cdprctl.motion.trajectory import Trajectory, pose_coordinates
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -118,6 +119,43 @@ def test_blended_circle_keeps_the_limits_and_saves_time(rowc):
     circle = p[round(ends[0] / dt):round(ends[-2] / dt)]  # the 24 chords
     r = np.hypot(circle[:, 0] - 1.5, circle[:, 2] - 0.59)
     assert np.abs(r - 0.1).max() < 5e-3  # measured 4.2 mm (the chords alone: 0.86 mm)
+
+
+class LimitsWithABand(SoftLimits):
+    """rowc's soft limits plus a slab ``x ∈ [x0, x0 + width]`` (m) where the margin is
+    −1 N: a region narrower than any spacing a coarse check could get away with."""
+
+    def __init__(self, model, x0: float, width: float):
+        super().__init__(model)
+        self.x0, self.width = x0, width
+
+    def check(self, coords, acceleration=None, floor=None):
+        margin, ok = super().check(coords, acceleration, floor)
+        x = np.asarray(coords, dtype=float).reshape(-1, 6)[:, 0]
+        inside = (x >= self.x0) & (x <= self.x0 + self.width)
+        return np.where(inside, -1.0, margin), ok & ~inside
+
+
+def test_the_check_samples_densely_enough_to_find_a_narrow_band(rowc):
+    """Both waypoints hold and the line between them crosses a 3 mm band that does not:
+    every sample of the plan is within CHECK_SPACING (2 mm) of the next, so the band is hit
+    wherever it lies — here at several offsets along a 0.4 m segment and a blended circle."""
+    start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
+    text = "x, y, z\n1.9, 0.35, 0.59\n"
+    clear = plan_path(rowc, parse_path(text, START), start, rowc.control.period)
+    assert clear.spacing <= CHECK_SPACING
+    assert clear.samples >= 0.4 / CHECK_SPACING
+    for x0 in (1.5123, 1.6401, 1.7777, 1.8953):
+        with pytest.raises(PathRejectedError, match=r"line 2 \(segment 1\): at t = .* tension "
+                           r"margin is -1\.00 N"):
+            plan_path(rowc, parse_path(text, START), start, rowc.control.period,
+                      limits=LimitsWithABand(rowc, x0, 0.003))  # fmt: skip
+    circle = (ROOT / "paths" / "rowc_circle.ngc").read_text()
+    plan = plan_path(rowc, parse_path(circle, START), start, rowc.control.period)
+    assert plan.spacing <= CHECK_SPACING
+    p, _, _, _ = play(rowc, plan)  # the path as the loop plays it, every period
+    steps = np.linalg.norm(np.diff(p[:, :3], axis=0), axis=1)
+    assert plan.samples >= steps.sum() / CHECK_SPACING  # as many samples as 2 mm apart needs
 
 
 def test_timed_rows_are_reached_on_time_or_refused(rowc):

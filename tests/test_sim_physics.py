@@ -168,3 +168,25 @@ def test_the_drives_torque_does_not_depend_on_where_a_step_is_split():
     split.step(0.0001)
     assert abs(whole.theta[0] - split.theta[0]) < 1e-6  # rad: the same motion
     assert abs(whole.servo.applied[0] - split.servo.applied[0]) < 1e-3  # N·m
+
+
+@pytest.mark.parametrize("slip", [60.0, 200.0, 1000.0])
+def test_a_cable_paying_out_fast_never_pushes(slip):
+    """A taut cable whose brake slips (rad/s, paying out): its stretch still positive, the
+    damping term ``c ė`` of the cable law goes negative faster than ``k e`` shrinks — the cable
+    goes slack at zero tension, it never pushes the platform. Each step's force is checked
+    for a push; the rule must have acted (stretched, yet no force) for the test to count."""
+    model = load_robot(CONFIG / "rowc.toml")
+    plant = CdprPlant(model)
+    i = 3
+    plant.brake_slip[i] = slip
+    dt = plant.opt.physics_dt
+    seen_clamped = False
+    kin = KinematicsData(model)
+    for _ in range(200):
+        inverse_kinematics(model, kin, plant.position, plant.R)
+        taut = kin.length[i] > plant.unstretched_length()[i]  # stretched as the step starts
+        plant.step(dt)  # one physics step: its tension is the law at the step's start
+        assert np.all(plant.tension >= 0.0), plant.tension
+        seen_clamped |= bool(taut and plant.tension[i] == 0.0)
+    assert seen_clamped  # the rule acted: taut (stretched) yet no force

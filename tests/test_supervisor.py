@@ -47,6 +47,13 @@ CASES = [
      lambda s, d, v: healthy(s, 2.5), State.FAULT, FaultKind.ENABLE_TIMEOUT),
     ("still enabling", State.ENABLING, Lifecycle.INACTIVE,
      lambda s, d, v: healthy(s, 1.5), State.ENABLING, None),
+    # the timeout runs from entering ENABLING, not from the start of time
+    ("still enabling 1.9 s after entering it at 100 s", State.READY, Lifecycle.INACTIVE,
+     lambda s, d, v: s.set_state(State.ENABLING, 100.0, "enable") or healthy(s, 101.9),
+     State.ENABLING, None),
+    ("enable times out 2.1 s after entering it at 100 s", State.READY, Lifecycle.INACTIVE,
+     lambda s, d, v: s.set_state(State.ENABLING, 100.0, "enable") or healthy(s, 102.1),
+     State.FAULT, FaultKind.ENABLE_TIMEOUT),
     ("disabling ends ready", State.DISABLING, Lifecycle.ACTIVE,
      lambda s, d, v: healthy(s), State.READY, None),
     ("target reached", State.MOVING, Lifecycle.ACTIVE,

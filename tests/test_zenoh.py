@@ -555,6 +555,18 @@ def write_conf(tmp_path: Any, text: str) -> str:
             (),
             ["default_permission = 'allow' must be \"deny\""],
         ),
+        # a user and password, but no dictionary to check incoming peers against: this
+        # peer authenticates itself, nobody who connects to it is authenticated
+        (
+            ACL.replace('dictionary_file: "/etc/cdprctl/zenoh-users.txt",', ""),
+            (),
+            ["not authenticated", "usrpwd (user, password, dictionary_file)"],
+        ),
+        (
+            ACL.replace('user: "cdprctl",', "").replace('password: "change-me-gateway",', ""),
+            (),
+            ["not authenticated"],
+        ),
         (
             '{transport: {link: {tls: {enable_mtls: true, root_ca_certificate: "ca.pem"}}},'
             ' access_control: {enabled: true, default_permission: "deny"}}',

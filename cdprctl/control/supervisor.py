@@ -190,7 +190,8 @@ class Supervisor:
             if drv.lifecycle is Lifecycle.ACTIVE:
                 self.set_state(State.ENABLED, t, "drives enabled, holding the pose")
             elif t - self.t_state > self.ENABLE_TIMEOUT:
-                self.fault(t, FaultKind.ENABLE_TIMEOUT, "drives not enabled within 2 s", False)
+                why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
+                self.fault(t, FaultKind.ENABLE_TIMEOUT, why, False)
             return
         if d.state is State.DISABLING:
             drv.begin_deactivate()

@@ -1,0 +1,80 @@
+"""The torque law of ``control/torques.py`` against its formula written out independently in
+numpy, on seeded inputs that reach past each motor's limit: the controller's own clamp, not
+only the driver's, keeps every torque within ``torque_limit`` (``ControlData.torques`` is what
+telemetry, the observer and the cable-space estimate read)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.control.torques import FRICTION_SMOOTHING, WinchTorques
+from cdprctl.model import load_robot
+
+
+def reference_torques(model, tensions, WT, acceleration, velocity, friction):
+    """``τ = (r/G) t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J Wᵀ a / (r/G)`` within ±limit, per cable."""
+    w = [c.winch for c in model.cables]
+    r = np.array([x.drum_radius / x.gear_ratio for x in w])
+    tau = r * tensions + np.array([x.rotor_inertia for x in w]) * (WT @ acceleration) / r
+    if friction:
+        tau += np.array([x.viscous_friction for x in w]) * velocity
+        tau += np.array([x.coulomb_friction for x in w]) * np.tanh(velocity / FRICTION_SMOOTHING)
+    limit = np.array([x.torque_limit for x in w])
+    return np.minimum(limit, np.maximum(-limit, tau)), tau, limit
+
+
+@pytest.mark.parametrize("robot_file", ["rowc.toml", "seed000.toml"])
+@pytest.mark.parametrize("friction", [False, True])
+def test_torques_follow_the_law_and_never_leave_their_limit(robot_file, friction):
+    model = load_robot(CONFIG / robot_file)
+    model = dataclasses.replace(
+        model, control=dataclasses.replace(model.control, friction_compensation=friction)
+    )
+    wt = WinchTorques(model)
+    m = model.n_cables
+    rng = np.random.default_rng(44)
+    out = np.empty(m)
+    beyond = 0
+    t_max = float(np.max([c.tension_max for c in model.cables]))
+    for _ in range(200):
+        # tensions from slack to five times the largest allowed, both signs of every term
+        tensions = rng.uniform(-0.5, 5.0, m) * t_max
+        WT = rng.normal(size=(m, 6))
+        acceleration = rng.normal(scale=5.0, size=6)
+        velocity = rng.normal(scale=50.0, size=m)
+        wt.update(tensions, WT, acceleration, velocity, True, out)
+        expected, raw, limit = reference_torques(model, tensions, WT, acceleration, velocity,
+                                                 friction)  # fmt: skip
+        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)
+        assert np.all(np.abs(out) <= limit)
+        beyond += int(np.sum(np.abs(raw) > limit))
+    assert beyond > 100  # the clamp was exercised, on both sides
+    wt.update(np.full(m, 10 * t_max), np.zeros((m, 6)), np.zeros(6), np.zeros(m), True, out)
+    np.testing.assert_array_equal(out, [c.winch.torque_limit for c in model.cables])
+    wt.update(np.full(m, -10 * t_max), np.zeros((m, 6)), np.zeros(6), np.zeros(m), True, out)
+    np.testing.assert_array_equal(out, [-c.winch.torque_limit for c in model.cables])
+
+
+def test_inactive_torques_are_zero():
+    model = load_robot(CONFIG / "rowc.toml")
+    wt = WinchTorques(model)
+    out = np.full(model.n_cables, 7.0)
+    wt.update(np.full(model.n_cables, 100.0), np.ones((model.n_cables, 6)), np.ones(6),
+              np.ones(model.n_cables), False, out)  # fmt: skip
+    assert np.all(out == 0.0)
+
+
+def test_the_rotor_term_is_the_laws_inertia_part():
+    model = load_robot(CONFIG / "rowc.toml")
+    wt = WinchTorques(model)
+    rng = np.random.default_rng(7)
+    WT, a = rng.normal(size=(model.n_cables, 6)), rng.normal(size=6)
+    out = np.empty(model.n_cables)
+    wt.rotor_term(WT, a, out)
+    _, raw, _ = reference_torques(model, np.zeros(model.n_cables), WT, a,
+                                  np.zeros(model.n_cables), False)  # fmt: skip
+    np.testing.assert_allclose(out, raw, rtol=1e-12)
