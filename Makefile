@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test lint bench clean
+.PHONY: run test lint bench mutation clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "cdprctl needs Python >= 3.11, found " + sys.version.split()[0])'
@@ -24,6 +24,12 @@ lint: $(STAMP)
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest
+
+# Mutation testing of the safety-relevant modules (docs/mutation.md); hours, not part of `test`.
+# MODULES="supervisor torques" JOBS=2 make mutation  runs a selection
+mutation: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[dev,mutation]'
+	$(BIN)/python tools/mutation.py --jobs $(or $(JOBS),1) $(MODULES)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_kinematics.py

@@ -11,8 +11,11 @@ import numpy as np
 import pytest
 from conftest import CONFIG
 
-from cdprctl.control.torques import FRICTION_SMOOTHING, WinchTorques
+from cdprctl.control.torques import WinchTorques, applied_tension, friction_kernel
 from cdprctl.model import load_robot
+
+
+SMOOTHING = 0.05  # rad/s: the Coulomb model's tanh(θ̇/ω_ε), as control/torques.py documents it
 
 
 def reference_torques(model, tensions, WT, acceleration, velocity, friction):
@@ -22,7 +25,7 @@ def reference_torques(model, tensions, WT, acceleration, velocity, friction):
     tau = r * tensions + np.array([x.rotor_inertia for x in w]) * (WT @ acceleration) / r
     if friction:
         tau += np.array([x.viscous_friction for x in w]) * velocity
-        tau += np.array([x.coulomb_friction for x in w]) * np.tanh(velocity / FRICTION_SMOOTHING)
+        tau += np.array([x.coulomb_friction for x in w]) * np.tanh(velocity / SMOOTHING)
     limit = np.array([x.torque_limit for x in w])
     return np.minimum(limit, np.maximum(-limit, tau)), tau, limit
 
@@ -78,3 +81,34 @@ def test_the_rotor_term_is_the_laws_inertia_part():
     _, raw, _ = reference_torques(model, np.zeros(model.n_cables), WT, a,
                                   np.zeros(model.n_cables), False)  # fmt: skip
     np.testing.assert_allclose(out, raw, rtol=1e-12)
+
+
+def test_applied_tension_takes_the_law_back():
+    """The grasp sensing's and the cable space's ``applied_tension`` inverts the torque law:
+    from the torque the law gives for a tension (friction and the rotor's term included),
+    it returns that tension, per cable, at speeds of both signs."""
+    model = load_robot(CONFIG / "seed000.toml")
+    rng = np.random.default_rng(45)
+    m = model.n_cables
+    for _ in range(50):
+        t = rng.uniform(0.0, 200.0, m)
+        WT, a, w = rng.normal(size=(m, 6)), rng.normal(size=6), rng.normal(scale=3.0, size=m)
+        _, tau, _ = reference_torques(model, t, WT, a, w, True)
+        rotor = reference_torques(model, np.zeros(m), WT, a, np.zeros(m), False)[1]
+        for i, c in enumerate(model.cables):
+            x = c.winch
+            r = x.drum_radius / x.gear_ratio
+            got = applied_tension(tau[i], x.viscous_friction, x.coulomb_friction, w[i], rotor[i], r)
+            assert got == pytest.approx(t[i], rel=1e-12, abs=1e-9)
+
+
+def test_friction_kernel_takes_the_cables_it_is_given():
+    model = load_robot(CONFIG / "seed000.toml")
+    wt = WinchTorques(model)
+    velocity = np.linspace(-2.0, 2.0, model.n_cables)
+    cables = np.array([7, 0, 3], dtype=np.int64)
+    out = np.empty(3)
+    friction_kernel(wt.viscous, wt.coulomb, velocity, cables, out)
+    full = reference_torques(model, np.zeros(model.n_cables), np.zeros((model.n_cables, 6)),
+                             np.zeros(6), velocity, True)[1]  # fmt: skip
+    np.testing.assert_allclose(out, full[cables], rtol=1e-12)

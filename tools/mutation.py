@@ -1,0 +1,411 @@
+"""Mutation testing of the modules where a wrong line is unsafe or silent (``make mutation``).
+
+Runs cosmic-ray (https://cosmic-ray.readthedocs.io) module by module, each against the test
+files that cover it, in a scratch copy of the working tree (``out/mutation/tree-N``: cosmic-ray
+writes each mutant into the file on disk, so the checkout itself is never touched). Numba
+kernels are mutated like any other code: each mutant's process recompiles the kernels of the
+mutated file (numba's cache is keyed on the source file's stamp), the other files' kernels
+come from the copy's cache, warmed by a baseline run.
+
+Writes ``docs/mutation.md``: per module the mutants run, killed, survived, equivalent and the
+score (killed / (run − equivalent)), and every survivor that is not written down as equivalent
+in ``tools/mutation_equivalents.toml`` (with why). A survivor is a bug no test would catch:
+kill it with a test, or explain in that file why no behaviour can change.
+
+    .venv/bin/python tools/mutation.py                 # every module (hours: a benchmark-like job)
+    .venv/bin/python tools/mutation.py supervisor torques --jobs 2
+    .venv/bin/python tools/mutation.py --report        # the report again from the sessions kept
+    .venv/bin/python tools/mutation.py --fresh torques # a new session (after the code changed)
+    .venv/bin/python tools/mutation.py --survivors     # only the survivors again (after new tests)
+    .venv/bin/python tools/mutation.py --list          # the modules and their tests
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import re
+import shutil
+import sqlite3
+import subprocess
+import sys
+import time
+import tomllib
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "mutation"
+REPORT = ROOT / "docs" / "mutation.md"
+EQUIVALENTS = ROOT / "tools" / "mutation_equivalents.toml"
+
+
+@dataclass(frozen=True)
+class Target:
+    name: str
+    module: str  # path from the repository's root
+    tests: str  # pytest arguments: the test files (and selection) that cover the module
+    timeout: float = 30.0  # s per mutant's test run at least: a mutant that hangs is killed
+    why: str = ""
+
+
+# The modules where a wrong line is unsafe or silent (issue 44), each with the tests that cover
+# it. Test selections are the files a developer would run for that module, not the suite.
+TARGETS = [
+    Target("supervisor", "cdprctl/control/supervisor.py",
+           "tests/test_supervisor.py tests/test_ride_through.py",
+           why="states, faults, persistence, the controlled stop"),
+    Target("torques", "cdprctl/control/torques.py",
+           "tests/test_torques.py tests/test_cable_space.py",
+           why="the torque law and its clamp"),
+    Target("cia402-protocol", "drivers/cia402/protocol.py",
+           "tests/test_drivers_frames.py tests/test_sim_drive.py tests/test_canopen_drives.py",
+           why="CiA 402 codec, statusword/controlword, unit conversions"),
+    Target("cia402-cyclic", "drivers/cia402/cyclic.py",
+           "tests/test_drivers_frames.py tests/test_ride_through.py tests/test_canopen_drives.py",
+           why="the cyclic decoding and the feedback's plausibility"),
+    Target("cia402-setup", "drivers/cia402/pdo_setup.py",
+           "tests/test_drivers_frames.py tests/test_canopen_drives.py tests/test_canopen_sim.py",
+           why="the SDO set-up: PDO mapping written and read back"),
+    Target("cia402-driver", "drivers/cia402/driver.py",
+           "tests/test_drivers_frames.py tests/test_canopen_drives.py tests/test_ride_through.py",
+           why="SDO client, drive set-up, SYNC/target timing"),
+    Target("odrive", "drivers/odrive/driver.py",
+           "tests/test_drivers_frames.py tests/test_driver_contract.py",
+           why="ODrive units (turns, turns/s) and axis states"),
+    Target("sim-cia402", "sim_backend/drives/cia402.py",
+           "tests/test_sim_drive.py tests/test_canopen_sim.py tests/test_drivers_frames.py",
+           why="the simulated drives' state machine"),
+    Target("numerics", "cdprctl/numerics.py",
+           "tests/test_sim_physics.py tests/test_kinematics.py tests/test_drivers_frames.py",
+           why="the cable law, the clamp, a motor step's plausibility"),
+    Target("physics", "sim_backend/physics.py",
+           "tests/test_sim_physics.py tests/test_sim_faults.py",
+           why="the cable law's clamps, brakes, the drives' position loop"),
+    Target("path-file", "cdprctl/motion/path_file.py", "tests/test_path_files.py",
+           why="path files: units, columns, refusals"),
+    Target("path-plan", "cdprctl/motion/path_plan.py",
+           "tests/test_path_files.py tests/test_operating.py", why="the path check"),
+    Target("security", "cdprctl/telemetry/security.py",
+           "tests/test_zenoh.py -k 'refused or shipped or open_commands'",
+           why="commands fail closed"),
+    Target("validate", "cdprctl/telemetry/validate.py",
+           "tests/test_zenoh.py -k 'rejected or becomes or refused or section' tests/test_fuzz.py",
+           why="command validation at the gateway"),
+    Target("calibration-record", "cdprctl/calibration/record.py", "tests/test_homing.py",
+           why="the calibration record and its checks"),
+    Target("calibration-identify", "cdprctl/calibration/identify.py", "tests/test_homing.py",
+           why="the identification's residuals, weights and statistics"),
+]  # fmt: skip
+
+# Operators kept: the bugs a person plausibly writes. Arithmetic among + − × ÷ (not into
+# shifts, bit operations, powers or modulo), bit operations among themselves, every
+# comparison except into identity/membership tests, and/or, not, negation, True/False,
+# break/continue, numbers ±1, a loop that runs zero times, an exception replaced.
+# Left out: removing a decorator (@njit off is the same code, slower), variable replacement
+# and insertion (mostly type errors caught at import).
+EXCLUDE_OPERATORS = [
+    r"core/ReplaceBinaryOperator_(Add|Sub|Mul|Div)_(FloorDiv|Mod|Pow|RShift|LShift|BitOr|BitAnd|BitXor)$",
+    r"core/ReplaceBinaryOperator_(FloorDiv|Mod|Pow)_(RShift|LShift|BitOr|BitAnd|BitXor)$",
+    r"core/ReplaceBinaryOperator_(RShift|LShift|BitOr|BitAnd|BitXor)_(Add|Sub|Mul|Div|FloorDiv|Mod|Pow)$",
+    r"core/ReplaceComparisonOperator_(Eq|NotEq|Lt|LtE|Gt|GtE)_(Is|IsNot|In|NotIn)$",
+    r"core/ReplaceComparisonOperator_(Is|IsNot|In|NotIn)_(Eq|NotEq|Lt|LtE|Gt|GtE)$",
+    r"core/ReplaceUnaryOperator_.*Invert.*",
+    r"core/RemoveDecorator",
+    r"core/VariableReplacer",
+    r"core/VariableInserter",
+]  # fmt: skip
+
+
+def tool(name: str) -> str:
+    """A cosmic-ray command beside this interpreter (the venv's), else on PATH."""
+    here = Path(sys.executable).parent / name
+    return str(here) if here.exists() else name
+
+
+def sync_tree(dest: Path) -> None:
+    """``dest`` ← the working tree's files (tracked and untracked, not ignored); what git no
+    longer lists is removed, numba's caches are kept."""
+    files = subprocess.run(
+        ["git", "ls-files", "-z", "-co", "--exclude-standard"],
+        cwd=ROOT, check=True, capture_output=True,
+    ).stdout.decode().split("\0")  # fmt: skip
+    keep = {f for f in files if f and (ROOT / f).is_file()}
+    dest.mkdir(parents=True, exist_ok=True)
+    for f in keep:
+        src, dst = ROOT / f, dest / f
+        if not dst.exists() or dst.read_bytes() != src.read_bytes():
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dst)
+    for p in dest.rglob("*"):
+        rel = p.relative_to(dest).as_posix()
+        if p.is_file() and rel not in keep and "__pycache__" not in rel and not rel.startswith(
+            (".pytest_cache", "out/")
+        ):
+            p.unlink()
+
+
+def config_text(t: Target, timeout: float) -> str:
+    excludes = ",\n    ".join(json.dumps(e) for e in EXCLUDE_OPERATORS)
+    command = json.dumps(f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}")
+    return f"""[cosmic-ray]
+module-path = "{t.module}"
+timeout = {timeout:.0f}
+excluded-modules = []
+test-command = {command}
+
+[cosmic-ray.distributor]
+name = "local"
+
+[cosmic-ray.filters.operators-filter]
+exclude-operators = [
+    {excludes},
+]
+"""
+
+
+def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None:
+    """One module's session, kept in out/mutation/<name>.sqlite: the tests run unmutated first
+    (they must pass; it also fills numba's cache in the tree), then init, the filters, exec
+    with a per-mutant timeout of ``max(t.timeout, 4 × that run)``."""
+    cfg, db = OUT / f"{t.name}.toml", OUT / f"{t.name}.sqlite"
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+
+    def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
+        return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)
+
+    start = time.monotonic()
+    base = subprocess.run(
+        f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}",
+        shell=True, cwd=tree, env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    baseline = time.monotonic() - start
+    if base.returncode != 0:
+        log(f"{t.name}: the tests fail unmutated, skipped:\n{base.stdout[-3000:]}")
+        db.unlink(missing_ok=True)
+        return
+    cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline)))
+    if fresh or not db.exists():
+        run(tool("cosmic-ray"), "init", str(cfg), str(db), "--force")
+        run(tool("cr-filter-operators"), str(db), str(cfg))
+        run(tool("cr-filter-pragma"), str(db))
+    else:
+        if survivors:  # their results dropped: exec runs them again, against today's tests
+            with sqlite3.connect(db) as con:
+                n = con.execute("DELETE FROM work_results WHERE test_outcome = 'SURVIVED'")
+                log(f"{t.name}: {n.rowcount} survivors to run again")
+        log(f"{t.name}: resuming the session kept in {db.relative_to(ROOT)}")
+    run(tool("cosmic-ray"), "exec", str(cfg), str(db))
+    took = time.monotonic() - start
+    if fresh or not (OUT / f"{t.name}.seconds").exists():  # a whole session's time
+        (OUT / f"{t.name}.seconds").write_text(f"{took:.0f}\n")
+    log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s)")
+
+
+@dataclass
+class Mutant:
+    module: str
+    operator: str
+    line: int
+    source: str  # the line as it stands (stripped)
+    diff: str  # the changed line(s), "- old / + new"
+    outcome: str  # killed, survived, timeout, incompetent, skipped
+    equivalent: str = ""  # why, where it is written down as equivalent
+
+
+def read_session(t: Target, tree: Path) -> list[Mutant]:
+    db = OUT / f"{t.name}.sqlite"
+    if not db.exists():
+        return []
+    out = subprocess.run([tool("cosmic-ray"), "dump", str(db)], cwd=tree, check=True,
+                         capture_output=True, text=True).stdout  # fmt: skip
+    source = (tree / t.module).read_text().splitlines()
+    mutants = []
+    for row in out.splitlines():
+        job, result = json.loads(row)
+        mu = job["mutations"][0]
+        line = int(mu["start_pos"][0])
+        if result is None:
+            outcome = "pending"
+        elif result.get("worker_outcome") == "skipped":
+            outcome = "skipped"
+        elif result.get("test_outcome") == "killed":
+            outcome = "timeout" if result.get("output") == "timeout" else "killed"
+        else:
+            outcome = result.get("test_outcome") or result.get("worker_outcome") or "?"
+        changed = [x for x in ((result or {}).get("diff") or "").splitlines()
+                   if x[:1] in "+-" and not x.startswith(("+++", "---"))]  # fmt: skip
+        mutants.append(Mutant(t.module, mu["operator_name"], line, source[line - 1].strip(),
+                              " / ".join(c.strip() for c in changed), outcome))  # fmt: skip
+    return mutants
+
+
+def load_equivalents() -> list[dict]:
+    if not EQUIVALENTS.exists():
+        return []
+    return tomllib.loads(EQUIVALENTS.read_text()).get("equivalent", [])
+
+
+def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]:
+    """Survivors written down as equivalent (module or "*", and regular expressions of the
+    operator and of the line's text, stripped);
+    returns the indices of the entries that matched nothing (stale)."""
+    used: set[int] = set()
+    for m in mutants:
+        if m.outcome != "survived":
+            continue
+        for i, e in enumerate(equivalents):
+            if (e["module"] in ("*", m.module) and re.fullmatch(e["operator"], m.operator)
+                    and re.fullmatch(e["line"], m.source)
+                    and re.search(e.get("mutant", ""), m.diff.split(" / +")[-1])):  # fmt: skip
+                m.equivalent = e["why"]
+                used.add(i)
+                break
+    return {i for i, e in enumerate(equivalents) if i not in used
+            and any(e["module"] in ("*", t.module) for t in TARGETS)}  # fmt: skip
+
+
+def report(targets: list[Target], tree: Path) -> str:
+    equivalents = load_equivalents()
+    rows, survivors, totals = [], [], [0, 0, 0, 0]
+    all_mutants: list[Mutant] = []
+    for t in targets:
+        ms = read_session(t, tree)
+        all_mutants += ms
+    stale = mark_equivalents(all_mutants, equivalents)
+    for t in targets:
+        ms = [m for m in all_mutants if m.module == t.module]
+        if not ms:
+            rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
+            continue
+        run = [m for m in ms if m.outcome not in ("skipped", "pending")]
+        killed = [m for m in run if m.outcome in ("killed", "timeout", "incompetent")]
+        equiv = [m for m in run if m.equivalent]
+        alive = [m for m in run if m.outcome == "survived" and not m.equivalent]
+        pending = sum(m.outcome == "pending" for m in ms)
+        denom = len(run) - len(equiv)
+        score = f"{100.0 * len(killed) / denom:.1f} %" if denom else "—"
+        if pending:
+            score += f" ({pending} not run yet)"
+        took = OUT / f"{t.name}.seconds"
+        wall = f"{int(took.read_text()) / 60:.0f} min" if took.exists() else "?"
+        rows.append(f"| {t.name} | `{t.module}` | {len(run)} | {len(killed)} | {len(alive)} | "
+                    f"{len(equiv)} | {score} | {wall} | {t.tests} |")  # fmt: skip
+        for i, v in enumerate((len(run), len(killed), len(alive), len(equiv))):
+            totals[i] += v
+        survivors += [(t, m) for m in alive]
+    denom = totals[0] - totals[3]
+    lines = [
+        "# Mutation testing",
+        "",
+        "Generated by `make mutation` (`tools/mutation.py`, cosmic-ray) — do not edit by hand;",
+        "survivors that cannot change behaviour go into `tools/mutation_equivalents.toml`, "
+        "with why.",
+        "",
+        f"Run: {dt.date.today().isoformat()}, Python {platform.python_version()}, "
+        f"{os.cpu_count()} CPUs, cosmic-ray {cosmic_ray_version()}.",
+        "",
+        f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
+        if denom else "**No mutants run yet.**",
+        f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
+        "",
+        "| module | file | run | killed | survived | equivalent | score | wall time | tests |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        *rows,
+        "",
+        "Operators: arithmetic among + − × ÷, bit operations among themselves, comparisons, "
+        "and/or, not, unary minus, True/False, break/continue, numbers ±1, zero-iteration "
+        "loops, exceptions replaced (`EXCLUDE_OPERATORS` in the tool lists what is left out "
+        "and why). A mutant is killed when a test fails or the tests exceed the module's "
+        "timeout; incompetent mutants (that cannot run at all) count as killed.",
+        "",
+        "## Survivors",
+        "",
+    ]
+    if not survivors:
+        lines.append("None.")
+    for _, m in survivors:
+        lines.append(f"- `{m.module}:{m.line}` {m.operator.removeprefix('core/')}: `{m.diff}`")
+    lines += ["", "## Equivalent mutants", ""]
+    eq = [m for m in all_mutants if m.equivalent]
+    if not eq:
+        lines.append("None.")
+    for m in eq:
+        lines.append(f"- `{m.module}:{m.line}` {m.operator.removeprefix('core/')}: `{m.diff}` "
+                     f"— {m.equivalent}")  # fmt: skip
+    if stale:
+        stale_list = ", ".join(str(i + 1) for i in sorted(stale))
+        lines += ["", "Entries of `tools/mutation_equivalents.toml` that matched no survivor "
+                  f"(the code changed): {stale_list}"]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def cosmic_ray_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("cosmic-ray")
+    except Exception:
+        return "?"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    ap.add_argument("modules", nargs="*", help="module names (--list); default every one")
+    ap.add_argument("--jobs", type=int, default=1, help="modules run at once (one tree each)")
+    ap.add_argument("--report", action="store_true", help="only write the report again")
+    ap.add_argument("--fresh", action="store_true",
+                    help="start each module's session anew (default: resume what is kept)")
+    ap.add_argument("--survivors", action="store_true",
+                    help="run the kept sessions' survivors again (after new tests)")
+    ap.add_argument("--list", action="store_true", help="list the modules and their tests")
+    a = ap.parse_args(argv)
+    if a.list:
+        for t in TARGETS:
+            print(f"{t.name:22} {t.module:38} {t.tests}")
+        return 0
+    unknown = set(a.modules) - {t.name for t in TARGETS}
+    if unknown:
+        print(f"mutation: unknown module(s) {', '.join(sorted(unknown))}; --list shows them")
+        return 2
+    if shutil.which(tool("cosmic-ray")) is None:
+        print("mutation: cosmic-ray is not installed: run `make mutation` (it installs the "
+              "project's [mutation] extra)")  # fmt: skip
+        return 2
+    chosen = [t for t in TARGETS if not a.modules or t.name in a.modules]
+    OUT.mkdir(parents=True, exist_ok=True)
+    logfile = OUT / "log.txt"
+
+    def log(msg: str) -> None:
+        print(msg, flush=True)
+        with logfile.open("a") as f:
+            f.write(f"{dt.datetime.now().isoformat(timespec='seconds')} {msg}\n")
+
+    trees = [OUT / f"tree-{k}" for k in range(max(1, a.jobs))]
+    if not a.report:
+        for tr in trees:
+            sync_tree(tr)
+        queue = list(chosen)
+
+        def worker(tree: Path) -> None:
+            while queue:
+                t = queue.pop(0)
+                log(f"{t.name}: {t.module} against {t.tests}")
+                run_target(t, tree, log, a.fresh, a.survivors)
+
+        with ThreadPoolExecutor(len(trees)) as pool:
+            list(pool.map(worker, trees))
+    else:
+        sync_tree(trees[0])
+    REPORT.write_text(report(TARGETS, trees[0]))
+    print(f"mutation: {REPORT.relative_to(ROOT)} written")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
