@@ -9,6 +9,7 @@ each of its cycles; in real time (``cdprctl sim``) a loop calls it against the w
 from __future__ import annotations
 
 import math
+import uuid
 from collections.abc import Callable
 from typing import Any
 
@@ -250,14 +251,45 @@ class SimNetwork:
             self.time += dt
 
 
+class SimulatedRobot:
+    """The simulated robot on in-process buses of its own: the plant, its drives
+    (``SimNetwork``) and the bus settings a driver joins them with. One recipe for lock-step
+    (``LockStep``) and for the daemon's ``--sim``; ``driver`` builds the controller's side."""
+
+    def __init__(
+        self, model: RobotModel, plant: CdprPlant | None = None, encoders: str = "absolute"
+    ):
+        tag = uuid.uuid4().hex[:12]
+        channels = [f"cdprctl-sim-{tag}-{b}" for b in range(len(model.drives.buses))]
+        # a second driver (a restarted daemon) can join the same buses with these
+        self.overrides: dict[str, Any] = {"interface": "inprocess", "channels": channels}
+        self.model = model
+        self.plant = plant or CdprPlant(model)
+        self.net = SimNetwork(model, self.plant, self.overrides, encoders=encoders)
+
+    def driver(
+        self,
+        period: float,
+        name: str | None = None,
+        clock: Callable[[], float] | None = None,
+        wait: Callable[[float], None] | None = None,
+    ) -> Any:
+        """The robot's driver (``[drives] driver``, or ``name``) on these buses; ``clock`` and
+        ``wait`` as ``drivers.create_driver`` takes them."""
+        from drivers import create_driver
+
+        kw: dict[str, Any] = {} if clock is None else {"clock": clock}
+        if wait is not None:
+            kw["wait"] = wait
+        return create_driver(self.model, name, period=period, bus_overrides=self.overrides, **kw)
+
+
 class LockStep:
     """In-process, deterministic: a driver and the simulated robot sharing a simulated clock.
 
     The driver's ``wait`` advances the simulation, so blocking set-up calls work unchanged;
     ``cycle(torques)`` is one control period: read, write, advance.
     """
-
-    _counter = 0
 
     def __init__(
         self,
@@ -267,26 +299,13 @@ class LockStep:
         plant: CdprPlant | None = None,
         encoders: str = "absolute",
     ):
-        from drivers import create_driver
-
-        LockStep._counter += 1
-        channels = [
-            f"lockstep-{id(self)}-{LockStep._counter}-{b}" for b in range(len(model.drives.buses))
-        ]
-        overrides = {"interface": "inprocess", "channels": channels}
-        self.overrides = overrides  # a second driver (a restarted daemon) can join the buses
+        robot = SimulatedRobot(model, plant, encoders)
+        self.overrides = robot.overrides
         self.model = model
         self.period = period = period if period is not None else model.control.period
-        self.plant = plant or CdprPlant(model)
-        self.net = SimNetwork(model, self.plant, overrides, encoders=encoders)
-        self.driver = create_driver(
-            model,
-            driver,
-            period=period,
-            clock=self.clock,
-            wait=self.net.advance,
-            bus_overrides=overrides,
-        )
+        self.plant = robot.plant
+        self.net = robot.net
+        self.driver = robot.driver(period, driver, clock=self.clock, wait=self.net.advance)
 
     def clock(self) -> float:
         return self.net.time

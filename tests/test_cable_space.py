@@ -598,7 +598,7 @@ def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_f
     """A user's robot: a shipped one with its platform's mass and inertia and its cables'
     stiffness changed, nothing else — the gains follow from the model (the lowest mode moves
     by √(stiffness/mass)) and the demo's moves track within a millimetre, without a fault."""
-    from cdprctl.daemon.service import demo_targets
+    from cdprctl.daemon.scripts import demo_targets
     from cdprctl.stiffness import lowest_mode
 
     base = load_robot(CONFIG / f"{name}.toml")

@@ -143,7 +143,7 @@ def test_a_stall_at_a_jerk_step_rides_through_on_the_springs(seed000, rate, stal
     on at the old speed through the stall, past the reference, and the next target reversed
     them (cycle 99, 12 ms: a fault without ``CableSpace._after_stall``, 1.00 of the window
     for 8 ms). Now the drives stay within 0.4 of their window (0.15-0.19 measured)."""
-    from cdprctl.daemon.service import demo_targets
+    from cdprctl.daemon.scripts import demo_targets
 
     model = dataclasses.replace(seed000, control=dataclasses.replace(seed000.control, rate=rate))
     window = model.drives.following_error_window_rad(model.cables[0].winch)
@@ -172,7 +172,7 @@ def test_stalls_through_a_reversal_ride_through_with_the_grippers(stall, every, 
     drives 3 and 5 rang in opposition until one faulted on its following error (1.87 / 1.49
     of its window; the third: beyond capacity at 0.83). At the working pose
     (``reference_pose.py``) they stay within 0.6 of it (0.34 / 0.22 / 0.49 measured)."""
-    from cdprctl.daemon.service import demo_targets
+    from cdprctl.daemon.scripts import demo_targets
     from cdprctl.model import load_robot
 
     model = load_robot(CONFIG / "seed000_grippers.toml")

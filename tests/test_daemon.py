@@ -181,36 +181,27 @@ def test_unit_file_verifies(tmp_path):
 
 
 def test_demo_script_moves_inside_the_workspace():
-    from cdprctl.control.commands import Command
-    from cdprctl.daemon.service import demo_script
+    """The demo is a script of the commands an operator would send (and, on the simulated
+    robot, a lateral force on and off): ordered, enable first and disable last, every move
+    inside the workspace box, fresh commands on every call."""
+    from cdprctl.daemon.scripts import Disturbance, demo_script
     from cdprctl.model import load_robot
 
     model = load_robot(CONFIG / "rowc.toml")
-
-    class Recorder:
-        def __init__(self):
-            self.commands = []
-            self.controller = self
-            self.sim = None
-            self.events = []
-            self.time = 0.0
-
-        def submit(self, cmd: Command) -> bool:
-            self.commands.append(cmd)
-            return True
-
-    rec = Recorder()
     script = demo_script(model, force=30.0)
     assert [t for t, _ in script] == sorted(t for t, _ in script)
-    for _, action in script:
-        action(rec)
-    kinds = [c.kind for c in rec.commands]
+    commands = [s for _, s in script if not isinstance(s, Disturbance)]
+    kinds = [c.kind for c in commands]
     assert kinds[0] == "enable" and kinds[-1] == "disable" and kinds.count("move") == 4
+    assert [s.force for _, s in script if isinstance(s, Disturbance)] == [30.0, 0.0]
     ws = model.workspace
-    for c in rec.commands:
+    for c in commands:
         if c.kind == "move":
             assert c.pose.shape == (6,)
             assert np.all(c.pose[:3] >= ws.position_min) and np.all(c.pose[:3] <= ws.position_max)
+    again = demo_script(model, force=30.0)
+    assert all(a[1] is not b[1] for a, b in zip(script, again, strict=True))
+    assert not any(isinstance(s, Disturbance) for _, s in demo_script(model))
 
 
 def test_loop_stats_window_follows_the_ring():

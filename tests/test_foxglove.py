@@ -111,6 +111,7 @@ def test_live_view_of_the_daemon(tmp_path):
     # 30 Hz for 2 s; a fresh-clone CI on this shared VM got 28 once under the suite's load
     # (the bound was 30): 10 still tells the decimation from a broken one (1 Hz: 2, every
     # cycle: 500); the rate itself is benchmarks/bench_foxglove.py's
+    assert "/scene" in got, {k: len(v) for k, v in got.items()}
     assert 10 <= len(got["/scene"]) <= 90, len(got["/scene"])
     tf = decoder(channels["/tf"]).FromString(got["/tf"][-1])
     platform = next(x for x in tf.transforms if x.child_frame_id == "platform")

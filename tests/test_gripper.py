@@ -151,7 +151,7 @@ def test_the_jaws_inertia_fed_forward_keeps_the_platform_on_its_path(grippers):
     when it shipped in torque mode: 2.21 mm, 5.20 without (they swung it on the springs,
     which the 0.3 Hz pose loop corrected only slowly); in position mode 1.80 against 6.40."""
     from cdprctl.control.states import State
-    from cdprctl.daemon.service import demo_targets
+    from cdprctl.daemon.scripts import demo_targets
     from cdprctl.experiments.closed_loop import ClosedLoop
 
     m = grippers

@@ -14,7 +14,6 @@ from conftest import CONFIG
 from cdprctl.control.torques import WinchTorques, applied_tension, friction_kernel
 from cdprctl.model import load_robot
 
-
 SMOOTHING = 0.05  # rad/s: the Coulomb model's tanh(θ̇/ω_ε), as control/torques.py documents it
 
 

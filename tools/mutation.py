@@ -53,72 +53,10 @@ class Target:
     why: str = ""
 
 
-# The modules where a wrong line is unsafe or silent (issue 44), each with the tests that cover
-# it. Test selections are the files a developer would run for that module, not the suite.
-TARGETS = [
-    Target("supervisor", "cdprctl/control/supervisor.py",
-           "tests/test_supervisor.py tests/test_ride_through.py",
-           why="states, faults, persistence, the controlled stop"),
-    Target("torques", "cdprctl/control/torques.py",
-           "tests/test_torques.py tests/test_cable_space.py",
-           why="the torque law and its clamp"),
-    Target("cia402-protocol", "drivers/cia402/protocol.py",
-           "tests/test_drivers_frames.py tests/test_sim_drive.py tests/test_canopen_drives.py",
-           why="CiA 402 codec, statusword/controlword, unit conversions"),
-    Target("cia402-cyclic", "drivers/cia402/cyclic.py",
-           "tests/test_drivers_frames.py tests/test_ride_through.py tests/test_canopen_drives.py",
-           why="the cyclic decoding and the feedback's plausibility"),
-    Target("cia402-setup", "drivers/cia402/pdo_setup.py",
-           "tests/test_drivers_frames.py tests/test_canopen_drives.py tests/test_canopen_sim.py",
-           why="the SDO set-up: PDO mapping written and read back"),
-    Target("cia402-driver", "drivers/cia402/driver.py",
-           "tests/test_drivers_frames.py tests/test_canopen_drives.py tests/test_ride_through.py",
-           why="SDO client, drive set-up, SYNC/target timing"),
-    Target("odrive", "drivers/odrive/driver.py",
-           "tests/test_drivers_frames.py tests/test_driver_contract.py",
-           why="ODrive units (turns, turns/s) and axis states"),
-    Target("sim-cia402", "sim_backend/drives/cia402.py",
-           "tests/test_sim_drive.py tests/test_canopen_sim.py tests/test_drivers_frames.py",
-           why="the simulated drives' state machine"),
-    Target("numerics", "cdprctl/numerics.py",
-           "tests/test_sim_physics.py tests/test_kinematics.py tests/test_drivers_frames.py",
-           why="the cable law, the clamp, a motor step's plausibility"),
-    Target("physics", "sim_backend/physics.py",
-           "tests/test_sim_physics.py tests/test_sim_faults.py",
-           why="the cable law's clamps, brakes, the drives' position loop"),
-    Target("path-file", "cdprctl/motion/path_file.py", "tests/test_path_files.py",
-           why="path files: units, columns, refusals"),
-    Target("path-plan", "cdprctl/motion/path_plan.py",
-           "tests/test_path_files.py tests/test_operating.py", why="the path check"),
-    Target("security", "cdprctl/telemetry/security.py",
-           "tests/test_zenoh.py -k 'refused or shipped or open_commands'",
-           why="commands fail closed"),
-    Target("validate", "cdprctl/telemetry/validate.py",
-           "tests/test_zenoh.py -k 'rejected or becomes or refused or section' tests/test_fuzz.py",
-           why="command validation at the gateway"),
-    Target("calibration-record", "cdprctl/calibration/record.py", "tests/test_homing.py",
-           why="the calibration record and its checks"),
-    Target("calibration-identify", "cdprctl/calibration/identify.py", "tests/test_homing.py",
-           why="the identification's residuals, weights and statistics"),
-]  # fmt: skip
-
-# Operators kept: the bugs a person plausibly writes. Arithmetic among + − × ÷ (not into
-# shifts, bit operations, powers or modulo), bit operations among themselves, every
-# comparison except into identity/membership tests, and/or, not, negation, True/False,
-# break/continue, numbers ±1, a loop that runs zero times, an exception replaced.
-# Left out: removing a decorator (@njit off is the same code, slower), variable replacement
-# and insertion (mostly type errors caught at import).
-EXCLUDE_OPERATORS = [
-    r"core/ReplaceBinaryOperator_(Add|Sub|Mul|Div)_(FloorDiv|Mod|Pow|RShift|LShift|BitOr|BitAnd|BitXor)$",
-    r"core/ReplaceBinaryOperator_(FloorDiv|Mod|Pow)_(RShift|LShift|BitOr|BitAnd|BitXor)$",
-    r"core/ReplaceBinaryOperator_(RShift|LShift|BitOr|BitAnd|BitXor)_(Add|Sub|Mul|Div|FloorDiv|Mod|Pow)$",
-    r"core/ReplaceComparisonOperator_(Eq|NotEq|Lt|LtE|Gt|GtE)_(Is|IsNot|In|NotIn)$",
-    r"core/ReplaceComparisonOperator_(Is|IsNot|In|NotIn)_(Eq|NotEq|Lt|LtE|Gt|GtE)$",
-    r"core/ReplaceUnaryOperator_.*Invert.*",
-    r"core/RemoveDecorator",
-    r"core/VariableReplacer",
-    r"core/VariableInserter",
-]  # fmt: skip
+TARGETS_FILE = ROOT / "tools" / "mutation.toml"
+_SPEC = tomllib.loads(TARGETS_FILE.read_text())
+TARGETS = [Target(**t) for t in _SPEC["target"]]
+EXCLUDE_OPERATORS: list[str] = _SPEC["exclude-operators"]
 
 
 def tool(name: str) -> str:
@@ -319,7 +257,7 @@ def report(targets: list[Target], tree: Path) -> str:
         "",
         "Operators: arithmetic among + − × ÷, bit operations among themselves, comparisons, "
         "and/or, not, unary minus, True/False, break/continue, numbers ±1, zero-iteration "
-        "loops, exceptions replaced (`EXCLUDE_OPERATORS` in the tool lists what is left out "
+        "loops, exceptions replaced (`tools/mutation.toml` lists what is left out "
         "and why). A mutant is killed when a test fails or the tests exceed the module's "
         "timeout; incompetent mutants (that cannot run at all) count as killed.",
         "",

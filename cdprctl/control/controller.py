@@ -117,6 +117,11 @@ class Controller:
             CommandKind.RESUME: self._resume,
             CommandKind.ABORT: self._abort,
         }
+        d.gains = {
+            "force_feedback": self.cable_space.iff,
+            "disturbance_bandwidth": self.cable_space.disturbance_bandwidth,
+            "pose_bandwidth": self.pose.bandwidth.tolist(),
+        }
         # what outside readers see, bound once
         d.position, d.rotation = e.position, e.rotation
         d.velocity, d.omega = e.velocity, e.omega

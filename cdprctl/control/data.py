@@ -86,6 +86,9 @@ class ControlData:
         self.motor_position: np.ndarray = np.zeros(m)  # rad
         self.grasp: Any = None  # GraspSensor, with grippers
         self.tda_method = ""
+        # where the loop's gains come from, set once (controller.py): force_feedback rad/s,
+        # disturbance_bandwidth Hz, pose_bandwidth Hz per axis (torque mode's, set by hand)
+        self.gains: dict[str, Any] = {}
         # what moves the reference (MOTIONS), and a path's progress (path_follower.py)
         self.motion = ""
         self.path_state = ""  # PATH_STATES

@@ -121,7 +121,8 @@ class FoxgloveLink:
             daemon=True,
         )
         self._next = 0.0
-        self._period = 1.0 / model.foxglove.rate
+        self.period = 1.0 / model.foxglove.rate  # s
+        self.start_failure = f"the Foxglove view did not start on {host}:{port} in 20 s"
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
@@ -131,19 +132,25 @@ class FoxgloveLink:
         """Whether the view's period has come (then the caller ``write``s)."""
         now = time.monotonic()
         # the I/O thread's ticks jitter around the period: a tick a little early still counts
-        slack = 0.3 * self._period
+        slack = 0.3 * self.period
         if now < self._next - slack:
             return False
-        self._next = max(self._next + self._period, now - slack)
+        self._next = max(self._next + self.period, now - slack)
         return True
 
-    def write(self, values: dict[str, Any]) -> None:
+    def write(self, values: dict[str, Any], stats: Any = None) -> None:
         """The loop's values (``snapshot.controller_values``) into the view's snapshot."""
         self.snapshot.write(values)
 
     def event(self, t: float, text: str, kind: str = "event") -> None:
+        if kind == "fault" and not text:  # a fault reset: the log says so in its own line
+            return
         with contextlib.suppress(queue.Full):
             self.events.put_nowait((kind, t, text))
+
+    def take_commands(self) -> list[Any]:
+        """The view takes no commands."""
+        return []
 
     def close(self) -> None:
         self.stop.set()

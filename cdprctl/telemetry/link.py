@@ -43,12 +43,18 @@ class TelemetryLink:
             daemon=True,
         )
         self._next_timing = 0.0
+        self.period = 1.0 / model.zenoh.state_rate  # s: the state's rate
+        self.start_failure = "the Zenoh gateway did not start in 20 s"
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
-    def publish(self, values: dict[str, Any], stats: Any) -> None:
+    def due(self) -> bool:
+        """Every tick of the daemon's I/O thread (it wakes at the state's rate)."""
+        return True
+
+    def write(self, values: dict[str, Any], stats: Any) -> None:
         """The loop's values (``snapshot.controller_values``) into the snapshot, the loop's
         timing with them at ``zenoh.timing_rate``."""
         now = time.monotonic()

@@ -1,0 +1,195 @@
+"""What ``cdprctl run`` prints and keeps: the start-up lines (gains, the drives' identities),
+the status line, the tracking statistics and the summary at exit; the configuration summary
+the gateway serves. Read from ``ControlData`` and the loop's statistics only."""
+
+from __future__ import annotations
+
+import collections
+import json
+from typing import Any
+
+import numpy as np
+
+from cdprctl.control.data import PHASES, ControlData
+from cdprctl.control.states import State
+from cdprctl.model.robot import RobotModel
+
+
+class RunReport:
+    def __init__(self, model: RobotModel, data: ControlData, stats: Any):
+        self.model, self.data, self.stats = model, data, stats
+        self.errors: list[float] = []  # m, the reference against the estimate
+        self.true_errors: list[float] = []  # m, against the simulated platform
+        self.faults: collections.Counter[str] = collections.Counter()
+        self.summary: dict[str, Any] = {}
+
+    def track(self, true_position: Any) -> None:
+        """One sample of the tracking error while the drives hold or move the platform."""
+        d = self.data
+        if d.state in (State.ENABLED, State.MOVING):
+            ref = d.reference[:3]
+            self.errors.append(float(np.linalg.norm(ref - d.position)))
+            if true_position is not None:  # the truth the simulator knows
+                self.true_errors.append(float(np.linalg.norm(ref - true_position)))
+
+    def status_line(self, now: float, every: float, true_position: Any) -> str:
+        d, p = self.data, self.data.position
+        # percentiles over the cycles since the last line (the whole run: in the summary)
+        s = self.stats.summary(round(every / self.model.control.period))
+        sim = ""
+        if true_position is not None:
+            q = true_position
+            sim = f" true [{q[0]:.3f} {q[1]:.3f} {q[2]:.3f}]"
+        return (
+            f"t={now:6.1f}s {d.state.value:<9} P [{p[0]:.3f} {p[1]:.3f} {p[2]:.3f}] m{sim} err "
+            f"{np.linalg.norm(d.pose_error[:3]) * 1e3:5.2f} mm "
+            f"t {d.tensions.min():5.1f}..{d.tensions.max():5.1f} N tda {d.tda_status.name}"
+            + (f" sat {d.saturation:.2f}" if d.saturation < 1.0 else "")
+            + (f" path {d.path_segment}/{d.path_segments} "
+               f"{d.path_fraction:.0%} {d.path_state}" if d.path_segments else "")
+            + " "
+            f"late p99 {s.get('lateness_p99_us', 0):6.0f} us missed {int(s.get('missed', 0))}"
+        )  # fmt: skip
+
+    def finish(self, driver_stats: dict[str, Any]) -> list[str]:
+        """The summary (``self.summary``) and its lines, at exit."""
+        s, d = self.stats.summary(), self.data
+        errs = np.array(self.errors) if self.errors else np.zeros(1)
+        per_phase = self.stats.phases[: min(self.stats.count, self.stats.size)]
+        phases = {
+            name: (float(np.median(per_phase[:, k])), float(np.percentile(per_phase[:, k], 99)))
+            for k, name in enumerate(PHASES)
+        } if len(per_phase) else {}  # fmt: skip
+        true = {}
+        if self.true_errors:
+            true = {
+                "true_tracking_rms_mm": float(np.sqrt(np.mean(np.square(self.true_errors)))) * 1e3,
+                "true_tracking_max_mm": float(np.max(self.true_errors)) * 1e3,
+            }
+        self.summary = {
+            "loop": s,
+            "phases_us": phases,
+            "tracking_rms_mm": float(np.sqrt(np.mean(errs**2)) * 1e3),
+            "tracking_max_mm": float(errs.max() * 1e3),
+            **true,
+            "final_state": d.state.value,
+            "fault": d.fault_reason,
+            "driver": driver_stats,
+            "faults": dict(self.faults),
+            "saturated_cycles": d.saturated_cycles,
+        }
+        lines = [
+            "summary:",
+            f"  cycles {int(s.get('cycles', 0))}, wake lateness p50 "
+            f"{s.get('lateness_p50_us', 0):.1f} us, p99 {s.get('lateness_p99_us', 0):.1f}"
+            f" us, max {s.get('lateness_max_us', 0):.0f} us; compute p50 "
+            f"{s.get('compute_p50_us', 0):.0f} us, p99 {s.get('compute_p99_us', 0):.0f} "
+            f"us; overruns {int(s.get('overruns', 0))}, missed periods "
+            f"{int(s.get('missed', 0))} ({s.get('missed_percent', 0):.3f} %)",
+        ]
+        if "sim_step_p50_us" in s:
+            lines.append(
+                f"  the simulated robot's step before each cycle (not in compute): p50 "
+                f"{s['sim_step_p50_us']:.0f} us, p99 {s['sim_step_p99_us']:.0f} us"
+            )
+        if phases:
+            lines.append("  per phase (median/p99 us): "
+                         + ", ".join(f"{k} {v[0]:.0f}/{v[1]:.0f}" for k, v in phases.items()))
+        if d.saturated_cycles:
+            lines.append(f"  feedback saturated in {d.saturated_cycles} cycles (the cables gave "
+                         "what they could: docs/control.md)")
+        if self.faults:
+            lines.append("  faults handled: "
+                         + ", ".join(f"{k} {n}" for k, n in self.faults.most_common()))
+        if true:
+            lines.append(f"  tracking error (the simulated platform) RMS "
+                         f"{true['true_tracking_rms_mm']:.2f} mm, max "
+                         f"{true['true_tracking_max_mm']:.2f} mm")
+        lines.append(
+            f"  tracking error (estimated) RMS {self.summary['tracking_rms_mm']:.2f} mm, "
+            f"max {self.summary['tracking_max_mm']:.2f} mm; final state "
+            f"{d.state.value}" + (f" ({d.fault_reason})" if d.fault_reason else "")
+        )  # fmt: skip
+        return lines
+
+
+def gains_line(model: RobotModel, data: ControlData) -> str:
+    """Where the loop's gains come from: in position mode all from the model."""
+    g = data.gains
+    if model.drives.holds_lengths:
+        torque = ", ".join(model.cables[i].name for i in model.drives.torque_cables)
+        return (
+            f"gains from the model: drives hold the lengths (csp, position loops "
+            f"{model.drives.position_loop_bandwidth:g} Hz on each rotor's inertia"
+            + (f"; cables {torque} in torque mode, their grippers'" if torque else "")
+            + f"), force feedback {g['force_feedback']:.1f} rad/s (the lowest mode × "
+            f"{model.control.force_feedback:g}), external-wrench estimate "
+            f"{g['disturbance_bandwidth']:.3g} Hz"
+        )
+    return (
+        "gains: torque mode, the pose loop at [control] bandwidth "
+        + "/".join(f"{x:.2g}" for x in g["pose_bandwidth"])
+        + " Hz (x y z roll pitch yaw; set by hand: "
+        'docs/control.md, "Gains from the model")'
+    )
+
+
+def identity_lines(model: RobotModel, driver: Any) -> tuple[list[str], str]:
+    """The drives' identities (0x1018, read at set-up): a line per drive, and the JSON the
+    status carries ("" when the driver reads none)."""
+    identities = getattr(driver, "identities", None)
+    nodes = getattr(driver, "node", None)
+    if not identities or nodes is None:
+        return [], ""
+    lines, drives = [], []
+    for c, ident in enumerate(identities):
+        node = int(nodes[c])
+        drives.append({"cable": model.cables[c].name, "node": node, **(ident or {})})
+        text = ", ".join(f"{k} 0x{v:08X}" for k, v in ident.items()) if ident else (
+            "no identity object")  # fmt: skip
+        lines.append(f"drive of cable index {c} (node {node}): {text}")
+    return lines, json.dumps(drives)
+
+
+def config_summary(model: RobotModel, simulated: bool) -> dict[str, Any]:
+    """What the gateway's status serves of the configuration."""
+    import cdprctl
+    from cdprctl.telemetry.scene import SceneLayout
+
+    m, c = model, model.control
+    return {
+        "robot": m.name,
+        "config_file": m.source_file,
+        "cables": [w.name for w in m.cables],
+        "tension_min": m.tension_min.tolist(),
+        "tension_max": m.tension_max.tolist(),
+        "torque_limit": [w.winch.torque_limit for w in m.cables],
+        "rate_hz": c.rate,
+        "tda": c.tda_method,
+        "limits": {  # what a jog may ask (control/jog.py)
+            "max_velocity": c.max_velocity,
+            "max_angular_velocity": c.max_angular_velocity,
+            "jog_deadman": c.jog_deadman,
+        },
+        "workspace": {
+            "position_min": m.workspace.position_min.tolist(),
+            "position_max": m.workspace.position_max.tolist(),
+            "max_angle": m.workspace.max_angle,
+        },
+        # what a client needs to draw the robot (cdprctl record --mcap's scene)
+        "layout": SceneLayout.from_model(m).to_dict(),
+        "simulated": simulated,
+        "versions": {"cdprctl": getattr(cdprctl, "__version__", "?"), **_versions()},
+    }
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("eclipse-zenoh", "python-can", "ruckig", "numpy"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "?"
+    return out

@@ -1,0 +1,60 @@
+"""``cdprctl run --sim``: the simulated robot in the daemon's process, on in-process buses
+(``sim_backend.network.SimulatedRobot``, the recipe lock-step uses), stepped by the loop's clock
+before each cycle and pushed by the demo's lateral force."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from cdprctl.model.robot import RobotModel
+
+
+class SimStepper:
+    def __init__(self, model: RobotModel):
+        from sim_backend.network import SimulatedRobot
+
+        self.robot = SimulatedRobot(model)
+        self.plant, self.net = self.robot.plant, self.robot.net
+        self._driver: Any = None
+        self._last_t: float | None = None
+
+    def driver(self, period: float) -> Any:
+        """The daemon's driver on the simulated buses: its start-up calls wait in real time
+        while the simulated robot keeps time."""
+        net = self.net
+
+        def wait(dt: float) -> None:
+            net.advance(dt)
+            time.sleep(dt)
+
+        self._driver = self.robot.driver(period, wait=wait)
+        return self._driver
+
+    def step(self, t: float) -> None:
+        """Before the cycle at ``t`` (the loop's clock, s): the simulated robot follows the
+        loop's clock, skipped periods included: the last cycle's frames handled at the time
+        they were sent, then the physics up to this cycle. (Stepped after the cycle instead,
+        every frame was handled a cycle's time late: after a late cycle the drives took a
+        three-period target step at the last interval and faulted on their following error,
+        `--sim --no-realtime` under load.) The frames were sent when the last cycle's
+        computation ended (the targets are for that instant: drivers/cia402 carries them to
+        it), not when it started."""
+        dt = 0.0 if self._last_t is None else t - self._last_t
+        sent = 0.0 if self._last_t is None else self._driver.sent_at - self._last_t
+        self._last_t = t
+        # all of a stall (capped at 0.05 s, the simulated robot fell behind the loop by the
+        # rest of a longer one, and its drives saw the next SYNC as a target step)
+        self.net.advance(min(max(dt, 0.0), self.net.MAX_CATCH_UP), sent_after=sent)
+
+    def disturb(self, force: float) -> None:
+        """A lateral force ``force`` N along y at the platform, ramped over 1 s from now."""
+        from sim_backend.faults import FaultEvent, FaultInjector
+
+        value = (0.0, force, 0.0, 0.0, 0.0, 0.0)
+        FaultInjector([FaultEvent(self.net.time, "external_wrench", value=value, ramp=1.0)]).attach(
+            self.net
+        )
+
+    def close(self) -> None:
+        self.net.close()
