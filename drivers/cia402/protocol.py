@@ -237,24 +237,28 @@ EMCY_CODES = {
     0x9000: "external error",
     0xFF00: "device specific",
 }
-EMCY_CLASSES = {
-    0x1: "generic",
-    0x2: "current",
-    0x3: "voltage",
-    0x4: "temperature",
-    0x5: "device hardware",
-    0x6: "device software",
-    0x7: "additional modules",
-    0x8: "monitoring / communication",
-    0x9: "external",
-    0xF: "device specific",
-}
+# (value, mask, class) of CiA 301 Table 21: the first digit, or the first two where the table
+# names them (0x5, 0x7, 0x9: xx00 only; 0xF0 additional functions, 0xFF device specific)
+EMCY_CLASSES = (
+    (0x1000, 0xFF00, "generic"),
+    (0x2000, 0xF000, "current"),
+    (0x3000, 0xF000, "voltage"),
+    (0x4000, 0xF000, "temperature"),
+    (0x5000, 0xFF00, "device hardware"),
+    (0x6000, 0xF000, "device software"),
+    (0x7000, 0xFF00, "additional modules"),
+    (0x8000, 0xF000, "monitoring / communication"),
+    (0x9000, 0xFF00, "external"),
+    (0xF000, 0xFF00, "additional functions"),
+    (0xFF00, 0xFF00, "device specific"),
+)
 
 
 def describe_emcy(code: int) -> str:
     if code in EMCY_CODES:
         return EMCY_CODES[code]
-    cls = EMCY_CLASSES.get(code >> 12, "unknown class")
+    cls = next((name for value, mask, name in EMCY_CLASSES if code & mask == value),
+               "unknown class")  # fmt: skip
     return f"{cls} error (code 0x{code:04X})"
 
 

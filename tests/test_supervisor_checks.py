@@ -1,0 +1,147 @@
+"""The supervisor's checks one by one, at their limits and in their words: which values fault,
+after how long, with which reason (the value, the limit, the unit), and what the stop is. Each
+case here was a mutant of supervisor.py that the table of test_supervisor.py let through
+(make mutation, docs/mutation.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import FakeDrives
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import FaultKind, State
+from cdprctl.control.supervisor import Supervisor
+from cdprctl.forward_kinematics import FKStatus
+from cdprctl.model import load_robot
+from drivers.base import Lifecycle
+
+ROOT = Path(__file__).resolve().parents[1]
+ROWC = load_robot(ROOT / "config" / "rowc.toml")
+CFG = ROWC.control
+M = ROWC.n_cables
+TENSION_LIMITS = np.full(M, 10.0)  # N
+TORQUE_LIMITS = np.full(M, 2.0)  # N·m
+
+
+def rig(state: State = State.ENABLED, position_mode: bool = False):
+    d = ControlData(M, 0)
+    d.state = state
+    drives = FakeDrives(M, Lifecycle.ACTIVE)
+    s = Supervisor(CFG, d, drives, lambda: None,
+                   TENSION_LIMITS if position_mode else None,
+                   TORQUE_LIMITS if position_mode else None)  # fmt: skip
+    return s, d, drives
+
+
+def run(s: Supervisor, t0: float, t1: float, dt: float = 0.002, **kw) -> None:
+    args = {"fk_status": FKStatus.CONVERGED, "fk_residual": 0.0, "speed": 0.0}
+    args.update(kw)
+    for t in np.arange(t0, t1 + 1e-12, dt):
+        s.supervise(float(t), args["fk_status"], args["fk_residual"], args["speed"], False)
+
+
+def test_reasons_name_the_value_the_limit_and_the_unit():
+    s, d, _ = rig()
+    residual = CFG.max_fk_residual + 1.234e-3
+    run(s, 1.0, 1.0, fk_residual=residual)
+    assert d.fault_kind is FaultKind.ENCODERS_DISAGREE
+    assert (f"forward-kinematics residual {residual * 1e3:.2f} mm > "
+            f"{CFG.max_fk_residual * 1e3:.0f} mm" in d.fault_reason)  # fmt: skip
+    # a tracking error along x alone (the norm takes every axis)
+    s, d, _ = rig(State.MOVING)
+    d.pose_error[0] = CFG.max_position_error + 1.23e-3
+    run(s, 1.0, 1.0)
+    assert d.fault_kind is FaultKind.TRACKING
+    assert d.fault_reason == (f"tracking error {(CFG.max_position_error + 1.23e-3) * 1e3:.1f} mm "
+                              f"> {CFG.max_position_error * 1e3:.1f} mm")  # fmt: skip
+    s, d, v = rig()
+    v.states.feedback_age[2] = CFG.max_feedback_age + 0.0012
+    run(s, 1.0, 1.0 + CFG.period, dt=CFG.period)
+    assert d.fault_kind is FaultKind.FEEDBACK_AGE
+    assert d.fault_reason == (f"feedback {(CFG.max_feedback_age + 0.0012) * 1e3:.1f} ms old > "
+                              f"{CFG.max_feedback_age * 1e3:.0f} ms")  # fmt: skip
+
+
+def test_a_speed_at_the_limit_is_not_over_it():
+    s, d, _ = rig()
+    run(s, 1.0, 1.5, speed=CFG.max_speed)
+    assert d.state is State.ENABLED
+    run(s, 1.5, 1.5 + Supervisor.OVER_SPEED_FOR, speed=CFG.max_speed * 1.001)
+    assert d.fault_kind is FaultKind.OVER_SPEED
+
+
+def test_beyond_capacity_brakes_at_once_without_a_controlled_stop():
+    """A drive at its torque limit for TORQUE_FOR: the cables cannot hold the platform, so no
+    controlled stop (it would hold with the same torques): FAULT, drives off, brakes."""
+    s, d, v = rig(State.MOVING, position_mode=True)
+    v.states.torque[3] = -TORQUE_LIMITS[3]
+    run(s, 1.0, 1.0 + Supervisor.TORQUE_FOR - 0.004)
+    assert d.state is State.MOVING
+    run(s, 1.0 + Supervisor.TORQUE_FOR - 0.002, 1.0 + Supervisor.TORQUE_FOR)
+    assert d.state is State.FAULT and d.fault_kind is FaultKind.BEYOND_CAPACITY
+    assert "deactivate" in v.calls
+    assert "cable index 3 at its torque limit (-2.00 of ±2.00 N·m) for 30 ms" in d.fault_reason
+
+
+def test_the_cable_tension_check_faults_on_what_persists_beyond_its_limit():
+    s, d, _ = rig(State.ENABLED, position_mode=True)
+    d.internal_tension_error[5] = 1.5 * TENSION_LIMITS[5]  # 1.5 times: faster than plain time
+    d.internal_leverage[:] = 0.5
+    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    assert d.fault_kind is FaultKind.CABLE_TENSION and d.state is State.STOPPING
+    assert "index 5:" in d.fault_reason and "+15.0 N at index 5 (> 10.0 N" in d.fault_reason
+    assert f"for {Supervisor.TENSION_FOR * 1e3:.0f} ms;" in d.fault_reason
+    s, d, _ = rig(State.ENABLED, position_mode=True)
+    d.internal_tension_error[5] = 0.99 * TENSION_LIMITS[5]
+    run(s, 1.0, 2.0)
+    assert d.state is State.ENABLED
+
+
+def test_a_drive_at_its_torque_limit_leaves_the_tension_check_to_the_capacity_check():
+    s, d, v = rig(State.ENABLED, position_mode=True)
+    d.internal_tension_error[1] = 3.0 * TENSION_LIMITS[1]
+    v.states.torque[1] = TORQUE_LIMITS[1]
+    run(s, 1.0, 1.0 + 0.02)  # less than TORQUE_FOR: no fault of either kind yet
+    assert d.state is State.ENABLED
+
+
+@pytest.mark.parametrize(
+    "internal, leverage, suspects, words",
+    [
+        ([0, 0, 9.0, 0, 1.0, 0, 0, 0], np.full(8, 0.5), [2], "index 2:"),
+        # equal scores: both named, best first, "or" between the last two
+        ([0, 4.0, 0, 4.0, 0, 0, 0, 0], np.full(8, 0.5), [1, 3], "index 1 or 3:"),
+        ([5.0, 0, 4.9, 0, 4.8, 0, 0, 0], np.full(8, 0.5), [0, 2, 4], "index 0, 2 or 4:"),
+        # the leverage weighs: |e|/√leverage, so the smaller error on the smaller leverage wins
+        ([4.0, 0, 0, 0, 0, 0, 0, 3.0], np.array([1.0, 1, 1, 1, 1, 1, 1, 0.25]), [7], "index 7:"),
+        # at 0.9 of the best a cable is a suspect, at 0.8 it is not
+        ([10.0, 9.05, 8.0, 0, 0, 0, 0, 0], np.full(8, 0.5), [0, 1], "index 0 or 1:"),
+        # a cable the null space does not reach (leverage 0) with no error: not a suspect
+        ([0, 6.0, 0, 0, 0, 0, 0, 0], np.array([0.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), [1],
+         "index 1:"),
+    ],
+)  # fmt: skip
+def test_the_suspects_are_the_cables_that_explain_the_internal_error(
+    internal, leverage, suspects, words
+):
+    with np.errstate(all="raise"):  # no 0/0 on the fault path (a leverage of zero)
+        assert Supervisor._suspects(np.array(internal, float), leverage) == suspects
+    s, d, _ = rig(State.ENABLED, position_mode=True)
+    d.internal_tension_error[:] = np.array(internal, float) * 5.0  # N, beyond the 10 N limit
+    d.internal_leverage[:] = leverage
+    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    assert d.fault_kind is FaultKind.CABLE_TENSION
+    assert words in d.fault_reason, d.fault_reason
+    assert ("would explain it" in d.fault_reason) == (len(suspects) > 1)
+
+
+def test_the_controlled_stop_holds_for_stop_duration_then_disables():
+    s, d, v = rig(State.MOVING)
+    s.fault(10.0, FaultKind.TRACKING, "x", hold=True)
+    run(s, 10.0, 10.0 + CFG.stop_duration - 0.01)
+    assert d.state is State.STOPPING and "deactivate" not in v.calls
+    run(s, 10.0 + CFG.stop_duration, 10.0 + CFG.stop_duration)
+    assert d.state is State.FAULT and "deactivate" in v.calls
