@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from conftest import CONFIG, ROOT
 
+from cdprctl import realtime as rt
 from cdprctl.control.loop import LoopStats, run_loop
-from cdprctl.daemon import rt
 from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 
 

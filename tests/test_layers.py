@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # bottom → top; the first prefix that matches a module names its layer
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("cdprctl.rotation", "cdprctl.numerics")),
+    ("core", ("cdprctl.rotation", "cdprctl.numerics", "cdprctl.realtime")),
     (
         "model",
         tuple(
@@ -99,7 +99,21 @@ def test_imports_point_down(module, path):
         control = imp.startswith("cdprctl.control")
         if telemetry and control and not imp.startswith(TELEMETRY_MAY_USE):
             up.append(f"{imp} (telemetry may use only {', '.join(TELEMETRY_MAY_USE)})")
+        if telemetry and imp.startswith("cdprctl.daemon"):  # the daemon uses the telemetry
+            up.append(f"{imp} (the telemetry runs beside the daemon, never on it)")
     assert up == [], f"{module} imports upwards: {up}"
+
+
+def test_the_checker_sees_the_telemetry_import_the_daemon(tmp_path, monkeypatch):
+    """The rule within the services layer can fail too: a planted import of the daemon from
+    a telemetry module is reported."""
+    f = tmp_path / "x.py"
+    f.write_text("def f():\n    from cdprctl.daemon.service import Daemon\n")
+    monkeypatch.setattr(
+        "test_layers.imports_of", lambda module, path: ["cdprctl.daemon.service.Daemon"]
+    )
+    with pytest.raises(AssertionError, match="runs beside the daemon"):
+        test_imports_point_down("cdprctl.telemetry.x", f)
 
 
 def test_the_checker_sees_an_upward_import(tmp_path):

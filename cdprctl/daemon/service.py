@@ -22,12 +22,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from cdprctl import realtime as rt
 from cdprctl.control.commands import Command, CommandKind
 from cdprctl.control.data import PHASES
 from cdprctl.control.loop import LoopStats
 from cdprctl.control.manager import ControllerManager
 from cdprctl.control.states import State
-from cdprctl.daemon import rt
 from cdprctl.daemon.links import Links, links_of
 from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cdprctl.daemon import rt
+from cdprctl import realtime as rt
 from cdprctl.daemon.report import identity_lines
 from cdprctl.daemon.scripts import PathScript
 

@@ -29,7 +29,7 @@ def foxglove_main(
     import foxglove
     from foxglove.channels import FrameTransformsChannel, LogChannel, SceneUpdateChannel
 
-    from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
+    from cdprctl.realtime import loop_cpu, yield_to_the_loop
     from cdprctl.telemetry.foxglove_messages import (
         SIGNALS_SCHEMA,
         TOPICS,

@@ -40,7 +40,7 @@ def gateway_main(
     """Runs until ``stop`` is set or the daemon's process is gone."""
     import zenoh
 
-    from cdprctl.daemon.rt import loop_cpu, yield_to_the_loop
+    from cdprctl.realtime import loop_cpu, yield_to_the_loop
     from cdprctl.telemetry.session import open_session
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
