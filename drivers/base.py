@@ -16,7 +16,6 @@ per-mille) are converted once, at this edge, by the protocol subclass.
 from __future__ import annotations
 
 import contextlib
-import enum
 import logging
 import math
 import time
@@ -29,61 +28,13 @@ from numba import njit
 
 from cdprctl.numerics import clamp
 from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
+from drivers.vocabulary import DriverStats, DriveState, Lifecycle, WinchStates
 
 _LOG = logging.getLogger("cdprctl.drivers")
 
 if TYPE_CHECKING:
     from cdprctl.model.drives import DrivesConfig
     from cdprctl.model.robot import RobotModel
-
-
-class Lifecycle(enum.Enum):
-    UNCONFIGURED = "unconfigured"
-    INACTIVE = "inactive"  # buses open, feedback readable, drives not enabled
-    ACTIVE = "active"  # drives enabled, torque commands applied
-    ERROR = "error"
-    FINALIZED = "finalized"
-
-
-class DriveState(enum.IntEnum):
-    """Protocol-independent drive state."""
-
-    UNKNOWN = 0  # no feedback yet
-    DISABLED = 1  # power stage off (brake holds)
-    READY = 2  # ready / switched on, not enabled
-    ENABLED = 3  # torque applied
-    QUICK_STOP = 4
-    FAULT = 5
-
-
-class WinchStates:
-    """Feedback of every winch (SI, motor side), preallocated and overwritten by ``read``."""
-
-    def __init__(self, m: int):
-        self.position = np.zeros(m)  # rad
-        self.velocity = np.zeros(m)  # rad/s
-        self.torque = np.zeros(m)  # N·m
-        self.state = np.zeros(m, dtype=np.int64)  # DriveState
-        self.feedback_age = np.full(m, math.inf)  # s since the last feedback
-        self.sampled_at = np.full(m, -math.inf)  # s: when the last feedback was taken (its SYNC)
-        self.fault_code = np.zeros(m, dtype=np.int64)  # drive error code, 0 when none
-        self.stamp = 0.0  # s, the time given to read()
-
-
-class DriverStats:
-    def __init__(self) -> None:
-        self.cycles = 0
-        self.frames_sent = 0
-        self.frames_received = 0
-        self.frames_ignored = 0  # foreign ids, wrong lengths
-        self.missed_feedback = 0  # cable-cycles without feedback
-        self.implausible_frames = 0  # position steps no motor can make: dropped
-        self.clamped_commands = 0  # torques beyond the limit, clamped
-        self.rejected_commands = 0  # non-finite torques, replaced by the last valid one
-        self.send_errors = 0
-
-    def as_dict(self) -> dict[str, int]:
-        return dict(vars(self))
 
 
 class WinchDriver(ABC):
@@ -156,11 +107,13 @@ class WinchDriver(ABC):
         self.lifecycle = Lifecycle.INACTIVE
 
     def activate(self, timeout: float = 2.0) -> None:
-        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``."""
+        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``. The
+        non-blocking ``begin_activate`` with the cycles run here: ``read`` is where every
+        drive reporting enabled makes the driver ``ACTIVE``, for both."""
         self._require(Lifecycle.INACTIVE)
         self._command[:] = 0.0
         self._last_command[:] = 0.0
-        self._request_enable(True)
+        self.begin_activate()
         deadline = self.clock() + timeout
         while True:
             now = self.clock()
@@ -168,17 +121,16 @@ class WinchDriver(ABC):
             self.write(now, self._command)
             if self.lifecycle is Lifecycle.ERROR:
                 raise self.error or DriverOperationError("activation failed")
-            if np.all(self.states.state == DriveState.ENABLED):
-                break
+            if self.lifecycle is Lifecycle.ACTIVE:
+                return
             if now > deadline:
                 not_on = [i for i in range(self.m) if self.states.state[i] != DriveState.ENABLED]
-                self._request_enable(False)
+                self.begin_deactivate()
                 raise DriverTimeoutError(
                     f"drives of cable indices {not_on} not enabled after {timeout:g} s",
                     not_on[0],
                 )
             self.wait(self.period)
-        self.lifecycle = Lifecycle.ACTIVE
 
     def deactivate(self, timeout: float = 1.0) -> None:
         """Disable the drives (brakes hold) → ``INACTIVE``."""

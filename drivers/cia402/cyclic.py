@@ -13,6 +13,19 @@ from numba import njit
 
 from cdprctl.numerics import clamp, plausible_step
 from drivers.cia402 import protocol as p
+from drivers.vocabulary import DriveState
+
+# each CiA 402 power state as the control side's protocol-independent drive state
+GENERIC_STATE = {
+    p.PowerState.NOT_READY_TO_SWITCH_ON: DriveState.DISABLED,
+    p.PowerState.SWITCH_ON_DISABLED: DriveState.DISABLED,
+    p.PowerState.READY_TO_SWITCH_ON: DriveState.READY,
+    p.PowerState.SWITCHED_ON: DriveState.READY,
+    p.PowerState.OPERATION_ENABLED: DriveState.ENABLED,
+    p.PowerState.QUICK_STOP_ACTIVE: DriveState.QUICK_STOP,
+    p.PowerState.FAULT_REACTION_ACTIVE: DriveState.FAULT,
+    p.PowerState.FAULT: DriveState.FAULT,
+}
 
 #: PowerState of every statusword, by its bits 0-6 (the only ones Table 30 looks at)
 POWER_STATE_OF_SW7 = np.array([int(p.decode_statusword(sw)) for sw in range(128)], dtype=np.int64)

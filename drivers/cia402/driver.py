@@ -18,30 +18,18 @@ from typing import Any
 import can
 import numpy as np
 
-from drivers.base import DriveState, Lifecycle, register_driver
+from drivers.base import Lifecycle, register_driver
 from drivers.canbase import CanWinchDriver
-from drivers.cia402 import cyclic, pdo_setup
+from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
-from drivers.cia402.dcf import parameter_values
+from drivers.cia402.cyclic import GENERIC_STATE
+from drivers.cia402.drive_setup import configure_drive
+from drivers.cia402.sdo_client import SdoClient
 from drivers.errors import (
     DriveFaultError,
     DriverError,
-    DriverInitializationError,
     DriverOperationError,
-    DriverTimeoutError,
-    SdoAbortError,
 )
-
-_GENERIC_STATE = {
-    p.PowerState.NOT_READY_TO_SWITCH_ON: DriveState.DISABLED,
-    p.PowerState.SWITCH_ON_DISABLED: DriveState.DISABLED,
-    p.PowerState.READY_TO_SWITCH_ON: DriveState.READY,
-    p.PowerState.SWITCHED_ON: DriveState.READY,
-    p.PowerState.OPERATION_ENABLED: DriveState.ENABLED,
-    p.PowerState.QUICK_STOP_ACTIVE: DriveState.QUICK_STOP,
-    p.PowerState.FAULT_REACTION_ACTIVE: DriveState.FAULT,
-    p.PowerState.FAULT: DriveState.FAULT,
-}
 
 
 @register_driver
@@ -132,10 +120,11 @@ class Cia402Driver(CanWinchDriver):
         self._prev = np.full((m, 2), -math.inf)  # last position (rad) and its instant (s)
         self._tpdo1 = np.zeros((4 * m, 4), dtype=np.int64)  # the cycle's TPDO1s, decoded
         self._rpdo_fields = np.zeros((m, 2), dtype=np.int64)  # controlword, torque per-mille
-        self._generic = np.array([int(_GENERIC_STATE[s]) for s in sorted(p.PowerState)])
+        self._generic = np.array([int(GENERIC_STATE[s]) for s in sorted(p.PowerState)])
         self._nmt_state = np.full(m, -1, dtype=np.int64)
         self._emcy = np.zeros(m, dtype=np.int64)
         self._sdo_reply: dict[int, bytes] = {}
+        self.sdo = SdoClient(self)
         self._enable = False
         self._reset_request = 0  # cycles left sending the fault-reset edge
         self._last_sync = -math.inf  # s (clock): the last SYNC sent
@@ -147,16 +136,16 @@ class Cia402Driver(CanWinchDriver):
     # -- hooks: set-up ------------------------------------------------------------------------
     def _configure_drives(self, timeout: float) -> None:
         """Each drive in PRE-OPERATIONAL by SDO (``_configure_drive``), then NMT start."""
-        self._nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
+        self.sdo.nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
         for c in range(self.m):
             self._configure_drive(c, timeout)
-        self._nmt_all(p.NMT_START)
+        self.sdo.nmt_all(p.NMT_START)
         self._started = True
 
         # cycle (zero torque, drives disabled) until every drive has sent feedback
         def resend_start(now: float) -> None:
             if int(now / 0.5) != int((now - self.period) / 0.5):
-                self._nmt_all(p.NMT_START)  # a lost NMT start (lossy buses) is sent again
+                self.sdo.nmt_all(p.NMT_START)  # a lost NMT start (lossy buses) is sent again
 
         self._await_first_feedback(
             timeout,
@@ -165,140 +154,8 @@ class Cia402Driver(CanWinchDriver):
             resend_start,
         )
 
-    SDO_RETRY = 0.25  # s: a request (or its answer) lost on a lossy bus is sent again
-
     def _configure_drive(self, c: int, timeout: float) -> None:
-        """Identity (0x1018, logged), rated torque (0x6076) against the config, the PDOs the
-        codec needs (``pdo_setup``), mode (0x6502 first), heartbeat, abort-connection option,
-        torque limit (0x6072), SYNC counter and, in position mode, the following error."""
-        n = int(self.node[c])
-        who = f"drive of cable index {c} (node {n})"
-        mode = self.modes[c]
-
-        def read(index: int, sub: int) -> int:
-            return self._sdo_read(c, index, sub, timeout, signed=False)
-
-        def write(index: int, sub: int, value: int, size: int) -> None:
-            self._sdo_write(c, index, sub, value, size, timeout)
-
-        self.identities[c] = self._identity(read)
-        # Five heartbeats per timeout: with three (167 ms of 0.5 s) the loop's 4 ms ticks left
-        # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
-        # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
-        # the bus-load budget counts
-        hb_ms = max(1, round(self.config.heartbeat_timeout * 1000 / 5))
-        # before a DCF can write it
-        self._reset_flags[c] = self._optional(read, p.OD_PRODUCER_HEARTBEAT) != hb_ms
-        dcf = self._dcf[c]
-        if dcf:  # the integrator's parameters first; cdprctl's own settings below win
-            for index, sub, value, size in parameter_values(dcf, n):
-                try:
-                    write(index, sub, value, size)
-                except SdoAbortError as exc:
-                    raise DriverInitializationError(
-                        f"{who}: refused 0x{index:04X}:{sub:02X} := {value} from {dcf} "
-                        f"(SDO abort 0x{exc.code:08X})"
-                    ) from exc
-        rated = self._optional(read, p.OD_RATED_TORQUE)
-        if rated is not None and abs(rated / 1000.0 - self.rated_torque) > 0.01 * self.rated_torque:
-            raise DriverInitializationError(
-                f"{who}: rated torque 0x6076 is {rated} mN·m, the config says "
-                f"{self.rated_torque * 1000:.0f} mN·m ([drives] rated_torque): the torques "
-                "would be scaled wrong"
-            )
-        configure = self.config.pdo_mapping == "configure"
-        velocity = self.config.velocity_source == "pdo"
-        for pdo in pdo_setup.wanted(mode, n, velocity):
-            self.pdos_written += pdo_setup.set_up(read, write, pdo, configure, who)
-        modes = self._optional(read, p.OD_SUPPORTED_DRIVE_MODES)
-        bit = p.SUPPORTED_MODE_BIT[mode]
-        if modes is not None and not modes >> bit & 1:
-            raise DriverInitializationError(
-                f"{who}: supported drive modes 0x6502 = 0x{modes:08X} lacks "
-                f"{p.MODE_NAMES[mode]} (bit {bit}; [drives] mode)"
-            )
-        fe_ms = max(1, round(self.config.following_error_timeout * 1000))
-        write(p.OD_MODES_OF_OPERATION, 0, mode, 1)
-        write(p.OD_PRODUCER_HEARTBEAT, 0, hb_ms, 2)
-        write(p.OD_ABORT_CONNECTION, 0, p.ABORT_CONNECTION_QUICK_STOP, 2)
-        write(p.OD_MAX_TORQUE, 0, int(self._max_torque_pm[c]), 2)
-        write(p.OD_SYNC_COUNTER_OVERFLOW, 0, p.SYNC_COUNTER_OVERFLOW, 1)
-        if self._position[c]:  # the drive stops its winch when it cannot follow (docs/control.md)
-            write(p.OD_FOLLOWING_ERROR_WINDOW, 0, int(self._following_window[c]), 4)
-            write(p.OD_FOLLOWING_ERROR_TIMEOUT, 0, fe_ms, 2)
-        shown = self._sdo_read(c, p.OD_MODES_DISPLAY, 0, timeout)
-        if shown != mode:
-            raise DriverInitializationError(
-                f"{who} reports mode {shown} in 0x6061, expected {mode} "
-                f"({p.MODE_NAMES[mode]}, [drives] mode)"
-            )
-
-    @staticmethod
-    def _optional(read: pdo_setup.Read, index: int, sub: int = 0) -> int | None:
-        """An object a drive may not have (CiA 402 optional): None when it aborts."""
-        try:
-            return read(index, sub)
-        except SdoAbortError:
-            return None
-
-    def _identity(self, read: pdo_setup.Read) -> dict[str, int] | None:
-        """0x1018 (CiA 301 mandatory, but sub-indices 2-4 optional): what the drive has."""
-        ident = {
-            name: self._optional(read, p.OD_IDENTITY, sub)
-            for sub, name in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial"))
-        }
-        return {k: v for k, v in ident.items() if v is not None} or None
-
-    def _nmt_all(self, command: int) -> None:
-        for b in self.media:
-            self._send(
-                b, can.Message(arbitration_id=p.NMT, data=bytes([command, 0]), is_extended_id=False)
-            )
-
-    def _sdo_exchange(self, c: int, request: bytes, timeout: float) -> bytes:
-        b, n = int(self.bus_of[c]), int(self.node[c])
-        self._sdo_reply.pop(c, None)
-        msg = can.Message(arbitration_id=p.SDO_RX + n, data=request, is_extended_id=False)
-        start = self.clock()
-        deadline = start + timeout
-        next_try = start
-        while c not in self._sdo_reply:
-            now = self.clock()
-            if now > deadline:
-                raise DriverTimeoutError(
-                    f"no SDO answer from node {n} (cable index {c}) within {timeout:g} s", c
-                )
-            if now >= next_try:
-                self._send(b, msg)  # expedited transfers are idempotent: safe to repeat
-                next_try = now + self.SDO_RETRY
-            self.wait(self.period / 4)
-            self._drain(self.clock())
-        reply = self._sdo_reply.pop(c)
-        if reply[0] == 0x80:
-            code = int.from_bytes(reply[4:8], "little")
-            index = int.from_bytes(request[1:3], "little")
-            raise SdoAbortError(
-                f"node {n} aborted SDO to 0x{index:04X}:{request[3]:02X}: code 0x{code:08X}",
-                n, index, request[3], code,
-            )  # fmt: skip
-        return reply
-
-    def _sdo_write(
-        self, c: int, index: int, sub: int, value: int, size: int, timeout: float
-    ) -> None:
-        reply = self._sdo_exchange(c, p.sdo_download(index, sub, value, size), timeout)
-        if reply[0] != 0x60:
-            raise DriverInitializationError(f"unexpected SDO answer {reply.hex()}")
-
-    def _sdo_read(self, c: int, index: int, sub: int, timeout: float, signed: bool = True) -> int:
-        reply = self._sdo_exchange(c, p.sdo_upload(index, sub), timeout)
-        if reply[0] & 0xE0 != 0x40 or not reply[0] & 0x2:  # expedited uploads only
-            raise DriverInitializationError(
-                f"node {int(self.node[c])}: unexpected SDO answer {reply.hex()} reading "
-                f"0x{index:04X}:{sub:02X}"
-            )
-        size = 4 - ((reply[0] >> 2) & 0x3) if reply[0] & 0x1 else 4
-        return int.from_bytes(reply[4 : 4 + size], "little", signed=signed)
+        configure_drive(self, self.sdo, c, timeout)
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable

@@ -116,24 +116,24 @@ class PowerState(enum.IntEnum):
     FAULT = 7
 
 
+# CiA 402 Table 30: (mask, value) of the statusword bits 0-3, 5, 6 in each state
+STATUSWORD_STATES = (
+    (0x4F, 0x00, PowerState.NOT_READY_TO_SWITCH_ON),
+    (0x4F, 0x40, PowerState.SWITCH_ON_DISABLED),
+    (0x6F, 0x21, PowerState.READY_TO_SWITCH_ON),
+    (0x6F, 0x23, PowerState.SWITCHED_ON),
+    (0x6F, 0x27, PowerState.OPERATION_ENABLED),
+    (0x6F, 0x07, PowerState.QUICK_STOP_ACTIVE),
+    (0x4F, 0x0F, PowerState.FAULT_REACTION_ACTIVE),
+    (0x4F, 0x08, PowerState.FAULT),
+)
+
+
 def decode_statusword(sw: int) -> PowerState:
-    """CiA 402 Table 30 (statusword bits 0-3, 5, 6)."""
-    if sw & 0x4F == 0x00:
-        return PowerState.NOT_READY_TO_SWITCH_ON
-    if sw & 0x4F == 0x40:
-        return PowerState.SWITCH_ON_DISABLED
-    if sw & 0x6F == 0x21:
-        return PowerState.READY_TO_SWITCH_ON
-    if sw & 0x6F == 0x23:
-        return PowerState.SWITCHED_ON
-    if sw & 0x6F == 0x27:
-        return PowerState.OPERATION_ENABLED
-    if sw & 0x6F == 0x07:
-        return PowerState.QUICK_STOP_ACTIVE
-    if sw & 0x4F == 0x0F:
-        return PowerState.FAULT_REACTION_ACTIVE
-    if sw & 0x4F == 0x08:
-        return PowerState.FAULT
+    """CiA 402 Table 30; a statusword of no state there reads as not ready (never enabled)."""
+    for mask, value, state in STATUSWORD_STATES:
+        if sw & mask == value:
+            return state
     return PowerState.NOT_READY_TO_SWITCH_ON
 
 
