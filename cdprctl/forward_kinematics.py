@@ -18,7 +18,12 @@ import numpy as np
 from numba import njit
 
 from cdprctl.kinematics import KinematicsData, ik_kernel
-from cdprctl.numerics import cable_compliance_py, compliance_terms, kernel_args
+from cdprctl.numerics import (
+    cable_compliance_py,
+    compliance_terms,
+    forward_substitution,
+    kernel_args,
+)
 from cdprctl.rotation import FloatArray, exp_so3_kernel
 
 if TYPE_CHECKING:
@@ -137,11 +142,7 @@ def _cholesky_solve6(A, b):  # pragma: no cover - compiled
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
     y = np.zeros(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
+    forward_substitution(L, b, y)
     x = np.zeros(n)
     for i in range(n - 1, -1, -1):
         s = y[i]

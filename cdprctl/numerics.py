@@ -6,6 +6,7 @@ text. Rotations are in ``rotation.py``.
   integral limit).
 * ``plausible_step``: whether a motor can have turned by a step between two samples (the
   drivers' rejection of corrupted position feedback).
+* ``forward_substitution``: a lower-triangular solve (forward kinematics, the null space).
 * ``cable_compliance``: 1/k (m/N) of a cable and its series spring at a length (the model's
   stiffness, the estimator's stretch, the simulated plant's cable force).
 """
@@ -37,6 +38,17 @@ def _cable_compliance(
     elastic ``(l + l_w)/(E S)`` (the cable from the exit point to the drum), plus the series
     spring's ``1/k_s`` (each term zero where it does not apply)."""
     return inv_k_fixed + inv_es * (length + l_winch) + inv_spring
+
+
+@njit(cache=True)
+def forward_substitution(L, b, y):  # pragma: no cover - compiled
+    """``y`` ← the solution of ``L y = b`` for a lower-triangular ``L`` (n × n), row by row
+    (the forward kinematics' Cholesky solve, the null space's ``Rᵀ y = w`` with ``L = Rᵀ``)."""
+    for i in range(y.shape[0]):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
 
 
 clamp = njit(cache=True)(_clamp)

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import forward_substitution
 from cdprctl.rotation import FloatArray
 
 
@@ -55,11 +56,7 @@ def particular_kernel(A, Q, w, out):  # pragma: no cover - compiled
     ``Rᵀ y = w`` by forward substitution, then ``Q₆ y``."""
     d = A.shape[1]
     y = np.empty(d)
-    for j in range(d):
-        s = w[j]
-        for k in range(j):
-            s -= A[k, j] * y[k]
-        y[j] = s / A[j, j]
+    forward_substitution(A.T, w, y)
     for i in range(out.shape[0]):
         s = 0.0
         for j in range(d):

@@ -37,6 +37,22 @@ _PLANAR_CODE = {
 BOUND_TOLERANCE = 1e-6  # N: round-off accepted on a bound, then clipped onto it
 
 
+class SolveInput:
+    """One solve's inputs, set by ``solve`` into the distributor's own instance (allocated
+    once: the loop builds no objects) and read by the methods it dispatches to."""
+
+    __slots__ = ("W", "hi", "k", "kin", "lo", "t_prev", "w")
+
+    def __init__(self, model: RobotModel):
+        self.W: FloatArray = np.zeros((6, model.n_cables))  # the wrench matrix at the pose
+        self.w: FloatArray = np.zeros(6)  # N, N·m: the wrench the tensions must produce
+        self.lo: FloatArray = model.tension_min  # N, per cable
+        self.hi: FloatArray = model.tension_max  # N, per cable
+        self.k: FloatArray | None = None  # N/m, cable stiffness (energy, sotda)
+        self.kin: KinematicsData | None = None  # the kinematics at the pose (sotda)
+        self.t_prev: FloatArray | None = None  # N: the last tensions (the rate limit)
+
+
 class TensionDistributor(EnergyMethod):
     """Tension distribution for one robot and one set of options."""
 
@@ -63,6 +79,7 @@ class TensionDistributor(EnergyMethod):
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
         self._direction = np.zeros(3)
         self._delta_wrench = np.zeros(6)
+        self._in = SolveInput(model)
         self.set_options(self.options)
 
     def set_options(self, options: TDAOptions) -> None:
@@ -99,9 +116,10 @@ class TensionDistributor(EnergyMethod):
         kinematics at the pose of ``W``) by ``sotda``; ``t_prev`` (N) enables the rate limit,
         over ``dt`` s since ``t_prev`` (default: the options' period).
         """
-        out = self.out
-        lo = self.model.tension_min if t_min is None else t_min
-        hi = self.model.tension_max if t_max is None else t_max
+        out, i = self.out, self._in
+        i.W, i.w, i.k, i.kin, i.t_prev = W, wrench, k, kin, t_prev
+        i.lo = self.model.tension_min if t_min is None else t_min
+        i.hi = self.model.tension_max if t_max is None else t_max
         out.rate_limited = False
         out.max_violation = 0.0
         out.message = ""
@@ -117,24 +135,16 @@ class TensionDistributor(EnergyMethod):
             out.energies[:] = math.nan
         try:
             self._dt = dt if dt is not None else self.options.period
-            status = self._solve(W, wrench, lo, hi, k, kin, t_prev)
+            status = self._solve()
         except Exception as exc:
             status = TDAStatus.INTERNAL_ERROR
             out.message = f"{type(exc).__name__}: {exc}"
-        return self._finish(status, W, wrench, lo, hi, k, t_prev)
+        return self._finish(status)
 
     # -- dispatch -----------------------------------------------------------------------------
-    def _solve(
-        self,
-        W: FloatArray,
-        w: FloatArray,
-        lo: FloatArray,
-        hi: FloatArray,
-        k: FloatArray | None,
-        kin: KinematicsData | None,
-        t_prev: FloatArray | None,
-    ) -> TDAStatus:
-        out, ns, method = self.out, self.ns, self.options.method
+    def _solve(self) -> TDAStatus:
+        out, ns, method, i = self.out, self.ns, self.options.method, self._in
+        W, w, lo, hi = i.W, i.w, i.lo, i.hi
         if not ns.update(W, w) or not math.isfinite(sum(w.tolist())):
             out.message = "wrench matrix rank-deficient or non-finite input"
             return TDAStatus.DEGENERATE
@@ -145,21 +155,15 @@ class TensionDistributor(EnergyMethod):
         if method is TDAMethod.CLOSED_FORM:
             return self._closed_form(W, w, lo, hi)
         if method is TDAMethod.ENERGY:
-            return self._energy(lo, hi, k, t_prev)
+            return self._energy(lo, hi, i.k, i.t_prev)
         if method is TDAMethod.QP or (method is TDAMethod.MIN_2NORM and self.r != 2):
             return self._qp(lo, hi, np.zeros(self.r))
-        return self._polygon_method(lo, hi, k, kin, t_prev)
+        return self._polygon_method()
 
-    def _polygon_method(
-        self,
-        lo: FloatArray,
-        hi: FloatArray,
-        k: FloatArray | None,
-        kin: KinematicsData | None,
-        t_prev: FloatArray | None,
-    ) -> TDAStatus:
+    def _polygon_method(self) -> TDAStatus:
         """The r = 2 polygon methods in one compiled call (``planar.planar_kernel``)."""
-        out, ns, opt = self.out, self.ns, self.options
+        out, ns, opt, i = self.out, self.ns, self.options, self._in
+        lo, hi, k, kin, t_prev = i.lo, i.hi, i.k, i.kin, i.t_prev
         sotda = opt.method is TDAMethod.SOTDA
         if sotda and (k is None or kin is None):
             out.message = "sotda needs the cable stiffness k and the kinematics"
@@ -269,17 +273,9 @@ class TensionDistributor(EnergyMethod):
             t[i] = lo[i] if ta[worst] < lo[i] else hi[i]
 
     # -- the guarantee ------------------------------------------------------------------------
-    def _finish(
-        self,
-        status: TDAStatus,
-        W: FloatArray,
-        w: FloatArray,
-        lo: FloatArray,
-        hi: FloatArray,
-        k: FloatArray | None,
-        t_prev: FloatArray | None,
-    ) -> TDAOutput:
-        out = self.out
+    def _finish(self, status: TDAStatus) -> TDAOutput:
+        out, i = self.out, self._in
+        W, w, lo, hi, k, t_prev = i.W, i.w, i.lo, i.hi, i.k, i.t_prev
         t = out.tensions
         finite = math.isfinite(sum(t.tolist()))  # NaN and inf survive a sum
         if status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR) or not finite:
