@@ -20,19 +20,9 @@ def run_json(capsys, *args):
 
 
 def test_energy_json_reproduces_sensors_2019(capsys):
-    code, r = run_json(
-        capsys,
-        "--config",
-        SEED,
-        "--pose",
-        SEED_POSE,
-        "--wrench",
-        "200,0,0,-0.5,0,0",
-        "--method",
-        "energy",
-        "--impose",
-        "8:energy=100",
-    )
+    code, r = run_json(capsys, "--config", SEED, "--pose", SEED_POSE, "--wrench",
+                       "200,0,0,-0.5,0,0", "--method", "energy",
+                       "--impose", "8:energy=100")  # fmt: skip
     assert code == 0
     assert r["status"] == "OK"
     assert r["wrench_residual"] < 1e-9
@@ -71,23 +61,9 @@ def test_every_method_from_the_cli(capsys, method, tmp_path):
 
 def test_energy_line_plot(capsys, tmp_path):
     png = tmp_path / "e.png"
-    code = main(
-        [
-            "tda",
-            "--config",
-            SEED,
-            "--pose",
-            SEED_POSE,
-            "--wrench",
-            "200,0,0,-0.5,0,0",
-            "--method",
-            "energy",
-            "--impose",
-            "8:deformation=0.4472",
-            "--plot",
-            str(png),
-        ]
-    )
+    code = main(["tda", "--config", SEED, "--pose", SEED_POSE, "--wrench", "200,0,0,-0.5,0,0",
+                 "--method", "energy", "--impose", "8:deformation=0.4472",
+                 "--plot", str(png)])  # fmt: skip
     assert code == 0
     assert png.stat().st_size > 10_000
     assert "plot written" in capsys.readouterr().out

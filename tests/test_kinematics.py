@@ -16,6 +16,16 @@ def perturbed(p, R, dX):
     return p + dX[:3], exp_so3(dX[3:]) @ R
 
 
+def central_differences(fun, h=1e-6):
+    """The Jacobian of ``fun(dX)`` (a pose's 6 coordinates perturbed by dX) at dX = 0."""
+    cols = []
+    for j in range(6):
+        dX = np.zeros(6)
+        dX[j] = h
+        cols.append((fun(dX) - fun(-dX)) / (2 * h))
+    return np.array(cols).T
+
+
 def test_ik_fk_round_trip_every_robot(robot):
     rng = np.random.default_rng(42)
     fk = ForwardKinematics(robot, tolerance=1e-13, step_tolerance=1e-12)
@@ -53,19 +63,11 @@ def test_fk_reports_bad_input_without_raising(seed000):
 
 def test_wrench_matrix_is_minus_length_jacobian(robot):
     """Wᵀ = −∂l/∂X by central finite differences (pulleys included: the wrapped arc)."""
-    rng = np.random.default_rng(3)
     data = KinematicsData(robot)
-    h = 1e-6
-    for p, R in random_poses(robot, 8, rng):
+    for p, R in random_poses(robot, 8, np.random.default_rng(3)):
         inverse_kinematics(robot, data, p, R)
         WT = data.WT.copy()
-        J = np.zeros((robot.n_cables, 6))
-        for j in range(6):
-            dX = np.zeros(6)
-            dX[j] = h
-            lp = cable_lengths(robot, *perturbed(p, R, dX))
-            lm = cable_lengths(robot, *perturbed(p, R, -dX))
-            J[:, j] = (lp - lm) / (2 * h)
+        J = central_differences(lambda dX, p=p, R=R: cable_lengths(robot, *perturbed(p, R, dX)))
         np.testing.assert_allclose(WT, -J, atol=2e-8)
 
 
@@ -75,7 +77,6 @@ def test_stiffness_matches_finite_differences_of_cable_wrench(robot):
         pytest.skip("Ka neglects the tangent point's motion on the pulley (documented)")
     rng = np.random.default_rng(4)
     data = KinematicsData(robot)
-    h = 1e-6
     for p, R in random_poses(robot, 5, rng):
         inverse_kinematics(robot, data, p, R)
         l0 = data.length.copy()
@@ -88,11 +89,7 @@ def test_stiffness_matches_finite_differences_of_cable_wrench(robot):
             inverse_kinematics(robot, d, *perturbed(p, R, dX))
             return d.W @ (t0 + k * (d.length - l0))
 
-        K_fd = np.zeros((6, 6))
-        for j in range(6):
-            dX = np.zeros(6)
-            dX[j] = h
-            K_fd[:, j] = -(cable_wrench(dX) - cable_wrench(-dX)) / (2 * h)
+        K_fd = -central_differences(cable_wrench)
         scale = np.abs(K_fd).max()
         np.testing.assert_allclose(K, K_fd, atol=1e-6 * scale)
 

@@ -11,28 +11,8 @@ from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd
 from cdprctl.rotation import exp_so3, exp_so3_kernel, log_so3, log_so3_kernel
 
 
-def reference(
-    ref_x,
-    ref_v,
-    ref_a,
-    p,
-    R,
-    v,
-    w,
-    R_home,
-    kp,
-    kd,
-    ki,
-    integral,
-    lim,
-    integ,
-    dt,
-    mass,
-    inertia,
-    com,
-    g,
-    ext,
-):
+def reference(ref_x, ref_v, ref_a, p, R, v, w, R_home, kp, kd, ki, integral, lim, integ, dt,
+              mass, inertia, com, g, ext):  # fmt: skip
     integral = integral.copy()
     err = np.zeros(6)
     err[:3] = ref_x[:3] - p
@@ -63,28 +43,9 @@ def test_kernel_matches_the_numpy_law(seed):
     lim = rng.uniform(0.005, 0.05, size=6)
     args = (gains[0], gains[1], gains[2], lim, True, 0.002, 12.0, inertia, com, g, ext)
     kp, kd, ki, lim, integ, dt, mass = args[:7]
-    err_ref, int_ref, wrench_ref = reference(
-        ref_x,
-        ref_v,
-        ref_a,
-        p,
-        R,
-        v,
-        w,
-        R_home,
-        kp,
-        kd,
-        ki,
-        integral,
-        lim,
-        integ,
-        dt,
-        mass,
-        inertia,
-        com,
-        g,
-        ext,
-    )
+    err_ref, int_ref, wrench_ref = reference(ref_x, ref_v, ref_a, p, R, v, w, R_home, kp, kd, ki,
+                                             integral, lim, integ, dt, mass, inertia, com, g,
+                                             ext)  # fmt: skip
     err, wrench, feedback = np.zeros(6), np.zeros(6), np.zeros(6)
     integral_k = integral.copy()
     pd_wrench_kernel(

@@ -28,21 +28,9 @@ def run(config_dir: Path = CONFIG_DIR, out_dir: Path = Path("out")) -> int:
     print(summary(seed))
     print("\n== Sensors 2019 §3: cable 8 held at 100 J, minimum total energy")
     code = cli_main(
-        [
-            "tda",
-            "--config",
-            str(config_dir / "seed000.toml"),
-            "--pose",
-            "7,4,1.5,0.5235987755982988,0,0",
-            "--wrench",
-            "200,0,0,-0.5,0,0",
-            "--method",
-            "energy",
-            "--impose",
-            "8:energy=100",
-            "--plot",
-            str(out_dir / "energy.png"),
-        ]
+        ["tda", "--config", str(config_dir / "seed000.toml"),
+         *["--pose", "7,4,1.5,0.5235987755982988,0,0", "--wrench", "200,0,0,-0.5,0,0"],
+         *["--method", "energy", "--impose", "8:energy=100", "--plot"], str(out_dir / "energy.png")]
     )
     print("\n== ARK 2020: window-cleaning robot at X0, 50 N water-jet force, SOTDA ν = 0.9")
     code |= cli_main(
