@@ -93,8 +93,8 @@ def _measure(
         for i in range(len(phases)):
             cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
-            phases[i] = c.phase_us
-        return phases, c.state.value
+            phases[i] = c.data.phase_us
+        return phases, c.data.state.value
 
 
 if __name__ == "__main__":

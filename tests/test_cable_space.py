@@ -303,7 +303,7 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         cl.run(5.0, each=jet)
         a = cl.arrays()
         dy = a["p_true"][a["t"] >= t0, 1] - y0
-        assert c.state.value == "enabled", c.fault_reason
+        assert c.data.state.value == "enabled", c.data.fault_reason
         assert np.max(np.abs(dy)) < 0.015  # the transient
         assert abs(dy[-1]) < 0.001  # the deflection gone
         est = c.data.ext_estimate
@@ -314,7 +314,7 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         cl.run(3.0, each=jet)
         a = cl.arrays()
         err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)[a["t"] >= t0 + 5.0]
-        assert c.state.value == "enabled", c.fault_reason
+        assert c.data.state.value == "enabled", c.data.fault_reason
         assert err.max() < 0.002  # m: the move under the jet (10 mm uncompensated)
         assert np.all(np.isfinite(a["torques"]))
 
@@ -358,12 +358,13 @@ def test_a_snapped_cable_is_caught_by_its_tension_and_a_jet_is_not():
         ).attach(cl.net)
         cl.run(2.5)
         c = cl.controller
-        assert c.state.value == "enabled", c.fault_reason
+        assert c.data.state.value == "enabled", c.data.fault_reason
         assert np.abs(c.data.internal_tension_error).max() < 5.0  # N (limit: 19 N)
         t_snap = cl.net.time
         FaultInjector([FaultEvent(t_snap, "cable_snap", cable=2)]).attach(cl.net)
-        cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
-        assert c.fault_kind is not None and c.fault_kind.value == "cable tension", c.fault_reason
+        cl.run(1.0, until=lambda cl: cl.controller.data.fault_kind is not None)
+        d = c.data
+        assert d.fault_kind is not None and d.fault_kind.value == "cable tension", d.fault_reason
         assert cl.net.time - t_snap < 0.3
 
 
@@ -433,14 +434,15 @@ def test_beyond_capacity_the_brakes_close_at_once(drives_watch):
         FaultInjector([FaultEvent(t0, "external_wrench", value=(0, 400.0, 0, 0, 0, 0))]).attach(
             cl.net
         )
-        cl.run(1.0, until=lambda cl: cl.controller.fault_kind is not None)
-        assert c.fault_kind is not None
+        cl.run(1.0, until=lambda cl: cl.controller.data.fault_kind is not None)
+        assert c.data.fault_kind is not None
         if drives_watch:
-            assert c.fault_kind.value == "drive fault" and "following error" in c.fault_reason
+            d = c.data
+            assert d.fault_kind.value == "drive fault" and "following error" in d.fault_reason
         else:
-            assert c.fault_kind.value == "beyond capacity", c.fault_reason
+            assert c.data.fault_kind.value == "beyond capacity", c.data.fault_reason
         assert cl.net.time - t0 < 0.2
-        assert c.state.value == "fault" and bool(np.all(cl.plant.brake))
+        assert c.data.state.value == "fault" and bool(np.all(cl.plant.brake))
         cl.run(1.0)
         assert np.linalg.norm(cl.plant.position - p0) < 0.2  # m: held by the brakes
 
@@ -462,7 +464,7 @@ def test_a_robot_parked_by_its_own_distribution_enables_without_a_step(config):
             cl.net.advance(cl.period)
             if plant.servo.kp[0] > 0.0:  # the drives hold their targets
                 worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
-        assert cl.controller.state.value == "enabled", cl.manager.driver.error
+        assert cl.controller.data.state.value == "enabled", cl.manager.driver.error
         assert worst < 0.01  # rad (it was 0.24)
 
 
@@ -495,7 +497,7 @@ def test_enabling_after_a_change_of_distribution_settles_without_a_step(config):
             cl.net.advance(cl.period)
             if plant.servo.kp[0] > 0.0:  # the drives hold their targets
                 worst = max(worst, float(np.max(np.abs(plant.servo.target - plant.theta))))
-        assert c.state.value == "enabled", (cl.manager.driver.error, list(c.data.events)[-3:])
+        assert c.data.state.value == "enabled", (cl.manager.driver.error, list(c.data.events)[-3:])
         # rad: the drives' largest error on the way, 0.045: their loops carry the internal
         # force the torque feed-forward (the commanded tensions) lacks until the settle has
         # gone (87 N through kp); stepped, 0.155 at 250 Hz and a fault at 1 kHz
@@ -523,7 +525,7 @@ def test_a_length_the_model_has_wrong_settles_within_the_tension_range(error):
             lo = min(lo, float(np.min(c.cable_space.expected - model.tension_min)))
             hi = max(hi, float(np.max(c.cable_space.expected - model.tension_max)))
         assert lo >= 0.0 and hi <= 0.0, (lo, hi)
-        assert c.state.value == "fault"
+        assert c.data.state.value == "fault"
         assert "pull against each other" in str(list(c.data.events)), list(c.data.events)
 
 
@@ -561,9 +563,9 @@ def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, rel
         events = str(list(c.data.events))
         assert min(sent.values()) > 5  # every drive answered with no torque at first
         if faults:
-            assert c.state.value != "enabled" and "pull against each other" in events, events
+            assert c.data.state.value != "enabled" and "pull against each other" in events, events
         else:
-            assert c.state.value == "enabled", events
+            assert c.data.state.value == "enabled", events
             assert float(np.max(np.abs(c.data.internal_tension_error))) < 5.0  # N
 
 
@@ -621,7 +623,7 @@ def test_a_robot_nobody_tuned_runs_the_demo_moves(name, mass_factor, stiffness_f
         for p in (a, model.home.position, b):
             cl.command("move", pose=np.concatenate([p, model.home.rpy]))
             cl.run(3.0)
-            assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+            assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
         a = cl.arrays()
         assert np.linalg.norm(a["p_true"] - a["p_des"][:, :3], axis=1).max() < 1e-3  # m
 
@@ -663,12 +665,12 @@ def test_a_struck_cable_is_named_among_those_that_explain_it(kind, cable, group)
         value = 0.05 if kind == "winch_slip" else None
         event = FaultEvent(cl.net.time, kind, cable=cable, value=value, duration=0.5)
         FaultInjector([event]).attach(cl.net)
-        cl.run(0.3, until=lambda cl: cl.controller.state is not State.MOVING)
+        cl.run(0.3, until=lambda cl: cl.controller.data.state is not State.MOVING)
         c = cl.controller
-        assert c.state is State.STOPPING, c.fault_reason
+        assert c.data.state is State.STOPPING, c.data.fault_reason
         head = r"a cable is not the length its encoder says, index ([\d, or]+):"
-        m = re.match(head, c.fault_reason)
-        assert m, c.fault_reason
+        m = re.match(head, c.data.fault_reason)
+        assert m, c.data.fault_reason
         named = {int(x) for x in re.findall(r"\d+", m.group(1))}
         assert named == group and cable in named
 

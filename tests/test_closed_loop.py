@@ -45,7 +45,7 @@ def enabled(model, tda=None):
     cl.startup()
     cl.command("enable")
     cl.run(0.3)
-    assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+    assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
     return cl
 
 
@@ -68,7 +68,7 @@ def test_point_to_point(rowc, target):
         cl.command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]]))
         cl.run(4.0)
         c = cl.controller
-        assert c.state is State.ENABLED, c.fault_reason
+        assert c.data.state is State.ENABLED, c.data.fault_reason
         a = cl.arrays()
         err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1)
         assert err.max() < 2.5e-3  # m, tracking the jerk-limited reference (ζ = 0.6: 2.0-2.1)
@@ -92,7 +92,7 @@ def test_lateral_force_is_rejected_down_to_the_cable_elasticity(rowc_torque):
         ).attach(cl.net)
         cl.run(6.0)
         c = cl.controller
-        assert c.state is State.ENABLED, c.fault_reason
+        assert c.data.state is State.ENABLED, c.data.fault_reason
         a = cl.arrays()
         y = a["p_true"][:, 1] - rowc.home.position[1]
         assert y.max() < 0.065  # m, the peak while the y integral (0.6 Hz loop) catches up
@@ -129,7 +129,7 @@ def test_a_tiny_encoder_step_mid_move_does_not_grow(rowc, rowc_torque):
                 cl.net
             )
             cl.run(3.0)
-            assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+            assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
             assert np.linalg.norm(cl.plant.position - [1.9, 0.35, 0.5]) < 1e-3
     fast = dataclasses.replace(
         rowc_torque.control, axis_bandwidth=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
@@ -140,7 +140,7 @@ def test_a_tiny_encoder_step_mid_move_does_not_grow(rowc, rowc_torque):
         cl.run(0.5)
         FaultInjector([FaultEvent(cl.net.time, "encoder_jump", cable=1, value=1e-4)]).attach(cl.net)
         cl.run(3.0)
-        assert cl.controller.state is State.FAULT  # the oscillation grew into a fault
+        assert cl.controller.data.state is State.FAULT  # the oscillation grew into a fault
 
 
 def test_infeasible_wrench_stops_and_holds(rowc):
@@ -155,7 +155,7 @@ def test_infeasible_wrench_stops_and_holds(rowc):
         fi.attach(cl.net)
         cl.run(1.5)
         c = cl.controller
-        assert c.state is State.FAULT
+        assert c.data.state is State.FAULT
         # whichever check trips first: 400 N truly blows the platform away (> 1 m/s); in
         # position mode the drives that cannot follow (their following error) or sit at
         # their torque limit say so first
@@ -163,7 +163,7 @@ def test_infeasible_wrench_stops_and_holds(rowc):
             "tension distribution", "tracking", "platform speed", "beyond capacity",
             "0x8611: following error",
         )  # fmt: skip
-        assert any(why in c.fault_reason for why in reasons), c.fault_reason
+        assert any(why in c.data.fault_reason for why in reasons), c.data.fault_reason
         a = cl.arrays()
         # never a tension command outside the limits, never a non-finite torque
         assert np.all(np.isfinite(a["torques"]))
@@ -182,17 +182,17 @@ def test_a_drive_fault_during_the_controlled_stop_ends_it(rowc_torque):
             [FaultEvent(cl.net.time, "external_wrench", value=(0, 400.0, 0, 0, 0, 0), ramp=0.2)]
         )
         fi.attach(cl.net)
-        cl.run(0.5, until=lambda x: x.controller.state is State.STOPPING)
+        cl.run(0.5, until=lambda x: x.controller.data.state is State.STOPPING)
         c = cl.controller
-        assert c.state is State.STOPPING, c.fault_reason
+        assert c.data.state is State.STOPPING, c.data.fault_reason
         fi.events.append(FaultEvent(cl.net.time + 0.01, "drive_fault", cable=2, value=0x2310))
         cl.run(0.1)  # well inside the 0.5 s stop
-        assert c.state is State.FAULT
-        assert any("during the stop" in text for _, text in c.events)
+        assert c.data.state is State.FAULT
+        assert any("during the stop" in text for _, text in c.data.events)
         assert np.all(cl.plant.brake)
         cl.command("reset")
         cl.run(0.3)
-        assert c.state is not State.STOPPING
+        assert c.data.state is not State.STOPPING
 
 
 def test_drive_fault_disables_and_reset_recovers(rowc):
@@ -202,14 +202,14 @@ def test_drive_fault_disables_and_reset_recovers(rowc):
         )
         cl.run(0.3)
         c = cl.controller
-        assert c.state is State.FAULT and "0x2310" in c.fault_reason
+        assert c.data.state is State.FAULT and "0x2310" in c.data.fault_reason
         assert np.all(cl.plant.brake)
         cl.command("reset")
         cl.run(0.6)
-        assert c.state is State.READY, c.fault_reason
+        assert c.data.state is State.READY, c.data.fault_reason
         cl.command("enable")
         cl.run(0.3)
-        assert c.state is State.ENABLED, c.fault_reason
+        assert c.data.state is State.ENABLED, c.data.fault_reason
 
 
 def test_enable_as_a_drive_faults_is_refused_not_an_internal_error(rowc):
@@ -225,9 +225,9 @@ def test_enable_as_a_drive_faults_is_refused_not_an_internal_error(rowc):
         cl.command("enable")
         cl.run(cl.period)
         c = cl.controller
-        assert c.state is State.FAULT
-        assert "internal" not in c.fault_reason and "0x2310" in c.fault_reason
-        assert any("enable refused" in text for _, text in c.events)
+        assert c.data.state is State.FAULT
+        assert "internal" not in c.data.fault_reason and "0x2310" in c.data.fault_reason
+        assert any("enable refused" in text for _, text in c.data.events)
 
 
 def test_commands_in_the_wrong_state_are_ignored(rowc):
@@ -235,8 +235,8 @@ def test_commands_in_the_wrong_state_are_ignored(rowc):
         cl.startup()
         cl.command("move", pose=np.array([1.6, 0.35, 0.6, 0, 0, 0]))
         cl.run(0.05)
-        assert cl.controller.state is State.READY
-        assert any("ignored" in text for _, text in cl.controller.events)
+        assert cl.controller.data.state is State.READY
+        assert any("ignored" in text for _, text in cl.controller.data.events)
 
 
 def test_workspace_clamp(rowc):
@@ -246,9 +246,9 @@ def test_workspace_clamp(rowc):
     with enabled(rowc) as cl:
         c = cl.controller
         cl.command("move", pose=np.array([5.0, 0.35, 0.59, 0.0, 0.0, 0.0]))
-        assert not c.mailbox
-        assert "x = 2.5" in c.events[-1][1] and "outside the workspace box [0.5, 2.5] m" in (
-            c.events[-1][1])
+        assert not c.desk.mailbox
+        assert "x = 2.5" in c.data.events[-1][1] and "outside the workspace box [0.5, 2.5] m" in (
+            c.data.events[-1][1])
         c.trajectory.set_target(np.array([5.0, 0.35, 0.59, 0.0, 0.0, 0.0]))
         assert c.trajectory.target[0] == pytest.approx(rowc.workspace.position_max[0])
 
@@ -269,7 +269,7 @@ def move_without_slack(cl, model, seconds):
     for _ in range(round(seconds / cl.period)):
         cl.run(cl.period)
         lowest = min(lowest, float(cl.plant.tension.min()))
-    assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+    assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
     assert lowest > 0.5 * min(model.tension_min)
     assert np.linalg.norm(cl.plant.position - [1.8, 0.35, 0.49]) < 2e-3
 
@@ -313,8 +313,8 @@ def deflection_under_lateral_force(model, tda, seconds):
         cl.run(2.0)
         y0 = cl.plant.position[1]
         y = push_sideways(cl, seconds) - y0
-        assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
-        return float(np.mean(y)), cl.controller.tensions.copy()
+        assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
+        return float(np.mean(y)), cl.controller.data.tensions.copy()
 
 
 def static_deflection(model, tensions):
@@ -360,7 +360,7 @@ def test_the_observer_estimates_the_water_jet(rowc_torque):
             [FaultEvent(cl.net.time, "external_wrench", value=(0.0, 30.0, 0.0, 0, 0, 0), ramp=1.0)]
         ).attach(cl.net)
         cl.run(3.0)
-        assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+        assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
         assert 22.0 < est[1] < 33.0
         assert abs(est[0]) < 2.0 and abs(est[2]) < 2.0 and np.abs(est[3:]).max() < 0.5
     with enabled(rowc) as cl:  # off by default

@@ -34,7 +34,7 @@ def test_point_to_point(seed000, offset):
         cl.command("move", pose=np.concatenate([goal, log_so3(seed000.home.rotation)]))
         cl.run(8.0)
         c = cl.controller
-        assert c.state is State.ENABLED, c.fault_reason
+        assert c.data.state is State.ENABLED, c.data.fault_reason
         a = cl.arrays()
         assert np.linalg.norm(a["p_true"] - a["p_des"], axis=1).max() < 4e-3  # m, at 0.2 m/s
         assert np.linalg.norm(cl.plant.position - goal) < 1e-3  # m
@@ -52,8 +52,8 @@ def test_lateral_force_deflects_the_springs_as_the_stiffness_predicts(seed000):
     with enabled(torque) as cl:
         y = push_sideways(cl, 12.0) - seed000.home.position[1]
         c = cl.controller
-    assert c.state is State.ENABLED, c.fault_reason
-    assert float(np.mean(y)) == pytest.approx(static_deflection(seed000, c.tensions), rel=0.1)
+    assert c.data.state is State.ENABLED, c.data.fault_reason
+    assert float(np.mean(y)) == pytest.approx(static_deflection(seed000, c.data.tensions), rel=0.1)
 
 
 def test_the_estimate_takes_a_lateral_force_over_at_the_rate_the_model_gives(seed000):
@@ -65,7 +65,7 @@ def test_the_estimate_takes_a_lateral_force_over_at_the_rate_the_model_gives(see
     with enabled(seed000) as cl:
         y = push_sideways(cl, 20.0) - seed000.home.position[1]
         c = cl.controller
-    assert c.state is State.ENABLED, c.fault_reason
+    assert c.data.state is State.ENABLED, c.data.fault_reason
     assert np.abs(y).max() < 1e-3  # m, from 23 mm
     assert c.data.ext_estimate[1] == pytest.approx(30.0, abs=1.0)  # N
 
@@ -80,15 +80,15 @@ def test_switching_the_distribution_blends_instead_of_faulting(seed000):
 
     with enabled(seed000) as cl:
         cl.run(1.0)
-        before = cl.controller.tensions.copy()
+        before = cl.controller.data.tensions.copy()
         cl.command("set_tda", tda=TDAOptions(method=TDAMethod.ENERGY, period=cl.period))
         cl.run(4.0)
         c = cl.controller
-        assert c.state is State.ENABLED, c.fault_reason
+        assert c.data.state is State.ENABLED, c.data.fault_reason
         a = cl.arrays()
         steps = np.abs(np.diff(a["tensions"], axis=0)).max()
         assert steps < 1.0  # N per cycle; the switch moves some cables by 10-20 N in all
-        assert np.abs(c.tensions - before).max() > 5.0  # it did switch
+        assert np.abs(c.data.tensions - before).max() > 5.0  # it did switch
         assert np.abs(a["p_true"] - seed000.home.position).max() < 2e-3
         assert Distribution.BLEND_TIME == 1.0
 
@@ -98,11 +98,11 @@ def test_the_same_distribution_again_changes_nothing(seed000):
 
     with enabled(seed000) as cl:
         c = cl.controller
-        tda = c.tda
+        tda = c.distribution.current
         cl.command("set_tda", tda=tda_options_of(seed000))
         cl.run(0.1)
-        assert c.tda is tda and c.distribution.old is None
-        assert "unchanged" in c.events[-1][1]
+        assert c.distribution.current is tda and c.distribution.old is None
+        assert "unchanged" in c.data.events[-1][1]
 
 
 def test_sotda_runs_in_the_loop_on_the_spring_robot(seed000):
@@ -120,8 +120,9 @@ def test_sotda_runs_in_the_loop_on_the_spring_robot(seed000):
         cl.command("move", pose=np.concatenate([goal, log_so3(seed000.home.rotation)]))
         cl.run(6.0)
         c = cl.controller
-        assert c.state is State.ENABLED, c.fault_reason
-        assert c.tda.options.method is TDAMethod.SOTDA and c.tda_status.name == "OK"
+        assert c.data.state is State.ENABLED, c.data.fault_reason
+        assert c.distribution.current.options.method is TDAMethod.SOTDA
+        assert c.data.tda_status.name == "OK"
         a = cl.arrays()
         assert np.linalg.norm(a["p_true"] - a["p_des"], axis=1).max() < 4e-3  # m, at 0.2 m/s
         assert np.linalg.norm(cl.plant.position - goal) < 1e-3  # m
@@ -156,7 +157,7 @@ def test_a_stall_at_a_jerk_step_rides_through_on_the_springs(seed000, rate, stal
             net.advance(cl.period + (stall if k == at else 0.0))
             worst = max(worst, float(np.abs(net.plant.servo.target - net.plant.theta).max()))
         c = cl.controller
-        assert c.state is not State.FAULT, c.fault_reason
+        assert c.data.state is not State.FAULT, c.data.fault_reason
         assert worst < 0.4 * window  # rad
 
 
@@ -193,5 +194,5 @@ def test_stalls_through_a_reversal_ride_through_with_the_grippers(stall, every, 
             net.advance(cl.period + late)
             worst = max(worst, float(np.abs(servo.target - net.plant.theta)[held].max()))
         c = cl.controller
-        assert c.state is not State.FAULT, c.fault_reason
+        assert c.data.state is not State.FAULT, c.data.fault_reason
         assert worst < 0.6 * window  # rad

@@ -15,7 +15,7 @@ from cdprctl.control.controller import Controller
 from cdprctl.control.distribution import Distribution
 from cdprctl.model import load_robot
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
-from drivers.base import Lifecycle
+from drivers.vocabulary import Lifecycle
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWC = load_robot(ROOT / "config" / "rowc.toml")

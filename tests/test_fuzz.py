@@ -15,6 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cdprctl.control.commands import Command
+from cdprctl.control.desk import FULL
 from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model import load_robot
@@ -121,14 +122,15 @@ def test_a_command_flood_never_stalls_or_breaks_the_loop():
                     )
                 else:
                     cmd = Command("enable")
-                refused += not c.submit(cmd)
+                refused += c.submit(cmd) is FULL
             cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
-            assert len(c.mailbox) <= 64
+            assert len(c.desk.mailbox) <= 64
             assert np.all(np.isfinite(c.trajectory.target))  # the NaN moves never got in
-            assert np.all(np.isfinite(c.torques)) and np.all(np.abs(c.torques) <= limit + 1e-9)
+            tq = c.data.torques
+            assert np.all(np.isfinite(tq)) and np.all(np.abs(tq) <= limit + 1e-9)
         assert refused > 0  # the bound was reached
-        assert c.state in (State.ENABLED, State.MOVING, State.STOPPING, State.FAULT)
+        assert c.data.state in (State.ENABLED, State.MOVING, State.STOPPING, State.FAULT)
         assert np.all(np.isfinite(c.trajectory.target))
 
 
@@ -159,13 +161,14 @@ def test_random_and_malformed_can_frames_change_nothing():
             cl.net._send(rnd.randrange(len(cl.net.buses)), frames)  # either bus
             cl.manager.step(cl.net.time)
             cl.net.advance(cl.period)
-            assert np.all(np.isfinite(c.torques)) and np.all(np.abs(c.torques) <= limit + 1e-9)
+            tq = c.data.torques
+            assert np.all(np.isfinite(tq)) and np.all(np.abs(tq) <= limit + 1e-9)
         drv = cl.rig.driver
         assert drv.stats.frames_ignored > 10_000
         # random frames can hit the drives' own ids (a corrupted TPDO, a false EMCY): then the
         # robot must have stopped safely; otherwise the move completed
-        if c.state is State.ENABLED:
+        if c.data.state is State.ENABLED:
             assert np.linalg.norm(cl.plant.position - [1.7, 0.35, 0.55]) < 2e-3
         else:
-            assert c.state in (State.STOPPING, State.FAULT), c.state
-            assert c.fault_reason
+            assert c.data.state in (State.STOPPING, State.FAULT), c.data.state
+            assert c.data.fault_reason

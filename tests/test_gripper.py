@@ -163,7 +163,7 @@ def test_the_jaws_inertia_fed_forward_keeps_the_platform_on_its_path(grippers):
         for p, seconds in ((a, 3.0), (m.home.position, 6.0), (b, 3.0), (m.home.position, 6.0)):
             cl.command("move", pose=np.concatenate([p, m.home.rpy]))
             cl.run(seconds)
-        assert cl.controller.state is State.ENABLED, cl.controller.fault_reason
+        assert cl.controller.data.state is State.ENABLED, cl.controller.data.fault_reason
         log = cl.arrays()
         error = np.linalg.norm(log["p_true"] - log["p_des"], axis=1)
         assert error.max() < 2.5e-3, error.max()
@@ -255,19 +255,20 @@ def test_gripper_command_beyond_the_redundancy_is_refused_with_the_range(gripper
         cl.startup()
         cl.command("enable")
         cl.run(0.5, record=False)
-        lo, hi = cl.controller.gripper_range(1)
+        lo, hi = cl.controller.grippers.travel_range(1)
         assert 0.0 < lo < hi
-        held = float(cl.controller.grip_target[1])  # every gripper holds its travel once enabled
+        # every gripper holds its travel once enabled
+        held = float(cl.controller.data.grip_target[1])
         assert lo <= held <= hi
         cl.command("gripper", gripper=1, grip="travel", value=hi + 0.05)
         cl.run(0.1, record=False)
-        refused = [e for _, e in cl.controller.events if "refused" in e]
+        refused = [e for _, e in cl.controller.data.events if "refused" in e]
         assert refused and f"{hi * 1e3:.1f}] mm" in refused[-1], refused
-        assert cl.controller.grip_target[1] == held
+        assert cl.controller.data.grip_target[1] == held
         # squeezing before any contact is refused too
         cl.command("gripper", gripper=0, grip="force", value=10.0)
         cl.run(0.1, record=False)
-        assert "no contact sensed" in cl.controller.events[-1][1]
+        assert "no contact sensed" in cl.controller.data.events[-1][1]
 
 
 @pytest.mark.parametrize(
@@ -300,11 +301,11 @@ def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
         cl.command("enable")
         cl.run(0.5, record=False)
         c = cl.controller
-        lo, hi = c.gripper_range(0)
+        lo, hi = c.grippers.travel_range(0)
         snap = {
             "position": c.estimator.position.copy(),
             "rpy": matrix_to_rpy(c.estimator.rotation),
-            "grip_target": c.grip_target.copy(),
+            "grip_target": c.data.grip_target.copy(),
         }
     ok = v.check("gripper", {"gripper": "1", "travel": round((lo + hi) / 2, 4)}, "enabled", snap)
     assert ok[0] == "gripper"
@@ -391,8 +392,8 @@ def test_squeeze_force_command_and_release(grippers):
         p.set_object(0, 0.10, math.inf)
         c.submit(Command("gripper", gripper=0, grip="travel", value=0.12))
         cl.run(5.0, record=False)
-        assert c.grasp.state[0].value != "open"
-        assert c.grasp.contact_travel[0] == pytest.approx(0.10, abs=3e-3)
+        assert c.grippers.grasp.state[0].value != "open"
+        assert c.grippers.grasp.contact_travel[0] == pytest.approx(0.10, abs=3e-3)
         for force, tol in ((10.0, 1.5), (25.0, 2.0)):
             c.submit(Command("gripper", gripper=0, grip="force", value=force))
             cl.run(4.0, record=False)
@@ -400,7 +401,7 @@ def test_squeeze_force_command_and_release(grippers):
         c.submit(Command("gripper", gripper=0, grip="release"))
         cl.run(5.0, record=False)
         assert p.contact_force[0] == 0.0 and p.jaw_travel[0] < 0.06
-        assert c.grasp.state[0].value == "open"
-        assert c.state.value == "enabled"
+        assert c.grippers.grasp.state[0].value == "open"
+        assert c.data.state.value == "enabled"
     finally:
         cl.close()

@@ -32,12 +32,12 @@ def enabled(model):
     cl.startup()
     cl.command("enable")
     cl.run(0.4)
-    assert cl.controller.state.value == "enabled"
+    assert cl.controller.data.state.value == "enabled"
     return cl
 
 
 def events(cl):
-    return [e for _, e in cl.controller.events]
+    return [e for _, e in cl.controller.data.events]
 
 
 def on_polyline(p, corners):
@@ -57,13 +57,13 @@ def test_gcode_square_with_dwell_is_traced(rowc):
     with enabled(rowc) as cl:
         c = cl.controller
         cl.command("path", text=SQUARE, name="square")
-        plan = c.mailbox[-1].plan[0]
+        plan = c.desk.mailbox[-1].plan[0]
         seen = []
         cl.run(30.0, each=lambda cl: seen.append((cl.net.time, c.data.path_segment,
                                                    c.data.path_state, c.data.path_fraction,
                                                    c.trajectory.position[:3].copy())),
-               until=lambda cl: c.data.path_state == "done" and c.state.value == "enabled")
-        assert c.data.path_state == "done" and c.state.value == "enabled", events(cl)[-5:]
+               until=lambda cl: c.data.path_state == "done" and c.data.state.value == "enabled")
+        assert c.data.path_state == "done" and c.data.state.value == "enabled", events(cl)[-5:]
         a = cl.arrays()
         moving = np.array([s == "moving" for s in a["state"]])
         t_move = a["t"][moving]
@@ -91,12 +91,12 @@ def test_infeasible_waypoint_rejected_before_any_motion(rowc):
         c = cl.controller
         before = cl.plant.position.copy()
         cl.command("path", text=text, name="bad.csv")
-        assert not c.mailbox
+        assert not c.desk.mailbox
         why = events(cl)[-1]
         assert why.startswith("path bad.csv rejected: line 3: waypoint [0.55, 0.35, 1.25")
         assert "tension margin" in why and "N required" in why
         cl.run(0.5)
-        assert c.state.value == "enabled" and c.data.path_state == ""
+        assert c.data.state.value == "enabled" and c.data.path_state == ""
         assert np.linalg.norm(cl.plant.position - before) < 1e-5
 
 
@@ -120,10 +120,10 @@ def test_pause_resume_abort(rowc):
         c = cl.controller
         cl.command("path", text=text, name="wipe")
         cl.run(2.0)
-        assert c.data.path_state in ("running", "dwell") and c.state.value == "moving"
+        assert c.data.path_state in ("running", "dwell") and c.data.state.value == "moving"
         cl.command("pause")
         cl.run(1.0)
-        assert c.data.path_state == "paused" and c.state.value == "enabled"
+        assert c.data.path_state == "paused" and c.data.state.value == "enabled"
         held = c.trajectory.position.copy()
         cl.command("jog", velocity=np.array([0.1, 0, 0, 0, 0, 0]))  # refused while paused
         cl.run(0.5)
@@ -143,7 +143,7 @@ def test_pause_resume_abort(rowc):
         cl.run(1.0)
         cl.command("abort")
         cl.run(1.0)
-        assert c.data.path_state == "aborted" and c.state.value == "enabled"
+        assert c.data.path_state == "aborted" and c.data.state.value == "enabled"
         assert np.all(np.abs(c.trajectory.velocity) < 1e-12)
         cl.command("resume")
         cl.run(0.1)
@@ -158,7 +158,7 @@ def test_a_fault_mid_path_stops_it_the_controlled_way(rowc):
         FaultInjector([FaultEvent(cl.net.time + 0.01, "drive_fault", cable=3, value=0x7500)]
                       ).attach(cl.net)  # fmt: skip
         cl.run(3.0)
-        assert c.state.value == "fault"
+        assert c.data.state.value == "fault"
         assert c.data.path_state == "stopped"
         assert any(e.startswith("path stopped at segment") for e in events(cl))
 
@@ -176,7 +176,7 @@ def test_jog_towards_the_bound_stops_at_it(rowc):
         assert a["p_des"][:, 0].max() <= bound + 1e-9
         assert a["p_des"][-1, 0] > bound - 1e-3  # at it
         assert a["p_true"][:, 0].max() < bound + 0.1e-3
-        assert c.state.value == "enabled"  # arrived, holding, jog still alive
+        assert c.data.state.value == "enabled"  # arrived, holding, jog still alive
         box = "outside the workspace box [0.5, 2.5] m"
         assert any(e.startswith("jog: stops at [2.5") and box in e for e in events(cl))
 
@@ -211,7 +211,7 @@ def test_deadman_stops_a_silent_jog(rowc):
         stopped = v[np.abs(v[:, 1]) < 1e-12]
         assert stopped[0, 0] < deadman + 0.5  # braking from 0.2 m/s: 0.2 s at 1 m/s², jerk
         assert stopped[0, 0] > deadman
-        assert c.state.value == "enabled"
+        assert c.data.state.value == "enabled"
         assert any("deadman" in e for e in events(cl))
 
 
@@ -237,11 +237,11 @@ def test_a_move_whose_line_leaves_the_limits_is_refused(rowc):
     with enabled(model) as cl:
         c = cl.controller
         cl.command("move", pose=np.array([0.45, 0.38, 1.05, 0, 0, 0]))
-        cl.run(8.0, until=lambda cl: c.state.value == "enabled" and c.trajectory.finished
+        cl.run(8.0, until=lambda cl: c.data.state.value == "enabled" and c.trajectory.finished
                and c.data.motion == "")  # fmt: skip
         assert np.linalg.norm(c.trajectory.position[:3] - [0.45, 0.38, 1.05]) < 1e-9
         cl.command("move", pose=np.array([2.55, 0.38, 1.05, 0, 0, 0]))
-        assert not c.mailbox
+        assert not c.desk.mailbox
         why = events(cl)[-1]
         assert why.startswith("move ignored: the line to the target leaves the soft limits "
                               "after [")  # fmt: skip

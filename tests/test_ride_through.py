@@ -47,7 +47,7 @@ def run(stalls: list[float], jet: float = 0.0, late: float = 0.0) -> dict[str, f
         err = np.linalg.norm(a["p_true"] - a["p_des"], axis=1) * 1e3
         t = a["tensions"]
         return {
-            "state": c.state,
+            "state": c.data.state,
             "err_max_mm": float(err.max()),
             "err_final_mm": float(err[-1]),
             "inside": bool(
@@ -142,7 +142,7 @@ def two_moves_held_up(hold: float, where: str, resend: bool = True, times: int =
                 net.advance(period * (int(spent / period) + 1) - spent)  # the missed ones skipped
                 servo = net.plant.servo
                 worst = max(worst, float(np.max(np.abs(servo.target - net.plant.theta))))
-        return {"state": cl.controller.state, "worst": worst, "held": held["count"],
+        return {"state": cl.controller.data.state, "worst": worst, "held": held["count"],
                 "resent": drv.resent_targets, "error": drv.error}  # fmt: skip
 
 
@@ -229,7 +229,7 @@ def stalled_at_full_speed(stall: float, wait: bool = True) -> tuple[State, float
 
         cl.net.advance(stall)
         cl.run(1.0, each=following)
-        return cl.controller.state, worst[0]
+        return cl.controller.data.state, worst[0]
 
 
 @pytest.mark.parametrize("stall", [0.078, 0.12, 0.3])

@@ -17,8 +17,8 @@ from cdprctl.control.supervisor import TRANSITIONS, Supervisor
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model import load_robot
 from cdprctl.tda import TDAMethod, TDAOptions
-from drivers.base import Lifecycle
 from drivers.errors import DriveFaultError, DriverOperationError, DriverTimeoutError
+from drivers.vocabulary import Lifecycle
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWC = load_robot(ROOT / "config" / "rowc.toml")
@@ -201,7 +201,7 @@ def test_command_acceptance_table(controller, kind):
         c.drives.lifecycle = Lifecycle.INACTIVE
         c.data.events.clear()
         assert c.submit(command_of(kind))
-        c._handle_commands(0.0)
+        c.desk.handle(0.0)
         ignored = any("ignored in state" in e for _, e in c.data.events)
         assert ignored is (not accepted(kind, state)), (kind, state, list(c.data.events))
         assert accepted(kind, state) is (state in ACCEPTED_IN[kind])
@@ -209,13 +209,18 @@ def test_command_acceptance_table(controller, kind):
 
 def test_bad_commands_stop_at_the_mailbox(controller):
     c = controller
-    c.mailbox.clear()
+    c.desk.mailbox.clear()
     c.data.events.clear()
-    assert c.submit(Command(CommandKind.MOVE, pose=np.array([np.nan, 0, 0, 0, 0, 0])))
-    assert c.submit(Command(CommandKind.MOVE, pose=np.zeros(6), speed=2.0))
-    assert c.submit(Command(CommandKind.SET_TDA, tda=TDAOptions(method=TDAMethod.QP, nu=3.0)))
-    assert len(c.mailbox) == 0
+    verdicts = [
+        c.submit(Command(CommandKind.MOVE, pose=np.array([np.nan, 0, 0, 0, 0, 0]))),
+        c.submit(Command(CommandKind.MOVE, pose=np.zeros(6), speed=2.0)),
+        c.submit(Command(CommandKind.SET_TDA, tda=TDAOptions(method=TDAMethod.QP, nu=3.0))),
+    ]
+    assert len(c.desk.mailbox) == 0
     texts = [e for _, e in c.data.events]
+    # refused, each with the reason the event gives
+    assert [v.accepted for v in verdicts] == [False] * 3
+    assert [v.reason for v in verdicts] == texts
     assert texts[0].startswith("move ignored") and texts[1].startswith("move ignored")
     assert "nu = 3.0 must be in [0, 1]" in texts[2]
     with pytest.raises(ValueError):
@@ -241,10 +246,10 @@ def test_typed_faults_in_the_closed_loop():
             fi.events.append(
                 FaultEvent(cl.net.time + 0.01, event.kind, cable=event.cable, value=event.value)
             )
-            cl.run(1.5, until=lambda c: c.controller.state is State.FAULT)
+            cl.run(1.5, until=lambda c: c.controller.data.state is State.FAULT)
             c = cl.controller
-            assert c.state in (State.STOPPING, State.FAULT)
-            assert c.fault_kind is kind, c.fault_reason
+            assert c.data.state in (State.STOPPING, State.FAULT)
+            assert c.data.fault_kind is kind, c.data.fault_reason
             assert next(k for _, k in c.data.faults) is kind
 
 
@@ -256,8 +261,8 @@ def test_enable_starts_with_no_saturation_carried_over(controller):
     c.data.state = State.READY
     c.drives.lifecycle = Lifecycle.INACTIVE
     c.data.saturated_for, c.data.saturation = 1.42, 0.3
-    c.mailbox.clear()
+    c.desk.mailbox.clear()
     assert c.submit(Command(CommandKind.ENABLE))
-    c._handle_commands(0.0)
+    c.desk.handle(0.0)
     assert c.data.state is State.ENABLING
     assert c.data.saturated_for == 0.0 and c.data.saturation == 1.0

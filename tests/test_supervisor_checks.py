@@ -16,7 +16,7 @@ from cdprctl.control.states import FaultKind, State
 from cdprctl.control.supervisor import Supervisor
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model import load_robot
-from drivers.base import Lifecycle
+from drivers.vocabulary import Lifecycle
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWC = load_robot(ROOT / "config" / "rowc.toml")

@@ -64,7 +64,8 @@ SCRIPT = textwrap.dedent(
             after = signatures()
             new = sorted(k for k, n in after.items() if n > before.get(k, 0))
             out[name] = {"compiled": new, "kernels": len(before),
-                         "state": cl.controller.state.value, "cycles": cl.controller.cycle}
+                         "state": cl.controller.data.state.value,
+                         "cycles": cl.controller.data.cycle}
     print(json.dumps(out))
     """
 )

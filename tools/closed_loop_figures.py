@@ -54,7 +54,7 @@ def move(model: RobotModel, goal: list[float], seconds: float) -> str:
         settle = (outside[-1] + 1 - (done_at or 0)) * cl.period if len(outside) else 0.0
         t = a["tensions"][n0:]
         return (
-            f"| {model.name} | move to {goal} m | {cl.controller.state.value} | "
+            f"| {model.name} | move to {goal} m | {cl.controller.data.state.value} | "
             f"{np.sqrt(np.mean(err**2)):.2f} | {err.max():.2f} | {t.min():.0f}-{t.max():.0f} | "
             f"{max(settle, 0.0):.2f} |"
         )

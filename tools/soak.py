@@ -75,7 +75,7 @@ def main() -> None:
         c.submit(Command("enable"))
         n = round(args.minutes * 60.0 / cl.period)
         next_move = 1.0
-        last_state = c.state
+        last_state = c.data.state
         for i in range(n):
             t = cl.net.time
             t0 = time.perf_counter_ns()
@@ -83,23 +83,24 @@ def main() -> None:
             compute.append((time.perf_counter_ns() - t0) / 1e3)
             cl.net.advance(cl.period)
             watch.check(c, cl.plant.position, measure_excursion=False)
-            if c.state is not last_state:
-                counts[f"-> {c.state.value}"] += 1
-                if c.state is State.STOPPING or (
-                    c.state is State.FAULT and last_state is not State.STOPPING
+            if c.data.state is not last_state:
+                counts[f"-> {c.data.state.value}"] += 1
+                if c.data.state is State.STOPPING or (
+                    c.data.state is State.FAULT and last_state is not State.STOPPING
                 ):
-                    kind = c.fault_kind
+                    kind = c.data.fault_kind
                     internal = kind is FaultKind.INTERNAL  # keep what failed
-                    key = c.fault_reason if internal else kind.value if kind else "?"
-                    if kind is FaultKind.DRIVE_FAULT and "0x" in c.fault_reason:  # its EMCY code
-                        key += " " + c.fault_reason[c.fault_reason.index("0x") :][:6]
+                    key = c.data.fault_reason if internal else kind.value if kind else "?"
+                    # its EMCY code
+                    if kind is FaultKind.DRIVE_FAULT and "0x" in c.data.fault_reason:
+                        key += " " + c.data.fault_reason[c.data.fault_reason.index("0x") :][:6]
                     faults[key] += 1
-                last_state = c.state
-            if c.state is State.FAULT and i % 250 == 0:
+                last_state = c.data.state
+            if c.data.state is State.FAULT and i % 250 == 0:
                 c.submit(Command("reset"))
-            elif c.state is State.READY and i % 250 == 0:
+            elif c.data.state is State.READY and i % 250 == 0:
                 c.submit(Command("enable"))
-            elif c.state is State.ENABLED and t >= next_move:
+            elif c.data.state is State.ENABLED and t >= next_move:
                 goal = rng.uniform(lo, hi)
                 c.submit(Command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]])))
                 counts["moves"] += 1
@@ -129,7 +130,7 @@ def main() -> None:
         "faults_detected_by_reason": dict(faults),
         "state_changes": dict(counts),
         "invariant_violations": violations,
-        "final_state": c.state.value,
+        "final_state": c.data.state.value,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(summary, indent=1))

@@ -44,9 +44,6 @@ class Distribution:
     # energy moved seed000's soft cables by 10-20 N, 1-2 cm of stretch the pose estimate took
     # for an encoder fault at once (lock-step, tests/test_closed_loop_seed000.py).
     BLEND_TIME = 1.0  # s
-    # infeasible wrenches in a row before the supervisor faults (the last feasible tensions
-    # are held meanwhile): a one-cycle spike of the PID is not a fault
-    BAD_CYCLES = 3
 
     def __init__(
         self,

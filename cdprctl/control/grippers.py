@@ -22,7 +22,7 @@ from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import Trajectory
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.grip_range import travel_range
-from drivers.base import WinchStates
+from drivers.vocabulary import WinchStates
 
 
 class GripperControl:

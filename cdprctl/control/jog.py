@@ -12,6 +12,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command
 from cdprctl.control.data import ControlData
+from cdprctl.control.motion_source import MotionSource
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_plan import FLOOR
@@ -19,14 +20,11 @@ from cdprctl.motion.trajectory import Trajectory, coordinates_rotation
 from cdprctl.rotation import FloatArray
 
 
-class Jog:
+class Jog(MotionSource):
     def __init__(
         self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
     ):
-        self.model = model
-        self.data = data
-        self.trajectory = trajectory
-        self.limits = limits
+        super().__init__(model, data, trajectory, limits)
         self.deadman = model.control.jog_deadman  # s
         self._bound: FloatArray | None = None  # where the last jog's limits ended it
         self.active = False

@@ -13,7 +13,9 @@ import numpy as np
 from cdprctl.control.commands import Command
 from cdprctl.control.controller import Controller
 from cdprctl.control.data import ControlData
+from cdprctl.control.desk import Verdict
 from cdprctl.control.loop import LoopStats, run_loop
+from cdprctl.control.startup import initialise
 from cdprctl.control.warm_up import warm_up
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import TDAOptions
@@ -45,10 +47,10 @@ class ControllerManager:
         if found is not None:
             self.controller.estimator.apply_calibration(*found)
         now = d.clock()
-        self.controller.initialise(now, d.read(now))
+        initialise(self.controller, now, d.read(now))
 
-    def submit(self, cmd: Command) -> bool:
-        return self.controller.submit(cmd)
+    def submit(self, cmd: Command) -> Verdict:
+        return self.controller.desk.submit(cmd)
 
     def step(self, t: float) -> None:
         """One cycle at time ``t`` (s). Never raises."""

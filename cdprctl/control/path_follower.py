@@ -12,6 +12,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command
 from cdprctl.control.data import ControlData
+from cdprctl.control.motion_source import MotionSource
 from cdprctl.control.states import State
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
@@ -20,14 +21,11 @@ from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path, pla
 from cdprctl.motion.trajectory import Trajectory
 
 
-class PathFollower:
+class PathFollower(MotionSource):
     def __init__(
         self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
     ):
-        self.model = model
-        self.data = data
-        self.trajectory = trajectory
-        self.limits = limits
+        super().__init__(model, data, trajectory, limits)
         self.plan: PathPlan | None = None
         self.k = 0  # the segment under way (0-based, in ``plan``)
         self.offset = 0  # segments of the original path before ``plan`` (after a resume)

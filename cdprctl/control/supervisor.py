@@ -24,8 +24,8 @@ from cdprctl.control.states import FaultKind, State
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.numerics import worst_ratio
-from drivers.base import Lifecycle, WinchStates
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError
+from drivers.vocabulary import Lifecycle, WinchStates
 
 
 class DrivePort(Protocol):
@@ -329,6 +329,42 @@ class Supervisor:
         score = np.abs(internal) / np.sqrt(np.maximum(leverage, 1e-12))
         order = np.argsort(-score)
         return [int(j) for j in order if score[j] >= cls.SUSPECT_SHARE * score[order[0]]]
+
+    # infeasible wrenches in a row before the supervisor faults (the last feasible tensions
+    # are held meanwhile): a one-cycle spike of the PID is not a fault
+    BAD_CYCLES = 3
+    # Saturated time drains at this fraction of real time once the cables give the whole
+    # feedback again: a loop that saturates in most of its cycles (an unstable gain chattering
+    # on the limits: 60 % of the cycles on rowc tuned at 1 Hz in y, a 0.5 mm limit cycle) adds
+    # up to a fault; one long push that then recovers drains away.
+    SATURATION_LEAK = 0.25
+
+    def distribution(self, t: float, bad_cycles: int, status: str, message: str) -> None:
+        """After the cycle's tension distribution (``bad_cycles`` in a row with no feasible
+        feed-forward, the last ``status`` and ``message``): the saturated time counted
+        (``data.saturated_for``, s of real elapsed time, leaking at ``SATURATION_LEAK``; and
+        ``saturated_cycles``), then a controlled stop when the feed-forward stays infeasible or
+        the feedback stays saturated beyond ``max_saturation_time``."""
+        d = self.data
+        if d.saturation < 1.0:
+            d.saturated_for += d.dt
+            d.saturated_cycles += 1
+        else:
+            d.saturated_for = max(0.0, d.saturated_for - self.SATURATION_LEAK * d.dt)
+        if d.state is State.STOPPING:
+            return
+        if bad_cycles >= self.BAD_CYCLES:
+            self.fault(t, FaultKind.TENSION_DISTRIBUTION, f"tension distribution {status} (the "
+                       f"feed-forward alone): {message}", hold=True)  # fmt: skip
+        elif d.saturated_for > self.config.max_saturation_time:
+            self.fault(
+                t,
+                FaultKind.TENSION_DISTRIBUTION,
+                f"feedback wrench saturated for {d.saturated_for:.2f} s "
+                f"(> max_saturation_time {self.config.max_saturation_time:g} s; "
+                f"the cables gave {d.saturation:.0%} of it last)",
+                hold=True,
+            )
 
     def _over_speed(self, t: float, speed: float, limit: float) -> bool:
         return self._speed_over.held(t, speed > limit)

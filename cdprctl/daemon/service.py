@@ -25,6 +25,7 @@ from typing import Any
 from cdprctl import realtime as rt
 from cdprctl.control.commands import Command, CommandKind
 from cdprctl.control.data import PHASES
+from cdprctl.control.desk import FULL
 from cdprctl.control.loop import LoopStats
 from cdprctl.control.manager import ControllerManager
 from cdprctl.control.states import State
@@ -182,7 +183,7 @@ class Daemon:
             self._drain_events()
             self.links.publish(d, self.stats, true)
             for taken in self.links.take_commands():
-                if not submit(taken):
+                if submit(taken) is FULL:  # a refusal's reason is an event already
                     self.links.event(d.time, f"command {taken.kind} dropped: mailbox full",
                                      "reject")  # fmt: skip
             while script and script[0][0] <= now:

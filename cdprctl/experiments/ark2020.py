@@ -98,9 +98,9 @@ def static_under_force(model: RobotModel, nu: float, force: float = 30.0,
         cl.run(seconds)
         c = cl.controller
         y = float(np.mean(cl.arrays()["p_true"][-50:, 1])) - y0
-        t = c.tensions.copy()
+        t = c.data.tensions.copy()
         ref = deflection_reference(model, cl.plant.position, t, force)
-        return Static(nu, y, ref, t, c.state.value)
+        return Static(nu, y, ref, t, c.data.state.value)
 
 
 @dataclass
@@ -144,4 +144,4 @@ def path_under_force(model: RobotModel, nu: float, force: float) -> PathRun:
         a = cl.arrays()
         c = cl.controller
         return PathRun(nu, force, a["t"], a["tensions"], a["p_true"], a["p_des"],
-                       c.state.value, c.fault_reason)  # fmt: skip
+                       c.data.state.value, c.data.fault_reason)  # fmt: skip

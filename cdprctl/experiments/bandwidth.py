@@ -71,7 +71,7 @@ def response(model: RobotModel, axis: int, frequency: float) -> Response:
 
         periods = SETTLE_PERIODS + FIT_PERIODS
         cl.run(periods / frequency, each=drive, record=False)
-        state = cl.controller.state
+        state = cl.controller.data.state
         t = np.array(times)
         keep = t >= SETTLE_PERIODS / frequency
         # both at the same instants: the lag includes the loop's period of delay

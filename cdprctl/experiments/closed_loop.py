@@ -39,7 +39,7 @@ class ClosedLoop:
         """``seconds`` of control cycles and simulation; after each cycle ``each(self)`` (a
         per-cycle check), then ``until(self)`` ends the run early when true; ``record=False``
         keeps nothing in ``log``."""
-        c, step = self.controller, self.manager.step
+        d, step = self.controller.data, self.manager.step
         for _ in range(round(seconds / self.period)):
             t = self.net.time
             step(t)
@@ -47,13 +47,13 @@ class ClosedLoop:
             if record:
                 lg = self.log
                 lg["t"].append(t)
-                lg["state"].append(c.state.value)
+                lg["state"].append(d.state.value)
                 lg["p_true"].append(self.plant.position.copy())
-                lg["p_est"].append(c.estimator.position.copy())
-                lg["p_des"].append(c.trajectory.position[:3].copy())
-                lg["tensions"].append(c.tensions.copy())
-                lg["torques"].append(c.torques.copy())
-                lg["tda_ok"].append(c.tda_status.name == "OK")
+                lg["p_est"].append(d.position.copy())
+                lg["p_des"].append(d.reference[:3].copy())
+                lg["tensions"].append(d.tensions.copy())
+                lg["torques"].append(d.torques.copy())
+                lg["tda_ok"].append(d.tda_status.name == "OK")
             if each is not None:
                 each(self)
             if until is not None and until(self):

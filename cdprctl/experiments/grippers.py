@@ -59,10 +59,11 @@ def _loop(model: RobotModel, ext: tuple[float, ...]) -> ClosedLoop:
 
 def _check(cl: ClosedLoop, what: str) -> None:
     c = cl.controller
-    if c.state not in (State.ENABLED, State.MOVING):
+    if c.data.state not in (State.ENABLED, State.MOVING):
         cl.close()
-        events = "; ".join(f"{t:.3f} s {e}" for t, e in list(c.events)[-6:])
-        raise ExperimentError(f"{what}: controller {c.state.value}: {c.fault_reason} ({events})")
+        events = "; ".join(f"{t:.3f} s {e}" for t, e in list(c.data.events)[-6:])
+        d = c.data
+        raise ExperimentError(f"{what}: controller {d.state.value}: {d.fault_reason} ({events})")
 
 
 def spring_deformation(cl: ClosedLoop, cable: int) -> float:
@@ -85,28 +86,28 @@ def tension_planner(
     # the held cable's deformation is brought to its value in 3 s: a step of a soft cable's
     # tension is a step of its stretch, which the pose estimate cannot follow
     k_held = float(model.cable_stiffness(c.estimator.kin.length)[cable_held])
-    d_start = float(c.tensions[cable_held]) / k_held
+    d_start = float(c.data.tensions[cable_held]) / k_held
     t_start = cl.net.time
 
     def bring(loop: ClosedLoop) -> None:
         s = min(1.0, (loop.net.time - t_start) / 3.0)
         d = d_start + s * (held_deformation - d_start)
         held_now = Imposition(cable_held, ImposedQuantity.DEFORMATION, d)
-        loop.controller.impose((held_now,))
+        loop.controller.distribution.impose((held_now,))
 
     cl.run(6.0, each=bring, record=False)
     _check(cl, "holding the imposed deformation")
     held = Imposition(cable_held, ImposedQuantity.DEFORMATION, held_deformation)
-    u_lo, u_hi = (float(x) for x in c.tda.out.energy_range[cable_swept])
+    u_lo, u_hi = (float(x) for x in c.distribution.current.out.energy_range[cable_swept])
     k = float(model.cable_stiffness(c.estimator.kin.length)[cable_swept])
     # from where cable 1 is, down to its minimum energy in 3 s: the sweep starts there
-    u_now = float(c.tensions[cable_swept]) ** 2 / (2.0 * k)
+    u_now = float(c.data.tensions[cable_swept]) ** 2 / (2.0 * k)
     t_down = cl.net.time
 
     def down(loop: ClosedLoop) -> None:
         s = min(1.0, (loop.net.time - t_down) / 3.0)
         imp = Imposition(cable_swept, ImposedQuantity.ENERGY, u_now + s * (u_lo - u_now))
-        loop.controller.impose((held, imp))
+        loop.controller.distribution.impose((held, imp))
 
     cl.run(5.0, each=down, record=False)
     _check(cl, "bringing the swept cable to its minimum energy")
@@ -121,7 +122,7 @@ def tension_planner(
         s = min(1.0, max(0.0, (loop.net.time - t0) / sweep))
         u = u_lo + s * (u_hi - u_lo)
         imp = Imposition(cable_swept, ImposedQuantity.ENERGY, u)
-        loop.controller.impose((held, imp))
+        loop.controller.distribution.impose((held, imp))
         p = loop.plant
         log["t"].append(loop.net.time - t0)
         log["u_imposed"].append(u)
@@ -134,7 +135,7 @@ def tension_planner(
 
     cl.run(sweep + 3.0, each=plan, record=False)
     _check(cl, "the tension planner")
-    status = c.tda_status.name
+    status = c.data.tda_status.name
     cl.close()
     out: dict[str, Any] = {key: np.array(v) for key, v in log.items()}
     out.update(u_range=(u_lo, u_hi), stiffness=k, tda_status=status)
@@ -163,17 +164,18 @@ def gripper_sweep(
     p.set_object(gripper, object_travel if object_travel is not None else 10.0, object_stiffness)
     wait = 0.0
     for j, travel in (hold or {}).items():
-        wait = max(wait, abs(travel - float(c.grasp.travel[j])) / c.grippers.GRIP_SPEED)
+        wait = max(wait, abs(travel - float(c.grippers.grasp.travel[j])) / c.grippers.GRIP_SPEED)
         c.submit(Command(CommandKind.GRIPPER, gripper=j, grip=GripKind.TRAVEL, value=travel))
         cl.run(0.01, record=False)
     cl.run(wait + 2.0 if hold else 0.0, record=False)
     _check(cl, "moving the held grippers")
-    lo, hi = c.gripper_range(gripper)
+    lo, hi = c.grippers.travel_range(gripper)
     if not math.isfinite(lo):
         cl.close()
         raise ExperimentError("no feasible travel for the gripper here")
     c.submit(Command(CommandKind.GRIPPER, gripper=gripper, grip=GripKind.TRAVEL, value=lo + 0.001))
-    cl.run(max(abs(lo - c.grasp.travel[gripper]) / c.grippers.GRIP_SPEED, 0.0) + 4.0, record=False)
+    gr = c.grippers
+    cl.run(max(abs(lo - gr.grasp.travel[gripper]) / gr.GRIP_SPEED, 0.0) + 4.0, record=False)
     _check(cl, "opening the gripper")
     end = min(hi, travel_to) if travel_to is not None else hi
     end -= 0.001
@@ -197,7 +199,7 @@ def gripper_sweep(
         log["deformation"].append(d)
         log["tension"].append(tau)
         log["contact"].append(float(p.contact_force[gripper]))
-        g = loop.controller.grasp
+        g = loop.controller.grippers.grasp
         log["state"].append(g.state[gripper].value)
         log["force_est"].append(float(g.force[gripper]))
         log["travel_est"].append(float(g.travel[gripper]))

@@ -116,19 +116,19 @@ class Watch:
 
     def check(self, c: Controller, p_true: np.ndarray, measure_excursion: bool) -> None:
         r = self.res
-        tau = c.torques
+        tau = c.data.torques
         if not np.all(np.isfinite(tau)):
             r.nonfinite_torques += 1
         else:
             r.torques_over_limit += int(np.sum(np.abs(tau) > self.limit + 1e-9))
             r.max_torque_nm = max(r.max_torque_nm, float(np.max(np.abs(tau))))
-        if c.state in HEALTHY:
-            t = c.tensions
+        if c.data.state in HEALTHY:
+            t = c.data.tensions
             bad = np.sum(t < self.model.tension_min - 1e-9) + np.sum(
                 t > self.model.tension_max + 1e-9
             )
             r.tensions_outside_limits_while_healthy += int(bad)
-        r.max_tension_n = max(r.max_tension_n, float(np.max(c.tensions)))
+        r.max_tension_n = max(r.max_tension_n, float(np.max(c.data.tensions)))
         if measure_excursion:
             d = float(np.linalg.norm(p_true - c.trajectory.position[:3])) * 1e3
             r.excursion_mm = max(r.excursion_mm, d)
@@ -153,8 +153,9 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
         ).attach(cl.net)
         c = cl.controller
         _observe(cl, watch, res, t_fault, observe)
-        res.reaction = c.state.value + (f": {c.fault_reason}" if c.fault_reason else "")
-        res.fault_kind = c.fault_kind.value if c.fault_kind is not None else ""
+        d = c.data
+        res.reaction = d.state.value + (f": {d.fault_reason}" if d.fault_reason else "")
+        res.fault_kind = c.data.fault_kind.value if c.data.fault_kind is not None else ""
         _recover(cl, res, watch, t_fault + sc.duration)
     finally:
         cl.close()
@@ -164,10 +165,10 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
 def _observe(cl: ClosedLoop, watch: Watch, res: Result, t_fault: float, seconds: float) -> None:
     def each(cl: ClosedLoop) -> None:
         c = cl.controller
-        if res.detection_s is None and c.state in (State.STOPPING, State.FAULT):
+        if res.detection_s is None and c.data.state in (State.STOPPING, State.FAULT):
             res.detection_s = cl.net.time - cl.period - t_fault
-        stopping = c.state is State.STOPPING
-        watch.check(c, cl.plant.position, measure_excursion=c.state in HEALTHY or stopping)
+        stopping = c.data.state is State.STOPPING
+        watch.check(c, cl.plant.position, measure_excursion=c.data.state in HEALTHY or stopping)
 
     cl.run(seconds, each=each, record=False)
 
@@ -175,29 +176,29 @@ def _observe(cl: ClosedLoop, watch: Watch, res: Result, t_fault: float, seconds:
 def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     """Once the fault has cleared: reset (if it faulted), enable, a move back to the start."""
     c = cl.controller
-    if c.state in HEALTHY and res.detection_s is None:
-        if c.state is State.MOVING:
-            _steps(cl, watch, 3.0, until=lambda: c.state is not State.MOVING)
+    if c.data.state in HEALTHY and res.detection_s is None:
+        if c.data.state is State.MOVING:
+            _steps(cl, watch, 3.0, until=lambda: c.data.state is not State.MOVING)
         at = np.linalg.norm(cl.plant.position - TARGET) * 1e3
         res.recovered = f"rode through; move finished {at:.1f} mm from its target"
         return
     if not math.isfinite(t_clear):
         res.recovered = "no (the fault is permanent)"
-        if c.state is State.FAULT:
+        if c.data.state is State.FAULT:
             c.submit(Command(CommandKind.RESET))
             _steps(cl, watch, 1.0)
             res.notes.append(
-                f"reset with the fault still present: {c.state.value} {c.fault_reason}"
+                f"reset with the fault still present: {c.data.state.value} {c.data.fault_reason}"
             )
         return
     if cl.net.time < t_clear:
         _steps(cl, watch, t_clear - cl.net.time)
     # a controlled stop ends in FAULT after stop_duration: reset only then
-    _steps(cl, watch, 3.0, until=lambda: c.state is not State.STOPPING)
+    _steps(cl, watch, 3.0, until=lambda: c.data.state is not State.STOPPING)
     c.submit(Command(CommandKind.RESET))
     _steps(cl, watch, 1.0)
-    if c.state is not State.READY:
-        res.recovered = f"no: reset left it {c.state.value} {c.fault_reason}"
+    if c.data.state is not State.READY:
+        res.recovered = f"no: reset left it {c.data.state.value} {c.data.fault_reason}"
         return
     c.submit(Command(CommandKind.ENABLE))
     _steps(cl, watch, 0.5)
@@ -205,11 +206,11 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     c.submit(Command(CommandKind.MOVE, pose=np.concatenate([START, cl.model.home.rpy])))
     _steps(cl, watch, 4.0)
     err = np.linalg.norm(cl.plant.position - START) * 1e3
-    ok = c.state is State.ENABLED and err < 2.0
+    ok = c.data.state is State.ENABLED and err < 2.0
     res.recovered = (
         f"yes: reset, enable, move back ({err:.1f} mm)"
         if ok
-        else f"no: {c.state.value} {c.fault_reason} ({err:.1f} mm)"
+        else f"no: {c.data.state.value} {c.data.fault_reason} ({err:.1f} mm)"
     )
     res.notes.append(f"platform at re-enable {np.round(before, 4).tolist()} m")
 
@@ -276,9 +277,9 @@ def _sigkill(model: RobotModel, cl: ClosedLoop, res: Result, watch: Watch, sc: S
             cl.net.advance(cl.period)
             watch.check(c2, cl.plant.position, measure_excursion=False)
             jump = max(jump, float(np.linalg.norm(cl.plant.position - p0)) * 1e3)
-        ok = c2.state is State.ENABLED and jump < 0.5
+        ok = c2.data.state is State.ENABLED and jump < 0.5
         res.recovered = (
-            f"{'yes' if ok else 'no'}: restarted, {c2.state.value}, largest move while "
+            f"{'yes' if ok else 'no'}: restarted, {c2.data.state.value}, largest move while "
             f"taking over {jump:.3f} mm"
         )
     except RuntimeError as exc:

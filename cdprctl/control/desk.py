@@ -1,0 +1,244 @@
+"""The command desk: what an operator asks of the controller, checked on the way in and acted
+on at the start of the next cycle.
+
+``submit`` (outside the loop: the gateway's process hands commands to the daemon's I/O thread,
+tests and scripts call it directly) checks a command's payload and plans what needs planning
+(a move's line, a jog's segment, a path), and answers with a ``Verdict``: accepted into the
+mailbox, or refused with the reason (also an event). ``handle`` (in the cycle) acts on each
+queued command whose kind the state accepts (``commands.ACCEPTED_IN``), through the handlers
+below; the cycle checks nothing twice. One rule decides which motion source moves the
+reference (``_take_motion``)."""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cdprctl.control.commands import Command, CommandKind, accepted
+from cdprctl.control.states import HEALTHY_STATES, State
+from cdprctl.rotation import FloatArray, rpy_to_matrix
+from drivers.vocabulary import Lifecycle
+
+if TYPE_CHECKING:
+    from cdprctl.control.controller import Controller
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What ``submit`` did with a command: queued for the next cycle, or refused (why)."""
+
+    accepted: bool
+    reason: str = ""
+
+    def __bool__(self) -> bool:
+        return self.accepted
+
+
+ACCEPTED = Verdict(True)
+MAILBOX = 64  # commands waiting for the next cycle at most
+FULL = Verdict(False, "the command mailbox is full")
+
+
+class CommandDesk:
+    def __init__(self, ctl: Controller):
+        self.ctl = ctl
+        self.data = ctl.data
+        self.mailbox: collections.deque[Command] = collections.deque(maxlen=MAILBOX)
+        self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
+            CommandKind.ENABLE: self._enable,
+            CommandKind.DISABLE: self._disable,
+            CommandKind.STOP: self._stop,
+            CommandKind.RESET: self._reset,
+            CommandKind.MOVE: self._move,
+            CommandKind.SET_TDA: self._set_tda,
+            CommandKind.GRIPPER: ctl.grippers.command,
+            CommandKind.JOG: self._jog,
+            CommandKind.PATH: self._path,
+            CommandKind.PAUSE: self._pause,
+            CommandKind.RESUME: self._resume,
+            CommandKind.ABORT: self._abort,
+        }
+
+    # -- outside the loop ------------------------------------------------------------------------
+    def submit(self, cmd: Command) -> Verdict:
+        """Queue ``cmd`` for the next cycle, or refuse it (a pose or speed out of range, a path
+        the limits refuse, TDA options this robot cannot use, a full mailbox): the reason is
+        in the verdict and, except for a full mailbox, an event."""
+        why = self._refusal(cmd)
+        if why:
+            return Verdict(False, why)
+        if len(self.mailbox) >= MAILBOX:
+            return FULL
+        self.mailbox.append(cmd)
+        return ACCEPTED
+
+    def _refusal(self, cmd: Command) -> str:
+        """Why ``cmd`` cannot be acted on (also written as an event), or ""."""
+        c, d = self.ctl, self.data
+        ok = True
+        if cmd.kind is CommandKind.MOVE:
+            pose = None if cmd.pose is None else np.asarray(cmd.pose, dtype=float)
+            if (
+                pose is None
+                or pose.shape != (6,)
+                or not np.all(np.isfinite(pose))
+                or not (0.0 < cmd.speed <= 1.0 and 0.0 < cmd.accel <= 1.0)
+            ):  # the gateway validates; this is the last guard before the trajectory
+                d.events.append((d.time, "move ignored: pose or speed not finite/in range"))
+                ok = False
+            else:
+                cmd.target = c.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
+                why = self._line_leaves_limits(cmd.target)
+                if why:
+                    d.events.append((d.time, f"move ignored: {why}"))
+                    ok = False
+        elif cmd.kind is CommandKind.JOG:
+            why = self._take_motion(d.time, "jog", ask_only=True)  # again in the cycle: a
+            if why:  # path may end meanwhile
+                d.events.append((d.time, f"jog ignored: {why}"))
+                ok = False
+            else:
+                ok = c.jog.plan(cmd)
+        elif cmd.kind is CommandKind.PATH:
+            ok = c.path.plan_path(cmd)
+        elif cmd.kind is CommandKind.RESUME:
+            ok = c.path.plan_resume(cmd)
+        elif cmd.kind is CommandKind.SET_TDA:
+            errors = ["no options"] if cmd.tda is None else cmd.tda.validate(c.model)
+            if errors:
+                d.events.append((d.time, f"TDA options rejected: {'; '.join(errors)}"))
+                ok = False
+        return "" if ok else d.events[-1][1]
+
+    def _line_leaves_limits(self, target: FloatArray) -> str:
+        """Where the straight line from the reference to ``target`` (coordinates) leaves the
+        soft limits, or "" (``SoftLimits.ray_end``, sampled every 2 cm)."""
+        tr = self.ctl.trajectory
+        start = tr.position.copy()
+        end, why = self.ctl.limits.ray_end(start, target - start, 1.0, step=0.02)
+        if not why:
+            return ""
+        where = np.round(end[:3], 4).tolist()
+        return f"the line to the target leaves the soft limits after {where} m: {why}"
+
+    # -- in the cycle ------------------------------------------------------------------------------
+    def handle(self, t: float) -> None:
+        d = self.data
+        while self.mailbox:
+            cmd = self.mailbox.popleft()
+            if accepted(cmd.kind, d.state):
+                self._handlers[cmd.kind](t, cmd)
+            else:
+                d.events.append((t, f"command {cmd.kind.value} ignored in state {d.state.value}"))
+
+    def _take_motion(self, t: float, by: str, ask_only: bool = False) -> str:
+        """One source moves the reference at a time. A move or a stop (``by``) takes over
+        from a path (braked and forgotten) and a jog; a jog does not take over a path (pause
+        or abort it first). Returns why ``by`` may not, or ""; ``ask_only``: change nothing."""
+        c = self.ctl
+        if by == "jog":
+            return "a path is running (pause or abort it first)" if c.path.plan is not None else ""
+        if not ask_only:
+            c.path.abort(t)
+            c.jog.active = False
+        return ""
+
+    def _enable(self, t: float, cmd: Command) -> None:
+        c, d = self.ctl, self.data
+        if c.drives.lifecycle is not Lifecycle.INACTIVE:
+            # a drive fault came back after the reset: the supervisor faults next
+            d.events.append((t, f"enable refused: drives {c.drives.lifecycle.value} "
+                             f"{c.drives.error}"))  # fmt: skip
+            return
+        c.trajectory.reset(c.pose6())
+        c.reference.restart()
+        d.tensions[:] = d.hold_tensions
+        c.pose.reset()
+        c.observer.reset()
+        c.cable_space.start_measuring()
+        # a fresh start: the saturation of before the fault is not this run's
+        d.saturation, d.saturated_for = 1.0, 0.0
+        c.grippers.hold()
+        c.drives.begin_activate()
+        c.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
+
+    def _disable(self, t: float, cmd: Command) -> None:
+        self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested")
+
+    def _stop(self, t: float, cmd: Command) -> None:
+        self._take_motion(t, "stop")
+        self.ctl.trajectory.stop_here()
+        self.ctl.supervisor.set_state(State.ENABLED, t, "stop: decelerating, then holding")
+
+    def _reset(self, t: float, cmd: Command) -> None:
+        c = self.ctl
+        c.drives.begin_recover()
+        c.supervisor.clear_fault()
+        c.trajectory.reset(c.pose6())
+        c.supervisor.set_state(State.READY, t, "fault reset")
+
+    def _move(self, t: float, cmd: Command) -> None:
+        if cmd.target is None or cmd.pose is None:  # not through submit(): nothing to act on
+            return
+        c = self.ctl
+        self._take_motion(t, "move")
+        c.trajectory.set_target(cmd.target, cmd.speed, cmd.accel)
+        self.data.motion = "move"
+        c.supervisor.set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
+
+    def _jog(self, t: float, cmd: Command) -> None:
+        c, d = self.ctl, self.data
+        why = self._take_motion(t, "jog")
+        if why:
+            d.events.append((t, f"jog ignored: {why}"))
+            return
+        c.jog.command(t, cmd)
+        if c.jog.active and d.state is not State.MOVING:
+            c.supervisor.set_state(State.MOVING, t, "jog")
+
+    def _path(self, t: float, cmd: Command) -> None:
+        c, d = self.ctl, self.data
+        plan, offset = cmd.plan
+        if not c.trajectory.finished or not plan.starts_at(c.trajectory.position):
+            d.events.append((t, f"path {plan.name} not started: the robot moved since it was "
+                             "checked"))  # fmt: skip
+            return
+        c.path.start(t, plan, offset)
+        c.supervisor.set_state(State.MOVING, t, f"path {plan.name}: {plan.summary()}")
+
+    def _pause(self, t: float, cmd: Command) -> None:
+        path = self.ctl.path
+        if path.plan is None or path.paused:
+            self.data.events.append((t, "pause ignored: no running path"))
+            return
+        path.pause(t)
+
+    def _resume(self, t: float, cmd: Command) -> None:
+        c = self.ctl
+        if not c.path.paused or cmd.plan is None:
+            self.data.events.append((t, "resume ignored: no paused path"))
+            return
+        plan, offset = cmd.plan
+        c.path.start(t, plan, offset)
+        c.supervisor.set_state(State.MOVING, t, f"path {plan.name} resumed at segment "
+                               f"{offset + 1}")  # fmt: skip
+
+    def _abort(self, t: float, cmd: Command) -> None:
+        self.ctl.path.abort(t)
+        self.ctl.jog.stop()
+
+    def _set_tda(self, t: float, cmd: Command) -> None:
+        c, d, opts = self.ctl, self.data, cmd.tda
+        if opts is None:
+            return
+        if opts == c.distribution.options:
+            # the same options again (an operator's retry, a script): no switch, no blend
+            d.events.append((t, f"TDA method {opts.method.value} unchanged"))
+            return
+        # the stretch estimate assumes the tensions the cables now get: both switch
+        c.distribution.switch(opts, t, blend=d.state in HEALTHY_STATES)
+        d.events.append((t, f"TDA method {opts.method.value}"))
