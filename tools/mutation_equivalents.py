@@ -1,0 +1,76 @@
+"""Mutants equivalent to the code (no test can kill them), for tools/mutation.py: the entries
+of tools/mutation_equivalents.toml (each with why), and the rules known before running — a
+``|`` inside an annotation, never evaluated — so such mutants cost no test run."""
+
+from __future__ import annotations
+
+import ast
+import re
+import sqlite3
+import tomllib
+from pathlib import Path
+
+EQUIVALENTS = Path(__file__).resolve().parent / "mutation_equivalents.toml"
+
+
+def load_equivalents() -> list[dict]:
+    """The entries of tools/mutation_equivalents.toml."""
+    if not EQUIVALENTS.exists():
+        return []
+    return tomllib.loads(EQUIVALENTS.read_text()).get("equivalent", [])
+
+
+EQUIVALENT_PREFIX = "equivalent: "
+ANNOTATION = "annotations are not evaluated (every module has from __future__ import annotations)"
+
+
+def annotation_operators(source: str) -> set[tuple[int, int]]:
+    """(line, column) of every ``|`` inside an annotation (``X | None``): never evaluated."""
+    spots: set[tuple[int, int]] = set()
+    annotations = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.arg | ast.AnnAssign) and node.annotation is not None:
+            annotations.append(node.annotation)
+        elif isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.returns:
+            annotations.append(node.returns)
+    lines = source.splitlines()
+    for ann in annotations:
+        for op in ast.walk(ann):
+            if isinstance(op, ast.BinOp) and isinstance(op.op, ast.BitOr):
+                row, col = op.left.end_lineno or 0, op.left.end_col_offset or 0
+                text = lines[row - 1]
+                bar = text.index("|", col) if "|" in text[col:] else -1
+                if bar >= 0:
+                    spots.add((row, bar))
+    return spots
+
+
+def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
+    """Mark the pending mutants that are equivalent by a rule known beforehand (``|`` in an
+    annotation; the module-independent entries of the equivalents file without a ``mutant``
+    pattern) as skipped, with why: they would survive every test, each at the full cost."""
+    source = (tree / module).read_text()
+    lines = source.splitlines()
+    bars = annotation_operators(source)
+    rules = [e for e in load_equivalents() if e["module"] == "*" and "mutant" not in e]
+    marked = 0
+    with sqlite3.connect(db) as con:
+        pending = con.execute(
+            "SELECT m.job_id, m.operator_name, m.start_pos_row, m.start_pos_col "
+            "FROM mutation_specs m LEFT JOIN work_results r ON m.job_id = r.job_id "
+            "WHERE r.job_id IS NULL"
+        ).fetchall()
+        for job, op, row, col in pending:
+            why = ""
+            if op.startswith("core/ReplaceBinaryOperator_BitOr_") and (row, col) in bars:
+                why = ANNOTATION
+            else:
+                text = lines[row - 1].strip()
+                why = next((e["why"] for e in rules if re.fullmatch(e["operator"], op)
+                            and re.fullmatch(e["line"], text)), "")  # fmt: skip
+            if why:
+                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
+                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
+                            (EQUIVALENT_PREFIX + why, job))  # fmt: skip
+                marked += 1
+    return marked
