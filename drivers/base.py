@@ -107,13 +107,11 @@ class WinchDriver(ABC):
         self.lifecycle = Lifecycle.INACTIVE
 
     def activate(self, timeout: float = 2.0) -> None:
-        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``. The
-        non-blocking ``begin_activate`` with the cycles run here: ``read`` is where every
-        drive reporting enabled makes the driver ``ACTIVE``, for both."""
+        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``."""
         self._require(Lifecycle.INACTIVE)
         self._command[:] = 0.0
         self._last_command[:] = 0.0
-        self.begin_activate()
+        self._request_enable(True)
         deadline = self.clock() + timeout
         while True:
             now = self.clock()
@@ -121,16 +119,17 @@ class WinchDriver(ABC):
             self.write(now, self._command)
             if self.lifecycle is Lifecycle.ERROR:
                 raise self.error or DriverOperationError("activation failed")
-            if self.lifecycle is Lifecycle.ACTIVE:
-                return
+            if np.all(self.states.state == DriveState.ENABLED):
+                break
             if now > deadline:
                 not_on = [i for i in range(self.m) if self.states.state[i] != DriveState.ENABLED]
-                self.begin_deactivate()
+                self._request_enable(False)
                 raise DriverTimeoutError(
                     f"drives of cable indices {not_on} not enabled after {timeout:g} s",
                     not_on[0],
                 )
             self.wait(self.period)
+        self.lifecycle = Lifecycle.ACTIVE
 
     def deactivate(self, timeout: float = 1.0) -> None:
         """Disable the drives (brakes hold) → ``INACTIVE``."""
