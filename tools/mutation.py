@@ -23,6 +23,7 @@ kill it with a test, or explain in that file why no behaviour can change.
 from __future__ import annotations
 
 import argparse
+import ast
 import datetime as dt
 import json
 import os
@@ -94,14 +95,13 @@ def sync_tree(dest: Path) -> None:
             p.unlink()
 
 
-def config_text(t: Target, timeout: float) -> str:
+def config_text(t: Target, timeout: float, command: str) -> str:
     excludes = ",\n    ".join(json.dumps(e) for e in EXCLUDE_OPERATORS)
-    command = json.dumps(f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}")
     return f"""[cosmic-ray]
 module-path = "{t.module}"
 timeout = {timeout:.0f}
 excluded-modules = []
-test-command = {command}
+test-command = {json.dumps(command)}
 
 [cosmic-ray.distributor]
 name = "local"
@@ -113,27 +113,61 @@ exclude-operators = [
 """
 
 
+def importers(tree: Path, module: str) -> set[str]:
+    """The file stems of ``module`` and of every module of the tree that imports it, directly
+    or through others (their numba kernels may have compiled the module's code in)."""
+    names = {}
+    for pkg in ("cdprctl", "drivers", "sim_backend"):
+        for f in (tree / pkg).rglob("*.py"):
+            rel = f.relative_to(tree).with_suffix("")
+            parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+            names[".".join(parts)] = f
+    deps: dict[str, set[str]] = {}
+    for name, f in names.items():
+        found = set()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {a.name for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                found |= {node.module} | {f"{node.module}.{a.name}" for a in node.names}
+        deps[name] = {d for d in found if d in names}
+    target = ".".join(Path(module).with_suffix("").parts)
+    hit, grew = {target}, True
+    while grew:
+        new = {n for n, d in deps.items() if n not in hit and d & hit}
+        grew = bool(new)
+        hit |= new
+    return {names[n].stem for n in hit if names[n].stem != "__init__"}
+
+
 def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None:
     """One module's session, kept in out/mutation/<name>.sqlite: the tests run unmutated first
-    (they must pass; it also fills numba's cache in the tree), then init, the filters, exec
-    with a per-mutant timeout of ``max(t.timeout, 4 × that run)``."""
+    (they must pass; they also warm the numba cache every mutant starts from), then init, the
+    filters, exec with a per-mutant timeout of ``max(t.timeout, 4 × that run)``, each mutant
+    on a copy of that cache without the entries that may hold the module's code
+    (``tools/mutation_pytest.sh``)."""
     cfg, db = OUT / f"{t.name}.toml", OUT / f"{t.name}.sqlite"
+    base = OUT / f"numba-{tree.name}"
+    shutil.rmtree(base, ignore_errors=True)  # never a cache written while a mutant was on disk
     env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
 
     def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)
 
     start = time.monotonic()
-    base = subprocess.run(
-        f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}",
-        shell=True, cwd=tree, env=env, capture_output=True, text=True,
+    base_run = subprocess.run(
+        f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}", shell=True, cwd=tree,
+        env={**env, "NUMBA_CACHE_DIR": str(base)}, capture_output=True, text=True,
     )  # fmt: skip
     baseline = time.monotonic() - start
-    if base.returncode != 0:
-        log(f"{t.name}: the tests fail unmutated, skipped:\n{base.stdout[-3000:]}")
+    if base_run.returncode != 0:
+        log(f"{t.name}: the tests fail unmutated, skipped:\n{base_run.stdout[-3000:]}")
         db.unlink(missing_ok=True)
         return
-    cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline)))
+    stems = " ".join(sorted(importers(tree, t.module)))
+    command = (f"sh tools/mutation_pytest.sh {sys.executable} {base} '{stems}' "
+               f"-x -q -p no:cacheprovider {t.tests}")  # fmt: skip
+    cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline), command))
     if fresh or not db.exists():
         run(tool("cosmic-ray"), "init", str(cfg), str(db), "--force")
         run(tool("cr-filter-operators"), str(db), str(cfg))
