@@ -14,7 +14,6 @@ from __future__ import annotations
 import numpy as np
 
 from cdprctl.control.commands import Command
-from cdprctl.control.controller import Controller
 from cdprctl.control.states import State
 from cdprctl.experiments.ark2020 import deflection_reference
 from cdprctl.experiments.closed_loop import ClosedLoop
@@ -70,15 +69,15 @@ def lateral(model: RobotModel, tda: TDAOptions, seconds: float) -> str:
             [FaultEvent(cl.net.time, "external_wrench", value=(0.0, 30.0, 0, 0, 0, 0), ramp=1.0)]
         ).attach(cl.net)
         cl.run(seconds)
-        c: Controller = cl.controller
+        d = cl.controller.data
         a = cl.arrays()
         y = (a["p_true"][n0:, 1] - y0) * 1e3
-        pred = deflection_reference(model, model.home.position, c.tensions, 30.0) * 1e3
+        pred = deflection_reference(model, model.home.position, d.tensions, 30.0) * 1e3
         t = a["tensions"][n0:]
         name = tda.method.value + (f" ν={tda.nu}" if tda.method is TDAMethod.SOTDA else "")
-        ok = c.state is State.ENABLED
+        ok = d.state is State.ENABLED
         return (
-            f"| {model.name} | {name} | {c.state.value} {'' if ok else c.fault_reason[:48]} | "
+            f"| {model.name} | {name} | {d.state.value} {'' if ok else d.fault_reason[:48]} | "
             f"{y.max():.2f} | {np.mean(y[-250:]):.2f} | {pred:.2f} | {t.min():.0f}-{t.max():.0f} |"
         )
 

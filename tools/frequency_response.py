@@ -59,7 +59,7 @@ def response(model: RobotModel, axis: int, f: float) -> tuple[float, float, str]
         cl.run(1.0 + (cycles + 1) / f, each=sample, record=False)
         t_arr, y = np.array(ts), np.array(ys) - np.mean(ys)
         re, im = 2 * np.mean(y * np.sin(w * t_arr)), 2 * np.mean(y * np.cos(w * t_arr))
-        return math.hypot(re, im) / a, math.degrees(math.atan2(im, re)), c.state.value
+        return math.hypot(re, im) / a, math.degrees(math.atan2(im, re)), c.data.state.value
 
 
 def main() -> None:
