@@ -166,7 +166,7 @@ def test_a_lost_rpdo_the_drive_goes_on_at_the_targets_rate(rig):
         rig.net.rx_filter = None
         if k == 30:
             assert plant.servo.rate[0] == pytest.approx(speed, rel=0.05)
-    assert drive.sync_period == pytest.approx(rig.period, rel=1e-6)
+    assert drive.sync.period == pytest.approx(rig.period, rel=1e-6)
     assert drive.state is p.PowerState.OPERATION_ENABLED
     assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
 

@@ -25,6 +25,7 @@ from canopen import SdoAbortedError
 from drivers.cia402 import protocol as p
 from sim_backend.drives import pdo
 from sim_backend.drives.dictionary import Dictionary
+from sim_backend.drives.sync_clock import SyncClock
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
@@ -62,13 +63,9 @@ class Cia402Drive:
         # s: how long the position target goes on at its last rate without a new one (a SYNC or
         # an RPDO late or lost) before the drive holds it ([drives] target_extrapolation)
         self.extrapolate_for = target_extrapolation
-        self.last_sync = -math.inf
-        self.sync_count = 0  # the last SYNC's counter (0: none, or SYNCs without one)
-        self.rpdos_since_sync = 0  # RPDOs received since the last SYNC this drive saw
+        self.sync = SyncClock(target_extrapolation)  # the SYNC as this drive sees it
         self.stale_targets = 0  # RPDOs not taken: they were for a SYNC this drive missed
         self.last_target = -math.inf  # s, the SYNC that applied the last RPDO
-        self.sync_period = 0.0  # s, the drive's estimate (0: none yet)
-        self._intervals: list[float] = []  # s, the last SYNC intervals
         self.nmt = p.HB_PRE_OPERATIONAL
         self.state = p.PowerState.SWITCH_ON_DISABLED  # transitions 0 and 1 done at power-on
         # the object dictionary of the shipped EDS; this drive's stored parameters over its
@@ -146,7 +143,7 @@ class Cia402Drive:
             self._compile_pdos()
             self.nmt = p.HB_PRE_OPERATIONAL
             self.pending = None
-            self.sync_count = 0
+            self.sync.count = 0
             self.last_hb = -math.inf
             if not self.silent:
                 return [self._heartbeat_frame(p.HB_BOOTUP)]
@@ -172,7 +169,7 @@ class Cia402Drive:
                 latched[slot] = value
         cw, torque, position, offset = latched
         self.pending = (cw, torque, position, offset)
-        self.rpdos_since_sync += 1
+        self.sync.rpdos += 1
         self.last_rx = t
 
     def _compile_pdos(self) -> None:
@@ -274,9 +271,8 @@ class Cia402Drive:
     def on_sync(self, t: float, data: bytes = b"") -> list[can.Message]:
         """Apply the latched RPDO, then sample and send the TPDOs."""
         self.last_rx = t
-        interval, self.last_sync = t - self.last_sync, t
-        self._measure_sync_period(interval)
-        stale = self._missed_sync_since_rpdo(data)
+        interval = self.sync.sync(t)
+        stale = self.sync.missed_since_rpdo(data, self.od[(p.OD_SYNC_COUNTER_OVERFLOW, 0)])
         if self.nmt != p.HB_OPERATIONAL:
             return []
         pending, self.pending = self.pending, None
@@ -300,22 +296,6 @@ class Cia402Drive:
         if self.silent:
             return []
         return self._tpdos()
-
-    def _missed_sync_since_rpdo(self, data: bytes) -> bool:
-        """Counts this SYNC; True when its counter (0x1019) says SYNCs were lost since the
-        last one and fewer RPDOs came than were sent (one before each SYNC): the pending one
-        may be for a SYNC this drive missed. Applied now, its target is a period late: the
-        drive falls behind by a period and its catch-up over the next lost SYNC overshoots
-        (5 % frame loss, rowc: 0.37 rad, a following-error fault). One more RPDO than lost
-        SYNCs: the last one came after them, for this SYNC."""
-        overflow = self.od[(p.OD_SYNC_COUNTER_OVERFLOW, 0)]
-        received, self.rpdos_since_sync = self.rpdos_since_sync, 0
-        if overflow < 2 or len(data) != 1:
-            self.sync_count = 0
-            return False
-        previous, self.sync_count = self.sync_count, data[0]
-        missed = (self.sync_count - previous - 1) % overflow if previous else 0
-        return received <= missed
 
     def _apply_controlword(self, cw: int) -> None:
         cmd = p.command_of(cw)
@@ -359,8 +339,9 @@ class Cia402Drive:
                     end = theta + step * 2.0 * math.pi / self.cpr
                     # reach it one SYNC period from now (the drive's estimate of the period);
                     # after a long gap, a step
-                    if 0.0 <= interval < self.extrapolate_for and self.sync_period > 0.0:
-                        servo.rate[c] = (end - servo.target[c]) / self.sync_period
+                    period = self.sync.period
+                    if 0.0 <= interval < self.extrapolate_for and period > 0.0:
+                        servo.rate[c] = (end - servo.target[c]) / period
                     else:
                         servo.target[c], servo.rate[c] = end, 0.0
                 servo.kp[c], servo.kd[c] = self.position_gains
@@ -373,21 +354,6 @@ class Cia402Drive:
             servo.beyond[c] = 0.0
             self.target_counts = None
             plant.brake[c] = True
-
-    def _measure_sync_period(self, interval: float) -> None:
-        """``sync_period`` (s): the SYNC period as a drive locks to it, the median of the last
-        ``SYNC_WINDOW`` intervals: a late SYNC or two at once do not move it, a new rate (set-up
-        to cycling) takes half the window. Interpolating over the last interval instead, SYNCs
-        handled late by a loaded simulator (two in one step: an interval of 0) made a target
-        step and a following-error fault mid-move."""
-        if not 0.0 <= interval < self.extrapolate_for:
-            return
-        self._intervals.append(interval)
-        del self._intervals[: -self.SYNC_WINDOW]
-        ordered = sorted(self._intervals)
-        self.sync_period = ordered[len(ordered) // 2]
-
-    SYNC_WINDOW = 9
 
     def jump_encoder(self, counts: int) -> None:
         """Fault injection: the encoder jumps by ``counts``. In position mode the drive's loop
