@@ -18,8 +18,8 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         "model",
         tuple(
             f"cdprctl.model.{m}"
-            for m in ("robot", "control", "drives", "grippers", "zenoh", "foxglove", "errors",
-                      "reader")
+            for m in ("robot", "control", "drives", "buses", "grippers", "zenoh", "foxglove",
+                      "errors", "reader")
         ),
     ),
     (

@@ -8,10 +8,10 @@ Absent, every robot gets one simulated bus: CiA 402 drives with node ids 1..m on
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
+from cdprctl.model.buses import BusConfig, default_buses, read_buses
 from cdprctl.model.reader import TableReader
 
 DRIVES_KEYS = (
@@ -36,24 +36,7 @@ DRIVES_KEYS = (
     "log_file",
     "buses",
 )
-BUS_KEYS = ("interface", "channel", "bitrate", "cables", "node_ids", "options", "dcf")
 DRIVERS = ("cia402", "odrive")
-
-
-@dataclass(frozen=True)
-class BusConfig:
-    interface: str  # python-can interface: socketcan, virtual, udp_multicast, pcan, ...
-    channel: str
-    bitrate: int  # bit/s
-    cables: tuple[int, ...]  # 0-based cable indices on this bus
-    node_ids: tuple[int, ...]  # drive node id of each of those cables
-    options: dict[str, Any] = field(default_factory=dict)  # any other python-can argument
-    # per drive: a DCF/EDS whose ParameterValues the driver writes at set-up ("": none)
-    dcf: tuple[str, ...] = ()
-
-    def dcf_of(self, k: int) -> str:
-        """The DCF of the bus's ``k``-th drive ("": none)."""
-        return self.dcf[k] if k < len(self.dcf) else ""
 
 
 @dataclass(frozen=True)
@@ -156,19 +139,6 @@ class DrivesConfig:
 MODES = ("cst", "csp")
 ENCODERS = ("incremental", "absolute")
 POSITION_LOOP_DAMPING = 0.7  # of the simulated drives' position loop
-
-
-def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
-    """One simulated bus: node ids 1..m on python-can's ``virtual`` interface."""
-    return (
-        BusConfig(
-            interface="virtual",
-            channel=f"cdpr-{name}",
-            bitrate=1_000_000,
-            cables=tuple(range(n_cables)),
-            node_ids=tuple(range(1, n_cables + 1)),
-        ),
-    )
 
 
 def default_mode(driver: str) -> str:
@@ -277,109 +247,7 @@ def read_drives(
     if not isinstance(assume_home, bool):
         rd.error("drives.assume_home_at_start", assume_home, "", "must be true or false")
     log_file = rd.string(t, "log_file", "drives", required=False, default=None)
-    buses: list[BusConfig] = []
-    seen_cable: dict[int, str] = {}
-    raw = t.get("buses")
-    if raw is None:  # the default simulated bus
-        raw = []
-        buses.extend(default_buses(name, len(cable_names)))
-        seen_cable.update({i: "the default bus" for i in range(len(cable_names))})
-    elif not isinstance(raw, list) or not raw or not all(isinstance(b, dict) for b in raw):
-        rd.errors.append(
-            f"{rd.file}: drives.buses must be an array of tables [[drives.buses]], at least one"
-        )
-        raw = []
-    for bi, bt in enumerate(raw):
-        path = f"drives.buses[{bi}]"
-        rd.check_keys(bt, BUS_KEYS, path)
-        iface = rd.string(bt, "interface", path)
-        channel = bt.get("channel")
-        if not isinstance(channel, str | int) or isinstance(channel, bool):
-            rd.error(f"{path}.channel", channel, "", "must be a string (or an integer)")
-            channel = None
-        bitrate = rd.number(
-            bt,
-            "bitrate",
-            path,
-            "bit/s",
-            required=False,
-            default=1_000_000,
-            positive=True,
-            integer=True,
-        )
-        cables = bt.get("cables")
-        nodes = bt.get("node_ids")
-        idx: list[int] = []
-        if not isinstance(cables, list) or not all(isinstance(c, str) for c in cables):
-            rd.error(f"{path}.cables", cables, "", "must be a list of cable names")
-        else:
-            for c in cables:
-                if c not in cable_names:
-                    rd.error(f"{path}.cables", c, "", f"is not a cable ({', '.join(cable_names)})")
-                elif cable_names.index(c) in seen_cable:
-                    rd.error(
-                        f"{path}.cables",
-                        c,
-                        "",
-                        f"is already on {seen_cable[cable_names.index(c)]}: one bus per cable",
-                    )
-                else:
-                    seen_cable[cable_names.index(c)] = path
-                    idx.append(cable_names.index(c))
-        if (
-            not isinstance(nodes, list)
-            or not all(isinstance(n, int) and not isinstance(n, bool) for n in nodes)
-            or (isinstance(cables, list) and len(nodes) != len(cables))
-        ):
-            rd.error(
-                f"{path}.node_ids",
-                nodes,
-                "",
-                "must be a list of integers, one per cable of the bus",
-            )
-            nodes = []
-        else:
-            for n in nodes:
-                if not 1 <= n <= 127:
-                    rd.error(f"{path}.node_ids", n, "", "must be a CANopen node id in [1, 127]")
-            dups = sorted({n for n in nodes if nodes.count(n) > 1})
-            if dups:
-                rd.error(
-                    f"{path}.node_ids",
-                    nodes,
-                    "",
-                    f"repeats node id {dups[0]}: node ids on a bus must be unique",
-                )
-            if ctrl_id is not None and int(ctrl_id) in nodes:
-                rd.error(
-                    f"{path}.node_ids",
-                    nodes,
-                    "",
-                    f"contains the controller's node id {int(ctrl_id)}",
-                )
-        options = bt.get("options", {})
-        if not isinstance(options, dict):
-            rd.error(f"{path}.options", options, "", "must be a table of python-can arguments")
-            options = {}
-        dcf = _read_dcf(rd, bt.get("dcf"), f"{path}.dcf", len(nodes) if nodes else 0)
-        if iface and channel is not None and bitrate is not None:
-            buses.append(
-                BusConfig(
-                    iface,
-                    str(channel),
-                    int(bitrate),
-                    tuple(idx),
-                    tuple(int(n) for n in nodes),
-                    dict(options),
-                    dcf,
-                )
-            )
-    missing = [cable_names[i] for i in range(len(cable_names)) if i not in seen_cable]
-    if raw and missing:
-        rd.errors.append(
-            f"{rd.file}: drives.buses: cables {', '.join(missing)} are on no bus: every cable "
-            "needs a drive"
-        )
+    buses = read_buses(rd, t, cable_names, name, ctrl_id)
     if len(rd.errors) > n0:
         return None
     return DrivesConfig(
@@ -403,25 +271,3 @@ def read_drives(
         log_file=log_file,
         buses=tuple(buses),
     )
-
-
-def _read_dcf(rd: TableReader, value: Any, path: str, n: int) -> tuple[str, ...]:
-    """``dcf``: one file for every drive of the bus, or a list of one per drive ("" for
-    none); relative paths from the config file's folder; each must exist (parsed at set-up)."""
-    if value is None:
-        return ()
-    files = [value] * n if isinstance(value, str) else value
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        rd.error(path, value, "", "must be a file name, or a list of one per drive")
-        return ()
-    if len(files) != n:
-        rd.error(path, value, "", f"must list one file per drive of the bus ({n}), '' for none")
-        return ()
-    base = Path(rd.file).parent
-    out = []
-    for f in files:
-        full = "" if not f else str((base / f) if not Path(f).is_absolute() else Path(f))
-        if full and not Path(full).is_file():
-            rd.error(path, f, "", f"no such file ({full}; relative to the config file's folder)")
-        out.append(full)
-    return tuple(out)
