@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdprctl.control.cable_space import (
+from cdprctl.control.cable_kernels import (
     disturbance_kernel,
     force_feedback_kernel,
     tension_hold_kernel,
