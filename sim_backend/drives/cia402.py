@@ -1,23 +1,21 @@
 """A CiA 402 drive as the simulator's CAN node: it answers the frames a real drive answers.
 
 NMT (pre-operational → operational on "start", boot-up after a reset), the object dictionary
-of the shipped EDS served by canopen's SDO server (``dictionary.py``), RPDO1 latched and
-applied at the next SYNC (CiA 301 synchronous PDO) in
-cyclic synchronous torque (mode 10) or position (mode 8: the target interpolated linearly
-between SYNCs, the drive's own position loop run at every physics step, ``physics.Servo``), TPDO1
-(and TPDO2) sampled at the SYNC, the power state machine of CiA 402 (the transition table of
-``drivers.cia402.protocol``), heartbeat production (0x1017), EMCY on faults, and drive-side
-safety: the communication timeout triggers the abort-connection option (0x6007),
-the following error in position mode (beyond 0x6065 for longer than 0x6066: FAULT, EMCY
-0x8611), the torque limit, and the brake that holds the drum whenever the drive is not
-enabled.
+of the shipped EDS served by canopen's SDO server (``dictionary.py``), its PDOs as its mapping
+objects say (``pdo.PdoEngine``: RPDO1 latched and applied at the next SYNC, TPDOs sampled at
+the SYNC), the SYNC as it sees it (``sync_clock.py``), cyclic synchronous torque (mode 10) or
+position (mode 8: the target interpolated linearly between SYNCs, the drive's own position
+loop run at every physics step, ``physics.Servo``), the power state machine of CiA 402 (the
+transition table of ``drivers.cia402.protocol``), heartbeat production (0x1017), EMCY on
+faults, and drive-side safety: the communication timeout triggers the abort-connection option
+(0x6007), the following error in position mode (beyond 0x6065 for longer than 0x6066: FAULT,
+EMCY 0x8611), the torque limit, and the brake that holds the drum while not enabled.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from functools import partial
 
 import can
 from canopen import SdoAbortedError
@@ -93,12 +91,8 @@ class Cia402Drive:
             self._object_written,
         )
         self.od = self.dictionary.values  # (index, sub) → value, typed by the dictionary
-        self._rx: pdo.Layout | None = None
-        self._rx_slots: tuple[int, ...] = ()  # each RPDO entry's place in ``pending`` (-1: none)
-        self._tx: list[pdo.Layout] = []
-        self._tx_values: list[list[Callable[[], int]]] = []  # each TPDO entry's value, now
-        self._tx_count = [0] * len(pdo.TPDO_COMMS)  # SYNCs since each TPDO was last sent
-        self._compile_pdos()
+        # RPDO1 and the TPDOs as this drive's mapping objects say (CiA 301's PDO engine)
+        self.pdos = pdo.PdoEngine(self.dictionary, self._live, _RPDO_SLOTS, self.rpdo_owners, self)
         # the RPDO latched for the next SYNC: (controlword, target torque per mille, target
         # position counts, torque offset per mille), None where not mapped
         self.pending: tuple[int | None, int | None, int | None, int | None] | None = None
@@ -115,7 +109,6 @@ class Cia402Drive:
         self.incremental = False
         self.encoder_zero = 0
         self.transitions: list[int] = []  # CiA 402 transition numbers taken (for tests)
-        self.rpdo_length_errors = 0  # RPDOs shorter than their mapping: not processed
         self._set_following_error()
 
     # -- frames in ------------------------------------------------------------------------------
@@ -140,7 +133,7 @@ class Cia402Drive:
             else:
                 self.dictionary.reset(0x1000, 0x2000)
             self._set_following_error()
-            self._compile_pdos()
+            self.pdos.compile()
             self.nmt = p.HB_PRE_OPERATIONAL
             self.pending = None
             self.sync.count = 0
@@ -157,54 +150,15 @@ class Cia402Drive:
         """An RPDO as its mapping says, latched for the next SYNC (transmission types 0-240;
         254/255 would act at once: not used by cdprctl, not offered here). Shorter than its
         mapping: not processed (CiA 301: a length error)."""
-        rx = self._rx
-        if self.nmt != p.HB_OPERATIONAL or rx is None or not rx.valid:
+        if self.nmt != p.HB_OPERATIONAL:
             return
-        if len(data) < rx.codec.size:
-            self.rpdo_length_errors += 1
+        latched = self.pdos.decode_rpdo(data)
+        if latched is None:  # not valid, or shorter than its mapping
             return
-        latched: list[int | None] = [None, None, None, None]
-        for slot, value in zip(self._rx_slots, rx.codec.unpack_from(data), strict=True):
-            if slot >= 0:
-                latched[slot] = value
         cw, torque, position, offset = latched
         self.pending = (cw, torque, position, offset)
         self.sync.rpdos += 1
         self.last_rx = t
-
-    def _compile_pdos(self) -> None:
-        """The PDOs from the communication and mapping objects (after a write or a reset)."""
-        old = self._rx
-        self._rx = pdo.layout(self.dictionary.od, self.od, pdo.RPDO_COMM)
-        self._rx_slots = tuple(_RPDO_SLOTS.get(index, -1) for index, _ in self._rx.entries)
-        self._tx = [pdo.layout(self.dictionary.od, self.od, comm) for comm in pdo.TPDO_COMMS]
-        self._tx_values = [
-            [self._live.get(index) or partial(self.od.__getitem__, (index, sub))
-             for index, sub in tx.entries]
-            for tx in self._tx
-        ]  # fmt: skip
-        if old is not None and self.rpdo_owners.get(old.cob_id) is self:
-            del self.rpdo_owners[old.cob_id]
-        if self._rx.valid:
-            self.rpdo_owners[self._rx.cob_id] = self
-
-    def _tpdos(self) -> list[can.Message]:
-        """The TPDOs due at this SYNC (transmission type n: every n-th SYNC), as mapped."""
-        out = []
-        for k, tx in enumerate(self._tx):
-            if not tx.valid or not 0 <= tx.transmission <= 240:
-                continue
-            self._tx_count[k] += 1
-            if self._tx_count[k] < max(1, tx.transmission):
-                continue
-            self._tx_count[k] = 0
-            values = [value() for value in self._tx_values[k]]
-            out.append(
-                can.Message(
-                    arbitration_id=tx.cob_id, data=tx.codec.pack(*values), is_extended_id=False
-                )
-            )
-        return out
 
     def on_sdo(self, data: bytes) -> can.Message | None:
         """The SDO server's answer (CiA 301 §7.2.4; not in NMT STOPPED)."""
@@ -225,7 +179,7 @@ class Cia402Drive:
     def _object_written(self, index: int, sub: int, value: int) -> None:
         """A stored download's effect on the drive."""
         if pdo.is_pdo_object(index):
-            self._compile_pdos()
+            self.pdos.compile()
         if index == p.OD_MODES_OF_OPERATION:
             self.od[(p.OD_MODES_DISPLAY, 0)] = value  # switched at once
         if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
@@ -295,7 +249,7 @@ class Cia402Drive:
         self._apply_to_plant(interval, fresh)
         if self.silent:
             return []
-        return self._tpdos()
+        return self.pdos.tpdos()
 
     def _apply_controlword(self, cw: int) -> None:
         cmd = p.command_of(cw)
@@ -383,9 +337,8 @@ class Cia402Drive:
     def holds_at(self) -> float:
         """s: when the position target stops going on at its last rate, ``extrapolate_for``
         after the last new one (inf: it is not moving)."""
-        if self.plant.servo.rate[self.cable] == 0.0:
-            return math.inf
-        return self.last_target + self.extrapolate_for
+        moving = self.plant.servo.rate[self.cable] != 0.0
+        return self.last_target + self.extrapolate_for if moving else math.inf
 
     def tick(self, t: float) -> list[can.Message]:
         """Heartbeat when due; the position target held after ``extrapolate_for`` without a

@@ -12,8 +12,12 @@ object that cannot be mapped in that direction or with another length (0x0604004
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
+import can
 from canopen import SdoAbortedError
 from canopen.objectdictionary import ObjectDictionary
 
@@ -116,3 +120,74 @@ def check_write(
         or (not receive and not readable)
     ):
         raise SdoAbortedError(0x06040041)
+
+
+class PdoEngine:
+    """A node's PDO communication: RPDO1 and the TPDOs compiled from its objects (again after
+    a write to them or a reset), an RPDO's values by the slots its owner keeps them in, and
+    the TPDOs due at a SYNC (transmission type n: every n-th)."""
+
+    def __init__(self, dictionary: Any, live: dict[int, Callable[[], int]],
+                 slots: dict[int, int], owners: dict[int, Any], owner: Any):  # fmt: skip
+        """``live``: the objects whose value is the node's state, by index (the rest are read
+        from the dictionary); ``slots``: the place of each RPDO-mappable object in what
+        ``decode_rpdo`` returns; ``owners``: COB-ID → node, shared by the nodes of a bus (who
+        takes an RPDO), kept as ``owner``'s RPDO COB-ID changes."""
+        self.dictionary, self.od, self.live = dictionary, dictionary.values, live
+        self.slots, self.owners, self.owner = slots, owners, owner
+        self.rx: Layout | None = None
+        self.rx_slots: tuple[int, ...] = ()  # each RPDO entry's slot (-1: none)
+        self.tx: list[Layout] = []
+        self.tx_values: list[list[Callable[[], int]]] = []  # each TPDO entry's value, now
+        self.tx_count = [0] * len(TPDO_COMMS)  # SYNCs since each TPDO was last sent
+        self.length_errors = 0  # RPDOs shorter than their mapping: not processed
+        self.compile()
+
+    def compile(self) -> None:
+        """The PDOs from the communication and mapping objects (after a write or a reset)."""
+        old = self.rx
+        self.rx = layout(self.dictionary.od, self.od, RPDO_COMM)
+        self.rx_slots = tuple(self.slots.get(index, -1) for index, _ in self.rx.entries)
+        self.tx = [layout(self.dictionary.od, self.od, comm) for comm in TPDO_COMMS]
+        self.tx_values = [
+            [self.live.get(index) or partial(self.od.__getitem__, (index, sub))
+             for index, sub in tx.entries]
+            for tx in self.tx
+        ]  # fmt: skip
+        if old is not None and self.owners.get(old.cob_id) is self.owner:
+            del self.owners[old.cob_id]
+        if self.rx.valid:
+            self.owners[self.rx.cob_id] = self.owner
+
+    def decode_rpdo(self, data: bytes) -> list[int | None] | None:
+        """An RPDO's values by slot (None where not mapped); None when the RPDO is not valid
+        or shorter than its mapping (CiA 301: a length error, not processed)."""
+        rx = self.rx
+        if rx is None or not rx.valid:
+            return None
+        if len(data) < rx.codec.size:
+            self.length_errors += 1
+            return None
+        latched: list[int | None] = [None] * (max(self.slots.values()) + 1)
+        for slot, value in zip(self.rx_slots, rx.codec.unpack_from(data), strict=True):
+            if slot >= 0:
+                latched[slot] = value
+        return latched
+
+    def tpdos(self) -> list[can.Message]:
+        """The TPDOs due at this SYNC (transmission type n: every n-th SYNC), as mapped."""
+        out = []
+        for k, tx in enumerate(self.tx):
+            if not tx.valid or not 0 <= tx.transmission <= 240:
+                continue
+            self.tx_count[k] += 1
+            if self.tx_count[k] < max(1, tx.transmission):
+                continue
+            self.tx_count[k] = 0
+            values = [value() for value in self.tx_values[k]]
+            out.append(
+                can.Message(
+                    arbitration_id=tx.cob_id, data=tx.codec.pack(*values), is_extended_id=False
+                )
+            )
+        return out
