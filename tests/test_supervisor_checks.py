@@ -145,3 +145,86 @@ def test_the_controlled_stop_holds_for_stop_duration_then_disables():
     assert d.state is State.STOPPING and "deactivate" not in v.calls
     run(s, 10.0 + CFG.stop_duration, 10.0 + CFG.stop_duration)
     assert d.state is State.FAULT and "deactivate" in v.calls
+
+
+def test_limits_are_exclusive_and_every_axis_counts():
+    """A tracking or orientation error exactly at its limit holds; just over it faults, on
+    whichever axis it is (the norms take x, y, z and roll, pitch, yaw)."""
+    for axis, limit in ((0, CFG.max_position_error), (3, CFG.max_angle_error),
+                        (4, CFG.max_angle_error), (5, CFG.max_angle_error)):  # fmt: skip
+        s, d, _ = rig(State.MOVING)
+        d.pose_error[axis] = limit
+        run(s, 1.0, 1.0)
+        assert d.state is State.MOVING, axis
+        d.pose_error[axis] = limit * 1.001
+        run(s, 1.002, 1.002)
+        assert d.fault_kind in (FaultKind.TRACKING, FaultKind.ORIENTATION), axis
+        assert d.state is State.STOPPING
+
+
+def test_over_speed_reason_says_how_long_it_persisted():
+    s, d, _ = rig()
+    run(s, 1.0, 1.0 + Supervisor.OVER_SPEED_FOR, speed=2 * CFG.max_speed)
+    assert d.fault_reason.endswith(f"for {Supervisor.OVER_SPEED_FOR * 1e3:.0f} ms")
+    assert "for 30 ms" in d.fault_reason  # the documented 30 ms
+
+
+def test_the_cable_tension_fault_comes_after_its_documented_50_ms_inverse_time():
+    """Beyond its limit by a ratio r the error faults after 50 ms / r (inverse time)."""
+    for ratio in (1.0001, 2.5):
+        s, d, _ = rig(State.ENABLED, position_mode=True)
+        d.internal_tension_error[2] = ratio * TENSION_LIMITS[2]
+        t, dt = 1.0, 0.001
+        while d.state is State.ENABLED and t < 2.0:
+            run(s, t, t)
+            t += dt
+        assert d.fault_kind is FaultKind.CABLE_TENSION
+        assert t - 1.0 == pytest.approx(0.05 / ratio, abs=2 * dt)
+
+
+def test_the_distributions_faults_stop_the_controlled_way():
+    """Three cycles in a row with no feasible feed-forward, or the feedback saturated beyond
+    max_saturation_time (the time counted while saturated, not before): a controlled stop."""
+    s, d, v = rig(State.MOVING)
+    d.dt = 0.002
+    s.distribution(1.0, 2, "INFEASIBLE", "x")
+    assert d.state is State.MOVING
+    s.distribution(1.002, 3, "INFEASIBLE", "wrench infeasible")
+    assert d.state is State.STOPPING and d.fault_kind is FaultKind.TENSION_DISTRIBUTION
+    assert d.fault_reason == "tension distribution INFEASIBLE (the feed-forward alone): " \
+        "wrench infeasible"
+    s, d, v = rig(State.MOVING)
+    d.saturation, d.dt = 0.5, 0.0
+    d.saturated_for = CFG.max_saturation_time  # at the limit, not over it
+    s.distribution(1.0, 0, "OK", "")
+    assert d.state is State.MOVING and d.saturated_cycles == 1
+    d.dt = 0.002
+    s.distribution(1.002, 0, "OK", "")
+    assert d.state is State.STOPPING and "feedback wrench saturated for" in d.fault_reason
+    assert "deactivate" not in v.calls  # held, then disabled after the stop
+
+
+def test_a_state_change_is_an_event_and_staying_is_not():
+    s, d, _ = rig(State.ENABLED)
+    s.set_state(State.MOVING, 1.0, "move")
+    assert list(d.events) == [(1.0, "state enabled -> moving: move")]
+    s.set_state(State.MOVING, 1.1, "move again")
+    assert len(d.events) == 1
+
+
+def test_the_controlled_stop_ends_at_the_first_cycle_past_its_length():
+    s, d, v = rig(State.MOVING)
+    s.fault(10.0, FaultKind.TRACKING, "x", hold=True)
+    run(s, 10.0 + CFG.stop_duration + 0.0013, 10.0 + CFG.stop_duration + 0.0013)
+    assert d.state is State.FAULT and "deactivate" in v.calls
+
+
+def test_the_tension_check_stands_alone_without_a_torque_check():
+    """Tension limits without torque limits (no drive can be at its limit): the check acts from
+    the first cycle."""
+    d = ControlData(M, 0)
+    d.state = State.ENABLED
+    s = Supervisor(CFG, d, FakeDrives(M, Lifecycle.ACTIVE), lambda: None, TENSION_LIMITS, None)
+    d.internal_tension_error[1] = 2.0 * TENSION_LIMITS[1]
+    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    assert d.fault_kind is FaultKind.CABLE_TENSION
