@@ -182,24 +182,31 @@ def test_the_cable_tension_fault_comes_after_its_documented_50_ms_inverse_time()
         assert t - 1.0 == pytest.approx(0.05 / ratio, abs=2 * dt)
 
 
+class Outcome:
+    """A distribution's outcome as the supervisor reads it (``TDAOutput``'s status, message)."""
+
+    def __init__(self, status: str, message: str):
+        self.status, self.message = type("S", (), {"name": status})(), message
+
+
 def test_the_distributions_faults_stop_the_controlled_way():
     """Three cycles in a row with no feasible feed-forward, or the feedback saturated beyond
     max_saturation_time (the time counted while saturated, not before): a controlled stop."""
     s, d, v = rig(State.MOVING)
     d.dt = 0.002
-    s.distribution(1.0, 2, "INFEASIBLE", "x")
+    s.distribution(1.0, 2, Outcome("INFEASIBLE", "x"))
     assert d.state is State.MOVING
-    s.distribution(1.002, 3, "INFEASIBLE", "wrench infeasible")
+    s.distribution(1.002, 3, Outcome("INFEASIBLE", "wrench infeasible"))
     assert d.state is State.STOPPING and d.fault_kind is FaultKind.TENSION_DISTRIBUTION
     assert d.fault_reason == "tension distribution INFEASIBLE (the feed-forward alone): " \
         "wrench infeasible"
     s, d, v = rig(State.MOVING)
     d.saturation, d.dt = 0.5, 0.0
     d.saturated_for = CFG.max_saturation_time  # at the limit, not over it
-    s.distribution(1.0, 0, "OK", "")
+    s.distribution(1.0, 0, Outcome("OK", ""))
     assert d.state is State.MOVING and d.saturated_cycles == 1
     d.dt = 0.002
-    s.distribution(1.002, 0, "OK", "")
+    s.distribution(1.002, 0, Outcome("OK", ""))
     assert d.state is State.STOPPING and "feedback wrench saturated for" in d.fault_reason
     assert "deactivate" not in v.calls  # held, then disabled after the stop
 

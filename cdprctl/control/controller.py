@@ -180,9 +180,7 @@ class Controller:
         ph[3] = (t4 - t3) / 1e3
         if active:
             out = self.distribution.distribute()
-            self.supervisor.distribution(
-                t, self.distribution.bad_cycles, out.status.name, out.message
-            )
+            self.supervisor.distribution(t, self.distribution.bad_cycles, out)
         t5 = clock()
         ph[4] = (t5 - t4) / 1e3
         self.winches.update(

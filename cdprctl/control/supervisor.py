@@ -15,7 +15,7 @@ persist. Nothing here raises or allocates but the event text of a transition or 
 from __future__ import annotations
 
 import math
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -339,9 +339,9 @@ class Supervisor:
     # up to a fault; one long push that then recovers drains away.
     SATURATION_LEAK = 0.25
 
-    def distribution(self, t: float, bad_cycles: int, status: str, message: str) -> None:
+    def distribution(self, t: float, bad_cycles: int, out: Any) -> None:
         """After the cycle's tension distribution (``bad_cycles`` in a row with no feasible
-        feed-forward, the last ``status`` and ``message``): the saturated time counted
+        feed-forward, ``out`` its last ``TDAOutput``): the saturated time counted
         (``data.saturated_for``, s of real elapsed time, leaking at ``SATURATION_LEAK``; and
         ``saturated_cycles``), then a controlled stop when the feed-forward stays infeasible or
         the feedback stays saturated beyond ``max_saturation_time``."""
@@ -354,8 +354,9 @@ class Supervisor:
         if d.state is State.STOPPING:
             return
         if bad_cycles >= self.BAD_CYCLES:
-            self.fault(t, FaultKind.TENSION_DISTRIBUTION, f"tension distribution {status} (the "
-                       f"feed-forward alone): {message}", hold=True)  # fmt: skip
+            self.fault(t, FaultKind.TENSION_DISTRIBUTION, f"tension distribution "
+                       f"{out.status.name} (the feed-forward alone): {out.message}",
+                       hold=True)  # fmt: skip
         elif d.saturated_for > self.config.max_saturation_time:
             self.fault(
                 t,
