@@ -107,11 +107,13 @@ class WinchDriver(ABC):
         self.lifecycle = Lifecycle.INACTIVE
 
     def activate(self, timeout: float = 2.0) -> None:
-        """Enable every drive (zero torque) → ``ACTIVE``; blocks with ``wait``."""
+        """Enable every drive (zero torque, targets where the motors stand) → ``ACTIVE``;
+        blocks with ``wait``: ``begin_activate`` and the cycles it needs (``read`` alone says
+        when every drive is enabled)."""
         self._require(Lifecycle.INACTIVE)
         self._command[:] = 0.0
         self._last_command[:] = 0.0
-        self._request_enable(True)
+        self.begin_activate()
         deadline = self.clock() + timeout
         while True:
             now = self.clock()
@@ -119,17 +121,16 @@ class WinchDriver(ABC):
             self.write(now, self._command)
             if self.lifecycle is Lifecycle.ERROR:
                 raise self.error or DriverOperationError("activation failed")
-            if np.all(self.states.state == DriveState.ENABLED):
-                break
+            if self.lifecycle is Lifecycle.ACTIVE:
+                return
             if now > deadline:
                 not_on = [i for i in range(self.m) if self.states.state[i] != DriveState.ENABLED]
-                self._request_enable(False)
+                self.begin_deactivate()
                 raise DriverTimeoutError(
                     f"drives of cable indices {not_on} not enabled after {timeout:g} s",
                     not_on[0],
                 )
             self.wait(self.period)
-        self.lifecycle = Lifecycle.ACTIVE
 
     def deactivate(self, timeout: float = 1.0) -> None:
         """Disable the drives (brakes hold) → ``INACTIVE``."""
@@ -181,6 +182,7 @@ class WinchDriver(ABC):
         fall)."""
         self._require(Lifecycle.INACTIVE)
         self._activating = True
+        self.targets[:] = self.states.position  # held where they stand until targets come
         self._request_enable(True)
 
     def begin_deactivate(self) -> None:
