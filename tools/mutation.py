@@ -357,7 +357,8 @@ def main(argv: list[str] | None = None) -> int:
         print("mutation: cosmic-ray is not installed: run `make mutation` (it installs the "
               "project's [mutation] extra)")  # fmt: skip
         return 2
-    chosen = [t for t in TARGETS if not a.modules or t.name in a.modules]
+    by_name = {t.name: t for t in TARGETS}
+    chosen = [by_name[n] for n in a.modules] if a.modules else list(TARGETS)  # in that order
     OUT.mkdir(parents=True, exist_ok=True)
     logfile = OUT / "log.txt"
 
