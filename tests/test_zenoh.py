@@ -591,6 +591,56 @@ def test_commands_are_refused_without_authentication_and_a_deny_acl(tmp_path, te
     assert not command_security_problems(ZenohConfig(commands=False, config_file=conf))
 
 
+MTLS = '{transport: {link: {tls: {enable_mtls: %s, root_ca_certificate: %s}}}, %s ' \
+    'access_control: {enabled: true, default_permission: "deny"}}'
+
+
+@pytest.mark.parametrize(
+    "text, listen, refused",
+    [
+        (MTLS % ("true", '"ca.pem"', ""), ("tls/127.0.0.1:7447",), False),
+        # half of mutual TLS is none: no CA to check clients against, or not asked for
+        (MTLS % ("false", '"ca.pem"', ""), ("tls/127.0.0.1:7447",), True),
+        (MTLS % ("true", "null", ""), ("tls/127.0.0.1:7447",), True),
+        # the endpoints the file listens on count when the command line gives none
+        (MTLS % ("true", '"ca.pem"', 'listen: {endpoints: ["tcp/127.0.0.1:7447"]},'), (), True),
+        (MTLS % ("true", '"ca.pem"', 'listen: {endpoints: ["tls/127.0.0.1:7447"]},'), (), False),
+        # and per mode: a tcp/ endpoint for peers lets anybody in as well
+        (MTLS % ("true", '"ca.pem"', 'listen: {endpoints: {peer: ["tcp/127.0.0.1:7447"], '
+                 'router: ["tls/127.0.0.1:7448"]}},'), (), True),
+        (MTLS % ("true", '"ca.pem"', 'listen: {endpoints: {peer: ["tls/127.0.0.1:7447"], '
+                 'router: ["tls/127.0.0.1:7448"]}},'), (), False),
+    ],
+)  # fmt: skip
+def test_mutual_tls_counts_only_whole_and_on_every_listen_endpoint(tmp_path, text, listen, refused):
+    from cdprctl.model.zenoh import ZenohConfig
+    from cdprctl.telemetry.security import command_security_problems
+
+    zc = ZenohConfig(commands=True, config_file=write_conf(tmp_path, text), listen=listen)
+    problems = " ".join(command_security_problems(zc))
+    assert bool(problems) is refused, problems
+    if refused:
+        assert "not authenticated" in problems
+        assert "router" not in problems and "peer," not in problems  # endpoints, not modes
+
+
+def test_security_messages_and_unreadable_files(tmp_path):
+    from cdprctl.model.zenoh import ZenohConfig
+    from cdprctl.telemetry.security import _get, command_security_problems
+
+    # no mutual TLS at all: no word of its endpoints
+    plain = ZenohConfig(commands=True, config_file=write_conf(tmp_path, "{}"),
+                        listen=("tcp/127.0.0.1:7447",))  # fmt: skip
+    assert "tcp/127.0.0.1:7447 is not" not in " ".join(command_security_problems(plain))
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{access_control: {enabled: true, default_permission: 'permit'}}")
+    (problem,) = command_security_problems(ZenohConfig(commands=True, config_file=str(bad)))
+    assert problem.startswith(f"zenoh.config_file = {bad}: not a Zenoh configuration (")
+    import zenoh
+
+    assert _get(zenoh.Config(), "no/such/key") is None  # zenoh raises for unknown keys
+
+
 def test_the_shipped_examples_pass_the_check():
     from cdprctl.model.zenoh import ZenohConfig
     from cdprctl.telemetry.security import command_security_problems

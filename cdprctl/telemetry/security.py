@@ -53,9 +53,10 @@ def command_security_problems(zc: ZenohConfig) -> list[str]:
     problems = []
     usrpwd = _get(conf, "transport/auth/usrpwd") or {}
     tls = _get(conf, "transport/link/tls") or {}
-    listen = list(zc.listen) or list(_get(conf, "listen/endpoints") or [])
-    if isinstance(listen, dict):  # per-mode endpoints
-        listen = [e for v in listen.values() for e in (v or [])]
+    endpoints = list(zc.listen) or _get(conf, "listen/endpoints") or []
+    if isinstance(endpoints, dict):  # per mode ({peer: [...], router: [...]}): every one
+        endpoints = [e for v in endpoints.values() for e in (v or [])]
+    listen = list(endpoints)
     by_password = bool(usrpwd.get("user") and usrpwd.get("dictionary_file"))
     by_mtls = bool(tls.get("enable_mtls") and tls.get("root_ca_certificate"))
     plain = [e for e in listen if not str(e).startswith(("tls/", "quic/"))]
