@@ -72,12 +72,64 @@ G1 X9999
         ("x, y, z, speed\n1, 2, 3, 0\n", "line 2: speed = 0 m/s must be > 0"),
         ("x, y, z, blend\n1, 2, 3, 2\n", "line 2: blend = 2 must be 0 or 1"),
         ("x, y, z\n", "a header but no waypoint"),
+        ("G0 X1 (a (b) c)\n", "line 1, column 10: nested comment"),
+        ("G0 X1 a)\n", "line 1, column 8: ')' without '('"),
+        ("G1.5 X1\n", "line 1, column 1: G1.5 is not supported"),
+        ("G19 X1\n", "line 1, column 1: G19 is not supported"),
+        ("G0 X1 G1 Y2 F10\n", "line 1, column 7: two motions in a block"),
+        ("G4 P1 X3\n", "line 1: G4 takes no axis words"),
+        ("G0 X1 P2\n", "line 1, column 7: P belongs to G4"),
+        ("G4 P3600.5\n", "line 1, column 4: P3600.5 must be a dwell in [0, 3600] s"),
+        ("G4 P-0.5\n", "line 1, column 4: P-0.5 must be a dwell"),
+        ("G0\n", "line 1: G0 without an axis word"),
+        ("G1 X1 F0\n", "line 1, column 7: F0 must be > 0 (mm/min)"),
+        ("G20 G1 X1 F0\n", "line 1, column 11: F0 must be > 0 (in/min)"),
+        ("G0 X1 M5\n", "line 1, column 7: M5 is not supported"),
+        ("G1 X1 F100 D5\n", "line 1, column 12: word D5 is not supported"),
+        ("G1 X1 F100 E5\n", "line 1, column 12: word E5 is not supported"),
+        ("x, y, z, dwell\n1, 2, 3, 3600.5\n", "line 2: dwell = 3600.5 s must be in [0, 3600] s"),
+        ("x, y, z, dwell\n1, 2, 3, -1\n", "line 2: dwell = -1 s must be in [0, 3600] s"),
+        ("x, y, z, blend\n1, 2, 3, 0.5\n", "line 2: blend = 0.5 must be 0 or 1"),
+        ("x, y, z, speed\n1, 2, 3, -0.1\n", "line 2: speed = -0.1 m/s must be > 0"),
+        ("x, y, z, time\n1, 2, 3, 0\n", "line 2: time = 0 s must be later than the previous "
+         "waypoint's 0 s"),
+        ("x, x, z\n", "column 'x' appears twice"),
+        ("x, z, roll\n", "the header needs x, y, z (missing: y)"),
     ],
 )
 def test_refusals_name_line_and_column(text, message):
     with pytest.raises(PathFileError) as exc:
         parse_path(text, START)
     assert message in str(exc.value)
+
+
+def test_what_the_files_say_is_what_the_waypoints_are():
+    """At the edges of each rule: the bounds themselves accepted, the default unit (mm), the
+    modes and their words read as the G-code standard says, comments skipped (CSV '#', G-code
+    '(…)' and ';'), a dwell before any motion held at the start."""
+    w = parse_path("# a comment first\nx, y, z, dwell, blend\n# and between\n"
+                   "1, 2, 3, 3600, 1\n4, 5, 6, 0, 0\n", START)  # fmt: skip
+    assert [x.dwell for x in w] == [3600.0, 0.0] and [x.blend for x in w] == [True, False]
+    assert w[0].pose == (1.0, 2.0, 3.0, *START[3:]) and w[0].time is None
+    w = parse_path("x, y, z, time\n1, 2, 3, 0.5\n1, 2, 4, 1.5\n", START)
+    assert [x.time for x in w] == [0.5, 1.5]
+    w = parse_path("G4 P0\nG4 P3600\nG0 X100 (mm: the default) ; and more\nG91 G0 X-50\n"
+                   "G0 Y10 Z5\nG90 G0 X7\n", START)  # fmt: skip
+    assert w[0].pose == tuple(START) and w[0].dwell == 3600.0  # held at the start
+    assert w[1].pose[0] == pytest.approx(0.1) and w[1].speed is None and not w[1].blend
+    assert w[2].pose[0] == pytest.approx(0.05)  # relative
+    assert w[3].pose[1:3] == pytest.approx((START[1] + 0.01, START[2] + 0.005))  # still G91
+    assert w[4].pose[0] == pytest.approx(0.007)  # absolute again
+    w = parse_path("G1 X10 F6000\nG4 P2\nG1 X20\n", START)
+    assert w[0].dwell == 2.0 and w[0].speed == pytest.approx(0.1) and w[1].dwell == 0.0
+    assert w[1].speed == pytest.approx(0.1)  # the feed is modal
+    w = parse_path("G21 G1 X10 F60 M2\nG1 X20\n", START)
+    assert len(w) == 1  # M2 ends the program too
+    w = parse_path("(first a comment) G1 X10 F6000\nG1 X20\nG4 P2\nG20 G0 X1\nG21 G0 X1000\n",
+                   START)  # fmt: skip
+    assert [x.dwell for x in w] == [0.0, 2.0, 0.0, 0.0]  # the dwell on the motion before it
+    assert [x.pose[0] for x in w[:2]] == pytest.approx([0.01, 0.02])  # and nothing else of it
+    assert w[2].pose[0] == pytest.approx(0.0254) and w[3].pose[0] == pytest.approx(1.0)
 
 
 def play(model, plan):
