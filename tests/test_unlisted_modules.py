@@ -1,0 +1,74 @@
+"""Rules of modules outside the mutation targets, against references written out here: the
+bugs an independent check planted there (one at a time, in a scratch copy) that no test
+caught — the wrench the cables must hold, the soft limits' inertial load, the telemetry's
+fault kind (docs/mutation.md, "Checked independently")."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.control.data import ControlData
+from cdprctl.control.states import FaultKind
+from cdprctl.model import load_robot
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.rotation import exp_so3
+from cdprctl.tda.workspace import hold_wrench
+from cdprctl.telemetry.schema import state_payload
+from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values
+
+
+def weight_wrench_by_hand(model, R):
+    """Gravity on the platform at its COM, as a wrench at P in the base frame."""
+    f = model.platform.mass * np.asarray(model.gravity, dtype=float)
+    return np.concatenate([f, np.cross(R @ np.asarray(model.platform.com, dtype=float), f)])
+
+
+@pytest.mark.parametrize("robot_file", ["rowc.toml", "caroca.toml", "seed000.toml"])
+def test_the_cables_hold_minus_the_weight_and_the_known_external_wrench(robot_file):
+    model = load_robot(CONFIG / robot_file)
+    rng = np.random.default_rng(46)
+    for _ in range(5):
+        R = exp_so3(rng.normal(scale=0.2, size=3)) @ model.home.rotation
+        ext = rng.normal(scale=20.0, size=6)
+        expected = -(weight_wrench_by_hand(model, R) + ext)  # W t + w_g + w_e = 0
+        np.testing.assert_allclose(hold_wrench(model, R, ext), expected, rtol=1e-12, atol=1e-9)
+
+
+def test_the_soft_limits_add_the_motions_inertial_load():
+    """What the cables must exert while accelerating: the holding wrench plus m·a and R I Rᵀ α
+    (as SoftLimits writes it); an upward acceleration of a hanging load asks for m·a more."""
+    model = load_robot(CONFIG / "rowc.toml")
+    lim = SoftLimits(model)
+    rng = np.random.default_rng(47)
+    R = np.array([exp_so3(rng.normal(scale=0.1, size=3)) @ model.home.rotation for _ in range(4)])
+    acc = rng.normal(scale=2.0, size=(4, 6))
+    got = lim.wrenches(R, acc)
+    inertia = np.asarray(model.platform.inertia, dtype=float)
+    for k in range(4):
+        inertial = np.concatenate([model.platform.mass * acc[k, :3],
+                                   R[k] @ inertia @ R[k].T @ acc[k, 3:]])  # fmt: skip
+        expected = hold_wrench(model, R[k], model.control.external_wrench) + inertial
+        np.testing.assert_allclose(got[k], expected, rtol=1e-12, atol=1e-9)
+    up = np.zeros((1, 6))
+    up[0, 2] = 3.0
+    lifted = lim.wrenches(R[:1], up)[0, 2] - lim.wrenches(R[:1], None)[0, 2]
+    assert lifted == pytest.approx(3.0 * model.platform.mass)
+
+
+def test_telemetry_reports_no_fault_kind_until_there_is_one():
+    model = load_robot(CONFIG / "rowc.toml")
+    d = ControlData(model.n_cables, 0)
+    d.tda_method = model.control.tda_method  # as the distribution sets it
+    snap = SharedSnapshot(model.n_cables)
+    try:
+        names = [c.name for c in model.cables]
+        snap.write(controller_values(d))
+        assert state_payload(snap.read(), names, "")["fault_kind"] == ""
+        for kind in (next(iter(FaultKind)), FaultKind.TRACKING):
+            d.fault_kind = kind
+            snap.write(controller_values(d))
+            assert state_payload(snap.read(), names, "")["fault_kind"] == kind.value
+    finally:
+        snap.close()
