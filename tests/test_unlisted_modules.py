@@ -146,3 +146,43 @@ def test_the_estimators_velocity_takes_each_sample_at_its_own_instant():
         vx.append(float(est.velocity[0]))
     tail = np.array(vx[200:])
     assert np.abs(tail - speed).max() < 0.002 * speed, (tail.min(), tail.max())
+
+
+def _controller_at_home(model):
+    from conftest import FakeDrives
+
+    from cdprctl.control.controller import Controller
+    from drivers.vocabulary import Lifecycle
+
+    c = Controller(model, FakeDrives(model.n_cables, Lifecycle.INACTIVE))
+    c.estimator.update(0.0, np.zeros(model.n_cables), model.tension_min.copy())
+    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation)
+    return c
+
+
+def test_the_distribution_keeps_its_tension_margin_from_both_limits():
+    """``[control] tension_margin`` N from each limit: a wrench that pushes the tensions to
+    their bounds gets tensions inside [t_min + margin, t_max − margin], not beyond."""
+    import dataclasses
+
+    base = load_robot(CONFIG / "rowc.toml")
+    margin = 12.0
+    model = dataclasses.replace(
+        base, control=dataclasses.replace(base.control, tension_margin=margin)
+    )
+    c = _controller_at_home(model)
+    lo, hi = model.tension_min + margin, model.tension_max - margin
+    c.distribution.distribute()  # the holding tensions, feasible: held when a wrench is not
+    rng = np.random.default_rng(48)
+    inside = 0
+    for _ in range(40):
+        # a feedback wrench beyond what the cables give: saturated onto the feasible set's
+        # edge, where a tension sits at its bound
+        c.data.feedback_wrench[:] = rng.normal(scale=400.0, size=6)
+        c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation) + c.data.feedback_wrench
+        c.data.tensions[:] = c.data.hold_tensions  # no rate limit in the way of the bounds
+        out = c.distribution.distribute()
+        t = c.data.tensions
+        assert np.all(t >= lo - 1e-6) and np.all(t <= hi + 1e-6), (out.status, t)
+        inside += bool(np.any(t <= lo + 0.5) or np.any(t >= hi - 0.5))
+    assert inside > 5  # the bounds were met, not just stayed away from
