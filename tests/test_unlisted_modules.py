@@ -1,7 +1,8 @@
-"""Rules of modules outside the mutation targets, against references written out here: the
+"""Rules of modules outside the mutation targets, each against a reference written out here:
 bugs an independent check planted there (one at a time, in a scratch copy) that no test
 caught — the wrench the cables must hold, the soft limits' inertial load, the telemetry's
-fault kind (docs/mutation.md, "Checked independently")."""
+fault kind, the wrench observer's bandwidth, the estimator's sample instants, the
+distribution's tension margin. Each test fails on its planted bug."""
 
 from __future__ import annotations
 
