@@ -303,6 +303,10 @@ def report(targets: list[Target], tree: Path) -> str:
         "and why). A mutant is killed when a test fails or the tests exceed the module's "
         "timeout; incompetent mutants (that cannot run at all) count as killed.",
         "",
+        "Modules outside these targets are checked independently: bugs planted one at a time "
+        "in a scratch copy; those no test caught have tests now (`tests/test_unlisted_modules.py`"
+        " lists them).",
+        "",
         "## Survivors",
         "",
     ]
