@@ -279,6 +279,8 @@ def report(targets: list[Target], tree: Path) -> str:
             totals[i] += v
         survivors += [(t, m) for m in alive]
     denom = totals[0] - totals[3]
+    done = sum(1 for r in rows if "not run |" not in r)
+    complete = sum(1 for r in rows if "not run" not in r)
     lines = [
         "# Mutation testing",
         "",
@@ -289,8 +291,10 @@ def report(targets: list[Target], tree: Path) -> str:
         f"Run: {dt.date.today().isoformat()}, Python {platform.python_version()}, "
         f"{os.cpu_count()} CPUs, cosmic-ray {cosmic_ray_version()}.",
         "",
-        f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
-        if denom else "**No mutants run yet.**",
+        (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
+         f" — over the mutants run so far, in {done} of {len(targets)} modules ({complete} "
+         "complete); a module not run or not complete is not yet held to it") if denom
+        else "**No mutants run yet.**",
         f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
         "",
         "| module | file | run | killed | survived | equivalent | score | wall time | tests |",
