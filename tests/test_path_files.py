@@ -86,6 +86,11 @@ G1 X9999
         ("G20 G1 X1 F0\n", "line 1, column 11: F0 must be > 0 (in/min)"),
         ("G0 X1 M5\n", "line 1, column 7: M5 is not supported"),
         ("G1 X1 F100 D5\n", "line 1, column 12: word D5 is not supported"),
+        ("G0 X1\n$\n", "line 2, column 1: '$' is not a G-code word"),
+        ("G0 X1 $ Y2\n", "line 1, column 7: '$' is not a G-code word"),
+        ("((a)) G0 X1\n", "line 1, column 2: nested comment"),
+        ("(open\n", "line 1, column 1: comment not closed"),
+        ("x, y, z\n1, 2, 3, 4\n", "line 2: 4 values for 3 columns"),
         ("G1 X1 F100 E5\n", "line 1, column 12: word E5 is not supported"),
         ("x, y, z, dwell\n1, 2, 3, 3600.5\n", "line 2: dwell = 3600.5 s must be in [0, 3600] s"),
         ("x, y, z, dwell\n1, 2, 3, -1\n", "line 2: dwell = -1 s must be in [0, 3600] s"),
@@ -130,6 +135,15 @@ def test_what_the_files_say_is_what_the_waypoints_are():
     assert [x.dwell for x in w] == [0.0, 2.0, 0.0, 0.0]  # the dwell on the motion before it
     assert [x.pose[0] for x in w[:2]] == pytest.approx([0.01, 0.02])  # and nothing else of it
     assert w[2].pose[0] == pytest.approx(0.0254) and w[3].pose[0] == pytest.approx(1.0)
+    assert w[2].speed is None and w[1].speed is not None  # G0 is rapid: no feed, set or not
+    w = parse_path("N5 G0 X1 B5.72958 C-5.72958 A2.86479 ; a ( comment\n"
+                   "(a;b) G1 X2 F0.5 (c;d)\n", START)  # fmt: skip
+    assert w[0].pose[:3] == pytest.approx((0.001, START[1], START[2]))
+    assert w[0].pose[3:] == pytest.approx((0.05, 0.1, -0.1), abs=1e-6)  # degrees → rad
+    assert w[1].speed == pytest.approx(0.5e-3 / 60.0)
+    w = parse_path("G4 P1\nG0 X100\n", START)
+    assert not w[0].blend and not w[1].blend  # the dwell at the start is no blend
+    assert not parse_path("x, y, z\n1, 2, 3\n", START)[0].blend  # without the column: 0
 
 
 def play(model, plan):
