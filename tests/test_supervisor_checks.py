@@ -150,7 +150,8 @@ def test_the_controlled_stop_holds_for_stop_duration_then_disables():
 def test_limits_are_exclusive_and_every_axis_counts():
     """A tracking or orientation error exactly at its limit holds; just over it faults, on
     whichever axis it is (the norms take x, y, z and roll, pitch, yaw)."""
-    for axis, limit in ((0, CFG.max_position_error), (3, CFG.max_angle_error),
+    for axis, limit in ((0, CFG.max_position_error), (1, CFG.max_position_error),
+                        (2, CFG.max_position_error), (3, CFG.max_angle_error),
                         (4, CFG.max_angle_error), (5, CFG.max_angle_error)):  # fmt: skip
         s, d, _ = rig(State.MOVING)
         d.pose_error[axis] = limit
@@ -235,3 +236,11 @@ def test_the_tension_check_stands_alone_without_a_torque_check():
     d.internal_tension_error[1] = 2.0 * TENSION_LIMITS[1]
     run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
     assert d.fault_kind is FaultKind.CABLE_TENSION
+
+
+def test_saturated_time_drains_at_a_quarter_of_real_time():
+    s, d, _ = rig(State.MOVING)
+    d.saturation, d.saturated_for, d.dt = 1.0, 0.1, 0.002
+    s.distribution(1.0, 0, Outcome("OK", ""))
+    assert d.saturated_for == pytest.approx(0.1 - Supervisor.SATURATION_LEAK * 0.002)
+    assert Supervisor.SATURATION_LEAK == 0.25  # documented: drains at a quarter of real time
