@@ -49,7 +49,6 @@ from mutation_equivalents import (  # noqa: E402
 
 OUT = ROOT / "out" / "mutation"
 REPORT = ROOT / "docs" / "mutation.md"
-EQUIVALENTS = ROOT / "tools" / "mutation_equivalents.toml"
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,9 @@ def start_up(dm: Daemon, path: tuple[str, str] | None) -> PathScript | None:
     failure = dm.links.start()
     if failure:
         raise StartupRefusedError(f"cdprctl run: {failure}", 1)
-    _announce_links(dm)
+    for link in dm.links.links:  # what each link is, once it runs
+        for text, err in link.announcement():
+            dm._print(text, err=err)
     # real-time settings next (the gateway, started before, keeps its own CPU affinity);
     # locking memory and freezing the collector take a while, and once the drives are started
     # their heartbeats are watched
@@ -74,25 +76,6 @@ def start_up(dm: Daemon, path: tuple[str, str] | None) -> PathScript | None:
     if drives:
         dm.links.event(dm.data.time, drives, "drives")
     return None if path is None else _plan_path(dm, *path)
-
-
-def _announce_links(dm: Daemon) -> None:
-    from cdprctl.telemetry.link import TelemetryLink
-
-    for link in dm.links.links:
-        if isinstance(link, TelemetryLink):
-            zc = dm.model.zenoh
-            if zc.commands and zc.allow_unauthenticated_commands:
-                from cdprctl.telemetry.security import UNAUTHENTICATED_WARNING
-
-                dm._print(f"warning: {UNAUTHENTICATED_WARNING}", err=True)
-            listening = f", listening on {', '.join(zc.listen)}" if zc.listen else ""
-            dm._print(f"zenoh: {zc.key_prefix(dm.model.name)}/{{state,timing,events,status}}, "
-                      f"commands {'on' if zc.commands else 'off'}{listening}")  # fmt: skip
-        else:
-            where = f"{link.host}:{link.port}"  # type: ignore[attr-defined]
-            dm._print(f"foxglove: ws://{where} — the live 3D view (open it in Foxglove: "
-                      "docs/foxglove.md)")  # fmt: skip
 
 
 def _calibration(dm: Daemon) -> Any:

@@ -128,6 +128,11 @@ class FoxgloveLink:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
+    def announcement(self) -> list[tuple[str, bool]]:
+        """What ``cdprctl run`` says once the view serves: (line, to stderr)."""
+        return [(f"foxglove: ws://{self.host}:{self.port} — the live 3D view (open it in "
+                 "Foxglove: docs/foxglove.md)", False)]  # fmt: skip
+
     def due(self) -> bool:
         """Whether the view's period has come (then the caller ``write``s)."""
         now = time.monotonic()

@@ -50,6 +50,19 @@ class TelemetryLink:
         self.process.start()
         return bool(self.ready.wait(timeout))
 
+    def announcement(self) -> list[tuple[str, bool]]:
+        """What ``cdprctl run`` says once the gateway runs: (line, to stderr)."""
+        from cdprctl.telemetry.security import UNAUTHENTICATED_WARNING
+
+        zc = self.model.zenoh
+        out = []
+        if zc.commands and zc.allow_unauthenticated_commands:
+            out.append((f"warning: {UNAUTHENTICATED_WARNING}", True))
+        listening = f", listening on {', '.join(zc.listen)}" if zc.listen else ""
+        out.append((f"zenoh: {zc.key_prefix(self.model.name)}/{{state,timing,events,status}}, "
+                    f"commands {'on' if zc.commands else 'off'}{listening}", False))  # fmt: skip
+        return out
+
     def due(self) -> bool:
         """Every tick of the daemon's I/O thread (it wakes at the state's rate)."""
         return True
