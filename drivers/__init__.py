@@ -1,14 +1,6 @@
 """Hardware abstraction for winch drives over python-can (see drivers.base)."""
 
-from drivers.base import (
-    DriveState,
-    Lifecycle,
-    WinchDriver,
-    WinchStates,
-    create_driver,
-    driver_names,
-    register_driver,
-)
+from drivers.base import WinchDriver
 from drivers.cia402.driver import Cia402Driver
 from drivers.errors import (
     DriveFaultError,
@@ -19,6 +11,8 @@ from drivers.errors import (
     DriverTimeoutError,
 )
 from drivers.odrive.driver import ODriveDriver
+from drivers.registry import create_driver, driver_names, register_driver
+from drivers.vocabulary import DriveState, Lifecycle, WinchStates
 
 __all__ = [
     "Cia402Driver",

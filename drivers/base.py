@@ -27,7 +27,9 @@ import numpy as np
 from numba import njit
 
 from cdprctl.numerics import clamp
-from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
+from drivers import blocking
+from drivers.errors import DriverError, DriverOperationError
+from drivers.liveness import PLAUSIBLE_CABLE_SPEED, Liveness
 from drivers.vocabulary import DriverStats, DriveState, Lifecycle, WinchStates
 
 _LOG = logging.getLogger("cdprctl.drivers")
@@ -42,6 +44,9 @@ class WinchDriver(ABC):
 
     #: registry name (config ``[drives] driver = ...``)
     name: str = ""
+    #: what the drive is called in messages, and what its cyclic feedback is
+    drive_label = "drive"
+    feedback_label = "feedback"
 
     def __init__(
         self,
@@ -82,6 +87,14 @@ class WinchDriver(ABC):
         self.reset_since_setup: list[bool] | None = None
         self._activating = False
         self._recover_until = -math.inf
+        # the feedback's liveness; a position step faster than PLAUSIBLE_CABLE_SPEED is a
+        # corrupted frame (or a failing encoder), dropped like a lost one: the liveness check
+        # then stops the robot if it persists
+        r = np.array([w.winch.drum_radius / w.winch.gear_ratio for w in model.cables])
+        self.liveness = Liveness(
+            self.m, period, PLAUSIBLE_CABLE_SPEED / r, self.stats,
+            self.config.feedback_timeout, self.config.heartbeat_timeout,
+        )  # fmt: skip
 
     # -- lifecycle (outside the loop: may block, may raise) -----------------------------------
     def configure(self, timeout: float = 2.0) -> None:
@@ -108,71 +121,18 @@ class WinchDriver(ABC):
 
     def activate(self, timeout: float = 2.0) -> None:
         """Enable every drive (zero torque, targets where the motors stand) → ``ACTIVE``;
-        blocks with ``wait``: ``begin_activate`` and the cycles it needs (``read`` alone says
-        when every drive is enabled)."""
-        self._require(Lifecycle.INACTIVE)
-        self._command[:] = 0.0
-        self._last_command[:] = 0.0
-        self.begin_activate()
-        deadline = self.clock() + timeout
-        while True:
-            now = self.clock()
-            self.read(now)
-            self.write(now, self._command)
-            if self.lifecycle is Lifecycle.ERROR:
-                raise self.error or DriverOperationError("activation failed")
-            if self.lifecycle is Lifecycle.ACTIVE:
-                return
-            if now > deadline:
-                not_on = [i for i in range(self.m) if self.states.state[i] != DriveState.ENABLED]
-                self.begin_deactivate()
-                raise DriverTimeoutError(
-                    f"drives of cable indices {not_on} not enabled after {timeout:g} s",
-                    not_on[0],
-                )
-            self.wait(self.period)
+        blocks (``drivers/blocking.py``: ``begin_activate`` and the cycles it needs)."""
+        blocking.activate(self, timeout)
 
     def deactivate(self, timeout: float = 1.0) -> None:
-        """Disable the drives (brakes hold) → ``INACTIVE``."""
-        if self.lifecycle not in (Lifecycle.ACTIVE, Lifecycle.ERROR):
-            return
-        self._request_enable(False)
-        deadline = self.clock() + timeout
-        while self.clock() <= deadline:
-            now = self.clock()
-            self.read(now)
-            self.write(now, np.zeros(self.m), force=True)
-            if np.all(self.states.state != DriveState.ENABLED):
-                break
-            self.wait(self.period)
-        if self.lifecycle is Lifecycle.ACTIVE:
-            self.lifecycle = Lifecycle.INACTIVE
+        """Disable the drives (brakes hold) → ``INACTIVE``; blocks (``drivers/blocking.py``)."""
+        blocking.deactivate(self, timeout)
 
     def recover(self, timeout: float = 1.0) -> None:
         """From ``ERROR``: reset drive faults, keep the drives disabled, and return to
-        ``INACTIVE`` once every drive answers again without a fault."""
-        if self.lifecycle is not Lifecycle.ERROR:
-            return
-        self.error = None
-        self._request_enable(False)
-        self._fault_reset()
-        deadline = self.clock() + timeout
-        while True:
-            now = self.clock()
-            self.lifecycle = Lifecycle.INACTIVE
-            self.error = None  # a fault still latched this cycle sets it again
-            self.read(now)
-            self.write(now, np.zeros(self.m), force=True)
-            if self.lifecycle is Lifecycle.INACTIVE and np.all(
-                (self.states.state != DriveState.FAULT)
-                & (self.states.state != DriveState.UNKNOWN)
-                & (self.states.feedback_age < 10 * self.period + 1e-9)
-            ):
-                return
-            if now > deadline:
-                self.lifecycle = Lifecycle.ERROR
-                raise self.error or DriverTimeoutError("drives did not recover", None)
-            self.wait(self.period)
+        ``INACTIVE`` once every drive answers again without a fault; blocks
+        (``drivers/blocking.py``)."""
+        blocking.recover(self, timeout)
 
     # -- non-blocking lifecycle, for a running loop ------------------------------------------
     def begin_activate(self) -> None:
@@ -232,7 +192,7 @@ class WinchDriver(ABC):
         now = self.clock() if t is None else t
         self.states.stamp = now
         try:
-            err = self._read_internal(now)
+            err = self._read_cycle(now)
         except Exception as exc:  # the loop never sees an exception
             err = DriverOperationError(f"read failed: {type(exc).__name__}: {exc}")
         if err is not None and now < self._recover_until:
@@ -280,7 +240,7 @@ class WinchDriver(ABC):
             # targets given holds each motor where it stands instead of driving it to zero
             self.targets[:] = self.states.position
         try:
-            err = self._write_internal(now, cmd)
+            err = self._write_cycle(now, cmd)
         except Exception as exc:
             err = DriverOperationError(f"write failed: {type(exc).__name__}: {exc}")
         self.sent_at = self._sent_instant()
@@ -289,11 +249,6 @@ class WinchDriver(ABC):
             self._fail(err)
 
     # -- helpers ------------------------------------------------------------------------------
-    def _sent_instant(self) -> float:
-        """s (clock): when the drives take the last write's frames: by default now, after
-        them (``sent_at``)."""
-        return self.clock()
-
     def _fail(self, err: DriverError) -> None:
         self._activating = False
         if self.error is None:
@@ -309,14 +264,54 @@ class WinchDriver(ABC):
                 f"{self.lifecycle.value}"
             )
 
-    # -- hooks --------------------------------------------------------------------------------
+    def _read_cycle(self, t: float) -> DriverError | None:
+        """Drain the feedback (``_drain``), then every cable's state (``_update_states``) and
+        liveness (compiled, once per cycle); when one is wrong, the first error in cable order,
+        a cable's drive fault before its timeout."""
+        lv = self.liveness
+        lv.fresh[:] = False
+        self._drain(t)
+        gap = lv.read_gap(t)
+        fault = self._update_states()
+        late = lv.update(t, gap, self.states)
+        if not (fault or late):
+            return None
+        for c in range(self.m):
+            err = self._cable_fault(c) or lv.error(
+                c, t, self._where(c), self.feedback_label, float(self.states.feedback_age[c])
+            )
+            if err is not None:
+                return err
+        return None
+
+    def _write_cycle(
+        self, t: float, torques: np.ndarray, setup: bool = False
+    ) -> DriverError | None:
+        """The cycle's frames (``_write_frames``) between ``_begin_frames`` and ``_end_frames``
+        (a medium that batches them sends them there). ``setup``: the set-up's own cycling."""
+        self._begin_frames(setup)
+        err = self._write_frames(t, torques, setup)
+        self._end_frames()
+        return err
+
+    def _where(self, c: int) -> str:
+        return f"{self.drive_label} of cable index {c}"
+
+    # -- hooks: the one layer a driver implements (transport, then protocol) -----------------
     def _warm_up(self) -> None:
         """Call the cyclic path's compiled kernels once, on copies, before the drives start:
         a first call compiles (seconds) or loads from numba's cache (ms), neither of which
-        belongs in the loop (cdprctl/control/warm_up.py)."""
+        belongs in the loop (cdprctl/control/warm_up.py). Extend it with the driver's own."""
         clamp_kernel(self._command, self._last_command.copy(), self.torque_limit, np.zeros(self.m))
         finite_into(self.targets, self.targets.copy())
+        self.liveness.warm_up(self.states)
 
+    def _sent_instant(self) -> float:
+        """s (clock): when the drives take the last write's frames: by default now, after
+        them (``sent_at``)."""
+        return self.clock()
+
+    # the transport (drivers/canbase.py: python-can buses)
     @abstractmethod
     def _open(self) -> None:
         """Open the buses (raise DriverInitializationError)."""
@@ -326,9 +321,20 @@ class WinchDriver(ABC):
         """Close the buses; idempotent."""
 
     @abstractmethod
+    def _begin_frames(self, setup: bool) -> None:
+        """A cycle's frames are about to be sent (``setup``: the set-up's, each of which waits
+        for its answer, so none may be held back)."""
+
+    @abstractmethod
+    def _end_frames(self) -> None:
+        """The cycle's frames were all given (``_write_frames`` returned): send what was held
+        back, in its order."""
+
+    # the protocol: set-up (outside the loop), then the cyclic path
+    @abstractmethod
     def _configure_drives(self, timeout: float) -> None:
         """Start the drives' communication and wait for their first feedback (may block via
-        ``self.wait``)."""
+        ``self.wait``: ``blocking.await_first_feedback``); set ``liveness.started``."""
 
     @abstractmethod
     def _request_enable(self, enable: bool) -> None:
@@ -339,14 +345,25 @@ class WinchDriver(ABC):
         """Ask the cyclic path to reset drive faults."""
 
     @abstractmethod
-    def _read_internal(self, t: float) -> DriverError | None:
-        """Drain and decode feedback into ``self.states``; return an error, never raise."""
+    def _drain(self, t: float) -> None:
+        """Decode every frame received so far into the protocol's state; mark each cable's
+        feedback in ``liveness`` (``fresh``, ``fb_stamp``, ``last_hb``). Never blocks."""
 
     @abstractmethod
-    def _write_internal(
+    def _update_states(self) -> bool:
+        """``self.states`` of every cable from the decoded feedback; True if a drive reports a
+        fault (``_cable_fault`` says which)."""
+
+    @abstractmethod
+    def _cable_fault(self, c: int) -> DriverError | None:
+        """Cable ``c``'s drive fault, if any."""
+
+    @abstractmethod
+    def _write_frames(
         self, t: float, torques: np.ndarray, setup: bool = False
     ) -> DriverError | None:
-        """Encode and send the torques (N·m); return an error, never raise. ``setup``: a
+        """Encode and send the cycle's frames for the torques (N·m; in position mode with
+        ``self.targets``); an error when sending keeps failing, never raise. ``setup``: a
         write of the set-up's own cycling, not of the control loop."""
 
 
@@ -373,28 +390,3 @@ def finite_into(values, out):  # pragma: no cover - compiled
     for i in range(len(out)):
         if np.isfinite(values[i]):
             out[i] = values[i]
-
-
-_REGISTRY: dict[str, type[WinchDriver]] = {}
-
-
-def register_driver(cls: type[WinchDriver]) -> type[WinchDriver]:
-    """Class decorator: make a driver available by its ``name``."""
-    _REGISTRY[cls.name] = cls
-    return cls
-
-
-def driver_names() -> list[str]:
-    return sorted(_REGISTRY)
-
-
-def create_driver(model: RobotModel, name: str | None = None, **kwargs: Any) -> WinchDriver:
-    """The driver named ``name`` (default: the config's ``[drives] driver``)."""
-    from drivers.errors import DriverConfigurationError
-
-    key = name or model.drives.driver
-    if key not in _REGISTRY:
-        raise DriverConfigurationError(
-            f"drives.driver = {key!r}: no such driver (registered: {', '.join(driver_names())})"
-        )
-    return _REGISTRY[key](model, **kwargs)

@@ -67,7 +67,7 @@ class FakeDrives:
     what it asks of them; ``lifecycle`` as given."""
 
     def __init__(self, m: int, lifecycle=None):
-        from drivers.base import Lifecycle, WinchStates
+        from drivers.vocabulary import Lifecycle, WinchStates
 
         self.lifecycle = Lifecycle.ACTIVE if lifecycle is None else lifecycle
         self.error = None
@@ -80,7 +80,7 @@ class FakeDrives:
         self.calls.append("activate")
 
     def begin_deactivate(self) -> None:
-        from drivers.base import Lifecycle
+        from drivers.vocabulary import Lifecycle
 
         self.calls.append("deactivate")
         if self.lifecycle is Lifecycle.ACTIVE:

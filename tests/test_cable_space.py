@@ -226,7 +226,7 @@ def test_the_realtime_simulator_handles_frames_at_their_arrival(rig):
     t0 = net.time
     zeros = np.zeros(rig.model.n_cables)
     for k in range(3):  # three cycles' frames waiting at once
-        d._write_internal(t0 + k * rig.period, zeros, setup=True)
+        d._write_cycle(t0 + k * rig.period, zeros, setup=True)
     syncs_before: dict[str, int] = {}
 
     def when(msg):  # stamped a period apart: cycle k's frames at t0 + k period (per bus)
@@ -721,8 +721,8 @@ def test_measured_tensions_take_the_rotor_out_at_the_samples_own_times():
         shown = v.copy() if corrupted is None else np.full(m, corrupted)
         sampled = np.full(m, s)
         measured_tension_kernel(
-            torque, shown, sampled, last_s, last_v, J, r, b, np.zeros(m), limit, t_true,
-            f, 20.0, out, cmd_f, error, fast,
+            torque, shown, sampled, (r, b, np.zeros(m), J, limit), t_true, f, 20.0,
+            (last_s, last_v, cmd_f, fast), out, error,
         )  # fmt: skip
         if first_s is None:
             first_s = s

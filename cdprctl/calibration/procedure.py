@@ -33,7 +33,8 @@ from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.numerics import compliance_of, unstretched_lengths
 from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda.hold import equilibrium_tensions
-from drivers.base import Lifecycle, WinchDriver, WinchStates
+from drivers.base import WinchDriver
+from drivers.vocabulary import Lifecycle, WinchStates
 
 
 class CalibrationFailedError(Exception):

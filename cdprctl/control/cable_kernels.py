@@ -83,8 +83,7 @@ def tension_hold_kernel(
 
 @njit(cache=True)
 def measured_tension_kernel(
-    torque, velocity, sampled, last_sampled, last_velocity, J, r, viscous, coulomb, limit,
-    commanded, f_slow, f_fast, out, commanded_f, error, fast_error,
+    torque, velocity, sampled, winches, commanded, f_slow, f_fast, state, out, error
 ):  # pragma: no cover - compiled  # fmt: skip
     """Per cable with a new sample (taken at ``sampled`` s, after ``last_sampled``): the
     tension its drive's measured ``torque`` (N·m) applies (``torques.applied_tension``), less
@@ -97,7 +96,11 @@ def measured_tension_kernel(
     A torque beyond the drive's ``limit`` (N·m), or a rotor inertia term beyond twice it
     (motor and cable together cannot accelerate the rotor more), is a corrupted frame: that
     sample is skipped, the next one measured against the last good one. A cable's first
-    sample only starts its count; a cable without a new one keeps its values."""
+    sample only starts its count; a cable without a new one keeps its values.
+    ``winches``: the ``WinchTerms`` (``r``, the friction, ``J``, the ``limit``); ``state``:
+    ``(last_sampled, last_velocity, commanded_f, fast_error)``, updated in place."""
+    r, viscous, coulomb, J, limit = winches
+    last_sampled, last_velocity, commanded_f, fast_error = state
     for i in range(out.shape[0]):
         h = sampled[i] - last_sampled[i]
         if h > 0.0 and math.isfinite(h):

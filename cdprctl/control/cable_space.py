@@ -125,6 +125,9 @@ class CableSpace:
         self._last_velocity = np.zeros(model.n_cables)
         self._commanded = np.zeros(model.n_cables)  # N, the commanded tensions low-passed
         self._fast_error = np.zeros(model.n_cables)  # N, at SUPERVISION_FILTER
+        # the measured tensions' filter state, as measured_tension_kernel takes it
+        self._measuring = (self._last_sampled, self._last_velocity, self._commanded,
+                           self._fast_error)  # fmt: skip
         self.give = np.zeros(model.n_cables)  # m, paid out by the force feedback
         m = model.n_cables
         # m, paid out at enable so the targets start where the motors are, to none over
@@ -301,9 +304,7 @@ class CableSpace:
         if self._measured_for <= self._release:
             return
         measured_tension_kernel(
-            torque, velocity, sampled_at, self._last_sampled, self._last_velocity,
-            w.rotor_inertia, w.r, w.viscous, w.coulomb, w.limit, self.expected,
-            self.MEASURED_TENSION_FILTER, self.SUPERVISION_FILTER, d.measured_tensions,
-            self._commanded, d.tension_error, self._fast_error,
+            torque, velocity, sampled_at, w.terms, self.expected, self.MEASURED_TENSION_FILTER,
+            self.SUPERVISION_FILTER, self._measuring, d.measured_tensions, d.tension_error,
         )  # fmt: skip
         internal_part_kernel(N, self._fast_error, d.internal_tension_error, d.internal_leverage)

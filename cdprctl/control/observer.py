@@ -32,6 +32,7 @@ from numba import njit
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
+from cdprctl.control.pd_kernel import Platform, PoseEstimate
 from cdprctl.control.torques import WinchTorques, applied_tension
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import kernel_args
@@ -64,15 +65,17 @@ def momentum_kernel(mass, inertia, R, v, w, out):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def observer_kernel(
-    dt, gain, mass, inertia, gravity, com, R, v, w, W, torque, velocity, accel_term, winches,
-    state,
+    dt, gain, platform, est, W, torque, velocity, accel_term, winches, state
 ):  # pragma: no cover - compiled  # fmt: skip
     """One step of the observer (module docstring): the applied tensions from the measured
     ``torque`` (N·m) less friction at ``velocity`` (rad/s) and the rotor-inertia term
     ``accel_term`` (N·m, per winch), the wrench they exert with gravity, the integral, and
-    ``w_hat`` from the momentum now. ``winches`` = (r, viscous, coulomb)."""
+    ``w_hat`` from the momentum now. ``platform``: a ``Platform``; ``est``: the estimate, a
+    ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``."""
     w_hat, p0, integral, t_a = state
-    r, viscous, coulomb = winches
+    r, viscous, coulomb = winches[0], winches[1], winches[2]
+    _, mass, inertia, com, gravity = platform
+    R, v, w = est[1], est[2], est[3]
     m = torque.shape[0]
     for i in range(m):
         t_a[i] = applied_tension(
@@ -117,7 +120,13 @@ class WrenchObserver:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
-        self._winches = (winches.r, winches.viscous, winches.coulomb)
+        self._winches = winches.terms
+        e = estimator
+        self._platform = kernel_args(Platform(
+            np.ascontiguousarray(model.home.rotation, dtype=float), self._mass, self._inertia,
+            self._com, self._gravity,
+        ))  # fmt: skip
+        self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
         self._rotor_term = winches.rotor_term
         self._accel_term = np.zeros(m)  # N·m: J θ̈_d of the torques' feedforward
         self._state = kernel_args(ObserverState(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(m)))
@@ -159,8 +168,7 @@ class WrenchObserver:
         e = self.estimator
         self._rotor_term(e.kin.WT, acceleration, self._accel_term)
         observer_kernel(
-            dt, self.gain, self._mass, self._inertia, self._gravity, self._com, e.rotation,
-            e.velocity, e.omega, e.kin.W, torque, velocity, self._accel_term, self._winches,
-            self._state,
+            dt, self.gain, self._platform, self._est, e.kin.W, torque, velocity,
+            self._accel_term, self._winches, self._state,
         )  # fmt: skip
         self.data.ext_estimate[:] = self._state[0]

@@ -33,10 +33,11 @@ from typing import Protocol
 import numpy as np
 from numba import njit
 
+from cdprctl.control.pd_kernel import PoseEstimate, Reference
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import Trajectory
-from cdprctl.numerics import stiffness_kernel
+from cdprctl.numerics import kernel_args, stiffness_kernel
 from cdprctl.rotation import FloatArray, log_relative_kernel, rotated_kernel
 
 # the working pose's low-pass, below the drives' position loops by this factor (a decade)
@@ -57,16 +58,21 @@ class WorkingPose(Protocol):
 
 @njit(cache=True)
 def reference_pose_kernel(
-    x, xd, R_home, est_p, est_R, alpha, offset, law, ref_kin, kin, p, R, v, w, k, R_ref, E, dev
+    ref, R_home, est_p, est_R, alpha, offset, law, ref_kin, kin, pose, k, work
 ):  # pragma: no cover - compiled  # fmt: skip
-    """The reference ``x`` (m, rotation vector rad from ``R_home``; rate ``xd``) with its
+    """The reference ``x`` (m, rotation vector rad from ``R_home``; rate ``xd``: ``ref``, a
+    ``Reference``) with its
     inverse kinematics into ``ref_kin``, ``R_ref`` = exp(x[3:]) R_home; ``offset`` (m, rad,
     base frame) ← a low-pass step ``offset + alpha (dev − offset)`` towards the estimate's
     (``est_p``, ``est_R``) deviation from it, ``dev`` = [est_p − x, log(est_R R_refᵀ)]; the
-    working pose ``p`` = x + offset[:3], ``R`` = exp(offset[3:]) R_ref with its inverse
-    kinematics into ``kin`` and each cable's stiffness ``k`` (N/m) at its length; ``v``
-    (m/s), ``w`` (rad/s: the rotation vector's rate, the angular velocity to first order, as
-    the trajectory's acceleration is taken) the reference's. ``E``: (3, 3) scratch."""
+    working pose (``pose``, a ``PoseEstimate``) ``p`` = x + offset[:3], ``R`` = exp(offset[3:])
+    R_ref with its inverse kinematics into ``kin`` and each cable's stiffness ``k`` (N/m) at
+    its length; ``v`` (m/s), ``w`` (rad/s: the rotation vector's rate, the angular velocity to
+    first order, as the trajectory's acceleration is taken) the reference's. ``work``:
+    ``R_ref``, ``E`` (3, 3) scratch, ``dev`` (6,)."""
+    x, xd = ref[0], ref[1]
+    p, R, v, w = pose
+    R_ref, E, dev = work
     rotated_kernel(x[3:], R_home, E, R_ref)
     for i in range(3):
         v[i] = xd[i]
@@ -114,20 +120,21 @@ class ReferencePose:
         self.offset = np.zeros(6)  # m, rad (base frame): the deviation low-passed
         self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
         self._law = law  # the cable law's kernel arguments (Estimator's)
-        self._R_ref = np.zeros((3, 3))
-        self._E = np.zeros((3, 3))
-        self._dev = np.zeros(6)
+        # the kernel's bundles: the trajectory's reference, this working pose, a scratch
+        tr = trajectory
+        self._ref = kernel_args(Reference(tr.position, tr.velocity, tr.acceleration))
+        self._pose = kernel_args(PoseEstimate(self.position, self.rotation, self.velocity,
+                                              self.omega))  # fmt: skip
+        self._work = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(6))  # R_ref, E, dev
         self.hold(self.position, self.rotation)
 
     def update(self, estimate: WorkingPose) -> None:
         """At the trajectory's reference now, moved by the ``estimate``'s deviation from it
         through the low-pass, one period's step (each cycle, after the trajectory's)."""
-        tr = self.trajectory
         reference_pose_kernel(
-            tr.position, tr.velocity, self._R_home, estimate.position, estimate.rotation,
-            self._alpha,
-            self.offset, self._law, self.reference_kin.arrays, self.kin.arrays, self.position,
-            self.rotation, self.velocity, self.omega, self.k, self._R_ref, self._E, self._dev,
+            self._ref, self._R_home, estimate.position, estimate.rotation, self._alpha,
+            self.offset, self._law, self.reference_kin.arrays, self.kin.arrays, self._pose,
+            self.k, self._work,
         )  # fmt: skip
 
     def hold(self, position: FloatArray, rotation: FloatArray) -> None:

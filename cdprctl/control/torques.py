@@ -6,12 +6,13 @@ the grasp sensing that takes it back out of the drives' torques."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import clamp
+from cdprctl.numerics import clamp, kernel_args
 from cdprctl.rotation import FloatArray
 
 #: rad/s: the Coulomb friction model's ``tanh(θ̇/ω_ε)`` smoothing of the sign
@@ -42,15 +43,17 @@ def friction_kernel(viscous, coulomb, velocity, cables, out):  # pragma: no cove
 
 @njit(cache=True)
 def winch_torque_kernel(
-    tensions, r, viscous, coulomb, rotor_inertia, WT, acceleration, velocity, friction, limit, out
+    tensions, winches, WT, acceleration, velocity, friction, out
 ):  # pragma: no cover - compiled
-    """``out`` ← ``τ = r t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J θ̈_d`` (N·m) within ±``limit``.
+    """``out`` ← ``τ = r t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J θ̈_d`` (N·m) within ±``limit``
+    (``winches``: the :class:`WinchTerms`).
 
     ``r`` (m/rad) the drum radius over the gear ratio, ``t`` (N) the tensions, ``θ̇``
     (rad/s) the motor velocities, friction terms only when ``friction``; the rotor's
     ``θ̈_d = Wᵀ a_d / r`` from the desired platform acceleration ``a_d`` (``δl = −Wᵀ δX`` and
     ``l0 = l − r θ``: θ > 0 winds in).
     """
+    r, viscous, coulomb, rotor_inertia, limit = winches
     for i in range(out.shape[0]):
         tau = r[i] * tensions[i]
         if friction:
@@ -62,8 +65,20 @@ def winch_torque_kernel(
         out[i] = clamp(tau, -limit[i], limit[i])
 
 
+class WinchTerms(NamedTuple):
+    """Each winch's terms of the torque law, per cable (the kernels take them as
+    ``kernel_args``): ``r`` (m/rad) the drum radius over the gear ratio, ``viscous``
+    (N·m·s/rad), ``coulomb`` (N·m), ``rotor_inertia`` (kg·m²), ``limit`` (N·m)."""
+
+    r: np.ndarray
+    viscous: np.ndarray
+    coulomb: np.ndarray
+    rotor_inertia: np.ndarray
+    limit: np.ndarray
+
+
 class WinchTorques:
-    """The winches' parameters, per cable, as the kernels take them."""
+    """The winches' parameters, per cable, as the kernels take them (``terms``)."""
 
     def __init__(self, model: RobotModel):
         w = [x.winch for x in model.cables]
@@ -74,6 +89,9 @@ class WinchTorques:
         self.limit = np.array([x.torque_limit for x in w])  # N·m
         self.friction_compensation = model.control.friction_compensation
         self._J_over_r = self.rotor_inertia / self.r
+        self.terms = kernel_args(
+            WinchTerms(self.r, self.viscous, self.coulomb, self.rotor_inertia, self.limit)
+        )
 
     def rotor_term(self, WT: FloatArray, acceleration: FloatArray, out: FloatArray) -> None:
         """``out`` (N·m) ← the rotor-inertia feed-forward ``J θ̈_d = J Wᵀ a_d / r`` of the
@@ -95,15 +113,6 @@ class WinchTorques:
             out[:] = 0.0
             return
         winch_torque_kernel(
-            tensions,
-            self.r,
-            self.viscous,
-            self.coulomb,
-            self.rotor_inertia,
-            WT,
-            acceleration,
-            motor_velocity,
-            self.friction_compensation,
-            self.limit,
+            tensions, self.terms, WT, acceleration, motor_velocity, self.friction_compensation,
             out,
-        )
+        )  # fmt: skip

@@ -78,7 +78,7 @@ class DrivesConfig:
     # not a count of cycles, so the tolerance is the same at every rate (30 ms; the old count
     # of 5 missed reads was 10-12 ms at 500 Hz, 20 ms at 250 Hz). A stall of the loop itself
     # counts at most two periods: no SYNC went out, the drives could not answer
-    # (drivers/canbase.py)
+    # (drivers/liveness.py)
     feedback_timeout: float = 0.03
     heartbeat_timeout: float = 0.5  # s without a drive's heartbeat: drive lost
     heartbeat_period: float = 0.1  # s, the controller's own heartbeat

@@ -8,6 +8,7 @@ SOTDA on rowc, benchmarks/bench_loop.py).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -23,6 +24,22 @@ from cdprctl.tda.sotda import (
 BARYCENTER, MIN_2NORM, MIN_1NORM, SOTDA = 0, 1, 2, 3
 # slots of the kernel's ``info`` output
 NV, AREA, BX, BY, SOTDA_DP, RATE_FLAG = range(6)
+
+
+class PlanarWork(NamedTuple):
+    """The polygon methods' workspace (passed as ``kernel_args``): the polygon's vertices
+    (rows λ1, λ2; at most ``2 m + 8``), those of the rate-limited polygon, a scratch of the
+    same shape, and ``info`` (the slots above)."""
+
+    verts: np.ndarray
+    verts_rate: np.ndarray
+    tmp: np.ndarray
+    info: np.ndarray
+
+    @classmethod
+    def of(cls, m: int) -> PlanarWork:
+        n = 2 * m + 8
+        return cls(np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2)), np.zeros(6))
 
 
 @njit(cache=True)
@@ -82,34 +99,15 @@ def rate_limit_kernel(x, y, N, t0, lo, hi, t_prev, step, verts, tmp):  # pragma:
 
 @njit(cache=True)
 def planar_kernel(
-    method,
-    N,
-    t0,
-    lo,
-    hi,
-    verts,
-    verts_rate,
-    tmp,
-    k,
-    uT,
-    W,
-    rbT,
-    free_len,
-    dw,
-    direction,
-    nu,
-    grid,
-    t_prev,
-    step,
-    lam,
-    tensions,
-    info,
+    method, N, t0, lo, hi, k, kin, dw, direction, nu, grid, t_prev, step, work, lam, tensions
 ):  # pragma: no cover - compiled
-    """The polygon of ``t0 + N λ`` within ``[lo, hi]`` into ``verts``, the method's point
+    """The polygon of ``t0 + N λ`` within ``[lo, hi]`` into ``work.verts``, the method's point
     (``method``: BARYCENTER, MIN_2NORM, MIN_1NORM or SOTDA — its candidates the vertices, or
-    with ``grid`` > 0 a ``grid × grid`` mesh over the polygon too), rate-limited around ``t_prev``
-    when ``step`` (N) is finite; ``lam`` and ``tensions`` (N) out, and ``info`` (see the
+    with ``grid`` > 0 a ``grid × grid`` mesh over the polygon too; SOTDA reads the stiffness
+    ``k`` (N/m) and the kinematics ``kin``, a ``KinArrays``), rate-limited around ``t_prev``
+    when ``step`` (N) is finite; ``lam`` and ``tensions`` (N) out, and ``work.info`` (see the
     slots above). False when the polygon is empty (nothing else written but ``info[NV]``)."""
+    verts, verts_rate, tmp, info = work
     nv = pg.polygon_kernel(N, t0, lo, hi, 1e-9, verts, tmp)
     info[NV] = nv
     if nv == 0:
@@ -137,8 +135,9 @@ def planar_kernel(
         if grid > 0:  # the paper's meshgrid search
             cand = np.empty((grid * grid + nv, 2))
             nc = grid_candidates_kernel(verts, nv, grid, cand)
+        W, rbT, free_len = kin[10], kin[4], kin[7]  # KinArrays' fields, by position
         x, y, info[SOTDA_DP] = sotda_kernel(
-            cand, nc, bx, by, N, t0, k, uT, W, rbT, free_len, dw, direction, nu
+            cand, nc, bx, by, N, t0, k, W[:3], W, rbT, free_len, dw, direction, nu
         )
     info[RATE_FLAG] = 0.0
     if math.isfinite(step):

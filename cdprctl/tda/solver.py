@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from cdprctl.kinematics import KinematicsData
+from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
@@ -68,12 +69,11 @@ class TensionDistributor(EnergyMethod):
         self.out = TDAOutput(self.m, self.r)
         self._f = np.zeros(2)
         self._lam2 = np.zeros(2)
-        self._verts = np.zeros((2 * self.m + 8, 2))
         self._no_polygon = np.zeros((0, 2))
         self._no_free = np.zeros((self.m, 0))
-        self._verts_rate = np.zeros((2 * self.m + 8, 2))
-        self._verts_tmp = np.zeros((2 * self.m + 8, 2))
-        self._planar_info = np.zeros(6)
+        self._planar_work = planar.PlanarWork.of(self.m)
+        self._planar = kernel_args(self._planar_work)  # the same arrays, as the kernel takes them
+        self._verts = self._planar_work.verts
         self._ones = np.ones(self.m)
         self._dt = self.options.period  # s, the rate limit's step of this solve
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
@@ -168,7 +168,7 @@ class TensionDistributor(EnergyMethod):
         if sotda and (k is None or kin is None):
             out.message = "sotda needs the cable stiffness k and the kinematics"
             return TDAStatus.DEGENERATE
-        info = self._planar_info
+        info = self._planar_work.info
         kd = kin if kin is not None else self._no_kin
         rate = t_prev is not None and opt.max_tension_rate is not None
         ok = planar.planar_kernel(
@@ -177,23 +177,17 @@ class TensionDistributor(EnergyMethod):
             ns.t0,
             lo,
             hi,
-            self._verts,
-            self._verts_rate,
-            self._verts_tmp,
             k if k is not None else self._ones,
-            kd.uT,
-            kd.W,
-            kd.rbT,
-            kd.free_length,
+            kd.arrays,
             self._delta_wrench,
             self._direction,
             opt.nu,
             opt.grid_points if sotda and opt.sotda_variant == "grid" else 0,
             t_prev if rate else lo,
             (opt.max_tension_rate or 0.0) * self._dt if rate else math.inf,
+            self._planar,
             out.lam,
             out.tensions,
-            info,
         )
         if not ok:
             return self._least_violating(lo, hi)

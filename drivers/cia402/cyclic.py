@@ -8,6 +8,8 @@ cost ~60 µs of a 500 Hz cycle on 8 drives (benchmarks/bench_loop.py).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -39,30 +41,32 @@ _FAULT_RESET = int(p.Command.FAULT_RESET)
 _DISABLE_VOLTAGE = int(p.Command.DISABLE_VOLTAGE)
 
 
+class Decoded(NamedTuple):
+    """The driver's decoding state per cable (arrays, written in place; the kernels take it
+    as ``kernel_args``): ``raw[c]`` = (last 32-bit position, 1 if any, implausible frames in a
+    row), ``counts`` the unwrapped multi-turn counts, ``ps`` the power state, ``emcy`` the last
+    EMCY code (0: none), ``prev[c]`` = (last position rad, its instant s)."""
+
+    raw: np.ndarray
+    counts: np.ndarray
+    ps: np.ndarray
+    emcy: np.ndarray
+    prev: np.ndarray
+
+
 @njit(cache=True)
 def tpdo1_kernel(
-    n,
-    frames,
-    stamp,
-    period,
-    max_speed,
-    rad_per_count,
-    rated_torque,
-    raw,
-    ps_table,
-    counts,
-    ps,
-    torque,
-    fresh,
-    fb_stamp,
-):  # pragma: no cover - compiled
+    n, frames, stamp, period, max_speed, rad_per_count, rated_torque, ps_table, decoded,
+    torque, fresh, fb_stamp,
+):  # pragma: no cover - compiled  # fmt: skip
     """Apply ``n`` TPDO1 frames in their order of arrival. ``frames[i]`` = (cable, statusword,
-    torque per-mille, 32-bit position); ``raw[c]`` = (last 32-bit position, 1 if any,
-    implausible frames in a row); ``stamp`` (s) the frames' sample instant. A position step no
-    motor can make within the time since the last accepted sample (plus a period of slack) is a
-    corrupted frame: dropped whole. Sets the power state, torque actual (N·m, ``rated_torque``
-    per 1000 per-mille), unwrapped counts, freshness and sample instant of each cable; returns
-    the number of frames dropped."""
+    torque per-mille, 32-bit position); ``decoded``: the :class:`Decoded` state; ``stamp`` (s)
+    the frames' sample instant. A position step no motor (``max_speed`` rad/s) can make within
+    the time since the last accepted sample (plus a ``period`` of slack) is a corrupted frame:
+    dropped whole. Sets the power state, torque actual (N·m, ``rated_torque`` per 1000
+    per-mille), unwrapped counts, freshness and sample instant (s) of each cable; returns the
+    number of frames dropped."""
+    raw, counts, ps = decoded[0], decoded[1], decoded[2]
     dropped = 0
     for i in range(n):
         c = frames[i, 0]
@@ -94,23 +98,15 @@ def tpdo1_kernel(
 
 @njit(cache=True)
 def state_kernel(
-    fresh,
-    counts,
-    rad_per_count,
-    fb_stamp,
-    prev,
-    derived,
-    ps,
-    emcy,
-    generic,
-    position,
-    velocity,
-    state,
-    fault_code,
+    fresh, fb_stamp, rad_per_count, derived, generic, decoded, feedback
 ):  # pragma: no cover - compiled
     """Motor position (rad) of the fresh cables, their velocity (rad/s) by differences of
-    sample instants when ``derived``, the generic state and fault code of every cable;
-    ``prev[c]`` = (last position, its instant). True if a drive is in fault."""
+    sample instants (``fb_stamp``, s) when ``derived``, the generic state (``generic``: of
+    each power state) and fault code of every cable, from the :class:`Decoded` state into
+    ``feedback`` = (position, velocity, state, fault_code) of ``WinchStates``. True if a drive
+    is in fault."""
+    counts, ps, emcy, prev = decoded[1], decoded[2], decoded[3], decoded[4]
+    position, velocity, state, fault_code = feedback
     fault = False
     for c in range(len(fresh)):
         if fresh[c]:

@@ -18,7 +18,8 @@ from typing import Any
 import can
 import numpy as np
 
-from drivers.base import Lifecycle, register_driver
+from cdprctl.numerics import kernel_args
+from drivers import blocking
 from drivers.canbase import CanWinchDriver
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
@@ -30,6 +31,8 @@ from drivers.errors import (
     DriverError,
     DriverOperationError,
 )
+from drivers.registry import register_driver
+from drivers.vocabulary import Lifecycle
 
 
 @register_driver
@@ -116,13 +119,19 @@ class Cia402Driver(CanWinchDriver):
         # per cable: last 32-bit position (for unwrapping), 1 once there is one, implausible
         # frames in a row
         self._raw = np.zeros((m, 3), dtype=np.int64)
-        self._implausible = self._raw[:, 2]  # a view: what the liveness error reports
+        self.liveness.implausible = self._raw[:, 2]  # a view: what the liveness error reports
         self._prev = np.full((m, 2), -math.inf)  # last position (rad) and its instant (s)
         self._tpdo1 = np.zeros((4 * m, 4), dtype=np.int64)  # the cycle's TPDO1s, decoded
         self._rpdo_fields = np.zeros((m, 2), dtype=np.int64)  # controlword, torque per-mille
         self._generic = np.array([int(GENERIC_STATE[s]) for s in sorted(p.PowerState)])
+        st = self.states
+        self._decoded = kernel_args(
+            cyclic.Decoded(self._raw, self._counts, self._ps, np.zeros(m, dtype=np.int64),
+                           self._prev)
+        )  # fmt: skip
+        self._emcy = self._decoded[3]
+        self._feedback = (st.position, st.velocity, st.state, st.fault_code)
         self._nmt_state = np.full(m, -1, dtype=np.int64)
-        self._emcy = np.zeros(m, dtype=np.int64)
         self._sdo_reply: dict[int, bytes] = {}
         self.sdo = SdoClient(self)
         self._enable = False
@@ -140,16 +149,17 @@ class Cia402Driver(CanWinchDriver):
         for c in range(self.m):
             self._configure_drive(c, timeout)
         self.sdo.nmt_all(p.NMT_START)
-        self._started = True
+        self.liveness.started = True
 
         # cycle (zero torque, drives disabled) until every drive has sent feedback
         def resend_start(now: float) -> None:
             if int(now / 0.5) != int((now - self.period) / 0.5):
                 self.sdo.nmt_all(p.NMT_START)  # a lost NMT start (lossy buses) is sent again
 
-        self._await_first_feedback(
+        blocking.await_first_feedback(
+            self,
             timeout,
-            lambda: bool(np.all(np.isfinite(self._fb_stamp))),
+            lambda: bool(np.all(np.isfinite(self.liveness.fb_stamp))),
             "feedback (TPDO1)",
             resend_start,
         )
@@ -166,23 +176,13 @@ class Cia402Driver(CanWinchDriver):
     # -- hooks: the cyclic path ---------------------------------------------------------------
     def _warm_up(self) -> None:
         super()._warm_up()
-        m, st = self.m, self.states
+        m = self.m
         self._apply_tpdo1(0, 0.0)  # no frame: nothing written
         cyclic.state_kernel(
-            np.zeros(m, dtype=bool),
-            self._counts,
-            self.rad_per_count,
-            self._fb_stamp,
-            self._prev.copy(),
-            True,
-            self._ps,
-            self._emcy,
-            self._generic,
-            st.position.copy(),
-            st.velocity.copy(),
-            st.state.copy(),
-            st.fault_code.copy(),
-        )
+            np.zeros(m, dtype=bool), self.liveness.fb_stamp, self.rad_per_count, True,
+            self._generic, tuple(a.copy() for a in self._decoded),
+            tuple(a.copy() for a in self._feedback),
+        )  # fmt: skip
         cyclic.controlword_kernel(
             np.zeros(m),
             self._ps,
@@ -194,13 +194,13 @@ class Cia402Driver(CanWinchDriver):
             self._rpdo_fields.copy(),
         )
         cyclic.target_rates_kernel(
-            self.targets, 0.0, self._last_targets.copy(), -1.0, self._max_motor_speed,
+            self.targets, 0.0, self._last_targets.copy(), -1.0, self.liveness.max_motor_speed,
             self._target_rate.copy(),
         )  # fmt: skip
         cyclic.carry_targets_kernel(self.targets, self._target_rate, 0.0, self._carried.copy())
         cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
 
-    # of a period: targets this much older than their SYNC are sent again (``_write_internal``)
+    # of a period: targets this much older than their SYNC are sent again (``_write_frames``)
     RESEND_AFTER = 0.25
     # times the targets may go out again before one SYNC (each check costs a clock read)
     RESEND_TRIES = 3
@@ -256,7 +256,7 @@ class Cia402Driver(CanWinchDriver):
             elif kind == 3 and len(data) == 8:
                 self._emcy[c] = p.EMCY_STRUCT.unpack(data)[0]
             elif kind == 4 and len(data) >= 1:
-                self._last_hb[c] = t
+                self.liveness.last_hb[c] = t
                 self._nmt_state[c] = data[0]
             elif kind == 5 and len(data) == 8:
                 self._sdo_reply[c] = bytes(data)
@@ -268,42 +268,21 @@ class Cia402Driver(CanWinchDriver):
     def _apply_tpdo1(self, n: int, t: float) -> None:
         stamp = self._last_sync if math.isfinite(self._last_sync) else t
         dropped = cyclic.tpdo1_kernel(
-            n,
-            self._tpdo1,
-            stamp,
-            self.period,
-            self._max_motor_speed,
-            self.rad_per_count,
-            self.rated_torque,
-            self._raw,
-            cyclic.POWER_STATE_OF_SW7,
-            self._counts,
-            self._ps,
-            self.states.torque,
-            self._fresh,
-            self._fb_stamp,
-        )
+            n, self._tpdo1, stamp, self.period, self.liveness.max_motor_speed,
+            self.rad_per_count, self.rated_torque, cyclic.POWER_STATE_OF_SW7, self._decoded,
+            self.states.torque, self.liveness.fresh, self.liveness.fb_stamp,
+        )  # fmt: skip
         self.stats.implausible_frames += dropped
 
     def _update_states(self) -> bool:
-        st = self.states
+        lv = self.liveness
         return bool(
             cyclic.state_kernel(
-                self._fresh,
-                self._counts,
-                self.rad_per_count,
-                self._fb_stamp,
-                self._prev,
-                self.config.velocity_source == "derived",
-                self._ps,
-                self._emcy,
-                self._generic,
-                st.position,
-                st.velocity,
-                st.state,
-                st.fault_code,
+                lv.fresh, lv.fb_stamp, self.rad_per_count,
+                self.config.velocity_source == "derived", self._generic, self._decoded,
+                self._feedback,
             )
-        )
+        )  # fmt: skip
 
     def _cable_fault(self, c: int) -> DriverError | None:
         code = int(self._emcy[c])
@@ -345,7 +324,7 @@ class Cia402Driver(CanWinchDriver):
             running = self.lifecycle is Lifecycle.ACTIVE
             since = self._last_targets_t if running else -math.inf
             cyclic.target_rates_kernel(
-                self.targets, t, self._last_targets, since, self._max_motor_speed,
+                self.targets, t, self._last_targets, since, self.liveness.max_motor_speed,
                 self._target_rate,
             )  # fmt: skip
             self._last_targets_t = t if running else -math.inf

@@ -14,10 +14,12 @@ from typing import Any
 import can
 import numpy as np
 
-from drivers.base import DriveState, register_driver
+from drivers import blocking
 from drivers.canbase import CanWinchDriver
 from drivers.errors import DriveFaultError, DriverError, DriverOperationError
 from drivers.odrive import protocol as p
+from drivers.registry import register_driver
+from drivers.vocabulary import DriveState
 
 TWO_PI = 2.0 * math.pi
 
@@ -68,12 +70,12 @@ class ODriveDriver(CanWinchDriver):
                 p.MODE_STRUCT.pack(p.CONTROL_MODE_TORQUE, p.INPUT_MODE_PASSTHROUGH),
             )
             self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(p.AxisState.IDLE))
-        self._started = True
-        self._await_first_feedback(
+        lv = self.liveness
+        lv.started = True
+        blocking.await_first_feedback(
+            self,
             timeout,
-            lambda: bool(
-                np.all(np.isfinite(self._fb_stamp)) and np.all(np.isfinite(self._last_hb))
-            ),
+            lambda: bool(np.all(np.isfinite(lv.fb_stamp)) and np.all(np.isfinite(lv.last_hb))),
             "encoder estimates (ODrive axes)",
         )
 
@@ -88,14 +90,14 @@ class ODriveDriver(CanWinchDriver):
             if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
                 pos, vel = p.ENCODER_STRUCT.unpack(data)
                 step = pos * TWO_PI - self.states.position[c]
-                if not (math.isfinite(pos) and math.isfinite(vel)) or not self._plausible(
+                if not (math.isfinite(pos) and math.isfinite(vel)) or not self.liveness.plausible(
                     c, step, t
                 ):
                     continue  # a corrupted frame: dropped whole, like a lost one
                 self.states.position[c] = pos * TWO_PI
                 self.states.velocity[c] = vel * TWO_PI
-                self._fresh[c] = True
-                self._fb_stamp[c] = t
+                self.liveness.fresh[c] = True
+                self.liveness.fb_stamp[c] = t
             elif cmd == p.GET_TORQUES and len(data) == 8:
                 self.states.torque[c] = p.TORQUES_STRUCT.unpack(data)[1]
             elif cmd == p.HEARTBEAT and len(data) >= 7:
@@ -105,9 +107,13 @@ class ODriveDriver(CanWinchDriver):
                     self.axis_state[c] = p.AxisState(state)
                 except ValueError:
                     self.axis_state[c] = p.AxisState.UNDEFINED
-                self._last_hb[c] = t
+                self.liveness.last_hb[c] = t
             else:
                 self.stats.frames_ignored += 1
+
+    def _update_states(self) -> bool:
+        """Each axis's state from its heartbeat (``_cable_fault``, cable by cable)."""
+        return any([self._cable_fault(c) is not None for c in range(self.m)])
 
     def _cable_fault(self, c: int) -> DriverError | None:
         st = self.states

@@ -1,0 +1,114 @@
+"""The blocking lifecycle calls of a driver (``activate``, ``deactivate``, ``recover``), for
+set-up and tools outside a running loop, written on the non-blocking one: a ``begin_*`` call,
+then ``read``/``write`` cycles letting time pass with the driver's ``wait`` until the
+lifecycle says it is done or the timeout passes. The control loop itself uses ``begin_*``.
+``await_first_feedback`` is the set-up's own cycling, for a protocol's ``_configure_drives``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drivers.errors import DriverOperationError, DriverTimeoutError
+from drivers.vocabulary import DriveState, Lifecycle
+
+if TYPE_CHECKING:
+    from drivers.base import WinchDriver
+
+
+def activate(drv: WinchDriver, timeout: float = 2.0) -> None:
+    """Enable every drive (zero torque, targets where the motors stand) → ``ACTIVE``;
+    blocks with ``wait``: ``begin_activate`` and the cycles it needs (``read`` alone says
+    when every drive is enabled)."""
+    drv._require(Lifecycle.INACTIVE)
+    drv._command[:] = 0.0
+    drv._last_command[:] = 0.0
+    drv.begin_activate()
+    deadline = drv.clock() + timeout
+    while True:
+        now = drv.clock()
+        drv.read(now)
+        drv.write(now, drv._command)
+        if drv.lifecycle is Lifecycle.ERROR:
+            raise drv.error or DriverOperationError("activation failed")
+        if drv.lifecycle is Lifecycle.ACTIVE:
+            return
+        if now > deadline:
+            not_on = [i for i in range(drv.m) if drv.states.state[i] != DriveState.ENABLED]
+            drv.begin_deactivate()
+            raise DriverTimeoutError(
+                f"drives of cable indices {not_on} not enabled after {timeout:g} s",
+                not_on[0],
+            )
+        drv.wait(drv.period)
+
+
+def deactivate(drv: WinchDriver, timeout: float = 1.0) -> None:
+    """Disable the drives (brakes hold) → ``INACTIVE``."""
+    if drv.lifecycle not in (Lifecycle.ACTIVE, Lifecycle.ERROR):
+        return
+    drv._request_enable(False)
+    deadline = drv.clock() + timeout
+    while drv.clock() <= deadline:
+        now = drv.clock()
+        drv.read(now)
+        drv.write(now, np.zeros(drv.m), force=True)
+        if np.all(drv.states.state != DriveState.ENABLED):
+            break
+        drv.wait(drv.period)
+    if drv.lifecycle is Lifecycle.ACTIVE:
+        drv.lifecycle = Lifecycle.INACTIVE
+
+
+def recover(drv: WinchDriver, timeout: float = 1.0) -> None:
+    """From ``ERROR``: reset drive faults, keep the drives disabled, and return to
+    ``INACTIVE`` once every drive answers again without a fault."""
+    if drv.lifecycle is not Lifecycle.ERROR:
+        return
+    drv.error = None
+    drv._request_enable(False)
+    drv._fault_reset()
+    deadline = drv.clock() + timeout
+    while True:
+        now = drv.clock()
+        drv.lifecycle = Lifecycle.INACTIVE
+        drv.error = None  # a fault still latched this cycle sets it again
+        drv.read(now)
+        drv.write(now, np.zeros(drv.m), force=True)
+        if drv.lifecycle is Lifecycle.INACTIVE and np.all(
+            (drv.states.state != DriveState.FAULT)
+            & (drv.states.state != DriveState.UNKNOWN)
+            & (drv.states.feedback_age < 10 * drv.period + 1e-9)
+        ):
+            return
+        if now > deadline:
+            drv.lifecycle = Lifecycle.ERROR
+            raise drv.error or DriverTimeoutError("drives did not recover", None)
+        drv.wait(drv.period)
+
+
+def await_first_feedback(
+    drv: WinchDriver, timeout: float, heard: Callable[[], bool], what: str,
+    on_tick: Callable[[float], None] | None = None,
+) -> None:  # fmt: skip
+    """Cycle (zero torque, drives disabled) until ``heard()`` says every drive has sent
+    feedback; ``on_tick(now)`` once a cycle (a repeated NMT start, say). Raises
+    ``DriverTimeoutError`` naming the silent cables' indices and ``what`` was awaited."""
+    deadline = drv.clock() + timeout
+    while True:
+        now = drv.clock()
+        drv._read_cycle(now)
+        drv._write_cycle(now, np.zeros(drv.m), setup=True)
+        if heard():
+            return
+        if on_tick is not None:
+            on_tick(now)
+        if now > deadline:
+            silent = [c for c in range(drv.m) if not np.isfinite(drv.liveness.fb_stamp[c])]
+            raise DriverTimeoutError(
+                f"no {what} from the drives of cable indices {silent} within {timeout:g} s",
+                silent[0] if silent else None,
+            )
+        drv.wait(drv.period)

@@ -1,0 +1,149 @@
+"""The liveness rules of drives on a fieldbus, per cable: the feedback's age, the reads that
+missed it and their time, the heartbeat, and the plausibility of a position sample.
+
+The protocol says when a cable's feedback arrived (``fresh[c] = True``, ``fb_stamp[c] = t``)
+and when its heartbeat did (``last_hb[c] = t``); :meth:`Liveness.update` does the rest once a
+cycle, compiled, and :meth:`Liveness.error` words the timeout of a cable past its limit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from cdprctl.numerics import plausible_step_py
+from drivers.errors import DriverError, DriverTimeoutError
+from drivers.vocabulary import DriverStats, WinchStates
+
+#: m/s of cable: a position step faster than this between two samples is a corrupted frame
+#: (or a failing encoder): five times the supervisor's speed limit
+PLAUSIBLE_CABLE_SPEED = 5.0
+
+
+class Liveness:
+    """Per-cable liveness state (arrays, written in place by the protocol and the kernel)."""
+
+    def __init__(self, m: int, period: float, max_motor_speed: np.ndarray, stats: DriverStats,
+                 feedback_timeout: float, heartbeat_timeout: float):  # fmt: skip
+        """``period`` (s): the control period; ``max_motor_speed`` (rad/s per cable): the
+        fastest a motor can turn (``PLAUSIBLE_CABLE_SPEED`` of cable); the timeouts (s) are
+        the config's ``[drives] feedback_timeout`` and ``heartbeat_timeout``."""
+        self.period = period
+        self.stats = stats
+        self.feedback_timeout = feedback_timeout
+        self.heartbeat_timeout = heartbeat_timeout
+        self.max_motor_speed = max_motor_speed
+        self.fresh = np.zeros(m, dtype=bool)  # feedback arrived during this read
+        self.fb_stamp = np.full(m, -math.inf)  # s, time of the last feedback
+        self.missed = np.zeros(m, dtype=np.int64)  # consecutive reads without feedback
+        # s of running cycles without feedback, per cable: each read adds the time since the
+        # last one, at most two periods — a stall of the loop itself sends no SYNC, so the
+        # drives could not answer; it is the loop's to report, not a drive's silence
+        self.silent = np.zeros(m)
+        self.last_hb = np.full(m, -math.inf)  # s, the drive's last heartbeat
+        self.last_read = -math.inf
+        self.started = False  # the drives were started: silence now counts
+        # position samples no motor can make, in a row, per cable (a protocol may replace it
+        # by a view of its own decoding state)
+        self.implausible = np.zeros(m, dtype=np.int64)
+
+    def plausible(self, c: int, step: float, stamp: float) -> bool:
+        """Whether motor ``c`` can have turned by ``step`` (rad) since its last accepted
+        sample, at ``stamp`` (s); counts the implausible ones."""
+        prev = self.fb_stamp[c]
+        if not math.isfinite(prev):
+            return True
+        # a period of slack for timing jitter (the one rule: cdprctl.numerics.plausible_step)
+        if plausible_step_py(step, float(self.max_motor_speed[c]), stamp - prev, self.period):
+            self.implausible[c] = 0
+            return True
+        self.implausible[c] += 1
+        self.stats.implausible_frames += 1
+        return False
+
+    def read_gap(self, t: float) -> float:
+        """s since the last read, at most two periods (0 at the same instant: that misses
+        nothing; the first read: one period)."""
+        gap = t - self.last_read if math.isfinite(self.last_read) else self.period
+        self.last_read = t
+        return min(max(gap, 0.0), 2.0 * self.period)
+
+    def update(self, t: float, gap: float, states: WinchStates) -> bool:
+        """The cycle's bookkeeping (``liveness_kernel``) after the feedback was decoded, the
+        ages into ``states``; True when a cable is past a limit (``error`` says which)."""
+        missed, late = liveness_kernel(
+            self.fresh, self.fb_stamp, self.missed, self.silent, self.last_hb, t, gap,
+            self.started, self.feedback_timeout, self.heartbeat_timeout,
+            states.feedback_age, states.sampled_at,
+        )  # fmt: skip
+        self.stats.missed_feedback += missed
+        return late
+
+    def warm_up(self, states: WinchStates) -> None:
+        """The kernel once, on copies (compiled or loaded before the drives start)."""
+        liveness_kernel(
+            self.fresh.copy(), self.fb_stamp.copy(), self.missed.copy(), self.silent.copy(),
+            self.last_hb.copy(), 0.0, 0.002, True, self.feedback_timeout,
+            self.heartbeat_timeout, states.feedback_age.copy(), states.sampled_at.copy(),
+        )  # fmt: skip
+
+    def error(self, c: int, t: float, where: str, feedback: str,
+              age: float) -> DriverError | None:  # fmt: skip
+        """The timeout error of cable ``c`` (``where``: its drive, in words; ``feedback``: what
+        its feedback is called; ``age``: s since it) when a limit is passed
+        (``feedback_timeout`` s without feedback, ``heartbeat_timeout`` s without heartbeat)."""
+        if self.silent[c] > self.feedback_timeout:
+            why = (
+                f" (the last {int(self.implausible[c])} were position jumps no motor can "
+                "make: corrupted frames or a failing encoder)"
+                if self.implausible[c]
+                else ""
+            )
+            return DriverTimeoutError(
+                f"{where}: no {feedback} for {self.silent[c] * 1e3:.1f} ms "
+                f"of running cycles ({int(self.missed[c])} reads, last {age * 1e3:.1f} ms ago; "
+                f"feedback_timeout {self.feedback_timeout * 1e3:g} ms){why}",
+                c,
+            )
+        if (
+            self.started
+            and math.isfinite(self.last_hb[c])
+            and t - self.last_hb[c] > self.heartbeat_timeout
+        ):
+            return DriverTimeoutError(
+                f"{where} lost: no heartbeat for {t - self.last_hb[c]:.3f} s "
+                f"(timeout {self.heartbeat_timeout:g} s)",
+                c,
+            )
+        return None
+
+
+@njit(cache=True)
+def liveness_kernel(
+    fresh, fb_stamp, missed, silent, last_hb, t, gap, started, fb_timeout, hb_timeout, age,
+    sampled,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Per cable: the count of consecutive reads without feedback and their time ``silent``
+    (s; each read adds ``gap``, the capped time since the last read; silence counts once the
+    drives were started and have spoken), the feedback age (s) and instant (``sampled``, s).
+    Returns the cable-reads missed now and whether a cable was silent over ``fb_timeout`` s or
+    ``hb_timeout`` s without heartbeat."""
+    n_missed = 0
+    late = False
+    for c in range(len(fresh)):
+        if fresh[c]:
+            missed[c] = 0
+            silent[c] = 0.0
+        elif gap > 0.0 and started and np.isfinite(fb_stamp[c]):
+            missed[c] += 1
+            silent[c] += gap
+            n_missed += 1
+        age[c] = t - fb_stamp[c]
+        sampled[c] = fb_stamp[c]
+        if silent[c] > fb_timeout:
+            late = True
+        if started and np.isfinite(last_hb[c]) and t - last_hb[c] > hb_timeout:
+            late = True
+    return n_missed, late
