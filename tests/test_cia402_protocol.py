@@ -6,6 +6,7 @@ sample: a mask off by one bit changes states nobody thought of."""
 
 from __future__ import annotations
 
+import os
 import re
 import struct
 import time
@@ -20,7 +21,11 @@ from canopen.sdo import constants as sdo
 
 from drivers.cia402 import protocol as p
 
-VENDOR_EDS = Path(__file__).resolve().parents[2] / "shared" / "vendor_eds"
+# beside the checkout; CDPRCTL_VENDOR_EDS names them from elsewhere (make mutation's copies)
+VENDOR_EDS = Path(
+    os.environ.get("CDPRCTL_VENDOR_EDS")
+    or Path(__file__).resolve().parents[2] / "shared" / "vendor_eds"
+)
 PS = p.PowerState
 # canopen's state names → ours
 NAMES = {

@@ -13,7 +13,7 @@ from conftest import FakeDrives
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import FaultKind, State
-from cdprctl.control.supervisor import Supervisor
+from cdprctl.control.supervisor import Persistence, Supervisor
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model import load_robot
 from drivers.vocabulary import Lifecycle
@@ -244,3 +244,127 @@ def test_saturated_time_drains_at_a_quarter_of_real_time():
     s.distribution(1.0, 0, Outcome("OK", ""))
     assert d.saturated_for == pytest.approx(0.1 - Supervisor.SATURATION_LEAK * 0.002)
     assert Supervisor.SATURATION_LEAK == 0.25  # documented: drains at a quarter of real time
+
+
+def test_each_limit_exactly_reached_is_not_beyond_it():
+    """Every check faults beyond its limit, not at it: an FK residual, a feedback age, an
+    internal tension error equal to the limit, and the enable time-out on its last instant
+    (values exact in binary, so the comparison itself is what is tested)."""
+    s, d, _ = rig()
+    run(s, 1.0, 1.1, fk_residual=CFG.max_fk_residual)
+    assert d.state is State.ENABLED
+    s, d, v = rig()
+    v.states.feedback_age[:] = CFG.max_feedback_age
+    run(s, 1.0, 1.1)
+    assert d.state is State.ENABLED
+    s, d, _ = rig(State.ENABLED, position_mode=True)
+    d.internal_tension_error[4] = TENSION_LIMITS[4]  # ratio exactly 1
+    run(s, 1.0, 1.5)
+    assert d.state is State.ENABLED
+    s, d, v = rig(State.ENABLING)
+    v.lifecycle = Lifecycle.INACTIVE  # the drives never report enabled
+    s.t_state = 100.0
+    s.supervise(100.0 + Supervisor.ENABLE_TIMEOUT, FKStatus.CONVERGED, 0.0, 0.0, False)
+    assert d.state is State.ENABLING
+    s.supervise(100.0 + Supervisor.ENABLE_TIMEOUT + 0.25, FKStatus.CONVERGED, 0.0, 0.0, False)
+    assert d.fault_kind is FaultKind.ENABLE_TIMEOUT
+
+
+def test_a_drive_at_exactly_its_at_limit_share_counts_as_at_its_limit():
+    """``AT_LIMIT`` of the torque limit is at the limit (the capacity check's threshold is
+    inclusive: a drive clamped there is not applying what it was asked)."""
+    s, d, v = rig(State.MOVING, position_mode=True)
+    v.states.torque[2] = Supervisor.AT_LIMIT * TORQUE_LIMITS[2]
+    run(s, 1.0, 1.0 + Supervisor.TORQUE_FOR)
+    assert d.fault_kind is FaultKind.BEYOND_CAPACITY
+
+
+def test_a_persistence_holds_once_on_for_its_duration():
+    """``Persistence.held``: True at the instant the time on reaches its duration (to within
+    1 ns of rounding), not a sample later; a sample at the same instant adds nothing."""
+    p = Persistence(1.0)
+    assert not p.held(0.0, True)
+    assert not p.held(0.0, True)
+    assert not p.held(0.5, True)
+    assert p.held(1.0 - 1e-9, True)
+    p = Persistence(1.0)
+    p.held(0.0, True)
+    assert not p.held(1.0 - 2e-9, True)
+
+
+def test_what_persists_across_enabled_and_moving_is_not_restarted():
+    """ENABLED → MOVING is supervised on both sides: a drive at its torque limit since before
+    a move began faults ``TORQUE_FOR`` after it reached the limit, not after the move began.
+    Leaving the supervised states (a stop, a fault) restarts the count."""
+    s, d, v = rig(State.ENABLED, position_mode=True)
+    v.states.torque[1] = TORQUE_LIMITS[1]
+    run(s, 1.0, 1.02)
+    s.set_state(State.MOVING, 1.02, "a move")
+    run(s, 1.022, 1.0 + Supervisor.TORQUE_FOR)
+    assert d.fault_kind is FaultKind.BEYOND_CAPACITY
+    s, d, v = rig(State.ENABLED, position_mode=True)
+    v.states.torque[1] = TORQUE_LIMITS[1]
+    run(s, 1.0, 1.02)
+    s.set_state(State.DISABLING, 1.02, "disable")
+    s.set_state(State.READY, 1.02, "disabled")
+    s.set_state(State.ENABLING, 1.02, "enable")
+    s.set_state(State.ENABLED, 1.022, "enabled")
+    run(s, 1.024, 1.024 + 0.02)
+    assert d.state is State.ENABLED  # 20 ms at the limit since the enable: not yet
+
+
+def test_more_bad_cycles_than_the_limit_fault_too():
+    """The feed-forward infeasible ``BAD_CYCLES`` times in a row or more: a count that went
+    past the limit (the cycle at the limit skipped) stops the robot all the same."""
+    s, d, _ = rig(State.MOVING)
+    d.dt = 0.002
+    s.distribution(1.0, Supervisor.BAD_CYCLES + 1, Outcome("INFEASIBLE", "no tensions"))
+    assert d.fault_kind is FaultKind.TENSION_DISTRIBUTION
+
+
+def test_saturated_time_drains_to_zero_and_no_further():
+    """After a long unsaturated stretch the saturated time is 0, not below: the next
+    saturation counts from zero, not from a credit."""
+    s, d, _ = rig(State.MOVING)
+    d.saturation, d.saturated_for, d.dt = 1.0, 0.01, 0.002
+    for k in range(200):
+        s.distribution(1.0 + k * 0.002, 0, Outcome("OK", ""))
+    assert d.saturated_for == 0.0
+
+
+@pytest.mark.parametrize("name", ["OVER_SPEED_FOR", "TORQUE_FOR", "TENSION_FOR"])
+def test_persistence_times_are_reported_in_milliseconds(monkeypatch, name):
+    """Each persistent fault's reason says how long it persisted, in ms: checked with the
+    constant at 2 s, where a wrong factor shows in the printed figure."""
+    monkeypatch.setattr(Supervisor, name, 2.0)
+    s, d, v = rig(State.MOVING, position_mode=name != "OVER_SPEED_FOR")
+    if name == "OVER_SPEED_FOR":
+        run(s, 1.0, 3.0, dt=0.01, speed=2.0 * CFG.max_speed)
+    elif name == "TORQUE_FOR":
+        v.states.torque[0] = TORQUE_LIMITS[0]
+        run(s, 1.0, 3.0, dt=0.01)
+    else:
+        d.internal_tension_error[0] = 1.01 * TENSION_LIMITS[0]
+        run(s, 1.0, 3.0, dt=0.01)
+    assert d.fault_reason and "2000 ms" in d.fault_reason, d.fault_reason
+
+
+def test_limits_in_the_reasons_are_in_milli_units():
+    """The FK residual's and the feedback age's limits, printed to the mm and the ms: checked
+    at limits where a wrong factor shows (2 m, 2 s)."""
+    import dataclasses
+
+    cfg = dataclasses.replace(CFG, max_fk_residual=2.0, max_feedback_age=2.0)
+    d = ControlData(M, 0)
+    d.state = State.ENABLED
+    v = FakeDrives(M, Lifecycle.ACTIVE)
+    s = Supervisor(cfg, d, v, lambda: None)
+    run(s, 1.0, 1.0, fk_residual=2.5)
+    assert "> 2000 mm" in d.fault_reason, d.fault_reason
+    d = ControlData(M, 0)
+    d.state = State.ENABLED
+    v = FakeDrives(M, Lifecycle.ACTIVE)
+    s = Supervisor(cfg, d, v, lambda: None)
+    v.states.feedback_age[:] = 2.5
+    run(s, 1.0, 1.1, dt=0.01)
+    assert "> 2000 ms" in d.fault_reason, d.fault_reason

@@ -149,6 +149,9 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     base = OUT / f"numba-{tree.name}"
     shutil.rmtree(base, ignore_errors=True)  # never a cache written while a mutant was on disk
     env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+    vendor_eds = ROOT.parent / "shared" / "vendor_eds"  # test data beside the checkout
+    if vendor_eds.is_dir():  # the copies in out/mutation are not beside it
+        env.setdefault("CDPRCTL_VENDOR_EDS", str(vendor_eds))
 
     def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)
