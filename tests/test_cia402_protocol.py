@@ -249,3 +249,89 @@ def frame(arb: int, data: bytes):
     import can
 
     return can.Message(arbitration_id=arb, data=data, is_extended_id=False)
+
+
+def test_ids_states_and_modes_are_the_canopen_packages():
+    """The SYNC's COB-ID, the heartbeat's NMT states, a PDO's not-valid bit and the modes of
+    operation, as the canopen package has them."""
+    from canopen.nmt import NMT_STATES
+    from canopen.pdo.base import PDO_NOT_VALID
+    from canopen.profiles.p402 import OperationMode
+    from canopen.sync import SyncProducer
+
+    assert SyncProducer.cob_id == p.SYNC
+    state = {name: code for code, name in NMT_STATES.items()}
+    assert state["INITIALISING"] == p.HB_BOOTUP
+    assert state["STOPPED"] == p.HB_STOPPED
+    assert state["OPERATIONAL"] == p.HB_OPERATIONAL
+    assert state["PRE-OPERATIONAL"] == p.HB_PRE_OPERATIONAL
+    assert p.PDO_NOT_VALID == PDO_NOT_VALID
+    assert OperationMode.NAME2CODE["CYCLIC SYNCHRONOUS POSITION"] == p.MODE_CSP
+    assert OperationMode.NAME2CODE["CYCLIC SYNCHRONOUS TORQUE"] == p.MODE_CST
+
+
+def test_pdo_mapping_entries_name_their_objects_and_sizes():
+    """Each mapping entry (index << 16 | subindex << 8 | bits, CiA 301 §7.5.2.36) names the
+    object it says (by the name the drive's EDS gives it) with that object's size."""
+    from sim_backend.drives.dictionary import EDS
+
+    od = canopen.import_od(str(EDS), 5)
+    want = {0x60410010: ("statusword", 16), 0x60770010: ("torqueactualvalue", 16),
+            0x60640020: ("positionactualvalue", 32), 0x606C0020: ("velocityactualvalue", 32),
+            0x60400010: ("controlword", 16), 0x60710010: ("targettorque", 16),
+            0x607A0020: ("targetposition", 32), 0x60B20010: ("torqueoffset", 16)}  # fmt: skip
+    entries = list(p.TPDO1_MAPPING) + list(p.TPDO2_MAPPING)
+    entries += [e for mapping in p.RPDO1_MAPPING.values() for e in mapping]
+    for entry in entries:
+        index, sub, bits = entry >> 16, entry >> 8 & 0xFF, entry & 0xFF
+        obj = od[index] if sub == 0 else od[index][sub]
+        name = re.sub(r"[^a-z0-9]", "", obj.name.lower())
+        assert (name, bits) == want[entry], hex(entry)
+        assert len(obj.encode_raw(0)) * 8 == bits, hex(entry)
+    assert set(p.TPDO2_MAPPING) == {0x606C0020}
+
+
+def test_every_sdo_download_size_has_its_command_specifier():
+    """Expedited downloads of 1 to 4 bytes: CiA 301's command byte (n = 4 − size unused
+    bytes), as the canopen package builds it."""
+    for size in (1, 2, 3, 4):
+        cmd = p.sdo_download(0x2000, 1, 0x123456, size)[0]
+        assert cmd == sdo.REQUEST_DOWNLOAD | sdo.EXPEDITED | sdo.SIZE_SPECIFIED | (4 - size) << 2
+
+
+def test_emcy_texts_and_classes_for_every_code_shape():
+    """CiA 301 Table 21's named codes word for word, and each class for a code ending in 00,
+    in 01 and in AB (the masks that tell xx00 from xxAB)."""
+    named = {0x0000: "error reset or no error", 0x1000: "generic error",
+             0x6100: "internal software", 0x9000: "external error"}  # fmt: skip
+    for code, text in named.items():
+        assert p.describe_emcy(code) == text, hex(code)
+    words = {"Generic Error": "generic", "Current": "current", "Voltage": "voltage",
+             "Temperature": "temperature", "Device Hardware": "device hardware",
+             "Device Software": "device software", "Additional Modules": "additional modules",
+             "Monitoring": "monitoring", "External Error": "external",
+             "Additional Functions": "additional functions",
+             "Device Specific": "device specific"}  # fmt: skip
+    for high in range(0x10, 0x100):
+        for low in (0x00, 0x01, 0xAB):
+            code = high << 8 | low
+            if code in p.EMCY_CODES:
+                continue
+            theirs = EmcyError(code, 0, b"", 0.0).get_desc()
+            ours = p.describe_emcy(code)
+            expected = words[theirs] if theirs else "unknown class"
+            assert ours.startswith(expected), (hex(code), theirs, ours)
+
+
+def test_pdo_parameter_objects_and_cob_ids_are_the_canopen_packages():
+    """Where the canopen package, as a master, looks for RPDO1, TPDO1 and TPDO2's
+    communication and mapping parameters and what COB-IDs it predefines for them."""
+    from sim_backend.drives.dictionary import EDS
+
+    node = canopen.RemoteNode(5, canopen.import_od(str(EDS), 5))
+    for maps, n, comm, mapping, cob in ((node.rpdo, 1, p.RPDO1_COMM, p.RPDO1_MAP, p.RPDO1),
+                                        (node.tpdo, 1, p.TPDO1_COMM, p.TPDO1_MAP, p.TPDO1),
+                                        (node.tpdo, 2, p.TPDO2_COMM, p.TPDO2_MAP, p.TPDO2)):
+        m = maps.map[n]
+        assert (m.com_record.od.index, m.map_array.od.index) == (comm, mapping)
+        assert m.predefined_cob_id == cob + 5
