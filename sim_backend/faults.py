@@ -179,8 +179,8 @@ class FaultInjector:
             net.drives[c].silent = True
         elif ev.kind == "encoder_jump":
             d = net.drives[c]
-            if hasattr(d, "cpr"):  # CiA 402: counts
-                d.jump_encoder(round(float(ev.value) * d.cpr / (2 * math.pi)))
+            if hasattr(d, "axis"):  # CiA 402: counts
+                d.axis.jump_encoder(round(float(ev.value) * d.axis.cpr / (2 * math.pi)))
             else:  # ODrive: rad
                 d.encoder_offset += float(ev.value)
         elif ev.kind == "cable_snap":

@@ -69,8 +69,8 @@ class SimNetwork:
                         self.cfg.target_extrapolation,
                     )
                 if encoders == "incremental" and self.protocol != "odrive":
-                    drive.incremental = True
-                    drive.zero_counter()
+                    drive.axis.incremental = True
+                    drive.axis.zero_counter()
                 table[n] = drive
                 self.drives[c] = drive
             self.nodes.append(table)
@@ -242,7 +242,7 @@ class SimNetwork:
         first = end
         if self.protocol == "cia402":
             for d in self.drives:
-                first = min(first, d.holds_at())
+                first = min(first, d.axis.holds_at())
         return max(first, self.time)
 
     def _step(self, dt: float) -> None:

@@ -87,7 +87,7 @@ def test_a_mode_the_drive_does_not_have_is_refused(rig):
     reply = drive.on_sdo(p.sdo_download(p.OD_MODES_OF_OPERATION, 0, 3, 1))  # profile velocity
     assert reply is not None and reply.data[0] == 0x80  # abort
     assert int.from_bytes(reply.data[4:8], "little") == 0x06090030
-    assert drive.mode == 0
+    assert drive.axis.mode == 0
 
 
 def test_the_drive_holds_its_position_target(rig):
@@ -167,7 +167,7 @@ def test_a_lost_rpdo_the_drive_goes_on_at_the_targets_rate(rig):
         if k == 30:
             assert plant.servo.rate[0] == pytest.approx(speed, rel=0.05)
     assert drive.sync.period == pytest.approx(rig.period, rel=1e-6)
-    assert drive.state is p.PowerState.OPERATION_ENABLED
+    assert drive.axis.state is p.PowerState.OPERATION_ENABLED
     assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
 
 
@@ -204,7 +204,7 @@ def test_after_a_lost_sync_a_target_for_it_is_not_taken_late(rig, next_rpdo_lost
             # the motor's target goes on where the targets go (the one sent at k = 31,
             # reached a period after its SYNC)
             assert plant.servo.target[0] == pytest.approx(target[0] - speed * rig.period, abs=0.01)
-    assert drive.state is p.PowerState.OPERATION_ENABLED
+    assert drive.axis.state is p.PowerState.OPERATION_ENABLED
     assert abs(plant.servo.target[0] - plant.theta[0]) < 0.05
 
 
@@ -538,18 +538,18 @@ def test_the_torque_before_the_drives_applied_any_is_no_tension(monkeypatch, rel
     internal tension error, and the supervisor stops 20 ms after enabling; for
     ``[drives] brake_release_time`` (default 0.05 s) after enabling the torques are not taken
     as tensions, and the robot holds."""
-    from sim_backend.drives.cia402 import Cia402Drive
+    from sim_backend.drives.axis import Cia402Axis
 
-    actual = Cia402Drive._torque_actual_pm
+    actual = Cia402Axis.torque_actual_pm
     sent: dict[int, int] = {}
 
-    def late_torque(drive):
-        if drive.state is not p.PowerState.OPERATION_ENABLED:
-            return actual(drive)
-        sent[drive.cable] = sent.get(drive.cable, 0) + 1
-        return 0 if sent[drive.cable] <= 5 else actual(drive)
+    def late_torque(axis):
+        if axis.state is not p.PowerState.OPERATION_ENABLED:
+            return actual(axis)
+        sent[axis.cable] = sent.get(axis.cable, 0) + 1
+        return 0 if sent[axis.cable] <= 5 else actual(axis)
 
-    monkeypatch.setattr(Cia402Drive, "_torque_actual_pm", late_torque)
+    monkeypatch.setattr(Cia402Axis, "torque_actual_pm", late_torque)
     model = rowc_csp()
     if release is not None:
         drives = dataclasses.replace(model.drives, brake_release_time=release)

@@ -119,7 +119,7 @@ def test_live_objects_read_by_sdo_follow_the_drive(rig):
     node, drive = nodes[2], robot.drive(2)
     assert node.sdo[0x6041].raw == p.STATUSWORD_OF[p.PowerState.SWITCH_ON_DISABLED]
     with robot.lock:
-        counts = drive._counts()
+        counts = drive.axis.counts()
     assert node.sdo[0x6064].raw == pytest.approx(counts, abs=2)
     assert node.sdo[0x6077].raw == 0  # not enabled: no torque
 
@@ -150,7 +150,7 @@ def test_values_are_typed_by_the_dictionary(rig):
     node.sdo[0x1017].raw = 40000
     assert node.sdo[0x1017].raw == 40000 and drive.od[(0x1017, 0)] == 40000
     node.sdo.download(0x6076, 0, (2600).to_bytes(4, "little"), force_segment=True)
-    assert node.sdo[0x6076].raw == 2600 and drive.rated_torque == pytest.approx(2.6)
+    assert node.sdo[0x6076].raw == 2600 and drive.axis.rated_torque == pytest.approx(2.6)
     with pytest.raises(SdoAbortedError) as err:
         node.sdo.download(0x1017, 0, b"\x01\x02\x03\x04")  # 4 bytes into an UNSIGNED16
     assert err.value.code == 0x06070010
@@ -233,7 +233,7 @@ def test_the_master_reads_and_changes_the_mapping(rig):
     while not got and time.monotonic() < deadline:
         time.sleep(0.01)
     with robot.lock:
-        counts = robot.drive(2)._counts()
+        counts = robot.drive(2).axis.counts()
     assert len(got[0]) == 4  # position actual, nothing else
     assert int.from_bytes(got[0], "little", signed=True) == pytest.approx(counts, abs=2)
 
@@ -258,7 +258,7 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
         with robot.lock:
             cable = robot.drive(5).cable
             hold = float(robot.plant.drum_ratio[cable] * robot.plant.tension[cable])
-        rated = robot.drive(5).rated_torque
+        rated = robot.drive(5).axis.rated_torque
         node.rpdo[1]["Target torque"].raw = round(hold / rated * 1000)
         node.rpdo[1].start(0.01)  # synchronous RPDO: sent every 10 ms, taken at each SYNC
         for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
@@ -280,7 +280,7 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
         with robot.lock:
             moved = float(robot.plant.theta[cable]) - theta0
         assert abs(moved) > 0.01  # rad: the winch turned under 20 % more than its holding torque
-        assert robot.drive(5).state is p.PowerState.OPERATION_ENABLED
+        assert robot.drive(5).axis.state is p.PowerState.OPERATION_ENABLED
     finally:
         node.rpdo[1].stop()
         network.sync.stop()

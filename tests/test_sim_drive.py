@@ -38,7 +38,7 @@ def test_torque_actual_is_the_torque_applied_after_0x6072():
     with enabled_rig("seed000.toml", torque_mode=True) as rig:
         drive = rig.net.drives[0]
         limit = rig.model.cables[0].winch.torque_limit
-        half_pm = round(0.5 * limit / drive.rated_torque * 1000)
+        half_pm = round(0.5 * limit / drive.axis.rated_torque * 1000)
         reply = drive.on_sdo(p.sdo_download(p.OD_MAX_TORQUE, 0, half_pm, 2))
         assert reply is not None and reply.data[0] == 0x60
         torques = np.full(rig.model.n_cables, 0.9 * limit)
@@ -68,17 +68,17 @@ def test_the_abort_connection_option_decides_the_reaction(option, state, emcy):
         assert reply is not None and reply.data[0] == 0x60
         hold = rig.plant.drum_ratio * rig.plant.tension
         cycles(rig, hold, 10)
-        assert drive.state is p.PowerState.OPERATION_ENABLED
+        assert drive.axis.state is p.PowerState.OPERATION_ENABLED
         frames: list[int] = []
         for _ in range(round(3 * rig.model.drives.comm_timeout / rig.period)):
             rig.net.advance(rig.period)  # no frame from the controller
             while (msg := rig.driver.buses[rig.net.bus_index_of(3)].recv(0)) is not None:
                 if msg.arbitration_id == p.EMCY + drive.node_id:
                     frames.append(p.EMCY_STRUCT.unpack(msg.data)[0])
-        assert drive.state is state
+        assert drive.axis.state is state
         assert (0x8130 in frames) is emcy
         if option == 1:
-            assert drive.fault_code == 0x8130
+            assert drive.axis.fault_code == 0x8130
 
 
 def test_an_abort_connection_option_beyond_the_standard_is_refused():
@@ -157,7 +157,7 @@ def test_configure_writes_the_mapping_and_reads_it_back():
                 "serial": 0x53494D00 + d.node_id,
             }  # fmt: skip
         cycles(rig, rig.plant.drum_ratio * rig.plant.tension, 20)
-        assert all(d.state is p.PowerState.OPERATION_ENABLED for d in rig.net.drives)
+        assert all(d.axis.state is p.PowerState.OPERATION_ENABLED for d in rig.net.drives)
         assert rig.driver.lifecycle.value == "active"
 
 
