@@ -626,7 +626,7 @@ def test_mutual_tls_counts_only_whole_and_on_every_listen_endpoint(tmp_path, tex
 
 def test_security_messages_and_unreadable_files(tmp_path):
     from cdprctl.model.zenoh import ZenohConfig
-    from cdprctl.telemetry.security import _get, command_security_problems
+    from cdprctl.telemetry.security import command_security_problems, config_value
 
     # no mutual TLS at all: no word of its endpoints
     plain = ZenohConfig(commands=True, config_file=write_conf(tmp_path, "{}"),
@@ -638,7 +638,7 @@ def test_security_messages_and_unreadable_files(tmp_path):
     assert problem.startswith(f"zenoh.config_file = {bad}: not a Zenoh configuration (")
     import zenoh
 
-    assert _get(zenoh.Config(), "no/such/key") is None  # zenoh raises for unknown keys
+    assert config_value(zenoh.Config(), "no/such/key") is None  # zenoh raises for unknown keys
 
 
 def test_the_shipped_examples_pass_the_check():

@@ -57,8 +57,9 @@ def run(file: str) -> int:
         return 1
     print(summary(model))
     from cdprctl.telemetry.security import command_security_problems
+    from cdprctl.telemetry.zenoh_files import missing_files
 
-    problems = command_security_problems(model.zenoh)
+    problems = missing_files(model.zenoh.config_file) + command_security_problems(model.zenoh)
     for p in problems:  # cdprctl run would refuse to start with these
         print(f"{file}: {p}", file=sys.stderr)
     return 1 if problems else 0

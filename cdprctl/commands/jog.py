@@ -157,6 +157,8 @@ def jog(args: argparse.Namespace) -> int:
         print("cdprctl jog: error: needs a terminal (stdin is not a tty)", file=sys.stderr)
         return 2
     session = tool_session(args)
+    if session is None:
+        return 2
     latest: dict[str, Any] = {}
     lock = threading.Lock()
 

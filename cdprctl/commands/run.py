@@ -144,8 +144,11 @@ def run(args: argparse.Namespace) -> int:
         model = dataclasses.replace(model, zenoh=dataclasses.replace(model.zenoh, **zo))
     if args.zenoh or bool(zo) or model.zenoh.enabled:
         from cdprctl.telemetry.security import command_security_problems
+        from cdprctl.telemetry.zenoh_files import missing_files
 
-        problems = command_security_problems(model.zenoh)
+        problems = missing_files(model.zenoh.config_file) or command_security_problems(
+            model.zenoh
+        )
         for p in problems:
             print(f"cdprctl run: refused: {p}", file=sys.stderr)
         if problems:

@@ -79,5 +79,7 @@ class Links:
         return [cmd for link in self.links for cmd in link.take_commands()]
 
     def close(self) -> None:
-        for link in self.links:
+        """Close every link; safe twice (a failed start closes them, the exit again)."""
+        links, self.links = self.links, []
+        for link in links:
             link.close()

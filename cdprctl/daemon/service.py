@@ -98,6 +98,8 @@ class Daemon:
             script = start_up(self, path)
         except StartupRefusedError as exc:
             self._print(exc.message, err=True)
+            if self.realtime:
+                rt.restore_gc()  # as after a run: what the start-up built is collectable again
             self.driver.shutdown()
             if self.sim is not None:
                 self.sim.close()

@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.helper import helper_entry, wait_ready
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -47,11 +48,10 @@ def foxglove_main(
     try:
         server = foxglove.start_server(name=f"cdprctl {model.name}", host=host, port=port,
                                        context=ctx)  # fmt: skip
-    except Exception as exc:
-        print(f"cdprctl-foxglove: cannot serve on {host}:{port}: {exc}", file=sys.stderr,
-              flush=True)  # fmt: skip
+    except Exception as exc:  # the daemon prints it (telemetry/helper.py)
         snap.close()
-        return
+        raise OSError(f"cannot serve on {host}:{port} ({exc}): give another port with "
+                      "--foxglove HOST:PORT or [foxglove] listen") from None
     tf = FrameTransformsChannel(TOPICS["tf"], context=ctx)
     scene_ch = SceneUpdateChannel(TOPICS["scene"], context=ctx)
     log_ch = LogChannel(TOPICS["log"], context=ctx)
@@ -114,9 +114,11 @@ class FoxgloveLink:
         self.events: Any = ctx.Queue(maxsize=1000)
         self.stop = ctx.Event()
         self.ready = ctx.Event()
+        self.failed: Any = ctx.SimpleQueue()
         self.process = ctx.Process(
-            target=foxglove_main,
-            args=(model, self.snapshot.name, self.events, self.stop, self.ready, host, port),
+            target=helper_entry,
+            args=(foxglove_main, self.failed, model, self.snapshot.name, self.events, self.stop,
+                  self.ready, host, port),
             name="cdprctl-foxglove",
             daemon=True,
         )
@@ -126,7 +128,10 @@ class FoxgloveLink:
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
-        return bool(self.ready.wait(timeout))
+        why = wait_ready(self.process, self.ready, self.failed, timeout)
+        if why:
+            self.start_failure = f"the Foxglove view did not start: {why}"
+        return not why
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the view serves: (line, to stderr)."""

@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, GripKind
 from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.helper import helper_entry, wait_ready
 from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
 
 
@@ -28,9 +29,12 @@ class TelemetryLink:
         self.stop = ctx.Event()
         self.ready = ctx.Event()
         self.dropped_events = 0
+        self.failed: Any = ctx.SimpleQueue()
         self.process = ctx.Process(
-            target=gateway_main,
+            target=helper_entry,
             args=(
+                gateway_main,
+                self.failed,
                 model,
                 self.snapshot.name,
                 self.commands,
@@ -48,7 +52,10 @@ class TelemetryLink:
 
     def start(self, timeout: float = 20.0) -> bool:
         self.process.start()
-        return bool(self.ready.wait(timeout))
+        why = wait_ready(self.process, self.ready, self.failed, timeout)
+        if why:
+            self.start_failure = f"the Zenoh gateway did not start: {why}"
+        return not why
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the gateway runs: (line, to stderr)."""

@@ -26,7 +26,8 @@ UNAUTHENTICATED_WARNING = (
 )
 
 
-def _get(conf: Any, key: str) -> Any:
+def config_value(conf: Any, key: str) -> Any:
+    """The value at ``key`` (``a/b/c``) of a ``zenoh.Config``, None when absent."""
     try:
         return json.loads(conf.get_json(key))
     except Exception:  # absent keys raise in zenoh's binding
@@ -51,9 +52,9 @@ def command_security_problems(zc: ZenohConfig) -> list[str]:
     except Exception as exc:
         return [f"zenoh.config_file = {zc.config_file}: not a Zenoh configuration ({exc})"]
     problems = []
-    usrpwd = _get(conf, "transport/auth/usrpwd") or {}
-    tls = _get(conf, "transport/link/tls") or {}
-    endpoints = list(zc.listen) or _get(conf, "listen/endpoints") or []
+    usrpwd = config_value(conf, "transport/auth/usrpwd") or {}
+    tls = config_value(conf, "transport/link/tls") or {}
+    endpoints = list(zc.listen) or config_value(conf, "listen/endpoints") or []
     if isinstance(endpoints, dict):  # per mode ({peer: [...], router: [...]}): every one
         endpoints = [e for v in endpoints.values() for e in (v or [])]
     listen = list(endpoints)
@@ -69,7 +70,7 @@ def command_security_problems(zc: ZenohConfig) -> list[str]:
             + (f"; {', '.join(map(str, plain))} is not" if by_mtls and plain else "")
             + f"), as in {EXAMPLE}; {BENCH}"
         )
-    acl = _get(conf, "access_control") or {}
+    acl = config_value(conf, "access_control") or {}
     if not acl.get("enabled"):
         problems.append(
             f"zenoh.config_file = {zc.config_file}: access_control.enabled is not true: every "

@@ -1,0 +1,92 @@
+"""Every ``cdprctl`` command in a fenced block of the README and docs/ is one the command line
+takes as written: parsed by cdprctl's own parser (an unknown option, a missing argument or a
+wrong sub-command fails here, not in a user's terminal), a Zenoh tool given the robot it talks
+to (``--robot`` or ``--prefix``: a documented step once had neither), and every file it names
+by a path in this repository present. Running them all is the other tests' work (the daemon,
+the tools against a live gateway); a command that needs a robot cannot run here."""
+
+from __future__ import annotations
+
+import itertools
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from cdprctl.cli import build_parser
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+ZENOH_TOOLS = {"send", "monitor", "record", "jog"}
+FILE_OPTIONS = {"--config", "--path", "--file", "--zenoh-config"}
+SUBCOMMANDS = set(build_parser()._subparsers._group_actions[0].choices)  # type: ignore[union-attr]
+
+
+def fenced_commands() -> list[tuple[str, str]]:
+    """(where, command) of every cdprctl line in a fenced block; shell variables set in the
+    block (``Z="..."``) substituted, comments and continuation lines joined."""
+    out = []
+    for doc in DOCS:
+        fenced, in_block, env, pending = False, False, {}, ""
+        for n, raw in enumerate(doc.read_text().splitlines(), 1):
+            if raw.lstrip().startswith("```"):
+                fenced = not fenced
+                in_block = fenced and raw.strip()[3:] in ("", "sh", "bash", "shell", "console")
+                env, pending = {}, ""
+                continue
+            if not in_block or re.search("[─│├└┌┐┘┬┴▶►]", raw):  # a diagram, not a shell
+                continue
+            line = pending + raw.split(" #", 1)[0].rstrip()
+            if line.endswith("\\"):
+                pending = line[:-1] + " "
+                continue
+            pending = ""
+            m = re.fullmatch(r"\s*([A-Z_]+)=\"([^\"]*)\"", line)
+            if m:
+                env[m.group(1)] = m.group(2)
+                continue
+            m = re.match(r"\s*(?:\.venv/bin/)?cdprctl\s+(.*)", line)
+            if m:
+                text = m.group(1)
+                for k, v in env.items():
+                    text = text.replace(f"${k}", v)
+                out.append((f"{doc.relative_to(ROOT)}:{n}", text))
+        # and in the prose: `cdprctl ...` spans (a span may wrap a line), whole commands only
+        text = re.sub(r"```.*?```", "", doc.read_text(), flags=re.S)
+        for m in re.finditer(r"`(?:\.venv/bin/)?cdprctl ([^`]+)`", text):
+            span = " ".join(m.group(1).split())
+            words = span.split()
+            synopsis = re.search(r"[\[<…]|\.\.\.", span) or any(
+                w.isalpha() and w.isupper() for w in words  # --rate R, --config FILE
+            )
+            if synopsis or words[0] not in SUBCOMMANDS or len(words) < 4:
+                continue  # a synopsis, a name or an excerpt (`cdprctl run --path`)
+            line = text.count("\n", 0, m.start()) + 1
+            out.append((f"{doc.relative_to(ROOT)}:{line}", span))
+    return out
+
+
+COMMANDS = fenced_commands()
+
+
+def test_the_docs_have_commands_to_check():
+    assert len(COMMANDS) > 30
+
+
+@pytest.mark.parametrize("where, text", COMMANDS, ids=[w for w, _ in COMMANDS])
+def test_a_documented_command_is_taken_as_written(where, text, capsys):
+    argv = shlex.split(text)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:
+        if exc.code == 0:  # --help
+            return
+        pytest.fail(f"{where}: cdprctl {text}: {capsys.readouterr().err.strip()}")
+    if argv[0] in ZENOH_TOOLS:
+        assert args.robot or args.prefix, f"{where}: cdprctl {text}: give --robot or --prefix"
+    for opt, value in itertools.pairwise(argv):
+        if opt in FILE_OPTIONS and not value.startswith(("/", "$", "~")) and "/" in value:
+            if any(p in value for p in ("robot.toml", "my_", "FILE", "runs/")):
+                continue  # a placeholder for the user's own file
+            assert (ROOT / value).exists(), f"{where}: {opt} {value}: no such file here"
