@@ -331,7 +331,8 @@ def self_calibrate(
     ses.k[:] = k_axial
     ses.gain = 1.0 - math.exp(-2.0 * math.pi * opt.force_bandwidth * driver.period)
     names = ", ".join(model.cables[i].name for i in force)
-    log(f"self-calibration: {len(poses)} poses (± {opt.travel:g} m, ± {opt.tilt:g} rad); "
+    log(f"self-calibration: the start pose and {len(poses) - 1} moves away from it "
+        f"(± {opt.travel:g} m, ± {opt.tilt:g} rad); "
         f"cables {names or '(none)'} held by tension, the others by position")  # fmt: skip
     theta_all, tension_all = [], []
     ses.torques[:] = ses.ratio * plan[0]

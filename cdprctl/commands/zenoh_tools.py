@@ -37,15 +37,27 @@ def key_prefix(args: argparse.Namespace) -> str | None:
 
 
 def tool_session(args: argparse.Namespace) -> Any:
+    """The tool's Zenoh session; None, with what is wrong said in a line or a few, when the
+    configuration names files that are missing or Zenoh cannot open a session."""
     from cdprctl.telemetry.session import open_session
+    from cdprctl.telemetry.zenoh_files import missing_files
 
-    return open_session(
-        mode="peer",
-        listen=args.listen or (),
-        connect=args.connect or (),
-        multicast_scouting=not args.no_multicast_scouting,
-        config_file=args.zenoh_config,
-    )
+    problems = missing_files(args.zenoh_config)
+    for p in problems:
+        print(f"cdprctl {args.cmd}: error: --zenoh-config {p}", file=sys.stderr)
+    if problems:
+        return None
+    try:
+        return open_session(
+            mode="peer",
+            listen=args.listen or (),
+            connect=args.connect or (),
+            multicast_scouting=not args.no_multicast_scouting,
+            config_file=args.zenoh_config,
+        )
+    except Exception as exc:  # zenoh.ZError: endpoints, TLS, the configuration's values
+        print(f"cdprctl {args.cmd}: error: cannot open a Zenoh session: {exc}", file=sys.stderr)
+        return None
 
 
 def add_parsers(sub: Any) -> None:
@@ -145,6 +157,8 @@ def send(args: argparse.Namespace) -> int:
             done.set()
 
     session = tool_session(args)
+    if session is None:
+        return 2
     try:
         sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
         time.sleep(0.3)  # let the subscription reach the gateway before asking
@@ -218,13 +232,21 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
 
 
 def robot_status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, Any]:
-    for r in session.get(f"{prefix}/status", timeout=timeout):
-        if r.ok is not None:
-            try:
-                return dict(json.loads(r.ok.payload.to_bytes()))
-            except ValueError:
-                pass
-    return {}
+    """The robot's status (name, limits, layout), asked again until it answers or ``timeout``
+    s pass ({} then): a session just opened may not be routed to the daemon's queryable yet
+    (behind a router, the second of two robots' status came back empty 3 runs of 3)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        left = deadline - time.monotonic()
+        for r in session.get(f"{prefix}/status", timeout=min(1.0, max(left, 0.1))):
+            if r.ok is not None:
+                try:
+                    return dict(json.loads(r.ok.payload.to_bytes()))
+                except ValueError:
+                    pass
+        if time.monotonic() >= deadline:
+            return {}
+        time.sleep(0.1)
 
 
 def monitor(args: argparse.Namespace) -> int:
@@ -246,6 +268,8 @@ def monitor(args: argparse.Namespace) -> int:
             new.set()
 
     session = tool_session(args)
+    if session is None:
+        return 2
     try:
         subs = [session.declare_subscriber(f"{prefix}/{k}", on_sample) for k in ("state", "timing")]
         meta = robot_status(session, prefix).get("config", {})
@@ -300,6 +324,8 @@ def record(args: argparse.Namespace) -> int:
                 raw.append((time.time_ns(), key, data))
 
     session = tool_session(args)
+    if session is None:
+        return 2
     try:
         subs = [
             session.declare_subscriber(f"{prefix}/{k}", on_sample)
@@ -308,9 +334,18 @@ def record(args: argparse.Namespace) -> int:
         status = robot_status(session, prefix)
         (out / "meta.json").write_text(json.dumps(status, indent=1))
         end = time.monotonic() + args.duration if args.duration else float("inf")
+        until = f"for {args.duration:g} s" if args.duration else "until Ctrl-C"
+        found = "" if status else " (no status from the robot yet: is it running?)"
+        print(f"cdprctl record: recording {prefix} into {out} {until}{found}", flush=True)
+        next_note = time.monotonic() + 5.0
         try:
             while time.monotonic() < end:
                 time.sleep(0.2)
+                if time.monotonic() >= next_note:  # a sign of life, every 5 s
+                    next_note += 5.0
+                    with lock:
+                        got = len(rows["state"])
+                    print(f"cdprctl record: {got} states so far", flush=True)
         except KeyboardInterrupt:
             pass
         for s in subs:
