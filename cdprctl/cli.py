@@ -58,9 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     zenoh_tools.add_parsers(sub)
     report.add_parser(sub)
     workspace_cmd.add_parser(sub)
-    from cdprctl.commands import jog
+    from cdprctl.commands import jog, path
 
     jog.add_parser(sub)
+    path.add_parser(sub)
     return parser
 
 

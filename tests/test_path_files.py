@@ -250,3 +250,80 @@ def test_run_path_rejects_before_enabling(tmp_path, capsys):
             "0.0]: x = 2.9000 m is outside the workspace box [0.5, 2.5] m") in out.err
     assert "enabling" not in out.out
     assert math.isfinite(1.0)
+
+
+def test_a_csv_row_of_units_converts_its_columns():
+    """A row of units under the header: mm, cm-free lengths, degrees, speeds per minute, ms;
+    each value in SI exactly as the unit says (against the conversions written out here)."""
+    text = ("# a wipe in millimetres\nx, y, z, roll, yaw, speed, dwell, blend\n"
+            "mm, mm, mm, deg, deg, mm/min, ms, -\n1400, 350, 500, 90, -45, 6000, 250, 1\n"
+            "1800, 350, 500, 0, 0, 6000, 0, 0\n")  # fmt: skip
+    w = parse_path(text, START)
+    assert w[0].pose == pytest.approx((1.4, 0.35, 0.5, math.pi / 2, 0.0, -math.pi / 4))
+    assert w[0].speed == pytest.approx(0.1) and w[0].dwell == pytest.approx(0.25)
+    assert w[0].blend and not w[1].blend and w[0].where == "line 4"
+    inches = parse_path("x,y,z,speed\nin,in,in,in/s\n10,20,30,2\n", START)[0]
+    assert inches.pose[:3] == pytest.approx((0.254, 0.508, 0.762)) and inches.speed == 0.0508
+    timed = parse_path("x,y,z,time\nm,m,m,ms\n1,2,3,1500\n", START)[0]
+    assert timed.time == pytest.approx(1.5)
+    assert parse_path("x,y,z,pitch\nm, m, m, rad\n1,2,3,0.5\n", START)[0].pose[4] == 0.5
+
+
+def test_units_for_a_csv_without_its_row():
+    """``units``: the lengths and speeds (per s) of a CSV without a row of units; G-code and a
+    CSV that has the row keep theirs."""
+    w = parse_path("x,y,z,speed,roll\n1400,350,500,100,0.5\n", START, units="mm")[0]
+    assert w.pose == pytest.approx((1.4, 0.35, 0.5, 0.5, 0.0, 0.0)) and w.speed == 0.1
+    assert parse_path("x,y,z\nm,m,m\n1,2,3\n", START, units="mm")[0].pose[:3] == (1, 2, 3)
+    g = parse_path("G21\nG1 X1400 Y350 Z500 F6000\n", START, units="in")[0]
+    assert g.pose[:3] == pytest.approx((1.4, 0.35, 0.5))
+    with pytest.raises(PathFileError, match="units = 'cm': must be one of m, mm, in"):
+        parse_path("x,y,z\n1,2,3\n", START, units="cm")
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("x,y,z\nmm,mm,furlong\n1,2,3\n", "line 2, column 3: 'furlong' is not a unit of z "
+                                          "(one of: m, mm, in)"),
+        ("x,y,roll,z\nmm,mm,mm,mm\n1,2,3,4\n", "line 2, column 3: 'mm' is not a unit of roll"),
+        ("x,y,z\n1,2,3\nmm,mm,mm\n", "line 3, column 1: x = 'mm' must be a finite number"),
+        ("x,y,z\nnan,inf,1\n", "line 2, column 1: x = 'nan' must be a finite number"),
+    ],
+)  # fmt: skip
+def test_a_wrong_unit_row_is_refused_by_line_and_column(text, words):
+    with pytest.raises(PathFileError) as e:
+        parse_path(text, START)
+    assert words in str(e.value)
+
+
+def test_path_check_plans_offline_and_hints_at_millimetres(tmp_path, capsys):
+    """``cdprctl path check``: the plan of a path that holds (exit 0), a millimetre file read
+    as metres refused with the hint (exit 2), the same with --units mm (exit 0), a bad
+    --from (exit 2)."""
+    cfg = str(ROOT / "config" / "rowc.toml")
+    assert main(["path", "check", str(ROOT / "paths" / "rowc_wipe.csv"), "--config", cfg]) == 0
+    out = capsys.readouterr().out
+    assert "6 segments, 19.20 s" in out and "smallest tension margin" in out
+    assert "ok: the path holds" in out
+    mm = tmp_path / "mm.csv"
+    mm.write_text("x,y,z\n1400,350,500\n1800,350,500\n")
+    assert main(["path", "check", str(mm), "--config", cfg]) == 2
+    err = capsys.readouterr().err
+    assert "x = 1400.0000 m is outside the workspace box" in err
+    assert "add a row of units under the header" in err and "--units mm" in err
+    assert main(["path", "check", str(mm), "--config", cfg, "--units", "mm"]) == 0
+    assert "2 segments" in capsys.readouterr().out
+    assert main(["path", "check", str(mm), "--config", cfg, "--from", "1.5,0.35"]) == 2
+    assert "--from = '1.5,0.35'" in capsys.readouterr().err
+
+
+def test_run_takes_units_for_its_path(tmp_path, capsys):
+    """``cdprctl run --path`` reads a CSV as ``--units`` says: a millimetre file without the
+    option is refused before the drives are enabled, with the hint."""
+    mm = tmp_path / "mm.csv"
+    mm.write_text("x,y,z\n1400,350,500\n")
+    rc = main(["run", "--config", str(ROOT / "config" / "rowc.toml"), "--sim", "--no-realtime",
+               "--path", str(mm)])  # fmt: skip
+    assert rc == 2
+    assert "or give --units mm" in capsys.readouterr().err

@@ -38,6 +38,9 @@ def add_parser(sub: Any) -> None:
         help="play this path once (CSV or G-code, docs/operating.md): checked whole before "
         "the drives are enabled, then enable, path, disable; exit 0 when it finished",
     )
+    p.add_argument("--units", choices=("m", "mm", "in"), default="m",
+                   help="a CSV path's lengths (speeds per s) when it has no row of units "
+                   "(default m); `cdprctl path check` checks a path offline")  # fmt: skip
     p.add_argument("--rate", type=float, help="loop rate in Hz, replacing [control] rate")
     p.add_argument(
         "--state-dir",
@@ -161,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         from pathlib import Path
 
         try:
-            path = (args.path, Path(args.path).read_text(encoding="utf-8"))
+            path = (args.path, Path(args.path).read_text(encoding="utf-8"), args.units)
         except (OSError, UnicodeDecodeError) as exc:
             print(f"cdprctl run: error: --path = {args.path}: {exc}", file=sys.stderr)
             return 2

@@ -86,8 +86,8 @@ class Daemon:
         return self.report.summary
 
     def run(self, duration: float | None, demo: bool, force: float = 0.0,
-            path: tuple[str, str] | None = None) -> int:  # fmt: skip
-        """``path``: (name, text) of a path file to play once (enable, the path, disable);
+            path: tuple[str, str, str] | None = None) -> int:  # fmt: skip
+        """``path``: (name, text, units) of a path file to play once (enable, the path, disable);
         checked whole before the drives are enabled (exit 2 when rejected)."""
         m, d = self.model, self.data
         self._print(f"cdprctl run: {m.name}, {m.n_cables} {m.drives.driver} drives, "

@@ -25,7 +25,7 @@ class StartupRefusedError(Exception):
         self.message, self.code = message, code
 
 
-def start_up(dm: Daemon, path: tuple[str, str] | None) -> PathScript | None:
+def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None:
     """Everything before ``ready``; returns the ``--path`` script (planned), if any."""
     from cdprctl.calibration.record import CalibrationError
     from cdprctl.calibration.startup import how_to_calibrate, load_record
@@ -90,16 +90,18 @@ def _calibration(dm: Daemon) -> Any:
     return offsets_of
 
 
-def _plan_path(dm: Daemon, name: str, text: str) -> PathScript:
-    """The whole path from the pose start-up found, checked before any motion."""
+def _plan_path(dm: Daemon, name: str, text: str, units: str) -> PathScript:
+    """The whole path from the pose start-up found, checked before any motion (``units``: a
+    CSV's lengths without a row of units)."""
     from cdprctl.motion.limits import SoftLimits
     from cdprctl.motion.path_file import PathFileError
-    from cdprctl.motion.path_plan import PathRejectedError, plan_text
+    from cdprctl.motion.path_plan import PathRejectedError, plan_text, units_hint
 
     try:
         plan = plan_text(dm.model, text, dm.data.reference.copy(), dm.model.control.period,
-                         SoftLimits(dm.model), name)  # fmt: skip
+                         SoftLimits(dm.model), name, units)  # fmt: skip
     except (PathFileError, PathRejectedError) as exc:
-        raise StartupRefusedError(f"cdprctl run: path {name} rejected: {exc}", 2) from None
+        why = f"{exc}{units_hint(text, units, str(exc))}"
+        raise StartupRefusedError(f"cdprctl run: path {name} rejected: {why}", 2) from None
     dm._print(f"path {name}: {plan.summary()}")
     return PathScript(name, text, plan)

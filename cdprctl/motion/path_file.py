@@ -4,7 +4,9 @@ CSV — a header naming the columns, then one waypoint per row; ``#`` starts a c
     ``x, y, z`` (m, base frame; required), ``roll, pitch, yaw`` (rad; default: the start's),
     ``speed`` (m/s along the segment that ends at the row) or ``time`` (s from the path's
     start at which the row is reached; not both), ``blend`` (1: pass through the row without
-    stopping), ``dwell`` (s held at the row).
+    stopping), ``dwell`` (s held at the row). A row of units right after the header (``mm,
+    mm, mm, deg, ...``; ``UNITS`` lists them) converts its columns; without one, ``units``
+    (``--units``) says the lengths' (m, mm or in) and the speeds' (per s).
 
 G-code — one block per line, words ``G0`` (at the configured speed), ``G1`` (at the feed
 ``F``), ``G4 P<s>`` (dwell), ``G20``/``G21`` (inches/mm: converted), ``G90``/``G91``
@@ -40,26 +42,58 @@ class PathFileError(ValueError):
     the unit and the rule."""
 
 
-def parse_path(text: str, start: FloatArray) -> list[Waypoint]:
+def parse_path(text: str, start: FloatArray, units: str = "m") -> list[Waypoint]:
     """The waypoints of a CSV or G-code path; ``start`` (x, y, z, roll, pitch, yaw; m, rad) is
-    where it starts (the axes a file leaves out, G91's origin). Raises PathFileError."""
+    where it starts (the axes a file leaves out, G91's origin); ``units`` (m, mm or in): a
+    CSV's lengths and speeds (per s) where it has no row of units (G-code says its own with
+    G20/G21). Raises PathFileError."""
+    if units not in LENGTH_UNITS:
+        raise PathFileError(f"units = {units!r}: must be one of {', '.join(LENGTH_UNITS)}")
     start = np.asarray(start, dtype=float)
     first = next((ln.strip() for ln in text.splitlines() if ln.strip()
                   and not ln.strip().startswith("#")), "")  # fmt: skip
     if not first:
         raise PathFileError("the path file is empty")
     if re.match(r"^[a-zA-Z_]+\s*,", first):  # a CSV header; G-code words carry numbers
-        return _csv(text, start)
+        return _csv(text, start, LENGTH_UNITS[units])
     return _gcode(text, start)
+
 
 
 CSV_COLUMNS = ("x", "y", "z", "roll", "pitch", "yaw", "speed", "time", "blend", "dwell")
 _CSV_UNITS = {"x": "m", "y": "m", "z": "m", "roll": "rad", "pitch": "rad", "yaw": "rad",
               "speed": "m/s", "time": "s", "blend": "0 or 1", "dwell": "s"}  # fmt: skip
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "in": 0.0254}  # m per unit
+#: a unit row's words, per column, and the SI value of one of each (m, rad, m/s, s)
+UNITS = {
+    "x": LENGTH_UNITS, "y": LENGTH_UNITS, "z": LENGTH_UNITS,
+    "roll": {"rad": 1.0, "deg": math.pi / 180.0}, "pitch": {"rad": 1.0, "deg": math.pi / 180.0},
+    "yaw": {"rad": 1.0, "deg": math.pi / 180.0},
+    "speed": {"m/s": 1.0, "mm/s": 1e-3, "mm/min": 1e-3 / 60.0, "in/s": 0.0254,
+              "in/min": 0.0254 / 60.0},
+    "time": {"s": 1.0, "ms": 1e-3}, "dwell": {"s": 1.0, "ms": 1e-3}, "blend": {"-": 1.0},
+}  # fmt: skip
 
 
-def _csv(text: str, start: FloatArray) -> list[Waypoint]:
+_UNIT_WORD = re.compile(r"(?!(?i:nan|inf|infinity)$)[a-zA-Z/-]*")  # not a number's word
+
+
+def _unit_row(cells: list[str], header: list[str], no: int) -> list[float]:
+    """The SI value of one unit of each column, from a row of unit words."""
+    out = []
+    for col, (name, word) in enumerate(zip(header, cells, strict=True)):
+        known = UNITS[name]
+        unit = word.lower() or ("-" if name == "blend" else "")
+        if unit not in known:
+            raise PathFileError(f"line {no}, column {col + 1}: {word!r} is not a unit of {name} "
+                                f"(one of: {', '.join(known)})")  # fmt: skip
+        out.append(known[unit])
+    return out
+
+
+def _csv(text: str, start: FloatArray, length_unit: float = 1.0) -> list[Waypoint]:
     header: list[str] | None = None
+    scale: list[float] = []  # SI per file unit, per column
     out: list[Waypoint] = []
     last_time = 0.0
     for no, raw in enumerate(text.splitlines(), 1):
@@ -83,11 +117,16 @@ def _csv(text: str, start: FloatArray) -> list[Waypoint]:
                                     f"{', '.join(missing)})")  # fmt: skip
             if "speed" in header and "time" in header:
                 raise PathFileError(f"line {no}: give speed or time, not both")
+            lengths = ("x", "y", "z", "speed")  # speeds per s: mm/s with mm
+            scale = [length_unit if name in lengths else 1.0 for name in header]
             continue
         if len(cells) != len(header):
             raise PathFileError(
                 f"line {no}: {len(cells)} values for {len(header)} columns ({', '.join(header)})"
             )
+        if not out and all(_UNIT_WORD.fullmatch(c) for c in cells):  # a row of units
+            scale = _unit_row(cells, header, no)
+            continue
         row: dict[str, float] = {}
         for col, (name, cell) in enumerate(zip(header, cells, strict=True)):
             try:
@@ -97,7 +136,7 @@ def _csv(text: str, start: FloatArray) -> list[Waypoint]:
             if not math.isfinite(v):
                 raise PathFileError(f"line {no}, column {col + 1}: {name} = {cell!r} must be a "
                                     f"finite number ({_CSV_UNITS[name]})")  # fmt: skip
-            row[name] = v
+            row[name] = v * scale[col]
         where = f"line {no}"
         speed = row.get("speed")
         if speed is not None and not speed > 0:

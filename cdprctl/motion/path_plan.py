@@ -17,13 +17,14 @@ apart; the first failing sample rejects the path, naming its waypoint, time, pos
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import Waypoint, parse_path
+from cdprctl.motion.path_file import UNITS, Waypoint, parse_path
 from cdprctl.motion.trajectory import (
     Trajectory,
     acceleration_limits,
@@ -167,13 +168,25 @@ def plan_text(
     period: float,
     limits: SoftLimits | None = None,
     name: str = "",
+    units: str = "m",
 ) -> PathPlan:
     """A path file's content planned and checked from the trajectory coordinates ``start``
-    (at rest; the axes a file leaves out keep its values). Raises PathFileError or
-    PathRejectedError."""
+    (at rest; the axes a file leaves out keep its values); ``units``: a CSV's lengths without
+    a row of units (``path_file.parse_path``). Raises PathFileError or PathRejectedError."""
     start = np.asarray(start, dtype=float)
-    waypoints = parse_path(text, coordinates_pose(model, start))
+    waypoints = parse_path(text, coordinates_pose(model, start), units)
     return plan_path(model, waypoints, start, period, limits, name)
+
+
+def units_hint(text: str, units: str, why: str) -> str:
+    """A hint for a CSV in metres rejected outside the workspace: its numbers may be mm."""
+    csv = re.match(r"^\s*(#.*\n\s*)*[a-zA-Z_]+\s*,", text) is not None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    has_row = len(lines) > 1 and lines[1].split(",")[0].strip().lower() in UNITS["x"]
+    if csv and units == "m" and not has_row and "outside the workspace box" in why:
+        return (" (a file in millimetres? add a row of units under the header, such as "
+                "'mm, mm, mm', or give --units mm)")
+    return ""
 
 
 def _blend_velocity(d_in: FloatArray, d_out: FloatArray, b_in: tuple, b_out: tuple) -> FloatArray:
