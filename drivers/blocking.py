@@ -1,5 +1,5 @@
 """The blocking lifecycle calls of a driver (``activate``, ``deactivate``, ``recover``), for
-set-up and tools outside a running loop, written on the non-blocking one: a ``begin_*`` call,
+set-up and tools outside a running loop, each written on the non-blocking one: its ``begin_*``,
 then ``read``/``write`` cycles letting time pass with the driver's ``wait`` until the
 lifecycle says it is done or the timeout passes. The control loop itself uses ``begin_*``.
 ``await_first_feedback`` is the set-up's own cycling, for a protocol's ``_configure_drives``."""
@@ -46,10 +46,11 @@ def activate(drv: WinchDriver, timeout: float = 2.0) -> None:
 
 
 def deactivate(drv: WinchDriver, timeout: float = 1.0) -> None:
-    """Disable the drives (brakes hold) → ``INACTIVE``."""
+    """Disable the drives (brakes hold) → ``INACTIVE``: ``begin_deactivate``, then cycles of
+    zero torque until no drive reports enabled (or ``timeout`` s)."""
     if drv.lifecycle not in (Lifecycle.ACTIVE, Lifecycle.ERROR):
         return
-    drv._request_enable(False)
+    drv.begin_deactivate()
     deadline = drv.clock() + timeout
     while drv.clock() <= deadline:
         now = drv.clock()
@@ -58,23 +59,18 @@ def deactivate(drv: WinchDriver, timeout: float = 1.0) -> None:
         if np.all(drv.states.state != DriveState.ENABLED):
             break
         drv.wait(drv.period)
-    if drv.lifecycle is Lifecycle.ACTIVE:
-        drv.lifecycle = Lifecycle.INACTIVE
 
 
 def recover(drv: WinchDriver, timeout: float = 1.0) -> None:
-    """From ``ERROR``: reset drive faults, keep the drives disabled, and return to
-    ``INACTIVE`` once every drive answers again without a fault."""
+    """From ``ERROR``: ``begin_recover`` (fault reset, drives disabled; faults still latched
+    are not counted for ``timeout`` s), then cycles until every drive answers again without a
+    fault → ``INACTIVE``; a fault still there after ``timeout`` is raised."""
     if drv.lifecycle is not Lifecycle.ERROR:
         return
-    drv.error = None
-    drv._request_enable(False)
-    drv._fault_reset()
+    drv.begin_recover(settle=timeout)
     deadline = drv.clock() + timeout
     while True:
         now = drv.clock()
-        drv.lifecycle = Lifecycle.INACTIVE
-        drv.error = None  # a fault still latched this cycle sets it again
         drv.read(now)
         drv.write(now, np.zeros(drv.m), force=True)
         if drv.lifecycle is Lifecycle.INACTIVE and np.all(

@@ -130,15 +130,20 @@ def test_nmt_commands_and_sdo_specifiers_are_the_canopen_packages():
     assert p.sdo_upload(0x1018, 2) == struct.pack("<BHB4s", sdo.REQUEST_UPLOAD, 0x1018, 2, b"")
 
 
+# the canopen package's EMCY class names → the words ours start with
+EMCY_CLASS_WORDS = {
+    "Generic Error": "generic", "Current": "current", "Voltage": "voltage",
+    "Temperature": "temperature", "Device Hardware": "device hardware",
+    "Device Software": "device software", "Additional Modules": "additional modules",
+    "Monitoring": "monitoring", "External Error": "external",
+    "Additional Functions": "additional functions", "Device Specific": "device specific",
+}  # fmt: skip
+
+
 def test_emcy_classes_are_the_canopen_packages():
     """CiA 301 Table 21's classes as the canopen package describes them, for every code the
     table's masks tell apart (each first digit, and xx00 / xxAB where it names only xx00)."""
-    words = {"Generic Error": "generic", "Current": "current", "Voltage": "voltage",
-             "Temperature": "temperature", "Device Hardware": "device hardware",
-             "Device Software": "device software", "Additional Modules": "additional modules",
-             "Monitoring": "monitoring", "External Error": "external",
-             "Additional Functions": "additional functions",
-             "Device Specific": "device specific"}  # fmt: skip
+    words = EMCY_CLASS_WORDS
     checked = 0
     for code in range(0x1000, 0x10000, 0x0101):  # every first and second digit
         theirs = EmcyError(code, 0, b"", 0.0).get_desc()
@@ -306,12 +311,7 @@ def test_emcy_texts_and_classes_for_every_code_shape():
              0x6100: "internal software", 0x9000: "external error"}  # fmt: skip
     for code, text in named.items():
         assert p.describe_emcy(code) == text, hex(code)
-    words = {"Generic Error": "generic", "Current": "current", "Voltage": "voltage",
-             "Temperature": "temperature", "Device Hardware": "device hardware",
-             "Device Software": "device software", "Additional Modules": "additional modules",
-             "Monitoring": "monitoring", "External Error": "external",
-             "Additional Functions": "additional functions",
-             "Device Specific": "device specific"}  # fmt: skip
+    words = EMCY_CLASS_WORDS
     for high in range(0x10, 0x100):
         for low in (0x00, 0x01, 0xAB):
             code = high << 8 | low

@@ -123,3 +123,25 @@ def test_the_checker_sees_an_upward_import(tmp_path):
     imps = imports_of("drivers.x", f)
     assert imps == ["cdprctl.control.controller.Controller"]
     assert layer_of(imps[0]) > layer_of("drivers.x")
+
+
+def test_the_controller_sees_a_view_of_the_drives_not_the_driver():
+    """The manager owns the driver; the controller and the supervisor get a ``DriveView``:
+    the lifecycle, its error, the feedback and the lifecycle requests — no read, no write, no
+    bus (ros2_control's state and command interfaces, not the hardware object)."""
+    from cdprctl.control.drive_view import DriveView
+    from cdprctl.control.manager import ControllerManager
+    from cdprctl.model import load_robot
+    from sim_backend.network import LockStep
+
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    rig = LockStep(model, period=model.control.period)
+    try:
+        manager = ControllerManager(model, rig.driver)
+        view = manager.controller.drives
+        assert isinstance(view, DriveView) and manager.controller.supervisor.drives is view
+        assert view.states is rig.driver.states and view.lifecycle is rig.driver.lifecycle
+        for name in ("read", "write", "configure", "shutdown", "buses", "model"):
+            assert not hasattr(view, name), name
+    finally:
+        rig.close()

@@ -360,7 +360,7 @@ def test_limits_in_the_reasons_are_in_milli_units():
     v = FakeDrives(M, Lifecycle.ACTIVE)
     s = Supervisor(cfg, d, v, lambda: None)
     run(s, 1.0, 1.0, fk_residual=2.5)
-    assert "> 2000 mm" in d.fault_reason, d.fault_reason
+    assert "residual 2500.00 mm > 2000 mm" in d.fault_reason, d.fault_reason
     d = ControlData(M, 0)
     d.state = State.ENABLED
     v = FakeDrives(M, Lifecycle.ACTIVE)
@@ -368,3 +368,14 @@ def test_limits_in_the_reasons_are_in_milli_units():
     v.states.feedback_age[:] = 2.5
     run(s, 1.0, 1.1, dt=0.01)
     assert "> 2000 ms" in d.fault_reason, d.fault_reason
+
+
+def test_a_paused_path_holding_is_not_a_target_reached():
+    """MOVING → ENABLED when the trajectory has stopped: for a paused path the event says so
+    (it had said 'target reached' right after 'path paused in segment 2')."""
+    for path_state, words in (("paused", "path paused, holding"), ("", "target reached")):
+        s, d, _ = rig(State.MOVING)
+        d.path_state = path_state
+        s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
+        assert d.state is State.ENABLED
+        assert d.events[-1][1] == f"state moving -> enabled: {words}", d.events

@@ -41,11 +41,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
-from mutation_equivalents import (  # noqa: E402
-    EQUIVALENT_PREFIX,
-    load_equivalents,
-    skip_known_equivalents,
-)
+from mutation_equivalents import EQUIVALENT_PREFIX, load_equivalents, skip_known_equivalents  # noqa: E402
 
 OUT = ROOT / "out" / "mutation"
 REPORT = ROOT / "docs" / "mutation.md"
@@ -149,9 +145,8 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     base = OUT / f"numba-{tree.name}"
     shutil.rmtree(base, ignore_errors=True)  # never a cache written while a mutant was on disk
     env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
-    vendor_eds = ROOT.parent / "shared" / "vendor_eds"  # test data beside the checkout
-    if vendor_eds.is_dir():  # the copies in out/mutation are not beside it
-        env.setdefault("CDPRCTL_VENDOR_EDS", str(vendor_eds))
+    eds = ROOT.parent / "shared" / "vendor_eds"  # beside the checkout, not beside its copies
+    env.update({"CDPRCTL_VENDOR_EDS": str(eds)} if eds.is_dir() else {})
 
     def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)

@@ -14,7 +14,7 @@ import tty
 from typing import Any
 
 from cdprctl.commands.common import command_parser
-from cdprctl.commands.zenoh_tools import (
+from cdprctl.commands.zenoh_session import (
     add_zenoh_arguments,
     key_prefix,
     robot_status,
@@ -156,11 +156,11 @@ def jog(args: argparse.Namespace) -> int:
     if not os.isatty(sys.stdin.fileno()):
         print("cdprctl jog: error: needs a terminal (stdin is not a tty)", file=sys.stderr)
         return 2
+    latest: dict[str, Any] = {}
+    lock = threading.Lock()
     session = tool_session(args)
     if session is None:
         return 2
-    latest: dict[str, Any] = {}
-    lock = threading.Lock()
 
     def on_state(sample: Any) -> None:
         try:

@@ -14,6 +14,7 @@ from cdprctl.control.commands import Command
 from cdprctl.control.controller import Controller
 from cdprctl.control.data import ControlData
 from cdprctl.control.desk import Verdict
+from cdprctl.control.drive_view import DriveView
 from cdprctl.control.loop import LoopStats, run_loop
 from cdprctl.control.startup import initialise
 from cdprctl.control.warm_up import warm_up
@@ -27,7 +28,7 @@ class ControllerManager:
         self.model = model
         self.driver = driver
         self.period = model.control.period
-        self.controller = Controller(model, driver, tda)
+        self.controller = Controller(model, DriveView(driver), tda)
         self.data: ControlData = self.controller.data
         self._clock_ns = time.perf_counter_ns
 

@@ -29,11 +29,15 @@ from drivers.vocabulary import Lifecycle, WinchStates
 
 
 class DrivePort(Protocol):
-    """What the control side may see and ask of the drives; the manager owns their I/O."""
+    """What the control side may see and ask of the drives (``drive_view.DriveView``); the
+    manager owns their I/O."""
 
-    lifecycle: Lifecycle
-    error: DriverError | None
-    states: WinchStates
+    @property
+    def lifecycle(self) -> Lifecycle: ...
+    @property
+    def error(self) -> DriverError | None: ...
+    @property
+    def states(self) -> WinchStates: ...
 
     def begin_activate(self) -> None: ...
     def begin_deactivate(self) -> None: ...
@@ -212,7 +216,8 @@ class Supervisor:
         if d.state is not State.ENABLED and d.state is not State.MOVING:
             return
         if d.state is State.MOVING and trajectory_finished:
-            self.set_state(State.ENABLED, t, "target reached")
+            paused = d.path_state == "paused"  # braked onto the path: not its target
+            self.set_state(State.ENABLED, t, "path paused, holding" if paused else "target reached")
         failure = self._motion_failure(t, fk_status, fk_residual, speed)
         if failure is not None:
             self.fault(t, failure[0], failure[1], hold=True)

@@ -10,6 +10,7 @@ from typing import Any, Protocol
 from cdprctl.control.commands import Command
 from cdprctl.control.data import ControlData
 from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.helper import HelperProcess
 from cdprctl.telemetry.snapshot import controller_values
 
 
@@ -18,9 +19,8 @@ class Link(Protocol):
     ``telemetry.foxglove_view.FoxgloveLink``)."""
 
     period: float  # s between the values it wants
-    start_failure: str  # what to say when it did not start
+    helper: HelperProcess  # its process: started by ``Links.start``
 
-    def start(self, timeout: float = 20.0) -> bool: ...
     def announcement(self) -> list[tuple[str, bool]]: ...  # (line, to stderr) once started
     def due(self) -> bool: ...
     def write(self, values: dict[str, Any], stats: Any) -> None: ...
@@ -58,9 +58,9 @@ class Links:
     def start(self) -> str:
         """Start every link; "" when all did, else what failed (every link closed)."""
         for link in self.links:
-            if not link.start():
+            if not link.helper.start(timeout=20.0):
                 self.close()
-                return link.start_failure
+                return link.helper.failure
         return ""
 
     def publish(self, data: ControlData, stats: Any, true_position: Any) -> None:

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import helper_entry, wait_ready
+from cdprctl.telemetry.helper import HelperProcess
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -114,24 +114,13 @@ class FoxgloveLink:
         self.events: Any = ctx.Queue(maxsize=1000)
         self.stop = ctx.Event()
         self.ready = ctx.Event()
-        self.failed: Any = ctx.SimpleQueue()
-        self.process = ctx.Process(
-            target=helper_entry,
-            args=(foxglove_main, self.failed, model, self.snapshot.name, self.events, self.stop,
-                  self.ready, host, port),
-            name="cdprctl-foxglove",
-            daemon=True,
+        self.helper = HelperProcess(
+            ctx, "cdprctl-foxglove", "the Foxglove view", foxglove_main,
+            (model, self.snapshot.name, self.events, self.stop, self.ready, host, port),
+            self.ready,
         )
         self._next = 0.0
         self.period = 1.0 / model.foxglove.rate  # s
-        self.start_failure = f"the Foxglove view did not start on {host}:{port} in 20 s"
-
-    def start(self, timeout: float = 20.0) -> bool:
-        self.process.start()
-        why = wait_ready(self.process, self.ready, self.failed, timeout)
-        if why:
-            self.start_failure = f"the Foxglove view did not start: {why}"
-        return not why
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the view serves: (line, to stderr)."""
@@ -164,11 +153,7 @@ class FoxgloveLink:
 
     def close(self) -> None:
         self.stop.set()
-        if self.process.pid is not None:  # started
-            self.process.join(timeout=5.0)
-            if self.process.is_alive():
-                self.process.terminate()
-                self.process.join(timeout=2.0)
+        self.helper.stop()
         self.events.cancel_join_thread()
         self.events.close()
         self.snapshot.close()

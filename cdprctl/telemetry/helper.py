@@ -27,14 +27,40 @@ def helper_entry(target: Callable[..., None], failed: Any, *args: Any) -> None:
         sys.exit(1)
 
 
-def wait_ready(process: Any, ready: Any, failed: Any, timeout: float) -> str:
-    """Wait until the helper sets ``ready``: "" then; else why not (its failure, or that it
-    did not start within ``timeout`` s)."""
-    deadline = time.monotonic() + timeout
-    while not ready.wait(0.05):
-        if not process.is_alive():
-            reason = failed.get() if not failed.empty() else f"exit status {process.exitcode}"
-            return reason
-        if time.monotonic() > deadline:
-            return f"it did not start in {timeout:g} s"
-    return ""
+class HelperProcess:
+    """One helper: ``target(*args)`` in a spawned process named ``name``; ``what`` it is in
+    words ("the Zenoh gateway"). ``args`` include ``ready`` (an event of ``ctx``) for the
+    target to set once it serves."""
+
+    def __init__(self, ctx: Any, name: str, what: str, target: Callable[..., None],
+                 args: tuple[Any, ...], ready: Any):  # fmt: skip
+        self.what, self.ready = what, ready
+        self.failed = ctx.SimpleQueue()
+        self.process = ctx.Process(target=helper_entry, args=(target, self.failed, *args),
+                                   name=name, daemon=True)  # fmt: skip
+        self.failure = f"{what} did not start"
+
+    def start(self, timeout: float) -> bool:
+        """Start it and wait until it is ready (True) or failed, or ``timeout`` s passed:
+        ``failure`` then says which, in one line."""
+        self.process.start()
+        deadline = time.monotonic() + timeout
+        while not self.ready.wait(0.05):
+            if not self.process.is_alive():
+                why = self.failed.get() if not self.failed.empty() else (
+                    f"exit status {self.process.exitcode}")  # fmt: skip
+                self.failure = f"{self.what} did not start: {why}"
+                return False
+            if time.monotonic() > deadline:
+                self.failure = f"{self.what} did not start in {timeout:g} s"
+                return False
+        return True
+
+    def stop(self) -> None:
+        """After its stop event was set: joined, terminated if it does not end."""
+        if self.process.pid is None:  # never started
+            return
+        self.process.join(timeout=5.0)
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(timeout=2.0)

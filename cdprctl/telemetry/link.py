@@ -13,7 +13,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, GripKind
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import helper_entry, wait_ready
+from cdprctl.telemetry.helper import HelperProcess
 from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
 
 
@@ -29,33 +29,13 @@ class TelemetryLink:
         self.stop = ctx.Event()
         self.ready = ctx.Event()
         self.dropped_events = 0
-        self.failed: Any = ctx.SimpleQueue()
-        self.process = ctx.Process(
-            target=helper_entry,
-            args=(
-                gateway_main,
-                self.failed,
-                model,
-                self.snapshot.name,
-                self.commands,
-                self.events,
-                self.stop,
-                self.ready,
-                summary,
-            ),
-            name="cdprctl-zenoh",
-            daemon=True,
-        )
+        self.helper = HelperProcess(
+            ctx, "cdprctl-zenoh", "the Zenoh gateway", gateway_main,
+            (model, self.snapshot.name, self.commands, self.events, self.stop, self.ready,
+             summary), self.ready,
+        )  # fmt: skip
         self._next_timing = 0.0
         self.period = 1.0 / model.zenoh.state_rate  # s: the state's rate
-        self.start_failure = "the Zenoh gateway did not start in 20 s"
-
-    def start(self, timeout: float = 20.0) -> bool:
-        self.process.start()
-        why = wait_ready(self.process, self.ready, self.failed, timeout)
-        if why:
-            self.start_failure = f"the Zenoh gateway did not start: {why}"
-        return not why
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the gateway runs: (line, to stderr)."""
@@ -131,10 +111,7 @@ class TelemetryLink:
 
     def close(self) -> None:
         self.stop.set()
-        self.process.join(timeout=5.0)
-        if self.process.is_alive():
-            self.process.terminate()
-            self.process.join(timeout=2.0)
+        self.helper.stop()
         for q in (self.commands, self.events):
             q.cancel_join_thread()
             q.close()

@@ -144,10 +144,11 @@ class Cia402Driver(CanWinchDriver):
 
     # -- hooks: set-up ------------------------------------------------------------------------
     def _configure_drives(self, timeout: float) -> None:
-        """Each drive in PRE-OPERATIONAL by SDO (``_configure_drive``), then NMT start."""
+        """Each drive in PRE-OPERATIONAL by SDO (``drive_setup.configure_drive``), then NMT
+        start."""
         self.sdo.nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
         for c in range(self.m):
-            self._configure_drive(c, timeout)
+            configure_drive(self, self.sdo, c, timeout)
         self.sdo.nmt_all(p.NMT_START)
         self.liveness.started = True
 
@@ -163,9 +164,6 @@ class Cia402Driver(CanWinchDriver):
             "feedback (TPDO1)",
             resend_start,
         )
-
-    def _configure_drive(self, c: int, timeout: float) -> None:
-        configure_drive(self, self.sdo, c, timeout)
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable
