@@ -7,6 +7,8 @@ import ctypes
 import ctypes.util
 import gc
 import os
+import sys
+from collections.abc import Iterator
 
 MCL_CURRENT, MCL_FUTURE = 1, 2
 
@@ -96,6 +98,24 @@ def yield_to_the_loop(loop_cpu_index: int | None, niceness: int = 10) -> list[st
     except (OSError, AttributeError) as exc:
         warnings.append(f"CPU affinity away from the loop's CPU not applied ({exc})")
     return warnings
+
+
+#: s: the interpreter's switch interval while another thread works long beside the loop's
+SHORT_SWITCH = 1e-4
+
+
+@contextlib.contextmanager
+def sharing_the_interpreter() -> Iterator[None]:
+    """Around long Python work in a thread beside the loop's (a resumed path planned again in
+    the I/O thread): the interpreter hands its lock to a waiting thread after ``SHORT_SWITCH``
+    instead of 5 ms, so the loop waits that long for it, not a period (rowc at 250 Hz: 14-17
+    periods missed within 1 s of a resume, benchmarks/bench_resume.py)."""
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(SHORT_SWITCH)
+    try:
+        yield
+    finally:
+        sys.setswitchinterval(old)
 
 
 def restore_gc() -> None:
