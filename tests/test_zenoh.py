@@ -20,6 +20,7 @@ import pytest
 from conftest import CONFIG, ROOT
 from mcap.reader import make_reader
 
+from cdprctl.cli import main
 from cdprctl.model import load_robot
 from cdprctl.model.errors import ConfigError
 from cdprctl.telemetry.snapshot import SharedSnapshot
@@ -449,7 +450,8 @@ def operator_enables(robot: Robot, viewer: Client, operator_config: str) -> None
     assert robot.stop() == 0
 
 
-def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path):
+def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path,
+                                                               capsys):  # fmt: skip
     """config/zenoh/gateway-acl.json5 (default deny) with its dictionary moved to a temporary
     file: the viewer and a third account receive telemetry but their puts never reach the
     gateway; the operator's does; a peer without credentials cannot connect."""
@@ -487,6 +489,24 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     finally:
         third.close()
         stranger.close()
+    # what `cdprctl send` tells the user when nothing answers: each cause by its name
+    (tmp_path / "wrong.json5").write_text(
+        '{transport: {auth: {usrpwd: {user: "operator", password: "typo"}}}}')
+
+    def send(config: str, name: str = "rowc") -> str:
+        rc = main(["send", "--robot", name, "--connect", robot.endpoint, "--timeout", "1",
+                   "--no-multicast-scouting", *(["--zenoh-config", config] if config else []),
+                   "stop"])  # fmt: skip
+        assert rc == 2
+        return capsys.readouterr().err
+
+    assert "is there but did not answer: this account may not command it" in send(
+        str(tmp_path / "viewer.json5"))
+    for config in (str(tmp_path / "wrong.json5"), ""):
+        assert "accepts connections but refused this session: authentication failed" in send(
+            config)
+    assert "connected, but no robot answers under cdpr/nobody (robots there: cdpr/rowc)" in (
+        send(str(tmp_path / "operator.json5"), "nobody"))
     operator_enables(robot, viewer, str(tmp_path / "operator.json5"))
     # each command the gateway saw is logged once, with its id and kind
     assert sum("command enable id=o: accepted" in x for x in robot.lines) == 1
@@ -654,6 +674,16 @@ def test_the_shipped_examples_pass_the_check():
         commands=True, config_file=tls, listen=("tls/0.0.0.0:7447", "tcp/0.0.0.0:7448")
     )
     assert "tcp/0.0.0.0:7448 is not" in " ".join(command_security_problems(also_tcp))
+
+
+def test_send_says_when_nothing_listens_at_the_endpoint(capsys):
+    """No daemon at the endpoint: not "no reply", but that nothing listens there."""
+    port = free_port()
+    rc = main(["send", "--robot", "rowc", "--connect", f"tcp/127.0.0.1:{port}", "--timeout",
+               "0.5", "--no-multicast-scouting", "stop"])  # fmt: skip
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert f"cannot connect to tcp/127.0.0.1:{port}: nothing listens there" in err, err
 
 
 def test_the_daemon_refuses_to_start_with_open_commands():

@@ -71,3 +71,54 @@ def robot_status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, A
         if time.monotonic() >= deadline:
             return {}
         time.sleep(0.1)
+
+
+def _reachable(endpoint: str) -> bool | None:
+    """Whether something accepts a TCP connection at a tcp/ or tls/ endpoint (None: another
+    kind, or not host:port)."""
+    import socket
+
+    proto, _, where = endpoint.partition("/")
+    host, _, port = where.rpartition(":")
+    if proto not in ("tcp", "tls") or not host or not port.isdigit():
+        return None
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
+def why_no_answer(session: Any, args: argparse.Namespace, prefix: str,
+                  command: bool = True) -> str:  # fmt: skip
+    """What a tool that heard nothing from the robot can tell: nobody reached (nothing listens
+    there, or a peer listens and refused this session: its credentials), reached but no robot
+    under ``prefix``, or the robot is there and took no ``command`` (its ACL, or commands
+    off) or, waiting for its state, publishes none."""
+    peers = [*session.info.peers_zid(), *session.info.routers_zid()]
+    if not peers:
+        endpoints = list(args.connect or ())
+        if not endpoints:
+            return ("no Zenoh peer found (multicast scouting finds none, or is off): give "
+                    "--connect ENDPOINT, the robot's --zenoh-listen")  # fmt: skip
+        refused = [e for e in endpoints if _reachable(e)]
+        if refused:
+            return (f"{', '.join(refused)} accepts connections but refused this session: "
+                    "authentication failed (the user/password or certificate of "
+                    "--zenoh-config), or it is not a Zenoh peer")  # fmt: skip
+        return (f"cannot connect to {', '.join(endpoints)}: nothing listens there (is the "
+                "daemon running, with --zenoh-listen on that endpoint?)")  # fmt: skip
+    status = robot_status(session, prefix, timeout=1.5)
+    if not status:
+        seen = sorted({str(r.ok.key_expr).rsplit("/", 1)[0] for r in
+                       session.get("cdpr/*/status", timeout=1.0) if r.ok is not None})  # fmt: skip
+        others = f" (robots there: {', '.join(seen)})" if seen else ""
+        return (f"connected, but no robot answers under {prefix}{others}: check --robot (the "
+                "robot's name in its config)")  # fmt: skip
+    if not command:
+        return f"{prefix} answers its status but publishes no state to this session"
+    commands = status.get("commands") or {}
+    if not commands.get("enabled", True):
+        return f"{prefix} takes no commands (start it with --accept-commands)"
+    return (f"{prefix} is there but did not answer: this account may not command it (the "
+            "gateway's ACL drops its commands without a reply)")

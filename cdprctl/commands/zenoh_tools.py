@@ -18,6 +18,7 @@ from cdprctl.commands.zenoh_session import (
     key_prefix,
     robot_status,
     tool_session,
+    why_no_answer,
 )
 
 
@@ -126,10 +127,12 @@ def send(args: argparse.Namespace) -> int:
         session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
         done.wait(args.timeout)
         sub.undeclare()
+        why = "" if got else why_no_answer(session, args, prefix)
     finally:
         session.close()
     if not got:
-        print(f"cdprctl send: no reply from {prefix} in {args.timeout:g} s", file=sys.stderr)
+        print(f"cdprctl send: no reply from {prefix} in {args.timeout:g} s: {why}",
+              file=sys.stderr)  # fmt: skip
         return 2
     if got.get("ok"):
         print(f"{args.kind}: accepted")
@@ -220,7 +223,9 @@ def monitor(args: argparse.Namespace) -> int:
         while True:
             if not new.wait(0.5):
                 if args.once and time.monotonic() - start > args.timeout:
-                    print(f"cdprctl monitor: no state from {prefix}", file=sys.stderr)
+                    why = why_no_answer(session, args, prefix, command=False)
+                    print(f"cdprctl monitor: no state from {prefix} in {args.timeout:g} s: "
+                          f"{why}", file=sys.stderr)  # fmt: skip
                     return 2
                 continue
             new.clear()
