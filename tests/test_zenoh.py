@@ -799,8 +799,12 @@ def test_the_jog_tool_in_tmux_moves_the_platform(robot_and_client):
     tmux("new-session", "-d", "-s", name, "-x", "160", "-y", "24", tool)
     try:
         assert client.wait(lambda: "state ready" in tmux("capture-pane", "-p", "-t", name))
+        tmux("send-keys", "-t", name, "d")  # not enabled: said here, nothing sent
+        assert client.wait(lambda: "jog: the robot is ready (E enables it)" in tmux(
+            "capture-pane", "-p", "-t", name))
         tmux("send-keys", "-t", name, "E")
         assert client.wait(lambda: client.last()["state"] == "enabled")
+        assert client.wait(lambda: "enable: accepted" in tmux("capture-pane", "-p", "-t", name))
         x0 = client.last()["pose"]["position"][0]
         for _ in range(30):
             tmux("send-keys", "-t", name, "d")
@@ -812,6 +816,7 @@ def test_the_jog_tool_in_tmux_moves_the_platform(robot_and_client):
         assert x1 - x0 > 0.05, (x0, x1)  # 50 % of 0.3 m/s for ~1.5 s
         time.sleep(0.5)
         assert abs(client.last()["pose"]["position"][0] - x1) < 1e-3  # it stays stopped
+        assert not any("command jog" in x and "rejected" in x for x in robot.lines)
         tmux("send-keys", "-t", name, "x")
         assert client.wait(lambda: name not in tmux("ls"), timeout=10.0)
     finally:

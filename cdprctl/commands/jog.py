@@ -70,9 +70,24 @@ class Jogger:
         self.moving = False
         self.note = ""
         self.quit = False
+        self.state = ""  # the robot's, as last received
+        self._ids = 0
 
     def put(self, kind: str, payload: dict[str, Any] | None = None) -> None:
-        self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(payload or {}))
+        """A command; every one but the jogs carries an id, so its reply is shown."""
+        body = dict(payload or {})
+        if kind != "jog":
+            self._ids += 1
+            body["id"] = f"jog-tool-{self._ids}"
+        self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(body))
+
+    def can_jog(self) -> bool:
+        """Jogs are taken in enabled and moving only: elsewhere each would be refused (a held
+        key, a dozen refusals in the daemon's log) — say so here instead."""
+        if self.state in ("enabled", "moving"):
+            return True
+        self.note = f"jog: the robot is {self.state or 'not heard from yet'} (E enables it)"
+        return False
 
     def velocity(self) -> list[float]:
         v = [0.0] * 6
@@ -83,6 +98,8 @@ class Jogger:
 
     def key(self, ch: str, now: float) -> None:
         if ch in KEYS:
+            if not self.can_jog():
+                return
             if self.axis != KEYS[ch]:
                 self.axis = KEYS[ch]
                 self.last_send = 0.0  # a new direction goes out at once
@@ -105,7 +122,7 @@ class Jogger:
         elif ch in "EDR":
             kind = {"E": "enable", "D": "disable", "R": "reset"}[ch]
             self.put(kind)
-            self.note = kind
+            self.note = f"{kind}: sent"
         elif ch in ("x", "\x03", "\x04"):
             self.quit = True
 
@@ -174,13 +191,26 @@ def jog(args: argparse.Namespace) -> int:
             body = json.loads(sample.payload.to_bytes())
         except ValueError:
             return
-        if not body.get("ok"):
-            kind = str(sample.key_expr).rsplit("/", 1)[-1]
+        kind = str(sample.key_expr).rsplit("/", 1)[-1]
+        if not str(body.get("id") or "").startswith("jog-tool-") and body.get("ok"):
+            return  # another client's
+        with lock:
+            latest["note"] = (f"{kind}: accepted" if body.get("ok")
+                              else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
+
+    def on_event(sample: Any) -> None:
+        """The daemon's word on a jog (where the soft limits stop it, and why) or a fault."""
+        try:
+            text = str(json.loads(sample.payload.to_bytes()).get("text", ""))
+        except ValueError:
+            return
+        if text.startswith(("jog", "FAULT")):
             with lock:
-                latest["note"] = f"{kind} rejected: {body.get('reason')}"
+                latest["note"] = text
 
     subs = [session.declare_subscriber(f"{prefix}/state", on_state),
-            session.declare_subscriber(f"{prefix}/reply/*", on_reply)]  # fmt: skip
+            session.declare_subscriber(f"{prefix}/reply/*", on_reply),
+            session.declare_subscriber(f"{prefix}/events", on_event)]  # fmt: skip
     limits = robot_status(session, prefix).get("config", {}).get("limits", {})
     j = Jogger(session, prefix, limits, args.speed, args.frame)
     if not limits:
@@ -202,6 +232,7 @@ def jog(args: argparse.Namespace) -> int:
                     if "note" in latest:
                         j.note = latest.pop("note")
                     state = latest.get("state")
+                j.state = str(state.get("state", "")) if state else ""
                 sys.stdout.write(_view(j, state, prefix))
                 sys.stdout.flush()
                 next_draw = now + 0.1
