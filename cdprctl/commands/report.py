@@ -64,17 +64,25 @@ def report(args: argparse.Namespace) -> int:
         plt.close(fig)
         written.append(name)
 
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(9, 7))
-    for ax, a in zip(axes, "xyz", strict=True):
-        ax.plot(t, _column(head, rows, a), label=f"{a} estimated")
-        ax.plot(t, _column(head, rows, f"ref_{a}"), "--", label=f"{a} reference")
+    # estimated, reference and true coincide to a fraction of a mm: a wide pale band under two
+    # thin lines keeps all three visible where they overlap
+    fig, axes = plt.subplots(3, 2, sharex=True, figsize=(11, 7))
+    for ax, a in zip(axes[:, 0], "xyz", strict=True):
+        ax.plot(t, _column(head, rows, a), color="C0", lw=4, alpha=0.35, label="estimated")
+        ax.plot(t, _column(head, rows, f"ref_{a}"), color="k", lw=1, ls="--", label="reference")
         true = _column(head, rows, f"true_{a}")
         if np.any(np.isfinite(true)):
-            ax.plot(t, true, ":", label=f"{a} simulated (true)")
+            ax.plot(t, true, color="C3", lw=1, ls=":", label="simulated (true)")
         ax.set_ylabel(f"{a} (m)")
-        ax.legend(loc="best", fontsize=8)
-    axes[-1].set_xlabel("time (s)")
-    fig.suptitle(f"{meta.get('robot', '')}: platform position and reference")
+        ax.legend(loc="best", fontsize=7)
+    for ax, a, name in zip(axes[:, 1], ("rx", "ry", "rz"), ("x", "y", "z"), strict=True):
+        ax.plot(t, _column(head, rows, f"err_{a}") * 1e3, color="C2", lw=1)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(f"orientation error\nabout {name} (mrad)")
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(f"{meta.get('robot', '')}: platform position and reference (left), orientation "
+                 "error, estimate − reference, base frame (right)")  # fmt: skip
     save(fig, "pose.png")
 
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -89,8 +97,10 @@ def report(args: argparse.Namespace) -> int:
     save(fig, "tracking.png")
 
     fig, ax = plt.subplots(figsize=(9, 5))
-    for c in cables:
-        ax.plot(t, _column(head, rows, f"t_{c}"), label=f"cable {c}")
+    styles = ("-", "--", ":", "-.")  # a symmetric robot's cables pull alike: lines on lines
+    for k, c in enumerate(cables):
+        ax.plot(t, _column(head, rows, f"t_{c}"), ls=styles[k % 4], lw=2.2 - 0.4 * (k % 4),
+                color=f"C{k % 10}", label=f"cable {c}")  # fmt: skip
     lo, hi = meta.get("tension_min"), meta.get("tension_max")
     if lo and hi:
         ax.axhline(min(lo), color="k", ls="--", lw=1, label="t_min")
@@ -98,7 +108,7 @@ def report(args: argparse.Namespace) -> int:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("commanded tension (N)")
     ax.legend(loc="best", fontsize=8, ncol=2)
-    ax.set_title("cable tensions")
+    ax.set_title("cable tensions (cables that pull alike overlap: told apart by line style)")
     save(fig, "tensions.png")
 
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -133,14 +143,22 @@ def report(args: argparse.Namespace) -> int:
     if (run / "timing.csv").is_file():
         th, tr = _read_csv(run / "timing.csv")
         if tr:
-            fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+            fig, (ax1, ax3, ax2) = plt.subplots(1, 3, figsize=(14, 4))
             tt = _column(th, tr, "time")
-            for k in ("lateness_p50_us", "lateness_p99_us", "lateness_max_us"):
-                ax1.plot(tt - tt[0], _column(th, tr, k), label=k.replace("_us", ""))
+            for key in ("lateness_p50_us", "lateness_p99_us", "lateness_max_us"):
+                ax1.plot(tt - tt[0], _column(th, tr, key), label=key.replace("_us", ""))
             ax1.set_yscale("symlog", linthresh=1.0)
             ax1.set_xlabel("time (s)")
-            ax1.set_ylabel("wake lateness (µs), over the run so far")
+            ax1.set_ylabel("wake lateness (µs), per report window")
             ax1.legend(fontsize=8)
+            # "missed" counts from the daemon's start: each window's own is the difference
+            total = np.nan_to_num(_column(th, tr, "missed"))
+            per_window = np.diff(total, prepend=total[0])
+            ax3.bar(tt - tt[0], per_window, width=0.8 * float(np.median(np.diff(tt)))
+                    if len(tt) > 1 else 0.5, color="C3")  # fmt: skip
+            ax3.set_xlabel("time (s)")
+            ax3.set_ylabel("missed periods, per report window")
+            ax3.set_title(f"{int(total[-1] - total[0])} missed in the recording", fontsize=9)
             ax2.hist(_column(th, tr, "compute_p50_us"), bins=20)
             ax2.set_xlabel("compute per cycle, median of each report (µs)")
             ax2.set_ylabel("reports")
