@@ -821,3 +821,29 @@ def test_the_jog_tool_in_tmux_moves_the_platform(robot_and_client):
         assert client.wait(lambda: name not in tmux("ls"), timeout=10.0)
     finally:
         tmux("kill-session", "-t", name)
+
+
+def test_a_fleet_behind_a_router_is_seen_robot_by_robot(capsys):
+    """Two daemons (rowc, CAROCA) connected to a Zenoh router, a tool connected to the router
+    only: each robot's status (its name, its limits) and state reach the tool — the second
+    daemon's status had come back empty to a tool just connected (3 runs of 3)."""
+    from cdprctl.telemetry.session import open_session
+
+    port = free_port()
+    router = open_session(mode="router", listen=[f"tcp/127.0.0.1:{port}"],
+                          multicast_scouting=False)  # fmt: skip
+    robots = []
+    try:
+        for config in ("rowc.toml", "caroca.toml"):
+            robots.append(Robot(["--zenoh-connect", f"tcp/127.0.0.1:{port}"], config=config))
+        for name in ("rowc", "caroca"):
+            rc = main(["monitor", "--once", "--robot", name, "--connect",
+                       f"tcp/127.0.0.1:{port}", "--no-multicast-scouting"])  # fmt: skip
+            out = capsys.readouterr().out
+            assert rc == 0, out
+            assert out.splitlines()[0].split()[0] == name, out  # the name, from its status
+            assert "?" not in out.splitlines()[0], out
+    finally:
+        for r in robots:
+            r.stop()
+        router.close()
