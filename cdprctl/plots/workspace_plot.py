@@ -1,7 +1,7 @@
 """Pictures of the wrench-feasible workspace (``cdprctl workspace --plot DIR``), after CASPR's
-workspace plots: slices of the grid coloured by the tension margin (N), the boundary
-(margin = 0) drawn, infeasible points grey, the configured workspace box and the anchors'
-projections marked; and the feasible points in 3-D."""
+workspace plots: slices through the feasible part of the grid coloured by the tension margin
+(N), the boundary drawn on the cells' edges, infeasible cells grey, the configured workspace
+box, the anchors' projections and the home pose marked; and the feasible points in 3-D."""
 
 from __future__ import annotations
 
@@ -47,7 +47,10 @@ def _slices(d: Path, model: RobotModel, res: WorkspaceResult, margin: np.ndarray
     axes = g.axes()
     a, b = [i for i in range(3) if i != k]
     count = g.n[k]
-    picks = np.unique(np.linspace(0, count - 1, min(count, 9)).round().astype(int))
+    # slices through the feasible part only (one all grey says nothing), spread over it
+    some = [i for i in range(count) if np.any(np.take(margin, i, axis=2 - k) >= 0.0)]
+    lo, hi = (some[0], some[-1]) if some else (0, count - 1)
+    picks = np.unique(np.linspace(lo, hi, min(hi - lo + 1, 9)).round().astype(int))
     cols = min(3, len(picks))
     rows = math.ceil(len(picks) / cols)
     feasible = margin[np.isfinite(margin) & (margin >= 0.0)]  # the colours are theirs
@@ -72,13 +75,19 @@ def _slices(d: Path, model: RobotModel, res: WorkspaceResult, margin: np.ndarray
         im = ax.imshow(shown, origin="lower", extent=extent, cmap="viridis", vmin=0.0,
                        vmax=top, aspect="auto", interpolation="nearest")  # fmt: skip
         if np.nanmax(img) >= 0.0 > np.nanmin(img) and g.n[a] > 1 and g.n[b] > 1:
-            ax.contour(axes[a], axes[b], np.nan_to_num(img, nan=-1e9), levels=[0.0],
+            # the feasibility (1/0) at level 0.5: halfway between a feasible point and an
+            # infeasible one, i.e. on the edge between their cells (the margin's own zero
+            # crossing, interpolated, sat up to half a cell off the coloured cells)
+            ax.contour(axes[a], axes[b], (img >= 0.0).astype(float), levels=[0.5],
                        colors="red", linewidths=1.2)  # fmt: skip
         ax.add_patch(plt.Rectangle((ws.position_min[a], ws.position_min[b]),
                                    ws.position_max[a] - ws.position_min[a],
                                    ws.position_max[b] - ws.position_min[b],
                                    fill=False, ls="--", color="black", lw=1))  # fmt: skip
         ax.plot(model.anchors[:, a], model.anchors[:, b], "k^", ms=5)
+        home = model.home.position
+        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="white", mew=1.5)
+        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="black", mew=0.7)
         ax.set_title(f"{AXES[k]} = {axes[k][idx]:.3g} m", fontsize=9)
         ax.set_xlabel(f"{AXES[a]} (m)")
         ax.set_ylabel(f"{AXES[b]} (m)")
@@ -88,7 +97,8 @@ def _slices(d: Path, model: RobotModel, res: WorkspaceResult, margin: np.ndarray
         fig.colorbar(im, ax=axs.ravel().tolist(), label="tension margin (N)")
     fig.suptitle(
         f"{title}\nfeasible: coloured by margin, red: boundary, grey: infeasible, "
-        f"dashed: configured workspace, ▲ anchors",
+        f"dashed: configured workspace, ▲ anchors, ☆ home "
+        f"({AXES[k]} = {model.home.position[k]:.3g} m)",
         fontsize=9,
     )
     path = d / f"slices_{AXES[a]}{AXES[b]}.png"
@@ -106,9 +116,24 @@ def _scatter(d: Path, model: RobotModel, res: WorkspaceResult, title: str) -> Pa
     ax = fig.add_subplot(projection="3d")
     ok = res.feasible
     p = res.points[ok]
-    sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=res.margin[ok], s=4, cmap="viridis")
+    # a cloud of thousands of opaque points hides itself: small, translucent
+    sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=res.margin[ok], s=2, alpha=0.35,
+                    cmap="viridis", depthshade=False)  # fmt: skip
     a = model.anchors
     ax.scatter(a[:, 0], a[:, 1], a[:, 2], marker="^", c="k", s=30)
+    h = model.home.position
+    ax.scatter([h[0]], [h[1]], [h[2]], marker="*", c="red", s=120, label="home")
+    ws = model.workspace
+    lo, hi = np.asarray(ws.position_min), np.asarray(ws.position_max)
+    for i in range(3):  # the configured box's 12 edges
+        for u in (lo, hi):
+            for v in (lo, hi):
+                e0, e1 = lo.copy(), hi.copy()
+                j, m = [x for x in range(3) if x != i]
+                e0[j] = e1[j] = u[j]
+                e0[m] = e1[m] = v[m]
+                ax.plot(*zip(e0, e1, strict=True), color="k", lw=0.6, ls="--")
+    ax.legend(loc="upper left", fontsize=8)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
