@@ -181,7 +181,12 @@ def _stills(run: Path, head: list[str], rows: list[list[str]], t: np.ndarray,
     layout = SceneLayout.from_dict(meta["layout"])
     grips = [h[len("grip_travel_") :] for h in head if h.startswith("grip_travel_")]
     state_col = head.index("state")
-    picks = sorted({round(k * (len(rows) - 1) / 3) for k in range(4)})
+    xyz = np.column_stack([_column(head, rows, a) for a in "xyz"])
+    # the start, the farthest from it, the farthest from both, the end: instants that differ
+    far = int(np.nanargmax(np.linalg.norm(xyz - xyz[0], axis=1))) if len(xyz) > 1 else 0
+    both = np.minimum(np.linalg.norm(xyz - xyz[0], axis=1), np.linalg.norm(xyz - xyz[far], axis=1))
+    third = int(np.nanargmax(both)) if np.any(np.isfinite(both)) else 0
+    picks = sorted({0, far, third, len(rows) - 1})
 
     def value(r: list[str], name: str) -> float:
         x = r[head.index(name)]
@@ -199,4 +204,5 @@ def _stills(run: Path, head: list[str], rows: list[list[str]], t: np.ndarray,
         }  # fmt: skip
         states.append((f"t = {t[i]:.1f} s, {r[state_col]}", state))
     scene_stills(str(run / "scene.png"), layout, states,
-                 f"{meta.get('robot', '')}: the robot at four instants of the run")  # fmt: skip
+                 f"{meta.get('robot', '')}: the robot at the start, the end and the run's two "
+                 "farthest points", trace=xyz)  # fmt: skip

@@ -67,8 +67,11 @@ def draw_scene(ax: Any, layout: SceneLayout, scene: Scene, title: str) -> None:
 
 
 def scene_stills(path: str, layout: SceneLayout, states: list[tuple[str, dict[str, Any]]],
-                 suptitle: str) -> None:  # fmt: skip
-    """``states``: (title, state payload) of each still, drawn side by side into ``path``."""
+                 suptitle: str, trace: Any = None) -> None:  # fmt: skip
+    """``states``: (title, state payload) of each still, drawn side by side into ``path``;
+    ``trace`` ((n, 3) m, optional): the platform's path over the run, drawn in each still with
+    the still's own position on it (a robot's moves are small beside its frame: without it
+    the stills looked alike)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -86,6 +89,12 @@ def scene_stills(path: str, layout: SceneLayout, states: list[tuple[str, dict[st
         scene = builder.build(state)
         if scene is not None:  # a row without a pose stays an empty frame
             draw_scene(ax, layout, scene, title)
+        if trace is not None and len(trace):
+            ax.plot(trace[:, 0], trace[:, 1], trace[:, 2], color="C1", lw=1.2,
+                    label="the platform's path")  # fmt: skip
+            p = state["pose"]["position"]
+            ax.scatter([p[0]], [p[1]], [p[2]], color="C1", s=40, edgecolor="k")
+            ax.legend(loc="upper left", fontsize=7)
         axes.append(ax)
     cmap = LinearSegmentedColormap.from_list("tension", [(s, c) for s, c in TENSION_STOPS])
     sm = plt.cm.ScalarMappable(norm=Normalize(0.0, 1.0), cmap=cmap)
