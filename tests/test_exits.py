@@ -129,3 +129,17 @@ def test_ctrl_c_to_the_process_group_stops_cleanly_with_helpers():
     assert "summary:" in rest
     assert took < 10.0
     assert_clean(out)
+
+
+def test_no_calibration_record_is_one_line_with_the_command_and_exit_4(tmp_path):
+    """A robot that trusts no encoder zero at start and an empty state directory, with the
+    real-time set-up: the refusal names the missing record and the command that makes it,
+    exit 4 (systemd does not restart it), and no leak report after it."""
+    config = tmp_path / "real.toml"
+    config.write_text(f'base = "{ROWC}"\n[drives]\nassume_home_at_start = false\n')
+    code, out, _ = cdprctl("run", "--config", str(config), "--state-dir", str(tmp_path / "s"),
+                           "--duration", "2")  # fmt: skip
+    assert code == 4, out
+    assert "cdprctl run: refusing to enable the drives:" in out
+    assert "cdprctl calibrate" in out
+    assert_clean(out)
