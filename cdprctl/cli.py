@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import gc
 import sys
 from collections.abc import Sequence
 
@@ -71,13 +70,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return int(args.func(args))
-    finally:
-        # whatever the command built goes before the interpreter's teardown: ruckig's
-        # extension types still alive then (in reference cycles, the collector frozen by the
-        # real-time set-up) are reported as leaks, 30 lines after a one-line refusal
-        gc.collect()
+    return int(args.func(args))
 
 
 if __name__ == "__main__":

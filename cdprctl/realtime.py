@@ -106,10 +106,11 @@ SHORT_SWITCH = 1e-4
 
 @contextlib.contextmanager
 def sharing_the_interpreter() -> Iterator[None]:
-    """Around long Python work in a thread beside the loop's (a resumed path planned again in
-    the I/O thread): the interpreter hands its lock to a waiting thread after ``SHORT_SWITCH``
-    instead of 5 ms, so the loop waits that long for it, not a period (rowc at 250 Hz: 14-17
-    periods missed within 1 s of a resume, benchmarks/bench_resume.py)."""
+    """Around long Python work in a thread beside the loop's (``CommandDesk.submit``: a path
+    or a resumed path planned in the I/O thread): the interpreter hands its lock to a waiting
+    thread after ``SHORT_SWITCH`` instead of 5 ms, so the loop waits that long for it, not a
+    period (rowc at 250 Hz: 14-17 periods missed within 1 s of a resume,
+    benchmarks/bench_resume.py)."""
     old = sys.getswitchinterval()
     sys.setswitchinterval(SHORT_SWITCH)
     try:

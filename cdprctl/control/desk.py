@@ -20,6 +20,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, accepted
 from cdprctl.control.states import HEALTHY_STATES, State
+from cdprctl.realtime import sharing_the_interpreter
 from cdprctl.rotation import FloatArray, rpy_to_matrix
 from drivers.vocabulary import Lifecycle
 
@@ -67,8 +68,11 @@ class CommandDesk:
     def submit(self, cmd: Command) -> Verdict:
         """Queue ``cmd`` for the next cycle, or refuse it (a pose or speed out of range, a path
         the limits refuse, TDA options this robot cannot use, a full mailbox): the reason is
-        in the verdict and, except for a full mailbox, an event."""
-        why = self._refusal(cmd)
+        in the verdict and, except for a full mailbox, an event. Runs beside the loop (the
+        daemon's I/O thread): a path's or a resume's plan checks thousands of samples, so the
+        interpreter's lock is shared in short turns meanwhile."""
+        with sharing_the_interpreter():
+            why = self._refusal(cmd)
         if why:
             return Verdict(False, why)
         if len(self.mailbox) >= MAILBOX:

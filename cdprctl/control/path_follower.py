@@ -19,7 +19,6 @@ from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_file import PathFileError
 from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path, plan_text
 from cdprctl.motion.trajectory import Trajectory
-from cdprctl.realtime import sharing_the_interpreter
 
 
 class PathFollower(MotionSource):
@@ -62,10 +61,8 @@ class PathFollower(MotionSource):
         durations = [None, *plan.durations[k + 1 :]]
         try:
             here = self.trajectory.position.copy()
-            with sharing_the_interpreter():  # the loop runs beside this (the I/O thread)
-                cmd.plan = (plan_path(self.model, plan.waypoints[k:], here,
-                                      self.model.control.period, self.limits, plan.name,
-                                      durations), offset)  # fmt: skip
+            cmd.plan = (plan_path(self.model, plan.waypoints[k:], here, self.model.control.period,
+                                  self.limits, plan.name, durations), offset)  # fmt: skip
         except PathRejectedError as exc:
             self.data.events.append((self.data.time, f"resume refused: {exc}"))
             return False

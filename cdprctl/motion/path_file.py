@@ -50,13 +50,29 @@ def parse_path(text: str, start: FloatArray, units: str = "m") -> list[Waypoint]
     if units not in LENGTH_UNITS:
         raise PathFileError(f"units = {units!r}: must be one of {', '.join(LENGTH_UNITS)}")
     start = np.asarray(start, dtype=float)
-    first = next((ln.strip() for ln in text.splitlines() if ln.strip()
-                  and not ln.strip().startswith("#")), "")  # fmt: skip
-    if not first:
+    lines = _content_lines(text)
+    if not lines:
         raise PathFileError("the path file is empty")
-    if re.match(r"^[a-zA-Z_]+\s*,", first):  # a CSV header; G-code words carry numbers
+    if _CSV_HEADER.match(lines[0]):
         return _csv(text, start, LENGTH_UNITS[units])
     return _gcode(text, start)
+
+
+_CSV_HEADER = re.compile(r"^[a-zA-Z_]+\s*,")  # a CSV's first line; G-code words carry numbers
+
+
+def _content_lines(text: str) -> list[str]:
+    """The lines that are neither blank nor ``#`` comments, stripped."""
+    return [s for s in (ln.strip() for ln in text.splitlines()) if s and not s.startswith("#")]
+
+
+def csv_without_units(text: str) -> bool:
+    """Whether ``text`` is a CSV path with no row of units under its header (its lengths are
+    then the ``units`` given, m by default)."""
+    lines = _content_lines(text)
+    if not lines or not _CSV_HEADER.match(lines[0]):
+        return False
+    return len(lines) < 2 or not all(_UNIT_WORD.fullmatch(c.strip()) for c in lines[1].split(","))
 
 
 

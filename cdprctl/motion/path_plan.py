@@ -17,14 +17,13 @@ apart; the first failing sample rejects the path, naming its waypoint, time, pos
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import UNITS, Waypoint, parse_path
+from cdprctl.motion.path_file import Waypoint, csv_without_units, parse_path
 from cdprctl.motion.trajectory import (
     Trajectory,
     acceleration_limits,
@@ -180,10 +179,7 @@ def plan_text(
 
 def units_hint(text: str, units: str, why: str) -> str:
     """A hint for a CSV in metres rejected outside the workspace: its numbers may be mm."""
-    csv = re.match(r"^\s*(#.*\n\s*)*[a-zA-Z_]+\s*,", text) is not None
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    has_row = len(lines) > 1 and lines[1].split(",")[0].strip().lower() in UNITS["x"]
-    if csv and units == "m" and not has_row and "outside the workspace box" in why:
+    if units == "m" and "outside the workspace box" in why and csv_without_units(text):
         return (" (a file in millimetres? add a row of units under the header, such as "
                 "'mm, mm, mm', or give --units mm)")
     return ""

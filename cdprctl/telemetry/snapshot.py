@@ -118,9 +118,6 @@ class SharedSnapshot:
         return None
 
     def close(self) -> None:
-        """Safe twice (a link closed on a failed start, then at the daemon's exit)."""
-        if not hasattr(self, "buf"):
-            return
         del self.buf
         self.shm.close()
         if self._owner:
