@@ -90,6 +90,20 @@ def test_every_controlword_encodes_the_command_of_table_28():
             assert p.command_of(code) is not None
 
 
+def test_each_command_is_the_controlword_the_canopen_package_sends_for_it():
+    """The value each command is sent as (what the drive decodes, Table 28), against the
+    canopen package's controlword constants; and each decodes back to its own command."""
+    theirs = {p.Command.SHUTDOWN: State402.CW_SHUTDOWN, p.Command.SWITCH_ON: State402.CW_SWITCH_ON,
+              p.Command.ENABLE_OPERATION: State402.CW_OPERATION_ENABLED,
+              p.Command.DISABLE_VOLTAGE: State402.CW_DISABLE_VOLTAGE,
+              p.Command.QUICK_STOP: State402.CW_QUICK_STOP,
+              p.Command.FAULT_RESET: State402.CW_SWITCH_ON_DISABLED}  # fmt: skip
+    assert set(theirs) == set(p.Command)
+    for command, cw in theirs.items():
+        assert int(command) == cw, command
+        assert p.command_of(int(command)) is command
+
+
 def test_transitions_agree_with_the_canopen_packages_table():
     """Each of our transitions is one the canopen package drives with a controlword that
     decodes to our command; the numbers are CiA 402 Figure 14's."""

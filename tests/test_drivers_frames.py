@@ -17,6 +17,7 @@ from cdprctl.model import load_robot
 from drivers import (
     DriveFaultError,
     DriverTimeoutError,
+    DriveState,
     Lifecycle,
     create_driver,
 )
@@ -66,6 +67,7 @@ class Cia402Script:
         self.silent: set[int] = set()
         self.drop_tpdo: set[int] = set()
         self.emcy: dict[int, int] = {}
+        self.statusword: dict[int, int] = {}  # node → a statusword sent instead of its state's
         self.objects = {n: self._table(n, rated_mnm) for n in nodes}
 
     @staticmethod
@@ -111,11 +113,9 @@ class Cia402Script:
             for n, st in self.state.items():
                 if n in self.silent or n in self.drop_tpdo:
                     continue
+                sw = self.statusword.get(n, p.STATUSWORD_OF[st])
                 out.append(
-                    frame(
-                        p.TPDO1 + n,
-                        p.TPDO1_STRUCT.pack(p.STATUSWORD_OF[st], self.torque[n], self.position[n]),
-                    )
+                    frame(p.TPDO1 + n, p.TPDO1_STRUCT.pack(sw, self.torque[n], self.position[n]))
                 )
                 out.append(frame(p.HEARTBEAT + n, bytes([p.HB_OPERATIONAL])))
             for n, code in list(self.emcy.items()):
@@ -330,6 +330,35 @@ def test_cia402_lost_heartbeat(seed):
             cycles(drv, peer)
         assert isinstance(drv.error, DriverTimeoutError)
         assert drv.error.cable == 5
+
+
+# CiA 402 Table 30 written out: a statusword of each power state (bits 0-3, 5, 6; the others
+# set where a drive may set them) and what the control side must see of it
+STATUSWORD_SEEN_AS = [
+    (0x0000, DriveState.DISABLED),  # not ready to switch on: booting, the brake holds
+    (0x0250, DriveState.DISABLED),  # switch on disabled, voltage and remote bits set
+    (0x0231, DriveState.READY),  # ready to switch on
+    (0x0233, DriveState.READY),  # switched on
+    (0x0637, DriveState.ENABLED),  # operation enabled, target reached
+    (0x0017, DriveState.QUICK_STOP),  # quick stop active
+    (0x001F, DriveState.FAULT),  # fault reaction active
+    (0x0218, DriveState.FAULT),  # fault
+]
+
+
+@pytest.mark.parametrize("sw, seen", STATUSWORD_SEEN_AS, ids=lambda v: f"{v}")
+def test_every_power_state_reaches_the_control_side_as_its_drive_state(seed, sw, seen):
+    """A statusword of each CiA 402 power state, from one drive, through the cyclic decoding
+    tables: the control side's drive state of that cable, the others untouched."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        script.statusword[3] = sw
+        cycles(drv, peer, 2)
+        drv.read(peer.t)
+        assert DriveState(drv.states.state[2]) is seen
+        assert set(drv.states.state[[0, 1, 3, 4, 5, 6, 7]]) == {DriveState.DISABLED}
 
 
 def test_cia402_ignores_foreign_and_malformed_frames(seed):

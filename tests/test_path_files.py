@@ -269,6 +269,52 @@ def test_a_csv_row_of_units_converts_its_columns():
     assert parse_path("x,y,z,pitch\nm, m, m, rad\n1,2,3,0.5\n", START)[0].pose[4] == 0.5
 
 
+#: one of each unit word in SI, written out here from the units' definitions (1 in = 25.4 mm
+#: exactly, 1° = π/180 rad, 1 min = 60 s), not read from path_file's table
+SI_OF_ONE = {
+    "x": {"m": 1.0, "mm": 0.001, "in": 0.0254},
+    "roll": {"rad": 1.0, "deg": math.radians(1.0)},
+    "speed": {"m/s": 1.0, "mm/s": 0.001, "mm/min": 0.001 / 60, "in/s": 0.0254,
+              "in/min": 0.0254 / 60},
+    "time": {"s": 1.0, "ms": 0.001},
+    "dwell": {"s": 1.0, "ms": 0.001},
+}  # fmt: skip
+SI_OF_ONE |= {"y": SI_OF_ONE["x"], "z": SI_OF_ONE["x"], "pitch": SI_OF_ONE["roll"],
+              "yaw": SI_OF_ONE["roll"]}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "column, word", [(c, w) for c, units in SI_OF_ONE.items() for w in units]
+)
+def test_every_unit_word_is_its_si_value(column, word):
+    """Each word of a unit row, in each column it belongs to: 7.5 of it is 7.5 × its SI value
+    (a wrong factor in one cell of the table is wrong here, and only here)."""
+    columns = ["x", "y", "z"] + [column] * (column not in ("x", "y", "z"))
+    if column == "time":
+        columns.append("blend")  # a timed row; blend keeps the row count the same
+    units = [word if c == column else {"blend": "-"}.get(c, "m") for c in columns]
+    values = ["7.5" if c == column else ("0" if c == "blend" else "1") for c in columns]
+    w = parse_path(f"{','.join(columns)}\n{','.join(units)}\n{','.join(values)}\n", START)[0]
+    got = {"x": w.pose[0], "y": w.pose[1], "z": w.pose[2], "roll": w.pose[3],
+           "pitch": w.pose[4], "yaw": w.pose[5], "speed": w.speed, "time": w.time,
+           "dwell": w.dwell}[column]  # fmt: skip
+    assert got == pytest.approx(7.5 * SI_OF_ONE[column][word], rel=1e-12)
+
+
+def test_blend_needs_no_unit_word_and_nothing_else_goes_without():
+    """Blend is a 0/1 flag: its cell of the unit row may be empty (or ``-``); an empty cell
+    under any other column is refused, naming it."""
+    w = parse_path("x,y,z,blend\nm,m,m,\n1,2,3,1\n1,2,4,0\n", START)
+    assert w[0].blend and not w[1].blend and w[0].pose[:3] == (1, 2, 3)
+    mm = parse_path("x,y,z,blend\nmm,mm,mm,-\n1,2,3,1\n", START)[0]
+    assert mm.pose[:3] == pytest.approx((0.001, 0.002, 0.003))
+    for header, row, col in [("x,y,z", ",m,m", "column 1: '' is not a unit of x"),
+                             ("x,y,z,roll", "m,m,m,", "column 4: '' is not a unit of roll"),
+                             ("x,y,z,dwell", "m,m,m,", "column 4: '' is not a unit of dwell")]:
+        with pytest.raises(PathFileError, match=f"line 2, {col}"):
+            parse_path(f"{header}\n{row}\n1,2,3,0\n", START)
+
+
 def test_units_for_a_csv_without_its_row():
     """``units``: the lengths and speeds (per s) of a CSV without a row of units; G-code and a
     CSV that has the row keep theirs."""

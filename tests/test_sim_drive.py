@@ -4,6 +4,9 @@ says (CiA 402 §6.4.1)."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import numpy as np
 import pytest
 from conftest import CONFIG, in_torque_mode
@@ -241,3 +244,24 @@ def test_the_realtime_simulator_says_ready_after_its_first_physics_step(monkeypa
     )  # fmt: skip
     net.close()
     assert said and said[0] >= 1
+
+
+def test_a_following_error_window_of_all_ones_switches_the_check_off():
+    """CiA 402 §6.5.7 (0x6065): 0xFFFFFFFF switches the drive's following-error monitoring
+    off, any other value is a window in counts. The frames are written out byte by byte here;
+    the driver never sends the all-ones value, even for a window beyond 32 bits of counts."""
+    model = load_robot(CONFIG / "rowc.toml")
+    huge = dataclasses.replace(model.drives, following_error_window=1e9)  # m of cable
+    with enabled_rig("rowc.toml") as rig:
+        drive, servo = rig.net.drives[0], rig.plant.servo
+        assert 0 < servo.window[0] < 1.0  # rad: the driver's window
+        reply = drive.on_sdo(bytes([0x23, 0x65, 0x60, 0x00, 0xFF, 0xFF, 0xFF, 0xFF]))
+        assert reply is not None and reply.data[0] == 0x60
+        assert servo.window[0] == math.inf
+        drive.on_sdo(bytes([0x23, 0x65, 0x60, 0x00, 0xFE, 0xFF, 0xFF, 0xFF]))
+        assert servo.window[0] == pytest.approx(0xFFFFFFFE * 2 * math.pi / drive.axis.cpr)
+    rig = LockStep(dataclasses.replace(model, drives=huge), period=model.control.period)
+    with rig:
+        rig.driver.configure()
+        assert rig.net.drives[0].axis.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] == 0xFFFFFFFE
+        assert math.isfinite(rig.plant.servo.window[0])

@@ -107,7 +107,7 @@ def _unit_row(cells: list[str], header: list[str], no: int) -> list[float]:
     return out
 
 
-def _csv(text: str, start: FloatArray, length_unit: float = 1.0) -> list[Waypoint]:
+def _csv(text: str, start: FloatArray, length_unit: float) -> list[Waypoint]:
     header: list[str] | None = None
     scale: list[float] = []  # SI per file unit, per column
     out: list[Waypoint] = []

@@ -235,8 +235,7 @@ EMCY_CODES = {
     0x8611: "following error",
     0x8612: "reference limit",
     0x9000: "external error",
-    0xFF00: "device specific",
-}
+}  # the device-specific codes (0xFFxx) are described by their class
 # (value, mask, class) of CiA 301 Table 21: the first digit, or the first two where the table
 # names them (0x5, 0x7, 0x9: xx00 only; 0xF0 additional functions, 0xFF device specific)
 EMCY_CLASSES = (
@@ -265,8 +264,8 @@ def describe_emcy(code: int) -> str:
 def sdo_download(index: int, subindex: int, value: int, size: int) -> bytes:
     """Expedited SDO download request (CiA 301 §7.2.4.3.3): ``size`` bytes of ``value``."""
     cmd = {1: 0x2F, 2: 0x2B, 3: 0x27, 4: 0x23}[size]
-    data = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little").ljust(4, b"\0")
-    return SDO_STRUCT.pack(cmd, index, subindex, data)
+    data = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
+    return SDO_STRUCT.pack(cmd, index, subindex, data)  # "4s" pads the unused bytes with 0
 
 
 def sdo_upload(index: int, subindex: int) -> bytes:
