@@ -65,12 +65,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
-    return int(args.func(args))
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        return int(args.func(args))
+    except KeyboardInterrupt:  # Ctrl-C in a tool, or before a command's own handling
+        print("cdprctl: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

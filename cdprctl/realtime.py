@@ -18,9 +18,12 @@ except (OSError, AttributeError):
     ALLOWED_CPUS = frozenset()
 
 
-def apply_realtime(priority: int, cpu: int, lock_memory: bool, freeze_gc: bool) -> list[str]:
-    """SCHED_FIFO at ``priority``, pinned to ``cpu`` (-1: the last), memory locked, the
-    garbage collector frozen. Returns one warning per setting that could not be applied."""
+def schedule_realtime(priority: int, cpu: int) -> list[str]:
+    """The calling thread (the loop's) at SCHED_FIFO ``priority``, pinned to ``cpu`` (-1: the
+    last). Right before the loop, after the start-up's work: a cold start compiles for a
+    minute, and a FIFO task runs until it blocks — another real-time loop on that CPU then
+    waited for it (a second daemon faulted on a lost heartbeat, 0.7 s without a cycle).
+    Returns one warning per setting that could not be applied."""
     warnings: list[str] = []
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
@@ -36,6 +39,25 @@ def apply_realtime(priority: int, cpu: int, lock_memory: bool, freeze_gc: bool) 
         os.sched_setaffinity(0, {target})
     except (OSError, AttributeError, ValueError) as exc:
         warnings.append(f"CPU affinity to CPU {cpu} not applied ({exc})")
+    return warnings
+
+
+def leave_realtime() -> None:
+    """The calling thread back at the normal scheduler, on every allowed CPU: after the loop,
+    before the shut-down's work (the collector's first pass over the start-up's objects, the
+    report) — at FIFO that work held another daemon's loop on the CPU for 1.3 s."""
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    if ALLOWED_CPUS:
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setaffinity(0, ALLOWED_CPUS)
+
+
+def lock_memory_and_freeze_gc(lock_memory: bool, freeze_gc: bool) -> list[str]:
+    """Memory locked (``mlockall``), the garbage collector frozen: before the drives start
+    (both take a while, and then the drives' heartbeats are watched). Returns one warning per
+    setting that could not be applied."""
+    warnings: list[str] = []
     if lock_memory:
         libc_name = ctypes.util.find_library("c")
         ok = False

@@ -3,6 +3,8 @@ real unix socket, the watchdog's rule, SIGTERM → controlled stop → exit 0, t
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import io
 import os
 import re
@@ -337,3 +339,95 @@ def test_a_signal_ends_the_loop_even_when_the_io_thread_hangs():
     last = d.stats.deadline[(d.stats.count - 1) % d.stats.size]
     assert last - signalled["at"] < 0.3 + 1.0  # the loop's last cycle: soon after the deadline
     assert d.driver.lifecycle.value == "finalized"
+
+
+def test_a_stop_signal_a_library_swallowed_still_ends_the_start_up():
+    """A signal during the start-up whose exception a library swallowed (raised inside
+    llvmlite's ctypes callback during a compile, it was printed as "Exception ignored" and the
+    daemon went on to ``ready``): the start-up's next step ends it — one line, exit 0, the
+    drives never enabled, the loop never run."""
+    from cdprctl.control.manager import ControllerManager
+    from cdprctl.daemon.service import Daemon
+    from cdprctl.daemon.startup import (
+        StartupInterrupted,
+        interrupt_the_start_up,
+        stop_if_interrupted,
+    )
+    from cdprctl.model import load_robot
+
+    def swallowed() -> None:
+        with contextlib.suppress(StartupInterrupted):  # as a C callback: it goes nowhere
+            signal.raise_signal(signal.SIGTERM)
+
+    startup = ControllerManager.startup
+
+    def startup_swallowing(self, *a, **k):
+        startup(self, *a, **k)
+        swallowed()
+
+    previous = interrupt_the_start_up()
+    try:
+        swallowed()
+        with pytest.raises(StartupInterrupted, match="SIGTERM"):
+            stop_if_interrupted()
+        for when in ("before", "during"):  # the kernels' loading; the drives' set-up (last)
+            interrupt_the_start_up()  # as `cdprctl run` does, each run from a clean slate
+            out = io.StringIO()
+            d = Daemon(load_robot(CONFIG / "rowc.toml"), sim=True, overrides={},
+                       realtime=False, status_every=0.0, out=out)  # fmt: skip
+            with pytest.MonkeyPatch.context() as mp:
+                if when == "before":
+                    swallowed()
+                else:
+                    mp.setattr(ControllerManager, "startup", startup_swallowing)
+                code = d.run(duration=1.0, demo=False)
+            assert code == 0
+            assert d.stats.count == 0 and "ready:" not in out.getvalue(), when
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+    assert signal.getsignal(signal.SIGTERM) is previous[signal.SIGTERM]
+
+
+def test_the_loop_alone_runs_at_sched_fifo():
+    """The start-up (a minute of compiles on a first run) and the shut-down run at the normal
+    scheduler; only the loop at SCHED_FIFO, pinned (a start-up at FIFO held a second daemon's
+    loop on the same CPU for 0.7 s: a lost heartbeat, a fault)."""
+    from cdprctl.control.manager import ControllerManager
+    from cdprctl.daemon.service import Daemon
+    from cdprctl.model import load_robot
+
+    seen: dict[str, int] = {}
+    model = load_robot(CONFIG / "rowc.toml")  # not the test process's memory locked for good
+    control = dataclasses.replace(model.control, lock_memory=False, freeze_gc=False)
+    d = Daemon(dataclasses.replace(model, control=control), sim=True, overrides={},
+               realtime=True, status_every=0.0, out=io.StringIO())  # fmt: skip
+    startup, run = ControllerManager.startup, ControllerManager.run
+
+    def watched_startup(self, *a, **k):
+        seen["start-up"] = os.sched_getscheduler(0)
+        return startup(self, *a, **k)
+
+    def watched_run(self, *a, **k):
+        seen["loop"] = os.sched_getscheduler(0)
+        return run(self, *a, **k)
+
+    shutdown = d.driver.shutdown
+
+    def watched_shutdown() -> None:  # right after the loop
+        seen["shut-down"] = os.sched_getscheduler(0)
+        seen["cpus"] = len(os.sched_getaffinity(0))
+        shutdown()
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ControllerManager, "startup", watched_startup)
+        mp.setattr(ControllerManager, "run", watched_run)
+        mp.setattr(d.driver, "shutdown", watched_shutdown)
+        try:
+            assert d.run(duration=0.2, demo=False) == 0
+        finally:
+            rt.leave_realtime()
+    assert seen["start-up"] == os.SCHED_OTHER
+    if seen["loop"] != os.SCHED_FIFO:
+        pytest.skip("SCHED_FIFO not permitted here")
+    assert seen["shut-down"] == os.SCHED_OTHER and seen["cpus"] == len(rt.ALLOWED_CPUS)

@@ -6,6 +6,7 @@ process group, helpers included, as a terminal sends it."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -31,6 +32,14 @@ def cdprctl(*args: str, timeout: float = 120.0) -> tuple[int, str, float]:
 def assert_clean(out: str) -> None:
     for word in NOISE:
         assert word not in out, f"{word!r} in:\n{out}"
+
+
+def group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def free_port() -> int:
@@ -142,4 +151,44 @@ def test_no_calibration_record_is_one_line_with_the_command_and_exit_4(tmp_path)
     assert code == 4, out
     assert "cdprctl run: refusing to enable the drives:" in out
     assert "cdprctl calibrate" in out
+    assert_clean(out)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_stop_during_the_start_up_closes_what_it_opened_in_one_line(sig):
+    """SIGTERM (systemd's stop) or SIGINT to the daemon alone while it starts — here while it
+    waits for drives that are not there (a CAN bus no drive is on), its Zenoh gateway
+    running: one line, exit 0, and no process of its group left (SIGTERM had killed it
+    mid-way, the gateway left running; Ctrl-C printed a traceback from a kernel's compile)."""
+    zport = free_port()
+    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", ROWC, "--no-realtime",
+           "--can-interface", "udp_multicast", "--can-channel", "239.74.163.2",
+           "--zenoh", "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting"]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         start_new_session=True, cwd=ROOT)  # fmt: skip
+    try:
+        assert p.stdout is not None
+        lines = []
+        for line in p.stdout:
+            lines.append(line)
+            if line.startswith("start-up:"):
+                break
+        time.sleep(1.0)  # in the kernels' loading or the drives' set-up: both are start-up
+        p.send_signal(sig)
+        rest = p.stdout.read()
+        code = p.wait(timeout=30)
+        left = time.monotonic() + 5.0
+        while group_alive(p.pid) and time.monotonic() < left:
+            time.sleep(0.05)
+        assert not group_alive(p.pid)  # the gateway (and multiprocessing's tracker) went too
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+    out = "".join(lines) + rest
+    assert code == 0, out
+    assert f"cdprctl run: stopped by {sig.name} during the start-up; the drives were not " \
+        "enabled" in rest, out
     assert_clean(out)

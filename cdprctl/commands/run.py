@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from typing import Any
 
@@ -176,8 +177,10 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             print(f"cdprctl run: error: --foxglove = {exc}", file=sys.stderr)
             return 2
+    from cdprctl.daemon.startup import StartupInterrupted, interrupt_the_start_up
     from drivers.errors import DriverError
 
+    previous = interrupt_the_start_up()
     try:
         daemon = Daemon(
             model,
@@ -190,8 +193,14 @@ def run(args: argparse.Namespace) -> int:
             state_dir=args.state_dir,
             foxglove=args.foxglove,
         )
+        demo = (args.sim or args.demo) and not args.no_demo and path is None
+        return daemon.run(args.duration, demo, args.disturbance, path)
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)
         return 1
-    demo = (args.sim or args.demo) and not args.no_demo and path is None
-    return daemon.run(args.duration, demo, args.disturbance, path)
+    except StartupInterrupted as exc:  # building the simulated robot compiles for ~10 s
+        print(exc.message, file=sys.stderr)
+        return exc.code
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

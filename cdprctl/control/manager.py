@@ -31,6 +31,13 @@ class ControllerManager:
         self.controller = Controller(model, DriveView(driver), tda)
         self.data: ControlData = self.controller.data
         self._clock_ns = time.perf_counter_ns
+        self._warm = False
+
+    def warm_up(self) -> None:
+        """Every kernel of the cycle compiled or loaded (``warm_up.py``); once."""
+        if not self._warm:
+            warm_up(self.controller)
+            self._warm = True
 
     def startup(
         self,
@@ -41,7 +48,7 @@ class ControllerManager:
         → READY. ``calibration(driver)``, with the drives configured: the encoders' offsets
         (``theta_zero`` rad, ``drum_scale``; None: zero at home), or it raises. Raises on
         failure."""
-        warm_up(self.controller)  # before the drives start (cdprctl/control/warm_up.py)
+        self.warm_up()  # before the drives start (cdprctl/control/warm_up.py)
         d = self.driver
         d.configure(timeout)
         found = calibration(d) if calibration is not None else None

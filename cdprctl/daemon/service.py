@@ -34,8 +34,15 @@ from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script
 from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
 from cdprctl.daemon.sim_step import SimStepper
-from cdprctl.daemon.startup import StartupRefusedError, start_up
+from cdprctl.daemon.startup import (
+    StartupInterrupted,
+    StartupRefusedError,
+    end_of_start_up,
+    forget_stop_signals,
+    start_up,
+)
 from cdprctl.model.robot import RobotModel
+from cdprctl.tda import tda_options_of
 
 
 class Daemon:
@@ -61,6 +68,10 @@ class Daemon:
         self.assume_home = sim or model.drives.assume_home_at_start
         self.record: Any = None
         self.out = out if out is not None else sys.stdout
+        # first, before the simulated robot is built (its first build compiles for ~10 s)
+        self._print(f"cdprctl run: {model.name}, {model.n_cables} {model.drives.driver} drives, "
+                    f"{model.control.rate:g} Hz, TDA {tda_options_of(model).method.value}"
+                    + (", simulated robot" if sim else ""))  # fmt: skip
         self.status_every, self.timing_file, self.realtime = status_every, timing_file, realtime
         self._cycle_done = threading.Event()  # set by the loop after each cycle
         period = model.control.period
@@ -90,13 +101,14 @@ class Daemon:
         """``path``: (name, text, units) of a path file to play once (enable, the path, disable);
         checked whole before the drives are enabled (exit 2 when rejected)."""
         m, d = self.model, self.data
-        self._print(f"cdprctl run: {m.name}, {m.n_cables} {m.drives.driver} drives, "
-                    f"{m.control.rate:g} Hz, TDA {d.tda_method}"
-                    + (", simulated robot" if self.sim else ""))  # fmt: skip
         self._print(gains_line(m, d))
         try:
             script = start_up(self, path)
-        except StartupRefusedError as exc:
+            # from here a signal is the loop's controlled stop (until now: the start-up's end)
+            old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+            end_of_start_up()  # a signal whose exception a library swallowed ends it here
+        except (StartupRefusedError, StartupInterrupted) as exc:
+            forget_stop_signals()
             self._print(exc.message, err=True)
             if self.realtime:
                 rt.restore_gc()  # as after a run: what the start-up built is collectable again
@@ -109,7 +121,9 @@ class Daemon:
         self._print(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
         notify("READY=1")
-        old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+        if self.realtime:  # the helper threads started below leave the loop's CPU and priority
+            for w in rt.schedule_realtime(m.control.sched_priority, m.control.cpu):
+                self._print(f"warning: {w}", err=True)
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip
         interval = watchdog_interval()
@@ -123,9 +137,8 @@ class Daemon:
                              plant_step=plant_step)  # fmt: skip
         finally:
             if self.realtime:
+                rt.leave_realtime()
                 rt.restore_gc()
-            for s, h in old.items():
-                signal.signal(s, h)
             if wd is not None:
                 wd.stop()
             if self.timing_file:
@@ -141,8 +154,12 @@ class Daemon:
             self._print(line)
         if path is not None and not self.stop_requested.is_set():
             self._print(f"path {path[0]}: {d.path_state or 'not run'}")
-            return 0 if d.path_state == "done" else 3
-        return 0 if d.state is not State.FAULT or self.stop_requested.is_set() else 3
+            code = 0 if d.path_state == "done" else 3
+        else:
+            code = 0 if d.state is not State.FAULT or self.stop_requested.is_set() else 3
+        for s, h in old.items():  # a signal during the shut-down above only asked again
+            signal.signal(s, h)
+        return code
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if not self.stop_requested.is_set():

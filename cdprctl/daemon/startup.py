@@ -1,10 +1,12 @@
-"""The daemon's start-up, in order: the links (gateway, view), the real-time settings, the
-calibration record, the drives and the pose (``ControllerManager.startup``), a ``--path``
-checked whole. Each refusal is one ``StartupRefusedError`` with its line and exit code; the caller
-closes what was opened."""
+"""The daemon's start-up, in order: the links (gateway, view), the calibration record, the
+compiled kernels, memory locked, the drives and the pose (``ControllerManager.startup``), a
+``--path`` checked whole — all at the normal scheduler (SCHED_FIFO only for the loop). Each
+refusal is one ``StartupRefusedError`` with its line and exit code; the caller closes what was
+opened."""
 
 from __future__ import annotations
 
+import signal
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,6 +27,57 @@ class StartupRefusedError(Exception):
         self.message, self.code = message, code
 
 
+class StartupInterrupted(KeyboardInterrupt):
+    """SIGTERM or SIGINT before ``ready``: nothing was enabled, so the stop is the start-up's
+    end — what was opened closed, one line, exit 0 (as a stop after ``ready``)."""
+
+    code = 0
+
+    def __init__(self, signame: str):
+        super().__init__(signame)
+        self.message = (f"cdprctl run: stopped by {signame} during the start-up; the drives "
+                        "were not enabled")  # fmt: skip
+
+
+_received: list[str] = []  # the stop signals received during the start-up, by name
+
+
+def interrupt_the_start_up() -> dict[signal.Signals, Any]:
+    """SIGTERM and SIGINT raise ``StartupInterrupted`` until the loop installs its controlled
+    stop (``Daemon.run``): without it, SIGTERM killed the start-up mid-way (its helper
+    processes left running) and Ctrl-C printed a traceback from inside a kernel's compile.
+    The signal is also kept: raised inside a library's callback (llvmlite's object cache,
+    during a compile) the exception was swallowed and the start-up went on to ``ready``, so
+    ``stop_if_interrupted`` raises it again at the start-up's steps. Returns the handlers it
+    replaced."""
+    _received.clear()
+
+    def raise_it(signum: int, _frame: object) -> None:
+        _received.append(signal.Signals(signum).name)
+        raise StartupInterrupted(_received[-1])
+
+    return {s: signal.signal(s, raise_it) for s in (signal.SIGTERM, signal.SIGINT)}
+
+
+def stop_if_interrupted() -> None:
+    """Raise ``StartupInterrupted`` if a stop signal came during the start-up."""
+    if _received:
+        raise StartupInterrupted(_received[0])
+
+
+def forget_stop_signals() -> None:
+    _received.clear()
+
+
+def end_of_start_up() -> None:
+    """The start-up's last check, once the loop's stop handling is installed: raise if a stop
+    signal came, and forget it either way (a later run in this process starts clean)."""
+    got = _received[:1]
+    _received.clear()
+    if got:
+        raise StartupInterrupted(got[0])
+
+
 def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None:
     """Everything before ``ready``; returns the ``--path`` script (planned), if any."""
     from cdprctl.calibration.record import CalibrationError
@@ -37,13 +90,6 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     for link in dm.links.links:  # what each link is, once it runs
         for text, err in link.announcement():
             dm._print(text, err=err)
-    # real-time settings next (the gateway, started before, keeps its own CPU affinity);
-    # locking memory and freezing the collector take a while, and once the drives are started
-    # their heartbeats are watched
-    if dm.realtime:
-        rc = m.control
-        for w in rt.apply_realtime(rc.sched_priority, rc.cpu, rc.lock_memory, rc.freeze_gc):
-            dm._print(f"warning: {w}", err=True)
 
     def refused(why: str) -> StartupRefusedError:  # no enable without a valid calibration
         return StartupRefusedError(f"cdprctl run: refusing to enable the drives: {why}; "
@@ -61,6 +107,12 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
     dm._print("start-up: loading the compiled kernels (the first run on a machine compiles "
               "them: about a minute), configuring the drives, estimating the pose")  # fmt: skip
+    stop_if_interrupted()
+    dm.manager.warm_up()
+    stop_if_interrupted()
+    if dm.realtime:  # SCHED_FIFO comes last, right before the loop (Daemon.run)
+        for w in rt.lock_memory_and_freeze_gc(m.control.lock_memory, m.control.freeze_gc):
+            dm._print(f"warning: {w}", err=True)
     try:
         dm.manager.startup(calibration=None if dm.assume_home else _calibration(dm))
     except CalibrationError as exc:
