@@ -359,9 +359,7 @@ class WinchDriver(ABC):
         """Cable ``c``'s drive fault, if any."""
 
     @abstractmethod
-    def _write_frames(
-        self, t: float, torques: np.ndarray, setup: bool = False
-    ) -> DriverError | None:
+    def _write_frames(self, t: float, torques: np.ndarray, setup: bool) -> DriverError | None:
         """Encode and send the cycle's frames for the torques (N·m; in position mode with
         ``self.targets``); an error when sending keeps failing, never raise. ``setup``: a
         write of the set-up's own cycling, not of the control loop."""

@@ -15,6 +15,7 @@ import numpy as np
 
 from drivers.base import WinchDriver
 from drivers.buses import TrafficLog, media_key, media_of, open_bus
+from drivers.errors import DriverError, DriverOperationError
 
 
 class CanWinchDriver(WinchDriver):
@@ -102,6 +103,17 @@ class CanWinchDriver(WinchDriver):
                 self._send_fail_streak += n - sent
             else:
                 self._send_fail_streak = 0
+
+    #: sends failed in a row that end the cycle's writing in an error: one is a full TX queue
+    #: for a moment, ten in a row (a cycle's frames to a few drives) a bus that is off
+    MAX_SEND_FAILS = 10
+
+    def _sends_failing(self) -> DriverError | None:
+        if self._send_fail_streak > self.MAX_SEND_FAILS:
+            return DriverOperationError(
+                f"CAN send failed {self._send_fail_streak} times in a row (bus off or TX full)"
+            )
+        return None
 
     def _send(self, b: int, msg: can.Message) -> bool:
         """Send on bus ``b`` without blocking (staged while batching: counted at the flush); a

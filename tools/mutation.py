@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import ast
 import datetime as dt
+import hashlib
 import json
 import os
 import platform
@@ -165,7 +166,11 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     command = (f"sh tools/mutation_pytest.sh {sys.executable} {base} '{stems}' "
                f"-x -q -p no:cacheprovider {t.tests}")  # fmt: skip
     cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline), command))
+    if db.exists() and not fresh and session_is_stale(t, tree):
+        log(f"{t.name}: {t.module} changed since its session was made: starting it anew")
+        fresh = True
     if fresh or not db.exists():
+        (OUT / f"{t.name}.sha256").write_text(module_digest(tree, t.module) + "\n")
         run(tool("cosmic-ray"), "init", str(cfg), str(db), "--force")
         run(tool("cr-filter-operators"), str(db), str(cfg))
         run(tool("cr-filter-pragma"), str(db))
@@ -184,14 +189,45 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s)")
 
 
+def module_digest(tree: Path, module: str) -> str:
+    return hashlib.sha256((tree / module).read_bytes()).hexdigest()
+
+
+def old_lines(diff: str) -> dict[int, str]:
+    """The unmutated file's lines a unified diff shows (context and removed), by number."""
+    out: dict[int, str] = {}
+    n = 0
+    for x in diff.splitlines():
+        hunk = re.match(r"@@ -(\d+)", x)
+        if hunk:
+            n = int(hunk.group(1))
+        elif n and x[:1] in (" ", "-") and not x.startswith("---"):
+            out[n] = x[1:]
+            n += 1
+    return out
+
+
+def session_is_stale(t: Target, tree: Path) -> bool:
+    """Whether the module changed since its session was made: its digest then (kept beside
+    the session), or, for a session without one, a line of the session's diffs that no longer
+    reads as it did."""
+    digest = OUT / f"{t.name}.sha256"
+    if digest.exists():
+        return digest.read_text().strip() != module_digest(tree, t.module)
+    source = [*(tree / t.module).read_text().splitlines(), ""]  # diffs show the end's ""
+    lines = (item for m in read_session(t, tree) for item in old_lines(m.raw_diff).items())
+    return any(n > len(source) or source[n - 1] != text for n, text in lines)
+
+
 @dataclass
 class Mutant:
     module: str
     operator: str
     line: int
-    source: str  # the line as it stands (stripped)
+    source: str  # the mutated line as the session found it (stripped)
     diff: str  # the changed line(s), "- old / + new"
     outcome: str  # killed, survived, timeout, incompetent, skipped
+    raw_diff: str = ""  # cosmic-ray's unified diff of the mutant
     equivalent: str = ""  # why, where it is written down as equivalent
 
 
@@ -219,8 +255,11 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
             outcome = result.get("test_outcome") or result.get("worker_outcome") or "?"
         changed = [x for x in ((result or {}).get("diff") or "").splitlines()
                    if x[:1] in "+-" and not x.startswith(("+++", "---"))]  # fmt: skip
-        mutants.append(Mutant(t.module, mu["operator_name"], line, source[line - 1].strip(),
-                              " / ".join(c.strip() for c in changed), outcome))  # fmt: skip
+        raw = (result or {}).get("diff") or ""
+        before = old_lines(raw)  # the line as the session found it, else as it is now
+        text = before.get(line, source[line - 1] if line <= len(source) else "").strip()
+        mutants.append(Mutant(t.module, mu["operator_name"], line, text,
+                              " / ".join(c.strip() for c in changed), outcome, raw))  # fmt: skip
         output = (result or {}).get("output") or ""
         if outcome == "survived" and output.startswith(EQUIVALENT_PREFIX):
             mutants[-1].equivalent = output.removeprefix(EQUIVALENT_PREFIX)
@@ -258,6 +297,10 @@ def report(targets: list[Target], tree: Path) -> str:
         ms = [m for m in all_mutants if m.module == t.module]
         if not ms:
             rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
+            continue
+        if session_is_stale(t, tree):  # its figures are of a file that is no longer there
+            rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
+                        f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue
         run = [m for m in ms if m.outcome not in ("skipped", "pending")]
         killed = [m for m in run if m.outcome in ("killed", "timeout", "incompetent")]
@@ -386,9 +429,9 @@ def main(argv: list[str] | None = None) -> int:
 
         with ThreadPoolExecutor(len(trees)) as pool:
             list(pool.map(worker, trees))
-    else:
-        sync_tree(trees[0])
-    REPORT.write_text(report(TARGETS, trees[0]))
+    # against the working tree: a copy may hold a mutant of a run going on (syncing it for the
+    # report had put the original back under that mutant's tests)
+    REPORT.write_text(report(TARGETS, ROOT))
     print(f"mutation: {REPORT.relative_to(ROOT)} written")
     return 0
 

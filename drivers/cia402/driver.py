@@ -29,7 +29,6 @@ from drivers.cia402.sdo_client import SdoClient
 from drivers.errors import (
     DriveFaultError,
     DriverError,
-    DriverOperationError,
 )
 from drivers.registry import register_driver
 from drivers.vocabulary import Lifecycle
@@ -293,9 +292,7 @@ class Cia402Driver(CanWinchDriver):
             )
         return None
 
-    def _write_frames(
-        self, t: float, torques: np.ndarray, setup: bool = False
-    ) -> DriverError | None:
+    def _write_frames(self, t: float, torques: np.ndarray, setup: bool) -> DriverError | None:
         reset = self._reset_request
         if reset:
             self._reset_request -= 1
@@ -365,8 +362,4 @@ class Cia402Driver(CanWinchDriver):
             for b in self.media:
                 self._send(b, self._hb)
             self._last_hb_sent = t
-        if self._send_fail_streak > 10:
-            return DriverOperationError(
-                f"CAN send failed {self._send_fail_streak} times in a row (bus off or TX full)"
-            )
-        return None
+        return self._sends_failing()

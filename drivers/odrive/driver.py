@@ -16,7 +16,7 @@ import numpy as np
 
 from drivers import blocking
 from drivers.canbase import CanWinchDriver
-from drivers.errors import DriveFaultError, DriverError, DriverOperationError
+from drivers.errors import DriveFaultError, DriverError
 from drivers.odrive import protocol as p
 from drivers.registry import register_driver
 from drivers.vocabulary import DriveState
@@ -131,9 +131,7 @@ class ODriveDriver(CanWinchDriver):
             return DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
         return None
 
-    def _write_frames(
-        self, t: float, torques: np.ndarray, setup: bool = False
-    ) -> DriverError | None:
+    def _write_frames(self, t: float, torques: np.ndarray, setup: bool) -> DriverError | None:
         if self._clear:
             for c in range(self.m):
                 self._send_cmd(c, p.CLEAR_ERRORS, b"")
@@ -153,6 +151,4 @@ class ODriveDriver(CanWinchDriver):
             msg = self._torque_msg[c]
             pack(msg.data, 0, float(torques[c]))
             self._send(int(self.bus_of[c]), msg)
-        if self._send_fail_streak > 10:
-            return DriverOperationError(f"CAN send failed {self._send_fail_streak} times in a row")
-        return None
+        return self._sends_failing()
