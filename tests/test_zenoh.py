@@ -686,6 +686,50 @@ def test_send_says_when_nothing_listens_at_the_endpoint(capsys):
     assert f"cannot connect to tcp/127.0.0.1:{port}: nothing listens there" in err, err
 
 
+def test_jog_and_record_say_why_they_hear_nothing(capsys, monkeypatch, tmp_path):
+    """No daemon at the endpoint: jog (before taking the terminal) and record (after its
+    duration) say that nothing listens there, exit 2 — not a screen of guesses or an empty
+    recording."""
+    import cdprctl.commands.jog as jog_cmd
+
+    port = free_port()
+    where = ["--robot", "rowc", "--connect", f"tcp/127.0.0.1:{port}", "--no-multicast-scouting"]
+    monkeypatch.setattr(jog_cmd.os, "isatty", lambda fd: True)  # as from a terminal
+    monkeypatch.setattr(jog_cmd.sys, "stdin", type("Tty", (), {"fileno": lambda self: 0})())
+    assert main(["jog", *where]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"cdprctl jog: cannot connect to tcp/127.0.0.1:{port}: nothing "
+                          "listens there"), err  # fmt: skip
+    assert main(["record", *where, "--duration", "0.3", "--output", str(tmp_path)]) == 2
+    out = capsys.readouterr()
+    assert "(no status yet: cannot connect to" in out.out
+    assert f"no state recorded: cannot connect to tcp/127.0.0.1:{port}" in out.err
+
+
+def test_the_jog_tool_notices_a_command_without_a_reply():
+    """A command with an id (enable, disable, reset, stop) unanswered for NO_REPLY s is
+    reported once (the screen then says why: its ACL, commands off, no robot); a reply in
+    time, or a jog (no id, no reply), is not."""
+    from cdprctl.commands.jog import NO_REPLY, Jogger
+
+    class Session:
+        def put(self, key: str, body: str) -> None:
+            self.last = json.loads(body)
+
+    s = Session()
+    j = Jogger(s, "cdpr/rowc", {}, 2, "base")
+    t0 = time.monotonic()
+    j.put("enable")
+    assert j.unanswered(t0 + NO_REPLY - 0.1, None) == ""
+    assert j.unanswered(t0 + NO_REPLY + 0.1, None) == "enable"
+    assert j.unanswered(t0 + 2 * NO_REPLY, None) == ""  # once
+    j.put("disable")
+    assert j.unanswered(time.monotonic() + 0.5, s.last["id"]) == ""  # answered
+    assert j.unanswered(time.monotonic() + 3 * NO_REPLY, None) == ""
+    j.put("jog", {"velocity": [0.0] * 6, "frame": "base"})
+    assert j.unanswered(time.monotonic() + 3 * NO_REPLY, None) == ""
+
+
 def test_the_daemon_refuses_to_start_with_open_commands():
     res = subprocess.run(
         [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(CONFIG / "rowc.toml"),

@@ -19,6 +19,7 @@ from cdprctl.commands.zenoh_session import (
     key_prefix,
     robot_status,
     tool_session,
+    why_no_answer,
 )
 
 # key → (coordinate, sign): x y z (m/s), roll pitch yaw (rad/s about the frame's axes)
@@ -38,6 +39,7 @@ HOLD_FIRST = 0.7  # s
 HOLD = 0.15  # s
 REPEAT = 0.1  # s: key events closer than this are a held key's repeats
 SEND_EVERY = 0.05  # s: well inside the daemon's deadman (default 0.2 s)
+NO_REPLY = 2.0  # s: a daemon answers a command within a cycle or two; none by then is news
 
 HELP = """\
 keys (hold to move; a terminal repeats a held key after ~0.5 s, so a tap moves a bit):
@@ -72,14 +74,29 @@ class Jogger:
         self.quit = False
         self.state = ""  # the robot's, as last received
         self._ids = 0
+        self.awaiting: tuple[str, str, float] | None = None  # (kind, id, sent at s)
 
     def put(self, kind: str, payload: dict[str, Any] | None = None) -> None:
-        """A command; every one but the jogs carries an id, so its reply is shown."""
+        """A command; every one but the jogs carries an id, so its reply is shown (and its
+        absence noticed: ``unanswered``)."""
         body = dict(payload or {})
         if kind != "jog":
             self._ids += 1
             body["id"] = f"jog-tool-{self._ids}"
+            self.awaiting = (kind, body["id"], time.monotonic())
         self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(body))
+
+    def unanswered(self, now: float, replied: str | None) -> str:
+        """The kind of the last command with an id if it has had no reply for ``NO_REPLY`` s
+        (then forgotten), else "" (``replied``: the id of a reply just received)."""
+        if self.awaiting is None or replied == self.awaiting[1]:
+            self.awaiting = None
+            return ""
+        kind, _, sent = self.awaiting
+        if now - sent <= NO_REPLY:
+            return ""
+        self.awaiting = None
+        return kind
 
     def can_jog(self) -> bool:
         """Jogs are taken in enabled and moving only: elsewhere each would be refused (a held
@@ -195,6 +212,7 @@ def jog(args: argparse.Namespace) -> int:
         if not str(body.get("id") or "").startswith("jog-tool-") and body.get("ok"):
             return  # another client's
         with lock:
+            latest["replied"] = body.get("id")
             latest["note"] = (f"{kind}: accepted" if body.get("ok")
                               else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
 
@@ -211,10 +229,18 @@ def jog(args: argparse.Namespace) -> int:
     subs = [session.declare_subscriber(f"{prefix}/state", on_state),
             session.declare_subscriber(f"{prefix}/reply/*", on_reply),
             session.declare_subscriber(f"{prefix}/events", on_event)]  # fmt: skip
-    limits = robot_status(session, prefix).get("config", {}).get("limits", {})
+    status = robot_status(session, prefix)
+    if not status:  # nothing to jog: say why before the screen takes the terminal
+        why = why_no_answer(session, args, prefix, command=False)
+        for sub in subs:
+            sub.undeclare()
+        session.close()
+        print(f"cdprctl jog: {why}", file=sys.stderr)
+        return 2
+    limits = status.get("config", {}).get("limits", {})
     j = Jogger(session, prefix, limits, args.speed, args.frame)
     if not limits:
-        j.note = f"no status from {prefix}: the limits are guesses (0.1 m/s, 0.1 rad/s)"
+        j.note = f"no limits in {prefix}'s status: guessed (0.1 m/s, 0.1 rad/s)"
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     next_draw = 0.0
@@ -232,6 +258,11 @@ def jog(args: argparse.Namespace) -> int:
                     if "note" in latest:
                         j.note = latest.pop("note")
                     state = latest.get("state")
+                    replied = latest.pop("replied", None)
+                lost = j.unanswered(now, replied)
+                if lost:  # a command the gateway dropped: say why
+                    why = why_no_answer(session, args, prefix)
+                    j.note = f"{lost}: no reply in {NO_REPLY:g} s: {why}"
                 j.state = str(state.get("state", "")) if state else ""
                 sys.stdout.write(_view(j, state, prefix))
                 sys.stdout.flush()

@@ -283,7 +283,7 @@ def record(args: argparse.Namespace) -> int:
         (out / "meta.json").write_text(json.dumps(status, indent=1))
         end = time.monotonic() + args.duration if args.duration else float("inf")
         until = f"for {args.duration:g} s" if args.duration else "until Ctrl-C"
-        found = "" if status else " (no status from the robot yet: is it running?)"
+        found = "" if status else f" (no status yet: {why_no_answer(session, args, prefix, False)})"
         print(f"cdprctl record: recording {prefix} into {out} {until}{found}", flush=True)
         next_note = time.monotonic() + 5.0
         try:
@@ -298,6 +298,9 @@ def record(args: argparse.Namespace) -> int:
             pass
         for s in subs:
             s.undeclare()
+        with lock:
+            heard = bool(rows["state"])
+        why = "" if heard else why_no_answer(session, args, prefix, command=False)
     finally:
         session.close()
     with lock:
@@ -311,7 +314,10 @@ def record(args: argparse.Namespace) -> int:
         f"cdprctl record: {n['state']} states, {n['timing']} timing, {n['events']} events → {out}"
         + (" (CSV, telemetry.mcap)" if args.mcap else "")
     )
-    return 0 if n["state"] else 1
+    if not n["state"]:
+        print(f"cdprctl record: no state recorded: {why}", file=sys.stderr)
+        return 2
+    return 0
 
 
 def _write_csvs(out: Path, rows: dict[str, list[Any]]) -> dict[str, int]:
