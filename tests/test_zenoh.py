@@ -205,6 +205,7 @@ class Robot:
         duration: float = 60.0,
         config: str = "rowc.toml",
         scheme: str = "tcp",
+        env: dict[str, str] | None = None,
     ):
         self.port = free_port()
         self.endpoint = f"{scheme}/127.0.0.1:{self.port}"
@@ -232,6 +233,7 @@ class Robot:
             stderr=subprocess.STDOUT,
             text=True,
             cwd=ROOT,
+            env={**os.environ, **(env or {})},
         )
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._read, daemon=True)
@@ -312,9 +314,10 @@ def robot_and_client():
     made: list[Any] = []
 
     def make(
-        extra: list[str], client_config: str = "", robot_file: str = "rowc.toml", scheme="tcp"
+        extra: list[str], client_config: str = "", robot_file: str = "rowc.toml", scheme="tcp",
+        env: dict[str, str] | None = None,
     ) -> tuple[Robot, Client]:
-        robot = Robot(extra, config=robot_file, scheme=scheme)
+        robot = Robot(extra, config=robot_file, scheme=scheme, env=env)
         made.append(robot)
         prefix = "cdpr/" + load_robot(CONFIG / robot_file).name
         client = Client(robot.endpoint, client_config, prefix)
@@ -450,6 +453,11 @@ def operator_enables(robot: Robot, viewer: Client, operator_config: str) -> None
     assert robot.stop() == 0
 
 
+#: RUST_LOG for the gateway that shows who Zenoh refused (docs/telemetry.md)
+WHO_WAS_REFUSED = ("zenoh::net::routing::interceptor::access_control=trace,"
+                   "zenoh_transport::unicast::establishment::accept=debug")  # fmt: skip
+
+
 def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path,
                                                                capsys):  # fmt: skip
     """config/zenoh/gateway-acl.json5 (default deny) with its dictionary moved to a temporary
@@ -471,6 +479,7 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     robot, viewer = robot_and_client(
         ["--accept-commands", "--zenoh-config", str(tmp_path / "gw.json5")],
         str(tmp_path / "viewer.json5"),
+        env={"RUST_LOG": WHO_WAS_REFUSED},
     )
     assert viewer.wait(lambda: len(viewer.states) > 0), "\n".join(robot.lines)
     viewer.put("enable", {"id": "v"})
@@ -511,6 +520,15 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     # each command the gateway saw is logged once, with its id and kind
     assert sum("command enable id=o: accepted" in x for x in robot.lines) == 1
     assert not any("id=v" in x or "id=m" in x for x in robot.lines)  # dropped before it
+    # ... and those Zenoh dropped, in Zenoh's log when asked for (docs/telemetry.md): who,
+    # what, where; the wrong password
+    denied = [x for x in robot.lines if "is unauthorized to Put (ingress) on cdpr/rowc/cmd/"
+              "enable" in x and "Msg intercepted" not in x]  # fmt: skip
+    assert any("Username(viewer)" in x for x in denied), "\n".join(robot.lines[-40:])
+    assert any("Username(maintenance)" in x for x in denied)
+    assert not any("Username(operator)" in x for x in denied)
+    assert any("Invalid password" in x for x in robot.lines)
+    assert not any("\x1b[" in x for x in robot.lines)  # plain text for the journal
 
 
 def test_gripper_commands_state_and_report_over_zenoh(robot_and_client, tmp_path):

@@ -44,6 +44,9 @@ def gateway_main(
     from cdprctl.telemetry.session import open_session
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
+    if os.environ.get("RUST_LOG"):  # Zenoh's own log, asked for (docs/telemetry.md: who was
+        os.environ.setdefault("NO_COLOR", "1")  # refused): plain text for the journal
+        zenoh.try_init_log_from_env()
     zc = model.zenoh
     parent = os.getppid()
     snap = SharedSnapshot(model.n_cables, shm_name, g=len(model.grippers))
