@@ -2,8 +2,9 @@
 takes as written: parsed by cdprctl's own parser (an unknown option, a missing argument or a
 wrong sub-command fails here, not in a user's terminal), a Zenoh tool given the robot it talks
 to (``--robot`` or ``--prefix``: a documented step once had neither), and every file it names
-by a path in this repository present. Running them all is the other tests' work (the daemon,
-the tools against a live gateway); a command that needs a robot cannot run here."""
+by a path in this repository present. Those that need no robot are run as written (exit 0,
+their plots written); the daemon and the tools against a live gateway are the other tests'
+work."""
 
 from __future__ import annotations
 
@@ -90,3 +91,37 @@ def test_a_documented_command_is_taken_as_written(where, text, capsys):
             if any(p in value for p in ("robot.toml", "my_", "FILE", "runs/")):
                 continue  # a placeholder for the user's own file
             assert (ROOT / value).exists(), f"{where}: {opt} {value}: no such file here"
+
+
+#: sub-commands that need no robot, no daemon and no recording: run as documented
+OFFLINE = {"check-config", "tda", "bus-load", "workspace", "path"}
+RUNNABLE = [(w, t) for w, t in COMMANDS if shlex.split(t)[0] in OFFLINE]
+
+
+def test_the_docs_have_commands_to_run():
+    assert len(RUNNABLE) >= 8
+
+
+@pytest.mark.parametrize("where, text", RUNNABLE, ids=[w for w, _ in RUNNABLE])
+def test_a_documented_offline_command_runs_as_written(where, text, tmp_path, monkeypatch,
+                                                      capsys):  # fmt: skip
+    """Run, not only parsed: from a directory like a checkout's (its config/ and paths/), so
+    what it writes (plots) lands in a temporary one; exit 0, no traceback, what it says it
+    wrote is there."""
+    from cdprctl.cli import main
+
+    for d in ("config", "paths"):
+        (tmp_path / d).symlink_to(ROOT / d)
+    monkeypatch.chdir(tmp_path)
+    argv = shlex.split(text)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # --help
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    assert code == 0, f"{where}: cdprctl {text}:\n{out.err}"
+    assert "Traceback" not in out.out + out.err
+    for opt, value in itertools.pairwise(argv):
+        if opt == "--plot":
+            made = list(tmp_path.glob(f"{value}*"))
+            assert made, f"{where}: --plot {value}: nothing written"
