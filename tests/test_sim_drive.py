@@ -5,8 +5,11 @@ says (CiA 402 §6.4.1)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
+import uuid
 
+import can
 import numpy as np
 import pytest
 from conftest import CONFIG, in_torque_mode
@@ -265,3 +268,85 @@ def test_a_following_error_window_of_all_ones_switches_the_check_off():
         rig.driver.configure()
         assert rig.net.drives[0].axis.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] == 0xFFFFFFFE
         assert math.isfinite(rig.plant.servo.window[0])
+
+
+class RawPeer:
+    """A plain python-can bus beside the simulated drives (lock-step, 1 ms steps): frames
+    written out byte by byte, what the drives send collected with its instant."""
+
+    def __init__(self) -> None:
+        from sim_backend.network import SimNetwork
+        from sim_backend.plant import CdprPlant
+
+        channel = f"raw-{uuid.uuid4().hex}"
+        model = load_robot(CONFIG / "rowc.toml")
+        self.net = SimNetwork(model, CdprPlant(model), {"interface": "inprocess",
+                                                        "channel": channel})  # fmt: skip
+        self.bus = can.Bus(interface="inprocess", channel=channel)
+        self.got: list[tuple[float, int, bytes]] = []
+
+    def send(self, arb: int, data: bytes) -> None:
+        self.bus.send(can.Message(arbitration_id=arb, data=data, is_extended_id=False))
+
+    def run(self, seconds: float) -> None:
+        for _ in range(round(seconds / 0.001)):
+            self.net.advance(0.001)
+            while (msg := self.bus.recv(0)) is not None:
+                self.got.append((self.net.time, msg.arbitration_id, bytes(msg.data)))
+
+    def heartbeats(self, node: int, since: float = -1.0) -> list[tuple[float, int]]:
+        return [(t, d[0]) for t, a, d in self.got if a == 0x700 + node and t > since]
+
+    def sdo(self, node: int, request: bytes) -> bytes | None:
+        before = len(self.got)
+        self.send(0x600 + node, request)
+        self.run(0.002)
+        return next((d for _, a, d in self.got[before:] if a == 0x580 + node), None)
+
+    def close(self) -> None:
+        self.bus.shutdown()
+        self.net.close()
+
+
+def test_heartbeats_at_the_producer_time_through_nmt_states_and_resets():
+    """CiA 301: a heartbeat (0x700 + node, one byte: the NMT state) every 0x1017 ms, none at
+    0; NMT stop (no SDO answered), pre-operational, an unknown command ignored; reset
+    communication restores 0x1000-0x1FFF and keeps 0x6007, reset node restores both; each
+    reset ends with the boot-up message and the heartbeat goes on."""
+    peer = RawPeer()
+    try:
+        peer.run(0.3)
+        assert peer.heartbeats(1) == []  # 0x1017 = 0 by default: none
+        assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, 0xD0, 0x07, 0, 0]))[0] == 0x60  # 2 s
+        assert peer.sdo(1, bytes([0x2B, 0x07, 0x60, 0, 2, 0, 0, 0]))[0] == 0x60  # 0x6007 := 2
+        peer.run(4.5)
+        beats = peer.heartbeats(1)
+        assert {s for _, s in beats} == {0x7F}  # pre-operational
+        gaps = {round(b[0] - a[0], 4) for a, b in itertools.pairwise(beats)}
+        assert gaps == {2.0} and len(beats) == 3  # to the ms
+        assert peer.heartbeats(2) == []
+        assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, 50, 0, 0, 0]))[0] == 0x60  # 50 ms
+        peer.run(0.2)
+        for command, state in ((0x01, 0x05), (0x03, 0x05), (0x00, 0x05), (0x02, 0x04),
+                               (0x83, 0x04), (0x80, 0x7F)):  # fmt: skip
+            t = peer.net.time
+            peer.send(0x000, bytes([command, 1]))
+            peer.run(0.12)
+            assert {s for _, s in peer.heartbeats(1, since=t + 0.002)} == {state}, command
+            if state == 0x04:  # stopped: no SDO answered
+                assert peer.sdo(1, bytes([0x40, 0x17, 0x10, 0, 0, 0, 0, 0])) is None
+        upload = bytes([0x40, 0x07, 0x60, 0, 0, 0, 0, 0])
+        for command, kept in ((0x82, 2), (0x81, None)):  # communication, then node
+            t = peer.net.time
+            peer.send(0x000, bytes([command, 1]))
+            peer.run(0.01)
+            assert peer.heartbeats(1, since=t)[0][1] == 0x00  # boot-up
+            assert peer.sdo(1, bytes([0x40, 0x17, 0x10, 0, 0, 0, 0, 0]))[4] == 0  # default
+            value = peer.sdo(1, upload)[4]
+            assert value == kept if kept is not None else value != 2
+            assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, 20, 0, 0, 0]))[0] == 0x60
+            t = peer.net.time
+            peer.run(0.2)
+            assert 9 <= len(peer.heartbeats(1, since=t)) <= 11  # the heartbeat goes on
+    finally:
+        peer.close()
