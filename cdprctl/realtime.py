@@ -22,7 +22,7 @@ def schedule_realtime(priority: int, cpu: int) -> list[str]:
     """The calling thread (the loop's) at SCHED_FIFO ``priority``, pinned to ``cpu`` (-1: the
     last). Right before the loop, after the start-up's work: a cold start compiles for a
     minute, and a FIFO task runs until it blocks — another real-time loop on that CPU then
-    waited for it (a second daemon faulted on a lost heartbeat, 0.7 s without a cycle).
+    waited for it (benchmarks/bench_second_daemon.py: the running daemon faulted).
     Returns one warning per setting that could not be applied."""
     warnings: list[str] = []
     try:
@@ -45,7 +45,8 @@ def schedule_realtime(priority: int, cpu: int) -> list[str]:
 def leave_realtime() -> None:
     """The calling thread back at the normal scheduler, on every allowed CPU: after the loop,
     before the shut-down's work (the collector's first pass over the start-up's objects, the
-    report) — at FIFO that work held another daemon's loop on the CPU for 1.3 s."""
+    report) — at FIFO that work held another daemon's loop on the CPU for 1.3 s (measured
+    beside a second daemon, benchmarks/bench_second_daemon.py)."""
     with contextlib.suppress(OSError, AttributeError):
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     if ALLOWED_CPUS:
