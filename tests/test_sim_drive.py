@@ -350,3 +350,36 @@ def test_heartbeats_at_the_producer_time_through_nmt_states_and_resets():
             assert 9 <= len(peer.heartbeats(1, since=t)) <= 11  # the heartbeat goes on
     finally:
         peer.close()
+
+
+def test_what_the_simulated_drive_answers_and_what_it_ignores():
+    """An SDO request of 7 bytes is not one (no answer); in PRE-OPERATIONAL a SYNC gets no
+    TPDO; an EMCY is a standard frame 0x80 + node: the code, the error register's generic bit,
+    five bytes 0; a value that equals a mode number written to another object is no mode
+    (0x6007 := 1, 0x6065 := 1 taken although 0x6502 has no mode 1), and only 0x6076 changes
+    the rated torque; 0x6072's default is the winch's limit in per mille of the rated torque."""
+    peer = RawPeer()
+    try:
+        model = peer.net.model
+        drive = peer.net.nodes[0][1]
+        assert peer.sdo(1, bytes([0x40, 0x18, 0x10, 1, 0, 0, 0])) is None
+        before = len(peer.got)
+        peer.send(0x080, b"")  # SYNC, the node pre-operational
+        peer.run(0.003)
+        assert not [a for _, a, _ in peer.got[before:] if 0x180 <= a < 0x500]
+        emcy = drive.inject_fault(0x2310)
+        assert emcy.arbitration_id == 0x81 and not emcy.is_extended_id
+        assert bytes(emcy.data) == bytes([0x10, 0x23, 0x01, 0, 0, 0, 0, 0])
+        rated = drive.axis.rated_torque
+        for index in (0x6007, 0x6065):
+            reply = peer.sdo(1, bytes([0x2B if index == 0x6007 else 0x23, index & 0xFF,
+                                       index >> 8, 0, 1, 0, 0, 0]))  # fmt: skip
+            assert reply is not None and reply[0] == 0x60, hex(index)
+        assert peer.sdo(1, bytes([0x23, 0x7A, 0x60, 0, 5, 0, 0, 0]))[0] == 0x60  # 0x607A := 5
+        assert drive.axis.rated_torque == rated
+        upload = peer.sdo(1, bytes([0x40, 0x72, 0x60, 0, 0, 0, 0, 0]))
+        winch = model.cables[0].winch
+        want = min(0xFFFF, round(winch.torque_limit / model.drives.rated_torque * 1000))
+        assert int.from_bytes(upload[4:6], "little") == want
+    finally:
+        peer.close()
