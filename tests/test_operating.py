@@ -150,6 +150,31 @@ def test_pause_resume_abort(rowc):
         assert "resume ignored: no paused path" in events(cl)
 
 
+def test_a_disable_mid_move_decelerates_before_the_brakes_close(rowc):
+    """The holding brakes are not for stopping a moving platform: a disable (the operator's,
+    or the daemon's on SIGTERM) during a move decelerates along the trajectory first; the
+    drives are disabled once it stands, the platform then at rest."""
+    with enabled(rowc) as cl:
+        c = cl.controller
+        cl.command("move", pose=np.array([1.9, 0.35, 0.5, 0.0, 0.0, 0.0]))
+        cl.run(1.0)
+        assert c.data.state.value == "moving"
+        assert np.linalg.norm(c.trajectory.velocity[:3]) > 0.05  # m/s
+        cl.command("disable")
+        seen: list[tuple[str, float, bool]] = []
+        cl.run(3.0, each=lambda cl: seen.append((
+            c.data.state.value, float(np.linalg.norm(c.trajectory.velocity[:3])),
+            bool(np.all(cl.plant.brake)))))  # fmt: skip
+        states = [s for s, _, _ in seen]
+        assert states[0] == "disabling" and states[-1] == "ready", events(cl)[-6:]
+        k = states.index("ready")
+        assert k * cl.period > 0.05  # it took the deceleration's time, not one cycle
+        assert seen[k - 1][1] < 1e-9 and not seen[k - 1][2]  # at rest, then the brakes
+        assert all(b for _, _, b in seen[k + 5:])
+        assert any("disable requested: decelerating, then the drives disabled" in e
+                   for e in events(cl))  # fmt: skip
+
+
 def test_a_fault_mid_path_stops_it_the_controlled_way(rowc):
     with enabled(rowc) as cl:
         c = cl.controller

@@ -54,8 +54,16 @@ CASES = [
     ("enable times out 2.1 s after entering it at 100 s", State.READY, Lifecycle.INACTIVE,
      lambda s, d, v: s.set_state(State.ENABLING, 100.0, "enable") or healthy(s, 102.1),
      State.FAULT, FaultKind.ENABLE_TIMEOUT),
-    ("disabling ends ready", State.DISABLING, Lifecycle.ACTIVE,
-     lambda s, d, v: healthy(s), State.READY, None),
+    # a disable decelerates first: the brakes close on a platform at rest, not in motion
+    ("disabling ends ready at rest", State.DISABLING, Lifecycle.ACTIVE,
+     lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True), State.READY, None),
+    ("disabling waits while decelerating", State.DISABLING, Lifecycle.ACTIVE,
+     lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.1, False), State.DISABLING,
+     None),
+    ("disabling still watches the tracking", State.DISABLING, Lifecycle.ACTIVE,
+     lambda s, d, v: d.pose_error.__setitem__(1, 1.01 * CFG.max_position_error)
+     or s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.1, False),
+     State.STOPPING, FaultKind.TRACKING),
     ("target reached", State.MOVING, Lifecycle.ACTIVE,
      lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True), State.ENABLED, None),
     ("drive fault: no hold", State.MOVING, Lifecycle.ERROR,

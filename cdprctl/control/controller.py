@@ -42,7 +42,7 @@ from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.vocabulary import WinchStates
 
 # the states in which the external wrench is observed (the drives apply what is computed)
-OBSERVED_STATES = frozenset({State.ENABLED, State.MOVING, State.STOPPING})
+OBSERVED_STATES = frozenset({State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING})
 
 
 class Controller:
@@ -216,7 +216,7 @@ class Controller:
         """The feed-forward tensions for the estimator's stretch (``Distribution.stretch``)."""
         e, tr, pf, ff = self.estimator, self.trajectory, self.model.platform, self._ff_wrench
         ff[:] = self.pose.gravity_hold(e.rotation)
-        if self.data.state in (State.ENABLED, State.MOVING, State.STOPPING):
+        if self.data.state in OBSERVED_STATES:  # the trajectory's acceleration is applied
             ff[:3] += pf.mass * tr.acceleration[:3]
             ff[3:] += e.rotation @ pf.inertia @ e.rotation.T @ tr.acceleration[3:]
         self.distribution.stretch(ff)

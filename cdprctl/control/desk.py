@@ -171,7 +171,12 @@ class CommandDesk:
         c.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
 
     def _disable(self, t: float, cmd: Command) -> None:
-        self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested")
+        """Decelerate to rest, then disable (the supervisor, once the trajectory stands):
+        the holding brakes are not for stopping a moving platform."""
+        self._take_motion(t, "stop")
+        self.ctl.trajectory.stop_here()
+        self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested: decelerating, "
+                                      "then the drives disabled")  # fmt: skip
 
     def _stop(self, t: float, cmd: Command) -> None:
         self._take_motion(t, "stop")

@@ -17,8 +17,10 @@ class State(enum.Enum):
     FAULT = "fault"
 
 
-#: the states in which the controller commands tensions
-ACTIVE_STATES = frozenset({State.ENABLING, State.ENABLED, State.MOVING, State.STOPPING})
+#: the states in which the controller commands tensions (DISABLING: decelerating to rest)
+ACTIVE_STATES = frozenset(
+    {State.ENABLING, State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING}
+)
 #: the states the supervisor watches the motion in
 HEALTHY_STATES = frozenset({State.ENABLED, State.MOVING})
 

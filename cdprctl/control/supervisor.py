@@ -3,7 +3,8 @@
 ::
 
     INIT ─startup→ READY ─enable→ ENABLING ─drives on→ ENABLED ⇄ MOVING (move / finished)
-    ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)    ─disable→ DISABLING → READY
+    ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)
+    ENABLED/MOVING ─disable→ DISABLING (decelerating) → READY (at rest: brakes, drives off)
     any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
     FAULT ─reset→ READY (drive faults reset, drives disabled)
 
@@ -197,12 +198,12 @@ class Supervisor:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
                 self.fault(t, FaultKind.ENABLE_TIMEOUT, why, False)
             return
-        if d.state is State.DISABLING:
+        if d.state is State.DISABLING and trajectory_finished:  # at rest: brakes close on it
             drv.begin_deactivate()
             self.set_state(State.READY, t, "drives disabled, brakes closed")
             return
         if self.torque_limits is not None and d.state in (
-            State.ENABLED, State.MOVING, State.STOPPING
+            State.ENABLED, State.MOVING, State.STOPPING, State.DISABLING
         ):
             beyond = self._beyond_capacity(t)
             if beyond is not None:
@@ -213,7 +214,7 @@ class Supervisor:
                 drv.begin_deactivate()
                 self.set_state(State.FAULT, t, "stopped; drives disabled, brakes closed")
             return
-        if d.state is not State.ENABLED and d.state is not State.MOVING:
+        if d.state not in (State.ENABLED, State.MOVING, State.DISABLING):
             return
         if d.state is State.MOVING and trajectory_finished:
             paused = d.path_state == "paused"  # braked onto the path: not its target

@@ -72,6 +72,9 @@ class Daemon:
         self._print(f"cdprctl run: {model.name}, {model.n_cables} {model.drives.driver} drives, "
                     f"{model.control.rate:g} Hz, TDA {tda_options_of(model).method.value}"
                     + (", simulated robot" if sim else ""))  # fmt: skip
+        if sim:
+            self._print("building the simulated robot (the first run on a machine compiles its "
+                        "kernels too: about 15 s more)")  # fmt: skip
         self.status_every, self.timing_file, self.realtime = status_every, timing_file, realtime
         self._cycle_done = threading.Event()  # set by the loop after each cycle
         period = model.control.period
@@ -88,6 +91,7 @@ class Daemon:
         self.stop_requested = threading.Event()
         self.finished = threading.Event()
         self._stop_deadline = float("inf")
+        self._stopped_by = ""  # the signal that asked for the stop
         self._last_fault = ""  # the fault the links were last told of
         self.links = Links(links_of(model, zenoh, foxglove,
                                     lambda: config_summary(model, self.sim is not None)))
@@ -164,6 +168,7 @@ class Daemon:
     def _on_signal(self, signum: int, frame: Any) -> None:
         if not self.stop_requested.is_set():
             self._stop_deadline = time.monotonic() + self.STOP_FALLBACK
+            self._stopped_by = signal.Signals(signum).name
         self.stop_requested.set()
 
     def _should_stop(self) -> bool:
@@ -233,6 +238,9 @@ class Daemon:
             )  # fmt: skip
             if (end or self.stop_requested.is_set()) and stopping_since is None:
                 stopping_since = now
+                if self.stop_requested.is_set():
+                    self._print(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}: "
+                                "decelerating, then the drives disabled")  # fmt: skip
                 if d.state in (State.ENABLED, State.MOVING, State.ENABLING):
                     submit(Command(CommandKind.STOP))
                     submit(Command(CommandKind.DISABLE))
