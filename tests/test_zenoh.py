@@ -705,9 +705,8 @@ def test_send_says_when_nothing_listens_at_the_endpoint(capsys):
 
 
 def test_jog_and_record_say_why_they_hear_nothing(capsys, monkeypatch, tmp_path):
-    """No daemon at the endpoint: jog (before taking the terminal) and record (after its
-    duration) say that nothing listens there, exit 2 — not a screen of guesses or an empty
-    recording."""
+    """No daemon at the endpoint: jog (before taking the terminal) and record say at once that
+    nothing listens there, exit 2 — not a screen of guesses or an empty recording."""
     import cdprctl.commands.jog as jog_cmd
 
     port = free_port()
@@ -718,16 +717,19 @@ def test_jog_and_record_say_why_they_hear_nothing(capsys, monkeypatch, tmp_path)
     err = capsys.readouterr().err
     assert err.startswith(f"cdprctl jog: cannot connect to tcp/127.0.0.1:{port}: nothing "
                           "listens there"), err  # fmt: skip
-    assert main(["record", *where, "--duration", "0.3", "--output", str(tmp_path)]) == 2
-    out = capsys.readouterr()
-    assert "(no status yet: cannot connect to" in out.out
-    assert f"no state recorded: cannot connect to tcp/127.0.0.1:{port}" in out.err
+    took = time.monotonic()
+    rec = tmp_path / "rec"
+    assert main(["record", *where, "--duration", "5", "--output", str(rec)]) == 2
+    assert time.monotonic() - took < 3.0  # known at once: not after the duration
+    err = capsys.readouterr().err
+    assert f"cdprctl record: cannot connect to tcp/127.0.0.1:{port}: nothing listens" in err
+    assert not rec.exists()  # no empty recording left behind
 
 
 def test_the_jog_tool_notices_a_command_without_a_reply():
-    """A command with an id (enable, disable, reset, stop) unanswered for NO_REPLY s is
-    reported once (the screen then says why: its ACL, commands off, no robot); a reply in
-    time, or a jog (no id, no reply), is not."""
+    """A command (enable, disable, reset, stop, a held jog key) unanswered for NO_REPLY s is
+    reported once (the screen then says why: its ACL, commands off, no robot); one answered
+    in time is not, nor a stream of jogs that are answered."""
     from cdprctl.commands.jog import NO_REPLY, Jogger
 
     class Session:
@@ -738,14 +740,23 @@ def test_the_jog_tool_notices_a_command_without_a_reply():
     j = Jogger(s, "cdpr/rowc", {}, 2, "base")
     t0 = time.monotonic()
     j.put("enable")
-    assert j.unanswered(t0 + NO_REPLY - 0.1, None) == ""
-    assert j.unanswered(t0 + NO_REPLY + 0.1, None) == "enable"
-    assert j.unanswered(t0 + 2 * NO_REPLY, None) == ""  # once
+    assert s.last["id"].startswith("jog-tool-")
+    assert j.unanswered(t0 + NO_REPLY - 0.1, False) == ""
+    assert j.unanswered(t0 + NO_REPLY + 0.1, False) == "enable"
+    assert j.unanswered(t0 + 2 * NO_REPLY, False) == ""  # once
     j.put("disable")
-    assert j.unanswered(time.monotonic() + 0.5, s.last["id"]) == ""  # answered
-    assert j.unanswered(time.monotonic() + 3 * NO_REPLY, None) == ""
-    j.put("jog", {"velocity": [0.0] * 6, "frame": "base"})
-    assert j.unanswered(time.monotonic() + 3 * NO_REPLY, None) == ""
+    assert j.unanswered(time.monotonic() + 0.5, True) == ""  # answered
+    assert j.unanswered(time.monotonic() + 3 * NO_REPLY, False) == ""
+    t1 = time.monotonic()
+    for k in range(60):  # a held key, 3 s of jogs every 50 ms, none answered (a viewer)
+        j.put("jog", {"velocity": [0.1, 0, 0, 0, 0, 0], "frame": "base"})
+        lost = j.unanswered(t1 + 0.05 * k, False)
+        if lost:
+            break
+    assert lost == "jog" and 0.05 * k > NO_REPLY and s.last["id"] == "jog-tool-jog"
+    for k in range(60):  # the operator's: each answered
+        j.put("jog", {"velocity": [0.1, 0, 0, 0, 0, 0], "frame": "base"})
+        assert j.unanswered(t1 + 0.05 * k, True) == ""
 
 
 def test_the_daemon_refuses_to_start_with_open_commands():

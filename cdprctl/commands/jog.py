@@ -74,25 +74,29 @@ class Jogger:
         self.quit = False
         self.state = ""  # the robot's, as last received
         self._ids = 0
-        self.awaiting: tuple[str, str, float] | None = None  # (kind, id, sent at s)
+        self.awaiting: tuple[str, float] | None = None  # the oldest unanswered: kind, sent s
 
     def put(self, kind: str, payload: dict[str, Any] | None = None) -> None:
-        """A command; every one but the jogs carries an id, so its reply is shown (and its
-        absence noticed: ``unanswered``)."""
+        """A command with this tool's id (the jogs one id for all), so its reply is shown and
+        its absence noticed (``unanswered``)."""
         body = dict(payload or {})
-        if kind != "jog":
+        if kind == "jog":
+            body["id"] = "jog-tool-jog"
+        else:
             self._ids += 1
             body["id"] = f"jog-tool-{self._ids}"
-            self.awaiting = (kind, body["id"], time.monotonic())
+        if self.awaiting is None:
+            self.awaiting = (kind, time.monotonic())
         self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(body))
 
-    def unanswered(self, now: float, replied: str | None) -> str:
-        """The kind of the last command with an id if it has had no reply for ``NO_REPLY`` s
-        (then forgotten), else "" (``replied``: the id of a reply just received)."""
-        if self.awaiting is None or replied == self.awaiting[1]:
+    def unanswered(self, now: float, replied: bool) -> str:
+        """The kind of the oldest command sent since the last reply if it has waited
+        ``NO_REPLY`` s (then forgotten), else "" (``replied``: a reply came since the last
+        call) — a viewer's held jog key as much as its enable."""
+        if self.awaiting is None or replied:
             self.awaiting = None
             return ""
-        kind, _, sent = self.awaiting
+        kind, sent = self.awaiting
         if now - sent <= NO_REPLY:
             return ""
         self.awaiting = None
@@ -209,12 +213,14 @@ def jog(args: argparse.Namespace) -> int:
         except ValueError:
             return
         kind = str(sample.key_expr).rsplit("/", 1)[-1]
-        if not str(body.get("id") or "").startswith("jog-tool-") and body.get("ok"):
+        ours = str(body.get("id") or "").startswith("jog-tool-")
+        if not ours and body.get("ok"):
             return  # another client's
         with lock:
-            latest["replied"] = body.get("id")
-            latest["note"] = (f"{kind}: accepted" if body.get("ok")
-                              else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
+            latest["replied"] = latest.get("replied", False) or ours
+            if not (kind == "jog" and body.get("ok")):  # not 20 "accepted" a second
+                latest["note"] = (f"{kind}: accepted" if body.get("ok")
+                                  else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
 
     def on_event(sample: Any) -> None:
         """The daemon's word on a jog (where the soft limits stop it, and why) or a fault."""
@@ -258,7 +264,7 @@ def jog(args: argparse.Namespace) -> int:
                     if "note" in latest:
                         j.note = latest.pop("note")
                     state = latest.get("state")
-                    replied = latest.pop("replied", None)
+                    replied = bool(latest.pop("replied", False))
                 lost = j.unanswered(now, replied)
                 if lost:  # a command the gateway dropped: say why
                     why = why_no_answer(session, args, prefix)

@@ -34,6 +34,7 @@ def key_prefix(args: argparse.Namespace) -> str | None:
 def tool_session(args: argparse.Namespace) -> Any:
     """The tool's Zenoh session; None, with what is wrong said in a line or a few, when the
     configuration names files that are missing or Zenoh cannot open a session."""
+    from cdprctl.telemetry.security import zenoh_error
     from cdprctl.telemetry.session import open_session
     from cdprctl.telemetry.zenoh_files import missing_files
 
@@ -41,6 +42,11 @@ def tool_session(args: argparse.Namespace) -> Any:
     for p in problems:
         print(f"cdprctl {args.cmd}: error: --zenoh-config {p}", file=sys.stderr)
     if problems:
+        return None
+    endpoints = list(args.connect or ())
+    if endpoints and all(_reachable(e) is False for e in endpoints):  # known now, not later
+        print(f"cdprctl {args.cmd}: cannot connect to {', '.join(endpoints)}: {NOTHING_THERE}",
+              file=sys.stderr)  # fmt: skip
         return None
     try:
         return open_session(
@@ -51,7 +57,8 @@ def tool_session(args: argparse.Namespace) -> Any:
             config_file=args.zenoh_config,
         )
     except Exception as exc:  # zenoh.ZError: endpoints, TLS, the configuration's values
-        print(f"cdprctl {args.cmd}: error: cannot open a Zenoh session: {exc}", file=sys.stderr)
+        why = zenoh_error(exc)
+        print(f"cdprctl {args.cmd}: error: cannot open a Zenoh session: {why}", file=sys.stderr)
         return None
 
 
@@ -71,6 +78,9 @@ def robot_status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, A
         if time.monotonic() >= deadline:
             return {}
         time.sleep(0.1)
+
+
+NOTHING_THERE = "nothing listens there (is the daemon running, with --zenoh-listen on it?)"
 
 
 def _reachable(endpoint: str) -> bool | None:
@@ -106,8 +116,7 @@ def why_no_answer(session: Any, args: argparse.Namespace, prefix: str,
             return (f"{', '.join(refused)} accepts connections but refused this session: "
                     "authentication failed (the user/password or certificate of "
                     "--zenoh-config), or it is not a Zenoh peer")  # fmt: skip
-        return (f"cannot connect to {', '.join(endpoints)}: nothing listens there (is the "
-                "daemon running, with --zenoh-listen on that endpoint?)")  # fmt: skip
+        return f"cannot connect to {', '.join(endpoints)}: {NOTHING_THERE}"
     status = robot_status(session, prefix, timeout=1.5)
     if not status:
         seen = sorted({str(r.ok.key_expr).rsplit("/", 1)[0] for r in

@@ -254,7 +254,6 @@ def record(args: argparse.Namespace) -> int:
     if prefix is None:
         return 2
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
     lock = threading.Lock()
     rows: dict[str, list[Any]] = {"state": [], "timing": [], "events": []}
     raw: list[tuple[int, str, bytes]] = []  # (receive time ns, key, payload), for MCAP
@@ -274,6 +273,7 @@ def record(args: argparse.Namespace) -> int:
     session = tool_session(args)
     if session is None:
         return 2
+    out.mkdir(parents=True, exist_ok=True)
     try:
         subs = [
             session.declare_subscriber(f"{prefix}/{k}", on_sample)

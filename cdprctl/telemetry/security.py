@@ -11,6 +11,7 @@ anybody in). Access control: ``access_control.enabled`` with ``default_permissio
 from __future__ import annotations
 
 import json
+import re
 from typing import Any
 
 from cdprctl.model.zenoh import ZenohConfig
@@ -50,7 +51,8 @@ def command_security_problems(zc: ZenohConfig) -> list[str]:
     try:
         conf = zenoh.Config.from_file(zc.config_file)
     except Exception as exc:
-        return [f"zenoh.config_file = {zc.config_file}: not a Zenoh configuration ({exc})"]
+        why = zenoh_error(exc)
+        return [f"zenoh.config_file = {zc.config_file}: not a Zenoh configuration ({why})"]
     problems = []
     usrpwd = config_value(conf, "transport/auth/usrpwd") or {}
     tls = config_value(conf, "transport/link/tls") or {}
@@ -85,3 +87,10 @@ def command_security_problems(zc: ZenohConfig) -> list[str]:
             f"only, as in {EXAMPLE}; {BENCH}"
         )
     return problems
+
+
+def zenoh_error(exc: BaseException) -> str:
+    """A Zenoh error's message without the Rust source location it ends with (`` at
+    /root/.cargo/...rs:1486.``) and on one line."""
+    text = " ".join(str(exc).split())
+    return re.sub(r"\s+at \S+\.rs:\d+\.?$", "", text)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cdprctl.telemetry.security import config_value
+from cdprctl.telemetry.security import config_value, zenoh_error
 
 MAKE_CERTS = (
     "create the certificates with tools/make_certs.sh DIR (docs/telemetry.md, \"Security\") "
@@ -38,13 +38,16 @@ def missing_files(config_file: str) -> list[str]:
         return []
     import zenoh
 
+    if not Path(config_file).is_file():
+        return [f"{config_file}: no such file"]
     try:
         conf = zenoh.Config.from_file(config_file)
     except Exception as exc:
-        return [f"{config_file}: not a Zenoh configuration ({exc})"]
+        return [f"{config_file}: not a Zenoh configuration ({zenoh_error(exc)})"]
     out = []
     for key, fix in FILE_KEYS.items():
         value = config_value(conf, key)
         if isinstance(value, str) and value and not Path(value).is_file():
             out.append(f"{config_file}: {key.replace('/', '.')} = {value}: no such file; {fix}")
     return out
+
