@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -64,17 +65,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _stop(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    previous = signal.signal(signal.SIGTERM, _stop)  # as Ctrl-C, from the first moment
     try:
         parser = build_parser()
-        args = parser.parse_args(argv)
+        args = parser.parse_args(words)
         if not getattr(args, "func", None):
             parser.print_help()
             return 2
         return int(args.func(args))
-    except KeyboardInterrupt:  # Ctrl-C in a tool, or before a command's own handling
-        print("cdprctl: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # before a command's own handling, or a tool's Ctrl-C
+        name = str(exc) or "SIGINT"
+        if words[:1] == ["run"]:  # as a stop during the start-up (docs/operating.md)
+            print(f"cdprctl run: stopped by {name} during the start-up; the drives were not "
+                  "enabled", file=sys.stderr)  # fmt: skip
+            return 0
+        print(f"cdprctl: interrupted ({name})", file=sys.stderr)
         return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

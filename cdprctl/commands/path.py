@@ -46,7 +46,8 @@ def check(args: argparse.Namespace) -> int:
     try:
         text = Path(args.file).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        print(f"cdprctl path check: error: {args.file}: {exc}", file=sys.stderr)
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        print(f"cdprctl path check: error: {args.file}: {why}", file=sys.stderr)
         return 2
     home = [*model.home.position, *model.home.rpy]
     try:

@@ -97,10 +97,7 @@ def report(args: argparse.Namespace) -> int:
     save(fig, "tracking.png")
 
     fig, ax = plt.subplots(figsize=(9, 5))
-    styles = ("-", "--", ":", "-.")  # a symmetric robot's cables pull alike: lines on lines
-    for k, c in enumerate(cables):
-        ax.plot(t, _column(head, rows, f"t_{c}"), ls=styles[k % 4], lw=2.2 - 0.4 * (k % 4),
-                color=f"C{k % 10}", label=f"cable {c}")  # fmt: skip
+    _per_cable(ax, t, [_column(head, rows, f"t_{c}") for c in cables], "cable", cables)
     lo, hi = meta.get("tension_min"), meta.get("tension_max")
     if lo and hi:
         ax.axhline(min(lo), color="k", ls="--", lw=1, label="t_min")
@@ -112,14 +109,14 @@ def report(args: argparse.Namespace) -> int:
     save(fig, "tensions.png")
 
     fig, ax = plt.subplots(figsize=(9, 4))
-    for c in cables:
-        ax.plot(t, _column(head, rows, f"tau_{c}"), label=f"winch {c}")
+    _per_cable(ax, t, [_column(head, rows, f"tau_{c}") for c in cables], "winch", cables)
     limits = meta.get("torque_limit")
     if limits:
         ax.axhline(max(limits), color="r", ls="--", lw=1, label="torque limit")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("motor torque (N·m)")
     ax.legend(loc="best", fontsize=8, ncol=2)
+    ax.set_title("motor torques (winches that pull alike overlap: told apart by line style)")
     save(fig, "torques.png")
 
     grips = [h[len("grip_travel_") :] for h in head if h.startswith("grip_travel_")]
@@ -206,3 +203,12 @@ def _stills(run: Path, head: list[str], rows: list[list[str]], t: np.ndarray,
     scene_stills(str(run / "scene.png"), layout, states,
                  f"{meta.get('robot', '')}: the robot at the start, the end and the run's two "
                  "farthest points", trace=xyz)  # fmt: skip
+
+
+def _per_cable(ax: Any, t: Any, series: list[Any], what: str, names: list[str]) -> None:
+    """One line per cable: a symmetric robot's cables pull alike, so lines lie on lines —
+    each cable its colour and one of four styles, wide under narrow, so every one shows."""
+    styles = ("-", "--", ":", "-.")
+    for k, (y, c) in enumerate(zip(series, names, strict=True)):
+        ax.plot(t, y, ls=styles[k % 4], lw=2.6 - 0.5 * (k % 4), color=f"C{k % 10}",
+                label=f"{what} {c}", zorder=2 + k % 4)  # fmt: skip

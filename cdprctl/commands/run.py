@@ -167,7 +167,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             path = (args.path, Path(args.path).read_text(encoding="utf-8"), args.units)
         except (OSError, UnicodeDecodeError) as exc:
-            print(f"cdprctl run: error: --path = {args.path}: {exc}", file=sys.stderr)
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            print(f"cdprctl run: error: --path = {args.path}: {why}", file=sys.stderr)
             return 2
     if args.foxglove is not None:
         from cdprctl.model.foxglove import parse_listen

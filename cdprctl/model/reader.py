@@ -7,6 +7,7 @@ no message was recorded, so a half-built model never escapes.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Iterable
 from typing import Any
@@ -60,8 +61,10 @@ class TableReader:
         for key in table:
             if key not in allowed:
                 where = f"{path}.{key}" if path else key
+                near = difflib.get_close_matches(key, allowed, n=1)
+                hint = f"did you mean {near[0]}? " if near else ""
                 self.errors.append(
-                    f"{self.file}: {where} is not a known key (allowed here: "
+                    f"{self.file}: {where} is not a known key ({hint}allowed here: "
                     f"{', '.join(sorted(allowed))})"
                 )
 

@@ -131,7 +131,7 @@ def plan_path(
     for w, x in zip(waypoints, targets, strict=True):  # the waypoints themselves first
         margin, ok = lim.check(x[None])
         if not ok[0]:
-            raise PathRejectedError(f"{w.where}: waypoint {np.round(w.pose, 4).tolist()}: "
+            raise PathRejectedError(f"{w.where}: waypoint {(np.round(w.pose, 4) + 0.0).tolist()}: "
                                f"{lim.why(x, float(margin[0]))}")  # fmt: skip
         if w.speed is not None and w.speed > c.max_velocity * (1 + 1e-9):
             raise PathRejectedError(f"{w.where}: speed {w.speed:g} m/s exceeds the configured "
