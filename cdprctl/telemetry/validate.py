@@ -4,6 +4,7 @@ supervisor state. A rejection names the field, the value, the unit and the rule.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from typing import Any
@@ -99,6 +100,13 @@ class CommandValidator:
         self.limits = SoftLimits(model)
         self._grip: GripperSet | None = None
         self._range_tda: TensionDistributor | None = None
+
+    def warm_up(self) -> None:
+        """The kernels a move's checks call (kinematics, the TDA, the soft limits) compiled or
+        loaded now, at the gateway's start: at the first move of a first run (an empty kernel
+        cache) they made its reply wait 5 s."""
+        with contextlib.suppress(CommandError):
+            self._move({"position": [float(v) for v in self.model.home.position]})
 
     def parse(self, payload: bytes, kind: str = "") -> dict[str, Any]:
         limit = MAX_PATH_PAYLOAD if kind == "path" else MAX_PAYLOAD
