@@ -104,9 +104,9 @@ CASES = [
     (
         "unknown key",
         sub(r"^tension_min = 10.0", "tension_min = 10.0\ntensoin_max = 3"),
-        ["cables[0].tensoin_max is not a known key"],
+        ["cables[0].tensoin_max is not a known key (did you mean tension_max? allowed"],
     ),
-    ("unknown top", BASE + "\nfoo = 1\n", ["foo is not a known key"]),
+    ("unknown top", BASE + "\nfoo = 1\n", ["foo is not a known key (allowed here:"]),
     (
         "winch too weak",
         sub(r"^torque_limit = 2.6", "torque_limit = 1.0"),

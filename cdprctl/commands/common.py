@@ -36,13 +36,14 @@ def command_parser(
     return p
 
 
-def load_or_report(path: str) -> RobotModel | None:
-    """The robot of ``path``, or None after printing every error of the file to stderr."""
+def load_or_report(path: str, who: str = "") -> RobotModel | None:
+    """The robot of ``path``, or None after printing every error of the file to stderr
+    (``who``: the command, before each line, as its other errors have it)."""
     try:
         return load_robot(path)
     except ConfigError as exc:
         for e in exc.errors:
-            print(e, file=sys.stderr)
+            print(f"{who}: {e}" if who else e, file=sys.stderr)
         return None
 
 

@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr
     )
     logging.getLogger("cdprctl.drivers").setLevel(logging.ERROR)  # warnings printed by us
-    model = load_or_report(args.config)
+    model = load_or_report(args.config, "cdprctl run")
     if model is None:
         return 1
     if args.rate is not None:
