@@ -6,8 +6,10 @@ import argparse
 import json
 import os
 import select
+import shutil
 import sys
 import termios
+import textwrap
 import threading
 import time
 import tty
@@ -177,8 +179,9 @@ def _view(j: Jogger, state: dict[str, Any] | None, prefix: str) -> str:
                      f"  motion {state.get('motion') or '-'}")  # fmt: skip
         if state.get("fault"):
             lines.append(f"fault: {state['fault']}")
-    if j.note:
-        lines.append(j.note)
+    if j.note:  # wrapped at words to the terminal (the terminal's own wrap cut them)
+        width = shutil.get_terminal_size((100, 24)).columns - 1
+        lines += textwrap.wrap(j.note, max(40, width), subsequent_indent="  ")
     lines.append(HELP)
     return "\x1b[H\x1b[2J" + "\r\n".join(x.replace("\n", "\r\n") for x in lines)
 
