@@ -274,3 +274,15 @@ def test_enable_starts_with_no_saturation_carried_over(controller):
     c.desk.handle(0.0)
     assert c.data.state is State.ENABLING
     assert c.data.saturated_for == 0.0 and c.data.saturation == 1.0
+
+
+def test_a_disable_whose_trajectory_never_stands_disables_after_disable_within():
+    """The drives are not kept on by a deceleration that does not end: DISABLE_WITHIN after
+    entering DISABLING (not after the start of time) the brakes close, the reason said."""
+    s, d, drives, _ = rig(State.ENABLED)
+    s.set_state(State.DISABLING, 100.0, "disable")
+    s.supervise(100.0 + 0.99 * s.DISABLE_WITHIN, FKStatus.CONVERGED, 0.0, 0.1, False)
+    assert d.state is State.DISABLING and drives.lifecycle is Lifecycle.ACTIVE
+    s.supervise(100.0 + 1.01 * s.DISABLE_WITHIN, FKStatus.CONVERGED, 0.0, 0.1, False)
+    assert d.state is State.READY
+    assert d.events[-1][1].endswith(f"(not at rest after {s.DISABLE_WITHIN:g} s)")

@@ -101,6 +101,9 @@ class Supervisor:
     TORQUE_FOR = 0.03  # s
     AT_LIMIT = 0.98  # of the torque limit
     ENABLE_TIMEOUT = 2.0  # s
+    # s: a disable's deceleration lasts a fraction of a second (max_velocity/max_acceleration
+    # and the jerk's ramps); a trajectory that never stands must not keep the drives on
+    DISABLE_WITHIN = 3.0
 
     def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
                  tension_limits: np.ndarray | None = None,
@@ -198,9 +201,12 @@ class Supervisor:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
                 self.fault(t, FaultKind.ENABLE_TIMEOUT, why, False)
             return
-        if d.state is State.DISABLING and trajectory_finished:  # at rest: brakes close on it
+        if d.state is State.DISABLING and (
+            trajectory_finished or t - self.t_state > self.DISABLE_WITHIN
+        ):  # at rest (or given up on: the brakes close anyway)
             drv.begin_deactivate()
-            self.set_state(State.READY, t, "drives disabled, brakes closed")
+            why = "" if trajectory_finished else f" (not at rest after {self.DISABLE_WITHIN:g} s)"
+            self.set_state(State.READY, t, f"drives disabled, brakes closed{why}")
             return
         if self.torque_limits is not None and d.state in (
             State.ENABLED, State.MOVING, State.STOPPING, State.DISABLING
