@@ -77,6 +77,8 @@ def test_encoder_estimates_in_turns_become_rad_and_bad_ones_are_dropped(seed):
             turns += 0.8 * most / TURN
             inject(drv, peer, encoder(2, turns, 0.0))
             assert st.position[1] == pytest.approx(turns * TURN)
+        inject(drv, peer, encoder(2, 2 * turns, 0.0))  # twice as far: a step, not a ratio
+        assert st.position[1] == pytest.approx(turns * TURN)
         before3 = st.position[2]
         inject(drv, peer, encoder(3, 0.76, math.nan), encoder(4, 1.01, -0.2))
         assert st.position[2] == before3 and math.isfinite(st.velocity[2])
