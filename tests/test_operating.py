@@ -162,15 +162,25 @@ def test_a_disable_mid_move_decelerates_before_the_brakes_close(rowc):
         assert np.linalg.norm(c.trajectory.velocity[:3]) > 0.05  # m/s
         cl.command("disable")
         seen: list[tuple[str, float, bool]] = []
-        cl.run(3.0, each=lambda cl: seen.append((
-            c.data.state.value, float(np.linalg.norm(c.trajectory.velocity[:3])),
-            bool(np.all(cl.plant.brake)))))  # fmt: skip
+        platform: list[float] = []  # m/s, the simulated platform's true speed
+
+        def each(cl: ClosedLoop) -> None:
+            v = float(np.linalg.norm(c.trajectory.velocity[:3]))
+            seen.append((c.data.state.value, v, bool(np.all(cl.plant.brake))))
+            platform.append(float(np.linalg.norm(cl.plant.v)))
+
+        cl.run(3.0, each=each)
         states = [s for s, _, _ in seen]
         assert states[0] == "disabling" and states[-1] == "ready", events(cl)[-6:]
         k = states.index("ready")
         assert k * cl.period > 0.05  # it took the deceleration's time, not one cycle
         assert seen[k - 1][1] < 1e-9 and not seen[k - 1][2]  # at rest, then the brakes
         assert all(b for _, _, b in seen[k + 5:])
+        # it braked where it was (not on to the target, 0.74 s further), and the platform,
+        # not only its reference, stood when the brakes closed
+        assert c.trajectory.position[0] < 1.9 - 0.05
+        assert k * cl.period < 0.7
+        assert platform[k - 1] < 0.01
         assert any("disable requested: decelerating, then the drives disabled" in e
                    for e in events(cl))  # fmt: skip
 

@@ -60,6 +60,9 @@ CASES = [
     ("disabling waits while decelerating", State.DISABLING, Lifecycle.ACTIVE,
      lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.1, False), State.DISABLING,
      None),
+    ("disabling waits for the platform, not only the reference", State.DISABLING,
+     Lifecycle.ACTIVE, lambda s, d, v: s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.02, True),
+     State.DISABLING, None),
     ("disabling still watches the tracking", State.DISABLING, Lifecycle.ACTIVE,
      lambda s, d, v: d.pose_error.__setitem__(1, 1.01 * CFG.max_position_error)
      or s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.1, False),
@@ -276,13 +279,13 @@ def test_enable_starts_with_no_saturation_carried_over(controller):
     assert c.data.saturated_for == 0.0 and c.data.saturation == 1.0
 
 
-def test_a_disable_whose_trajectory_never_stands_disables_after_disable_within():
-    """The drives are not kept on by a deceleration that does not end: DISABLE_WITHIN after
+def test_a_disable_that_never_comes_to_rest_disables_after_disable_within():
+    """The drives are not kept on by a deceleration that does not end: disable_within after
     entering DISABLING (not after the start of time) the brakes close, the reason said."""
     s, d, drives, _ = rig(State.ENABLED)
     s.set_state(State.DISABLING, 100.0, "disable")
-    s.supervise(100.0 + 0.99 * s.DISABLE_WITHIN, FKStatus.CONVERGED, 0.0, 0.1, False)
+    s.supervise(100.0 + 0.99 * s.disable_within, FKStatus.CONVERGED, 0.0, 0.1, False)
     assert d.state is State.DISABLING and drives.lifecycle is Lifecycle.ACTIVE
-    s.supervise(100.0 + 1.01 * s.DISABLE_WITHIN, FKStatus.CONVERGED, 0.0, 0.1, False)
+    s.supervise(100.0 + 1.01 * s.disable_within, FKStatus.CONVERGED, 0.0, 0.1, False)
     assert d.state is State.READY
-    assert d.events[-1][1].endswith(f"(not at rest after {s.DISABLE_WITHIN:g} s)")
+    assert d.events[-1][1].endswith(f"(not at rest after {s.disable_within:g} s)")

@@ -379,3 +379,16 @@ def test_a_paused_path_holding_is_not_a_target_reached():
         s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
         assert d.state is State.ENABLED
         assert d.events[-1][1] == f"state moving -> enabled: {words}", d.events
+
+
+def test_a_disable_does_not_restart_what_must_persist():
+    """DISABLING is supervised: an over-speed that began while moving faults when it has
+    lasted OVER_SPEED_FOR, whether or not a disable came in between (an operator pressing
+    disable because something looks wrong restarted the count: 30 → 50 ms)."""
+    s, d, _ = rig(State.MOVING)
+    fast = 2 * CFG.max_speed
+    run(s, 1.0, 1.0 + 0.6 * Supervisor.OVER_SPEED_FOR, speed=fast)
+    s.set_state(State.DISABLING, 1.0 + 0.6 * Supervisor.OVER_SPEED_FOR, "disable")
+    run(s, 1.0 + 0.6 * Supervisor.OVER_SPEED_FOR + 0.002, 1.0 + Supervisor.OVER_SPEED_FOR,
+        speed=fast)  # fmt: skip
+    assert d.fault_kind is FaultKind.OVER_SPEED

@@ -21,7 +21,8 @@ class State(enum.Enum):
 ACTIVE_STATES = frozenset(
     {State.ENABLING, State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING}
 )
-#: the states the supervisor watches the motion in
+#: the states in which the pose loop integrates and a TDA switch is blended (the supervisor
+#: also watches DISABLING and STOPPING)
 HEALTHY_STATES = frozenset({State.ENABLED, State.MOVING})
 
 

@@ -4,7 +4,7 @@
 
     INIT ─startup→ READY ─enable→ ENABLING ─drives on→ ENABLED ⇄ MOVING (move / finished)
     ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)
-    ENABLED/MOVING ─disable→ DISABLING (decelerating) → READY (at rest: brakes, drives off)
+    ENABLING/ENABLED/MOVING ─disable→ DISABLING (decelerating) → READY (at rest: brakes off)
     any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
     FAULT ─reset→ READY (drive faults reset, drives disabled)
 
@@ -101,9 +101,9 @@ class Supervisor:
     TORQUE_FOR = 0.03  # s
     AT_LIMIT = 0.98  # of the torque limit
     ENABLE_TIMEOUT = 2.0  # s
-    # s: a disable's deceleration lasts a fraction of a second (max_velocity/max_acceleration
-    # and the jerk's ramps); a trajectory that never stands must not keep the drives on
-    DISABLE_WITHIN = 3.0
+    # m/s: the estimated speed under which a disabled platform is at rest (the reference
+    # stands before the platform does: in torque mode the pose loop lags it by tens of mm)
+    AT_REST = 0.005
 
     def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
                  tension_limits: np.ndarray | None = None,
@@ -123,6 +123,14 @@ class Supervisor:
         self.drives = drives
         self._stop_here = stop_here
         self.t_state = 0.0  # s, when the state was entered
+        # s: the longest a disable decelerates before the brakes close anyway (a trajectory
+        # that never stands must not keep the drives on): twice the limits' own stop time
+        # (a jerk-limited stop from the top speed takes v/a + a/j), at least 3 s
+        c = config
+        stop = max(c.max_velocity / c.max_acceleration + c.max_acceleration / c.max_jerk,
+                   c.max_angular_velocity / c.max_angular_acceleration
+                   + c.max_angular_acceleration / c.max_angular_jerk)  # fmt: skip
+        self.disable_within = max(3.0, 2.0 * stop)
         self._stop_until = 0.0
         self._speed_over = Persistence(self.OVER_SPEED_FOR)
         # old feedback at two reads in a row: after a stall of the loop itself (no SYNC went
@@ -145,7 +153,7 @@ class Supervisor:
             return
         if s is not d.state:
             d.events.append((t, f"state {d.state.value} -> {s.value}: {why}"))
-        if s not in (State.ENABLED, State.MOVING, State.STOPPING):
+        if s not in (State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING):
             # unsupervised from here on: what held before must persist anew once enabled (a
             # drive at its limit before a fault tripped the check at the next enable at once)
             for p in self._persistences:
@@ -201,13 +209,13 @@ class Supervisor:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
                 self.fault(t, FaultKind.ENABLE_TIMEOUT, why, False)
             return
-        if d.state is State.DISABLING and (
-            trajectory_finished or t - self.t_state > self.DISABLE_WITHIN
-        ):  # at rest (or given up on: the brakes close anyway)
-            drv.begin_deactivate()
-            why = "" if trajectory_finished else f" (not at rest after {self.DISABLE_WITHIN:g} s)"
-            self.set_state(State.READY, t, f"drives disabled, brakes closed{why}")
-            return
+        if d.state is State.DISABLING:
+            at_rest = trajectory_finished and speed < self.AT_REST
+            if at_rest or t - self.t_state > self.disable_within:  # else: decelerating
+                drv.begin_deactivate()
+                why = "" if at_rest else f" (not at rest after {self.disable_within:g} s)"
+                self.set_state(State.READY, t, f"drives disabled, brakes closed{why}")
+                return
         if self.torque_limits is not None and d.state in (
             State.ENABLED, State.MOVING, State.STOPPING, State.DISABLING
         ):

@@ -190,8 +190,18 @@ class Daemon:
         except Exception as exc:  # the I/O thread must not die silently: stop the run
             self._print(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
             self.manager.submit(Command(CommandKind.DISABLE))
-            time.sleep(0.5)
+            self._await_disabled(time.monotonic())
             self.finished.set()
+
+    def _await_disabled(self, since: float) -> None:
+        """Until the drives are off (READY, FAULT, INIT): a disable's deceleration, at most the
+        supervisor's ``disable_within`` and a second from ``since`` (was a fixed 0.5 s, shorter
+        than a deceleration: the loop then ended mid-way)."""
+        limit = since + self.manager.controller.supervisor.disable_within + 1.0
+        while self.data.state not in (State.READY, State.FAULT, State.INIT):
+            if time.monotonic() > limit:
+                return
+            time.sleep(self.model.control.period)
 
     def _io_loop(self, duration: float | None, demo: bool, force: float,
                  path: PathScript | None) -> None:  # fmt: skip
@@ -245,7 +255,8 @@ class Daemon:
                     submit(Command(CommandKind.STOP))
                     submit(Command(CommandKind.DISABLE))
             if stopping_since is not None and (
-                d.state in (State.READY, State.FAULT, State.INIT) or now - stopping_since > 3.0
+                d.state in (State.READY, State.FAULT, State.INIT)
+                or now - stopping_since > self.manager.controller.supervisor.disable_within + 1.0
             ):
                 self.finished.set()
                 return
