@@ -24,9 +24,10 @@ class RunReport:
         self.summary: dict[str, Any] = {}
 
     def track(self, true_position: Any) -> None:
-        """One sample of the tracking error while the drives hold or move the platform."""
+        """One sample of the tracking error while the drives hold or move the platform (a
+        disable's deceleration included)."""
         d = self.data
-        if d.state in (State.ENABLED, State.MOVING):
+        if d.state in (State.ENABLED, State.MOVING, State.DISABLING):
             ref = d.reference[:3]
             self.errors.append(float(np.linalg.norm(ref - d.position)))
             if true_position is not None:  # the truth the simulator knows

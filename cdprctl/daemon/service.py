@@ -248,10 +248,11 @@ class Daemon:
             )  # fmt: skip
             if (end or self.stop_requested.is_set()) and stopping_since is None:
                 stopping_since = now
+                drives_on = d.state in (State.ENABLED, State.MOVING, State.ENABLING)
                 if self.stop_requested.is_set():
-                    self._print(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}: "
-                                "decelerating, then the drives disabled")  # fmt: skip
-                if d.state in (State.ENABLED, State.MOVING, State.ENABLING):
+                    how = ": decelerating, then the drives disabled" if drives_on else ""
+                    self._print(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}{how}")
+                if drives_on:
                     submit(Command(CommandKind.STOP))
                     submit(Command(CommandKind.DISABLE))
             if stopping_since is not None and (
