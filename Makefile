@@ -8,13 +8,11 @@ STAMP := $(VENV)/.installed-stamp
 
 .PHONY: run test lint bench mutation clean
 
-# editable_mode=compat: the checkout on the path, as a checkout is run (the default mode printed
-# setuptools' 10-line "Editable installation ... be careful with folders" on every first run)
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "cdprctl needs Python >= 3.11, found " + sys.version.split()[0])'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]' --config-settings editable_mode=compat
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -30,7 +28,7 @@ test: $(STAMP) lint
 # Mutation testing of the safety-relevant modules (docs/mutation.md); hours, not part of `test`.
 # MODULES="supervisor torques" JOBS=2 make mutation  runs a selection
 mutation: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,mutation]' --config-settings editable_mode=compat
+	$(BIN)/python -m pip install --quiet -e '.[dev,mutation]'
 	$(BIN)/python tools/mutation.py --jobs $(or $(JOBS),1) $(MODULES)
 
 bench: $(STAMP)
