@@ -81,10 +81,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except KeyboardInterrupt as exc:  # before a command's own handling, or a tool's Ctrl-C
         name = str(exc) or "SIGINT"
-        if words[:1] == ["run"]:  # as a stop during the start-up (docs/operating.md)
-            print(f"cdprctl run: stopped by {name} during the start-up; the drives were not "
-                  "enabled", file=sys.stderr)  # fmt: skip
-            return 0
+        if words[:1] == ["run"]:  # a stop during the start-up (docs/operating.md)
+            from cdprctl.daemon.startup import StartupInterrupted
+
+            stop = exc if isinstance(exc, StartupInterrupted) else StartupInterrupted(name)
+            print(stop.message, file=sys.stderr)
+            return stop.code
         print(f"cdprctl: interrupted ({name})", file=sys.stderr)
         return 130
     finally:

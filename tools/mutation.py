@@ -207,15 +207,16 @@ def old_lines(diff: str) -> dict[int, str]:
     return out
 
 
-def session_is_stale(t: Target, tree: Path) -> bool:
+def session_is_stale(t: Target, tree: Path, mutants: list[Mutant] | None = None) -> bool:
     """Whether the module changed since its session was made: its digest then (kept beside
     the session), or, for a session without one, a line of the session's diffs that no longer
-    reads as it did."""
+    reads as it did (``mutants``: the session, when already read)."""
     digest = OUT / f"{t.name}.sha256"
     if digest.exists():
         return digest.read_text().strip() != module_digest(tree, t.module)
     source = [*(tree / t.module).read_text().splitlines(), ""]  # diffs show the end's ""
-    lines = (item for m in read_session(t, tree) for item in old_lines(m.raw_diff).items())
+    session = read_session(t, tree) if mutants is None else mutants
+    lines = (item for m in session for item in old_lines(m.raw_diff).items())
     return any(n > len(source) or source[n - 1] != text for n, text in lines)
 
 
@@ -298,7 +299,7 @@ def report(targets: list[Target], tree: Path) -> str:
         if not ms:
             rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
             continue
-        if session_is_stale(t, tree):  # its figures are of a file that is no longer there
+        if session_is_stale(t, tree, ms):  # its figures are of a file that is no longer there
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue

@@ -36,6 +36,11 @@ def command_parser(
     return p
 
 
+def os_error_text(exc: Exception) -> str:
+    """An OS error as a user reads it ("No such file or directory"), not its errno repr."""
+    return str(exc.strerror) if isinstance(exc, OSError) and exc.strerror else str(exc)
+
+
 def load_or_report(path: str, who: str = "") -> RobotModel | None:
     """The robot of ``path``, or None after printing every error of the file to stderr
     (``who``: the command, before each line, as its other errors have it)."""

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.common import command_parser, load_or_report
+from cdprctl.commands.common import command_parser, load_or_report, os_error_text
 
 
 def add_parser(sub: Any) -> None:
@@ -46,8 +46,7 @@ def check(args: argparse.Namespace) -> int:
     try:
         text = Path(args.file).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-        print(f"cdprctl path check: error: {args.file}: {why}", file=sys.stderr)
+        print(f"cdprctl path check: error: {args.file}: {os_error_text(exc)}", file=sys.stderr)
         return 2
     home = [*model.home.position, *model.home.rpy]
     try:

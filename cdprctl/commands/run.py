@@ -8,7 +8,7 @@ import signal
 import sys
 from typing import Any
 
-from cdprctl.commands.common import command_parser, load_or_report
+from cdprctl.commands.common import command_parser, load_or_report, os_error_text
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
 
 
@@ -167,8 +167,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             path = (args.path, Path(args.path).read_text(encoding="utf-8"), args.units)
         except (OSError, UnicodeDecodeError) as exc:
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            print(f"cdprctl run: error: --path = {args.path}: {why}", file=sys.stderr)
+            print(f"cdprctl run: error: --path = {args.path}: {os_error_text(exc)}",
+                  file=sys.stderr)  # fmt: skip
             return 2
     if args.foxglove is not None:
         from cdprctl.model.foxglove import parse_listen
@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             print(f"cdprctl run: error: --foxglove = {exc}", file=sys.stderr)
             return 2
-    from cdprctl.daemon.startup import StartupInterrupted, interrupt_the_start_up
+    from cdprctl.daemon.startup import interrupt_the_start_up
     from drivers.errors import DriverError
 
     previous = interrupt_the_start_up()
@@ -199,9 +199,6 @@ def run(args: argparse.Namespace) -> int:
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)
         return 1
-    except StartupInterrupted as exc:  # building the simulated robot compiles for ~10 s
-        print(exc.message, file=sys.stderr)
-        return exc.code
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

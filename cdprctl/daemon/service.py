@@ -37,13 +37,14 @@ from cdprctl.daemon.sim_step import SimStepper
 from cdprctl.daemon.startup import (
     StartupInterrupted,
     StartupRefusedError,
-    end_of_start_up,
     forget_stop_signals,
     start_up,
+    stop_if_interrupted,
 )
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import tda_options_of
 
+DRIVES_OFF = frozenset({State.READY, State.FAULT, State.INIT})  # what a stop waits for
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -92,6 +93,8 @@ class Daemon:
         self.finished = threading.Event()
         self._stop_deadline = float("inf")
         self._stopped_by = ""  # the signal that asked for the stop
+        # s: the longest a stop waits for the drives to be off (a disable's deceleration)
+        self._stop_wait = self.manager.controller.supervisor.disable_within + 1.0
         self._last_fault = ""  # the fault the links were last told of
         self.links = Links(links_of(model, zenoh, foxglove,
                                     lambda: config_summary(model, self.sim is not None)))
@@ -110,9 +113,8 @@ class Daemon:
             script = start_up(self, path)
             # from here a signal is the loop's controlled stop (until now: the start-up's end)
             old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-            end_of_start_up()  # a signal whose exception a library swallowed ends it here
+            stop_if_interrupted()  # a signal whose exception a library swallowed ends it here
         except (StartupRefusedError, StartupInterrupted) as exc:
-            forget_stop_signals()
             self._print(exc.message, err=True)
             if self.realtime:
                 rt.restore_gc()  # as after a run: what the start-up built is collectable again
@@ -121,6 +123,8 @@ class Daemon:
                 self.sim.close()
             self.links.close()
             return exc.code
+        finally:
+            forget_stop_signals()
         p = d.position
         self._print(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
@@ -197,8 +201,8 @@ class Daemon:
         """Until the drives are off (READY, FAULT, INIT): a disable's deceleration, at most the
         supervisor's ``disable_within`` and a second from ``since`` (was a fixed 0.5 s, shorter
         than a deceleration: the loop then ended mid-way)."""
-        limit = since + self.manager.controller.supervisor.disable_within + 1.0
-        while self.data.state not in (State.READY, State.FAULT, State.INIT):
+        limit = since + self._stop_wait
+        while self.data.state not in DRIVES_OFF:
             if time.monotonic() > limit:
                 return
             time.sleep(self.model.control.period)
@@ -256,8 +260,7 @@ class Daemon:
                     submit(Command(CommandKind.STOP))
                     submit(Command(CommandKind.DISABLE))
             if stopping_since is not None and (
-                d.state in (State.READY, State.FAULT, State.INIT)
-                or now - stopping_since > self.manager.controller.supervisor.disable_within + 1.0
+                d.state in DRIVES_OFF or now - stopping_since > self._stop_wait
             ):
                 self.finished.set()
                 return

@@ -66,16 +66,8 @@ def stop_if_interrupted() -> None:
 
 
 def forget_stop_signals() -> None:
+    """At the start-up's end, whichever: a later run in this process starts clean."""
     _received.clear()
-
-
-def end_of_start_up() -> None:
-    """The start-up's last check, once the loop's stop handling is installed: raise if a stop
-    signal came, and forget it either way (a later run in this process starts clean)."""
-    got = _received[:1]
-    _received.clear()
-    if got:
-        raise StartupInterrupted(got[0])
 
 
 def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None:
