@@ -63,7 +63,8 @@ def test_position_mode_is_configured_by_sdo(rig):
     rig.driver.configure()
     for drive in rig.net.drives:
         assert drive.od[(p.OD_MODES_OF_OPERATION, 0)] == p.MODE_CSP
-        assert drive.od[(p.OD_MODES_DISPLAY, 0)] == p.MODE_CSP
+        shown = drive.on_sdo(p.sdo_upload(p.OD_MODES_DISPLAY, 0))  # as a master reads it
+        assert shown.data[0] & 0xE0 == 0x40 and shown.data[4] == p.MODE_CSP
     assert all(len(msg.data) == 8 for msg in rig.driver._rpdo)
     assert rig.driver.media == [0, 1]  # two buses, two media: a SYNC on each
 

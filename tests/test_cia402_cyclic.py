@@ -127,6 +127,12 @@ def test_positions_of_the_fresh_cables_and_velocities_by_their_sample_instants()
     c.fb_stamp[0] = 1.005  # an instant before the last (a clock stepped back): no velocity
     _, _, vel, _, _ = state(c, derived=True)
     assert vel[0] == 9.0
+    c = Codec()  # one cable sampled twice while the others have never been
+    c.tpdo1(2.0, (0, OP, 0, 0))
+    state(c, derived=True)
+    c.tpdo1(2.002, (0, OP, 0, 100))
+    _, _, vel, _, _ = state(c, derived=True)
+    assert vel[0] == pytest.approx(100 * RAD / 0.002, rel=1e-12) and vel[1] == 9.0
 
 
 def test_the_drive_state_fault_code_and_fault_flag_of_each_cable():

@@ -59,6 +59,8 @@ def test_every_statusword_decodes_as_the_canopen_package_decodes_it():
 
 
 def test_the_statusword_each_state_reports_decodes_to_that_state():
+    # CiA 402's eight states, each its own member: two equal values would make one an alias
+    assert [s.name.replace("_", " ") for s in PS] == list(NAMES)
     for state, sw in p.STATUSWORD_OF.items():
         assert p.decode_statusword(sw) is state
         assert canopen_state(sw) is state

@@ -284,6 +284,7 @@ class RawPeer:
                                                         "channel": channel})  # fmt: skip
         self.bus = can.Bus(interface="inprocess", channel=channel)
         self.got: list[tuple[float, int, bytes]] = []
+        self.extended: set[int] = set()  # the identifiers that came as extended frames
 
     def send(self, arb: int, data: bytes) -> None:
         self.bus.send(can.Message(arbitration_id=arb, data=data, is_extended_id=False))
@@ -293,6 +294,8 @@ class RawPeer:
             self.net.advance(0.001)
             while (msg := self.bus.recv(0)) is not None:
                 self.got.append((self.net.time, msg.arbitration_id, bytes(msg.data)))
+                if msg.is_extended_id:
+                    self.extended.add(msg.arbitration_id)
 
     def heartbeats(self, node: int, since: float = -1.0) -> list[tuple[float, int]]:
         return [(t, d[0]) for t, a, d in self.got if a == 0x700 + node and t > since]
@@ -348,6 +351,7 @@ def test_heartbeats_at_the_producer_time_through_nmt_states_and_resets():
             t = peer.net.time
             peer.run(0.2)
             assert 9 <= len(peer.heartbeats(1, since=t)) <= 11  # the heartbeat goes on
+        assert peer.extended == set()  # CiA 301's identifiers are 11-bit: standard frames
     finally:
         peer.close()
 
@@ -377,9 +381,46 @@ def test_what_the_simulated_drive_answers_and_what_it_ignores():
             assert reply is not None and reply[0] == 0x60, hex(index)
         assert peer.sdo(1, bytes([0x23, 0x7A, 0x60, 0, 5, 0, 0, 0]))[0] == 0x60  # 0x607A := 5
         assert drive.axis.rated_torque == rated
+        mode = peer.sdo(1, bytes([0x40, 0x61, 0x60, 0, 0, 0, 0, 0]))
+        assert mode[4] != 1  # 0x6061 follows 0x6060 alone, not a 1 written elsewhere
+        for value, taken in ((2500, 2.5), (0, 2.5)):  # 0x6076 in mN·m; 0 is no rated torque
+            reply = peer.sdo(1, bytes([0x23, 0x76, 0x60, 0, *value.to_bytes(4, "little")]))
+            assert reply[0] == 0x60 and drive.axis.rated_torque == taken, value
         upload = peer.sdo(1, bytes([0x40, 0x72, 0x60, 0, 0, 0, 0, 0]))
         winch = model.cables[0].winch
         want = min(0xFFFF, round(winch.torque_limit / model.drives.rated_torque * 1000))
         assert int.from_bytes(upload[4:6], "little") == want
+    finally:
+        peer.close()
+
+
+def test_the_torque_limit_object_saturates_at_its_type():
+    """0x6072 is UNSIGNED16 per mille of the rated torque: a winch limit beyond 65.535 × rated
+    stores 0xFFFF, one below stores its own per mille."""
+    from sim_backend.drives.cia402 import Cia402Drive
+    from sim_backend.plant import CdprPlant
+
+    model = load_robot(CONFIG / "rowc.toml")
+    plant = CdprPlant(model)
+    for limit, stored in ((100.0, 0xFFFF), (0.25, 250)):
+        drive = Cia402Drive(1, 0, plant, 1.0, 4096, limit, 0.1, (0.0, 0.0), {}, 0.05)
+        assert drive.od[(p.OD_MAX_TORQUE, 0)] == stored, limit
+
+
+def test_an_rpdo_is_taken_only_in_operational():
+    """CiA 301: PDOs are exchanged in OPERATIONAL alone; an RPDO that arrives in STOPPED or
+    PRE-OPERATIONAL is not latched for the next SYNC."""
+    peer = RawPeer()
+    try:
+        drive = peer.net.nodes[0][1]
+        rpdo = 0x200 + 1
+        size = drive.pdos.rx.codec.size
+        for command, taken in ((0x01, 1), (0x02, 0), (0x80, 0), (0x01, 1)):
+            peer.send(0x000, bytes([command, 1]))
+            peer.run(0.002)
+            before = drive.sync.rpdos
+            peer.send(rpdo, bytes(size))
+            peer.run(0.002)
+            assert drive.sync.rpdos - before == taken, hex(command)
     finally:
         peer.close()

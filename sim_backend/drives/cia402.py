@@ -41,14 +41,14 @@ class Cia402Drive:
         counts_per_rev: int,
         torque_limit: float,
         comm_timeout: float,
-        position_gains: tuple[float, float] = (0.0, 0.0),
-        rpdo_owners: dict[int, Cia402Drive] | None = None,
-        target_extrapolation: float = 0.05,
+        position_gains: tuple[float, float],
+        rpdo_owners: dict[int, Cia402Drive],
+        target_extrapolation: float,
     ):
         self.node_id = node_id
         # COB-ID → drive, shared by the drives of one bus: who takes an RPDO (the network's
         # dispatch; kept by each drive as its RPDO's COB-ID changes)
-        self.rpdo_owners: dict[int, Cia402Drive] = {} if rpdo_owners is None else rpdo_owners
+        self.rpdo_owners = rpdo_owners
         self.cable = cable
         self.comm_timeout = comm_timeout
         self.sync = SyncClock(target_extrapolation)  # the SYNC as this drive sees it
@@ -151,8 +151,6 @@ class Cia402Drive:
         """A stored download's effect on the drive."""
         if pdo.is_pdo_object(index):
             self.pdos.compile()
-        if index == p.OD_MODES_OF_OPERATION:
-            self.od[(p.OD_MODES_DISPLAY, 0)] = value  # switched at once
         if index in (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT):
             self.axis.set_following_error()
         if index == p.OD_RATED_TORQUE and value > 0:
