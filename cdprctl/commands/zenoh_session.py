@@ -99,14 +99,33 @@ def _reachable(endpoint: str) -> bool | None:
         return False
 
 
+def not_there(session: Any, args: argparse.Namespace, prefix: str) -> str:
+    """Before a tool waits for the robot's answer: why it will not come, when that is known
+    within a second or two — no peer reached (nothing listens, or the peer refused this
+    session: its credentials) or no robot under ``prefix``; "" when the robot answers its
+    status. A wrong password or robot name costs the second, not the reply's timeout."""
+    deadline = time.monotonic() + PEER_WAIT
+    while not _peers(session) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if _peers(session) and robot_status(session, prefix, timeout=2.0):
+        return ""
+    return why_no_answer(session, args, prefix)
+
+
+PEER_WAIT = 1.0  # s: a session reaches its --connect peers within this (measured: < 0.1 s)
+
+
+def _peers(session: Any) -> list[Any]:
+    return [*session.info.peers_zid(), *session.info.routers_zid()]
+
+
 def why_no_answer(session: Any, args: argparse.Namespace, prefix: str,
                   command: bool = True) -> str:  # fmt: skip
     """What a tool that heard nothing from the robot can tell: nobody reached (nothing listens
     there, or a peer listens and refused this session: its credentials), reached but no robot
     under ``prefix``, or the robot is there and took no ``command`` (its ACL, or commands
     off) or, waiting for its state, publishes none."""
-    peers = [*session.info.peers_zid(), *session.info.routers_zid()]
-    if not peers:
+    if not _peers(session):
         endpoints = list(args.connect or ())
         if not endpoints:
             return ("no Zenoh peer found (multicast scouting finds none, or is off): give "

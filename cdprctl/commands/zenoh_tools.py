@@ -16,6 +16,7 @@ from cdprctl.commands.common import command_parser
 from cdprctl.commands.zenoh_session import (
     add_zenoh_arguments,
     key_prefix,
+    not_there,
     robot_status,
     tool_session,
     why_no_answer,
@@ -122,14 +123,19 @@ def send(args: argparse.Namespace) -> int:
     if session is None:
         return 2
     try:
-        sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
-        time.sleep(0.3)  # let the subscription reach the gateway before asking
-        session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
-        done.wait(args.timeout)
-        sub.undeclare()
-        why = "" if got else why_no_answer(session, args, prefix)
+        early = not_there(session, args, prefix)  # known now: not after the reply's timeout
+        if not early:
+            sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
+            time.sleep(0.3)  # let the subscription reach the gateway before asking
+            session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
+            done.wait(args.timeout)
+            sub.undeclare()
+            why = "" if got else why_no_answer(session, args, prefix)
     finally:
         session.close()
+    if early:
+        print(f"cdprctl send: {args.kind} not sent: {early}", file=sys.stderr)
+        return 2
     if not got:
         print(f"cdprctl send: no reply from {prefix} in {args.timeout:g} s: {why}",
               file=sys.stderr)  # fmt: skip
