@@ -52,6 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     calibrate.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
+    from cdprctl.commands import drives
+
+    drives.add_parser(sub)
     from cdprctl.commands import report, zenoh_tools
     from cdprctl.commands import workspace as workspace_cmd
 

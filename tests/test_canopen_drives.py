@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import threading
 import time
 import uuid
 
@@ -17,6 +16,7 @@ import canopen
 import numpy as np
 import pytest
 from conftest import CONFIG
+from local_drives import LocalDrive
 
 from cdprctl.model import load_robot
 from cdprctl.model.drives import default_drives
@@ -64,63 +64,6 @@ def eds_variant(tmp_path, read_only: bool) -> str:
     path = tmp_path / ("ro.eds" if read_only else "rw.eds")
     path.write_text(text)
     return str(path)
-
-
-class LocalDrive:
-    """A ``LocalNode`` as a CiA 402 drive: at each SYNC in OPERATIONAL it takes its RPDO1 (as
-    mapped now), steps the power state machine, and sends TPDO1 (as mapped now)."""
-
-    def __init__(self, network: canopen.Network, node_id: int, eds: str):
-        self.node = canopen.LocalNode(node_id, eds)
-        network.add_node(self.node)
-        self.node.add_read_callback(self._read)
-        self.state = p.PowerState.SWITCH_ON_DISABLED
-        self.torque = 0  # per mille: cyclic synchronous torque's target
-        self.target = None  # counts, position mode's target (None: none came)
-        self.offset = None  # per mille, position mode's torque offset
-        self.lock = threading.Lock()
-        self.mapped = False
-        network.subscribe(p.NMT, self._on_nmt)
-        network.subscribe(p.SYNC, self._on_sync)
-
-    def _read(self, index: int, subindex: int, od):
-        if index == p.OD_MODES_DISPLAY:  # the mode in effect: the one written
-            return self.node.sdo[p.OD_MODES_OF_OPERATION].raw
-        if index == p.OD_STATUSWORD:
-            return p.STATUSWORD_OF[self.state]
-        return None
-
-    def _on_nmt(self, can_id, data, timestamp) -> None:
-        if data[0] == p.NMT_START and data[1] in (0, self.node.id):
-            self.node.tpdo.read()  # the mapping as it is now, from its own dictionary
-            self.node.rpdo.read()
-            self.mapped = True
-
-    def _on_sync(self, can_id, data, timestamp) -> None:
-        if not self.mapped or self.node.nmt.state != "OPERATIONAL":
-            return
-        with self.lock:
-            rpdo = self.node.rpdo[1]
-            if rpdo.is_received:
-                rpdo.is_received = False
-                values = {var.index: var.raw for var in rpdo}
-                command = p.command_of(values.get(p.OD_CONTROLWORD, 0))
-                nxt = p.TRANSITIONS.get((self.state, command))
-                if nxt is not None:
-                    self.state = nxt[0]
-                self.torque = values.get(p.OD_TARGET_TORQUE, self.torque)
-                self.target = values.get(p.OD_TARGET_POSITION, self.target)
-                self.offset = values.get(p.OD_TORQUE_OFFSET, self.offset)
-            tpdo = self.node.tpdo[1]
-            enabled = self.state is p.PowerState.OPERATION_ENABLED
-            live = {
-                p.OD_STATUSWORD: p.STATUSWORD_OF[self.state],
-                p.OD_POSITION_ACTUAL: 1234,
-                p.OD_TORQUE_ACTUAL: self.torque if enabled else 0,
-            }
-            for var in tpdo:
-                var.raw = live[var.index]
-            tpdo.transmit()
 
 
 @pytest.fixture

@@ -198,6 +198,7 @@ def test_cob_ids_and_objects_are_those_of_vendors_files(eds):
 
 # CiA 301/402's names of the objects cdprctl reads and writes (spaces, case and "_" aside)
 OBJECT_NAMES = {
+    "OD_DEVICE_TYPE": "devicetype",
     "OD_ERROR_REGISTER": "errorregister", "OD_ERROR_CODE": "errorcode",
     "OD_MAX_TORQUE": "maxtorque", "OD_SUPPORTED_DRIVE_MODES": "supporteddrivemodes",
     "OD_CONTROLWORD": "controlword", "OD_STATUSWORD": "statusword",

@@ -73,7 +73,10 @@ class Cia402Script:
     @staticmethod
     def _table(n: int, rated_mnm: int) -> dict[tuple[int, int], int]:
         table = {(p.OD_RATED_TORQUE, 0): rated_mnm, (p.OD_SUPPORTED_DRIVE_MODES, 0): 0x280,
-                 (p.OD_MODES_OF_OPERATION, 0): 0}  # fmt: skip
+                 (p.OD_MODES_OF_OPERATION, 0): 0, (p.OD_ABORT_CONNECTION, 0): 1,
+                 (p.OD_MAX_TORQUE, 0): 1000, (p.OD_SYNC_COUNTER_OVERFLOW, 0): 0,
+                 (p.OD_FOLLOWING_ERROR_WINDOW, 0): 1000,
+                 (p.OD_FOLLOWING_ERROR_TIMEOUT, 0): 10}  # fmt: skip
         for comm, mapping, cob, entries in (
             (p.RPDO1_COMM, p.RPDO1_MAP, p.RPDO1 + n, p.RPDO1_MAPPING[p.MODE_CST]),
             (p.TPDO1_COMM, p.TPDO1_MAP, p.TPDO1 + n, p.TPDO1_MAPPING),
@@ -156,11 +159,13 @@ def test_cia402_configure_frames(seed):
         assert min(t for t, a, d in peer.rx if a == p.NMT and d[0] == 0x01) >= last_sdo
         sdo = peer.sent(p.SDO_RX + 1)
         reads = [(d[2] << 8 | d[1], d[3]) for d in sdo if d[0] == 0x40]
-        # identity; the heartbeat time before anything is written (a reset drive has its
-        # default: docs/homing.md); the rated torque
-        assert reads[:6] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4), (0x1017, 0),
-                             (0x6076, 0)]  # fmt: skip
-        assert (0x1600, 0) in reads and (0x1A00, 0) in reads and (0x6502, 0) in reads
+        # capabilities first: identity, device type, modes, rated torque, the optional
+        # objects; then the heartbeat time before anything is written (a reset drive has its
+        # default: docs/homing.md)
+        assert reads[:13] == [(0x1018, 1), (0x1018, 2), (0x1018, 3), (0x1018, 4), (0x1000, 0),
+                              (0x6502, 0), (0x6076, 0), (0x6007, 0), (0x6072, 0), (0x1019, 0),
+                              (0x6065, 0), (0x6066, 0), (0x1017, 0)]  # fmt: skip
+        assert (0x1600, 0) in reads and (0x1A00, 0) in reads
         writes = [d for d in sdo if d[0] & 0xE0 == 0x20]
         assert writes[0] == bytes([0x2F, 0x60, 0x60, 0x00, 0x0A, 0, 0, 0])  # 0x6060 := 10 (CST)
         assert writes[1] == bytes([0x2B, 0x17, 0x10, 0x00, 0x64, 0x00, 0, 0])  # 0x1017 := 100 ms

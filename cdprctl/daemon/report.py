@@ -149,7 +149,27 @@ def identity_lines(model: RobotModel, driver: Any) -> tuple[list[str], str]:
         text = ", ".join(f"{k} 0x{v:08X}" for k, v in ident.items()) if ident else (
             "no identity object")  # fmt: skip
         lines.append(f"drive of cable index {c} (node {node}): {text}")
+    skipped = getattr(driver, "skipped", None) or [[] for _ in identities]
+    for c, what in enumerate(skipped):
+        drives[c]["skipped"] = list(what)
+    lines += skipped_lines(skipped, [int(n) for n in nodes])
     return lines, json.dumps(drives)
+
+
+def skipped_lines(skipped: list[list[str]], nodes: list[int]) -> list[str]:
+    """What each drive's set-up skipped (drivers/cia402/drive_setup.OPTIONAL), a line per
+    object, drives that skipped the same named together."""
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for c, what in enumerate(skipped):
+        if what:
+            groups.setdefault(tuple(what), []).append(c)
+    lines = []
+    for items, cables in groups.items():
+        who = (f"drive of cable index {cables[0]} (node {nodes[cables[0]]})" if len(cables) == 1
+               else f"drives of cable indices {', '.join(map(str, cables))} (nodes "
+                    f"{', '.join(str(nodes[c]) for c in cables)})")  # fmt: skip
+        lines += [f"{who}: {line}" for line in items]
+    return lines
 
 
 def config_summary(model: RobotModel, simulated: bool) -> dict[str, Any]:

@@ -23,13 +23,11 @@ from drivers import blocking
 from drivers.canbase import CanWinchDriver
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
+from drivers.cia402.capabilities import Capabilities, read_capabilities
 from drivers.cia402.cyclic import GENERIC_STATE
-from drivers.cia402.drive_setup import configure_drive
+from drivers.cia402.drive_setup import OPTIONAL, configure_drive
 from drivers.cia402.sdo_client import SdoClient
-from drivers.errors import (
-    DriveFaultError,
-    DriverError,
-)
+from drivers.errors import DriveFaultError, DriverError, DriverInitializationError
 from drivers.registry import register_driver
 from drivers.vocabulary import Lifecycle
 
@@ -105,6 +103,11 @@ class Cia402Driver(CanWinchDriver):
         self._reset_flags = [False] * m
         self.reset_since_setup = self._reset_flags
         self._sync = can.Message(arbitration_id=p.SYNC, data=bytearray(1), is_extended_id=False)
+        self._sync_plain = can.Message(arbitration_id=p.SYNC, data=b"", is_extended_id=False)
+        # per bus: its medium's SYNC carries the counter (every drive there has 0x1019)
+        self._sync_counted = [True] * len(cfg.buses)
+        # per drive: the optional objects its set-up skipped, and why (drive_setup.OPTIONAL)
+        self.skipped: list[list[str]] = [[] for _ in range(m)]
         self._hb = can.Message(
             arbitration_id=p.HEARTBEAT + cfg.controller_node_id,
             data=bytes([p.HB_OPERATIONAL]),
@@ -146,8 +149,22 @@ class Cia402Driver(CanWinchDriver):
         """Each drive in PRE-OPERATIONAL by SDO (``drive_setup.configure_drive``), then NMT
         start."""
         self.sdo.nmt_all(p.NMT_PRE_OPERATIONAL)  # one left operational (a restart) too
+        caps = [self._capabilities(c, timeout) for c in range(self.m)]
+        refused = [(c, why) for c, cap in enumerate(caps) if (why := cap.can_run(self.modes[c]))]
+        if refused:  # before any drive is written to: every mapping as it was
+            raise DriverInitializationError(
+                "; ".join(f"drive of cable index {c} (node {int(self.node[c])}) cannot run "
+                          f"cdprctl: {why}" for c, why in refused)
+                + " (nothing was written to any drive; `cdprctl drives scan` lists them all)"
+            )  # fmt: skip
+        # a SYNC with a counter byte on a medium where a drive has no 0x1019 would be one of
+        # the wrong length to it (CiA 301 §7.2.5: EMCY 0x8240 on a real drive)
+        counter = self._sync_counted
+        for c, cap in enumerate(caps):
+            if not cap.present[p.OD_SYNC_COUNTER_OVERFLOW]:
+                counter[self._medium_of(c)] = False
         for c in range(self.m):
-            configure_drive(self, self.sdo, c, timeout)
+            configure_drive(self, self.sdo, c, timeout, caps[c], counter[self._medium_of(c)])
         self.sdo.nmt_all(p.NMT_START)
         self.liveness.started = True
 
@@ -163,6 +180,16 @@ class Cia402Driver(CanWinchDriver):
             "feedback (TPDO1)",
             resend_start,
         )
+
+    def _capabilities(self, c: int, timeout: float) -> Capabilities:
+        return read_capabilities(
+            lambda index, sub: self.sdo.read(c, index, sub, timeout, signed=False),
+            tuple(OPTIONAL),
+        )
+
+    def _medium_of(self, c: int) -> int:
+        b = int(self.bus_of[c])
+        return self._shared.get(b, b)
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable
@@ -354,7 +381,7 @@ class Cia402Driver(CanWinchDriver):
             sync = self._sync.data
             sync[0] = sync[0] % p.SYNC_COUNTER_OVERFLOW + 1
             for b in self.media:
-                self._send(b, self._sync)
+                self._send(b, self._sync if self._sync_counted[b] else self._sync_plain)
             self._last_sync = self._write_sync = now
             if not setup:
                 self._last_cycle_sync = now

@@ -27,6 +27,13 @@ class Pdo:
     cob_id: int  # 11-bit
     entries: tuple[int, ...]
     enabled: bool = True
+    transmission: int = p.TRANSMISSION_EVERY_SYNC
+
+
+# COB-ID bit 30 (a TPDO's "no RTR allowed"; reserved in an RPDO): kept as the drive has it — a
+# drive may fix it (the EPOS4's TPDOs default to it set). Bit 29 (a 29-bit identifier) cleared:
+# cdprctl's PDOs are 11-bit (CiA 301 §7.5.2.35).
+KEPT_COB_BITS = 0x40000000
 
 
 def wanted(mode: int, node_id: int, velocity_pdo: bool) -> list[Pdo]:
@@ -40,17 +47,21 @@ def wanted(mode: int, node_id: int, velocity_pdo: bool) -> list[Pdo]:
     return pdos
 
 
-def found(read: Read, pdo: Pdo) -> tuple[int, int, tuple[int, ...]]:
-    """(COB-ID with its valid bit, transmission type, mapping entries) as the drive has them."""
+def found(read: Read, pdo: Pdo) -> tuple[int, int, tuple[int, ...] | None]:
+    """(COB-ID with its valid bit, transmission type, mapping entries) as the drive has them;
+    entries None when the drive holds no count (a vendor's EDS may give it no default)."""
     cob = read(pdo.comm, 1)
     transmission = read(pdo.comm, 2)
-    count = read(pdo.mapping, 0)
+    try:
+        count = read(pdo.mapping, 0)
+    except SdoAbortError:
+        return cob, transmission, None
     return cob, transmission, tuple(read(pdo.mapping, k) for k in range(1, count + 1))
 
 
-def differences(read: Read, pdo: Pdo) -> list[str]:
-    """What differs from ``pdo`` on the drive (empty: it is as wanted)."""
-    cob, transmission, entries = found(read, pdo)
+def differences(pdo: Pdo, cob: int, transmission: int, entries: tuple[int, ...] | None
+                ) -> list[str]:  # fmt: skip
+    """What differs from ``pdo`` in what the drive has (``found``; empty: it is as wanted)."""
     out = []
     want_cob = pdo.cob_id | (0 if pdo.enabled else p.PDO_NOT_VALID)
     if cob & (p.PDO_NOT_VALID | 0x7FF) != want_cob:
@@ -68,23 +79,27 @@ def differences(read: Read, pdo: Pdo) -> list[str]:
     return out
 
 
-def write(write_sdo: Write, pdo: Pdo) -> None:
-    """Writes ``pdo`` in CiA 301's order (raises ``SdoAbortError`` if the drive refuses)."""
-    write_sdo(pdo.comm, 1, pdo.cob_id | p.PDO_NOT_VALID, 4)
+def write(write_sdo: Write, pdo: Pdo, kept_bits: int = 0) -> None:
+    """Writes ``pdo`` in CiA 301's order (raises ``SdoAbortError`` if the drive refuses);
+    ``kept_bits``: the COB-ID's bits 29-30 (frame format, RTR) as the drive had them."""
+    cob_id = pdo.cob_id | kept_bits
+    write_sdo(pdo.comm, 1, cob_id | p.PDO_NOT_VALID, 4)
     write_sdo(pdo.mapping, 0, 0, 1)
     for k, entry in enumerate(pdo.entries, 1):
         write_sdo(pdo.mapping, k, entry, 4)
     write_sdo(pdo.mapping, 0, len(pdo.entries), 1)
-    write_sdo(pdo.comm, 2, p.TRANSMISSION_EVERY_SYNC, 1)
+    write_sdo(pdo.comm, 2, pdo.transmission, 1)
     if pdo.enabled:
-        write_sdo(pdo.comm, 1, pdo.cob_id, 4)
+        write_sdo(pdo.comm, 1, cob_id, 4)
 
 
 def set_up(read: Read, write_sdo: Write, pdo: Pdo, configure: bool, who: str) -> bool:
     """``pdo`` on the drive ``who`` (for messages): checked, written if it differs and
     ``configure``, checked again. Returns True when it was written. Raises
-    ``DriverInitializationError`` naming what differs."""
-    diff = differences(read, pdo)
+    ``DriverInitializationError`` naming what differs; a write the drive refuses midway puts
+    back what the drive had (and says so), or says the PDO is left disabled."""
+    cob, transmission, entries = found(read, pdo)
+    diff = differences(pdo, cob, transmission, entries)
     if not diff:
         return False
     if not configure:
@@ -92,15 +107,16 @@ def set_up(read: Read, write_sdo: Write, pdo: Pdo, configure: bool, who: str) ->
             f"{who}: {pdo.name} is not what cdprctl's codec needs ([drives] pdo_mapping = "
             f"\"static\": set it with the drive's tool, or use \"configure\"): " + "; ".join(diff)
         )
+    kept = cob & KEPT_COB_BITS
     try:
-        write(write_sdo, pdo)
+        write(write_sdo, pdo, kept)
     except SdoAbortError as exc:
-        why = "read-only" if exc.code == 0x06010002 else f"SDO abort 0x{exc.code:08X}"
+        why = "read-only" if exc.code == p.SDO_ABORT_READ_ONLY else f"SDO abort 0x{exc.code:08X}"
         raise DriverInitializationError(
             f"{who}: cannot set {pdo.name} (0x{exc.index:04X}:{exc.sub:02X} {why}) and it "
-            "differs: " + "; ".join(diff)
+            f"differs: {'; '.join(diff)}; {restore(write_sdo, pdo, cob, transmission, entries)}"
         ) from exc
-    diff = differences(read, pdo)
+    diff = differences(pdo, *found(read, pdo))
     if diff:
         raise DriverInitializationError(
             f"{who}: {pdo.name} written but reads back differently: " + "; ".join(diff)
@@ -108,12 +124,30 @@ def set_up(read: Read, write_sdo: Write, pdo: Pdo, configure: bool, who: str) ->
     return True
 
 
-def describe(entries: tuple[int, ...]) -> str:
+def restore(write_sdo: Write, pdo: Pdo, cob: int, transmission: int,
+            entries: tuple[int, ...] | None) -> str:  # fmt: skip
+    """Puts back the PDO the drive had before a refused write; says what the drive is left
+    with."""
+    if entries is not None:
+        before = Pdo(pdo.name, pdo.comm, pdo.mapping, cob & 0x7FF, entries,
+                     enabled=not cob & p.PDO_NOT_VALID, transmission=transmission)  # fmt: skip
+        try:
+            write(write_sdo, before, cob & KEPT_COB_BITS)
+            return f"{pdo.name} put back as the drive had it"
+        except SdoAbortError:
+            pass
+    return (f"{pdo.name} left disabled (bit 31 of 0x{pdo.comm:04X}:01 set): the drive sends "
+            "or takes no such PDO until it is set up again or reset")  # fmt: skip
+
+
+def describe(entries: tuple[int, ...] | None) -> str:
     names = {
         0x6040: "controlword", 0x6041: "statusword", 0x6064: "position actual",
         0x606C: "velocity actual", 0x6071: "target torque", 0x6077: "torque actual",
         0x607A: "target position", 0x60B2: "torque offset",
     }  # fmt: skip
+    if entries is None:
+        return "no count (sub-index 0 holds no value)"
     if not entries:
         return "nothing"
     return "[" + ", ".join(

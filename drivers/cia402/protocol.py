@@ -43,6 +43,7 @@ HB_OPERATIONAL = 0x05
 HB_PRE_OPERATIONAL = 0x7F
 
 # Objects
+OD_DEVICE_TYPE = 0x1000  # bits 0-15: the device profile (402)
 OD_ERROR_REGISTER = 0x1001
 OD_ERROR_CODE = 0x603F
 OD_MAX_TORQUE = 0x6072  # per mille of the rated torque
@@ -88,6 +89,24 @@ MODES = {"cst": MODE_CST, "csp": MODE_CSP}
 # 0x6502 (supported drive modes, CiA 402 §6.4.7): the bit of each mode cdprctl drives
 SUPPORTED_MODE_BIT = {MODE_CSP: 7, MODE_CST: 9}
 MODE_NAMES = {MODE_CSP: "cyclic synchronous position", MODE_CST: "cyclic synchronous torque"}
+MODE_SHORT_NAMES = {MODE_CSP: "csp", MODE_CST: "cst"}  # as [drives] mode spells them
+
+# CiA 301 §7.2.4.3.17 SDO abort codes: those the set-up tells apart, in words
+SDO_ABORT_NO_OBJECT = 0x06020000
+SDO_ABORT_NO_SUB = 0x06090011
+SDO_ABORT_READ_ONLY = 0x06010002
+SDO_ABORT_TEXT = {
+    SDO_ABORT_NO_OBJECT: "the drive has no such object",
+    SDO_ABORT_NO_SUB: "the drive has no such sub-index",
+    SDO_ABORT_READ_ONLY: "read-only in this drive",
+    0x06070010: "of another size in this drive",
+    0x06090030: "value outside the drive's range",
+    0x06090031: "value above the drive's range",
+    0x06090032: "value below the drive's range",
+    0x060A0023: "the drive holds no value",
+    0x08000020: "the drive cannot store it now",
+    0x08000022: "not in the drive's present state",
+}
 RPDO1_MAPPING = {  # by mode, what the cyclic codec (RPDO1_STRUCT, RPDO1_CSP_STRUCT) packs
     MODE_CST: (0x60400010, 0x60710010),  # controlword, target torque
     MODE_CSP: (0x60400010, 0x607A0020, 0x60B20010),  # controlword, target position, offset

@@ -11,8 +11,6 @@ import can
 from drivers.cia402 import protocol as p
 from drivers.errors import DriverInitializationError, DriverTimeoutError, SdoAbortError
 
-Read = Any  # (index, sub) -> int
-
 
 class SdoClient:
     RETRY = 0.25  # s: a request (or its answer) lost on a lossy bus is sent again
@@ -76,19 +74,3 @@ class SdoClient:
         size = 4 - ((reply[0] >> 2) & 0x3) if reply[0] & 0x1 else 4
         return int.from_bytes(reply[4 : 4 + size], "little", signed=signed)
 
-
-def optional(read: Read, index: int, sub: int = 0) -> int | None:
-    """An object a drive may not have (CiA 402 optional): None when it aborts."""
-    try:
-        return read(index, sub)
-    except SdoAbortError:
-        return None
-
-
-def identity(read: Read) -> dict[str, int] | None:
-    """0x1018 (CiA 301 mandatory, but sub-indices 2-4 optional): what the drive has."""
-    ident = {
-        name: optional(read, p.OD_IDENTITY, sub)
-        for sub, name in ((1, "vendor_id"), (2, "product_code"), (3, "revision"), (4, "serial"))
-    }
-    return {k: v for k, v in ident.items() if v is not None} or None

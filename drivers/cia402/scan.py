@@ -1,0 +1,149 @@
+"""What is on a CAN bus, for commissioning (``cdprctl drives scan``): every node that answers an
+SDO upload of 0x1000 or sends a heartbeat, and per node what cdprctl's set-up would meet —
+identity, device type, supported modes, rated torque, which optional objects it has, its
+PDO mappings — with a verdict per mode. Read-only: SDO uploads only, no NMT command, no SYNC,
+nothing written. The `canopen` package is the master here (its node scanner, its SDO client
+with segmented uploads for the device name); the judgement is the set-up's own
+(``capabilities``, ``drive_setup.OPTIONAL``), so the scan and a start cannot disagree."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import can
+import canopen
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+
+from drivers.cia402 import pdo_setup
+from drivers.cia402 import protocol as p
+from drivers.cia402.capabilities import Capabilities, read_capabilities
+from drivers.cia402.drive_setup import OPTIONAL
+from drivers.errors import SdoAbortError
+
+OD_DEVICE_NAME = 0x1008  # VISIBLE_STRING, often longer than 4 bytes (a segmented upload)
+NMT_STATE_NAMES = {0x00: "boot-up", 0x04: "stopped", 0x05: "operational", 0x7F: "pre-operational"}
+PDOS = [(f"RPDO{k}", 0x1400 + k - 1, 0x1600 + k - 1) for k in range(1, 5)] + [
+    (f"TPDO{k}", 0x1800 + k - 1, 0x1A00 + k - 1) for k in range(1, 5)
+]
+
+
+@dataclass
+class NodeReport:
+    node: int
+    nmt: str  # from its heartbeat, or why there was none
+    device_name: str | None
+    capabilities: Capabilities | None  # None: the node answered no SDO
+    pdos: dict[str, str] = field(default_factory=dict)  # name → COB-ID, type and mapping
+    cable: str | None = None  # the configured cable this node drives (None: not configured)
+    verdicts: dict[str, str] = field(default_factory=dict)  # "csp"/"cst" → "yes" / "no: why"
+    would_skip: list[str] = field(default_factory=list)
+
+    def as_json(self) -> dict[str, Any]:
+        out = asdict(self)
+        caps = self.capabilities
+        out["capabilities"] = None if caps is None else {
+            "identity": caps.identity, "device_type": caps.device_type,
+            "supported_drive_modes": caps.modes, "rated_torque_mNm": caps.rated_torque,
+            "optional_objects": {f"0x{k:04X}": v for k, v in caps.present.items()},
+        }  # fmt: skip
+        return out
+
+
+def _reader(node: canopen.RemoteNode, node_id: int):
+    def read(index: int, sub: int) -> int:
+        try:
+            data = node.sdo.upload(index, sub)
+        except SdoAbortedError as exc:
+            raise SdoAbortError(str(exc), node_id, index, sub, exc.code) from None
+        return int.from_bytes(data[:4], "little")
+
+    return read
+
+
+def _pdo_text(read, comm: int, mapping: int) -> str | None:
+    pdo = pdo_setup.Pdo("", comm, mapping, 0, ())
+    try:
+        cob, transmission, entries = pdo_setup.found(read, pdo)
+    except (SdoAbortError, SdoCommunicationError):
+        return None
+    state = "disabled" if cob & p.PDO_NOT_VALID else "enabled"
+    return (f"COB-ID 0x{cob:08X} ({state}), transmission type {transmission}, "
+            f"{pdo_setup.describe(entries)}")  # fmt: skip
+
+
+def scan_bus(bus: can.BusABC, listen: float, sdo_timeout: float) -> list[NodeReport]:
+    """Every node on ``bus``: found by an SDO upload of 0x1000 to nodes 1-127 and by the
+    heartbeats heard over ``listen`` s; then each read (``sdo_timeout`` s an answer)."""
+    network = canopen.Network(bus)
+    heard: dict[int, int] = {}
+
+    def on_heartbeat(can_id: int, data: bytearray, timestamp: float) -> None:
+        if data:
+            heard[can_id - p.HEARTBEAT] = data[0]
+
+    for n in range(1, 128):
+        network.subscribe(p.HEARTBEAT + n, on_heartbeat)
+    network.connect()
+    try:
+        network.scanner.search()
+        time.sleep(listen)
+        found = sorted(set(network.scanner.nodes) | set(heard))
+        reports = []
+        for n in found:
+            node = canopen.RemoteNode(n, canopen.ObjectDictionary())
+            node.sdo.RESPONSE_TIMEOUT = sdo_timeout
+            network.add_node(node)
+            reports.append(_read_node(node, n, heard.get(n)))
+        return reports
+    finally:
+        if network.notifier is not None:
+            network.notifier.stop()  # the bus is the caller's to shut down
+
+
+def _read_node(node: canopen.RemoteNode, node_id: int, heartbeat: int | None) -> NodeReport:
+    read = _reader(node, node_id)
+    nmt = ("no heartbeat heard (0x1017 = 0?)" if heartbeat is None
+           else NMT_STATE_NAMES.get(heartbeat, f"state 0x{heartbeat:02X}"))  # fmt: skip
+    try:
+        name: str | None = node.sdo.upload(OD_DEVICE_NAME, 0).decode("latin-1").strip("\0 ")
+    except (SdoAbortedError, SdoCommunicationError):
+        name = None
+    try:
+        caps = read_capabilities(read, tuple(OPTIONAL))
+    except SdoCommunicationError:
+        return NodeReport(node_id, nmt, name, None)
+    report = NodeReport(node_id, nmt, name, caps)
+    for pdo_name, comm, mapping in PDOS:
+        text = _pdo_text(read, comm, mapping)
+        if text is not None:
+            report.pdos[pdo_name] = text
+    return report
+
+
+def judge(report: NodeReport, cable: str | None, mode: int | None, rated_mnm: float) -> None:
+    """The verdicts of ``report`` for cdprctl: per cyclic synchronous mode, can the set-up
+    run it (capabilities, and the rated torque against the config's ``rated_mnm`` mN·m), and
+    what it would skip. ``cable``/``mode``: what the config makes of this node (None: not
+    configured)."""
+    report.cable = cable
+    caps = report.capabilities
+    if caps is None:
+        report.verdicts = {name: "no: it answers no SDO" for name in p.MODE_SHORT_NAMES.values()}
+        return
+    rated = caps.rated_torque
+    rated_wrong = rated is not None and abs(rated - rated_mnm) > 0.01 * rated_mnm
+    for m, name in p.MODE_SHORT_NAMES.items():
+        why = caps.can_run(m)
+        if why is None and rated_wrong:
+            why = (f"rated torque 0x6076 is {rated} mN·m, the config says {rated_mnm:.0f} mN·m "
+                   "([drives] rated_torque)")  # fmt: skip
+        report.verdicts[name] = "yes" if why is None else f"no: {why}"
+    position_only = (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT)
+    for index, present in caps.present.items():
+        if not present and (index not in position_only or mode == p.MODE_CSP):
+            obj, lost = OPTIONAL[index]
+            report.would_skip.append(f"0x{index:04X} {obj} (absent): {lost}")
+    if rated is None:
+        report.would_skip.append("0x6076 motor rated torque (absent): the config's is trusted")
