@@ -331,7 +331,7 @@ def test_heartbeats_at_the_producer_time_through_nmt_states_and_resets():
         assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, 50, 0, 0, 0]))[0] == 0x60  # 50 ms
         peer.run(0.2)
         for command, state in ((0x01, 0x05), (0x03, 0x05), (0x00, 0x05), (0x02, 0x04),
-                               (0x83, 0x04), (0x80, 0x7F)):  # fmt: skip
+                               (0x83, 0x04), (0x80, 0x7F), (0x00, 0x7F)):  # fmt: skip
             t = peer.net.time
             peer.send(0x000, bytes([command, 1]))
             peer.run(0.12)
@@ -375,6 +375,8 @@ def test_what_the_simulated_drive_answers_and_what_it_ignores():
         assert emcy.arbitration_id == 0x81 and not emcy.is_extended_id
         assert bytes(emcy.data) == bytes([0x10, 0x23, 0x01, 0, 0, 0, 0, 0])
         rated = drive.axis.rated_torque
+        stored = peer.sdo(1, bytes([0x40, 0x76, 0x60, 0, 0, 0, 0, 0]))  # 0x6076, mN·m
+        assert int.from_bytes(stored[4:8], "little") == round(model.drives.rated_torque * 1000)
         for index in (0x6007, 0x6065):
             reply = peer.sdo(1, bytes([0x2B if index == 0x6007 else 0x23, index & 0xFF,
                                        index >> 8, 0, 1, 0, 0, 0]))  # fmt: skip
@@ -422,5 +424,43 @@ def test_an_rpdo_is_taken_only_in_operational():
             peer.send(rpdo, bytes(size))
             peer.run(0.002)
             assert drive.sync.rpdos - before == taken, hex(command)
+            sent = len(peer.got)
+            peer.send(0x080, bytes([1]))  # a SYNC: TPDOs in OPERATIONAL alone
+            peer.run(0.002)
+            tpdos = [a for _, a, _ in peer.got[sent:] if a == 0x181]
+            assert len(tpdos) == taken, hex(command)
+    finally:
+        peer.close()
+
+
+def test_after_a_reset_the_first_sync_and_heartbeat_start_afresh():
+    """Reset communication, set up again (0x1019 := 240, a heartbeat of 60 s), start: the first
+    SYNC's counter (7) is no sign of missed SYNCs — the RPDO before it is taken, not counted
+    stale — and the first heartbeat goes out at once, not a period after the reset."""
+    peer = RawPeer()
+    try:
+        drive = peer.net.nodes[0][1]
+        size = drive.pdos.rx.codec.size
+        peer.send(0x000, bytes([0x01, 1]))
+        for counter in (3, 4):  # SYNCs with a counter before the reset
+            peer.send(0x080, bytes([counter]))
+            peer.run(0.002)
+        peer.send(0x000, bytes([0x82, 1]))  # reset communication
+        peer.run(0.002)
+        t = peer.net.time
+        assert peer.sdo(1, bytes([0x2F, 0x19, 0x10, 0, 240, 0, 0, 0]))[0] == 0x60
+        assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, *(60000).to_bytes(2, "little"), 0, 0]))[
+            0] == 0x60  # fmt: skip
+        peer.run(0.003)
+        assert [s for _, s in peer.heartbeats(1, since=t)] == [0x7F]  # at once
+        peer.send(0x000, bytes([0x01, 1]))
+        peer.run(0.002)
+        stale, taken = drive.stale_targets, drive.sync.rpdos
+        peer.send(0x200 + 1, bytes(size))
+        peer.run(0.002)
+        assert drive.sync.rpdos == taken + 1
+        peer.send(0x080, bytes([7]))
+        peer.run(0.002)
+        assert drive.stale_targets == stale
     finally:
         peer.close()
