@@ -92,6 +92,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return stop.code
         print(f"cdprctl: interrupted ({name})", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`| head`): no traceback, nothing more
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # for the exit's flush
+        return 141  # 128 + SIGPIPE, as a shell reports it
     finally:
         signal.signal(signal.SIGTERM, previous)
 

@@ -232,18 +232,23 @@ def test_the_scan_reads_each_vendors_drive_and_judges_it_as_the_set_up_would(cap
     assert bus["missing_nodes"] == [6, 7, 8]
     nodes = {r["node"]: r for r in bus["nodes"]}
     assert sorted(nodes) == [1, 2, 3, 4, 5]
-    for n in (1, 2, 3):
-        assert nodes[n]["verdicts"] == {"csp": "yes", "cst": "yes"}, files[n - 1]
+    unknown = "yes, unless the mode is refused (0x6502 holds no value)"  # EPOS4's, Elmo's
+    for n, yes in ((1, unknown), (2, "yes"), (3, unknown)):
+        assert nodes[n]["verdicts"] == {"csp": yes, "cst": yes}, files[n - 1]
+        assert nodes[n]["configured_mode"] == "csp" and nodes[n]["cable"] == n - 1
     for n, modes in ((4, 0x001F0065), (5, 0x43)):
         for verdict in nodes[n]["verdicts"].values():
             assert verdict.startswith(f"no: supported drive modes 0x6502 = 0x{modes:08X} lacks")
     skipped = {n: {line[:6] for line in nodes[n]["would_skip"]} for n in nodes}
-    assert skipped[1] == {"0x6072", "0x1019"} and skipped[2] == {"0x6076"}
-    assert skipped[3] == {"0x1019"}
+    # what is absent; the EPOS4's 0x6066 (range 0..0) shows only when the set-up writes it
+    assert skipped[1] == {"0x6072", "0x1019"} and skipped[3] == {"0x1019"}
+    assert skipped[2] == {"0x6076", "the SY"}  # the others take the SYNC counter off the bus
+    assert out["ok"] is False and out["summary"] == (
+        "5 of 8 configured drives found, 3 can run their configured mode")
     assert nodes[1]["capabilities"]["identity"] is None  # the EPOS4's file: no values
     assert nodes[2]["capabilities"]["identity"] == {  # Nanotec's: 0x26C, 0x5A, 0x8A50000
         "vendor_id": 0x26C, "product_code": 0x5A, "revision": 0x8A50000}  # fmt: skip
-    assert "TPDO1" in nodes[2]["pdos"] and nodes[2]["cable"] == "2"
+    assert "TPDO1" in nodes[2]["pdos"]
     assert all(d.writes == [] and d.refused == [] for d in drives) and nmt == []
 
 
@@ -278,3 +283,37 @@ def test_a_drive_with_only_the_cyclic_objects_runs(tmp_path):
     finally:
         driver.shutdown()
         network.disconnect()
+
+
+def test_the_scan_judges_by_the_set_ups_rules_static_mappings_and_an_unset_rated_torque(
+        tmp_path, capsys):  # fmt: skip
+    """With [drives] pdo_mapping = "static" a Nanotec at its file's default mapping cannot run
+    (the start would refuse it: RPDO1 differs), and an Elmo whose 0x6076 was never set (its
+    file's 0) cannot either — each "no" says why as the start would."""
+    from cdprctl.cli import main
+
+    config = tmp_path / "rowc_static.toml"
+    config.write_text((CONFIG / "rowc.toml").read_text().replace(
+        "[drives]\n", '[drives]\npdo_mapping = "static"\n', 1))  # fmt: skip
+    channel = f"scan-{uuid.uuid4().hex}"
+    network = canopen.Network()
+    network.connect(interface="inprocess", channel=channel)
+    drives = [LocalDrive(network, 1, vendor_file(NANOTEC)),
+              LocalDrive(network, 2, vendor_file(ELMO))]  # fmt: skip
+    try:
+        rc = main(["drives", "scan", "--config", str(config), "--can-interface", "inprocess",
+                   "--can-channel", channel, "--listen", "0.2", "--json"])  # fmt: skip
+        out = json.loads(capsys.readouterr().out)
+    finally:
+        network.disconnect()
+    assert rc == 1
+    nodes = {r["node"]: r for r in out["buses"][0]["nodes"]}
+    static = nodes[1]["verdicts"]["csp"]
+    assert static.startswith("no: RPDO1 is not what cdprctl's codec needs and [drives] "
+                             "pdo_mapping = \"static\": ")  # fmt: skip
+    assert "found [0x6040:00 controlword (16 bit), 0x6060:00 modes of operation (8 bit)]" in (
+        static)  # the Nanotec file's default RPDO1
+    assert nodes[2]["verdicts"]["cst"].startswith(
+        "no: rated torque 0x6076 is 0 mN·m (not set: set the motor's data with the vendor's "
+        "tool, or in a DCF)")  # fmt: skip
+    assert all(d.writes == [] for d in drives)

@@ -38,8 +38,10 @@ def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
     options: dict[str, Any] = {}
     for item in args.can_option:
         key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise SystemExit(f"--can-option {item!r}: expected KEY=VALUE")
+        if not sep or not key:  # bad input: 2, as every refused option (docs/operating.md)
+            print(f"cdprctl {args.cmd}: error: --can-option {item!r}: expected KEY=VALUE",
+                  file=sys.stderr)  # fmt: skip
+            raise SystemExit(2)
         options[key] = int(value) if value.lstrip("-").isdigit() else value
     if options:
         out["options"] = options

@@ -69,6 +69,17 @@ class Capabilities:
         return f"0x6502 = 0x{self.modes:08X} ({', '.join(have) or 'no csp, no cst'})"
 
 
+def rated_torque_problem(rated: int | None, want_mnm: float) -> str | None:
+    """0x6076 (mN·m) against ``[drives] rated_torque`` (``want_mnm``), the unit of every torque
+    per mille: why it cannot run (None: it matches within 1 %, or the drive has none)."""
+    if rated is None or abs(rated - want_mnm) <= 0.01 * want_mnm:
+        return None
+    unset = " (not set: set the motor's data with the vendor's tool, or in a DCF)" if (
+        rated == 0) else ""  # fmt: skip
+    return (f"rated torque 0x6076 is {rated} mN·m{unset}, the config says {want_mnm:.0f} mN·m "
+            "([drives] rated_torque): the torques would be scaled wrong")  # fmt: skip
+
+
 def read_capabilities(read: Read, optional_objects: tuple[int, ...]) -> Capabilities:
     """The drive's capabilities, by uploads only. ``optional_objects``: the indices whose
     presence to note (an upload that aborts 0x06020000 or 0x06090011: absent)."""

@@ -13,7 +13,7 @@ from typing import Any
 
 from drivers.cia402 import pdo_setup
 from drivers.cia402 import protocol as p
-from drivers.cia402.capabilities import Capabilities, optional
+from drivers.cia402.capabilities import Capabilities, optional, rated_torque_problem
 from drivers.cia402.dcf import parameter_values
 from drivers.cia402.sdo_client import SdoClient
 from drivers.errors import DriverInitializationError, SdoAbortError
@@ -135,19 +135,13 @@ def configure_drive(
 
 
 def check_rated_torque(drv: Any, who: str, rated: int | None, skipped: list[str]) -> None:
-    """0x6076 (mN·m) against ``[drives] rated_torque``: the unit of every torque per mille.
-    A drive without it is noted; one that differs by more than 1 % is refused."""
+    """0x6076 (mN·m) against ``[drives] rated_torque`` (``capabilities.rated_torque_problem``):
+    a drive without it is noted, one that differs refused."""
     want = drv.rated_torque * 1000.0
     if rated is None:
         skipped.append(
             f"0x6076 motor rated torque: the drive has none to check; torques in per mille "
             f"of {want:.0f} mN·m ([drives] rated_torque) as the config says"
         )
-        return
-    if abs(rated - want) > 0.01 * want:
-        unset = " (not set: set the motor's data with the vendor's tool, or in a DCF)" if (
-            rated == 0) else ""  # fmt: skip
-        raise DriverInitializationError(
-            f"{who}: rated torque 0x6076 is {rated} mN·m{unset}, the config says {want:.0f} "
-            "mN·m ([drives] rated_torque): the torques would be scaled wrong"
-        )
+    elif (why := rated_torque_problem(rated, want)) is not None:
+        raise DriverInitializationError(f"{who}: {why}")

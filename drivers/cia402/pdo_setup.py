@@ -142,15 +142,25 @@ def restore(write_sdo: Write, pdo: Pdo, cob: int, transmission: int,
 
 def describe(entries: tuple[int, ...] | None) -> str:
     names = {
-        0x6040: "controlword", 0x6041: "statusword", 0x6064: "position actual",
-        0x606C: "velocity actual", 0x6071: "target torque", 0x6077: "torque actual",
-        0x607A: "target position", 0x60B2: "torque offset",
+        0x6040: "controlword", 0x6041: "statusword", 0x6060: "modes of operation",
+        0x6061: "modes of operation display", 0x6062: "position demand", 0x6064:
+        "position actual", 0x606C: "velocity actual", 0x6071: "target torque", 0x6074:
+        "torque demand", 0x6077: "torque actual", 0x6078: "current actual", 0x607A:
+        "target position", 0x60B2: "torque offset", 0x60B1: "velocity offset", 0x60F4:
+        "following error actual", 0x60FD: "digital inputs", 0x60FF: "target velocity",
+        0x603F: "error code",
     }  # fmt: skip
+
+    def name(index: int) -> str:
+        if 0x2000 <= index < 0x6000:
+            return "vendor's"
+        return names.get(index, "CiA 402 object")
+
     if entries is None:
         return "no count (sub-index 0 holds no value)"
     if not entries:
         return "nothing"
     return "[" + ", ".join(
-        f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X} {names.get(e >> 16, '?')} ({e & 0xFF} bit)"
+        f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X} {name(e >> 16)} ({e & 0xFF} bit)"
         for e in entries
     ) + "]"

@@ -18,7 +18,7 @@ from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from drivers.cia402 import pdo_setup
 from drivers.cia402 import protocol as p
-from drivers.cia402.capabilities import Capabilities, read_capabilities
+from drivers.cia402.capabilities import Capabilities, rated_torque_problem, read_capabilities
 from drivers.cia402.drive_setup import OPTIONAL
 from drivers.errors import SdoAbortError
 
@@ -36,12 +36,21 @@ class NodeReport:
     device_name: str | None
     capabilities: Capabilities | None  # None: the node answered no SDO
     pdos: dict[str, str] = field(default_factory=dict)  # name → COB-ID, type and mapping
-    cable: str | None = None  # the configured cable this node drives (None: not configured)
+    cable: int | None = None  # the cable index this node drives in the config (None: none)
+    configured_mode: str | None = None  # "csp" / "cst" as the config has it
     verdicts: dict[str, str] = field(default_factory=dict)  # "csp"/"cst" → "yes" / "no: why"
     would_skip: list[str] = field(default_factory=list)
+    # PDO name → (COB-ID, transmission type, entries) as found (pdo_setup.found)
+    found: dict[str, tuple[int, int, tuple[int, ...] | None]] = field(default_factory=dict)
+
+    @property
+    def can_run_configured(self) -> bool:
+        return self.configured_mode is not None and self.verdicts.get(
+            self.configured_mode, "").startswith("yes")  # fmt: skip
 
     def as_json(self) -> dict[str, Any]:
         out = asdict(self)
+        del out["found"]
         caps = self.capabilities
         out["capabilities"] = None if caps is None else {
             "identity": caps.identity, "device_type": caps.device_type,
@@ -62,12 +71,8 @@ def _reader(node: canopen.RemoteNode, node_id: int):
     return read
 
 
-def _pdo_text(read, comm: int, mapping: int) -> str | None:
-    pdo = pdo_setup.Pdo("", comm, mapping, 0, ())
-    try:
-        cob, transmission, entries = pdo_setup.found(read, pdo)
-    except (SdoAbortError, SdoCommunicationError):
-        return None
+def _pdo_text(found: tuple[int, int, tuple[int, ...] | None]) -> str:
+    cob, transmission, entries = found
     state = "disabled" if cob & p.PDO_NOT_VALID else "enabled"
     return (f"COB-ID 0x{cob:08X} ({state}), transmission type {transmission}, "
             f"{pdo_setup.describe(entries)}")  # fmt: skip
@@ -116,34 +121,72 @@ def _read_node(node: canopen.RemoteNode, node_id: int, heartbeat: int | None) ->
         return NodeReport(node_id, nmt, name, None)
     report = NodeReport(node_id, nmt, name, caps)
     for pdo_name, comm, mapping in PDOS:
-        text = _pdo_text(read, comm, mapping)
-        if text is not None:
-            report.pdos[pdo_name] = text
+        try:
+            found = pdo_setup.found(read, pdo_setup.Pdo("", comm, mapping, 0, ()))
+        except (SdoAbortError, SdoCommunicationError):
+            continue  # a PDO the drive does not have
+        report.found[pdo_name] = found
+        report.pdos[pdo_name] = _pdo_text(found)
     return report
 
 
-def judge(report: NodeReport, cable: str | None, mode: int | None, rated_mnm: float) -> None:
-    """The verdicts of ``report`` for cdprctl: per cyclic synchronous mode, can the set-up
-    run it (capabilities, and the rated torque against the config's ``rated_mnm`` mN·m), and
-    what it would skip. ``cable``/``mode``: what the config makes of this node (None: not
-    configured)."""
+def judge(report: NodeReport, cable: int | None, cfg: Any, dcf: str = "") -> None:
+    """The verdicts of ``report`` for cdprctl, by the set-up's own rules: per cyclic
+    synchronous mode, can it run (``Capabilities.can_run``; the rated torque against
+    ``[drives] rated_torque``; with ``pdo_mapping = "static"`` the mappings as found), and
+    what the set-up would skip of what is absent. ``cable``: the cable index the config gives
+    this node (None: not configured); ``cfg``: ``[drives]``; ``dcf``: the node's DCF, whose
+    values the set-up writes first (they may change what was read)."""
     report.cable = cable
+    report.configured_mode = None if cable is None else cfg.mode_of(cable)
     caps = report.capabilities
     if caps is None:
         report.verdicts = {name: "no: it answers no SDO" for name in p.MODE_SHORT_NAMES.values()}
         return
-    rated = caps.rated_torque
-    rated_wrong = rated is not None and abs(rated - rated_mnm) > 0.01 * rated_mnm
+    rated_mnm = cfg.rated_torque * 1000.0
     for m, name in p.MODE_SHORT_NAMES.items():
-        why = caps.can_run(m)
-        if why is None and rated_wrong:
-            why = (f"rated torque 0x6076 is {rated} mN·m, the config says {rated_mnm:.0f} mN·m "
-                   "([drives] rated_torque)")  # fmt: skip
-        report.verdicts[name] = "yes" if why is None else f"no: {why}"
+        why = caps.can_run(m) or rated_torque_problem(caps.rated_torque, rated_mnm)
+        if why is None and cfg.pdo_mapping == "static":
+            why = _static_mapping_problem(report, m, cfg.velocity_source == "pdo")
+        if why is not None:
+            report.verdicts[name] = f"no: {why}"
+        elif caps.modes is None:
+            report.verdicts[name] = "yes, unless the mode is refused (0x6502 holds no value)"
+        else:
+            report.verdicts[name] = "yes"
+        if dcf and why is not None:
+            report.verdicts[name] += f" (before {dcf}'s values, which the set-up writes first)"
     position_only = (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT)
     for index, present in caps.present.items():
-        if not present and (index not in position_only or mode == p.MODE_CSP):
+        if not present and (index not in position_only or report.configured_mode == "csp"):
             obj, lost = OPTIONAL[index]
             report.would_skip.append(f"0x{index:04X} {obj} (absent): {lost}")
-    if rated is None:
-        report.would_skip.append("0x6076 motor rated torque (absent): the config's is trusted")
+    if caps.rated_torque is None:
+        report.would_skip.append(
+            f"0x6076 motor rated torque (absent): torques in per mille of {rated_mnm:.0f} mN·m "
+            "as [drives] rated_torque says")  # fmt: skip
+
+
+def judge_bus(reports: list[NodeReport]) -> None:
+    """What one drive does to its medium's others: a drive without 0x1019 takes the SYNC
+    counter off the bus (drive_setup: 0x1019 := 0 where a drive has it)."""
+    without = [r.node for r in reports if r.capabilities is not None
+               and not r.capabilities.present.get(p.OD_SYNC_COUNTER_OVERFLOW, True)]  # fmt: skip
+    if not without:
+        return
+    for r in reports:
+        if r.capabilities is not None and r.node not in without:
+            r.would_skip.append(
+                f"the SYNC counter (0x1019 := 0): node {', '.join(map(str, without))} on its "
+                "bus has no 0x1019, so the SYNC there goes without one")  # fmt: skip
+
+
+def _static_mapping_problem(report: NodeReport, mode: int, velocity: bool) -> str | None:
+    """With ``pdo_mapping = "static"``: what differs from the PDOs cdprctl's codec needs."""
+    for pdo in pdo_setup.wanted(mode, report.node, velocity):
+        found = report.found.get(pdo.name)
+        diff = ["not readable"] if found is None else pdo_setup.differences(pdo, *found)
+        if diff:
+            return (f"{pdo.name} is not what cdprctl's codec needs and [drives] pdo_mapping = "
+                    f"\"static\": {'; '.join(diff)}")  # fmt: skip
+    return None
