@@ -7,6 +7,7 @@ table). It implements the base's transport hooks (``_open``, ``_close``, ``_begi
 from __future__ import annotations
 
 import contextlib
+import math
 from collections.abc import Iterator
 from typing import Any
 
@@ -32,7 +33,8 @@ class CanWinchDriver(WinchDriver):
         for b, bus in enumerate(self.config.buses):
             for c, n in zip(bus.cables, bus.node_ids, strict=True):
                 self.node[c], self.bus_of[c] = n, b
-        self._send_fail_streak = 0
+        self._send_fail_streak = 0  # frames refused in a row
+        self._send_failing_since = math.inf  # clock s: when the bus began refusing them
         self._batching = False  # the cycle's frames are being staged (_begin_frames)
         self._stage_of: list[Any] = []  # per bus: its medium's stage(msg), or None
         self._can_batch = False  # some medium stages (drivers/udp_bus.py)
@@ -100,20 +102,31 @@ class CanWinchDriver(WinchDriver):
             self.stats.frames_sent += sent
             if sent < n:
                 self.stats.send_errors += n - sent
-                self._send_fail_streak += n - sent
+                self._refused(n - sent)
             else:
                 self._send_fail_streak = 0
 
-    #: sends failed in a row that end the cycle's writing in an error: one is a full TX queue
-    #: for a moment, ten in a row (a cycle's frames to a few drives) a bus that is off
-    MAX_SEND_FAILS = 10
+    def _refused(self, n: int) -> None:
+        """``n`` frames the bus would not take, in a row with those before."""
+        if self._send_fail_streak == 0:
+            self._send_failing_since = self.clock()
+        self._send_fail_streak += n
 
     def _sends_failing(self) -> DriverError | None:
-        if self._send_fail_streak > self.MAX_SEND_FAILS:
-            return DriverOperationError(
-                f"CAN send failed {self._send_fail_streak} times in a row (bus off or TX full)"
-            )
-        return None
+        """An error once the bus has refused every frame for longer than the feedback may be
+        missing (``[drives] feedback_timeout``): the drives have gone that long without our
+        targets. Shorter (a TX queue full for a moment, a link down for a blink): ridden
+        through, counted in ``stats.send_errors``; the drives' own comm timeout guards them."""
+        if self._send_fail_streak == 0:
+            return None
+        refusing = self.clock() - self._send_failing_since
+        if refusing <= self.config.feedback_timeout:
+            return None
+        return DriverOperationError(
+            f"the CAN bus refused every frame for {refusing:.3f} s ({self._send_fail_streak} in "
+            f"a row: link down, bus-off or TX queue full; longer than [drives] feedback_timeout "
+            f"{self.config.feedback_timeout:g} s)"
+        )
 
     def _send(self, b: int, msg: can.Message) -> bool:
         """Send on bus ``b`` without blocking (staged while batching: counted at the flush); a
@@ -132,7 +145,7 @@ class CanWinchDriver(WinchDriver):
             self.buses[b].send(msg, timeout=0)
         except can.CanError:
             self.stats.send_errors += 1
-            self._send_fail_streak += 1
+            self._refused(1)
             return False
         self._send_fail_streak = 0
         self.stats.frames_sent += 1
@@ -159,7 +172,11 @@ class CanWinchDriver(WinchDriver):
                     yield key[0], key[1], data
                 continue
             while True:
-                msg = bus.recv(0)
+                try:
+                    msg = bus.recv(0)
+                except can.CanError:  # the link down (ENETDOWN): nothing from this bus now;
+                    self.stats.receive_errors += 1  # the feedback timeout judges how long
+                    break
                 if msg is None:
                     break
                 self.stats.frames_received += 1

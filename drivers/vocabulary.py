@@ -54,7 +54,8 @@ class DriverStats:
         self.implausible_frames = 0  # position steps no motor can make: dropped
         self.clamped_commands = 0  # torques beyond the limit, clamped
         self.rejected_commands = 0  # non-finite torques, replaced by the last valid one
-        self.send_errors = 0
+        self.send_errors = 0  # frames the bus would not take (link down, bus-off, TX full)
+        self.receive_errors = 0  # reads the bus refused (link down)
 
     def as_dict(self) -> dict[str, int]:
         return dict(vars(self))

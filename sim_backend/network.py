@@ -76,6 +76,7 @@ class SimNetwork:
             self.nodes.append(table)
         self.frames_in = 0
         self.frames_out = 0
+        self.frames_refused = 0  # frames the bus would not take (its link down)
         # fault injection hooks (sim_backend.faults.FaultInjector.attach)
         self.tx_filter: Any = None  # (msg, t, bus) -> the frames really sent
         self.rx_filter: Any = None  # (msg, t) -> False: the frame is lost
@@ -106,8 +107,15 @@ class SimNetwork:
             out = [msg] if self.tx_filter is None else self.tx_filter(msg, self.time, b)
             for m in out:
                 m.timestamp = self.time
-                self.buses[b].send(m)
-                self.frames_out += 1
+                self._put(b, m)
+
+    def _put(self, b: int, msg: can.Message) -> None:
+        try:
+            self.buses[b].send(msg)
+        except can.CanError:  # the link down: the frame is lost, as on a real bus
+            self.frames_refused += 1
+            return
+        self.frames_out += 1
 
     def process(self, first: can.Message | None = None) -> None:
         """Handle every frame waiting on every bus, at the current time (``first``: a frame
@@ -123,7 +131,10 @@ class SimNetwork:
                 if first is not None and b == 0:
                     msg, first = first, None
                 else:
-                    msg = bus.recv(0)
+                    try:
+                        msg = bus.recv(0)
+                    except can.CanError:  # the link down: nothing to read from it now
+                        msg = None
                 if msg is None:
                     break
                 out.append((b, msg))
@@ -219,7 +230,7 @@ class SimNetwork:
         if self.faults is not None:
             self.faults.apply(self, self.time, dt)
             for b, msg in self.faults.release(self.time):
-                self.buses[b].send(msg)
+                self._put(b, msg)  # past the filter already: not delayed or dropped again
 
     # s: the most of a stall of whoever steps it that the simulated robot catches up on
     # (``cdprctl sim``, ``cdprctl run --sim``); a longer one is lost time

@@ -92,7 +92,11 @@ def run_realtime(
             # sleep until the next step, or until a frame comes (one bus is enough to wake)
             wait = step - (time.monotonic() - now)
             if wait > 0:
-                woke_on = net.buses[0].recv(wait)  # handled at once by the next advance
+                try:
+                    woke_on = net.buses[0].recv(wait)  # handled at once by the next advance
+                except can.CanError:  # the link down: the drives hear nothing meanwhile
+                    time.sleep(wait)
+                    woke_on = None
     finally:
         for s, h in old.items():
             signal.signal(s, h)

@@ -221,27 +221,38 @@ def test_configure_waits_for_heartbeats_as_well_as_estimates(seed):
         drv.configure(timeout=0.1)
 
 
-def test_sends_failing_in_a_row_end_the_writing_past_ten(seed):
-    """One failed send is a full TX queue for a moment; more than ten in a row
-    (``MAX_SEND_FAILS``: a bus that is off) is an error of the write."""
+def test_a_bus_refusing_every_frame_past_the_feedback_timeout_ends_the_writing(seed):
+    """A refused send is a TX queue full for a moment or a link down for a blink: ridden
+    through. Refused for longer than ``[drives] feedback_timeout`` (the drives as long without
+    our torques as we would go without their feedback): an error of the write, saying how
+    long; one frame through starts the count anew."""
     drv, peer = make(seed, ODriveScript(range(1, 9)), "odrive")
     with drv:
         drv.configure()
         cycle(drv, peer)
-        assert drv.MAX_SEND_FAILS == 10
-        drv._send_fail_streak = 2  # the 8 torque frames of a cycle add 8 when the bus is off
+        limit = drv.config.feedback_timeout
         bus = drv.buses[0]
 
         def refuse(msg, timeout=None):
-            raise can.CanError("bus off")
+            raise can.CanError("Network is down")
 
         real = bus.send
         bus.send = refuse
         try:
-            assert drv._write_cycle(peer.t, np.zeros(8)) is None  # 10 in a row
-            drv._send_fail_streak = 3
-            err = drv._write_cycle(peer.t, np.zeros(8))  # 11
+            assert drv._write_cycle(peer.t, np.zeros(8)) is None  # the first refusals
+            peer.t += 0.9 * limit
+            assert drv._write_cycle(peer.t, np.zeros(8)) is None  # still within
+            peer.t += 0.2 * limit
+            err = drv._write_cycle(peer.t, np.zeros(8))
         finally:
             bus.send = real
-        assert isinstance(err, DriverOperationError) and "11 times in a row" in str(err)
-        assert drv._write_cycle(peer.t, np.zeros(8)) is None  # one send through: reset
+        assert isinstance(err, DriverOperationError), err
+        assert f"refused every frame for {1.1 * limit:.3f} s" in str(err)
+        assert drv.stats.send_errors >= 24  # 8 torques a cycle, three cycles
+        assert drv._write_cycle(peer.t, np.zeros(8)) is None  # frames through: reset
+        bus.send = refuse
+        try:
+            peer.t += 0.5 * limit
+            assert drv._write_cycle(peer.t, np.zeros(8)) is None  # a new run, counted anew
+        finally:
+            bus.send = real

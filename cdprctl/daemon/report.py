@@ -99,6 +99,12 @@ class RunReport:
         if d.saturated_cycles:
             lines.append(f"  feedback saturated in {d.saturated_cycles} cycles (the cables gave "
                          "what they could: docs/control.md)")
+        unsent = int(driver_stats.get("send_errors", 0))
+        unread = int(driver_stats.get("receive_errors", 0))
+        if unsent or unread:  # the bus refused them (down, bus-off, TX full)
+            lines.append(f"  CAN frames the bus would not take: {unsent}, reads it refused: "
+                         f"{unread} (link down, bus-off or TX queue full; ridden through up to "
+                         "[drives] feedback_timeout)")  # fmt: skip
         if self.faults:
             lines.append("  faults handled: "
                          + ", ".join(f"{k} {n}" for k, n in self.faults.most_common()))
