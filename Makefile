@@ -6,7 +6,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test lint bench mutation clean
+.PHONY: run test hil lint bench mutation clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "cdprctl needs Python >= 3.11, found " + sys.version.split()[0])'
@@ -22,8 +22,15 @@ lint: $(STAMP)
 	$(BIN)/ruff check cdprctl drivers sim_backend tests benchmarks tools
 	$(BIN)/mypy
 
+# the hardware-in-the-loop tests (tests/test_hil.py) run on a kernel SocketCAN vcan0: this
+# machine's, or inside User-Mode Linux (tools/hil.py; docs/hil.md); `test` runs them where it
+# can, and says why where it cannot
 test: $(STAMP) lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -m "not hil"
+	$(BIN)/python tools/hil.py --if-possible
+
+hil: $(STAMP)
+	$(BIN)/python tools/hil.py
 
 # Mutation testing of the safety-relevant modules (docs/mutation.md); hours, not part of `test`.
 # MODULES="supervisor torques" JOBS=2 make mutation  runs a selection

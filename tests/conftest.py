@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +103,15 @@ def without_table(text: str, name: str) -> str:
         if not skipping:
             out.append(line)
     return "".join(out)
+
+
+def end_processes(procs: list[subprocess.Popen], grace: float = 10.0) -> None:
+    """Every process a test started, ended: SIGTERM, then SIGKILL after ``grace`` s."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
