@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from candump_witness import check_candump
 from conftest import CONFIG, end_processes, without_table
 
 from cdprctl.model import load_robot
@@ -41,10 +42,16 @@ def hil_config(tmp_path: Path, mode: str = "csp") -> Path:
     """rowc on vcan0 (its two buses on one channel: distinct node ids), with the time-outs a
     slow CPU needs: feedback 1 s (30 ms faulted at 100 Hz under User-Mode Linux, the issue's
     measurement; and a link taken down for 0.1 s stays down ~0.3 s there, `ip` being slow to
-    start), heartbeat 2 s, the drives' communication 1 s, and the drives' following
-    error 0.1 s beyond a 20 mm window (3 ms faulted the first move at 50 Hz: a cycle's write
-    held up 39 ms, p99, its targets then a step)."""
+    start), heartbeat 2 s, the tension consistency check at half the range (below), the
+    drives' communication 1 s, and the drives' following error 0.1 s beyond a 20 mm window
+    (3 ms faulted the first move at 50 Hz: a cycle's write held up 39 ms, p99, its targets
+    then a step)."""
     text = without_table((CONFIG / "rowc.toml").read_text(), "drives")
+    # the drives' position loops fight while a cycle is held up (91 N beyond the commanded,
+    # 0.4 s into a move: the consistency check's 10 % of the range is 19 N on rowc)
+    text = text.replace("[control.safety]\n",
+                        "[control.safety]\nmax_tension_disagreement = 0.5\n", 1)  # fmt: skip
+    assert "max_tension_disagreement = 0.5" in text
     text += (
         f'\n[drives]\ndriver = "cia402"\nmode = "{mode}"\nassume_home_at_start = true\n'
         "heartbeat_timeout = 2.0\nfeedback_timeout = 1.0\ncomm_timeout = 1.0\n"
@@ -75,11 +82,12 @@ def processes():
 def start_sim(processes, config: Path) -> subprocess.Popen:
     sim = processes(sys.executable, "-m", "cdprctl.cli", "sim", "--config", str(config),
                     "--status", "0")  # fmt: skip
+    said = []
     for _ in range(8):
-        line = sim.stdout.readline()
-        if "ready" in line:
+        said.append(sim.stdout.readline())
+        if "ready" in said[-1]:
             return sim
-    raise AssertionError(f"cdprctl sim did not start: {line}")
+    raise AssertionError("cdprctl sim did not start:\n" + "".join(said))
 
 
 def test_the_driver_contract_over_vcan0(tmp_path, processes):
@@ -190,7 +198,7 @@ def test_the_demo_over_vcan0_with_candump_as_witness(tmp_path, processes):
                            "--no-realtime")  # fmt: skip
         lines: list[str] = []
         reached = 0
-        deadline = time.monotonic() + 150.0
+        deadline = time.monotonic() + 300.0  # a cold numba cache compiles ~3 min in there
         while time.monotonic() < deadline and reached < 2:
             line = daemon.stdout.readline()
             if not line:
@@ -209,47 +217,6 @@ def test_the_demo_over_vcan0_with_candump_as_witness(tmp_path, processes):
     assert "FAULT" not in text and "Traceback" not in text, text
     assert "drives disabled" in text and daemon.returncode == 0, text
     check_candump(log.read_text(), nodes=range(1, 9), rate=RATE)
-
-
-FRAME = re.compile(r"\((\d+\.\d+)\) vcan0 ([0-9A-F]{3})#([0-9A-F]*)")
-
-
-def check_candump(text: str, nodes: range, rate: float) -> None:
-    """The candump log against CiA 301/402, from the frames alone: every node's SDO set-up
-    (requests 0x600+n answered on 0x580+n, none aborted but optional objects), NMT
-    pre-operational then start, SYNC at the loop's rate, one RPDO per node per SYNC, TPDO1
-    answering each SYNC, heartbeats of every drive and of the controller (node 127 or the
-    configured one), and no frame of an identifier nobody should send."""
-    frames = [(float(t), int(i, 16), bytes.fromhex(d)) for t, i, d in FRAME.findall(text)]
-    assert len(frames) > 1000, text[:500]
-    ids = {i for _, i, _ in frames}
-    expected = {0x000, 0x080} | {base + n for n in nodes for base in (
-        0x080, 0x180, 0x200, 0x580, 0x600, 0x700)}  # fmt: skip
-    controller_hb = {i for i in ids if 0x700 < i <= 0x77F and i - 0x700 not in nodes}
-    assert len(controller_hb) == 1, sorted(hex(i) for i in controller_hb)
-    unexpected = ids - expected - controller_hb - {0x280 + n for n in nodes}
-    assert not unexpected, sorted(hex(i) for i in unexpected)
-    nmt = [d for _, i, d in frames if i == 0x000]
-    assert nmt[:2] == [bytes([0x80, 0]), bytes([0x01, 0])]  # pre-operational, then start
-    for n in nodes:
-        requests = [d for _, i, d in frames if i == 0x600 + n]
-        answers = [d for _, i, d in frames if i == 0x580 + n]
-        assert requests and len(answers) >= len(requests) - 2  # a retry may cross its answer
-        aborts = [d for d in answers if d[0] == 0x80]
-        assert all(int.from_bytes(d[4:8], "little") == 0x06020000 for d in aborts)
-        assert any(i == 0x700 + n for _, i, _ in frames), f"no heartbeat of node {n}"
-    syncs = [t for t, i, _ in frames if i == 0x080]
-    cyclic = np.diff(syncs[len(syncs) // 4:])  # the loop's, past the set-up
-    assert np.median(cyclic) == pytest.approx(1.0 / rate, rel=0.15)
-    # over the loop's second half: a TPDO1 from every node for each SYNC, and at least one RPDO
-    # before each (a late cycle's targets may go out twice: driver.py, resent_targets)
-    last = max(t for t, _, _ in frames)
-    window = [i for t, i, _ in frames if syncs[len(syncs) // 2] <= t < last - 1.0]
-    n_syncs = window.count(0x080)
-    assert n_syncs > 50
-    for n in nodes:
-        assert abs(window.count(0x180 + n) - n_syncs) <= 2, n
-        assert window.count(0x200 + n) >= n_syncs - 2, n
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="taking vcan0 down needs root")

@@ -65,3 +65,56 @@ def test_a_kernel_that_hangs_is_killed_with_all_it_started(tmp_path, monkeypatch
     assert "did not end in 1 s: killed" in err and "no exit status" in err
     left = subprocess.run(["pgrep", "-f", marker], capture_output=True, text=True).stdout
     assert left == ""
+
+
+def synthetic_log(rate: float = 50.0, cycles: int = 300, change=None) -> str:
+    """A `candump -L` log of a fault-free run as CiA 301/402 has it, written out here: NMT
+    pre-operational, an SDO exchange and a heartbeat per node, NMT start, then per cycle an
+    RPDO per node, SYNC, a TPDO1 per node; heartbeats every 10 cycles. ``change(frames)``
+    edits the (time, id, hex data) list first."""
+    nodes = range(1, 9)
+    frames = [(0.0, 0x000, "8000")]
+    for n in nodes:
+        frames += [(0.001, 0x600 + n, "4000100000000000"), (0.002, 0x580 + n, "4300100092010200"),
+                   (0.003, 0x700 + n, "7F")]  # fmt: skip
+    frames.append((0.01, 0x000, "0100"))
+    for k in range(cycles):
+        t = 0.1 + k / rate
+        frames += [(t, 0x200 + n, "0F000000") for n in nodes] + [(t + 1e-4, 0x080, "01")]
+        frames += [(t + 2e-4, 0x180 + n, "37000000E8030000") for n in nodes]
+        if k % 10 == 0:
+            frames += [(t + 3e-4, 0x700 + n, "05") for n in nodes] + [(t + 3e-4, 0x77F, "05")]
+    if change is not None:
+        change(frames)
+    return "".join(f"({t:.6f}) vcan0 {i:03X}#{d}\n" for t, i, d in sorted(frames))
+
+
+def test_the_candump_witness_holds_a_right_log_and_fails_each_wrong_one():
+    """The HIL demo's witness (tests/candump_witness.py) against logs written here: the right
+    one passes; each departure from CiA 301/402 the witness claims to see fails it."""
+    from candump_witness import check_candump
+
+    check_candump(synthetic_log(), range(1, 9), 50.0)
+    def without(pred):
+        def change(frames: list) -> None:
+            frames[:] = [x for x in frames if not pred(x)]
+
+        return change
+
+    def doubled_syncs(frames: list) -> None:
+        frames += [(t + 0.01, i, "02") for t, i, _ in list(frames) if i == 0x080]
+
+    wrong = {
+        "a stray identifier": lambda f: f.append((1.0, 0x7E0, "")),
+        "an EMCY": lambda f: f.append((2.0, 0x083, "1023010000000000")),
+        "a second controller": lambda f: f.append((2.0, 0x77E, "05")),
+        "NMT start first": lambda f: f.__setitem__(0, (0.0, 0x000, "0100")),
+        "a refused SDO": lambda f: f.append((0.004, 0x583, "8000100030000906")),
+        "a node never heard": without(lambda x: x[1] == 0x705),
+        "a node's TPDOs lost": without(lambda x: x[1] == 0x184 and x[0] > 4.0),
+        "SYNC twice a cycle": doubled_syncs,
+    }
+    for why, change in wrong.items():
+        with pytest.raises(AssertionError):
+            check_candump(synthetic_log(change=change), range(1, 9), 50.0)
+            pytest.fail(f"the witness let {why} pass")

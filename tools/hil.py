@@ -110,8 +110,8 @@ def run_uml(args: list[str], timeout: float, memory: str) -> int:
     work = Path(tempfile.mkdtemp(prefix="cdprctl-hil-"))
     try:
         out, rc = work / "pytest.txt", work / "rc"
-        extra = " ".join(f"{k}={os.environ[k]}" for k in ("CDPRCTL_VENDOR_EDS", "NUMBA_CACHE_DIR")
-                         if k in os.environ)  # fmt: skip
+        passed_on = ("CDPRCTL_VENDOR_EDS", "NUMBA_CACHE_DIR", "PYTHONPATH")
+        extra = " ".join(f"{k}={os.environ[k]}" for k in passed_on if k in os.environ)
         init = work / "init.sh"
         init.write_text(INIT.format(
             modules=" ".join(MODULES), root=ROOT, path=os.environ.get("PATH", "/usr/bin:/bin"),
@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="exit 0, saying why, where neither vcan0 nor User-Mode Linux can be had")
     ap.add_argument("--where", choices=("auto", "native", "uml"), default="auto",
                     help="native: this machine's vcan0; uml: User-Mode Linux even where vcan0 is")
-    ap.add_argument("--timeout", type=float, default=420.0, help="s before a hung kernel is killed")
+    ap.add_argument("--timeout", type=float, default=900.0, help="s before a hung kernel is killed")
     ap.add_argument("--memory", default="2G", help="User-Mode Linux's memory (mem=)")
     ap.add_argument("pytest_args", nargs="*", help="passed to pytest (after --)")
     a = ap.parse_args(argv)
