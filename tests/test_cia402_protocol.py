@@ -18,6 +18,7 @@ from canopen.emcy import EmcyError
 from canopen.nmt import NMT_COMMANDS
 from canopen.profiles.p402 import State402
 from canopen.sdo import constants as sdo
+from canopen.sdo.exceptions import SdoAbortedError
 
 from drivers.cia402 import protocol as p
 
@@ -352,3 +353,13 @@ def test_pdo_parameter_objects_and_cob_ids_are_the_canopen_packages():
         m = maps.map[n]
         assert (m.com_record.od.index, m.map_array.od.index) == (comm, mapping)
         assert m.predefined_cob_id == cob + 5
+
+
+def test_the_sdo_abort_codes_the_set_up_tells_apart_are_cia_301s():
+    """Each code the set-up words (SDO_ABORT_TEXT) is one of CiA 301's, as the canopen
+    package's table has them, and the named ones are the codes of their meaning there."""
+    theirs = {text: code for code, text in SdoAbortedError.CODES.items()}
+    assert set(p.SDO_ABORT_TEXT) <= set(SdoAbortedError.CODES)
+    assert theirs["Object does not exist"] == p.SDO_ABORT_NO_OBJECT
+    assert theirs["Subindex does not exist"] == p.SDO_ABORT_NO_SUB
+    assert theirs["Attempt to write a read only object"] == p.SDO_ABORT_READ_ONLY

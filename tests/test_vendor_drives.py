@@ -90,6 +90,12 @@ def test_capable_vendor_drives_configure_and_run(name, mode):
         always, in_csp = SKIPPED[name]
         for c in range(model.n_cables):
             assert skipped_objects(driver, c) == always | (in_csp if mode == "csp" else set())
+        words = {line[:6]: line for line in driver.skipped[0]}  # CiA 301's abort, in words
+        if name == EPOS4:
+            assert "skipped, the drive has no such object (0x06020000): no torque limit" in (
+                words["0x6072"])  # fmt: skip
+        if name == EPOS4 and mode == "csp":
+            assert "skipped, value above the drive's range (0x06090031)" in words["0x6066"]
         driver.activate()
         targets = None
         if mode == "csp":  # half a turn beyond where each drive is, across the wrap
