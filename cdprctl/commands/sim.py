@@ -112,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
         f"{overrides.get('channel') or model.drives.buses[0].channel}",
         flush=True,
     )
+    print("cdprctl sim: building the simulated robot (the first start on a machine compiles "
+          "its physics: about a minute)", flush=True)  # fmt: skip
     faults = None
     if args.faults > 0:
         from sim_backend.faults import FaultInjector
