@@ -62,11 +62,14 @@ def test_torque_actual_is_the_torque_applied_after_0x6072():
         (1, p.PowerState.FAULT, True),
         (2, p.PowerState.SWITCH_ON_DISABLED, True),
         (3, p.PowerState.QUICK_STOP_ACTIVE, True),
+        (0xFFFF, p.PowerState.FAULT, True),  # -1 as INTEGER16: manufacturer-specific
     ],
 )
 def test_the_abort_connection_option_decides_the_reaction(option, state, emcy):
     """The controller goes silent: after the drives' communication timeout each reacts as
-    its 0x6007 says — 1 (fault signal) ends in FAULT, not in "disable voltage"."""
+    its 0x6007 says — 1 (fault signal) ends in FAULT, not in "disable voltage"; a negative
+    (manufacturer-specific) code reacts too, as a fault (no code of ours is "no action" but
+    0)."""
     with enabled_rig("rowc.toml") as rig:
         drive = rig.net.drives[3]
         assert drive.od[(p.OD_ABORT_CONNECTION, 0)] == 3  # the driver's choice: quick stop
@@ -351,6 +354,10 @@ def test_heartbeats_at_the_producer_time_through_nmt_states_and_resets():
             t = peer.net.time
             peer.run(0.2)
             assert 9 <= len(peer.heartbeats(1, since=t)) <= 11  # the heartbeat goes on
+        assert peer.sdo(1, bytes([0x2B, 0x17, 0x10, 0, 1, 0, 0, 0]))[0] == 0x60  # 1 ms, the least
+        t = peer.net.time
+        peer.run(0.02)
+        assert 18 <= len(peer.heartbeats(1, since=t)) <= 21
         assert peer.extended == set()  # CiA 301's identifiers are 11-bit: standard frames
     finally:
         peer.close()
@@ -385,7 +392,7 @@ def test_what_the_simulated_drive_answers_and_what_it_ignores():
         assert drive.axis.rated_torque == rated
         mode = peer.sdo(1, bytes([0x40, 0x61, 0x60, 0, 0, 0, 0, 0]))
         assert mode[4] != 1  # 0x6061 follows 0x6060 alone, not a 1 written elsewhere
-        for value, taken in ((2500, 2.5), (0, 2.5)):  # 0x6076 in mN·m; 0 is no rated torque
+        for value, taken in ((1, 0.001), (2500, 2.5), (0, 2.5)):  # mN·m; 0 is no rated torque
             reply = peer.sdo(1, bytes([0x23, 0x76, 0x60, 0, *value.to_bytes(4, "little")]))
             assert reply[0] == 0x60 and drive.axis.rated_torque == taken, value
         upload = peer.sdo(1, bytes([0x40, 0x72, 0x60, 0, 0, 0, 0, 0]))
