@@ -82,6 +82,11 @@ class SimNetwork:
         self.rx_filter: Any = None  # (msg, t) -> False: the frame is lost
         self.faults: Any = None
         self._bus_of = {c: b for b, bc in enumerate(self.cfg.buses) for c in bc.cables}
+        # powered on: each CiA 402 drive's boot-up message (CiA 301 §7.2.8.2, INITIALISATION
+        # → PRE-OPERATIONAL), heard by whoever already listens (candump, a master)
+        if self.protocol != "odrive":
+            for b, table in enumerate(self.nodes):
+                self._send(b, [m for d in table.values() for m in d.boot_up()])
 
     def bus_index_of(self, cable: int) -> int:
         return self._bus_of[cable]

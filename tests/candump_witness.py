@@ -12,9 +12,10 @@ FRAME = re.compile(r"\((\d+\.\d+)\) vcan0 ([0-9A-F]{3})#([0-9A-F]*)")
 
 
 def check_candump(text: str, nodes: range, rate: float) -> None:
-    """The candump log of a fault-free run against CiA 301/402, from the frames alone: every
-    node's SDO set-up (requests 0x600+n answered on 0x580+n, aborts only "no such object"),
-    NMT pre-operational then start, SYNC at the loop's rate, one RPDO per node per SYNC, TPDO1
+    """The candump log of a fault-free run against CiA 301/402, from the frames alone: each
+    node's boot-up message before the master's first NMT command, every node's SDO set-up
+    (requests 0x600+n answered on 0x580+n, aborts only "no such object"), NMT
+    pre-operational then start, SYNC at the loop's rate, one RPDO per node per SYNC, TPDO1
     answering each SYNC, heartbeats of every drive and of one controller, and no frame of an
     identifier nobody should send — no EMCY either (0x80 + node: a drive's fault)."""
     frames = [(float(t), int(i, 16), bytes.fromhex(d)) for t, i, d in FRAME.findall(text)]
@@ -28,6 +29,11 @@ def check_candump(text: str, nodes: range, rate: float) -> None:
     assert not unexpected, sorted(hex(i) for i in unexpected)
     nmt = [d for _, i, d in frames if i == 0x000]
     assert nmt[:2] == [bytes([0x80, 0]), bytes([0x01, 0])]  # pre-operational, then start
+    first_nmt = next(t for t, i, _ in frames if i == 0x000)
+    for n in nodes:  # powered on before the master: its boot-up message first
+        first = next(((t, d) for t, i, d in frames if i == 0x700 + n), None)
+        assert first is not None, f"node {n}: never heard"
+        assert first[1] == b"\x00" and first[0] < first_nmt, f"node {n}: no boot-up first"
     for n in nodes:
         requests = [d for _, i, d in frames if i == 0x600 + n]
         answers = [d for _, i, d in frames if i == 0x580 + n]

@@ -68,12 +68,12 @@ def test_a_kernel_that_hangs_is_killed_with_all_it_started(tmp_path, monkeypatch
 
 
 def synthetic_log(rate: float = 50.0, cycles: int = 300, change=None) -> str:
-    """A `candump -L` log of a fault-free run as CiA 301/402 has it, written out here: NMT
-    pre-operational, an SDO exchange and a heartbeat per node, NMT start, then per cycle an
-    RPDO per node, SYNC, a TPDO1 per node; heartbeats every 10 cycles. ``change(frames)``
-    edits the (time, id, hex data) list first."""
+    """A `candump -L` log of a fault-free run as CiA 301/402 has it, written out here: each
+    drive's boot-up, NMT pre-operational, an SDO exchange and a heartbeat per node, NMT start,
+    then per cycle an RPDO per node, SYNC, a TPDO1 per node; heartbeats every 10 cycles.
+    ``change(frames)`` edits the (time, id, hex data) list first."""
     nodes = range(1, 9)
-    frames = [(0.0, 0x000, "8000")]
+    frames = [(0.0, 0x700 + n, "00") for n in nodes] + [(0.0005, 0x000, "8000")]
     for n in nodes:
         frames += [(0.001, 0x600 + n, "4000100000000000"), (0.002, 0x580 + n, "4300100092010200"),
                    (0.003, 0x700 + n, "7F")]  # fmt: skip
@@ -108,7 +108,8 @@ def test_the_candump_witness_holds_a_right_log_and_fails_each_wrong_one():
         "a stray identifier": lambda f: f.append((1.0, 0x7E0, "")),
         "an EMCY": lambda f: f.append((2.0, 0x083, "1023010000000000")),
         "a second controller": lambda f: f.append((2.0, 0x77E, "05")),
-        "NMT start first": lambda f: f.__setitem__(0, (0.0, 0x000, "0100")),
+        "NMT start first": lambda f: f.__setitem__(8, (0.0005, 0x000, "0100")),
+        "no boot-up": without(lambda x: x[1] == 0x703 and x[2] == "00"),
         "a refused SDO": lambda f: f.append((0.004, 0x583, "8000100030000906")),
         "a node never heard": without(lambda x: x[1] == 0x705),
         "a node's TPDOs lost": without(lambda x: x[1] == 0x184 and x[0] > 4.0),

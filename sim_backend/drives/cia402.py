@@ -183,6 +183,10 @@ class Cia402Drive:
             return []
         return self.pdos.tpdos()
 
+    def boot_up(self) -> list[can.Message]:
+        """The boot-up message a drive sends once it is powered on (none while silent)."""
+        return [] if self.silent else [self._heartbeat_frame(p.HB_BOOTUP)]
+
     def power_cycle(self) -> list[can.Message]:
         """Fault injection: the drive loses power and boots (brake on, objects to their
         defaults, an incremental counter at zero, the boot-up message)."""
