@@ -244,9 +244,11 @@ def test_a_link_that_goes_down_is_said_and_never_crashes_the_daemon(tmp_path, pr
             break
     assert "init -> ready" in lines[-1], "".join(lines)
     ip = shutil.which("ip") or "/usr/sbin/ip"
-    subprocess.run([ip, "link", "set", "down", "vcan0"], check=True)
-    time.sleep(0.1)
-    subprocess.run([ip, "link", "set", "up", "vcan0"], check=True)
+    try:
+        subprocess.run([ip, "link", "set", "down", "vcan0"], check=True)
+        time.sleep(0.1)
+    finally:  # never left down, whatever happens
+        subprocess.run([ip, "link", "set", "up", "vcan0"], check=True)
     time.sleep(1.0)
     daemon.send_signal(signal.SIGTERM)
     out, _ = daemon.communicate(timeout=60)

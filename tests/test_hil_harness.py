@@ -86,7 +86,8 @@ def synthetic_log(rate: float = 50.0, cycles: int = 300, change=None) -> str:
             frames += [(t + 3e-4, 0x700 + n, "05") for n in nodes] + [(t + 3e-4, 0x77F, "05")]
     if change is not None:
         change(frames)
-    return "".join(f"({t:.6f}) vcan0 {i:03X}#{d}\n" for t, i, d in sorted(frames))
+    return "".join(f"({t:.6f}) vcan0 {i:03X}#{d}\n" if i < 0x800 else
+                   f"({t:.6f}) vcan0 {i:08X}#{d}\n" for t, i, d in sorted(frames))  # fmt: skip
 
 
 def test_the_candump_witness_holds_a_right_log_and_fails_each_wrong_one():
@@ -114,8 +115,33 @@ def test_the_candump_witness_holds_a_right_log_and_fails_each_wrong_one():
         "a node never heard": without(lambda x: x[1] == 0x705),
         "a node's TPDOs lost": without(lambda x: x[1] == 0x184 and x[0] > 4.0),
         "SYNC twice a cycle": doubled_syncs,
+        "an error frame": lambda f: f.append((3.0, 0x20000080, "0000000000000000")),
+        "a TPDO2": lambda f: f.append((3.0, 0x281, "00000000")),
     }
     for why, change in wrong.items():
         with pytest.raises(AssertionError):
             check_candump(synthetic_log(change=change), range(1, 9), 50.0)
             pytest.fail(f"the witness let {why} pass")
+
+
+def test_a_terminated_harness_takes_its_kernel_and_all_it_started(tmp_path):
+    """SIGTERM to tools/hil.py (a cancelled CI job) while its kernel runs: the kernel and what
+    it started are killed, the harness ends at once with 130."""
+    import signal
+    import time
+
+    marker = f"sleep 4{zlib.crc32(str(tmp_path).encode()) % 10**6}.5"
+    fake = tmp_path / "linux.uml"
+    fake.write_text(f"#!/bin/sh\n{marker} &\n{marker}\n")
+    fake.chmod(0o755)
+    code = (f"import sys; sys.path.insert(0, {str(Path(hil.__file__).parent)!r}); import hil; "
+            f"hil.UML = {str(fake)!r}; sys.exit(hil.run_uml([], 300.0, '64M'))")  # fmt: skip
+    proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline and not subprocess.run(
+            ["pgrep", "-f", marker], capture_output=True).stdout:  # fmt: skip
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130 and "interrupted" in err, err
+    assert subprocess.run(["pgrep", "-f", marker], capture_output=True, text=True).stdout == ""

@@ -41,7 +41,7 @@ ip link add dev vcan0 type vcan && ip link set up vcan0
 ip link set lo up
 cd {root}
 export PATH={path}:/usr/sbin:/sbin HOME={home} PYTHONDONTWRITEBYTECODE=1 CDPRCTL_HIL=uml {extra}
-{python} -m pytest -m hil -p no:cacheprovider {args} > {out} 2>&1
+{python} -m pytest -m hil -p no:cacheprovider --basetemp={basetemp} {args} > {out} 2>&1
 echo $? > {rc}
 halt -f
 """
@@ -57,19 +57,27 @@ def can_sockets() -> bool:
 
 
 def native_vcan0() -> str | None:
-    """vcan0 on this machine, made if it can be (root, the vcan module); None, or why not."""
-    if Path("/sys/class/net/vcan0").exists() and can_sockets():
+    """vcan0 on this machine, up, made if it can be (root, the vcan module); None, or why
+    not."""
+    root = os.geteuid() == 0
+    if not can_sockets() and root and shutil.which("modprobe"):
+        subprocess.run(["modprobe", "can-raw"], capture_output=True)  # where only unloaded
+    if not can_sockets():
+        return "this kernel has no CAN support (socket(AF_CAN): errno 97)"
+    up = Path("/sys/class/net/vcan0/operstate")
+    if up.exists() and up.read_text().strip() in ("up", "unknown"):  # vcan says unknown
         return None
-    if os.geteuid() != 0:
-        return "no vcan0, and not root to make one"
+    if not root:
+        return ("vcan0 is down, and not root to bring it up" if up.exists()
+                else "no vcan0, and not root to make one")  # fmt: skip
     for cmd in (["modprobe", "vcan"], ["ip", "link", "add", "dev", "vcan0", "type", "vcan"],
                 ["ip", "link", "set", "up", "vcan0"]):  # fmt: skip
         if shutil.which(cmd[0]) is None:
             return f"no vcan0, and no `{cmd[0]}` to make one"
         subprocess.run(cmd, capture_output=True)
-    if Path("/sys/class/net/vcan0").exists() and can_sockets():
+    if up.exists() and up.read_text().strip() in ("up", "unknown"):
         return None
-    return "this kernel has no CAN support (socket(AF_CAN): errno 97), no vcan0"
+    return "no vcan0, and `ip link add dev vcan0 type vcan` did not make one"
 
 
 def uml_ready(install: bool) -> str | None:
@@ -111,12 +119,16 @@ def run_uml(args: list[str], timeout: float, memory: str) -> int:
     try:
         out, rc = work / "pytest.txt", work / "rc"
         passed_on = ("CDPRCTL_VENDOR_EDS", "NUMBA_CACHE_DIR", "PYTHONPATH")
-        extra = " ".join(f"{k}={os.environ[k]}" for k in passed_on if k in os.environ)
+        extra = " ".join(f"{k}={shlex.quote(os.environ[k])}" for k in passed_on
+                         if k in os.environ)  # fmt: skip
         init = work / "init.sh"
+        q = shlex.quote
         init.write_text(INIT.format(
-            modules=" ".join(MODULES), root=ROOT, path=os.environ.get("PATH", "/usr/bin:/bin"),
-            home=os.environ.get("HOME", "/root"), extra=extra, python=sys.executable,
-            args=" ".join(shlex.quote(x) for x in args), out=out, rc=rc,
+            modules=" ".join(MODULES), root=q(str(ROOT)),
+            path=q(os.environ.get("PATH", "/usr/bin:/bin")),
+            home=q(os.environ.get("HOME", "/root")), extra=extra, python=q(sys.executable),
+            args=" ".join(q(x) for x in args), out=q(str(out)), rc=q(str(rc)),
+            basetemp=q(str(work / "pytest")),  # its own: the kernel runs pytest as root
         ))  # fmt: skip
         init.chmod(0o755)
         console = work / "console.txt"
@@ -128,12 +140,17 @@ def run_uml(args: list[str], timeout: float, memory: str) -> int:
                 stdin=subprocess.DEVNULL, stdout=con, stderr=subprocess.STDOUT,
                 start_new_session=True,
             )  # fmt: skip
+            stopped = signal.signal(signal.SIGTERM, _interrupt)  # a cancelled CI job
             try:
                 uml.wait(timeout=timeout)
             except subprocess.TimeoutExpired:
                 print(f"hil: the User-Mode Linux kernel did not end in {timeout:g} s: killed",
                       file=sys.stderr)  # fmt: skip
+            except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the kernel goes with us
+                print("hil: interrupted: the User-Mode Linux kernel killed", file=sys.stderr)
+                return 130
             finally:
+                signal.signal(signal.SIGTERM, stopped)
                 if uml.poll() is None:
                     os.killpg(uml.pid, signal.SIGKILL)
                     uml.wait()
@@ -149,6 +166,10 @@ def run_uml(args: list[str], timeout: float, memory: str) -> int:
         return int(rc.read_text().strip() or 1)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def main(argv: list[str] | None = None) -> int:
