@@ -471,3 +471,18 @@ def test_after_a_reset_the_first_sync_and_heartbeat_start_afresh():
         assert drive.stale_targets == stale
     finally:
         peer.close()
+
+
+def test_a_drive_powered_on_says_boot_up_unless_silent():
+    """CiA 301 §7.2.8.2: a node entering PRE-OPERATIONAL after its initialisation sends the
+    boot-up message (0x700 + node, one byte 0); a drive made silent (fault injection) sends
+    nothing."""
+    peer = RawPeer()
+    try:
+        drive = peer.net.nodes[0][1]
+        (frame,) = drive.boot_up()
+        assert (frame.arbitration_id, bytes(frame.data)) == (0x701, b"\x00")
+        drive.silent = True
+        assert drive.boot_up() == []
+    finally:
+        peer.close()
