@@ -3,6 +3,7 @@ command acceptance table against the controller; typed faults end to end in lock
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -289,3 +290,20 @@ def test_a_disable_that_never_comes_to_rest_disables_after_disable_within():
     s.supervise(100.0 + 1.01 * s.disable_within, FKStatus.CONVERGED, 0.0, 0.1, False)
     assert d.state is State.READY
     assert d.events[-1][1].endswith(f"(not at rest after {s.disable_within:g} s)")
+
+
+@pytest.mark.parametrize("limits, within", [
+    # (v, a, j, ω, α, ζ): a jerk-limited stop from the top speed takes v/a + a/j; twice the
+    # longer of the linear and the angular, at least 3 s — worked out here by hand
+    ((1.0, 0.25, 0.5, 0.1, 1.0, 10.0), 2 * (4.0 + 0.5)),  # linear: 4.5 s
+    ((0.1, 1.0, 10.0, 2.0, 0.4, 0.8), 2 * (5.0 + 0.5)),  # angular: 5.5 s
+    ((0.3, 1.0, 10.0, 0.5, 2.0, 20.0), 3.0),  # rowc-like: 0.4 s, the floor
+])  # fmt: skip
+def test_a_disable_decelerates_for_at_most_twice_the_limits_stop_time(limits, within):
+    v, a, j, w, al, ze = limits
+    cfg = dataclasses.replace(CFG, max_velocity=v, max_acceleration=a, max_jerk=j,
+                              max_angular_velocity=w, max_angular_acceleration=al,
+                              max_angular_jerk=ze)  # fmt: skip
+    s = Supervisor(cfg, ControlData(ROWC.n_cables, 0), FakeDrives(ROWC.n_cables, Lifecycle.ACTIVE),
+                   lambda: None)  # fmt: skip
+    assert s.disable_within == pytest.approx(within, rel=1e-12)
