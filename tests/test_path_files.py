@@ -373,3 +373,18 @@ def test_run_takes_units_for_its_path(tmp_path, capsys):
                "--path", str(mm)])  # fmt: skip
     assert rc == 2
     assert "or give --units mm" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, without", [
+    ("", False),  # nothing: no CSV
+    ("G1 X1 Y2 Z3\n", False),  # G-code: no CSV header
+    ("x,y,z\n", True),  # a header alone: no row of units
+    ("x,y,z\nm,m,m\n", False),  # the row of units, no waypoint yet
+    ("x,y,z\nmm,mm,mm\n1,2,3\n", False),
+    ("x,y,z\n1,2,3\n4,5,6\n", True),  # numbers under the header: the units are --units'
+    ("# a comment\nx,y,z\n\n1,2,3\n", True),
+])  # fmt: skip
+def test_a_csv_without_a_row_of_units_is_told_apart(text, without):
+    from cdprctl.motion.path_file import csv_without_units
+
+    assert csv_without_units(text) is without
