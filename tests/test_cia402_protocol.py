@@ -6,11 +6,9 @@ sample: a mask off by one bit changes states nobody thought of."""
 
 from __future__ import annotations
 
-import os
 import re
 import struct
 import time
-from pathlib import Path
 
 import canopen
 import pytest
@@ -19,14 +17,10 @@ from canopen.nmt import NMT_COMMANDS
 from canopen.profiles.p402 import State402
 from canopen.sdo import constants as sdo
 from canopen.sdo.exceptions import SdoAbortedError
+from local_drives import VENDOR_EDS
 
 from drivers.cia402 import protocol as p
 
-# beside the checkout; CDPRCTL_VENDOR_EDS names them from elsewhere (make mutation's copies)
-VENDOR_EDS = Path(
-    os.environ.get("CDPRCTL_VENDOR_EDS")
-    or Path(__file__).resolve().parents[2] / "shared" / "vendor_eds"
-)
 PS = p.PowerState
 # canopen's state names → ours
 NAMES = {

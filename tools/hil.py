@@ -65,7 +65,11 @@ def native_vcan0() -> str | None:
     if not can_sockets():
         return "this kernel has no CAN support (socket(AF_CAN): errno 97)"
     up = Path("/sys/class/net/vcan0/operstate")
-    if up.exists() and up.read_text().strip() in ("up", "unknown"):  # vcan says unknown
+
+    def is_up() -> bool:
+        return up.exists() and up.read_text().strip() in ("up", "unknown")  # vcan: unknown
+
+    if is_up():
         return None
     if not root:
         return ("vcan0 is down, and not root to bring it up" if up.exists()
@@ -75,7 +79,7 @@ def native_vcan0() -> str | None:
         if shutil.which(cmd[0]) is None:
             return f"no vcan0, and no `{cmd[0]}` to make one"
         subprocess.run(cmd, capture_output=True)
-    if up.exists() and up.read_text().strip() in ("up", "unknown"):
+    if is_up():
         return None
     return "no vcan0, and `ip link add dev vcan0 type vcan` did not make one"
 

@@ -44,6 +44,8 @@ OPTIONAL = {
         "the drive's own time out applies to its following-error stop",
     ),
 }
+# the optional objects written in position mode alone (the drive's own following-error stop)
+POSITION_ONLY = (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT)
 # what an optional object's write may meet and still be skipped: absent, read-only, another
 # size, the value out of the drive's range
 SKIPPABLE = {p.SDO_ABORT_NO_OBJECT, p.SDO_ABORT_NO_SUB, p.SDO_ABORT_READ_ONLY, 0x06070010,

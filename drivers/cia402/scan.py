@@ -19,7 +19,7 @@ from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 from drivers.cia402 import pdo_setup
 from drivers.cia402 import protocol as p
 from drivers.cia402.capabilities import Capabilities, rated_torque_problem, read_capabilities
-from drivers.cia402.drive_setup import OPTIONAL
+from drivers.cia402.drive_setup import OPTIONAL, POSITION_ONLY
 from drivers.errors import SdoAbortError
 
 OD_DEVICE_NAME = 0x1008  # VISIBLE_STRING, often longer than 4 bytes (a segmented upload)
@@ -156,9 +156,8 @@ def judge(report: NodeReport, cable: int | None, cfg: Any, dcf: str = "") -> Non
             report.verdicts[name] = "yes"
         if dcf and why is not None:
             report.verdicts[name] += f" (before {dcf}'s values, which the set-up writes first)"
-    position_only = (p.OD_FOLLOWING_ERROR_WINDOW, p.OD_FOLLOWING_ERROR_TIMEOUT)
     for index, present in caps.present.items():
-        if not present and (index not in position_only or report.configured_mode == "csp"):
+        if not present and (index not in POSITION_ONLY or report.configured_mode == "csp"):
             obj, lost = OPTIONAL[index]
             report.would_skip.append(f"0x{index:04X} {obj} (absent): {lost}")
     if caps.rated_torque is None:
