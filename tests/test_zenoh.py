@@ -453,11 +453,6 @@ def operator_enables(robot: Robot, viewer: Client, operator_config: str) -> None
     assert robot.stop() == 0
 
 
-#: RUST_LOG for the gateway that shows who Zenoh refused (docs/telemetry.md)
-WHO_WAS_REFUSED = ("zenoh::net::routing::interceptor::access_control=trace,"
-                   "zenoh_transport::unicast::establishment::accept=debug")  # fmt: skip
-
-
 def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client, tmp_path,
                                                                capsys):  # fmt: skip
     """config/zenoh/gateway-acl.json5 (default deny) with its dictionary moved to a temporary
@@ -479,7 +474,6 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     robot, viewer = robot_and_client(
         ["--accept-commands", "--zenoh-config", str(tmp_path / "gw.json5")],
         str(tmp_path / "viewer.json5"),
-        env={"RUST_LOG": WHO_WAS_REFUSED},
     )
     assert viewer.wait(lambda: len(viewer.states) > 0), "\n".join(robot.lines)
     viewer.put("enable", {"id": "v"})
@@ -526,15 +520,19 @@ def test_acl_lets_the_operator_command_and_a_viewer_only_watch(robot_and_client,
     # each command the gateway saw is logged once, with its id and kind
     assert sum("command enable id=o: accepted" in x for x in robot.lines) == 1
     assert not any("id=v" in x or "id=m" in x for x in robot.lines)  # dropped before it
-    # ... and those Zenoh dropped, in Zenoh's log when asked for (docs/telemetry.md): who,
-    # what, where; the wrong password
-    denied = [x for x in robot.lines if "is unauthorized to Put (ingress) on cdpr/rowc/cmd/"
-              "enable" in x and "Msg intercepted" not in x]  # fmt: skip
-    assert any("Username(viewer)" in x for x in denied), "\n".join(robot.lines[-40:])
-    assert any("Username(maintenance)" in x for x in denied)
-    # (not "no operator line": Zenoh judges each of a peer's subjects, and the operator's
-    # "authenticated" subject is refused what its "operator" subject is allowed — 1 run in 3)
-    assert any("Invalid password" in x for x in robot.lines)
+    # ... and those Zenoh refused, in the daemon's log (cdprctl/telemetry/refusals.py): who,
+    # what, once each; none for the operator, whose second ACL subject allowed its command
+    refused = [x for x in robot.lines if x.startswith("cdprctl-zenoh: refused")]
+    assert ("cdprctl-zenoh: refused by the access control: user viewer (peer "
+            in "\n".join(refused)), "\n".join(robot.lines[-40:])  # fmt: skip
+    for who in ("viewer", "maintenance"):
+        mine = [x for x in refused if f"user {who} " in x and "may not put cdpr/rowc/cmd/enable"
+                in x]  # fmt: skip
+        assert len(mine) == 1, refused
+    assert not any("user operator" in x for x in refused), refused
+    for why in ("wrong password", "no user and password given"):
+        assert f"cdprctl-zenoh: refused a login from 127.0.0.1: {why}" in refused, refused
+    assert not any("TRACE" in x or "DEBUG" in x for x in robot.lines)  # Zenoh's own: not asked
     assert not any("\x1b[" in x for x in robot.lines)  # plain text for the journal
 
 
@@ -823,6 +821,16 @@ def test_mutual_tls_certifies_who_watches_and_who_commands(robot_and_client, tmp
         impostor.close()
         nobody.close()
     operator_enables(robot, viewer, conf("operator-tls.json5"))
+    # who was refused, in the daemon's log: the viewer's certificate by its common name, the
+    # other CA's and the missing certificate by what was wrong
+    refused = [x for x in robot.lines if x.startswith("cdprctl-zenoh: refused")]
+    assert any(x.startswith("cdprctl-zenoh: refused by the access control: certificate viewer ")
+               and x.endswith("may not put cdpr/rowc/cmd/enable") for x in refused), refused
+    assert not any("certificate operator" in x for x in refused), refused
+    assert ("cdprctl-zenoh: refused a TLS connection: invalid peer certificate: BadSignature (a "
+            "certificate this robot's CA did not sign)") in refused, refused
+    assert ("cdprctl-zenoh: refused a TLS connection: peer sent no certificates (a client "
+            "without a certificate)") in refused, refused
 
 
 def test_check_config_names_open_commands(tmp_path, capsys):

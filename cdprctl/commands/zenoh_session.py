@@ -149,4 +149,5 @@ def why_no_answer(session: Any, args: argparse.Namespace, prefix: str,
     if not commands.get("enabled", True):
         return f"{prefix} takes no commands (start it with --accept-commands)"
     return (f"{prefix} is there but did not answer: this account may not command it (the "
-            "gateway's ACL drops its commands without a reply)")
+            "robot's ACL drops its commands without a reply; the daemon's log names each "
+            "refusal: journalctl -u cdprctl | grep refused)")

@@ -15,6 +15,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.refusals import log_refusals, refuses_anybody
 from cdprctl.telemetry.schema import (
     SCHEMA,
     encode,
@@ -44,10 +45,13 @@ def gateway_main(
     from cdprctl.telemetry.session import open_session
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
-    if os.environ.get("RUST_LOG"):  # Zenoh's own log, asked for (docs/telemetry.md: who was
-        os.environ.setdefault("NO_COLOR", "1")  # refused): plain text for the journal
-        zenoh.try_init_log_from_env()
     zc = model.zenoh
+    P = zc.key_prefix(model.name)
+    if zc.config_file and refuses_anybody(zc.config_file):
+        log_refusals(P)  # who Zenoh refused, from its log (docs/telemetry.md, "Security")
+    elif os.environ.get("RUST_LOG"):  # Zenoh's own log, asked for: plain text for the journal
+        os.environ.setdefault("NO_COLOR", "1")
+        zenoh.try_init_log_from_env()
     parent = os.getppid()
     snap = SharedSnapshot(model.n_cables, shm_name, g=len(model.grippers))
     session = open_session(
@@ -57,7 +61,6 @@ def gateway_main(
         multicast_scouting=zc.multicast_scouting,
         config_file=zc.config_file,
     )
-    P = zc.key_prefix(model.name)
     JSON = zenoh.Encoding.APPLICATION_JSON
     pub_state = session.declare_publisher(
         f"{P}/state", encoding=JSON, congestion_control=zenoh.CongestionControl.DROP
