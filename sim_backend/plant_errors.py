@@ -20,6 +20,7 @@ class PlantErrors:
     seed: int
     anchor: float = 0.005  # m
     drum: float = 0.005  # fraction of the radius
+    exact: tuple[int, ...] = ()  # anchors kept as drawn (a calibration's reference anchors)
 
     def apply(self, model: RobotModel) -> tuple[RobotModel, dict[str, list[float]]]:
         """The robot the plant simulates, and the errors drawn: ``anchor_offsets`` (m, base
@@ -27,6 +28,7 @@ class PlantErrors:
         rng = np.random.default_rng(self.seed)
         m = model.n_cables
         offsets = rng.uniform(-self.anchor, self.anchor, (m, 3))
+        offsets[list(self.exact)] = 0.0
         scales = 1.0 + rng.uniform(-self.drum, self.drum, m)
         cables = []
         for i, c in enumerate(model.cables):

@@ -289,3 +289,26 @@ def test_run_refuses_without_a_record_and_with_a_stale_one(tmp_path, capsys):
     assert "geometry changed" in capsys.readouterr().err
     data = json.loads(record_path(tmp_path / "state").read_text())
     assert data["format"] == 1
+
+
+def test_self_refuses_a_record_the_geometry_would_bias():
+    """rowc whose anchors are up to 5 mm off and drums 0.5 % (seeded): before, `self`
+    accepted such records predicting ~1 mm while 7-21 mm off (docs/homing.md); the length
+    closures are 3.6x what the drives' resolution explains, and the record is refused, naming
+    why and the geometric calibration; without the errors the same start is accepted."""
+    from sim_backend.plant_errors import PlantErrors
+
+    model = load_robot(CONFIG / "rowc.toml")
+    p, R = start_pose(model, 1)
+    with robot_at(model, p, R, PlantErrors(1).apply(model)[0]) as ls:
+        ls.driver.configure()
+        with pytest.raises(CalibrationFailedError, match="the length residuals are") as exc:
+            self_calibrate(model, ls.driver, log=lambda s: None)
+        assert "calibrate --config F geometry" in str(exc.value)
+        assert exc.value.record.notes["residuals_over_noise"] > 2.0
+        dp, _ = pose_error(model, exc.value.record, ls)
+        assert dp > 3.0  # mm: what accepting it would have cost
+    with robot_at(model, p, R) as ls:
+        ls.driver.configure()
+        rec, _ = self_calibrate(model, ls.driver, log=lambda s: None)
+        assert rec.notes["residuals_over_noise"] < 1.2

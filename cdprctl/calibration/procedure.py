@@ -25,7 +25,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cdprctl.calibration.identify import Identification, Identified, Samples, Weights
+from cdprctl.calibration.identify import (
+    Identification,
+    Identified,
+    Samples,
+    Weights,
+    length_noise,
+    model_test,
+)
 from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
@@ -387,6 +394,18 @@ def self_calibrate(
     weights = opt.weights or Weights.of(model)
     if not ident.success and ident.residual_rms > 5 * weights.length:
         raise CalibrationFailedError(f"the identification did not converge: {ident.message}")
+    noise = length_noise(model)
+    fits, ratio = model_test(ident.length_residuals, noise)
+    record.notes["length_noise"] = noise
+    record.notes["residuals_over_noise"] = ratio
+    if not fits:
+        raise CalibrationFailedError.with_result(record, ident,
+            f"the length residuals are {ratio:.1f}x what the encoders and the torque "
+            f"resolution explain (RMS {ident.residual_rms * 1e6:.1f} µm against "
+            f"{noise * 1e6:.1f} µm; χ² test at 99.9 %): the robot's geometry differs from the "
+            "file (anchors, drums); its pose from this record would be off by more than it "
+            "predicts. Run `cdprctl calibrate --config F geometry`, or measure the anchors"
+        )
     if ident.condition > opt.max_condition or worst > 1.0:
         raise CalibrationFailedError.with_result(record, ident,
             f"ill-conditioned: condition {ident.condition:.3g} (limit {opt.max_condition:g}), "

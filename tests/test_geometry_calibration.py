@@ -1,0 +1,112 @@
+"""The geometric identification (cdprctl/calibration/geometry.py) against independent
+references: its Jacobian against scipy's finite differences; the anchors and drums it finds
+against a seeded as-built robot whose samples come from the robot model's own inverse
+kinematics and tension distribution (not geometry.py's kinematics), quantized as the drives
+read them; and the model test (identify.model_test) against scipy's χ² distribution."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize._numdiff import approx_derivative
+
+from cdprctl.calibration.geometry import GeometryIdentification, GeometrySamples
+from cdprctl.calibration.identify import Weights, length_noise, model_test
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import load_robot
+from cdprctl.motion.trajectory import coordinates_rotation
+from cdprctl.numerics import compliance_of, unstretched_lengths
+from cdprctl.tda.hold import equilibrium_tensions
+from sim_backend.plant_errors import PlantErrors
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+
+
+def synthetic(robot: str, K: int, seed: int, reference: tuple[int, ...]):
+    """The file's model, the as-built truth (non-reference anchors ±20 mm, drums ±1 %), the
+    planned poses (spread over the workspace, feasible with margin), the samples the truth's
+    drives would read there (encoder counts, torques through the truth's drums, 0.2 N of
+    noise) and the true poses (the plan missed by a few mm, as a position loop on a wrong
+    model does)."""
+    model = load_robot(CONFIG / f"{robot}.toml")
+    truth = PlantErrors(seed, 0.02, 0.01, reference).apply(model)[0]
+    rng = np.random.default_rng(seed)
+    ws = model.workspace
+    lo, hi = np.asarray(ws.position_min), np.asarray(ws.position_max)
+    kin_n, kin_t = KinematicsData(model), KinematicsData(truth)
+    span = model.tension_max - model.tension_min
+    poses = [np.r_[model.home.position, 0.0, 0.0, 0.0]]
+    while len(poses) < K:
+        x = np.r_[lo + rng.choice([0.05, 0.5, 0.95], 3) * (hi - lo),
+                  rng.choice([-0.8, 0.0, 0.8], 3) * ws.max_angle]  # fmt: skip
+        inverse_kinematics(model, kin_n, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
+        t = equilibrium_tensions(model, kin_n)
+        low, high = model.tension_min + 0.05 * span, model.tension_max - 0.3 * span
+        if np.all(t > low) and np.all(t < high):
+            poses.append(x)
+    law = compliance_of(truth.cables)
+    ratio_t = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in truth.cables])
+    ratio_n = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
+    count = 2 * np.pi / np.array([c.winch.encoder_counts_per_rev for c in model.cables])
+    theta, tension, true_poses = [], [], []
+    for x in poses:
+        xt = x + np.r_[rng.normal(0, 0.003, 3), rng.normal(0, 0.002, 3)]
+        inverse_kinematics(truth, kin_t, xt[:3], coordinates_rotation(truth.home.rotation, xt[3:]))
+        t = equilibrium_tensions(truth, kin_t)
+        l0 = unstretched_lengths(law, kin_t.length.copy(), t)
+        theta.append(np.round((3.0 - l0 / ratio_t) / count) * count)  # incremental: any offset
+        tension.append(t * ratio_t / ratio_n + rng.normal(0.0, 0.2, t.size))
+        true_poses.append(xt)
+    samples = GeometrySamples(np.array(theta), np.array(tension), np.array(poses))
+    return model, truth, samples, np.array(true_poses)
+
+
+def identification(model, reference):
+    w = Weights.of(model)
+    return GeometryIdentification(model, list(reference), length_noise(model),
+                                  w.tension / np.sqrt(12.0))  # fmt: skip
+
+
+def test_the_jacobian_is_the_finite_differences_of_the_residuals():
+    model, _, s, _ = synthetic("rowc", 6, 3, (0, 3, 5))
+    ident = identification(model, (0, 3, 5))
+    rng = np.random.default_rng(3)
+    z = np.concatenate([ident.anchors0[ident.free].ravel() + rng.normal(0, 0.01, 15),
+                        1.0 + rng.normal(0, 0.005, 8),
+                        (s.guess + rng.normal(0, 0.02, s.guess.shape)).ravel()])  # fmt: skip
+    J = ident.jacobian(z, s)
+    Jn = approx_derivative(lambda q: ident.residuals(q, s), z, method="3-point")
+    assert np.max(np.abs(J - Jn)) < 1e-7 * np.max(np.abs(Jn))
+
+
+@pytest.mark.parametrize("robot, reference, seed", [
+    ("rowc", (0, 3, 5), 2), ("caroca", (0, 1, 2), 1), ("cogiro", (0, 3, 5), 1)])  # fmt: skip
+def test_anchors_and_drums_of_an_as_built_robot_are_found(robot, reference, seed):
+    model, truth, s, true_poses = synthetic(robot, 25, seed, reference)
+    r = identification(model, reference).solve(s)
+    assert r.success, r.message
+    true_anchors = np.array([c.anchor for c in truth.cables])
+    error = np.linalg.norm(r.anchors - true_anchors, axis=1)
+    drawn = np.array([c.anchor for c in model.cables])
+    assert np.max(np.linalg.norm(true_anchors - drawn, axis=1)) > 0.015  # it had to move them
+    assert np.max(error) < 2e-3, error
+    scale = np.array([c.winch.drum_radius for c in truth.cables]) / np.array(
+        [c.winch.drum_radius for c in model.cables])
+    assert np.max(np.abs(r.drum_scale - scale)) < 1e-3
+    assert np.linalg.norm(r.poses[0, :3] - true_poses[0, :3]) < 2e-3
+    # the σ it predicts covers the error it made (3 σ, per anchor)
+    assert np.all(error <= 3.0 * np.linalg.norm(r.std_anchors, axis=1) + 1e-4)
+    assert model_test(np.zeros(0), 1.0)[0]
+
+
+def test_the_model_test_passes_noise_of_its_size_and_refuses_twice_that():
+    rng = np.random.default_rng(7)
+    sigma = 8e-6
+    passed = [model_test(rng.normal(0.0, sigma, 96), sigma)[0] for _ in range(2000)]
+    assert 0.995 <= np.mean(passed) <= 1.0  # χ²(96) at 99.9 %
+    refused = [not model_test(rng.normal(0.0, 1.5 * sigma, 96), sigma)[0] for _ in range(200)]
+    assert np.mean(refused) > 0.99
+    ok, ratio = model_test(np.full(96, 2 * sigma), sigma)
+    assert not ok and ratio == pytest.approx(2.0)
