@@ -192,3 +192,40 @@ def test_a_stop_during_the_start_up_closes_what_it_opened_in_one_line(sig):
     assert f"cdprctl run: stopped by {sig.name} during the start-up; the drives were not " \
         "enabled" in rest, out
     assert_clean(out)
+
+
+@pytest.mark.parametrize("after", [0.3, 1.5, 3.0])
+def test_ctrl_c_to_the_group_while_it_starts_with_helpers_is_clean(after):
+    """A terminal's Ctrl-C (SIGINT to the whole group) at instants of the start-up of the
+    simulated robot with the Zenoh gateway and the Foxglove view: while the simulated robot's
+    buses are built (python-can warned "InProcessBus was not properly shut down") or a helper
+    imports its modules (a KeyboardInterrupt traceback, 1 start-up in ~9): one line, exit 0,
+    nothing else, no process of the group left."""
+    zport, fport = free_port(), free_port()
+    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", ROWC, "--sim",
+           "--no-realtime", "--no-demo", "--foxglove", f"127.0.0.1:{fport}", "--zenoh",
+           "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting"]  # fmt: skip
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         start_new_session=True, cwd=ROOT)  # fmt: skip
+    try:
+        assert p.stdout is not None
+        first = p.stdout.readline()
+        time.sleep(after)
+        os.killpg(p.pid, signal.SIGINT)
+        rest = p.stdout.read()
+        code = p.wait(timeout=30)
+        left = time.monotonic() + 5.0
+        while group_alive(p.pid) and time.monotonic() < left:
+            time.sleep(0.05)
+        assert not group_alive(p.pid)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+    out = first + rest
+    assert code == 0, out
+    assert ("stopped by SIGINT during the start-up" in rest
+            or "stop requested by SIGINT" in rest), out  # fmt: skip
+    assert_clean(out)

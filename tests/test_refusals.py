@@ -47,8 +47,24 @@ def test_a_denied_command_is_named_once_with_who_then_counted():
     assert out == [
         "cdprctl-zenoh: refused by the access control: user viewer (peer 3daf7a81 on lo) may "
         "not put cdpr/rowc/cmd/enable",
-        "cdprctl-zenoh: refused by the access control: user viewer (peer 3daf7a81 on lo) may "
-        "not put cdpr/rowc/cmd/enable (again, 4 more times in the last 10 s)",
+        "cdprctl-zenoh: refused by the access control: user viewer may not put "
+        "cdpr/rowc/cmd/enable (again, 4 more times in the last 10 s)",
+    ]
+
+
+def test_a_users_sessions_count_together():
+    """Every `cdprctl send` is a new Zenoh peer: twenty of a viewer's, a line and a count."""
+    lines = []
+    for i in range(20):
+        zid = f"{i + 1:02d}af7a8123c1b54e817939a7ddb0e1d"
+        who = f"{zid} on Interface(lo)+Username(viewer)+Transport(Tcp)+{zid}"
+        lines.append((0.2 * i, at(f"{10 + 0.2 * i:09.6f}", put(who, "unauthorized"))))
+    out = feed(lines)
+    assert out == [
+        "cdprctl-zenoh: refused by the access control: user viewer (peer 01af7a81 on lo) may "
+        "not put cdpr/rowc/cmd/enable",
+        "cdprctl-zenoh: refused by the access control: user viewer may not put "
+        "cdpr/rowc/cmd/enable (again, 19 more times in the last 10 s)",
     ]
 
 
@@ -111,13 +127,19 @@ def test_refused_certificates_say_what_was_wrong_without_zenohs_hint():
     warn = (" WARN acc-0 ThreadId(05) zenoh_link_tls::unicast: {}. Hint: increase the system "
             "open file limit.")
     lines = [(0.0, at("33.938685", warn.format("invalid peer certificate: BadSignature"))),
-             (1.0, at("35.496711", warn.format("peer sent no certificates")))]  # fmt: skip
+             (1.0, at("35.496711", warn.format("peer sent no certificates"))),
+             (2.0, at("36.0", warn.format("received fatal alert: UnknownCA"))),
+             (3.0, at("37.0", warn.format("tls handshake eof")))]  # fmt: skip
     assert feed(lines) == [
         "cdprctl-zenoh: refused a TLS connection: invalid peer certificate: BadSignature (a "
         "certificate this robot's CA did not sign)",
         "cdprctl-zenoh: refused a TLS connection: peer sent no certificates (a client without "
         "a certificate)",
-    ]
+        "cdprctl-zenoh: refused a TLS connection: received fatal alert: UnknownCA (the client "
+        "does not trust this robot's certificate: its root_ca_certificate is not this robot's "
+        "CA)",
+    ]  # a connection closed before its handshake (a port probe, `send`'s reachability
+    # check) is no refusal
 
 
 def test_a_flood_is_a_line_per_kind_every_ten_seconds():

@@ -80,11 +80,16 @@ class Daemon:
         self._cycle_done = threading.Event()  # set by the loop after each cycle
         period = model.control.period
         self.sim: SimStepper | None = None
-        if sim:
-            self.sim = SimStepper(model)
-            self.driver = self.sim.driver(period)
-        else:
-            self.driver = create_driver(model, period=period, bus_overrides=overrides)
+        self.driver: Any = None
+        try:
+            if sim:
+                self.sim = SimStepper(model)
+                self.driver = self.sim.driver(period)
+            else:
+                self.driver = create_driver(model, period=period, bus_overrides=overrides)
+        except BaseException:  # a stop signal while they were built: their buses closed
+            self._close_buses()  # (python-can warned "not properly shut down" at exit)
+            raise
         self.manager = ControllerManager(model, self.driver)
         self.data = self.manager.data
         self.stats = LoopStats(phases=len(PHASES))
@@ -98,6 +103,12 @@ class Daemon:
         self._last_fault = ""  # the fault the links were last told of
         self.links = Links(links_of(model, zenoh, foxglove,
                                     lambda: config_summary(model, self.sim is not None)))
+
+    def _close_buses(self) -> None:
+        if self.driver is not None:
+            self.driver.shutdown()
+        if self.sim is not None:
+            self.sim.close()
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -118,9 +129,7 @@ class Daemon:
             self._print(exc.message, err=True)
             if self.realtime:
                 rt.restore_gc()  # as after a run: what the start-up built is collectable again
-            self.driver.shutdown()
-            if self.sim is not None:
-                self.sim.close()
+            self._close_buses()
             self.links.close()
             return exc.code
         finally:

@@ -7,6 +7,7 @@ opened."""
 from __future__ import annotations
 
 import signal
+import sys
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -51,6 +52,18 @@ def interrupt_the_start_up() -> dict[signal.Signals, Any]:
     ``stop_if_interrupted`` raises it again at the start-up's steps. Returns the handlers it
     replaced."""
     _received.clear()
+    if not getattr(sys.unraisablehook, "keeps_stop_signals", False):
+        previous_hook = sys.unraisablehook
+
+        def hook(u: Any) -> None:
+            """A stop raised inside a library's callback is swallowed there (kept in
+            ``_received``); without this Python printed it as "Exception ignored ...
+            Traceback" (a Ctrl-C during a first run's compile, 1 start-up in 2)."""
+            if not isinstance(u.exc_value, StartupInterrupted):
+                previous_hook(u)
+
+        hook.keeps_stop_signals = True  # type: ignore[attr-defined]
+        sys.unraisablehook = hook
 
     def raise_it(signum: int, _frame: object) -> None:
         _received.append(signal.Signals(signum).name)

@@ -74,7 +74,8 @@ class PathPlan:
         return float(np.max(np.abs(np.asarray(x) - self.start))) <= START_TOLERANCE
 
     def summary(self) -> str:
-        return (f"{len(self.segments)} segments, {self.duration:.2f} s; checked at "
+        n = len(self.segments)
+        return (f"{n} segment{'s' if n != 1 else ''}, {self.duration:.2f} s; checked at "
                 f"{self.samples} samples ≤ {self.spacing * 1e3:.1f} mm apart, smallest tension "
                 f"margin {self.min_margin:.1f} N ({self.min_margin_at})")  # fmt: skip
 

@@ -2,9 +2,12 @@
 
 It ignores SIGINT: a terminal's Ctrl-C goes to the whole process group, and the daemon stops
 its helpers itself, through their stop event (each helper printed a ``KeyboardInterrupt``
-traceback, two interleaved during a start-up). A helper that fails before it is ready says why
-in one line, which the daemon prints at once instead of a traceback and a wait for a process
-that had already died."""
+traceback, two interleaved during a start-up). It is born with SIGINT blocked (the parent
+blocks it around the start: the mask survives spawn's exec), so a Ctrl-C while it imports its
+modules, before it can ignore it, waits and is then dropped (1 start-up in ~9 printed a
+traceback from the gateway's imports when it was ignored only once the target ran). A helper
+that fails before it is ready says why in one line, which the daemon prints at once instead
+of a traceback and a wait for a process that had already died."""
 
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ def helper_entry(target: Callable[..., None], failed: Any, *args: Any) -> None:
     """The process's target: ``target(*args)``; an exception goes to ``failed`` (a queue) as
     one line and ends the process with status 1."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # a pending one is dropped
     try:
         target(*args)
     except Exception as exc:
@@ -43,7 +47,11 @@ class HelperProcess:
     def start(self, timeout: float) -> bool:
         """Start it and wait until it is ready (True) or failed, or ``timeout`` s passed:
         ``failure`` then says which, in one line."""
-        self.process.start()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # held, not lost
+        try:
+            self.process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         deadline = time.monotonic() + timeout
         while not self.ready.wait(0.05):
             if not self.process.is_alive():

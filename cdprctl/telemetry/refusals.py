@@ -55,9 +55,11 @@ KEPT = 256
 
 @dataclass
 class _Kind:
-    """One kind of refusal (who, what): when it was last written, how many since."""
+    """One kind of refusal (who, what): when it was last written, how many since; ``again``:
+    the count's text (without the first peer's id: a user's every session counts)."""
 
     text: str
+    again: str
     last_written: float
     since: int = 0
 
@@ -68,7 +70,8 @@ class _Pending:
 
     log_time: float
     read_at: float
-    who: str
+    who: str  # the user or certificate, and the peer
+    ident: str  # the user or certificate alone (the peer when it has neither)
     action: str
     key: str
 
@@ -86,7 +89,7 @@ class Refusals:
     passthrough: bool = False
     kinds: OrderedDict[tuple[str, ...], _Kind] = field(default_factory=OrderedDict)
     pending: dict[tuple[str, ...], _Pending] = field(default_factory=dict)
-    who_is: dict[str, str] = field(default_factory=dict)  # zid -> who, from the full verdicts
+    who_is: dict[str, tuple[str, str]] = field(default_factory=dict)  # zid -> _who(...)
     remote: dict[str, str] = field(default_factory=dict)  # thread -> the peer it accepts
     caching: dict[str, str] = field(default_factory=dict)  # thread -> the key it evaluates
     next_tick: float = -1.0
@@ -107,11 +110,11 @@ class Refusals:
         for k, p in list(self.pending.items()):
             if now - p.read_at >= SETTLE:
                 del self.pending[k]
-                self._refused(("acl", p.who, p.action, p.key), self._acl_text(p), now)
+                self._acl_refused(p, now)
         for kind in self.kinds.values():
             if kind.since and now - kind.last_written >= self.every:
                 n = kind.since
-                self.emit(f"cdprctl-zenoh: {kind.text} (again, {n} more "
+                self.emit(f"cdprctl-zenoh: {kind.again} (again, {n} more "
                           f"time{'s' if n > 1 else ''} in the last {self.every:g} s)")  # fmt: skip
                 kind.last_written, kind.since = now, 0
 
@@ -128,7 +131,9 @@ class Refusals:
                 self.remote[thread] = a["remote"]
             elif m["level"] == "WARN" and target.startswith("zenoh_link_tls"):
                 why = text.split(". Hint:")[0].rstrip(".")  # its hint is about file limits
-                self._refused(("tls", why), f"refused a TLS connection: {why}{_tls(why)}", now)
+                if "handshake eof" not in why:  # closed before its handshake: a port probe
+                    self._refused(("tls", why), f"refused a TLS connection: {why}{_tls(why)}",
+                                  now)  # fmt: skip
         elif target.endswith("establishment::accept") and (u := _USRPWD.match(text)):
             who = self.remote.get(thread, "an unknown address")
             host = who.rsplit(":", 1)[0] if ":" in who else who
@@ -152,36 +157,43 @@ class Refusals:
         if p is not None and abs(log_time - p.log_time) < SAME_MESSAGE:
             return  # the same message judged for another subject
         if p is not None:
-            self._refused(("acl", p.who, p.action, p.key), self._acl_text(p), now)
-        who = self.who_is.get(zid, f"peer {zid[:8]}")
-        self.pending[k] = _Pending(log_time, now, who, action, key)
+            self._acl_refused(p, now)
+        who, ident = self.who_is.get(zid, (f"peer {zid[:8]}", f"peer {zid[:8]}"))
+        self.pending[k] = _Pending(log_time, now, who, ident, action, key)
 
-    @staticmethod
-    def _acl_text(p: _Pending) -> str:
-        return f"refused by the access control: {p.who} may not {p.action} {p.key}"
+    def _acl_refused(self, p: _Pending, now: float) -> None:
+        """One refusal of the kind (user or certificate, what, where): a user's sessions
+        count together (every ``cdprctl send`` is a new peer)."""
+        what = f"may not {p.action} {p.key}"
+        self._refused(("acl", p.ident, p.action, p.key),
+                      f"refused by the access control: {p.who} {what}", now,
+                      f"refused by the access control: {p.ident} {what}")  # fmt: skip
 
-    def _refused(self, key: tuple[str, ...], text: str, now: float) -> None:
+    def _refused(self, key: tuple[str, ...], text: str, now: float, again: str = "") -> None:
         kind = self.kinds.get(key)
         if kind is not None:
             kind.since += 1
             self.kinds.move_to_end(key)
             return
-        self.kinds[key] = _Kind(text, now)
+        self.kinds[key] = _Kind(text, again or text, now)
         if len(self.kinds) > KEPT:
             self.kinds.popitem(last=False)
         self.emit(f"cdprctl-zenoh: {text}")
 
 
-def _who(subject: str, zid: str) -> str:
-    """``Interface(lo)+Username(viewer)+Transport(Tcp)+<zid>`` → ``user viewer (peer 3daf7a81
-    on lo)``; a certificate's common name likewise."""
+def _who(subject: str, zid: str) -> tuple[str, str]:
+    """``Interface(lo)+Username(viewer)+Transport(Tcp)+<zid>`` → (``user viewer (peer
+    3daf7a81 on lo)``, ``user viewer``); a certificate's common name likewise; a peer with
+    neither: the peer, twice."""
     parts = dict(re.findall(r"(\w+)\(([^)]*)\)", subject))
     where = f"peer {zid[:8]}" + (f" on {parts['Interface']}" if "Interface" in parts else "")
     if "Username" in parts:
-        return f"user {parts['Username']} ({where})"
-    if "CertCommonName" in parts:
-        return f"certificate {parts['CertCommonName']} ({where})"
-    return where
+        ident = f"user {parts['Username']}"
+    elif "CertCommonName" in parts:
+        ident = f"certificate {parts['CertCommonName']}"
+    else:
+        return where, where
+    return f"{ident} ({where})", ident
 
 
 def _tls(why: str) -> str:
@@ -189,6 +201,9 @@ def _tls(why: str) -> str:
         return " (a certificate this robot's CA did not sign)"
     if "no certificates" in why:
         return " (a client without a certificate)"
+    if "UnknownCA" in why:
+        return (" (the client does not trust this robot's certificate: its "
+                "root_ca_certificate is not this robot's CA)")  # fmt: skip
     return ""
 
 

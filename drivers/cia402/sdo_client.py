@@ -42,7 +42,9 @@ class SdoClient:
             now = drv.clock()
             if now > deadline:
                 raise DriverTimeoutError(
-                    f"no SDO answer from node {n} (cable index {c}) within {timeout:g} s", c
+                    f"no SDO answer from node {n} (cable index {c}) within {timeout:g} s (is "
+                    "the drive powered, on this bus, at this node id and bitrate? `cdprctl "
+                    "drives scan --config F` lists the drives that answer)", c
                 )
             if now >= next_try:
                 drv._send(b, msg)  # expedited transfers are idempotent: safe to repeat
