@@ -110,3 +110,96 @@ def test_the_model_test_passes_noise_of_its_size_and_refuses_twice_that():
     assert np.mean(refused) > 0.99
     ok, ratio = model_test(np.full(96, 2 * sigma), sigma)
     assert not ok and ratio == pytest.approx(2.0)
+
+
+def test_reference_anchors_are_checked_and_default_to_the_widest_triangle(tmp_path):
+    from cdprctl.model.calibration import widest_triangle
+    from cdprctl.model.errors import ConfigError
+
+    model = load_robot(CONFIG / "rowc.toml")
+    assert model.calibration.reference_anchors is None
+    # brute force over every triple: the largest area, the first in index order
+    a = model.anchors
+    areas = {t: np.linalg.norm(np.cross(a[t[1]] - a[t[0]], a[t[2]] - a[t[0]]))
+             for t in __import__("itertools").combinations(range(8), 3)}  # fmt: skip
+    best = max(areas.values())
+    assert widest_triangle(a) == min(t for t, v in areas.items() if v > best - 1e-9)
+    f = tmp_path / "r.toml"
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[calibration]\nreference_anchors = [1, 4, 6]\n')
+    assert load_robot(f).calibration.reference_anchors == (0, 3, 5)
+    for bad, words in (("[1, 2]", "must be three cable numbers"),
+                       ("[1, 1, 2]", "three distinct cable numbers in 1..8"),
+                       ("[0, 1, 2]", "three distinct cable numbers in 1..8"),
+                       ('["1", "2", "3"]', "must be three cable numbers"),
+                       ("[1, 3, 5]", None)):  # fmt: skip
+        f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[calibration]\nreference_anchors = {bad}\n')
+        if words is None:
+            load_robot(f)  # three anchors of the frame's left and bottom edges: fine
+            continue
+        with pytest.raises(ConfigError) as exc:
+            load_robot(f)
+        assert any("calibration.reference_anchors" in e and words in e
+                   for e in exc.value.errors), exc.value.errors  # fmt: skip
+    # anchors 1, 2 and 3 of a robot whose first three anchors lie on one line
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[calibration]\nreference_anchors = [1, 2, 5]\n')
+    load_robot(f)
+
+
+def test_the_calibrated_robot_file_is_the_robot_as_identified(tmp_path):
+    """The file written by `calibrate geometry --out`, read back by the loader: the anchors
+    and drum radii identified, every other value as in the original (its base)."""
+    import dataclasses
+
+    from cdprctl.calibration.geometry_file import calibrated_robot_text
+    from cdprctl.calibration.record import geometry_hash
+
+    model = load_robot(CONFIG / "caroca.toml")
+    rng = np.random.default_rng(5)
+    anchors = model.anchors + rng.uniform(-0.02, 0.02, model.anchors.shape)
+    radius = np.array([c.winch.drum_radius for c in model.cables])
+    radius *= 1 + rng.uniform(-0.01, 0.01, 8)
+    out = tmp_path / "caroca-as-built.toml"
+    out.write_text(calibrated_robot_text(model, anchors, radius, "2026-12-03, 25 poses"))
+    built = load_robot(out)
+    assert np.allclose(built.anchors, anchors, atol=5e-7)
+    assert np.allclose([c.winch.drum_radius for c in built.cables], radius, rtol=1e-8)
+    for a, b in zip(model.cables, built.cables, strict=True):
+        for f in dataclasses.fields(a):
+            x, y = getattr(a, f.name), getattr(b, f.name)
+            if f.name == "winch":
+                y = dataclasses.replace(y, drum_radius=x.drum_radius)
+            if f.name != "anchor":
+                assert np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y, f.name
+    for field in ("platform", "home", "workspace", "drives", "control", "zenoh", "name"):
+        assert repr(getattr(built, field)) == repr(getattr(model, field)), field
+    assert geometry_hash(built) != geometry_hash(model)
+    assert "2026-12-03, 25 poses" in out.read_text()
+
+
+def test_the_simulated_robot_as_built_is_another_files_geometry(tmp_path, capsys):
+    from cdprctl.cli import main
+    from cdprctl.daemon.sim_step import SimStepper
+
+    model = load_robot(CONFIG / "rowc.toml")
+    truth_file = tmp_path / "truth.toml"
+    anchors = model.anchors + 0.01
+    from cdprctl.calibration.geometry_file import calibrated_robot_text
+
+    radius = np.array([c.winch.drum_radius for c in model.cables]) * 1.005
+    truth_file.write_text(calibrated_robot_text(model, anchors, radius, "truth"))
+    truth = load_robot(truth_file)
+    sim = SimStepper(model, truth)
+    try:
+        assert np.allclose(sim.plant.model.anchors, anchors)
+    finally:
+        sim.close()
+    other = tmp_path / "other.toml"
+    other.write_text(f'base = "{CONFIG / "caroca.toml"}"\n')
+    with pytest.raises(SystemExit) as exc:
+        main(["sim", "--config", str(CONFIG / "rowc.toml"), "--as-built", str(other),
+              "--duration", "0.1"])  # fmt: skip
+    assert exc.value.code == 1
+    assert "robot 'caroca', the config's is 'rowc'" in capsys.readouterr().err
+    assert main(["run", "--config", str(CONFIG / "rowc.toml"), "--as-built",
+                 str(truth_file)]) == 2  # fmt: skip
+    assert "--as-built is the simulated robot's: give --sim" in capsys.readouterr().err

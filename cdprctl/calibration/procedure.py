@@ -74,7 +74,7 @@ class SelfOptions:
     max_std: tuple[float, float] = (0.002, 0.004)  # m, rad: refuse a predicted σ beyond
 
 
-class _Session:
+class Session:
     """The drives held at the driver's period: position targets (rad), feed-forward torques
     (N·m) and, for the ``force`` cables, a tension loop moving their targets."""
 
@@ -218,7 +218,7 @@ def known_pose(
     """The platform is at ``pose`` (x, y, z m, roll, pitch, yaw rad): held where it stands
     with the tensions that hold it there as feed-forward (position mode) or as torques
     (torque mode), sampled at rest, each cable's offset from its unstretched length there."""
-    ses = _Session(model, driver, log)
+    ses = Session(model, driver, log)
     kin = KinematicsData(model)
     R = rpy_to_matrix(*map(float, pose[3:]))
     inverse_kinematics(model, kin, pose[:3], R)
@@ -324,7 +324,7 @@ def self_calibrate(
         )
     if model.grippers:
         raise CalibrationFailedError("self-calibration of a robot with grippers is not supported")
-    ses = _Session(model, driver, log)
+    ses = Session(model, driver, log)
     kin = KinematicsData(model)
     poses = sample_poses(model, opt)
     guess = poses.copy()
@@ -404,7 +404,8 @@ def self_calibrate(
             f"resolution explain (RMS {ident.residual_rms * 1e6:.1f} µm against "
             f"{noise * 1e6:.1f} µm; χ² test at 99.9 %): the robot's geometry differs from the "
             "file (anchors, drums); its pose from this record would be off by more than it "
-            "predicts. Run `cdprctl calibrate --config F geometry`, or measure the anchors"
+            "predicts. Measure the anchors and drums into the robot file (docs/homing.md, "
+            "\"When the geometry differs from the file\"), or calibrate at a known pose"
         )
     if ident.condition > opt.max_condition or worst > 1.0:
         raise CalibrationFailedError.with_result(record, ident,

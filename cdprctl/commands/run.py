@@ -9,13 +9,19 @@ import sys
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report, os_error_text
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from cdprctl.commands.sim import (
+    add_as_built_argument,
+    add_bus_arguments,
+    as_built_model,
+    bus_overrides,
+)
 
 
 def add_parser(sub: Any) -> None:
     p = command_parser(sub, "run", "run the controller daemon", run)
     p.add_argument("--sim", action="store_true", help="run against the simulated robot")
     p.add_argument("--no-demo", action="store_true", help="with --sim: no demo motion")
+    add_as_built_argument(p)
     p.add_argument(
         "--demo",
         action="store_true",
@@ -109,6 +115,15 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.config, "cdprctl run")
     if model is None:
         return 1
+    as_built = None
+    if args.as_built:
+        if not args.sim:
+            print("cdprctl run: error: --as-built is the simulated robot's: give --sim",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        as_built = as_built_model(model, args.as_built, "cdprctl run")
+        if as_built is None:
+            return 1
     if args.rate is not None:
         if not 1.0 <= args.rate <= 10000.0:
             print(
@@ -193,6 +208,7 @@ def run(args: argparse.Namespace) -> int:
             timing_file=args.timing_file,
             state_dir=args.state_dir,
             foxglove=args.foxglove,
+            as_built=as_built,
         )
         demo = (args.sim or args.demo) and not args.no_demo and path is None
         return daemon.run(args.duration, demo, args.disturbance, path)

@@ -88,10 +88,40 @@ def add_parser(sub: Any) -> None:
         help="the simulated robot differs from the config: anchors offset and drum radii "
         "scaled at random (seeded)",
     )
+    add_as_built_argument(h)
     h.add_argument("--anchor-error", type=float, default=0.005, help="m, with --plant-errors")
     h.add_argument(
         "--drum-error", type=float, default=0.005, help="fraction, with --plant-errors"
     )
+
+
+def add_as_built_argument(p: Any) -> None:
+    p.add_argument(
+        "--as-built",
+        metavar="TRUTH.toml",
+        help="the simulated robot as built: its geometry (anchors, attachments, each drum's "
+        "radius, the platform) from this robot file, the drives and buses from --config "
+        "(docs/homing.md, \"Geometric calibration\")",
+    )
+
+
+def as_built_model(model: Any, path: str, who: str) -> Any:
+    """The robot of ``path`` for the plant, checked to be ``model``'s robot (the same cables,
+    by name and order); None after printing why not."""
+    truth = load_or_report(path, who)
+    if truth is None:
+        return None
+    names, truth_names = [c.name for c in model.cables], [c.name for c in truth.cables]
+    if truth.name != model.name:
+        print(f"{who}: error: --as-built = {path}: robot {truth.name!r}, the config's is "
+              f"{model.name!r} (the same robot, as built)", file=sys.stderr)  # fmt: skip
+        return None
+    if names != truth_names:
+        print(f"{who}: error: --as-built = {path}: its cables {truth_names} are not the "
+              f"config's {names} (the same robot, as built: the same cables in the same "
+              "order)", file=sys.stderr)  # fmt: skip
+        return None
+    return truth
 
 
 def run(args: argparse.Namespace) -> int:
@@ -156,6 +186,14 @@ def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:
     from sim_backend.plant_errors import PlantErrors
 
     plant_model = model
+    if args.as_built and args.plant_errors is not None:
+        raise SystemExit("cdprctl sim: error: --as-built and --plant-errors: give one (the "
+                         "robot as built, or random errors of the config's)")  # fmt: skip
+    if args.as_built:
+        plant_model = as_built_model(model, args.as_built, "cdprctl sim")
+        if plant_model is None:
+            raise SystemExit(1)
+        print(f"cdprctl sim: the robot as built: {args.as_built}", flush=True)
     if args.plant_errors is not None:
         errors = PlantErrors(args.plant_errors, args.anchor_error, args.drum_error)
         plant_model, drawn = errors.apply(model)

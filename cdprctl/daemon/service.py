@@ -55,12 +55,14 @@ class Daemon:
     def __init__(self, model: RobotModel, sim: bool, overrides: dict[str, Any],
                  realtime: bool = True, status_every: float = 0.5, out: Any = None,
                  zenoh: bool = False, timing_file: str | None = None,
-                 state_dir: str | None = None, foxglove: str | None = None):  # fmt: skip
+                 state_dir: str | None = None, foxglove: str | None = None,
+                 as_built: RobotModel | None = None):  # fmt: skip
         """``state_dir``: where the calibration record is (default
         ``/var/lib/cdprctl/<robot>``); not read when the encoders are trusted to read zero at
         home (``[drives] assume_home_at_start``, or the simulated robot of ``sim``, which
         starts there). ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove]
-        listen`` in the config)."""
+        listen`` in the config). ``as_built``: with ``sim``, the robot the simulated plant is
+        (its geometry; the drives from ``model``)."""
         from cdprctl.calibration.record import default_state_dir
         from drivers import create_driver
 
@@ -83,7 +85,7 @@ class Daemon:
         self.driver: Any = None
         try:
             if sim:
-                self.sim = SimStepper(model)
+                self.sim = SimStepper(model, as_built)
                 self.driver = self.sim.driver(period)
             else:
                 self.driver = create_driver(model, period=period, bus_overrides=overrides)

@@ -11,10 +11,13 @@ from cdprctl.model.robot import RobotModel
 
 
 class SimStepper:
-    def __init__(self, model: RobotModel):
+    def __init__(self, model: RobotModel, as_built: RobotModel | None = None):
+        """``as_built``: the robot the plant is (its geometry), the drives ``model``'s."""
         from sim_backend.network import SimulatedRobot
+        from sim_backend.plant import CdprPlant
 
-        self.robot = SimulatedRobot(model)
+        plant = CdprPlant(as_built) if as_built is not None else None
+        self.robot = SimulatedRobot(model, plant=plant)
         self.plant, self.net = self.robot.plant, self.robot.net
         self._driver: Any = None
         self._last_t: float | None = None

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.model.cables import read_cables, read_winch
+from cdprctl.model.calibration import read_calibration
 from cdprctl.model.control import read_control
 from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
@@ -38,6 +39,7 @@ TOP_KEYS = (
     "zenoh",
     "foxglove",
     "grippers",
+    "calibration",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -57,6 +59,12 @@ def load_robot(path: str | Path) -> RobotModel:
     """
     path = Path(path)
     return parse_robot(_read_toml(path, []), str(path))
+
+
+def read_merged(path: str | Path) -> dict[str, Any]:
+    """The robot file's TOML with its ``base`` files merged in (what ``load_robot`` checks):
+    for tools that write a robot file derived from it."""
+    return _read_toml(Path(path), [])
 
 
 def _read_toml(path: Path, chain: list[Path]) -> dict[str, Any]:
@@ -113,6 +121,8 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     zenoh = read_zenoh(rd, data, name or "robot")
     foxglove = read_foxglove(rd, data)
     grippers = read_grippers(rd, data, cables)
+    anchors = np.array([c.anchor for c in cables], float) if cables else None
+    calibration = read_calibration(rd, data, len(cables or ()), anchors)
 
     if (
         rd.errors
@@ -148,6 +158,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         zenoh=zenoh,
         foxglove=foxglove,
         grippers=grippers,
+        calibration=calibration,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.model.calibration import CalibrationConfig
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.model.foxglove import FoxgloveConfig
@@ -131,6 +132,7 @@ class RobotModel:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
     grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
+    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame
