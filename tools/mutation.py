@@ -294,12 +294,14 @@ def report(targets: list[Target], tree: Path) -> str:
         ms = read_session(t, tree)
         all_mutants += ms
     stale = mark_equivalents(all_mutants, equivalents)
+    out_of_date: set[str] = set()  # modules whose session is of an older file: not listed
     for t in targets:
         ms = [m for m in all_mutants if m.module == t.module]
         if not ms:
             rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
             continue
         if session_is_stale(t, tree, ms):  # its figures are of a file that is no longer there
+            out_of_date.add(t.module)
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue
@@ -360,7 +362,7 @@ def report(targets: list[Target], tree: Path) -> str:
     for _, m in survivors:
         lines.append(f"- `{m.module}:{m.line}` {m.operator.removeprefix('core/')}: `{m.diff}`")
     lines += ["", "## Equivalent mutants", ""]
-    eq = [m for m in all_mutants if m.equivalent]
+    eq = [m for m in all_mutants if m.equivalent and m.module not in out_of_date]
     if not eq:
         lines.append("None.")
     for m in eq:
