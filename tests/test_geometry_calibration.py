@@ -203,3 +203,80 @@ def test_the_simulated_robot_as_built_is_another_files_geometry(tmp_path, capsys
     assert main(["run", "--config", str(CONFIG / "rowc.toml"), "--as-built",
                  str(truth_file)]) == 2  # fmt: skip
     assert "--as-built is the simulated robot's: give --sim" in capsys.readouterr().err
+
+
+def _as_built_caroca(attachment_error: float = 0.0):
+    import dataclasses
+
+    from cdprctl.model.calibration import reference_anchors
+
+    model = load_robot(CONFIG / "caroca.toml")
+    ref = reference_anchors(model.calibration, model.anchors)
+    truth = PlantErrors(1, 0.02, 0.01, ref).apply(model)[0]
+    if attachment_error:
+        rng = np.random.default_rng(11)
+        truth = dataclasses.replace(truth, cables=tuple(
+            dataclasses.replace(c, attachment=np.asarray(c.attachment)
+                                + rng.uniform(-attachment_error, attachment_error, 3))
+            for c in truth.cables))  # fmt: skip
+    return model, truth, ref
+
+
+def test_the_geometric_calibration_finds_an_as_built_robot_on_its_drives(tmp_path):
+    """CAROCA as built (non-reference anchors ±20 mm, drums ±1 %), started 4 cm from home
+    with incremental encoders, in lock-step on the simulated drives: the start estimated, 15
+    poses planned and visited, the geometry identified within its predicted σ, and the robot
+    file and record it writes fit each other and the platform."""
+    from test_homing import robot_at
+
+    from cdprctl.calibration.geometry_file import calibrated_robot_text
+    from cdprctl.calibration.geometry_procedure import (
+        GeometryOptions,
+        geometry_calibrate,
+        geometry_record,
+    )
+    from cdprctl.calibration.record import save
+    from cdprctl.calibration.startup import load_record
+
+    model, truth, ref = _as_built_caroca()
+    start = np.asarray(model.home.position) + np.array([0.03, -0.02, 0.02])
+    lines: list[str] = []
+    with robot_at(model, start, model.home.rotation, truth) as ls:
+        ls.driver.configure()
+        cal = geometry_calibrate(model, ls.driver, GeometryOptions(poses=15), log=lines.append)
+        true_start = ls.plant.position.copy()
+    assert cal.accepted, cal.reason
+    r = cal.result
+    assert cal.reference == ref and len(r.poses) == 13 + 14  # `self`'s samples, then the plan
+    true_anchors = np.array([c.anchor for c in truth.cables])
+    error = np.linalg.norm(r.anchors - true_anchors, axis=1)
+    sigma = np.linalg.norm(r.std_anchors, axis=1)
+    # 20 mm off before, within 3 σ of what it predicts after (σ under 3 mm: accepted)
+    assert np.max(error) < 4e-3 and np.all(error <= 3 * sigma + 1e-6), (error, sigma)
+    scale = np.array([c.winch.drum_radius for c in truth.cables]) / np.array(
+        [c.winch.drum_radius for c in model.cables])
+    assert np.max(np.abs(r.drum_scale - scale)) < 1e-3
+    assert cal.motion_time < 300.0
+    # the start, where the platform is back: within 3 σ of the start's predicted σ, per axis
+    assert np.all(np.abs(np.array(r.pose[:3]) - true_start) <= 3 * np.array(r.std_pose[:3])
+                  + 2e-4), (np.array(r.pose[:3]) - true_start, r.std_pose)  # fmt: skip
+    radius = np.array([c.winch.drum_radius for c in model.cables]) * r.drum_scale
+    f = tmp_path / "caroca-built.toml"
+    f.write_text(calibrated_robot_text(model, r.anchors, radius, "test"))
+    built = load_robot(f)
+    save(geometry_record(built, cal, [None] * 8), tmp_path / "state")
+    assert load_record(built, tmp_path / "state").method == "geometry"  # the file's record
+    assert any("the start:" in x for x in lines) and any("15 poses" in x or "14 poses" in x
+                                                          for x in lines)  # fmt: skip
+
+
+def test_calibrate_geometry_refuses_bad_options_in_one_line(capsys):
+    from cdprctl.cli import main
+
+    rowc = str(CONFIG / "rowc.toml")
+    for opts, words in ((["--poses", "5"], "--poses = 5: must be in [10, 80]"),
+                        (["--fill", "1.5"], "--fill = 1.5: must be in [0.1, 1.0]"),
+                        (["--out", rowc], "--out is the robot file itself")):  # fmt: skip
+        assert main(["calibrate", "--config", rowc, "geometry", *opts]) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err

@@ -304,7 +304,7 @@ def test_self_refuses_a_record_the_geometry_would_bias():
         ls.driver.configure()
         with pytest.raises(CalibrationFailedError, match="the length residuals are") as exc:
             self_calibrate(model, ls.driver, log=lambda s: None)
-        assert "Measure the anchors and drums into the robot file" in str(exc.value)
+        assert "cdprctl calibrate --config F geometry --out" in str(exc.value)
         assert exc.value.record.notes["residuals_over_noise"] > 2.0
         dp, _ = pose_error(model, exc.value.record, ls)
         assert dp > 3.0  # mm: what accepting it would have cost

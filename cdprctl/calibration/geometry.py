@@ -239,13 +239,33 @@ class GeometryIdentification:
             r += 6
         return A
 
+    #: m and fraction: how far an anchor and a drum may be from the file (further, it is
+    #: another robot, or the data are wrong: rowc's solver once went 5 m off without them)
+    ANCHOR_BOUND = 0.1
+    SCALE_BOUND = 0.05
+
+    def bounds(self, K: int) -> tuple[np.ndarray, np.ndarray]:
+        a = self.anchors0[self.free].ravel()
+        lo = np.r_[a - self.ANCHOR_BOUND, np.full(self.m, 1.0 - self.SCALE_BOUND),
+                   np.full(6 * K, -np.inf)]  # fmt: skip
+        hi = np.r_[a + self.ANCHOR_BOUND, np.full(self.m, 1.0 + self.SCALE_BOUND),
+                   np.full(6 * K, np.inf)]  # fmt: skip
+        return lo, hi
+
+    def at_bound(self, r: GeometryResult) -> bool:
+        """Whether an anchor or a drum ended at its bound (not identified: refuse)."""
+        a = r.anchors[self.free] - self.anchors0[self.free]
+        return bool(np.any(np.abs(a) > 0.99 * self.ANCHOR_BOUND)
+                    or np.any(np.abs(r.drum_scale - 1.0) > 0.99 * self.SCALE_BOUND))  # fmt: skip
+
     # -- the solution ----------------------------------------------------------------------
     def solve(self, s: GeometrySamples) -> GeometryResult:
         K = s.theta.shape[0]
         z0 = np.concatenate([self.anchors0[self.free].ravel(), np.ones(self.m), s.guess.ravel()])
+        lo, hi = self.bounds(K)
         res = least_squares(
-            self.residuals, z0, jac=self.jacobian, args=(s,), method="trf", x_scale="jac",
-            xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100,
+            self.residuals, z0, jac=self.jacobian, args=(s,), bounds=(lo, hi), method="trf",
+            x_scale="jac", xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=100,
         )  # fmt: skip
         anchors, scales, poses = self._unpack(res.x, K)
         J = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)

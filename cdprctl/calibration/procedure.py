@@ -97,6 +97,7 @@ class Session:
         self.t_stop_low = model.tension_min + 0.1 * span  # N: a move stops here
         self.t_stop_high = model.tension_max - 0.15 * span  # N
         self.states: WinchStates = driver.states
+        self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
         self._outside = 0.0  # s a tension has been outside its bounds
 
     # s: a tension outside its bounds this long stops the procedure (a transient, such as the
@@ -307,24 +308,11 @@ def sample_poses(model: RobotModel, opt: SelfOptions) -> np.ndarray:
 TENSION_MARGIN = (0.0, 0.3)
 
 
-def self_calibrate(
-    model: RobotModel,
-    driver: WinchDriver,
-    opt: SelfOptions | None = None,
-    log: Callable[[str], None] = print,
-) -> tuple[CalibrationRecord, Identified]:
-    """From an unknown pose near home: the samples (module docstring), the identification,
-    the record. Raises :class:`CalibrationFailedError` (drives disabled) when the drives are not in
-    position mode, the platform cannot be held, or the data do not decide the pose."""
-    opt = opt or SelfOptions()
-    if not model.drives.holds_lengths:
-        raise CalibrationFailedError(
-            "self-calibration moves the platform with the drives' position loops: it needs "
-            "[drives] mode = \"csp\" (this robot's drives are in torque mode); use known-pose"
-        )
-    if model.grippers:
-        raise CalibrationFailedError("self-calibration of a robot with grippers is not supported")
-    ses = Session(model, driver, log)
+def sample_around_start(ses: Session, opt: SelfOptions) -> Samples:
+    """``self``'s samples, on ``ses`` (not enabled yet; left enabled, back at the start): the
+    start and the moves of ``sample_poses`` away from it, six cables by position and the
+    redundant ones by tension (module docstring)."""
+    model, driver, log = ses.model, ses.driver, ses.log
     kin = KinematicsData(model)
     poses = sample_poses(model, opt)
     guess = poses.copy()
@@ -344,33 +332,56 @@ def self_calibrate(
     theta_all, tension_all = [], []
     ses.torques[:] = ses.ratio * plan[0]
     ses.tension_goal[:] = plan[0]
-    try:
-        ses.enable()
-        ses.run(1.5)  # the redundant cables to their tensions at the start
-        theta0, t0, _ = ses.average(opt.sample_time)
-        theta_all.append(theta0)
-        tension_all.append(t0)
-        start_targets = ses.base.copy()
-        comp = 1.0 / k_axial  # m/N
-        for k in range(1, len(poses)):
-            # the position cables: unstretched length change from the nominal geometry and
-            # the planned tensions; the force cables: their planned tension
-            dl0 = (lengths[k] - lengths[0]) - (plan[k] - t0) * comp
-            goal = theta0 - dl0 / ses.ratio
-            done = ses.move(goal, plan[k], opt.move_time)
-            if done < 1.0:  # the guess: where the ramp stopped
-                guess[k] = guess[0] + done * (guess[k] - guess[0])
-            ses.run(opt.settle_time)
-            th, t, speed = ses.average(opt.sample_time)
-            theta_all.append(th)
-            tension_all.append(t)
-            log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
-                f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
-        ses.move(start_targets, plan[0], opt.move_time)
+    ses.enable()
+    ses.run(1.5)  # the redundant cables to their tensions at the start
+    theta0, t0, _ = ses.average(opt.sample_time)
+    theta_all.append(theta0)
+    tension_all.append(t0)
+    start_targets = ses.base.copy()
+    comp = 1.0 / k_axial  # m/N
+    for k in range(1, len(poses)):
+        # the position cables: unstretched length change from the nominal geometry and the
+        # planned tensions; the force cables: their planned tension
+        dl0 = (lengths[k] - lengths[0]) - (plan[k] - t0) * comp
+        goal = theta0 - dl0 / ses.ratio
+        done = ses.move(goal, plan[k], opt.move_time)
+        if done < 1.0:  # the guess: where the ramp stopped
+            guess[k] = guess[0] + done * (guess[k] - guess[0])
         ses.run(opt.settle_time)
+        th, t, speed = ses.average(opt.sample_time)
+        theta_all.append(th)
+        tension_all.append(t)
+        log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
+            f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
+    ses.move(start_targets, plan[0], opt.move_time)
+    ses.run(opt.settle_time)
+    return Samples(np.array(theta_all), np.array(tension_all), guess)
+
+
+def self_calibrate(
+    model: RobotModel,
+    driver: WinchDriver,
+    opt: SelfOptions | None = None,
+    log: Callable[[str], None] = print,
+) -> tuple[CalibrationRecord, Identified]:
+    """From an unknown pose near home: the samples (module docstring), the identification,
+    the record. Raises :class:`CalibrationFailedError` (drives disabled) when the drives are not in
+    position mode, the platform cannot be held, or the data do not decide the pose."""
+    opt = opt or SelfOptions()
+    if not model.drives.holds_lengths:
+        raise CalibrationFailedError(
+            "self-calibration moves the platform with the drives' position loops: it needs "
+            "[drives] mode = \"csp\" (this robot's drives are in torque mode); use known-pose"
+        )
+    if model.grippers:
+        raise CalibrationFailedError("self-calibration of a robot with grippers is not supported")
+    ses = Session(model, driver, log)
+    try:
+        samples = sample_around_start(ses, opt)
     finally:
         ses.close()
-    samples = Samples(np.array(theta_all), np.array(tension_all), guess)
+    poses = samples.guess
+    force = list(np.flatnonzero(ses.force))
     ident = Identification(model, opt.fit_drum_scales, opt.weights).solve(samples)
     worst = max(max(ident.std[:3]) / opt.max_std[0], max(ident.std[3:]) / opt.max_std[1])
     record = CalibrationRecord(
@@ -404,8 +415,8 @@ def self_calibrate(
             f"resolution explain (RMS {ident.residual_rms * 1e6:.1f} µm against "
             f"{noise * 1e6:.1f} µm; χ² test at 99.9 %): the robot's geometry differs from the "
             "file (anchors, drums); its pose from this record would be off by more than it "
-            "predicts. Measure the anchors and drums into the robot file (docs/homing.md, "
-            "\"When the geometry differs from the file\"), or calibrate at a known pose"
+            "predicts. Identify them: `cdprctl calibrate --config F geometry --out "
+            "F-built.toml` (docs/homing.md, \"Geometric calibration\"), or measure them"
         )
     if ident.condition > opt.max_condition or worst > 1.0:
         raise CalibrationFailedError.with_result(record, ident,

@@ -47,6 +47,27 @@ def add_parser(sub: Any) -> None:
     sp.add_argument(
         "--fit-drum-scales", action="store_true", help="identify each drum's pay-out scale too"
     )
+    gp = methods.add_parser(
+        "geometry",
+        help="the anchors, drums and encoders' zeros, from a start near home (a few minutes "
+        "of motion over the workspace)",
+        description="Estimate the start (as self), move the platform through poses planned "
+        "for the identification (six cables by position, the redundant ones by tension), "
+        "sample at rest, identify every anchor but the reference ones, each drum's radius "
+        "and the encoders' zeros; refused when the residuals are more than the drives' "
+        "resolution explains or the data do not decide them (docs/homing.md).",
+    )
+    gp.add_argument("--poses", type=int, default=25, help="poses to sample (25; 10..80)")
+    gp.add_argument("--fill", type=float, default=0.8,
+                    help="fraction of the workspace box the poses span (0.8)")  # fmt: skip
+    gp.add_argument("--speed", type=float, default=0.1, help="m/s of the moves (0.1)")
+    gp.add_argument("--json", action="store_true", help="print the result as JSON")
+    gp.add_argument("--no-realtime", action="store_true",
+                    help="do not ask for SCHED_FIFO and CPU pinning while it moves")
+    gp.add_argument("--out", metavar="FILE",
+                    help="write the robot file as identified to FILE, and the calibration "
+                    "record for it to the state directory (then: cdprctl run --config "
+                    "FILE)")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.config)
     if model is None:
         return 1
+    if args.method == "geometry":
+        return run_geometry(args, model)
     state_dir = Path(args.state_dir) if args.state_dir else default_state_dir(model.name)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     pose = None
@@ -122,3 +145,116 @@ def run(args: argparse.Namespace) -> int:
                 f"{np.round(std[3:], 2).tolist()} mrad")  # fmt: skip
         log(f"record: {path}")
     return 0
+
+
+def run_geometry(args: argparse.Namespace, model: Any) -> int:
+    """``calibrate geometry``: exit 0 accepted (with --out: the file and its record written),
+    1 refused or stopped (the reason in one line), 2 bad options."""
+    from cdprctl.calibration.geometry_file import calibrated_robot_text
+    from cdprctl.calibration.geometry_procedure import (
+        GeometryOptions,
+        geometry_calibrate,
+        geometry_record,
+        plan,
+    )
+    from cdprctl.calibration.procedure import CalibrationFailedError
+    from cdprctl.calibration.record import default_state_dir, now_iso, save
+    from cdprctl.commands.common import load_or_report
+    from drivers import create_driver
+    from drivers.errors import DriverError
+
+    for name, value, lo, hi in (("poses", args.poses, 10, 80), ("fill", args.fill, 0.1, 1.0),
+                                ("speed", args.speed, 0.01, 0.5)):  # fmt: skip
+        if not lo <= value <= hi:
+            print(f"cdprctl calibrate: error: --{name} = {value}: must be in [{lo}, {hi}]",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+    out = Path(args.out) if args.out else None
+    if out is not None and out.resolve() == Path(model.source_file).resolve():
+        print("cdprctl calibrate: error: --out is the robot file itself: write the robot as "
+              "built to another file (it names this one as its base)", file=sys.stderr)  # fmt: skip
+        return 2
+    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
+    opt = GeometryOptions(poses=args.poses, fill=args.fill, speed=args.speed)
+    try:
+        log(f"cdprctl calibrate: {model.name}, geometry: planning the poses")
+        poses = plan(model, opt)
+    except CalibrationFailedError as exc:
+        print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
+        return 1
+    driver = create_driver(model, period=model.control.period, bus_overrides=bus_overrides(args))
+    from cdprctl import realtime as rt
+
+    try:
+        log(f"cdprctl calibrate: {model.name}, geometry: configuring the drives")
+        driver.configure()
+        if not args.no_realtime:  # the moves at the loop's priority: a late cycle is a
+            # tension spike on stiff cables (rowc: moves stopped short, a following error)
+            for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
+                log(f"cdprctl calibrate: warning: {w}")
+        cal = geometry_calibrate(model, driver, opt, log, poses)
+    except (DriverError, CalibrationFailedError) as exc:
+        print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if not args.no_realtime:
+            rt.leave_realtime()
+        driver.shutdown()
+    r = cal.result
+    drawn = model.anchors
+    radius = np.array([c.winch.drum_radius for c in model.cables]) * r.drum_scale
+    result: dict[str, Any] = {
+        "accepted": cal.accepted,
+        "reason": cal.reason,
+        "reference_anchors": [model.cables[i].name for i in cal.reference],
+        "anchors": np.round(r.anchors, 6).tolist(),
+        "anchor_moved": np.round(np.linalg.norm(r.anchors - drawn, axis=1), 6).tolist(),
+        "drum_scale": np.round(r.drum_scale, 7).tolist(),
+        "drum_radius": np.round(radius, 8).tolist(),
+        "theta_zero": np.round(r.theta_zero, 6).tolist(),
+        "pose": r.pose,
+        "residual_rms": r.residual_rms,
+        "residuals_over_noise": cal.residuals_over_noise,
+        "force_rms": r.force_rms,
+        "std": {"anchors": np.round(np.linalg.norm(r.std_anchors, axis=1), 6).tolist(),
+                "drum_scale": np.round(r.std_drum_scale, 7).tolist(),
+                "pose": r.std_pose},
+        "condition": r.condition,
+        "poses": len(r.poses),
+        "motion_time": cal.motion_time,
+    }
+    if cal.accepted and out is not None:
+        how = (f"{now_iso()}: {len(r.poses)} poses, {cal.motion_time:.0f} s of motion, "
+               f"residuals {cal.residuals_over_noise:.2f}x the drives' resolution, anchors "
+               f"of cables {', '.join(result['reference_anchors'])} as drawn")  # fmt: skip
+        out.write_text(calibrated_robot_text(model, r.anchors, radius, how), encoding="utf-8")
+        built = load_or_report(str(out), "cdprctl calibrate")
+        if built is None:
+            return 1
+        state_dir = Path(args.state_dir) if args.state_dir else default_state_dir(built.name)
+        record = geometry_record(built, cal, list(getattr(driver, "identities",
+                                                          [None] * model.n_cables)))  # fmt: skip
+        result["robot_file"] = str(out)
+        result["record"] = str(save(record, state_dir))
+    if args.json:
+        print(json.dumps(result))
+    else:
+        moved = np.linalg.norm(r.anchors - drawn, axis=1) * 1e3
+        sig = np.linalg.norm(r.std_anchors, axis=1) * 1e3
+        for i, c in enumerate(model.cables):
+            a = r.anchors[i]
+            ref = "  (reference: as drawn)" if i in cal.reference else (
+                f"  {moved[i]:.2f} mm from the drawing, σ {sig[i]:.2f} mm")  # fmt: skip
+            log(f"cable {c.name}: anchor [{a[0]:.4f}, {a[1]:.4f}, {a[2]:.4f}] m, drum "
+                f"x{r.drum_scale[i]:.5f}{ref}")  # fmt: skip
+        log(f"residual {r.residual_rms * 1e6:.1f} µm RMS ({cal.residuals_over_noise:.2f}x the "
+            f"drives' resolution), condition {r.condition:.3g}, {len(r.poses)} poses, "
+            f"{cal.motion_time:.0f} s of motion")  # fmt: skip
+        log(("accepted" if cal.accepted else "refused: ") + ("" if cal.accepted else
+                                                              cal.reason))  # fmt: skip
+        if "robot_file" in result:
+            log(f"robot file: {result['robot_file']}; record: {result['record']} — run it "
+                f"with `cdprctl run --config {result['robot_file']}`")  # fmt: skip
+        elif cal.accepted:
+            log("(nothing written: give --out FILE for the robot file and its record)")
+    return 0 if cal.accepted else 1

@@ -1,0 +1,513 @@
+"""``cdprctl calibrate geometry``: the platform moved through poses planned for the geometric
+identification, sampled at rest, the geometry identified (:mod:`geometry`), the record and the
+robot file of the robot as built (docs/homing.md, "Geometric calibration").
+
+The poses: candidates over the workspace (a grid of positions through ``fill`` of the box,
+each level and tilted about x, y and z), kept where the nominal model holds them with a wide
+tension margin (the real geometry differs from the file: its tensions do too); chosen one by
+one (D-optimal) for the information they add on the geometry. Each sample's rows depend on
+the geometry, the start pose and its own pose only, so its own pose is eliminated per sample
+(a Schur complement) and the information on (geometry, start) is a sum over samples: the
+greedy choice costs a determinant per candidate, not a least-squares problem.
+
+The moves: as in ``self`` (:mod:`procedure`), six cables hold lengths (the position loops of
+the drives), the redundant ones their tension (a loop on the measured torque): straight lines
+between the poses, their planned lengths and tensions interpolated every cycle, at ``speed``.
+A tension nearing its limit stops a move where it is (the sample is taken there).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from cdprctl.calibration.geometry import GeometryIdentification, GeometryResult, GeometrySamples
+from cdprctl.calibration.identify import Identification, Weights, length_noise, model_test
+from cdprctl.calibration.procedure import (
+    CalibrationFailedError,
+    SelfOptions,
+    Session,
+    sample_around_start,
+)
+from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
+from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model.calibration import reference_anchors
+from cdprctl.model.robot import RobotModel
+from cdprctl.motion.trajectory import coordinates_rotation
+from cdprctl.numerics import compliance_of, unstretched_lengths
+from cdprctl.tda.hold import equilibrium_tensions
+from drivers.base import WinchDriver
+
+
+@dataclasses.dataclass(frozen=True)
+class GeometryOptions:
+    poses: int = 25  # samples, the start included
+    fill: float = 0.8  # fraction of the workspace box the poses span (about its centre)
+    tilt: float = 0.8  # fraction of the workspace's max_angle the tilted poses take
+    speed: float = 0.1  # m/s (and rad/s): the moves' mean speed
+    settle_time: float = 1.0  # s at rest before sampling
+    sample_time: float = 0.3  # s averaged per sample
+    force_bandwidth: float = 2.0  # Hz: the redundant cables' tension loop
+    max_motion: float = 300.0  # s: refuse a plan whose moves take longer
+    max_anchor_std: float = 0.005  # m: refuse a predicted σ beyond, per anchor (3-D)
+    max_scale_std: float = 0.001  # refuse a drum's predicted σ beyond (fraction)
+
+
+@dataclasses.dataclass
+class GeometryCalibration:
+    result: GeometryResult
+    reference: tuple[int, int, int]
+    samples: GeometrySamples
+    motion_time: float  # s the platform moved
+    accepted: bool
+    reason: str
+    residuals_over_noise: float
+
+
+def _tensions_at(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
+    inverse_kinematics(model, kin, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
+    return equilibrium_tensions(model, kin)
+
+
+# What each cable's tension may be at a candidate (CANDIDATE_MARGIN), along a move
+# (PATH_MARGIN) and before a move stops short (STOP_MARGIN): below, a fraction of the way from
+# the cable's lower limit up to its tension at home (a fraction of the whole range would not
+# do: CoGiRo holds its home at 7 % of a 100-5000 N range, and no pose passed); above, a
+# fraction of the range kept free. Each wider than the next: the poses are far from the start,
+# and a robot whose anchors are 20 mm off holds them with other tensions (rowc: 25 N more than
+# planned at 0.3; lock-step); a straight move between two held poses can pass where a cable
+# goes slack (rowc's way back from a pose stopped below 29 N; lock-step).
+CANDIDATE_MARGIN = (0.35, 0.4)
+PATH_MARGIN = (0.25, 0.3)
+STOP_MARGIN = (0.18, 0.15)
+
+
+def move_duration(distance: float, opt: GeometryOptions) -> float:
+    """s: a move of ``distance`` (m and rad, the pose's 6-vector norm) at ``opt.speed`` mean
+    (a cosine time law), at least 1 s."""
+    return max(1.0, distance / opt.speed)
+
+
+def tension_noise(model: RobotModel) -> float:
+    """N: the σ of a tension read at rest: one torque count, quantized (/√12). (With the
+    motor's Coulomb friction added, uniform /√3, rowc's anchors came out 4.8 mm off where
+    without it 2.4 mm, lock-step: at rest the position loops hold, friction barely acts.)"""
+    return Weights.of(model).tension / math.sqrt(12.0)
+
+
+PATH_STEP = 0.05  # m (and rad) between the checked points of a move
+# s a tension stays beyond STOP_MARGIN before a move stops: a transient does not (across
+# processes, real time, rowc's moves stopped at 1-56 % on single-cycle spikes that the
+# samples at rest never showed; lock-step 67-91 %)
+STOP_PERSISTS = 0.02
+
+
+def _bounds(model: RobotModel, margin: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """N per cable: (lower, upper) bounds of ``margin`` (the MARGINs above)."""
+    kin = KinematicsData(model)
+    home = _tensions_at(model, kin, np.r_[model.home.position, 0.0, 0.0, 0.0])
+    span = model.tension_max - model.tension_min
+    low = model.tension_min + margin[0] * np.maximum(home - model.tension_min, 0.0)
+    return low, model.tension_max - margin[1] * span
+
+
+def line_is_held(model: RobotModel, kin: KinematicsData, a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the nominal model holds every point of the straight move from ``a`` to ``b``
+    (every ``PATH_STEP``) within ``PATH_MARGIN``."""
+    low, high = _bounds(model, PATH_MARGIN)
+    n = max(2, math.ceil(float(np.linalg.norm(b - a)) / PATH_STEP) + 1)
+    for f in np.linspace(0.0, 1.0, n):
+        t = _tensions_at(model, kin, a + f * (b - a))
+        if np.any(t < low) or np.any(t > high):
+            return False
+    return True
+
+
+def candidate_poses(model: RobotModel, opt: GeometryOptions,
+                    start: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """N × 6: the grid's poses the nominal model holds within ``CANDIDATE_MARGIN`` (and, with
+    ``start``, along the straight move from it: the way back is always there)."""
+    ws = model.workspace
+    lo, hi = np.asarray(ws.position_min, float), np.asarray(ws.position_max, float)
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo) * opt.fill
+    tilt = opt.tilt * ws.max_angle
+    turns = [np.zeros(3)] + [s * a * np.eye(3)[j] for j in range(3) for s in (1.0, -1.0)
+                             for a in (0.5 * tilt, tilt)]  # fmt: skip
+    low, high = _bounds(model, CANDIDATE_MARGIN)
+    kin = KinematicsData(model)
+    out = []
+    for f in itertools.product((-1.0, -0.5, 0.0, 0.5, 1.0), repeat=3):
+        p = centre + np.array(f) * half
+        for r in turns:
+            x = np.r_[p, r]
+            t = _tensions_at(model, kin, x)
+            if np.all(t >= low) and np.all(t <= high) and (
+                    start is None or line_is_held(model, kin, start, x)):  # fmt: skip
+                out.append(x)
+    return np.array(out)
+
+
+def _nominal_samples(model: RobotModel, poses: np.ndarray) -> GeometrySamples:
+    """What the drives would read at ``poses`` were the robot its file (for planning)."""
+    kin = KinematicsData(model)
+    law = compliance_of(model.cables)
+    ratio = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
+    theta, tension = [], []
+    for x in poses:
+        t = _tensions_at(model, kin, x)
+        l0 = unstretched_lengths(law, kin.length.copy(), t)
+        theta.append(-l0 / ratio)
+        tension.append(t)
+    return GeometrySamples(np.array(theta), np.array(tension), poses.copy())
+
+
+def plan_poses(model: RobotModel, ident: GeometryIdentification, opt: GeometryOptions,
+               start: np.ndarray) -> np.ndarray:  # fmt: skip
+    """K × 6: ``start``, then greedily the candidate adding the most information on the
+    geometry (D-optimal, the poses eliminated: module docstring)."""
+    cands = candidate_poses(model, opt, start)
+    if len(cands) == 0:
+        raise CalibrationFailedError("no pose of the workspace is held with margin: check "
+                                     "[workspace] and the tension limits")  # fmt: skip
+    g, m = ident.n_geo, ident.m
+    infos = []
+    z_geo = np.r_[ident.anchors0[ident.free].ravel(), np.ones(m)]
+    for x in cands:
+        s = _nominal_samples(model, np.array([start, x]))
+        J = ident.jacobian(np.r_[z_geo, s.guess.ravel()], s)
+        rows = J[6:]  # sample 1: its length closures and its equilibrium
+        A, B = rows[:, : g + 6], rows[:, g + 6 :]
+        BtB = B.T @ B
+        infos.append(A.T @ A - A.T @ B @ np.linalg.solve(BtB, B.T @ A))
+    s0 = _nominal_samples(model, np.array([start]))
+    J0 = ident.jacobian(np.r_[z_geo, s0.guess.ravel()], s0)
+    total = J0.T @ J0  # the start's equilibrium
+    chosen: list[int] = []
+    scale = np.sqrt(np.maximum(np.diag(total + sum(infos)), 1e-300))
+
+    def score(info: np.ndarray) -> float:
+        M = info / np.outer(scale, scale)
+        Mgg, Mg0, M00 = M[:g, :g], M[:g, g:], M[g:, g:]
+        S = Mgg - Mg0 @ np.linalg.pinv(M00) @ Mg0.T
+        sign, logdet = np.linalg.slogdet(S + 1e-12 * np.eye(g))
+        return logdet if sign > 0 else -math.inf
+
+    for _ in range(min(opt.poses - 1, len(cands))):
+        best, pick = -math.inf, -1
+        for j, info in enumerate(infos):
+            if j in chosen:
+                continue
+            v = score(total + info)
+            if v > best:
+                best, pick = v, j
+        chosen.append(pick)
+        total = total + infos[pick]
+    return np.vstack([start, _tour(model, start, cands[chosen])])
+
+
+def _tour(model: RobotModel, start: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The poses in a short order from ``start`` (nearest neighbour among the moves the
+    nominal model holds all along; when none is, through the start: every candidate's way
+    from and to it is held)."""
+    kin = KinematicsData(model)
+    left = list(range(len(poses)))
+    out, here = [], start
+    while left:
+        near = sorted(left, key=lambda i: float(np.linalg.norm(poses[i] - here)))
+        j = next((i for i in near[:8] if line_is_held(model, kin, here, poses[i])), None)
+        if j is None:
+            out.append(start)  # sampled again on the way: a check of the start's drift
+            j = near[0]
+        left.remove(j)
+        out.append(poses[j])
+        here = poses[j]
+    return np.array(out)
+
+
+def motion_time(poses: np.ndarray, opt: GeometryOptions) -> float:
+    """s: the moves (there and back) and the samples at rest."""
+    legs = np.r_[np.linalg.norm(np.diff(poses, axis=0), axis=1),
+                 np.linalg.norm(poses[-1] - poses[0])]  # fmt: skip
+    moves = float(sum(move_duration(d, opt) for d in legs))
+    return moves + len(poses) * (opt.settle_time + opt.sample_time)
+
+
+def check_robot(model: RobotModel) -> None:
+    """What the geometric calibration needs of a robot (:class:`CalibrationFailedError`)."""
+    if not model.drives.holds_lengths:
+        raise CalibrationFailedError(
+            "the geometric calibration moves the platform with the drives' position loops: "
+            "it needs [drives] mode = \"csp\" (this robot's drives are in torque mode)"
+        )
+    if model.grippers:
+        raise CalibrationFailedError("the geometric calibration of a robot with grippers is "
+                                     "not supported")  # fmt: skip
+    if any(c.pulley is not None for c in model.cables):
+        raise CalibrationFailedError("the geometric calibration identifies exit points: "
+                                     "cables with [cables.pulley] are not supported")  # fmt: skip
+
+
+def identification_of(model: RobotModel) -> GeometryIdentification:
+    reference = reference_anchors(model.calibration, model.anchors)
+    return GeometryIdentification(model, list(reference), length_noise(model),
+                                  tension_noise(model))  # fmt: skip
+
+
+def plan(model: RobotModel, opt: GeometryOptions) -> np.ndarray:
+    """The poses (K × 6, the first home: the start replaces it), checked against the motion
+    budget. Before the drives are configured: seconds of computing with a configured bus
+    idle left the drives' velocity readings at 10³ rad/s and a following-error fault at the
+    first move (across processes), and the poses hardly depend on where near home the
+    platform starts."""
+    check_robot(model)
+    home = np.r_[model.home.position, 0.0, 0.0, 0.0]
+    poses = plan_poses(model, identification_of(model), opt, home)
+    planned = motion_time(poses, opt)
+    if planned > opt.max_motion:
+        raise CalibrationFailedError(
+            f"the plan's {len(poses)} poses take {planned:.0f} s of motion, more than "
+            f"{opt.max_motion:g} s: fewer poses (--poses) or faster moves (--speed)"
+        )
+    return poses
+
+
+def geometry_calibrate(model: RobotModel, driver: WinchDriver,
+                       opt: GeometryOptions | None = None,
+                       log: Callable[[str], None] = print,
+                       poses: np.ndarray | None = None) -> GeometryCalibration:  # fmt: skip
+    """From a start near home: the moves and samples (``poses`` from :func:`plan`, planned
+    here when None), the identification, the test. Raises :class:`CalibrationFailedError`
+    (drives disabled) when it cannot run; a refused identification comes back with
+    ``accepted`` False and the reason."""
+    opt = opt or GeometryOptions()
+    check_robot(model)
+    if poses is None:
+        poses = plan(model, opt)
+    poses = poses.copy()
+    ident = identification_of(model)
+    reference = (ident.reference[0], ident.reference[1], ident.reference[2])
+    refs = ", ".join(model.cables[i].name for i in reference)
+    noise = ident.sigma_l
+    log(f"geometric calibration: {len(poses) - 1} poses over {opt.fill:.0%} of the "
+        f"workspace (about {motion_time(poses, opt):.0f} s of motion); the anchors of cables "
+        f"{refs} taken as drawn (they fix the frame)")  # fmt: skip
+    ses = Session(model, driver, log)
+    ses.t_stop_low, ses.t_stop_high = _bounds(model, STOP_MARGIN)
+    moved = 0.0
+    try:
+        # the start, first: poses a metre away reached from home's lengths would miss by the
+        # start's offset (rowc 10 cm from home: its cables 40 N above plan, the moves stopped)
+        near = sample_around_start(ses, SelfOptions())
+        start = _held_while(ses, lambda: Identification(model, False).solve(near).poses[0])
+        poses[0] = start
+        log(f"the start: [{start[0]:.4f}, {start[1]:.4f}, {start[2]:.4f}] m (from the "
+            "samples around it, on the file's geometry)")  # fmt: skip
+        kin = KinematicsData(model)
+        law = compliance_of(model.cables)
+        theta0, t0 = near.theta[0], near.tension[0]
+        _tensions_at(model, kin, start)
+        l0_start = unstretched_lengths(law, kin.length.copy(), t0)
+
+        def goal_of(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """The motor angles that give ``x``'s unstretched lengths under its planned
+            tensions (the cable law whole: over a metre of travel rowc's compliance changes
+            by half, 1.3 mm of stretch, 40 N on its stiff cables), and those tensions."""
+            t = _tensions_at(model, kin, x)
+            dl0 = unstretched_lengths(law, kin.length, t) - l0_start
+            return theta0 - dl0 / ses.ratio, t
+
+        theta_all, tension_all = list(near.theta), list(near.tension)
+        guess = list(near.guess - near.guess[0] + start)  # around the start found
+        here = start
+        for k in range(1, len(poses)):
+            origin = here
+            done, took = _move(ses, here, poses[k], goal_of, opt)
+            moved += took
+            here = here + done * (poses[k] - here)
+            ses.run(opt.settle_time)
+            th, t, speed = ses.average(opt.sample_time)
+            theta_all.append(th)
+            tension_all.append(t)
+            guess.append(here)
+            log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
+                f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
+            if done < 1.0:  # a tension near its limit: back the way it came (it held)
+                why = ses.stopped_by
+                back, took = _move(ses, here, origin, goal_of, opt, stop=False)
+                moved += took
+                here = here + back * (origin - here)
+                if back < 1.0:
+                    raise CalibrationFailedError(
+                        f"the move to pose {k} stopped ({why}) and so did the way back "
+                        f"({ses.stopped_by}, {back:.0%} of the way): the robot differs from "
+                        "its file more than the plan allows; plan closer to home "
+                        "(--fill)")  # fmt: skip
+        _, took = _move(ses, here, start, goal_of, opt)
+        moved += took
+        ses.run(opt.settle_time)
+    finally:
+        ses.close()
+    samples = GeometrySamples(np.array(theta_all), np.array(tension_all), np.array(guess))
+    result = ident.solve(samples)
+    length_res = _length_residuals(ident, result, samples)
+    fits, ratio = model_test(length_res, noise)
+    worst_anchor = float(np.max(np.linalg.norm(result.std_anchors, axis=1)))
+    worst_scale = float(np.max(result.std_drum_scale))
+    reason = "accepted"
+    if ident.at_bound(result):
+        reason = (f"an anchor or a drum ended at its bound ({ident.ANCHOR_BOUND * 1e3:g} mm, "
+                  f"{ident.SCALE_BOUND:.0%} from the file): the data do not decide it, or the "
+                  "robot is not this file's")  # fmt: skip
+    elif not result.success and ratio > 5.0:
+        reason = f"the identification did not converge: {result.message}"
+    elif not fits:
+        reason = (f"the length residuals are {ratio:.1f}x what the encoders and the torque "
+                  f"resolution explain (RMS {result.residual_rms * 1e6:.1f} µm against "
+                  f"{noise * 1e6:.1f} µm; χ² test at 99.9 %): the robot differs from the file "
+                  "in more than its anchors and drums (its attachments, a pulley, a cable "
+                  "that slips, a wrong cable law)")  # fmt: skip
+    elif worst_anchor > opt.max_anchor_std or worst_scale > opt.max_scale_std:
+        reason = (f"ill-conditioned: predicted σ up to {worst_anchor * 1e3:.2f} mm per anchor "
+                  f"(limit {opt.max_anchor_std * 1e3:g} mm) and {worst_scale * 100:.3f} % per "
+                  f"drum (limit {opt.max_scale_std * 100:g} %), condition "
+                  f"{result.condition:.3g}: more poses (--poses) or other reference "
+                  "anchors")  # fmt: skip
+    return GeometryCalibration(result, reference, samples, moved, reason == "accepted",
+                               reason, ratio)  # fmt: skip
+
+
+def _held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
+    """``compute()`` in a thread while the session holds the platform, cycle by cycle: the
+    drives want their SYNC and targets every period (an idle bus left their velocity readings
+    at 10³ rad/s and a following-error fault at the next move, across processes)."""
+    import threading
+
+    out: list[np.ndarray] = []
+    failed: list[BaseException] = []
+
+    def work() -> None:
+        import contextlib
+        import os
+
+        # at the normal scheduler: a SCHED_FIFO copy of the holder starved it (0x8130)
+        with contextlib.suppress(OSError, AttributeError):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        try:
+            out.append(compute())
+        except BaseException as exc:  # re-raised in the caller's thread
+            failed.append(exc)
+
+    worker = threading.Thread(target=work, name="cdprctl-identify", daemon=True)
+    worker.start()
+    while worker.is_alive():
+        ses.run(0.05)
+    if failed:
+        raise failed[0]
+    return out[0]
+
+
+def _length_residuals(ident: GeometryIdentification, result: GeometryResult,
+                      s: GeometrySamples) -> np.ndarray:  # fmt: skip
+    """m: the length closures at the solution (the equilibrium rows left out)."""
+    K, m = s.theta.shape
+    z = np.r_[result.anchors[ident.free].ravel(), result.drum_scale, result.poses.ravel()]
+    r = ident.residuals(z, s)
+    rows = [r[6 + (k - 1) * (m + 6) : 6 + (k - 1) * (m + 6) + m] for k in range(1, K)]
+    return np.concatenate(rows) * ident.sigma_l if rows else np.zeros(0)
+
+
+def _move(ses: Session, a: np.ndarray, b: np.ndarray,
+          goal_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+          opt: GeometryOptions, stop: bool = True) -> tuple[float, float]:  # fmt: skip
+    """From pose ``a`` to ``b`` in a straight line (a cosine time law at ``opt.speed``): the
+    planned motor angles and tensions every 1 cm (or 0.01 rad), interpolated per cycle.
+    Returns the fraction done (a tension near its limit stops it, unless ``stop`` is False:
+    a retreat along a way it came, where only the session's hard limits stop it) and the
+    seconds taken."""
+    dist = float(np.linalg.norm(b - a))
+    n = max(2, math.ceil(dist / 0.01) + 1)
+    fr = np.linspace(0.0, 1.0, n)
+    m = ses.model.n_cables
+    G, T = np.zeros((n, m)), np.zeros((n, m))
+    ready = [0]  # waypoints computed: as the ramp needs them, a few per cycle at most (all at
+    # once, a metre's 100 took 20-35 ms without a SYNC, a third of the drives' comm_timeout)
+    base0, tension0 = ses.base.copy(), ses.tension_goal.copy()
+
+    def waypoint(j: int) -> None:
+        while ready[0] <= j:
+            k = ready[0]
+            G[k], T[k] = goal_of(a + fr[k] * (b - a))
+            if k == 0:
+                offset_g, offset_t = base0 - G[0], tension0 - T[0]
+                G_off[:], T_off[:] = offset_g, offset_t
+            # from where the drives are (a stopped move, the real start): that offset fades
+            # out along the move, as ``Session.move``'s ramp does
+            G[k] += (1.0 - fr[k]) * G_off
+            T[k] += (1.0 - fr[k]) * T_off
+            ready[0] += 1
+
+    G_off, T_off = np.zeros(m), np.zeros(m)
+    waypoint(0)
+    duration = move_duration(dist, opt)
+    reached = [0.0, False]
+    before = ses.tensions().copy()
+    beyond = np.zeros(m)  # s each cable's tension has been beyond where a move stops
+    persist = max(STOP_PERSISTS, 2.5 * ses.driver.period)
+
+    def step(f: float) -> None:
+        if reached[1]:
+            return
+        t = ses.tensions()
+        high = stop & (t > ses.t_stop_high) & (t > before + 1.0)
+        low = stop & (t < ses.t_stop_low) & (t < before - 1.0)
+        beyond[:] = np.where(high | low, beyond + ses.driver.period, 0.0)
+        high &= beyond >= persist
+        low &= beyond >= persist
+        if np.any(high) or np.any(low):
+            i = int(np.flatnonzero(high | low)[0])
+            names = ses.model.cables[i].name
+            ses.stopped_by = (f"cable {names} at {t[i]:.1f} N (it stops a move beyond "
+                              f"{ses.t_stop_high[i] if high[i] else ses.t_stop_low[i]:.1f} N)")
+            reached[1] = True
+            return
+        s = 0.5 - 0.5 * math.cos(math.pi * f)
+        reached[0] = s
+        x = s * (n - 1)
+        i = min(int(x), n - 2)
+        u = x - i
+        waypoint(i + 1)
+        ses.base[:] = G[i] + u * (G[i + 1] - G[i])
+        ses.tension_goal[:] = T[i] + u * (T[i + 1] - T[i])
+        ses.torques[:] = ses.ratio * ses.tension_goal
+
+    ses.run(duration, step)
+    return reached[0], duration
+
+
+def geometry_record(built: RobotModel, cal: GeometryCalibration,
+                    identities: list[dict[str, int] | None]) -> CalibrationRecord:  # fmt: skip
+    """The calibration record of ``built`` (the robot file as identified): its encoders'
+    zeros, its drums as they are (scale 1), the start pose."""
+    r = cal.result
+    return CalibrationRecord(
+        robot=built.name,
+        method="geometry",
+        time=now_iso(),
+        geometry_hash=geometry_hash(built),
+        encoders=built.drives.encoders,
+        theta_zero=[float(x) for x in r.theta_zero],
+        drum_scale=[1.0] * built.n_cables,
+        pose=r.pose,
+        identities=identities,
+        residual_rms=r.residual_rms,
+        condition=r.condition,
+        std=r.std_pose,
+        samples=len(r.poses),
+        notes={"residuals_over_noise": cal.residuals_over_noise, "force_rms": r.force_rms,
+               "motion_time": cal.motion_time,
+               "reference_anchors": [built.cables[i].name for i in cal.reference]},
+    )  # fmt: skip
