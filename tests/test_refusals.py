@@ -5,6 +5,8 @@ command another of the peer's ACL subjects allowed, nor for the permissions Zeno
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from cdprctl.telemetry.refusals import Refusals
 
 T = "TRACE  rx-0 ThreadId(09) zenoh::net::routing::interceptor::access_control: "
@@ -155,3 +157,47 @@ def test_with_rust_log_every_line_goes_on_as_it_came():
     line = at("10.0", put(VIEWER, "unauthorized"))
     out = feed([(0.0, line), (0.0, "not a log line")], passthrough=True)
     assert out[:2] == [line, "not a log line"] and "refused" in out[2]
+
+
+def test_a_message_judged_across_a_minute_or_an_hour_is_one_and_the_clock_is_whole():
+    """Zenoh's timestamps, whole: the same message judged at 19:59:59.9998 and 20:00:00.0001
+    for two subjects is one refusal; two messages with the same seconds a minute or an hour
+    apart are two."""
+    def at_clock(clock: str, rest: str) -> str:
+        return f"2026-12-03T{clock}Z {rest}"
+
+    one = [(0.0, at_clock("19:59:59.999800", put(VIEWER, "unauthorized"))),
+           (0.0, at_clock("20:00:00.000100", put(VIEWER, "unauthorized")))]  # fmt: skip
+    assert len(feed(one)) == 1
+    for later in ("20:00:10.000100", "21:59:10.000100"):
+        two = [(0.0, at_clock("20:59:10.000100", put(VIEWER, "unauthorized"))),
+               (0.0, at_clock(later, put(VIEWER, "unauthorized")))]  # fmt: skip
+        out = feed(two)
+        assert len(out) == 2 and "again, 1 more time" in out[1], out
+
+
+def test_the_pipe_carries_zenohs_log_lines_to_the_daemons_refusal_lines(tmp_path):
+    """``log_refusals`` in a process of its own: what is written on its fd 1 (where Zenoh
+    writes its log) comes out as refusal lines on stderr, and Python's own prints still reach
+    the real stdout."""
+    import subprocess
+    import sys
+
+    line = at("10.000000", put(VIEWER, "unauthorized")) + "\n"
+    script = tmp_path / "pipe.py"
+    script.write_text(
+        "import os, time\n"
+        "from cdprctl.telemetry.refusals import log_refusals\n"
+        "log_refusals('cdpr/rowc')\n"
+        "print('python output', flush=True)\n"
+        f"os.write(1, {line.encode()!r})\n"
+        "time.sleep(0.6)\n"
+    )
+    env = {k: v for k, v in __import__("os").environ.items() if k != "RUST_LOG"}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1])  # this tree's cdprctl
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=60, env=env)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "python output" in res.stdout and "ThreadId" not in res.stdout
+    assert ("cdprctl-zenoh: refused by the access control: user viewer (peer 3daf7a81 on lo) "
+            "may not put cdpr/rowc/cmd/enable") in res.stderr, res.stderr
