@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import gc
 import io
 import os
 import re
@@ -431,3 +432,30 @@ def test_the_loop_alone_runs_at_sched_fifo():
     if seen["loop"] != os.SCHED_FIFO:
         pytest.skip("SCHED_FIFO not permitted here")
     assert seen["shut-down"] == os.SCHED_OTHER and seen["cpus"] == len(rt.ALLOWED_CPUS)
+
+
+def test_the_collector_is_frozen_for_the_loop_without_realtime_too():
+    """``--no-realtime`` (no privileges asked) still runs the loop with the garbage collector
+    disabled and what the start-up built frozen — a full collection after a first run's
+    compile held the loop 0.6 s on a slow CPU (the HIL demo under User-Mode Linux: a
+    feedback fault) — and gives the collector back after the run."""
+    from cdprctl.control.manager import ControllerManager
+    from cdprctl.daemon.service import Daemon
+    from cdprctl.model import load_robot
+
+    seen: dict[str, object] = {}
+    model = load_robot(CONFIG / "rowc.toml")
+    d = Daemon(model, sim=True, overrides={}, realtime=False, status_every=0.0,
+               out=io.StringIO())  # fmt: skip
+    run = ControllerManager.run
+
+    def watched_run(self, *a, **k):
+        seen["enabled"], seen["frozen"] = gc.isenabled(), gc.get_freeze_count()
+        return run(self, *a, **k)
+
+    assert gc.isenabled()
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ControllerManager, "run", watched_run)
+        assert d.run(duration=0.2, demo=False) == 0
+    assert seen["enabled"] is False and seen["frozen"] > 10_000
+    assert gc.isenabled() and gc.get_freeze_count() == 0

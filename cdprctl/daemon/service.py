@@ -129,8 +129,7 @@ class Daemon:
             stop_if_interrupted()  # a signal whose exception a library swallowed ends it here
         except (StartupRefusedError, StartupInterrupted) as exc:
             self._print(exc.message, err=True)
-            if self.realtime:
-                rt.restore_gc()  # as after a run: what the start-up built is collectable again
+            rt.restore_gc()  # as after a run: what the start-up built is collectable again
             self._close_buses()
             self.links.close()
             return exc.code
@@ -157,7 +156,7 @@ class Daemon:
         finally:
             if self.realtime:
                 rt.leave_realtime()
-                rt.restore_gc()
+            rt.restore_gc()
             if wd is not None:
                 wd.stop()
             if self.timing_file:

@@ -115,9 +115,12 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     stop_if_interrupted()
     dm.manager.warm_up()
     stop_if_interrupted()
-    if dm.realtime:  # SCHED_FIFO comes last, right before the loop (Daemon.run)
-        for w in rt.lock_memory_and_freeze_gc(m.control.lock_memory, m.control.freeze_gc):
-            dm._print(f"warning: {w}", err=True)
+    # SCHED_FIFO comes last, right before the loop (Daemon.run). The collector is frozen
+    # without --no-realtime's privileges too: after a first run's compile a full collection
+    # on a slow CPU held the loop 0.6 s (the HIL demo under User-Mode Linux: feedback fault)
+    for w in rt.lock_memory_and_freeze_gc(dm.realtime and m.control.lock_memory,
+                                          m.control.freeze_gc):  # fmt: skip
+        dm._print(f"warning: {w}", err=True)
     try:
         dm.manager.startup(calibration=None if dm.assume_home else _calibration(dm))
     except CalibrationError as exc:
