@@ -9,6 +9,7 @@ this process beyond ``SimNetwork.MAX_CATCH_UP``).
 
 from __future__ import annotations
 
+import gc
 import math
 import signal
 import time
@@ -42,6 +43,10 @@ def run_realtime(
     # one step before "ready": the physics kernels compile at their first call (seconds on a
     # cold cache, when the drives stood deaf for ~15 s after "ready")
     net.advance(step)
+    # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
+    # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf
+    gc.collect()
+    gc.freeze()
     print_fn("cdprctl sim: ready", flush=True)  # the buses are open: peers may start
     stop = {"flag": False}
 
@@ -98,6 +103,7 @@ def run_realtime(
                     time.sleep(wait)
                     woke_on = None
     finally:
+        gc.unfreeze()
         for s, h in old.items():
             signal.signal(s, h)
     return net
