@@ -177,27 +177,186 @@ def test_a_message_judged_across_a_minute_or_an_hour_is_one_and_the_clock_is_who
 
 
 def test_the_pipe_carries_zenohs_log_lines_to_the_daemons_refusal_lines(tmp_path):
-    """``log_refusals`` in a process of its own: what is written on its fd 1 (where Zenoh
-    writes its log) comes out as refusal lines on stderr, and Python's own prints still reach
-    the real stdout."""
+    """``log_refusals`` in a process of its own: Zenoh's log asked for with cdprctl's filter
+    (the user's with RUST_LOG); what is written on its fd 1 (where Zenoh writes its log, a pipe
+    of 1 MiB) comes out as refusal lines on stderr — also a line after a silence, and settled
+    by the silence itself; Python's own prints still reach the real stdout, a line at a time."""
+    import os
+    import select
     import subprocess
     import sys
 
     line = at("10.000000", put(VIEWER, "unauthorized")) + "\n"
     script = tmp_path / "pipe.py"
     script.write_text(
-        "import os, time\n"
+        "import fcntl, os, sys, time, zenoh\n"
+        "real = fcntl.fcntl\n"
+        "def refusing(fd, cmd, *a):\n"  # as where pipe-max-size is below 1 MiB
+        "    if cmd == 1031: raise PermissionError(1, 'Operation not permitted')\n"
+        "    return real(fd, cmd, *a)\n"
+        "if os.environ.get('PIPE_SZ_REFUSED'): fcntl.fcntl = refusing\n"
+        "asked = []\n"
+        "zenoh.init_log_from_env_or = lambda f: asked.append(('ours', f))\n"
+        "zenoh.try_init_log_from_env = lambda: asked.append(('env', None))\n"
         "from cdprctl.telemetry.refusals import log_refusals\n"
         "log_refusals('cdpr/rowc')\n"
-        "print('python output', flush=True)\n"
+        "print(asked, fcntl.fcntl(1, 1032))\n"  # F_GETPIPE_SZ of Zenoh's fd 1
+        "sys.stdin.readline()\n"  # the test saw the line before this process ends
+        "time.sleep(0.5)\n"  # a silence: the reader's wait times out twice
         f"os.write(1, {line.encode()!r})\n"
-        "time.sleep(0.6)\n"
+        "time.sleep(0.5)\n"  # settled by the next time-out, no line after it
     )
-    env = {k: v for k, v in __import__("os").environ.items() if k != "RUST_LOG"}
+    env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
     env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1])  # this tree's cdprctl
-    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                         timeout=60, env=env)  # fmt: skip
-    assert res.returncode == 0, res.stderr
-    assert "python output" in res.stdout and "ThreadId" not in res.stdout
-    assert ("cdprctl-zenoh: refused by the access control: user viewer (peer 3daf7a81 on lo) "
-            "may not put cdpr/rowc/cmd/enable") in res.stderr, res.stderr
+    for rust_log, size in ((None, 1 << 20), ("zenoh=info", 1 << 20), (None, 0)):
+        env.pop("RUST_LOG", None)
+        if rust_log:
+            env["RUST_LOG"] = rust_log
+        env["PIPE_SZ_REFUSED"] = "" if size else "1"  # then the pipe keeps its size
+        p = subprocess.Popen([sys.executable, str(script)], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=env)  # fmt: skip
+        try:
+            assert p.stdout is not None and p.stdin is not None
+            ready, _, _ = select.select([p.stdout], [], [], 60.0)
+            said = p.stdout.readline() if ready else ""
+            p.stdin.write("go\n")
+            p.stdin.close()
+            p.wait(timeout=60)
+            out, err = p.stdout.read(), p.stderr.read()  # a few lines: no pipe fills
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        assert p.returncode == 0, err
+        from cdprctl.telemetry.refusals import ZENOH_LOG_FILTER
+
+        asked = [("env", None)] if rust_log else [("ours", ZENOH_LOG_FILTER)]
+        assert said == f"{asked!r} {size or 65536}\n", (said, err)
+        assert "ThreadId" not in out if not rust_log else line.strip() in out
+        assert ("cdprctl-zenoh: refused by the access control: user viewer (peer 3daf7a81 on "
+                "lo) may not put cdpr/rowc/cmd/enable") in err, err
+
+
+def test_pending_verdicts_settle_at_settle_and_counts_come_at_every():
+    """A refusal is written once its verdict has waited ``SETTLE`` (no "authorized" for it from
+    another subject) — at that instant, not a tick later — and a count once ``every`` s have
+    passed since the kind's last line, at that instant too."""
+    from cdprctl.telemetry.refusals import SETTLE
+
+    out: list[str] = []
+    r = Refusals("cdpr/rowc", out.append, every=10.0)
+    r.feed(at("10.000000", put(VIEWER, "unauthorized")), 0.0)
+    r.feed("an unrelated line", SETTLE / 2)
+    assert out == []
+    r.feed("an unrelated line", SETTLE)
+    assert len(out) == 1 and "user viewer (peer 3daf7a81 on lo)" in out[0]
+    r.feed(at("11.000000", put(VIEWER, "unauthorized")), 1.0)
+    r.feed(at("12.000000", put(VIEWER, "unauthorized")), 2.0)
+    r.tick(2.0 + SETTLE)
+    r.tick(SETTLE + 10.0 - 1e-9)
+    assert len(out) == 1
+    r.tick(SETTLE + 10.0)
+    assert out[1].endswith("(again, 2 more times in the last 10 s)"), out
+
+
+def test_a_flood_of_lines_ticks_every_settle_not_every_line():
+    """Settling costs a pass over what is pending: on a line every millisecond it runs every
+    ``SETTLE`` (20 times a second), from the first line on, not on every line."""
+    from cdprctl.telemetry.refusals import SETTLE
+
+    r = Refusals("cdpr/rowc", lambda _: None)
+    ticks: list[float] = []
+    tick = r.tick
+
+    def counted(now: float) -> None:
+        ticks.append(now)
+        tick(now)
+
+    r.tick = counted  # type: ignore[method-assign]
+    for i in range(1000):
+        r.feed("a line", 100.0 + i * 0.001)
+    assert ticks[0] == 100.0 and len(ticks) == round(1.0 / SETTLE)
+
+
+def test_the_oldest_kinds_are_forgotten_beyond_kept():
+    """``KEPT`` kinds of refusal are remembered for their counts; one more forgets the one
+    refused least recently, which is then written anew when it comes back."""
+    from cdprctl.telemetry.refusals import KEPT
+
+    out: list[str] = []
+    r = Refusals("cdpr/rowc", out.append)
+
+    def refuse(i: int, now: float) -> None:
+        r.feed(at("10.000000", put(VIEWER, "unauthorized", f"cdpr/rowc/cmd/k{i}")), now)
+        r.tick(now + 1.0)
+
+    def first_lines() -> list[str]:  # a kind's first line, not its counts
+        return [x for x in out if "again" not in x]
+
+    for i in range(KEPT):
+        refuse(i, 2.0 * i)
+    refuse(0, 2.0 * KEPT)  # refused again: now the most recent
+    assert len(first_lines()) == KEPT
+    refuse(KEPT, 2.0 * KEPT + 2.0)  # one more kind: k1, the least recent, is forgotten
+    refuse(0, 2.0 * KEPT + 4.0)
+    assert len(first_lines()) == KEPT + 1
+    refuse(1, 2.0 * KEPT + 6.0)
+    assert len(first_lines()) == KEPT + 2 and out[-1].endswith("may not put cdpr/rowc/cmd/k1")
+
+
+def test_only_tls_warnings_are_tls_refusals_and_an_ipv6_address_is_whole():
+    """A TLS debug line or a TCP warning is no refused certificate; a refused login from an
+    IPv6 peer names its whole address."""
+    tls_debug = ACC + "zenoh_link_tls::unicast: TLS handshake with 127.0.0.1:4000 done"
+    tcp_warn = " WARN acc-0 ThreadId(05) zenoh_link_tcp::unicast: peer sent no certificates"
+    assert feed([(0.0, at("10.0", tls_debug)), (0.1, at("10.1", tcp_warn))]) == []
+    tcp = ACC + "zenoh_link_tcp::unicast: Accepted TCP connection on [::1]:7999: [::1]:39498"
+    login = (ACC + "zenoh_transport::unicast::establishment::accept: UsrPwd extension - Recv "
+             "OpenSyn. Invalid password.")  # fmt: skip
+    assert feed([(0.0, at("10.0", tcp)), (0.0, at("10.1", login))]) == [
+        "cdprctl-zenoh: refused a login from [::1]: wrong password"]
+
+
+def test_verdicts_a_millisecond_apart_are_two_messages():
+    """The same message judged for two subjects comes within ``SAME_MESSAGE`` (1 ms); two
+    verdicts exactly 1 ms apart are two messages."""
+    two = [(0.0, f"2026-12-03T00:00:00.000Z {put(VIEWER, 'unauthorized')}"),
+           (0.0, f"2026-12-03T00:00:00.001Z {put(VIEWER, 'unauthorized')}")]  # fmt: skip
+    out = feed(two)
+    assert len(out) == 2 and "again, 1 more time in" in out[1], out
+
+
+def test_a_peer_without_user_or_certificate_is_named_by_its_id():
+    """No user, no certificate: the peer's first 8 hex digits, in the first line and the
+    count's."""
+    zid = "0123456789abcdef0123456789abcdef"
+    out = feed([(0.0, at("10.0", put(zid, "unauthorized"))),
+                (1.0, at("11.0", put(zid, "unauthorized")))])  # fmt: skip
+    assert out == [
+        "cdprctl-zenoh: refused by the access control: peer 01234567 may not put "
+        "cdpr/rowc/cmd/enable",
+        "cdprctl-zenoh: refused by the access control: peer 01234567 may not put "
+        "cdpr/rowc/cmd/enable (again, 1 more time in the last 10 s)",
+    ]
+
+
+def test_refuses_anybody_names_each_way_a_configuration_refuses(tmp_path):
+    """A user/password dictionary, mutual TLS or an access control refuse somebody (and the
+    daemon then reads Zenoh's log); none of them, or a file Zenoh cannot read, nobody."""
+    from cdprctl.telemetry.refusals import refuses_anybody
+
+    bodies = {
+        '{transport: {auth: {usrpwd: {user: "a", password: "b", dictionary_file: "d.txt"}}}}':
+            True,
+        '{transport: {link: {tls: {enable_mtls: true}}}}': True,
+        '{access_control: {enabled: true, default_permission: "deny"}}': True,
+        '{access_control: {enabled: false}}': False,
+        '{transport: {auth: {usrpwd: {user: "a", password: "b"}}}}': False,
+        "{}": False,
+        "{ not json5 at all": False,
+    }  # fmt: skip
+    for i, (body, refuses) in enumerate(bodies.items()):
+        f = tmp_path / f"z{i}.json5"
+        f.write_text(body)
+        assert refuses_anybody(str(f)) is refuses, body

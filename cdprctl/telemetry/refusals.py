@@ -11,6 +11,7 @@ recorded from Zenoh 1.10.2) and the end-to-end ACL and TLS tests of tests/test_z
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import sys
@@ -92,7 +93,7 @@ class Refusals:
     who_is: dict[str, tuple[str, str]] = field(default_factory=dict)  # zid -> _who(...)
     remote: dict[str, str] = field(default_factory=dict)  # thread -> the peer it accepts
     caching: dict[str, str] = field(default_factory=dict)  # thread -> the key it evaluates
-    next_tick: float = -1.0
+    next_tick: float = -math.inf  # the first line ticks
 
     def feed(self, raw: str, now: float) -> None:
         """One line of Zenoh's log, read at ``now`` (s, monotonic)."""
