@@ -28,9 +28,9 @@ from cdprctl.calibration.geometry_file import calibrated_robot_text  # noqa: E40
 from cdprctl.calibration.geometry_procedure import (  # noqa: E402
     GeometryOptions,
     _move,
-    _tensions_at,
     geometry_calibrate,
     geometry_record,
+    motor_goals,
 )
 from cdprctl.calibration.procedure import (  # noqa: E402
     CalibrationFailedError,
@@ -42,7 +42,6 @@ from cdprctl.control.estimator import Estimator  # noqa: E402
 from cdprctl.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
 from cdprctl.model.calibration import reference_anchors  # noqa: E402
-from cdprctl.numerics import compliance_of, unstretched_lengths  # noqa: E402
 from cdprctl.rotation import exp_so3, log_so3  # noqa: E402
 from cdprctl.tda.hold import equilibrium_tensions  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
@@ -96,7 +95,6 @@ def visit(built, record, ls, targets) -> tuple[list[float], list[float]]:
     pose against the plant's: mm and mrad per target."""
     ses = Session(built, ls.driver, lambda s: None)
     kin = KinematicsData(built)
-    law = compliance_of(built.cables)
     theta_zero = np.asarray(record.theta_zero)
     inverse_kinematics(built, kin, built.home.position, built.home.rotation)
     l_home = kin.length.copy()
@@ -104,10 +102,7 @@ def visit(built, record, ls, targets) -> tuple[list[float], list[float]]:
     ses.k[:] = built.cable_stiffness(l_home)
     ses.gain = 1.0 - math.exp(-2.0 * math.pi * 2.0 * ls.driver.period)
 
-    def goal_of(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        t = _tensions_at(built, kin, x)
-        return theta_zero - (unstretched_lengths(law, kin.length, t) - l_home) / ses.ratio, t
-
+    goal_of = motor_goals(built, theta_zero, l_home, ses.ratio)
     start = np.r_[record.pose[:3], np.zeros(3)]
     _, t = goal_of(start)
     ses.torques[:] = ses.ratio * t

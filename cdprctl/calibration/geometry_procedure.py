@@ -31,15 +31,14 @@ from cdprctl.calibration.procedure import (
     CalibrationFailedError,
     SelfOptions,
     Session,
+    hold_tensions,
     sample_around_start,
 )
 from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.kinematics import KinematicsData
 from cdprctl.model.calibration import reference_anchors
 from cdprctl.model.robot import RobotModel
-from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.numerics import compliance_of, unstretched_lengths
-from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
 
 
@@ -66,11 +65,6 @@ class GeometryCalibration:
     accepted: bool
     reason: str
     residuals_over_noise: float
-
-
-def _tensions_at(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
-    inverse_kinematics(model, kin, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
-    return equilibrium_tensions(model, kin)
 
 
 # What each cable's tension may be at a candidate (CANDIDATE_MARGIN), along a move
@@ -106,22 +100,25 @@ PATH_STEP = 0.05  # m (and rad) between the checked points of a move
 STOP_PERSISTS = 0.02
 
 
-def _bounds(model: RobotModel, margin: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+Bounds = tuple[np.ndarray, np.ndarray]  # N per cable: (lower, upper)
+
+
+def tension_bounds(model: RobotModel, margin: tuple[float, float]) -> Bounds:
     """N per cable: (lower, upper) bounds of ``margin`` (the MARGINs above)."""
-    kin = KinematicsData(model)
-    home = _tensions_at(model, kin, np.r_[model.home.position, 0.0, 0.0, 0.0])
+    home = hold_tensions(model, KinematicsData(model), np.r_[model.home.position, np.zeros(3)])
     span = model.tension_max - model.tension_min
     low = model.tension_min + margin[0] * np.maximum(home - model.tension_min, 0.0)
     return low, model.tension_max - margin[1] * span
 
 
-def line_is_held(model: RobotModel, kin: KinematicsData, a: np.ndarray, b: np.ndarray) -> bool:
+def line_is_held(model: RobotModel, kin: KinematicsData, a: np.ndarray, b: np.ndarray,
+                 bounds: Bounds) -> bool:  # fmt: skip
     """Whether the nominal model holds every point of the straight move from ``a`` to ``b``
-    (every ``PATH_STEP``) within ``PATH_MARGIN``."""
-    low, high = _bounds(model, PATH_MARGIN)
+    (every ``PATH_STEP``) within ``bounds`` (``tension_bounds(model, PATH_MARGIN)``)."""
+    low, high = bounds
     n = max(2, math.ceil(float(np.linalg.norm(b - a)) / PATH_STEP) + 1)
     for f in np.linspace(0.0, 1.0, n):
-        t = _tensions_at(model, kin, a + f * (b - a))
+        t = hold_tensions(model, kin, a + f * (b - a))
         if np.any(t < low) or np.any(t > high):
             return False
     return True
@@ -137,16 +134,17 @@ def candidate_poses(model: RobotModel, opt: GeometryOptions,
     tilt = opt.tilt * ws.max_angle
     turns = [np.zeros(3)] + [s * a * np.eye(3)[j] for j in range(3) for s in (1.0, -1.0)
                              for a in (0.5 * tilt, tilt)]  # fmt: skip
-    low, high = _bounds(model, CANDIDATE_MARGIN)
+    low, high = tension_bounds(model, CANDIDATE_MARGIN)
+    path = tension_bounds(model, PATH_MARGIN)
     kin = KinematicsData(model)
     out = []
     for f in itertools.product((-1.0, -0.5, 0.0, 0.5, 1.0), repeat=3):
         p = centre + np.array(f) * half
         for r in turns:
             x = np.r_[p, r]
-            t = _tensions_at(model, kin, x)
+            t = hold_tensions(model, kin, x)
             if np.all(t >= low) and np.all(t <= high) and (
-                    start is None or line_is_held(model, kin, start, x)):  # fmt: skip
+                    start is None or line_is_held(model, kin, start, x, path)):  # fmt: skip
                 out.append(x)
     return np.array(out)
 
@@ -158,7 +156,7 @@ def _nominal_samples(model: RobotModel, poses: np.ndarray) -> GeometrySamples:
     ratio = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
     theta, tension = [], []
     for x in poses:
-        t = _tensions_at(model, kin, x)
+        t = hold_tensions(model, kin, x)
         l0 = unstretched_lengths(law, kin.length.copy(), t)
         theta.append(-l0 / ratio)
         tension.append(t)
@@ -214,11 +212,13 @@ def _tour(model: RobotModel, start: np.ndarray, poses: np.ndarray) -> np.ndarray
     nominal model holds all along; when none is, through the start: every candidate's way
     from and to it is held)."""
     kin = KinematicsData(model)
+    path = tension_bounds(model, PATH_MARGIN)
     left = list(range(len(poses)))
     out, here = [], start
     while left:
         near = sorted(left, key=lambda i: float(np.linalg.norm(poses[i] - here)))
-        j = next((i for i in near[:8] if line_is_held(model, kin, here, poses[i])), None)
+        j = next((i for i in near[:8] if line_is_held(model, kin, here, poses[i], path)),
+                 None)
         if j is None:
             out.append(start)  # sampled again on the way: a check of the start's drift
             j = near[0]
@@ -296,7 +296,7 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
         f"workspace (about {motion_time(poses, opt):.0f} s of motion); the anchors of cables "
         f"{refs} taken as drawn (they fix the frame)")  # fmt: skip
     ses = Session(model, driver, log)
-    ses.t_stop_low, ses.t_stop_high = _bounds(model, STOP_MARGIN)
+    ses.t_stop_low, ses.t_stop_high = tension_bounds(model, STOP_MARGIN)
     moved = 0.0
     try:
         # the start, first: poses a metre away reached from home's lengths would miss by the
@@ -307,18 +307,10 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
         log(f"the start: [{start[0]:.4f}, {start[1]:.4f}, {start[2]:.4f}] m (from the "
             "samples around it, on the file's geometry)")  # fmt: skip
         kin = KinematicsData(model)
-        law = compliance_of(model.cables)
-        theta0, t0 = near.theta[0], near.tension[0]
-        _tensions_at(model, kin, start)
-        l0_start = unstretched_lengths(law, kin.length.copy(), t0)
-
-        def goal_of(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            """The motor angles that give ``x``'s unstretched lengths under its planned
-            tensions (the cable law whole: over a metre of travel rowc's compliance changes
-            by half, 1.3 mm of stretch, 40 N on its stiff cables), and those tensions."""
-            t = _tensions_at(model, kin, x)
-            dl0 = unstretched_lengths(law, kin.length, t) - l0_start
-            return theta0 - dl0 / ses.ratio, t
+        hold_tensions(model, kin, start)
+        l0_start = unstretched_lengths(compliance_of(model.cables), kin.length.copy(),
+                                       near.tension[0])  # fmt: skip
+        goal_of = motor_goals(model, near.theta[0], l0_start, ses.ratio)
 
         theta_all, tension_all = list(near.theta), list(near.tension)
         guess = list(near.guess - near.guess[0] + start)  # around the start found
@@ -420,8 +412,28 @@ def _length_residuals(ident: GeometryIdentification, result: GeometryResult,
     return np.concatenate(rows) * ident.sigma_l if rows else np.zeros(0)
 
 
+GoalOf = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # pose -> (rad, N) per cable
+
+
+def motor_goals(model: RobotModel, theta_ref: np.ndarray, l0_ref: np.ndarray,
+                ratio: np.ndarray) -> GoalOf:  # fmt: skip
+    """``goal_of(x)``: the motor angles (rad) that give pose ``x``'s unstretched lengths under
+    its planned tensions, from motor angles ``theta_ref`` where the unstretched lengths are
+    ``l0_ref`` (m; ``ratio``: m of cable per motor rad), and those tensions (N). The cable law
+    whole: over a metre of travel rowc's compliance changes by half, 1.3 mm of stretch, 40 N
+    on its stiff cables."""
+    kin = KinematicsData(model)
+    law = compliance_of(model.cables)
+
+    def goal_of(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t = hold_tensions(model, kin, x)
+        return theta_ref - (unstretched_lengths(law, kin.length, t) - l0_ref) / ratio, t
+
+    return goal_of
+
+
 def _move(ses: Session, a: np.ndarray, b: np.ndarray,
-          goal_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+          goal_of: GoalOf,
           opt: GeometryOptions, stop: bool = True) -> tuple[float, float]:  # fmt: skip
     """From pose ``a`` to ``b`` in a straight line (a cosine time law at ``opt.speed``): the
     planned motor angles and tensions every 1 cm (or 0.01 rad), interpolated per cycle.

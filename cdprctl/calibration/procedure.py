@@ -202,7 +202,7 @@ class Session:
         self.driver.deactivate()
 
 
-def _hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
+def hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
     """N: the tensions holding the platform's weight at ``x`` (m; rotation vector from home)."""
     inverse_kinematics(model, kin, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
     return equilibrium_tensions(model, kin)
@@ -293,7 +293,7 @@ def sample_poses(model: RobotModel, opt: SelfOptions) -> np.ndarray:
                 x[j] = sign * min(opt.tilt, ws.max_angle)
             for _ in range(4):
                 pose = x + out[0]
-                t = _hold_tensions(model, kin, pose)
+                t = hold_tensions(model, kin, pose)
                 if np.all(t <= high) and np.all(t >= low):
                     break
                 x *= 0.5
@@ -318,7 +318,7 @@ def sample_around_start(ses: Session, opt: SelfOptions) -> Samples:
     guess = poses.copy()
     plan, lengths = [], []
     for x in guess:
-        plan.append(_hold_tensions(model, kin, x))  # leaves kin at x
+        plan.append(hold_tensions(model, kin, x))  # leaves kin at x
         lengths.append(kin.length.copy())
     k_axial = model.cable_stiffness(lengths[0])
     force = force_cables(model)
