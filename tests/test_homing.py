@@ -312,3 +312,52 @@ def test_self_refuses_a_record_the_geometry_would_bias():
         ls.driver.configure()
         rec, _ = self_calibrate(model, ls.driver, log=lambda s: None)
         assert rec.notes["residuals_over_noise"] < 1.2
+
+
+def test_a_move_stops_on_a_tension_that_persists_beyond_its_stop_not_on_a_spike():
+    """``Session.move_stops``, the rule of every calibration move: a tension beyond where a
+    move stops, and further that way than at the move's start, stops it once it has stayed
+    there ``STOP_PERSISTS`` (a single-cycle spike does not); one already beyond at the start
+    and going no further does not; ``stopped_by`` names the cable and the limit."""
+    from types import SimpleNamespace
+
+    from cdprctl.calibration.procedure import Session
+
+    model = load_robot(CONFIG / "rowc.toml")
+    m = model.n_cables
+    driver = SimpleNamespace(period=0.004, states=SimpleNamespace(torque=np.zeros(m)))
+    ses = Session(model, driver, lambda _: None)  # type: ignore[arg-type]
+    ses.t_stop_low, ses.t_stop_high = np.full(m, 50.0), np.full(m, 500.0)
+    ses.states = driver.states
+
+    def tensions(t: np.ndarray) -> None:
+        driver.states.torque[:] = t * ses.ratio
+
+    base = np.full(m, 100.0)
+    tensions(base)
+    ses.begin_move()
+    spike = base.copy()
+    spike[2] = 600.0
+    for _ in range(3):  # spikes of one cycle
+        tensions(spike)
+        assert not ses.move_stops()
+        tensions(base)
+        assert not ses.move_stops()
+    cycles = 0
+    tensions(spike)
+    while not ses.move_stops():
+        cycles += 1
+        assert cycles < 100
+    assert cycles + 1 == round(Session.STOP_PERSISTS / driver.period)
+    assert ses.stopped_by == (f"cable {model.cables[2].name} at 600.0 N (it stops a move "
+                              "beyond 500.0 N)")  # fmt: skip
+    low = base.copy()
+    low[5] = 40.0
+    tensions(low)
+    ses.begin_move()  # already below 50 N at the start, going no lower
+    assert ses.stopped_by == "" and not any(ses.move_stops() for _ in range(20))
+    low[5] = 38.0  # 2 N lower than at the start
+    tensions(low)
+    assert sum(not ses.move_stops() for _ in range(20)) == cycles
+    assert ses.stopped_by == (f"cable {model.cables[5].name} at 38.0 N (it stops a move "
+                              "beyond 50.0 N)")  # fmt: skip

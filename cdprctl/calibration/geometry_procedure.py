@@ -94,10 +94,6 @@ def tension_noise(model: RobotModel) -> float:
 
 
 PATH_STEP = 0.05  # m (and rad) between the checked points of a move
-# s a tension stays beyond STOP_MARGIN before a move stops: a transient does not (across
-# processes, real time, rowc's moves stopped at 1-56 % on single-cycle spikes that the
-# samples at rest never showed; lock-step 67-91 %)
-STOP_PERSISTS = 0.02
 
 
 Bounds = tuple[np.ndarray, np.ndarray]  # N per cable: (lower, upper)
@@ -466,24 +462,12 @@ def _move(ses: Session, a: np.ndarray, b: np.ndarray,
     waypoint(0)
     duration = move_duration(dist, opt)
     reached = [0.0, False]
-    before = ses.tensions().copy()
-    beyond = np.zeros(m)  # s each cable's tension has been beyond where a move stops
-    persist = max(STOP_PERSISTS, 2.5 * ses.driver.period)
+    ses.begin_move()
 
     def step(f: float) -> None:
         if reached[1]:
             return
-        t = ses.tensions()
-        high = stop & (t > ses.t_stop_high) & (t > before + 1.0)
-        low = stop & (t < ses.t_stop_low) & (t < before - 1.0)
-        beyond[:] = np.where(high | low, beyond + ses.driver.period, 0.0)
-        high &= beyond >= persist
-        low &= beyond >= persist
-        if np.any(high) or np.any(low):
-            i = int(np.flatnonzero(high | low)[0])
-            names = ses.model.cables[i].name
-            ses.stopped_by = (f"cable {names} at {t[i]:.1f} N (it stops a move beyond "
-                              f"{ses.t_stop_high[i] if high[i] else ses.t_stop_low[i]:.1f} N)")
+        if stop and ses.move_stops():
             reached[1] = True
             return
         s = 0.5 - 0.5 * math.cos(math.pi * f)

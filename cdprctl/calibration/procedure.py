@@ -99,10 +99,40 @@ class Session:
         self.states: WinchStates = driver.states
         self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
         self._outside = 0.0  # s a tension has been outside its bounds
+        self._before = np.zeros(m)  # N: the tensions a move started from
+        self._beyond = np.zeros(m)  # s each tension has been where a move stops
 
     # s: a tension outside its bounds this long stops the procedure (a transient, such as the
     # first feedback after the enable, does not)
     OUTSIDE_FOR = 0.1
+    # s a tension stays beyond where a move stops before it does (at least 2.5 periods): a
+    # transient does not (across processes, real time, rowc's geometric moves stopped at
+    # 1-56 % on single-cycle spikes that the samples at rest never showed; lock-step 67-91 %)
+    STOP_PERSISTS = 0.02
+
+    def begin_move(self) -> None:
+        """Before a move: the tensions it starts from (``move_stops`` compares with them)."""
+        self._before[:] = self.tensions()
+        self._beyond[:] = 0.0
+        self.stopped_by = ""
+
+    def move_stops(self) -> bool:
+        """Called every cycle of a move: whether a tension has stayed beyond ``t_stop_low`` /
+        ``t_stop_high`` and further that way than at the move's start (by 1 N) for
+        ``STOP_PERSISTS``; ``stopped_by`` then says which cable, at what."""
+        t = self.tensions()
+        high = (t > self.t_stop_high) & (t > self._before + 1.0)
+        low = (t < self.t_stop_low) & (t < self._before - 1.0)
+        period = self.driver.period
+        self._beyond[:] = np.where(high | low, self._beyond + period, 0.0)
+        persisted = self._beyond >= max(self.STOP_PERSISTS, 2.5 * period)
+        if not np.any(persisted):
+            return False
+        i = int(np.flatnonzero(persisted)[0])
+        limit = self.t_stop_high[i] if high[i] else self.t_stop_low[i]
+        self.stopped_by = (f"cable {self.model.cables[i].name} at {t[i]:.1f} N (it stops a "
+                           f"move beyond {limit:.1f} N)")  # fmt: skip
+        return True
 
     def tensions(self) -> np.ndarray:
         """N: the tensions the drives' torques hold (at rest, friction neglected)."""
@@ -173,20 +203,18 @@ class Session:
         """Over ``duration`` s (a cosine ramp): the planned motor angles to ``goal`` (rad; the
         force cables' tension loop corrects theirs), the force cables' tension and every
         feed-forward to ``tensions`` (N). A tension beyond ``t_stop_low/high`` and moving
-        further that way stops the ramp where it is (the start is only near home: the real
-        tensions differ from the plan's). Returns the fraction of the ramp done."""
+        further that way stops the ramp where it is (``move_stops``; the start is only near
+        home: the real tensions differ from the plan's). Returns the fraction of the ramp
+        done."""
         start = self.base.copy()
         t_start = self.tension_goal.copy()
         reached = [0.0, False]  # the ramp's fraction, stopped
-        before = self.tensions().copy()
+        self.begin_move()
 
         def ramp(f: float) -> None:
             if reached[1]:
                 return
-            t = self.tensions()
-            if np.any((t > self.t_stop_high) & (t > before + 1.0)) or np.any(
-                (t < self.t_stop_low) & (t < before - 1.0)
-            ):
+            if self.move_stops():
                 reached[1] = True  # a tension near its limit: the pose goes no further
                 return
             a = 0.5 - 0.5 * math.cos(math.pi * f)
