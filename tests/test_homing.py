@@ -12,14 +12,9 @@ import pytest
 from conftest import CONFIG, in_torque_mode
 
 from cdprctl.calibration.identify import Identification, Samples
-from cdprctl.calibration.procedure import (
-    CalibrationFailedError,
-    SelfOptions,
-    known_pose,
-    sample_poses,
-    self_calibrate,
-)
+from cdprctl.calibration.procedure import SelfOptions, known_pose, sample_poses, self_calibrate
 from cdprctl.calibration.record import CalibrationError, geometry_hash, load, record_path, save
+from cdprctl.calibration.session import CalibrationFailedError
 from cdprctl.calibration.startup import check_drives, load_record, offsets
 from cdprctl.cli import main
 from cdprctl.control.estimator import Estimator
@@ -321,7 +316,7 @@ def test_a_move_stops_on_a_tension_that_persists_beyond_its_stop_not_on_a_spike(
     and going no further does not; ``stopped_by`` names the cable and the limit."""
     from types import SimpleNamespace
 
-    from cdprctl.calibration.procedure import Session
+    from cdprctl.calibration.session import Session
 
     model = load_robot(CONFIG / "rowc.toml")
     m = model.n_cables

@@ -25,18 +25,15 @@ sys.path.insert(0, str(ROOT / "tests"))
 from test_homing import robot_at  # noqa: E402
 
 from cdprctl.calibration.geometry_file import calibrated_robot_text  # noqa: E402
+from cdprctl.calibration.geometry_plan import GeometryOptions  # noqa: E402
 from cdprctl.calibration.geometry_procedure import (  # noqa: E402
-    GeometryOptions,
     _move,
     geometry_calibrate,
     geometry_record,
     motor_goals,
 )
-from cdprctl.calibration.procedure import (  # noqa: E402
-    CalibrationFailedError,
-    Session,
-    force_cables,
-)
+from cdprctl.calibration.procedure import force_cables  # noqa: E402
+from cdprctl.calibration.session import CalibrationFailedError, Session  # noqa: E402
 from cdprctl.calibration.startup import offsets  # noqa: E402
 from cdprctl.control.estimator import Estimator  # noqa: E402
 from cdprctl.kinematics import KinematicsData, inverse_kinematics  # noqa: E402

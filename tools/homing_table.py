@@ -19,7 +19,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from test_homing import pose_error, robot_at, start_pose  # noqa: E402
 
-from cdprctl.calibration.procedure import CalibrationFailedError, self_calibrate  # noqa: E402
+from cdprctl.calibration.procedure import self_calibrate  # noqa: E402
+from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
 

@@ -34,30 +34,13 @@ from cdprctl.calibration.identify import (
     model_test,
 )
 from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
+from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.numerics import compliance_of, unstretched_lengths
 from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
-from drivers.vocabulary import Lifecycle, WinchStates
-
-
-class CalibrationFailedError(Exception):
-    """The procedure stopped (drives disabled, brakes on); the message says why. When the
-    identification ran but was refused, ``record`` and ``identified`` hold what it found."""
-
-    record: CalibrationRecord | None = None
-    identified: Identified | None = None
-
-    @classmethod
-    def with_result(
-        cls, record: CalibrationRecord, identified: Identified, message: str
-    ) -> CalibrationFailedError:
-        exc = cls(message)
-        exc.record, exc.identified = record, identified
-        return exc
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,168 +55,6 @@ class SelfOptions:
     weights: Weights | None = None  # None: from the drives' resolution (Weights.of)
     max_condition: float = 1.0e4  # refuse beyond: the samples do not decide the pose
     max_std: tuple[float, float] = (0.002, 0.004)  # m, rad: refuse a predicted σ beyond
-
-
-class Session:
-    """The drives held at the driver's period: position targets (rad), feed-forward torques
-    (N·m) and, for the ``force`` cables, a tension loop moving their targets."""
-
-    def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None]):
-        self.model, self.driver, self.log = model, driver, log
-        m = model.n_cables
-        self.ratio = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
-        self.csp = model.drives.holds_lengths
-        self.targets = np.zeros(m)  # rad: base + correction
-        self.base = np.zeros(m)  # rad: where the plan puts each motor
-        self.correction = np.zeros(m)  # rad: the force cables' tension loop
-        self.torques = np.zeros(m)
-        self.tension_goal = np.zeros(m)  # N, for the force cables
-        self.force = np.zeros(m, dtype=bool)
-        self.gain = 0.0  # per cycle, of the tension loop
-        self.k = np.ones(m)  # N/m, each cable's stiffness (the tension loop's scale)
-        self.t_low = 0.3 * model.tension_min  # N: below, a cable is going slack: stop
-        self.t_high = model.tension_max  # N
-        span = model.tension_max - model.tension_min
-        self.t_stop_low = model.tension_min + 0.1 * span  # N: a move stops here
-        self.t_stop_high = model.tension_max - 0.15 * span  # N
-        self.states: WinchStates = driver.states
-        self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
-        self._outside = 0.0  # s a tension has been outside its bounds
-        self._before = np.zeros(m)  # N: the tensions a move started from
-        self._beyond = np.zeros(m)  # s each tension has been where a move stops
-
-    # s: a tension outside its bounds this long stops the procedure (a transient, such as the
-    # first feedback after the enable, does not)
-    OUTSIDE_FOR = 0.1
-    # s a tension stays beyond where a move stops before it does (at least 2.5 periods): a
-    # transient does not (across processes, real time, rowc's geometric moves stopped at
-    # 1-56 % on single-cycle spikes that the samples at rest never showed; lock-step 67-91 %)
-    STOP_PERSISTS = 0.02
-
-    def begin_move(self) -> None:
-        """Before a move: the tensions it starts from (``move_stops`` compares with them)."""
-        self._before[:] = self.tensions()
-        self._beyond[:] = 0.0
-        self.stopped_by = ""
-
-    def move_stops(self) -> bool:
-        """Called every cycle of a move: whether a tension has stayed beyond ``t_stop_low`` /
-        ``t_stop_high`` and further that way than at the move's start (by 1 N) for
-        ``STOP_PERSISTS``; ``stopped_by`` then says which cable, at what."""
-        t = self.tensions()
-        high = (t > self.t_stop_high) & (t > self._before + 1.0)
-        low = (t < self.t_stop_low) & (t < self._before - 1.0)
-        period = self.driver.period
-        self._beyond[:] = np.where(high | low, self._beyond + period, 0.0)
-        persisted = self._beyond >= max(self.STOP_PERSISTS, 2.5 * period)
-        if not np.any(persisted):
-            return False
-        i = int(np.flatnonzero(persisted)[0])
-        limit = self.t_stop_high[i] if high[i] else self.t_stop_low[i]
-        self.stopped_by = (f"cable {self.model.cables[i].name} at {t[i]:.1f} N (it stops a "
-                           f"move beyond {limit:.1f} N)")  # fmt: skip
-        return True
-
-    def tensions(self) -> np.ndarray:
-        """N: the tensions the drives' torques hold (at rest, friction neglected)."""
-        return self.states.torque / self.ratio
-
-    def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
-        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle."""
-        d = self.driver
-        period = d.period
-        start = d.clock()
-        n = max(1, round(duration / period))
-        for i in range(n):
-            now = d.clock()
-            self.states = d.read(now)
-            if d.lifecycle is Lifecycle.ERROR:
-                raise CalibrationFailedError(f"the drives stopped: {d.error}")
-            if each is not None:
-                each((i + 1) / n)
-            if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
-                err = self.tension_goal - self.tensions()
-                step = self.gain * err / (self.k * self.ratio)
-                self.correction[self.force] += step[self.force]
-            np.add(self.base, self.correction, out=self.targets)
-            t = self.tensions()
-            outside = d.lifecycle is Lifecycle.ACTIVE and bool(
-                np.any(t > self.t_high) or np.any(t < self.t_low)
-            )
-            self._outside = self._outside + period if outside else 0.0
-            if self._outside > self.OUTSIDE_FOR:
-                worst = int(np.argmax(np.maximum(t - self.t_high, self.t_low - t)))
-                raise CalibrationFailedError(
-                    f"cable {self.model.cables[worst].name} at {t[worst]:.1f} N, outside "
-                    f"[{self.t_low[worst]:.1f}, {self.t_high[worst]:.1f}] N for "
-                    f"{self.OUTSIDE_FOR:g} s: stopped"
-                )
-            d.write(now, self.torques, targets=self.targets if self.csp else None)
-            d.wait(max(0.0, start + (i + 1) * period - d.clock()))
-
-    def enable(self, timeout: float = 3.0) -> None:
-        d = self.driver
-        self.states = d.read(d.clock())
-        self.base[:] = self.states.position
-        self.correction[:] = 0.0
-        d.begin_activate()
-        waited = 0.0
-        while d.lifecycle is not Lifecycle.ACTIVE:
-            self.run(d.period)
-            waited += d.period
-            if waited > timeout:
-                raise CalibrationFailedError(f"the drives did not enable in {timeout:g} s")
-
-    def average(self, duration: float) -> tuple[np.ndarray, np.ndarray, float]:
-        """Motor angles (rad) and tensions (N) averaged over ``duration`` s of holding, and
-        the largest motor speed seen (rad/s)."""
-        m = self.model.n_cables
-        theta, tension, speed, n = np.zeros(m), np.zeros(m), [0.0], [0]
-
-        def add(_: float) -> None:
-            theta[:] += self.states.position
-            tension[:] += self.tensions()
-            speed[0] = max(speed[0], float(np.max(np.abs(self.states.velocity))))
-            n[0] += 1
-
-        self.run(duration, add)
-        return theta / n[0], tension / n[0], speed[0]
-
-    def move(self, goal: np.ndarray, tensions: np.ndarray, duration: float) -> float:
-        """Over ``duration`` s (a cosine ramp): the planned motor angles to ``goal`` (rad; the
-        force cables' tension loop corrects theirs), the force cables' tension and every
-        feed-forward to ``tensions`` (N). A tension beyond ``t_stop_low/high`` and moving
-        further that way stops the ramp where it is (``move_stops``; the start is only near
-        home: the real tensions differ from the plan's). Returns the fraction of the ramp
-        done."""
-        start = self.base.copy()
-        t_start = self.tension_goal.copy()
-        reached = [0.0, False]  # the ramp's fraction, stopped
-        self.begin_move()
-
-        def ramp(f: float) -> None:
-            if reached[1]:
-                return
-            if self.move_stops():
-                reached[1] = True  # a tension near its limit: the pose goes no further
-                return
-            a = 0.5 - 0.5 * math.cos(math.pi * f)
-            reached[0] = a
-            self.base[:] = start + a * (goal - start)
-            self.tension_goal[:] = t_start + a * (tensions - t_start)
-            self.torques[:] = self.ratio * self.tension_goal
-
-        self.run(duration, ramp)
-        return reached[0]
-
-    def close(self) -> None:
-        self.driver.deactivate()
-
-
-def hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
-    """N: the tensions holding the platform's weight at ``x`` (m; rotation vector from home)."""
-    inverse_kinematics(model, kin, x[:3], coordinates_rotation(model.home.rotation, x[3:]))
-    return equilibrium_tensions(model, kin)
 
 
 def known_pose(
