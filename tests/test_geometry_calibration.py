@@ -230,11 +230,8 @@ def test_the_geometric_calibration_finds_an_as_built_robot_on_its_drives(tmp_pat
     from test_homing import robot_at
 
     from cdprctl.calibration.geometry_file import calibrated_robot_text
-    from cdprctl.calibration.geometry_procedure import (
-        GeometryOptions,
-        geometry_calibrate,
-        geometry_record,
-    )
+    from cdprctl.calibration.geometry_plan import GeometryOptions
+    from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
     from cdprctl.calibration.record import save
     from cdprctl.calibration.startup import load_record
 
@@ -280,3 +277,29 @@ def test_calibrate_geometry_refuses_bad_options_in_one_line(capsys):
         assert main(["calibrate", "--config", rowc, "geometry", *opts]) == 2
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_calibrates_options_come_before_or_after_the_method(capsys, tmp_path):
+    """``--config`` (and the state directory, the bus) before the method, as the docs write
+    it, or after it, as ``drives scan --config F`` takes it; without it, one line saying
+    where it goes (argparse said "--config is required" to a user who had given it after)."""
+    from cdprctl.cli import main
+
+    rowc = str(CONFIG / "rowc.toml")
+    for argv in (["calibrate", "--config", rowc, "geometry", "--poses", "5"],
+                 ["calibrate", "geometry", "--config", rowc, "--poses", "5"],
+                 ["calibrate", "--config", "/nowhere.toml", "geometry", "--config", rowc,
+                  "--poses", "5"]):  # fmt: skip
+        assert main(argv) == 2
+        assert "--poses = 5: must be in [10, 80]" in capsys.readouterr().err
+    assert main(["calibrate", "self", "--travel", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("cdprctl calibrate: error: --config FILE is required (the robot: cdprctl "
+                   "calibrate --config FILE self ...)\n")  # fmt: skip
+    from cdprctl.cli import build_parser
+
+    args = build_parser().parse_args([
+        "calibrate", "--state-dir", str(tmp_path), "--can-channel", "a", "known-pose",
+        "--config", rowc, "--can-interface", "virtual"])  # fmt: skip
+    assert (args.config, args.state_dir, args.can_channel, args.can_interface) == (
+        rowc, str(tmp_path), "a", "virtual")  # fmt: skip

@@ -15,16 +15,25 @@ from cdprctl.commands.common import command_parser, load_or_report, parse_pose
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
 
 
-def add_parser(sub: Any) -> None:
-    p = command_parser(
-        sub, "calibrate", "find the encoders' zero (homing): known-pose or self", run
-    )
+def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
+    """The options of every method, before or after its name (``default``: on a method,
+    ``SUPPRESS``, so one given before it is kept)."""
+    p.add_argument("--config", help="robot description (TOML)", **default)
     p.add_argument(
         "--state-dir",
         metavar="DIR",
         help="where the record goes (default /var/lib/cdprctl/<robot>)",
+        **default,
     )
-    add_bus_arguments(p)
+    add_bus_arguments(p, **default)
+
+
+def add_parser(sub: Any) -> None:
+    p = command_parser(
+        sub, "calibrate", "find the encoders' zero (homing): known-pose or self", run,
+        config=False,
+    )  # fmt: skip
+    _robot_and_bus(p)
     methods = p.add_subparsers(dest="method", required=True, metavar="METHOD")
     kp = methods.add_parser(
         "known-pose",
@@ -57,6 +66,8 @@ def add_parser(sub: Any) -> None:
         "and the encoders' zeros; refused when the residuals are more than the drives' "
         "resolution explains or the data do not decide them (docs/homing.md).",
     )
+    for method in (kp, sp, gp):
+        _robot_and_bus(method, default=argparse.SUPPRESS)
     gp.add_argument("--poses", type=int, default=25, help="poses to sample (25; 10..80)")
     gp.add_argument("--fill", type=float, default=0.8,
                     help="fraction of the workspace box the poses span (0.8)")  # fmt: skip
@@ -74,16 +85,16 @@ def run(args: argparse.Namespace) -> int:
     """Calibrate the robot's encoders: the drives are configured, enabled, the platform held
     (known-pose) or moved near its start (self), the drives disabled (brakes on), and the
     record written atomically to the state directory, where ``cdprctl run`` reads it."""
-    from cdprctl.calibration.procedure import (
-        CalibrationFailedError,
-        SelfOptions,
-        known_pose,
-        self_calibrate,
-    )
+    from cdprctl.calibration.procedure import SelfOptions, known_pose, self_calibrate
     from cdprctl.calibration.record import default_state_dir, save
+    from cdprctl.calibration.session import CalibrationFailedError
     from drivers import create_driver
     from drivers.errors import DriverError
 
+    if not args.config:
+        print(f"cdprctl calibrate: error: --config FILE is required (the robot: cdprctl "
+              f"calibrate --config FILE {args.method} ...)", file=sys.stderr)  # fmt: skip
+        return 2
     model = load_or_report(args.config)
     if model is None:
         return 1
@@ -151,14 +162,10 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     """``calibrate geometry``: exit 0 accepted (with --out: the file and its record written),
     1 refused or stopped (the reason in one line), 2 bad options."""
     from cdprctl.calibration.geometry_file import calibrated_robot_text
-    from cdprctl.calibration.geometry_procedure import (
-        GeometryOptions,
-        geometry_calibrate,
-        geometry_record,
-        plan,
-    )
-    from cdprctl.calibration.procedure import CalibrationFailedError
+    from cdprctl.calibration.geometry_plan import GeometryOptions, plan
+    from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
     from cdprctl.calibration.record import default_state_dir, now_iso, save
+    from cdprctl.calibration.session import CalibrationFailedError
     from cdprctl.commands.common import load_or_report
     from drivers import create_driver
     from drivers.errors import DriverError

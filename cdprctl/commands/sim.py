@@ -9,21 +9,24 @@ from typing import Any
 from cdprctl.commands.common import command_parser, load_or_report
 
 
-def add_bus_arguments(p: argparse.ArgumentParser) -> None:
-    """The bus overrides shared by ``cdprctl sim`` and ``cdprctl run``, so the two meet."""
+def add_bus_arguments(p: argparse.ArgumentParser, default: Any = None) -> None:
+    """The bus overrides shared by ``cdprctl sim`` and ``cdprctl run``, so the two meet
+    (``default``: ``argparse.SUPPRESS`` on a sub-command that repeats its parent's)."""
     p.add_argument(
         "--can-interface",
+        default=default,
         help="python-can interface replacing the config's (socketcan, virtual, udp_multicast, ...)",
     )
     p.add_argument(
         "--can-channel",
+        default=default,
         help="channel replacing the config's (can0, vcan0, a "
         "udp_multicast group such as 239.74.163.2, ...)",
     )
     p.add_argument(
         "--can-option",
         action="append",
-        default=[],
+        default=[] if default is None else default,
         metavar="KEY=VALUE",
         help="extra python-can argument, e.g. port=43113 (repeatable)",
     )
