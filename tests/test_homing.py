@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -314,7 +315,6 @@ def test_a_move_stops_on_a_tension_that_persists_beyond_its_stop_not_on_a_spike(
     move stops, and further that way than at the move's start, stops it once it has stayed
     there ``STOP_PERSISTS`` (a single-cycle spike does not); one already beyond at the start
     and going no further does not; ``stopped_by`` names the cable and the limit."""
-    from types import SimpleNamespace
 
     from cdprctl.calibration.session import Session
 
@@ -356,3 +356,54 @@ def test_a_move_stops_on_a_tension_that_persists_beyond_its_stop_not_on_a_spike(
     assert sum(not ses.move_stops() for _ in range(20)) == cycles
     assert ses.stopped_by == (f"cable {model.cables[5].name} at 38.0 N (it stops a move "
                               "beyond 50.0 N)")  # fmt: skip
+
+
+class _StallingDriver:
+    """A driver on a clock of its own: each write takes no time but the one ``stalls`` says
+    (cycle index -> s held up), as a process that stalled."""
+
+    def __init__(self, m: int, stalls: dict[int, float]):
+        from drivers.vocabulary import Lifecycle
+
+        self.period, self.now, self.stalls = 0.004, 100.0, stalls
+        self.lifecycle, self.error = Lifecycle.ACTIVE, ""
+        self.states = SimpleNamespace(torque=np.zeros(m), position=np.zeros(m))
+        self.writes: list[float] = []
+
+    def clock(self) -> float:
+        return self.now
+
+    def read(self, now: float):
+        return self.states
+
+    def write(self, now: float, torques, targets=None) -> None:
+        self.writes.append(now)
+        self.now += self.stalls.get(len(self.writes) - 1, 0.0)
+
+    def wait(self, dt: float) -> None:
+        self.now += dt
+
+
+def test_a_stalled_calibration_cycle_skips_what_it_missed_and_moves_on_by_the_extrapolation():
+    """``Session.run`` after a stall of 0.1 s (this process held up): no burst of catch-up
+    cycles (their SYNCs bunched made following-error faults across processes), the ramp's
+    fraction moves on by the drives' target extrapolation (50 ms: 12 periods) and waits out
+    the rest, and the last cycle still gets the fraction 1; the skipped periods counted."""
+    from cdprctl.calibration.session import Session
+
+    model = load_robot(CONFIG / "rowc.toml")
+    for stall_at in (40, 98):
+        d = _StallingDriver(model.n_cables, {stall_at: 0.1005})
+        ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+        d.states.torque[:] = 100.0 * ses.ratio  # N in every cable: inside its limits
+        fractions: list[float] = []
+        ses.run(0.4, fractions.append)  # 100 periods
+        steps = np.round(np.diff(fractions) * 100).astype(int)
+        gaps = np.diff(d.writes)
+        assert fractions[-1] == 1.0 and ses.missed_periods == 24
+        assert np.all(gaps > 0.5 * d.period)  # never two cycles in a burst
+        if stall_at == 40:
+            assert steps[stall_at] == 13 and np.all(np.delete(steps, stall_at) == 1)
+            assert len(fractions) == 100 - 12
+        else:
+            assert len(fractions) == 100 and np.all(steps == 1)

@@ -60,6 +60,7 @@ class Session:
         self.t_stop_high = model.tension_max - 0.15 * span  # N
         self.states: WinchStates = driver.states
         self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
+        self.missed_periods = 0  # cycles skipped: this process held up beyond a period
         self._outside = 0.0  # s a tension has been outside its bounds
         self._before = np.zeros(m)  # N: the tensions a move started from
         self._beyond = np.zeros(m)  # s each tension has been where a move stops
@@ -101,12 +102,21 @@ class Session:
         return self.states.torque / self.ratio
 
     def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
-        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle."""
+        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle.
+
+        A cycle held up more than a period (this process stalled) skips the periods it
+        missed instead of running them in a burst (their SYNCs bunched: following-error
+        faults), and the fraction moves on by what the drives extrapolated meanwhile
+        (``[drives] target_extrapolation``), the rest of the stall waited out: moving on by
+        all of it, the next target stepped ahead of the held drives; by none, behind the
+        extrapolated ones (the daemon's loop does the same)."""
         d = self.driver
         period = d.period
-        start = d.clock()
+        deadline = d.clock()
         n = max(1, round(duration / period))
-        for i in range(n):
+        extrapolated = max(0, math.floor(self.model.drives.target_extrapolation / period))
+        i = 0
+        while i < n:
             now = d.clock()
             self.states = d.read(now)
             if d.lifecycle is Lifecycle.ERROR:
@@ -131,7 +141,15 @@ class Session:
                     f"{self.OUTSIDE_FOR:g} s: stopped"
                 )
             d.write(now, self.torques, targets=self.targets if self.csp else None)
-            d.wait(max(0.0, start + (i + 1) * period - d.clock()))
+            deadline += period
+            missed = math.floor((d.clock() - deadline) / period)
+            step = 1
+            if missed > 0:
+                self.missed_periods += missed
+                deadline += missed * period
+                step += min(missed, extrapolated)
+            i = n if i + 1 >= n else min(i + step, n - 1)  # the last cycle's fraction is 1
+            d.wait(max(0.0, deadline - d.clock()))
 
     def enable(self, timeout: float = 3.0) -> None:
         d = self.driver

@@ -4,8 +4,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +28,28 @@ def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
         **default,
     )
     add_bus_arguments(p, **default)
+
+
+@contextlib.contextmanager
+def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterator[None]:
+    """A procedure's cycles as the daemon's loop runs its own: the garbage collector frozen
+    (a full collection of what the start-up built held a cycle ~80 ms on this VM: the drives
+    extrapolated, then a step in their targets) and, with ``realtime``, SCHED_FIFO on the
+    loop's CPU (a late cycle is a tension spike on stiff cables: rowc's moves stopped short,
+    a following error). Given back after."""
+    from cdprctl import realtime as rt
+
+    for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
+        log(f"cdprctl calibrate: warning: {w}")
+    if realtime:
+        for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
+            log(f"cdprctl calibrate: warning: {w}")
+    try:
+        yield
+    finally:
+        if realtime:
+            rt.leave_realtime()
+        rt.restore_gc()
 
 
 def add_parser(sub: Any) -> None:
@@ -119,13 +143,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         log(f"cdprctl calibrate: {model.name}, {args.method}: configuring the drives")
         driver.configure()
-        if pose is not None:
-            record = known_pose(model, driver, pose, log)
-        else:
-            opt = SelfOptions(
-                travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales
-            )
-            record, ident = self_calibrate(model, driver, opt, log)
+        with moves_held(model, False, log):
+            if pose is not None:
+                record = known_pose(model, driver, pose, log)
+            else:
+                opt = SelfOptions(
+                    travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales
+                )
+                record, ident = self_calibrate(model, driver, opt, log)
     except (DriverError, CalibrationFailedError) as exc:
         print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
         return 1
@@ -190,22 +215,15 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
         print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
         return 1
     driver = create_driver(model, period=model.control.period, bus_overrides=bus_overrides(args))
-    from cdprctl import realtime as rt
-
     try:
         log(f"cdprctl calibrate: {model.name}, geometry: configuring the drives")
         driver.configure()
-        if not args.no_realtime:  # the moves at the loop's priority: a late cycle is a
-            # tension spike on stiff cables (rowc: moves stopped short, a following error)
-            for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
-                log(f"cdprctl calibrate: warning: {w}")
-        cal = geometry_calibrate(model, driver, opt, log, poses)
+        with moves_held(model, not args.no_realtime, log):
+            cal = geometry_calibrate(model, driver, opt, log, poses)
     except (DriverError, CalibrationFailedError) as exc:
         print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
         return 1
     finally:
-        if not args.no_realtime:
-            rt.leave_realtime()
         driver.shutdown()
     r = cal.result
     drawn = model.anchors
