@@ -280,10 +280,10 @@ def test_a_flood_of_lines_ticks_every_settle_not_every_line():
 
 
 def test_the_oldest_kinds_are_forgotten_beyond_kept():
-    """``KEPT`` kinds of refusal are remembered for their counts; one more forgets the one
-    refused least recently, which is then written anew when it comes back."""
-    from cdprctl.telemetry.refusals import KEPT
-
+    """256 kinds of refusal are remembered for their counts (a bound on the memory a flood
+    of distinct refusals takes); one more forgets the one refused least recently, which is
+    then written anew when it comes back."""
+    KEPT = 256
     out: list[str] = []
     r = Refusals("cdpr/rowc", out.append)
 
