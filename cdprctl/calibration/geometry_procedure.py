@@ -100,7 +100,8 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
             theta_all.append(th)
             tension_all.append(t)
             guess.append(here)
-            log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
+            why = f" (stopped: {ses.stopped_by})" if done < 1.0 else ""
+            log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move{why}, tensions "
                 f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
             if done < 1.0:  # a tension near its limit: back the way it came (it held)
                 why = ses.stopped_by
