@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -407,3 +408,71 @@ def test_a_stalled_calibration_cycle_skips_what_it_missed_and_moves_on_by_the_ex
             assert len(fractions) == 100 - 12
         else:
             assert len(fractions) == 100 and np.all(steps == 1)
+
+
+def test_a_record_that_does_not_fit_the_robot_is_refused_saying_what(tmp_path):
+    """``CalibrationRecord.check`` and ``load``: another robot's name (either side of this
+    one's), a list of the wrong length, a drum scale at or beyond 0.9-1.1 (exclusive), a file
+    of another format or not a JSON object: each refused in words; the default state
+    directory is systemd's; the hash is 16 hex digits, blind to a float's last digits (below
+    a nanometre) and not to a nanometre."""
+    from cdprctl.calibration.record import default_state_dir
+
+    model = load_robot(CONFIG / "rowc.toml")
+    rec = _record(model)
+    rec.check(model)
+    assert default_state_dir("rowc") == Path("/var/lib/cdprctl/rowc")
+    for robot in ("aaa", "zzz"):
+        with pytest.raises(CalibrationError, match=f"the record is for robot '{robot}'"):
+            dataclasses.replace(rec, robot=robot).check(model)
+    with pytest.raises(CalibrationError, match=r"theta_zero: .* is not 8 finite numbers"):
+        dataclasses.replace(rec, theta_zero=[0.0] * 9).check(model)
+    for scales, ok in (([1.09] * 8, True), ([0.91] * 8, True), ([1.1] * 8, False),
+                       ([0.9] * 8, False), ([0.5] * 8, False), ([0.0] * 8, False)):  # fmt: skip
+        r = dataclasses.replace(rec, drum_scale=scales)
+        if ok:
+            r.check(model)
+        else:
+            with pytest.raises(CalibrationError, match=r"outside \(0.9, 1.1\)"):
+                r.check(model)
+    for text in ('{"format": 0}', '{"format": 2}', "[1, 2]", "{}"):
+        record_path(tmp_path).write_text(text)
+        with pytest.raises(CalibrationError, match="not a calibration record of format 1"):
+            load(tmp_path)
+    h = geometry_hash(model)
+    assert len(h) == 16 and int(h, 16) >= 0
+
+    def attached_off(dx: float):
+        c0 = model.cables[0]
+        return dataclasses.replace(model, cables=(
+            dataclasses.replace(c0, attachment=c0.attachment + np.array([dx, 0.0, 0.0])),
+            *model.cables[1:]))  # fmt: skip
+
+    assert geometry_hash(attached_off(3e-10)) == h and geometry_hash(attached_off(2e-9)) != h
+
+
+def test_a_record_is_saved_into_a_new_state_directory_and_a_failed_write_leaves_nothing(
+        tmp_path):  # fmt: skip
+    """``save`` makes the state directory with its parents (a first calibration on a robot
+    PC); a write that fails leaves the old record and no temporary file, and says why."""
+    model = load_robot(CONFIG / "rowc.toml")
+    rec = _record(model)
+    deep = tmp_path / "var" / "lib" / "cdprctl" / "rowc"
+    assert save(rec, deep) == record_path(deep) and load(deep) == rec
+    newer = dataclasses.replace(rec, time="2026-12-02T00:00:00+00:00")
+    with pytest.MonkeyPatch.context() as mp:
+        def refused(*_a, **_k):
+            raise OSError(28, "No space left on device")
+
+        mp.setattr("cdprctl.calibration.record.os.replace", refused)
+        with pytest.raises(OSError, match="No space left"):
+            save(newer, deep)
+    assert load(deep) == rec and sorted(p.name for p in deep.iterdir()) == ["calibration.json"]
+
+
+def test_the_geometry_hash_of_a_shipped_robot_is_what_records_in_the_field_hold():
+    """The hash every record on a robot PC was written with: a change of how it is computed
+    (the fields, their order, their rounding) refuses every one of them after an upgrade
+    ("geometry changed": recalibrate). Change these values only on purpose, and say so."""
+    assert geometry_hash(load_robot(CONFIG / "rowc.toml")) == "501d6d292634f352"
+    assert geometry_hash(load_robot(CONFIG / "caroca.toml")) == "65afdc6cefd6ee88"
