@@ -42,6 +42,40 @@ def group_alive(pgid: int) -> bool:
     return True
 
 
+@pytest.fixture
+def group():
+    """``start(*args)``: ``cdprctl *args`` in a process group of its own, as a terminal or
+    systemd runs it (its helpers and multiprocessing's tracker in it too); the whole group is
+    killed after the test, whatever happened."""
+    started: list[subprocess.Popen] = []
+
+    def start(*args: str) -> subprocess.Popen:
+        p = subprocess.Popen([sys.executable, "-m", "cdprctl.cli", *args],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             start_new_session=True, cwd=ROOT)  # fmt: skip
+        started.append(p)
+        return p
+
+    yield start
+    for p in started:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+        p.wait()
+
+
+def ended_with_its_group(p: subprocess.Popen) -> tuple[int, str]:
+    """The exit status and the rest of the output of ``p``, once it and every process of its
+    group ended (within 30 s and 5 s more)."""
+    assert p.stdout is not None
+    rest = p.stdout.read()
+    code = p.wait(timeout=30)
+    left = time.monotonic() + 5.0
+    while group_alive(p.pid) and time.monotonic() < left:
+        time.sleep(0.05)
+    assert not group_alive(p.pid)  # the helpers (and multiprocessing's tracker) went too
+    return code, rest
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -104,35 +138,27 @@ def test_shipped_security_files_name_what_is_missing_and_how_to_make_it(args, wo
     assert_clean(out)
 
 
-def test_ctrl_c_to_the_process_group_stops_cleanly_with_helpers():
+def test_ctrl_c_to_the_process_group_stops_cleanly_with_helpers(group):
     """SIGINT to the daemon and its helper processes (the Zenoh gateway, the Foxglove view)
     once it is running: a controlled stop, the summary, exit 0, no traceback from any of
     them."""
     zport, fport = free_port(), free_port()
-    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", ROWC, "--sim",
-           "--no-realtime", "--no-demo", "--foxglove", f"127.0.0.1:{fport}", "--zenoh",
-           "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting"]  # fmt: skip
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                         start_new_session=True, cwd=ROOT)  # fmt: skip
-    try:
-        lines = []
-        assert p.stdout is not None
-        deadline = time.monotonic() + 90.0
-        for line in p.stdout:
-            lines.append(line)
-            if line.startswith("ready") or time.monotonic() > deadline:
-                break
-        assert any(x.startswith("ready") for x in lines), "".join(lines)
-        time.sleep(0.5)
-        os.killpg(p.pid, signal.SIGINT)
-        t0 = time.monotonic()
-        rest = p.stdout.read()
-        code = p.wait(timeout=30)
-        took = time.monotonic() - t0
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+    p = group("run", "--config", ROWC, "--sim", "--no-realtime", "--no-demo", "--foxglove",
+              f"127.0.0.1:{fport}", "--zenoh", "--zenoh-listen", f"tcp/127.0.0.1:{zport}",
+              "--no-multicast-scouting")  # fmt: skip
+    lines = []
+    assert p.stdout is not None
+    deadline = time.monotonic() + 90.0
+    for line in p.stdout:
+        lines.append(line)
+        if line.startswith("ready") or time.monotonic() > deadline:
+            break
+    assert any(x.startswith("ready") for x in lines), "".join(lines)
+    time.sleep(0.5)
+    os.killpg(p.pid, signal.SIGINT)
+    t0 = time.monotonic()
+    code, rest = ended_with_its_group(p)
+    took = time.monotonic() - t0
     out = "".join(lines) + rest
     assert code == 0, out
     assert "summary:" in rest
@@ -155,38 +181,24 @@ def test_no_calibration_record_is_one_line_with_the_command_and_exit_4(tmp_path)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_a_stop_during_the_start_up_closes_what_it_opened_in_one_line(sig):
+def test_a_stop_during_the_start_up_closes_what_it_opened_in_one_line(sig, group):
     """SIGTERM (systemd's stop) or SIGINT to the daemon alone while it starts — here while it
     waits for drives that are not there (a CAN bus no drive is on), its Zenoh gateway
     running: one line, exit 0, and no process of its group left (SIGTERM had killed it
     mid-way, the gateway left running; Ctrl-C printed a traceback from a kernel's compile)."""
     zport = free_port()
-    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", ROWC, "--no-realtime",
-           "--can-interface", "udp_multicast", "--can-channel", "239.74.163.2",
-           "--zenoh", "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting"]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                         start_new_session=True, cwd=ROOT)  # fmt: skip
-    try:
-        assert p.stdout is not None
-        lines = []
-        for line in p.stdout:
-            lines.append(line)
-            if line.startswith("start-up:"):
-                break
-        time.sleep(1.0)  # in the kernels' loading or the drives' set-up: both are start-up
-        p.send_signal(sig)
-        rest = p.stdout.read()
-        code = p.wait(timeout=30)
-        left = time.monotonic() + 5.0
-        while group_alive(p.pid) and time.monotonic() < left:
-            time.sleep(0.05)
-        assert not group_alive(p.pid)  # the gateway (and multiprocessing's tracker) went too
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(p.pid, signal.SIGKILL)
+    p = group("run", "--config", ROWC, "--no-realtime", "--can-interface", "udp_multicast",
+              "--can-channel", "239.74.163.2", "--zenoh", "--zenoh-listen",
+              f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting")  # fmt: skip
+    assert p.stdout is not None
+    lines = []
+    for line in p.stdout:
+        lines.append(line)
+        if line.startswith("start-up:"):
+            break
+    time.sleep(1.0)  # in the kernels' loading or the drives' set-up: both are start-up
+    p.send_signal(sig)
+    code, rest = ended_with_its_group(p)
     out = "".join(lines) + rest
     assert code == 0, out
     assert f"cdprctl run: stopped by {sig.name} during the start-up; the drives were not " \
@@ -195,35 +207,21 @@ def test_a_stop_during_the_start_up_closes_what_it_opened_in_one_line(sig):
 
 
 @pytest.mark.parametrize("after", [0.3, 1.5, 3.0])
-def test_ctrl_c_to_the_group_while_it_starts_with_helpers_is_clean(after):
+def test_ctrl_c_to_the_group_while_it_starts_with_helpers_is_clean(after, group):
     """A terminal's Ctrl-C (SIGINT to the whole group) at instants of the start-up of the
     simulated robot with the Zenoh gateway and the Foxglove view: while the simulated robot's
     buses are built (python-can warned "InProcessBus was not properly shut down") or a helper
     imports its modules (a KeyboardInterrupt traceback, 1 start-up in ~9): one line, exit 0,
     nothing else, no process of the group left."""
     zport, fport = free_port(), free_port()
-    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", ROWC, "--sim",
-           "--no-realtime", "--no-demo", "--foxglove", f"127.0.0.1:{fport}", "--zenoh",
-           "--zenoh-listen", f"tcp/127.0.0.1:{zport}", "--no-multicast-scouting"]  # fmt: skip
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                         start_new_session=True, cwd=ROOT)  # fmt: skip
-    try:
-        assert p.stdout is not None
-        first = p.stdout.readline()
-        time.sleep(after)
-        os.killpg(p.pid, signal.SIGINT)
-        rest = p.stdout.read()
-        code = p.wait(timeout=30)
-        left = time.monotonic() + 5.0
-        while group_alive(p.pid) and time.monotonic() < left:
-            time.sleep(0.05)
-        assert not group_alive(p.pid)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(p.pid, signal.SIGKILL)
+    p = group("run", "--config", ROWC, "--sim", "--no-realtime", "--no-demo", "--foxglove",
+              f"127.0.0.1:{fport}", "--zenoh", "--zenoh-listen", f"tcp/127.0.0.1:{zport}",
+              "--no-multicast-scouting")  # fmt: skip
+    assert p.stdout is not None
+    first = p.stdout.readline()
+    time.sleep(after)
+    os.killpg(p.pid, signal.SIGINT)
+    code, rest = ended_with_its_group(p)
     out = first + rest
     assert code == 0, out
     assert ("stopped by SIGINT during the start-up" in rest
