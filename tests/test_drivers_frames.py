@@ -469,3 +469,32 @@ def test_odrive_frames(seed):
         drv.recover()
         assert drv.lifecycle is Lifecycle.INACTIVE
         assert peer.sent(po.arbitration_id(7, po.CLEAR_ERRORS))
+
+
+def test_capabilities_judge_the_profile_the_modes_and_the_rated_torque_by_their_bits():
+    """What ``drives scan`` and the set-up read, judged bit by bit: the device type's low 16
+    bits are the profile (402 with any additional information runs; 401, 403, 406 do not,
+    named); 0x6502's csp bit 7 and cst bit 9, each alone; the rated torque within 1 % of the
+    config's."""
+    from drivers.cia402.capabilities import Capabilities, rated_torque_problem
+
+    def caps(device_type: int | None = None, modes: int | None = None) -> Capabilities:
+        return Capabilities(None, device_type, modes, None)
+
+    assert caps(0x00020192).can_run(p.MODE_CSP) is None  # 402, a servo drive
+    for profile in (401, 403, 406):
+        why = caps(0x00010000 | profile).can_run(p.MODE_CSP)
+        assert why is not None and f"is profile {profile}, not CiA 402" in why
+    csp, cst, csv = 1 << 7, 1 << 9, 1 << 8
+    assert caps(modes=csp).modes_text() == "0x6502 = 0x00000080 (csp)"
+    assert caps(modes=cst).modes_text() == "0x6502 = 0x00000200 (cst)"
+    assert caps(modes=csp | cst).modes_text() == "0x6502 = 0x00000280 (csp, cst)"
+    assert caps(modes=csv).modes_text() == "0x6502 = 0x00000100 (no csp, no cst)"
+    assert caps(modes=csp).can_run(p.MODE_CSP) is None
+    why = caps(modes=csv | csp).can_run(p.MODE_CST)
+    assert why is not None and "lacks cyclic synchronous torque (bit 9" in why
+    assert rated_torque_problem(None, 1000.0) is None
+    assert rated_torque_problem(1009, 1000.0) is None and rated_torque_problem(991, 1000.0) is None
+    assert "rated torque 0x6076 is 1011 mN·m, the config says 1000" in (
+        rated_torque_problem(1011, 1000.0) or "")  # fmt: skip
+    assert "(not set:" in (rated_torque_problem(0, 1000.0) or "")
