@@ -43,10 +43,6 @@ def run_realtime(
     # one step before "ready": the physics kernels compile at their first call (seconds on a
     # cold cache, when the drives stood deaf for ~15 s after "ready")
     net.advance(step)
-    # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
-    # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf
-    gc.collect()
-    gc.freeze()
     print_fn("cdprctl sim: ready", flush=True)  # the buses are open: peers may start
     stop = {"flag": False}
 
@@ -71,6 +67,10 @@ def run_realtime(
         return msg.timestamp - wall_minus_mono - t0 - lag
 
     try:
+        # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
+        # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf
+        gc.collect()
+        gc.freeze()
         last = t0
         while not stop["flag"]:
             now = time.monotonic()

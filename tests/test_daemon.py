@@ -459,3 +459,24 @@ def test_the_collector_is_frozen_for_the_loop_without_realtime_too():
         assert d.run(duration=0.2, demo=False) == 0
     assert seen["enabled"] is False and seen["frozen"] > 10_000
     assert gc.isenabled() and gc.get_freeze_count() == 0
+
+
+def test_the_collector_is_given_back_when_the_start_up_fails_unexpectedly():
+    """A start-up that fails after the collector was frozen with an error no one foresaw (here
+    the drives' identity lines raising) still gives the collector back: an in-process run
+    (the tests, the lock-step harness) leaves the interpreter as it found it."""
+    from cdprctl.daemon.service import Daemon
+    from cdprctl.model import load_robot
+
+    d = Daemon(load_robot(CONFIG / "rowc.toml"), sim=True, overrides={}, realtime=False,
+               status_every=0.0, out=io.StringIO())  # fmt: skip
+
+    def broken(*_a, **_k):
+        raise RuntimeError("unforeseen")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("cdprctl.daemon.startup.identity_lines", broken)
+        with pytest.raises(RuntimeError, match="unforeseen"):
+            d.run(duration=0.2, demo=False)
+    d._close_buses()
+    assert gc.isenabled() and gc.get_freeze_count() == 0

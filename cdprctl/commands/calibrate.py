@@ -39,12 +39,12 @@ def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterat
     a following error). Given back after."""
     from cdprctl import realtime as rt
 
-    for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
-        log(f"cdprctl calibrate: warning: {w}")
-    if realtime:
-        for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
-            log(f"cdprctl calibrate: warning: {w}")
     try:
+        for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
+            log(f"cdprctl calibrate: warning: {w}")
+        if realtime:
+            for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
+                log(f"cdprctl calibrate: warning: {w}")
         yield
     finally:
         if realtime:

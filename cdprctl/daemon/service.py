@@ -120,6 +120,13 @@ class Daemon:
             path: tuple[str, str, str] | None = None) -> int:  # fmt: skip
         """``path``: (name, text, units) of a path file to play once (enable, the path, disable);
         checked whole before the drives are enabled (exit 2 when rejected)."""
+        try:
+            return self._run(duration, demo, force, path)
+        finally:  # however it ended: what the start-up froze is collectable again
+            rt.restore_gc()
+
+    def _run(self, duration: float | None, demo: bool, force: float,
+             path: tuple[str, str, str] | None) -> int:  # fmt: skip
         m, d = self.model, self.data
         self._print(gains_line(m, d))
         try:
@@ -129,7 +136,6 @@ class Daemon:
             stop_if_interrupted()  # a signal whose exception a library swallowed ends it here
         except (StartupRefusedError, StartupInterrupted) as exc:
             self._print(exc.message, err=True)
-            rt.restore_gc()  # as after a run: what the start-up built is collectable again
             self._close_buses()
             self.links.close()
             return exc.code
@@ -156,7 +162,6 @@ class Daemon:
         finally:
             if self.realtime:
                 rt.leave_realtime()
-            rt.restore_gc()
             if wd is not None:
                 wd.stop()
             if self.timing_file:
