@@ -61,6 +61,7 @@ class Session:
         self.states: WinchStates = driver.states
         self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
         self.missed_periods = 0  # cycles skipped: this process held up beyond a period
+        self.cycle_time = driver.period  # s the cycle under way stands for (missed included)
         self._outside = 0.0  # s a tension has been outside its bounds
         self._before = np.zeros(m)  # N: the tensions a move started from
         self._beyond = np.zeros(m)  # s each tension has been where a move stops
@@ -86,9 +87,8 @@ class Session:
         t = self.tensions()
         high = (t > self.t_stop_high) & (t > self._before + 1.0)
         low = (t < self.t_stop_low) & (t < self._before - 1.0)
-        period = self.driver.period
-        self._beyond[:] = np.where(high | low, self._beyond + period, 0.0)
-        persisted = self._beyond >= max(self.STOP_PERSISTS, 2.5 * period)
+        self._beyond[:] = np.where(high | low, self._beyond + self.cycle_time, 0.0)
+        persisted = self._beyond >= max(self.STOP_PERSISTS, 2.5 * self.driver.period)
         if not np.any(persisted):
             return False
         i = int(np.flatnonzero(persisted)[0])
@@ -104,35 +104,43 @@ class Session:
     def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
         """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle.
 
-        A cycle held up more than a period (this process stalled) skips the periods it
-        missed instead of running them in a burst (their SYNCs bunched: following-error
-        faults), and the fraction moves on by what the drives extrapolated meanwhile
-        (``[drives] target_extrapolation``), the rest of the stall waited out: moving on by
-        all of it, the next target stepped ahead of the held drives; by none, behind the
-        extrapolated ones (the daemon's loop does the same)."""
+        A cycle held up more than a period (this process stalled: in the wait, the last
+        write or this read) skips the periods it missed instead of running them in a burst
+        (their SYNCs bunched: following-error faults), and the fraction moves on by what the
+        drives extrapolated meanwhile (``[drives] target_extrapolation``), the rest of the
+        stall waited out: moving on by all of it, the next target stepped ahead of the held
+        drives; by none, behind the extrapolated ones (the daemon's reference does the same).
+        The persistence timers count the time the cycle stands for."""
         d = self.driver
         period = d.period
-        deadline = d.clock()
+        deadline = d.clock()  # when the next cycle is due
         n = max(1, round(duration / period))
-        extrapolated = max(0, math.floor(self.model.drives.target_extrapolation / period))
+        extrapolated = max(0, math.floor(self.model.drives.target_extrapolation / period + 1e-9))
         i = 0
         while i < n:
             now = d.clock()
             self.states = d.read(now)
+            missed = max(0, math.floor((d.clock() - deadline) / period))
+            if missed:
+                self.missed_periods += missed
+                deadline += missed * period
+                if i > 0:  # a ramp under way: the drives went on along it
+                    i = min(i + min(missed, extrapolated), n - 1)
+            self.cycle_time = (1 + missed) * period
             if d.lifecycle is Lifecycle.ERROR:
                 raise CalibrationFailedError(f"the drives stopped: {d.error}")
             if each is not None:
                 each((i + 1) / n)
             if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
                 err = self.tension_goal - self.tensions()
-                step = self.gain * err / (self.k * self.ratio)
-                self.correction[self.force] += step[self.force]
+                correction = self.gain * err / (self.k * self.ratio)
+                self.correction[self.force] += correction[self.force]
             np.add(self.base, self.correction, out=self.targets)
             t = self.tensions()
             outside = d.lifecycle is Lifecycle.ACTIVE and bool(
                 np.any(t > self.t_high) or np.any(t < self.t_low)
             )
-            self._outside = self._outside + period if outside else 0.0
+            self._outside = self._outside + self.cycle_time if outside else 0.0
             if self._outside > self.OUTSIDE_FOR:
                 worst = int(np.argmax(np.maximum(t - self.t_high, self.t_low - t)))
                 raise CalibrationFailedError(
@@ -142,13 +150,7 @@ class Session:
                 )
             d.write(now, self.torques, targets=self.targets if self.csp else None)
             deadline += period
-            missed = math.floor((d.clock() - deadline) / period)
-            step = 1
-            if missed > 0:
-                self.missed_periods += missed
-                deadline += missed * period
-                step += min(missed, extrapolated)
-            i = n if i + 1 >= n else min(i + step, n - 1)  # the last cycle's fraction is 1
+            i += 1
             d.wait(max(0.0, deadline - d.clock()))
 
     def enable(self, timeout: float = 3.0) -> None:
@@ -208,6 +210,9 @@ class Session:
 
     def close(self) -> None:
         self.driver.deactivate()
+        if self.missed_periods:
+            self.log(f"  the procedure's cycles: {self.missed_periods} periods missed (this "
+                     "process was held up; the moves waited them out)")  # fmt: skip
 
 
 def hold_tensions(model: RobotModel, kin: KinematicsData, x: np.ndarray) -> np.ndarray:
