@@ -61,14 +61,21 @@ def group():
         with contextlib.suppress(ProcessLookupError):
             os.killpg(p.pid, signal.SIGKILL)
         p.wait()
+        if p.stdout is not None:
+            p.stdout.close()
 
 
 def ended_with_its_group(p: subprocess.Popen) -> tuple[int, str]:
     """The exit status and the rest of the output of ``p``, once it and every process of its
-    group ended (within 30 s and 5 s more)."""
-    assert p.stdout is not None
-    rest = p.stdout.read()
-    code = p.wait(timeout=30)
+    group ended (within 30 s and 5 s more; its output ends when the last of them does, so a
+    helper left running fails the test at 30 s instead of hanging it)."""
+    try:
+        rest, _ = p.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        rest, _ = p.communicate()
+        raise AssertionError(f"cdprctl or a process of its group still running:\n{rest}") from None
+    code = p.returncode
     left = time.monotonic() + 5.0
     while group_alive(p.pid) and time.monotonic() < left:
         time.sleep(0.05)

@@ -105,15 +105,15 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
                 f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
             if done < 1.0:  # a tension near its limit: back the way it came (it held)
                 why = ses.stopped_by
-                back, took = _move(ses, here, origin, goal_of, opt, stop=False)
-                moved += took
-                here = here + back * (origin - here)
-                if back < 1.0:
+                try:  # stopped only by the session's limits (a slack cable, an overload)
+                    _, took = _move(ses, here, origin, goal_of, opt, stop=False)
+                except CalibrationFailedError as exc:
                     raise CalibrationFailedError(
-                        f"the move to pose {k} stopped ({why}) and so did the way back "
-                        f"({ses.stopped_by}, {back:.0%} of the way): the robot differs from "
-                        "its file more than the plan allows; plan closer to home "
-                        "(--fill)")  # fmt: skip
+                        f"the move to pose {k} stopped ({why}) and the way back did too: "
+                        f"{exc}; the robot differs from its file more than the plan allows: "
+                        "plan closer to home (--fill)") from None  # fmt: skip
+                moved += took
+                here = origin
         _, took = _move(ses, here, start, goal_of, opt)
         moved += took
         ses.run(opt.settle_time)

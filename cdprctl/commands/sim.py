@@ -10,8 +10,9 @@ from cdprctl.commands.common import command_parser, load_or_report
 
 
 def add_bus_arguments(p: argparse.ArgumentParser, default: Any = None) -> None:
-    """The bus overrides shared by ``cdprctl sim`` and ``cdprctl run``, so the two meet
-    (``default``: ``argparse.SUPPRESS`` on a sub-command that repeats its parent's)."""
+    """The bus overrides shared by ``cdprctl sim``, ``run``, ``calibrate`` and ``drives
+    scan``, so they meet (``default``: ``argparse.SUPPRESS`` on a sub-command that repeats
+    its parent's; there a ``--can-option`` list replaces the parent's, it is not added)."""
     p.add_argument(
         "--can-interface",
         default=default,
