@@ -42,6 +42,10 @@ class Robot:
         self.net = SimNetwork(
             self.model, self.plant, {"interface": "inprocess", "channel": channel}
         )
+        # a step before the thread: the physics kernels compile at their first call (seconds
+        # on a cold cache, the drives deaf meanwhile: the scanner found none in 3 s in a
+        # mutation session's fresh tree)
+        self.net.advance(0.001)
         self.lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="sim", daemon=True)
