@@ -438,10 +438,12 @@ def test_a_record_that_does_not_fit_the_robot_is_refused_saying_what(tmp_path):
     for robot in ("aaa", "zzz"):
         with pytest.raises(CalibrationError, match=f"the record is for robot '{robot}'"):
             dataclasses.replace(rec, robot=robot).check(model)
-    with pytest.raises(CalibrationError, match=r"theta_zero: .* is not 8 finite numbers"):
-        dataclasses.replace(rec, theta_zero=[0.0] * 9).check(model)
+    for n in (7, 9):
+        with pytest.raises(CalibrationError, match=r"theta_zero: .* is not 8 finite numbers"):
+            dataclasses.replace(rec, theta_zero=[0.0] * n).check(model)
     for scales, ok in (([1.09] * 8, True), ([0.91] * 8, True), ([1.1] * 8, False),
-                       ([0.9] * 8, False), ([0.5] * 8, False), ([0.0] * 8, False)):  # fmt: skip
+                       ([0.9] * 8, False), ([0.5] * 8, False), ([0.0] * 8, False),
+                       ([1.2] * 8, False)):  # fmt: skip
         r = dataclasses.replace(rec, drum_scale=scales)
         if ok:
             r.check(model)
@@ -452,16 +454,21 @@ def test_a_record_that_does_not_fit_the_robot_is_refused_saying_what(tmp_path):
         record_path(tmp_path).write_text(text)
         with pytest.raises(CalibrationError, match="not a calibration record of format 1"):
             load(tmp_path)
+    record_path(tmp_path).write_text('{"format": 1, "robot": "rowc"}')  # fields missing
+    with pytest.raises(CalibrationError, match=r"missing .* required positional argument"):
+        load(tmp_path)
+    assert rec.samples == 1  # a record made without samples: the one pose it was held at
     h = geometry_hash(model)
     assert len(h) == 16 and int(h, 16) >= 0
 
-    def attached_off(dx: float):
+    def off(field: str, dx: float):
         c0 = model.cables[0]
-        return dataclasses.replace(model, cables=(
-            dataclasses.replace(c0, attachment=c0.attachment + np.array([dx, 0.0, 0.0])),
-            *model.cables[1:]))  # fmt: skip
+        moved = getattr(c0, field) + np.array([dx, 0.0, 0.0])
+        return dataclasses.replace(model, cables=(dataclasses.replace(c0, **{field: moved}),
+                                                  *model.cables[1:]))  # fmt: skip
 
-    assert geometry_hash(attached_off(3e-10)) == h and geometry_hash(attached_off(2e-9)) != h
+    for field in ("anchor", "attachment"):
+        assert geometry_hash(off(field, 3e-10)) == h and geometry_hash(off(field, 2e-9)) != h
 
 
 def test_a_record_is_saved_into_a_new_state_directory_and_a_failed_write_leaves_nothing(
