@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import HelperProcess
+from cdprctl.telemetry.helper import HelperProcess, close_queue
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -154,6 +154,5 @@ class FoxgloveLink:
     def close(self) -> None:
         self.stop.set()
         self.helper.stop()
-        self.events.cancel_join_thread()
-        self.events.close()
+        close_queue(self.events)
         self.snapshot.close()

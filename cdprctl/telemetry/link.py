@@ -13,7 +13,7 @@ import numpy as np
 
 from cdprctl.control.commands import Command, CommandKind, GripKind
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import HelperProcess
+from cdprctl.telemetry.helper import HelperProcess, close_queue
 from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
 
 
@@ -113,6 +113,5 @@ class TelemetryLink:
         self.stop.set()
         self.helper.stop()
         for q in (self.commands, self.events):
-            q.cancel_join_thread()
-            q.close()
+            close_queue(q)
         self.snapshot.close()
