@@ -12,6 +12,7 @@ import numpy as np
 
 from cdprctl.calibration.identify import Identified
 from cdprctl.calibration.record import CalibrationRecord
+from cdprctl.control.loop import periods_missed
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import coordinates_rotation
@@ -120,7 +121,7 @@ class Session:
         while i < n:
             now = d.clock()
             self.states = d.read(now)
-            missed = max(0, math.floor((d.clock() - deadline) / period))
+            missed = periods_missed(d.clock() - deadline, period)
             if missed:
                 self.missed_periods += missed
                 deadline += missed * period

@@ -191,7 +191,6 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
     from cdprctl.calibration.record import default_state_dir, now_iso, save
     from cdprctl.calibration.session import CalibrationFailedError
-    from cdprctl.commands.common import load_or_report
     from drivers import create_driver
     from drivers.errors import DriverError
 

@@ -94,6 +94,14 @@ class LoopStats:
         }
 
 
+def periods_missed(late: float, period: float) -> int:
+    """The periods a cycle ``late`` s behind its deadline skips: every whole one missed once
+    it is more than a period late, so that a stall is never followed by a burst of catch-up
+    cycles (their SYNCs bunched, the drives' targets a step). The daemon's loop and the
+    calibration's cycles (``calibration.session``) both."""
+    return math.floor(late / period) if late > period else 0
+
+
 def run_loop(
     period: float,
     step: Callable[[float], None],
@@ -119,12 +127,10 @@ def run_loop(
             time.sleep(wait)
         while (now := clock()) < deadline:
             pass
+        skipped = periods_missed(now - deadline, period)
+        st.missed += skipped
+        deadline += skipped * period
         late = now - deadline
-        if late > period:  # skip what was missed, no burst of catch-up cycles
-            skipped = math.floor(late / period)
-            st.missed += skipped
-            deadline += skipped * period
-            late = now - deadline
         # the cycle's time is when it runs, not its deadline: a late cycle's position targets
         # are for the instant its SYNC goes out (for its deadline, up to a period behind,
         # the drives reversed out of their extrapolation and faulted on their following error
