@@ -388,3 +388,24 @@ def test_a_csv_without_a_row_of_units_is_told_apart(text, without):
     from cdprctl.motion.path_file import csv_without_units
 
     assert csv_without_units(text) is without
+
+
+def test_a_blend_passes_no_faster_than_the_slower_segment_allows(rowc):
+    """A fast row blended into a slow one: the waypoint is passed within the slow segment's
+    speed (per axis: a blend turns from one line to the next), not at the fast one's."""
+    start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
+    text = "x, y, z, speed, blend\n1.8, 0.35, 0.54, 0.15, 1\n1.9, 0.35, 0.44, 0.01, 0\n"
+    plan = plan_path(rowc, parse_path(text, START), start, rowc.control.period)
+    passing = np.abs(plan.segments[0].velocity[:3])
+    assert passing.max() > 0.0  # it is passed moving
+    assert passing.max() <= 0.01 * (1 + 1e-9)
+    _, v, _, ends = play(rowc, plan)
+    at = round(ends[0] / rowc.control.period) - 1
+    assert np.abs(v[at, :3]).max() <= 0.01 * (1 + 1e-6)
+
+
+def test_a_rejected_waypoint_is_named_to_the_tenth_of_a_millimetre(rowc):
+    start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
+    with pytest.raises(PathRejectedError, match=r"line 2: waypoint \[2\.6123, 0\.35, 0\.59, "):
+        plan_path(rowc, parse_path("x, y, z\n2.61234, 0.35, 0.59\n", START), start,
+                  rowc.control.period)  # fmt: skip

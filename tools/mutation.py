@@ -46,6 +46,9 @@ from mutation_equivalents import EQUIVALENT_PREFIX, load_equivalents, skip_known
 
 OUT = ROOT / "out" / "mutation"
 REPORT = ROOT / "docs" / "mutation.md"
+# each module's last results, kept in the repository (the sessions in out/ are not): what the
+# report is made of where no session is at hand, as long as the module is the file it was
+RESULTS = ROOT / "tools" / "mutation_results.json"
 
 
 @dataclass(frozen=True)
@@ -267,6 +270,36 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
     return mutants
 
 
+def load_results() -> dict[str, dict]:
+    return json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+
+
+def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | None) -> dict:
+    """A module's results for tools/mutation_results.json: the digest of the file they are of,
+    the killed as a count, every other mutant whole (survivors and equivalents are listed)."""
+    killed = sum(m.outcome in ("killed", "timeout", "incompetent") for m in mutants)
+    rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
+             "outcome": m.outcome, "equivalent": m.equivalent}
+            for m in mutants if m.outcome not in ("killed", "timeout", "incompetent")]  # fmt: skip
+    return {"module": t.module, "sha256": module_digest(tree, t.module),
+            "date": session_date(t), "seconds": seconds, "tests": t.tests,
+            "killed": killed, "others": rest}  # fmt: skip
+
+
+def session_date(t: Target) -> str:
+    """The day the module's session was last written to."""
+    db = OUT / f"{t.name}.sqlite"
+    return dt.date.fromtimestamp(db.stat().st_mtime).isoformat()
+
+
+def mutants_of(entry: dict) -> list[Mutant]:
+    """The mutants a kept entry stands for (the killed without their text)."""
+    killed = [Mutant(entry["module"], "", 0, "", "", "killed")] * entry["killed"]
+    rest = [Mutant(entry["module"], o["operator"], o["line"], o["source"], o["diff"],
+                   o["outcome"], "", o["equivalent"]) for o in entry["others"]]  # fmt: skip
+    return killed + rest
+
+
 def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]:
     """Survivors written down as equivalent (module or "*", and regular expressions of the
     operator and of the line's text, stripped);
@@ -287,11 +320,21 @@ def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]
 
 
 def report(targets: list[Target], tree: Path) -> str:
+    """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
     rows, survivors, totals = [], [], [0, 0, 0, 0]
     all_mutants: list[Mutant] = []
+    kept = load_results()
+    seconds: dict[str, int | None] = {}
     for t in targets:
+        took = OUT / f"{t.name}.seconds"
         ms = read_session(t, tree)
+        if ms and not session_is_stale(t, tree, ms):  # a session at hand: its results kept
+            seconds[t.name] = int(took.read_text()) if took.exists() else None
+            kept[t.name] = results_entry(t, tree, ms, seconds[t.name])
+        elif not ms and t.name in kept:
+            ms = mutants_of(kept[t.name])
+            seconds[t.name] = kept[t.name]["seconds"]
         all_mutants += ms
     stale = mark_equivalents(all_mutants, equivalents)
     out_of_date: set[str] = set()  # modules whose session is of an older file: not listed
@@ -300,7 +343,8 @@ def report(targets: list[Target], tree: Path) -> str:
         if not ms:
             rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
             continue
-        if session_is_stale(t, tree, ms):  # its figures are of a file that is no longer there
+        changed = t.name in kept and kept[t.name]["sha256"] != module_digest(tree, t.module)
+        if changed or session_is_stale(t, tree, ms):  # figures of a file no longer there
             out_of_date.add(t.module)
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
@@ -314,8 +358,7 @@ def report(targets: list[Target], tree: Path) -> str:
         score = f"{100.0 * len(killed) / denom:.1f} %" if denom else "—"
         if pending:
             score += f" ({pending} not run yet)"
-        took = OUT / f"{t.name}.seconds"
-        wall = f"{int(took.read_text()) / 60:.0f} min" if took.exists() else "?"
+        wall = f"{seconds[t.name] / 60:.0f} min" if seconds.get(t.name) else "?"
         rows.append(f"| {t.name} | `{t.module}` | {len(run)} | {len(killed)} | {len(alive)} | "
                     f"{len(equiv)} | {score} | {wall} | {t.tests} |")  # fmt: skip
         for i, v in enumerate((len(run), len(killed), len(alive), len(equiv))):
@@ -331,7 +374,8 @@ def report(targets: list[Target], tree: Path) -> str:
         "survivors that cannot change behaviour go into `tools/mutation_equivalents.toml`, "
         "with why.",
         "",
-        f"Run: {dt.date.today().isoformat()}, Python {platform.python_version()}, "
+        f"Written: {dt.date.today().isoformat()} (each module's session has its day in "
+        f"`tools/mutation_results.json`), Python {platform.python_version()}, "
         f"{os.cpu_count()} CPUs, cosmic-ray {cosmic_ray_version()}.",
         "",
         (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
@@ -368,6 +412,7 @@ def report(targets: list[Target], tree: Path) -> str:
     for m in eq:
         lines.append(f"- `{m.module}:{m.line}` {m.operator.removeprefix('core/')}: `{m.diff}` "
                      f"— {m.equivalent}")  # fmt: skip
+    RESULTS.write_text(json.dumps(kept, indent=1, sort_keys=True) + "\n")
     if stale:
         stale_list = ", ".join(str(i + 1) for i in sorted(stale))
         lines += ["", "Entries of `tools/mutation_equivalents.toml` that matched no survivor "

@@ -1,0 +1,38 @@
+"""The mutation report (tools/mutation.py) is made of the results kept in the repository where
+no session is at hand, and refuses them once the module is no longer the file they are of."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+import mutation as mu  # noqa: E402
+
+
+def test_kept_results_make_the_report_until_the_module_changes(tmp_path, monkeypatch):
+    module = tmp_path / "m.py"
+    module.write_text("def f(x):\n    return x + 1\n")
+    t = mu.Target("m", "m.py", "tests/test_m.py")
+    monkeypatch.setattr(mu, "OUT", tmp_path / "out")  # no session at hand
+    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
+    monkeypatch.setattr(mu, "load_equivalents", lambda: [])
+    survivor = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
+                         "- return x + 1 / + return x + 2", "survived")  # fmt: skip
+    killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
+                       "- return x + 1 / + return x - 1", "killed")  # fmt: skip
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "m.sqlite").touch()  # the session's day
+    entry = mu.results_entry(t, tmp_path, [killed, killed, survivor], 60)
+    assert entry["killed"] == 2 and len(entry["others"]) == 1
+    mu.RESULTS.write_text(json.dumps({"m": entry}))
+    (tmp_path / "out" / "m.sqlite").unlink()
+    text = mu.report([t], tmp_path)
+    assert "| m | `m.py` | 3 | 2 | 1 | 0 | 66.7 % | 1 min |" in text
+    assert "`m.py:2` NumberReplacer: `- return x + 1 / + return x + 2`" in text
+    assert json.loads(mu.RESULTS.read_text())["m"] == entry  # kept as it was
+    module.write_text("def f(x):\n    return x + 2\n")
+    text = mu.report([t], tmp_path)
+    assert "| m | `m.py` | not run (the file changed since its session: `--fresh m`)" in text
