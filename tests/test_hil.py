@@ -36,6 +36,13 @@ pytestmark = [
 ]
 VCAN = ["--can-interface", "socketcan", "--can-channel", "vcan0"]
 RATE = 50.0  # Hz: the daemon's rate here (one slow CPU under User-Mode Linux; docs/hil.md)
+# The daemon with its real-time settings (SCHED_FIFO, as the systemd unit runs it) where
+# permitted: at the normal scheduler the one slow CPU interleaved its writes with the simulated
+# robot's and candump's work (write phase 7.6-11 ms median, 45-64 overruns, a fifth of the
+# feedback a cycle late) and a drive sat at its torque limit: 5 of 10 demos faulted with the
+# host's other core busy, and one in CI; at FIFO 8 of 8 passed (compute p99 ≤ 7.7 ms, no
+# overrun)
+REALTIME = [] if os.geteuid() == 0 else ["--no-realtime"]
 
 
 def hil_config(tmp_path: Path, mode: str = "csp") -> Path:
@@ -198,7 +205,7 @@ def test_the_demo_over_vcan0_with_candump_as_witness(tmp_path, processes):
         start_sim(processes, config)
         daemon = processes(sys.executable, "-m", "cdprctl.cli", "run", "--config", str(config),
                            "--demo", "--rate", f"{RATE:g}", "--status", "0",
-                           "--no-realtime")  # fmt: skip
+                           *REALTIME)  # fmt: skip
         lines: list[str] = []
         reached = 0
         deadline = time.monotonic() + 300.0  # a cold numba cache compiles ~3 min in there
@@ -233,7 +240,7 @@ def test_a_link_that_goes_down_is_said_and_never_crashes_the_daemon(tmp_path, pr
     config = hil_config(tmp_path)
     sim = start_sim(processes, config)
     daemon = processes(sys.executable, "-m", "cdprctl.cli", "run", "--config", str(config),
-                       "--rate", f"{RATE:g}", "--status", "0", "--no-realtime",
+                       "--rate", f"{RATE:g}", "--status", "0", *REALTIME,
                        "--duration", "20")  # fmt: skip
     lines = []
     deadline = time.monotonic() + 120.0
