@@ -317,7 +317,9 @@ class CommandValidator:
         if method not in METHODS:
             raise CommandError(f"method = {json.dumps(method)} must be one of {', '.join(METHODS)}")
         nu = _number(d, "nu", "", 0.0, 1.0) if "nu" in d else base.nu
-        direction = tuple(_vector(d, "direction", "")) if "direction" in d else base.direction
+        direction = base.direction
+        if "direction" in d:  # plain floats: the message shows them as numbers
+            direction = tuple(_vector(d, "direction", "").tolist())
         if np.linalg.norm(direction) < 1e-9:
             raise CommandError(f"direction = {list(direction)} must be a non-zero 3-vector")
         return self._options(

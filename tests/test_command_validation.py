@@ -1,0 +1,142 @@
+"""The command validator's rules at the unit level (``cdprctl/telemetry/validate.py``), no
+network: each payload limit at its kind, a boolean or a string where a number goes, an unknown
+field whatever its name, the commands without fields, a path's name and its rejection, a move's
+scaled limits and its messages, a zero direction, a gripper named or not. Mutation testing
+found these held by no test (tools/mutation_results.json); every name here says "refused",
+"rejected" or "becomes", which the module's mutation selection picks."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+
+from cdprctl.model import load_robot
+from cdprctl.telemetry.validate import (
+    MAX_PATH_PAYLOAD,
+    MAX_PAYLOAD,
+    CommandError,
+    CommandValidator,
+)
+
+
+@pytest.fixture(scope="module")
+def v(rowc):
+    return CommandValidator(rowc, commands_enabled=True)
+
+
+def test_a_payload_beyond_its_kinds_limit_is_refused(v):
+    """4096 bytes for every command, 1 MiB for a path (its file travels in it): a path of
+    5000 bytes is taken, the same bytes as a move or a set_tda are refused, a path beyond
+    1 MiB too."""
+    big = json.dumps({"text": "x" * 5000}).encode()
+    assert MAX_PAYLOAD == 4096 and MAX_PATH_PAYLOAD == 1048576
+    assert v.parse(big, "path") == {"text": "x" * 5000}
+    for kind in ("move", "set_tda", "abort"):
+        with pytest.raises(CommandError, match=f"payload of {len(big)} bytes exceeds 4096 bytes"):
+            v.parse(big, kind)
+    huge = json.dumps({"text": "x" * MAX_PATH_PAYLOAD}).encode()
+    with pytest.raises(CommandError, match=f"exceeds {MAX_PATH_PAYLOAD} bytes"):
+        v.parse(huge, "path")
+
+
+@pytest.mark.parametrize("value", [True, "0.5", None, [0.5]])
+def test_a_number_field_holding_no_number_is_refused(v, value):
+    """max_acceleration = true would be 1.0 m/s² and within rowc's limit: refused as what it
+    is, like a string, null or a list."""
+    d = {"position": [1.5, 0.35, 0.59], "max_acceleration": value}
+    with pytest.raises(CommandError) as exc:
+        v.check("move", d, "enabled")
+    assert str(exc.value) == (
+        f"max_acceleration = {json.dumps(value)} must be a number (m/s²)"
+    )
+
+
+def test_a_vector_of_the_wrong_length_is_refused_showing_its_first_80_characters(v):
+    value = list(range(100))
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": value}, "enabled")
+    shown = json.dumps(value)[:80]
+    assert str(exc.value) == f"position = {shown} must be a list of 3 numbers (m)"
+
+
+@pytest.mark.parametrize("key", ["frame", "accel", "zzz", "Position"])
+def test_an_unknown_field_is_refused_whatever_its_name(v, key):
+    """Before or after "id" in the alphabet: "id" alone is allowed beside a kind's fields."""
+    with pytest.raises(CommandError, match=f"move: field '{key}' is unknown"):
+        v.check("move", {"position": [1.5, 0.35, 0.59], key: 1}, "enabled")
+    assert v.check("move", {"position": [1.5, 0.35, 0.59], "id": 7}, "enabled")[0] == "move"
+
+
+@pytest.mark.parametrize(
+    ("kind", "state"),
+    [("enable", "ready"), ("abort", "moving"), ("disable", "enabled"), ("stop", "moving"),
+     ("pause", "moving")],
+)  # fmt: skip
+def test_a_command_without_fields_becomes_itself(v, kind, state):
+    assert v.check(kind, {}, state) == (kind, {})
+
+
+def test_a_path_name_of_200_characters_is_taken_and_a_longer_one_refused(v):
+    text = "x, y, z\n1.6, 0.35, 0.59\n"
+    assert v.check("path", {"text": text, "name": "n" * 200}, "enabled")[1]["name"] == "n" * 200
+    assert v.check("path", {"text": text, "name": "short"}, "enabled")[1]["name"] == "short"
+    for name in ("n" * 201, 5):
+        with pytest.raises(CommandError, match="name must be a string of at most 200 characters"):
+            v.check("path", {"text": text, "name": name}, "enabled")
+
+
+def test_a_path_the_plan_rejects_is_refused_as_a_command(v, rowc):
+    """Planned from where the robot rests (the snapshot's reference): a waypoint outside the
+    workspace is a CommandError naming the path, never the planner's own exception."""
+    snap = {"reference": np.r_[rowc.home.position, rowc.home.rpy]}
+    ok = v.check("path", {"text": "x, y, z\n1.6, 0.35, 0.59\n", "name": "a.csv"}, "enabled",
+                 snap)  # fmt: skip
+    assert ok[1]["plan"] is not None
+    with pytest.raises(CommandError, match=r"^path b\.csv: .*x = 2\.9000 m is outside"):
+        v.check("path", {"text": "x, y, z\n2.9, 0.35, 0.59\n", "name": "b.csv"}, "enabled", snap)
+
+
+def test_a_moves_speed_becomes_a_fraction_of_the_limit_and_so_does_its_acceleration(v, rowc):
+    c = rowc.control
+    out = v.check("move", {"position": [1.6, 0.35, 0.59], "max_velocity": 0.25 * c.max_velocity,
+                           "max_acceleration": 0.4 * c.max_acceleration}, "enabled")  # fmt: skip
+    assert out[1]["speed"] == pytest.approx(0.25) and out[1]["accel"] == pytest.approx(0.4)
+    plain = v.check("move", {"position": [1.6, 0.35, 0.59]}, "enabled")[1]
+    assert plain["speed"] == 1.0 and plain["accel"] == 1.0
+
+
+def test_a_pose_no_tensions_hold_is_refused_to_the_tenth_of_a_millimetre(v):
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": [0.512345, 0.35, 0.3], "rpy": [0.0, -0.19876, 0.0]},
+                "enabled")  # fmt: skip
+    assert str(exc.value).startswith(
+        "position = [0.5123, 0.35, 0.3] m, rpy = [0.0, -0.1988, 0.0] rad cannot be held within "
+        "the tension limits (INFEASIBLE"
+    ), str(exc.value)
+
+
+def test_a_zero_direction_is_refused(v):
+    with pytest.raises(CommandError, match=r"direction = \[0.0, 0.0, 0.0\] must be a non-zero"):
+        v.check("set_tda", {"method": "barycenter", "direction": [0, 0, 0]}, "enabled")
+    out = v.check("set_tda", {"direction": [0, 0, 1e-3]}, "enabled")
+    assert out[0] == "set_tda" and out[1]["tda"].direction == (0.0, 0.0, 1e-3)
+
+
+def test_a_gripper_unnamed_on_a_robot_with_two_is_refused():
+    """seed000 with its grippers on cables 1 and 8: which one must be said (with one alone it
+    may go unsaid); a number names the cable as `cdprctl send ... gripper=1` gives it, a
+    boolean does not."""
+    v = CommandValidator(load_robot(CONFIG / "seed000_grippers.toml"), True)
+    with pytest.raises(CommandError, match=r"^gripper = null must name a gripper's cable \(1, 8\)"):
+        v.check("gripper", {"travel": 0.1}, "enabled")
+    assert v.check("gripper", {"gripper": 8, "travel": 0.1}, "enabled")[1] == {
+        "gripper": 1, "grip": "travel", "value": 0.1}  # fmt: skip
+    with pytest.raises(CommandError, match=r"^gripper = true must name"):
+        v.check("gripper", {"gripper": True, "travel": 0.1}, "enabled")
+    assert v.check("gripper", {"gripper": "1", "force": 5}, "enabled")[1] == {
+        "gripper": 0, "grip": "force", "value": 5.0}  # fmt: skip
+    assert v.check("gripper", {"gripper": "1", "release": True}, "enabled")[1] == {
+        "gripper": 0, "grip": "release", "value": 0.0}  # fmt: skip
