@@ -11,6 +11,9 @@ Kinds (``FaultEvent.kind``) and their ``value``:
 * ``encoder_jump`` — the encoder of ``cable`` jumps by ``value`` rad;
 * ``cable_snap`` — ``cable`` breaks;
 * ``winch_slip`` — ``cable`` slips on its drum at ``value`` m/s (unseen by the encoder);
+* ``estop`` — the safety chain opens at every drive's STO input (an e-stop; ``value``: the
+  error code the drives report, 0 for the simulated drives' own, ``EMCY_STO``), closed again
+  when the event ends (CiA 402 drives; the drives keep their error until a fault reset);
 * ``external_wrench`` — ``value`` = (fx, fy, fz, mx, my, mz) N, N·m at P, base frame,
   ramped over ``ramp`` s (0: a step) from the wrench acting when the event starts: an event
   of zeros with a ramp takes a force off as gradually as one put it on.
@@ -27,6 +30,8 @@ from typing import Any
 
 import can
 
+from drivers.cia402.protocol import EMCY_STO
+
 KINDS = (
     "frame_loss",
     "frame_delay",
@@ -37,6 +42,7 @@ KINDS = (
     "cable_snap",
     "winch_slip",
     "external_wrench",
+    "estop",
 )
 
 
@@ -185,6 +191,10 @@ class FaultInjector:
                 d.encoder_offset += float(ev.value)
         elif ev.kind == "cable_snap":
             net.plant.cable_cut[c] = True
+        elif ev.kind == "estop":
+            for i, d in enumerate(net.drives):
+                if d is not None:
+                    net._send(net.bus_index_of(i), d.open_sto(int(ev.value) or EMCY_STO))
 
     def _end(self, net: Any, ev: FaultEvent) -> None:
         c = ev.cable
@@ -196,6 +206,10 @@ class FaultInjector:
             self.corruption = 0.0
         elif ev.kind == "silent_drive":
             net.drives[c].silent = False
+        elif ev.kind == "estop":
+            for d in net.drives:
+                if d is not None:
+                    d.close_sto()
         elif ev.kind == "external_wrench":
             net.plant.ext_force[:] = 0.0
             net.plant.ext_moment[:] = 0.0

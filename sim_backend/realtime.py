@@ -90,7 +90,10 @@ def run_realtime(
                     f"sim t={sim_t:7.2f} s  P=[{p[0]:.4f} {p[1]:.4f} {p[2]:.4f}] m  "
                     f"tensions {plant.tension.min():.1f}..{plant.tension.max():.1f} N  "
                     f"frames in/out {net.frames_in}/{net.frames_out}  "
-                    f"brakes {int(plant.brake.sum())}/{len(plant.brake)}",
+                    f"brakes {int(plant.brake.sum())}/{len(plant.brake)}"
+                    + ("  safety chain OPEN" if any(
+                        getattr(getattr(d, "axis", None), "sto_open", False)
+                        for d in net.drives) else ""),
                     flush=True,
                 )
                 next_status += status_every

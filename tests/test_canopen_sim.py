@@ -288,3 +288,57 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
     finally:
         node.rpdo[1].stop()
         network.sync.stop()
+
+
+def test_an_open_safety_chain_faults_the_drive_until_released_and_reset(rig):
+    """The e-stop as canopen's master sees it (``FaultEvent`` "estop", what `cdprctl sim
+    --estop` schedules): an enabled drive goes to FAULT with maxon EPOS4's STO error 0x8A88
+    (its EMCY, 0x603F), no torque, the brake closed; a fault reset is refused while the chain
+    is open; once it closes the reset is taken and the drive enables again."""
+    from sim_backend.faults import FaultEvent, FaultInjector
+
+    robot, network, _ = rig
+    network.nodes.pop(5, None)
+    node = canopen.BaseNode402(5, str(EDS))
+    network.add_node(node)
+    node.sdo.RESPONSE_TIMEOUT = 1.0
+    node.nmt.state = "PRE-OPERATIONAL"
+    node.setup_402_state_machine()
+    node.op_mode = "CYCLIC SYNCHRONOUS TORQUE"
+    node.nmt.state = "OPERATIONAL"
+    network.sync.start(0.01)
+    try:
+        node.tpdo[1].wait_for_reception(timeout=2.0)
+        cable = robot.drive(5).cable
+        with robot.lock:
+            hold = float(robot.plant.drum_ratio[cable] * robot.plant.tension[cable])
+        node.rpdo[1]["Target torque"].raw = round(hold / robot.drive(5).axis.rated_torque * 1000)
+        node.rpdo[1].start(0.01)
+        for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
+            node.state = state
+        with robot.lock:
+            assert not robot.plant.brake[cable]
+            estop = FaultEvent(robot.net.time + 0.05, "estop", duration=1.0)
+            FaultInjector([estop]).attach(robot.net)
+        node.emcy.wait(p.EMCY_STO, timeout=2.0)
+        node.tpdo[1].wait_for_reception(timeout=1.0)
+        assert node.state == "FAULT"
+        assert node.sdo[0x603F].raw == p.EMCY_STO
+        with robot.lock:
+            assert robot.plant.brake[cable] and robot.plant.motor_torque[cable] == 0.0
+        node.controlword = 0x00
+        time.sleep(0.05)
+        node.controlword = 0x80  # a fault reset's rising edge, the chain still open
+        time.sleep(0.2)
+        assert node.state == "FAULT" and node.sdo[0x603F].raw == p.EMCY_STO
+        node.controlword = 0x00  # bit 7 down again: the master's reset below is an edge
+        while robot.net.time < estop.time + estop.duration + 0.05:
+            time.sleep(0.05)
+        node.state = "SWITCH ON DISABLED"  # canopen's master: the fault reset
+        assert node.sdo[0x603F].raw == 0
+        for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):
+            node.state = state
+        assert robot.drive(5).axis.state is p.PowerState.OPERATION_ENABLED
+    finally:
+        node.rpdo[1].stop()
+        network.sync.stop()

@@ -486,3 +486,55 @@ def test_a_drive_powered_on_says_boot_up_unless_silent():
         assert drive.boot_up() == []
     finally:
         peer.close()
+
+
+def test_an_open_safety_chain_faults_a_drive_only_when_its_power_stage_is_on():
+    """The STO input open (``Cia402Axis.open_sto``): a disabled drive stays disabled, no
+    error, until it is switched on — then FAULT with the STO error and its EMCY at the next
+    tick; an enabled one faults at once; no fault reset is taken while the chain is open, the
+    error stays after it closes until one is; the brake holds throughout."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as rig:
+        drive = rig.net.drives[2]
+        axis = drive.axis
+        assert axis.state is p.PowerState.SWITCH_ON_DISABLED
+        assert drive.open_sto() == [] and axis.state is p.PowerState.SWITCH_ON_DISABLED
+        assert axis.fault_code == 0 and rig.plant.brake[2]
+        axis.apply_controlword(0x06)  # shutdown: ready to switch on, the stage still off
+        assert axis.state is p.PowerState.READY_TO_SWITCH_ON and axis.emcy_due is None
+        axis.apply_controlword(0x07)  # switch on: the stage would be energised
+        assert axis.state is p.PowerState.FAULT and axis.fault_code == p.EMCY_STO
+        emcy = [m for m in drive.tick(rig.net.time) if m.arbitration_id == p.EMCY + 3]
+        assert [p.EMCY_STRUCT.unpack(m.data)[0] for m in emcy] == [p.EMCY_STO]
+        assert not any(m.arbitration_id == p.EMCY + 3 for m in drive.tick(rig.net.time))
+        for cw in (0x00, 0x80):
+            axis.apply_controlword(cw)
+        assert axis.state is p.PowerState.FAULT and axis.fault_code == p.EMCY_STO
+        drive.close_sto()
+        assert axis.state is p.PowerState.FAULT and rig.plant.brake[2]  # until acknowledged
+        for cw in (0x00, 0x80, 0x06, 0x0F):
+            axis.apply_controlword(cw)
+        assert axis.state is p.PowerState.OPERATION_ENABLED and axis.fault_code == 0
+        frames = drive.open_sto(0xFF20)  # Elmo's code, an enabled drive: at once
+        assert axis.state is p.PowerState.FAULT and axis.fault_code == 0xFF20
+        assert rig.plant.brake[2] and rig.plant.motor_torque[2] == 0.0
+        assert [p.EMCY_STRUCT.unpack(m.data)[0] for m in frames] == [0xFF20]
+    assert p.describe_emcy(0x8A88).startswith("safe torque off")
+
+
+@pytest.mark.parametrize("bad", ["x", "8:4", "-1", "8:12:14", "nan", "8:8"])
+def test_a_bad_estop_time_is_one_line_with_the_rule(bad, capsys):
+    from cdprctl.cli import main
+
+    assert main(["sim", "--config", str(CONFIG / "rowc.toml"), "--estop", bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"cdprctl sim: error: --estop = {bad!r}: must be AT or AT:RELEASE in s, "
+                   "0 <= AT < RELEASE (e.g. 8:12)"]  # fmt: skip
+
+
+def test_an_estop_time_is_the_event_it_says():
+    from cdprctl.commands.sim import estop_event
+
+    ev = estop_event("8:12", "cia402")
+    assert (ev.time, ev.kind, ev.duration, ev.value) == (8.0, "estop", 4.0, 0)
+    assert math.isinf(estop_event("3", "cia402").duration)
+    assert "no safety chain" in estop_event("3", "odrive")

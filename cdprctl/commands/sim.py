@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import Any
 
@@ -71,6 +72,14 @@ def add_parser(sub: Any) -> None:
         "faults, silent drives, lateral pushes (sim_backend/faults.py)",
     )
     p.add_argument("--fault-seed", type=int, default=1, help="seed of --faults")
+    p.add_argument(
+        "--estop",
+        metavar="AT[:RELEASE]",
+        help="open the drives' safety chain (their STO inputs: an e-stop) AT s after the start "
+        "and close it at RELEASE s: no torque, brakes closed, each energised drive in FAULT "
+        "with maxon EPOS4's STO error 0x8A88 until a fault reset after the release "
+        "(CiA 402 drives; docs/safety.md)",
+    )
     h = p.add_argument_group("start and errors (docs/homing.md)")
     h.add_argument(
         "--start-pose",
@@ -160,6 +169,18 @@ def run(args: argparse.Namespace) -> int:
             kinds=("frame_loss", "drive_fault", "silent_drive", "external_wrench"),
         )
         print(f"cdprctl sim: {len(faults.events)} faults scheduled (seed {args.fault_seed})")
+    if args.estop is not None:
+        estop = estop_event(args.estop, model.drives.driver)
+        if isinstance(estop, str):
+            print(f"cdprctl sim: error: {estop}", file=sys.stderr)
+            return 2
+        from sim_backend.faults import FaultInjector
+
+        faults = faults or FaultInjector([])
+        faults.events.append(estop)
+        print(f"cdprctl sim: the safety chain opens at {estop.time:g} s"
+              + (f", closes at {estop.time + estop.duration:g} s"
+                 if math.isfinite(estop.duration) else ""), flush=True)  # fmt: skip
     plant, encoders = start_state(model, args)
     try:
         net = run_realtime(
@@ -177,6 +198,25 @@ def run(args: argparse.Namespace) -> int:
     net.close()
     print("cdprctl sim: stopped", flush=True)
     return 0
+
+
+def estop_event(text: str, driver: str) -> Any:
+    """``--estop AT[:RELEASE]`` (s) as a ``FaultEvent``, or why not (a one-line message)."""
+    from sim_backend.faults import FaultEvent
+
+    if driver != "cia402":
+        return (f"--estop: the simulated {driver} drives have no safety chain (CiA 402 "
+                "drives only)")  # fmt: skip
+    parts = text.split(":")
+    try:
+        at = float(parts[0])
+        release = float(parts[1]) if len(parts) == 2 else math.inf
+    except ValueError:
+        at = release = math.nan
+    if len(parts) > 2 or not (math.isfinite(at) and at >= 0.0) or not release > at:
+        return (f"--estop = {text!r}: must be AT or AT:RELEASE in s, 0 <= AT < RELEASE "
+                "(e.g. 8:12)")  # fmt: skip
+    return FaultEvent(at, "estop", value=0, duration=release - at)
 
 
 def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:

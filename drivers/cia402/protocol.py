@@ -82,6 +82,14 @@ OD_FOLLOWING_ERROR_WINDOW = 0x6065
 OD_FOLLOWING_ERROR_TIMEOUT = 0x6066
 FOLLOWING_ERROR_OFF = 0xFFFFFFFF
 EMCY_FOLLOWING_ERROR = 0x8611
+# Safe torque off (the drive's STO input open: the e-stop chain): no CiA code exists; each
+# vendor has its own (docs/safety.md). The simulated drives report maxon EPOS4's.
+EMCY_STO = 0x8A88
+STO_CODES = {
+    0x8A88: "safe torque off: the STO input is open (maxon EPOS4 'STO error')",
+    0x5441: "disabled by the enable or STO input (Technosoft iPOS; Elmo: by INHIBIT or ABORT)",
+    0xFF20: "safe torque off in use (Elmo Gold)",
+}
 MODE_CSP = 8  # cyclic synchronous position (CiA 402 §8)
 MODE_CST = 10  # cyclic synchronous torque (CiA 402 §8)
 #: the modes of operation cdprctl drives a CiA 402 drive in, by the ``[drives] mode`` name
@@ -275,6 +283,8 @@ EMCY_CLASSES = (
 def describe_emcy(code: int) -> str:
     if code in EMCY_CODES:
         return EMCY_CODES[code]
+    if code in STO_CODES:
+        return STO_CODES[code]
     cls = next((name for value, mask, name in EMCY_CLASSES if code & mask == value),
                "unknown class")  # fmt: skip
     return f"{cls} error (code 0x{code:04X})"

@@ -20,6 +20,10 @@ from drivers.cia402 import protocol as p
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
+# the states with the power stage on: where an open safety chain faults the drive
+ENERGISED = frozenset((p.PowerState.SWITCHED_ON, p.PowerState.OPERATION_ENABLED,
+                       p.PowerState.QUICK_STOP_ACTIVE))  # fmt: skip
+
 
 class Cia402Axis:
     def __init__(self, cable: int, plant: CdprPlant, od: dict[tuple[int, int], Any],
@@ -49,6 +53,11 @@ class Cia402Axis:
         # ``encoder_zero`` is the motor angle (counts) it restarted at. Absolute: kept (0)
         self.incremental = False
         self.encoder_zero = 0
+        # the safety chain at the drive's STO input: open, the power stage can give no torque
+        # (``open_sto``); ``sto_code`` the error it reports, ``emcy_due`` one its node sends
+        self.sto_open = False
+        self.sto_code = p.EMCY_STO
+        self.emcy_due: int | None = None
 
     # -- the device profile ------------------------------------------------------------------
     @property
@@ -68,12 +77,17 @@ class Cia402Axis:
         self.last_controlword = cw
         if cmd is p.Command.FAULT_RESET and not rising_reset:
             return
+        if cmd is p.Command.FAULT_RESET and self.sto_open:
+            return  # the error persists while the chain is open: the reset is refused
         if cmd is p.Command.FAULT_RESET and self.state is p.PowerState.FAULT:
             self.fault_code = 0
         if cmd is None:
             return
         nxt = p.TRANSITIONS.get((self.state, cmd))
-        if nxt is not None:
+        if nxt is not None and self.sto_open and nxt[0] in ENERGISED:
+            self.fault(self.sto_code)  # switching the power stage on with the chain open
+            self.emcy_due = self.sto_code
+        elif nxt is not None:
             if self.state is p.PowerState.READY_TO_SWITCH_ON and cmd is p.Command.ENABLE_OPERATION:
                 self.state = p.PowerState.OPERATION_ENABLED  # 3 then 4 in one step
                 self.transitions += [3, 4]
@@ -100,6 +114,22 @@ class Cia402Axis:
         self.transitions.append(13)
         self.fault_code = code
         self.apply()
+
+    def open_sto(self, code: int) -> bool:
+        """The safety chain opens (an e-stop): no torque from now on, the brake closes; an
+        energised power stage (switched on, enabled, quick stop) faults with ``code``, as a
+        maxon EPOS4 does (0x8A88; docs/safety.md), and True (its node sends the EMCY); a
+        disabled one stays disabled, no error, until it is switched on."""
+        self.sto_open, self.sto_code = True, code
+        if self.state in ENERGISED or self.state is p.PowerState.FAULT_REACTION_ACTIVE:
+            self.fault(code)
+            return True
+        return False
+
+    def close_sto(self) -> None:
+        """The chain closes: the error stays until a fault reset (the operator's
+        acknowledgement), then the drive can be enabled again."""
+        self.sto_open = False
 
     def connection_lost(self, option: int) -> None:
         """The abort-connection option code's reaction (0x6007, CiA 402 §6.4.1; not 0): 2

@@ -203,6 +203,10 @@ class Cia402Drive:
             emcy = self.inject_fault(p.EMCY_FOLLOWING_ERROR)
             if not self.silent:
                 out.append(emcy)
+        if axis.emcy_due is not None:  # switched on with the safety chain open
+            if not self.silent:
+                out.append(self._emcy(axis.emcy_due))
+            axis.emcy_due = None
         if axis.state is p.PowerState.OPERATION_ENABLED and t - self.last_rx > self.comm_timeout:
             out += self._connection_lost()
         hb_ms = self.od[(p.OD_PRODUCER_HEARTBEAT, 0)]
@@ -225,6 +229,15 @@ class Cia402Drive:
         return can.Message(
             arbitration_id=p.HEARTBEAT + self.node_id, data=bytes([state]), is_extended_id=False
         )
+
+    def open_sto(self, code: int = p.EMCY_STO) -> list[can.Message]:
+        """The safety chain at this drive's STO input opens (``Cia402Axis.open_sto``): the
+        EMCY where the drive faults."""
+        faulted = self.axis.open_sto(code)
+        return [self._emcy(code)] if faulted and not self.silent else []
+
+    def close_sto(self) -> None:
+        self.axis.close_sto()
 
     def inject_fault(self, code: int) -> can.Message:
         """A drive fault: FAULT state (brake), and its EMCY."""
