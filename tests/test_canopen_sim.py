@@ -242,21 +242,28 @@ def test_the_master_reads_and_changes_the_mapping(rig):
     assert int.from_bytes(got[0], "little", signed=True) == pytest.approx(counts, abs=2)
 
 
-def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
-    """canopen's CiA 402 master (``BaseNode402``) against a simulated drive, given only the
-    EDS: cyclic synchronous torque, OPERATION ENABLED through its state machine, then a
-    target torque by RPDO and SYNC reaches the winch."""
-    robot, network, _ = rig
-    network.nodes.pop(5, None)
-    node = canopen.BaseNode402(5, str(EDS))
+def torque_node_402(network, node_id: int):
+    """canopen's CiA 402 master (``BaseNode402``) for one drive, given only the EDS: its state
+    machine set up, cyclic synchronous torque, OPERATIONAL, the network's SYNC at 100 Hz."""
+    network.nodes.pop(node_id, None)
+    node = canopen.BaseNode402(node_id, str(EDS))
     network.add_node(node)
     node.sdo.RESPONSE_TIMEOUT = 1.0
     node.nmt.state = "PRE-OPERATIONAL"
     node.setup_402_state_machine()
     node.op_mode = "CYCLIC SYNCHRONOUS TORQUE"
-    assert node.sdo[0x6061].raw == 10
     node.nmt.state = "OPERATIONAL"
     network.sync.start(0.01)
+    return node
+
+
+def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
+    """canopen's CiA 402 master (``BaseNode402``) against a simulated drive, given only the
+    EDS: cyclic synchronous torque, OPERATION ENABLED through its state machine, then a
+    target torque by RPDO and SYNC reaches the winch."""
+    robot, network, _ = rig
+    node = torque_node_402(network, 5)
+    assert node.sdo[0x6061].raw == 10
     try:
         node.tpdo[1].wait_for_reception(timeout=2.0)
         with robot.lock:
@@ -298,15 +305,7 @@ def test_an_open_safety_chain_faults_the_drive_until_released_and_reset(rig):
     from sim_backend.faults import FaultEvent, FaultInjector
 
     robot, network, _ = rig
-    network.nodes.pop(5, None)
-    node = canopen.BaseNode402(5, str(EDS))
-    network.add_node(node)
-    node.sdo.RESPONSE_TIMEOUT = 1.0
-    node.nmt.state = "PRE-OPERATIONAL"
-    node.setup_402_state_machine()
-    node.op_mode = "CYCLIC SYNCHRONOUS TORQUE"
-    node.nmt.state = "OPERATIONAL"
-    network.sync.start(0.01)
+    node = torque_node_402(network, 5)
     try:
         node.tpdo[1].wait_for_reception(timeout=2.0)
         cable = robot.drive(5).cable
