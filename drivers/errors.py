@@ -50,3 +50,9 @@ class DriveFaultError(DriverError):
         self.node_id = node_id
         self.code = code
         self.description = description
+
+
+class SafeTorqueOffError(DriveFaultError):
+    """A drive reports safe torque off (its STO input open: the e-stop's safety chain, by one of
+    ``protocol.STO_CODES``): not a fault of the drive's; it has no torque, its brake holds, and
+    it takes no fault reset until the chain is closed (docs/safety.md)."""

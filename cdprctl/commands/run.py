@@ -35,6 +35,13 @@ def add_parser(sub: Any) -> None:
         help="with the demo: a lateral force (N along y, ramped) at home",
     )
     p.add_argument(
+        "--estop",
+        metavar="AT[:RELEASE]",
+        help="with --sim: the drives' safety chain opens AT s after the start (an e-stop: "
+        "safe torque off, brakes closed) and closes at RELEASE s; the daemon stays in its "
+        "e-stop state until a reset (docs/safety.md)",
+    )
+    p.add_argument(
         "--duration",
         type=float,
         help="stop after this many seconds (the demo plays again while a round fits)",
@@ -193,6 +200,15 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             print(f"cdprctl run: error: --foxglove = {exc}", file=sys.stderr)
             return 2
+    estop = None
+    if args.estop is not None:
+        from cdprctl.commands.sim import estop_event
+
+        estop = estop_event(args.estop, model.drives.driver) if args.sim else (
+            "--estop needs --sim: a real robot's safety chain is opened by its e-stop button")
+        if isinstance(estop, str):
+            print(f"cdprctl run: error: {estop}", file=sys.stderr)
+            return 2
     from cdprctl.daemon.startup import interrupt_the_start_up
     from drivers.errors import DriverError
 
@@ -211,6 +227,8 @@ def run(args: argparse.Namespace) -> int:
             as_built=as_built,
         )
         demo = (args.sim or args.demo) and not args.no_demo and path is None
+        if estop is not None and daemon.sim is not None:
+            daemon.sim.schedule([estop])
         return daemon.run(args.duration, demo, args.disturbance, path)
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

@@ -68,7 +68,7 @@ ACCEPTED_IN: dict[CommandKind, frozenset[State]] = {
     CommandKind.ENABLE: frozenset({State.READY}),
     CommandKind.DISABLE: frozenset({State.ENABLED, State.MOVING, State.ENABLING}),
     CommandKind.STOP: _MOTION,
-    CommandKind.RESET: frozenset({State.FAULT}),
+    CommandKind.RESET: frozenset({State.FAULT, State.ESTOP}),
     CommandKind.MOVE: _MOTION,
     CommandKind.GRIPPER: _MOTION,
     CommandKind.SET_TDA: frozenset(State),

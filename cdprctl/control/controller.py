@@ -81,6 +81,7 @@ class Controller:
         # position mode: a drive sitting at its torque limit is a load beyond the cables
         torque_limits = self.winches.limit if model.drives.holds_lengths else None
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits)
+        self.supervisor.position = e.position  # the estimate, updated in place
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
         self.jog = Jog(model, d, tr, self.limits)

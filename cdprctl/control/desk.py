@@ -185,6 +185,10 @@ class CommandDesk:
 
     def _reset(self, t: float, cmd: Command) -> None:
         c = self.ctl
+        # from the e-stop the drives take the reset only once the chain is closed; else they
+        # report it again and the e-stop says so
+        if self.data.state is State.ESTOP:
+            c.supervisor.estop.reset_at = t
         c.drives.begin_recover()
         c.supervisor.clear_fault()
         c.trajectory.reset(c.pose6())

@@ -15,6 +15,7 @@ class State(enum.Enum):
     DISABLING = "disabling"
     STOPPING = "stopping"  # a fault: holding, then disabling
     FAULT = "fault"
+    ESTOP = "estop"  # the drives' safety chain open (safe torque off): not a fault; estop.py
 
 
 #: the states in which the controller commands tensions (DISABLING: decelerating to rest)

@@ -7,10 +7,13 @@
     ENABLING/ENABLED/MOVING ─disable→ DISABLING (decelerating) → READY (at rest: brakes off)
     any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
     FAULT ─reset→ READY (drive faults reset, drives disabled)
+    any but INIT ─the drives report safe torque off→ ESTOP ─reset, the chain closed→ READY
 
-A driver fault skips STOPPING: the drives are not to be trusted, their brakes close. Every
-fault has a ``FaultKind``; ``states.PERSISTENCE`` says why it is immediate or what must
-persist. Nothing here raises or allocates but the event text of a transition or a fault.
+A driver fault skips STOPPING: the drives are not to be trusted, their brakes close. An open
+safety chain (``SafeTorqueOffError``) is no fault: the e-stop state (``estop.py``), no FAULT,
+no re-enable until a reset the drives take. Every fault has a ``FaultKind``;
+``states.PERSISTENCE`` says why it is immediate or what must persist. Nothing here raises or
+allocates but the event text of a transition, a fault or the e-stop.
 """
 
 from __future__ import annotations
@@ -21,11 +24,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from cdprctl.control.data import ControlData
+from cdprctl.control.estop import EmergencyStop
 from cdprctl.control.states import FaultKind, State
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.numerics import worst_ratio
-from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError
+from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
 from drivers.vocabulary import Lifecycle, WinchStates
 
 
@@ -56,7 +60,11 @@ TRANSITIONS: dict[State, frozenset[State]] = {
     S.DISABLING: frozenset({S.READY, S.STOPPING, S.FAULT}),
     S.STOPPING: frozenset({S.FAULT}),
     S.FAULT: frozenset({S.READY}),
+    S.ESTOP: frozenset({S.READY}),
 }
+# the safety chain can open in any state but the start-up's (the drives not yet configured)
+for _s in (S.READY, S.ENABLING, S.ENABLED, S.MOVING, S.DISABLING, S.STOPPING, S.FAULT):
+    TRANSITIONS[_s] = TRANSITIONS[_s] | {S.ESTOP}
 
 
 def driver_fault_kind(err: DriverError | None) -> FaultKind:
@@ -138,6 +146,9 @@ class Supervisor:
         # seed000_grippers at 500 Hz stopped once on 64 ms after such a stall; drives that
         # really fall silent are the driver's (feedback_timeout, over running cycles)
         self._feedback_old = Persistence(config.period)
+        self.estop = EmergencyStop()
+        # m, base frame: the estimated position (the controller gives the estimator's array)
+        self.position = np.zeros(3)
         self._persistences = (
             self._tension_over, self._torque_at_limit, self._speed_over, self._feedback_old
         )
@@ -193,6 +204,21 @@ class Supervisor:
     ) -> None:
         """One cycle's checks, in order of precedence (``speed``: m/s, estimated)."""
         d, drv = self.data, self.drives
+        if d.state is State.ESTOP:
+            said = self.estop.watch(t, self.position, speed)
+            if said is not None:
+                d.events.append((t, said))
+            return
+        err = drv.error
+        if drv.lifecycle is Lifecycle.ERROR and isinstance(err, DriveFaultError) and (
+            isinstance(err, SafeTorqueOffError) or self.estop.refused(t, err)
+        ):
+            d.events.append((t, self.estop.enter(t, self.position, err)))
+            d.fault_reason = "emergency stop: the safety chain is open"
+            d.fault_kind = None
+            drv.begin_deactivate()
+            self.set_state(State.ESTOP, t, "the drives' safety chain is open")
+            return
         if drv.lifecycle is Lifecycle.ERROR and d.state is not State.FAULT:
             if d.state is State.STOPPING:  # the drives failed during the controlled stop
                 d.events.append((t, f"FAULT during the stop: drives: {drv.error}"))

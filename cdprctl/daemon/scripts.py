@@ -69,7 +69,7 @@ class PathScript:
 
     def step(self, d: ControlData) -> Command | None:
         """The next command to submit, if any; sets ``done`` once the path ended."""
-        if d.state is State.FAULT:
+        if d.state in (State.FAULT, State.ESTOP):
             self.done = True
             return None
         if not self._path_sent:

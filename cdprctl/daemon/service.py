@@ -44,7 +44,9 @@ from cdprctl.daemon.startup import (
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import tda_options_of
 
-DRIVES_OFF = frozenset({State.READY, State.FAULT, State.INIT})  # what a stop waits for
+DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
+# where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
+DEMO_ENDS = frozenset({State.READY, State.FAULT, State.ESTOP})  # what a stop waits for
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -263,7 +265,7 @@ class Daemon:
                 submit(cmd)
             end = (path is not None and path.done) or (
                 duration is not None and now >= duration) or (
-                demo and not script and duration is None and d.state in (State.READY, State.FAULT)
+                demo and not script and duration is None and d.state in DEMO_ENDS
             )  # fmt: skip
             if (end or self.stop_requested.is_set()) and stopping_since is None:
                 stopping_since = now

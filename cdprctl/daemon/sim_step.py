@@ -52,12 +52,19 @@ class SimStepper:
 
     def disturb(self, force: float) -> None:
         """A lateral force ``force`` N along y at the platform, ramped over 1 s from now."""
-        from sim_backend.faults import FaultEvent, FaultInjector
+        from sim_backend.faults import FaultEvent
 
         value = (0.0, force, 0.0, 0.0, 0.0, 0.0)
-        FaultInjector([FaultEvent(self.net.time, "external_wrench", value=value, ramp=1.0)]).attach(
-            self.net
-        )
+        self.schedule([FaultEvent(self.net.time, "external_wrench", value=value, ramp=1.0)])
+
+    def schedule(self, events: list) -> None:
+        """``sim_backend.faults.FaultEvent``s (simulated time, s), beside those scheduled."""
+        from sim_backend.faults import FaultInjector
+
+        if self.net.faults is None:
+            FaultInjector(events).attach(self.net)
+        else:
+            self.net.faults.events.extend(events)
 
     def close(self) -> None:
         self.net.close()

@@ -27,7 +27,12 @@ from drivers.cia402.capabilities import Capabilities, read_capabilities
 from drivers.cia402.cyclic import GENERIC_STATE
 from drivers.cia402.drive_setup import OPTIONAL, configure_drive
 from drivers.cia402.sdo_client import SdoClient
-from drivers.errors import DriveFaultError, DriverError, DriverInitializationError
+from drivers.errors import (
+    DriveFaultError,
+    DriverError,
+    DriverInitializationError,
+    SafeTorqueOffError,
+)
 from drivers.registry import register_driver
 from drivers.vocabulary import Lifecycle
 
@@ -311,7 +316,8 @@ class Cia402Driver(CanWinchDriver):
     def _cable_fault(self, c: int) -> DriverError | None:
         code = int(self._emcy[c])
         if code != 0 or self._ps[c] == p.PowerState.FAULT:
-            return DriveFaultError(
+            kind = SafeTorqueOffError if code in p.STO_CODES else DriveFaultError
+            return kind(
                 c,
                 int(self.node[c]),
                 code,
