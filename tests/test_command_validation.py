@@ -7,6 +7,7 @@ found these held by no test (tools/mutation_results.json); every name here says 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -140,3 +141,92 @@ def test_a_gripper_unnamed_on_a_robot_with_two_is_refused():
         "gripper": 0, "grip": "force", "value": 5.0}  # fmt: skip
     assert v.check("gripper", {"gripper": "1", "release": True}, "enabled")[1] == {
         "gripper": 0, "grip": "release", "value": 0.0}  # fmt: skip
+
+
+def test_a_number_at_its_bounds_is_taken_and_beyond_them_refused(v):
+    """[lo, hi] closed: nu 0 and 1 taken, 1.5 and -0.1 refused; a move's speed from 1e-6 m/s
+    (0 and below refused); a gripper's force from 0 N."""
+    for nu in (0.0, 1.0):
+        assert v.check("set_tda", {"method": "barycenter", "nu": nu}, "enabled")[1]["tda"].nu == nu
+    for nu in (1.5, -0.1):
+        with pytest.raises(CommandError, match=r"nu = .* must be in \[0, 1\]"):
+            v.check("set_tda", {"nu": nu}, "enabled")
+    for speed in (0.0, -0.1):
+        with pytest.raises(CommandError, match=r"max_velocity = .* m/s must be in \[1e-06, 0.3\]"):
+            v.check("move", {"position": [1.6, 0.35, 0.59], "max_velocity": speed}, "enabled")
+    g = CommandValidator(load_robot(CONFIG / "seed000_grippers.toml"), True)
+    assert g.check("gripper", {"gripper": "1", "force": 0}, "enabled")[1]["value"] == 0.0
+    with pytest.raises(CommandError, match=r"force = -0.5 N must be in \[0, "):
+        g.check("gripper", {"gripper": "1", "force": -0.5}, "enabled")
+
+
+@pytest.mark.parametrize("bad", [[True, 0.35, 0.59], ["1.5", 0.35, 0.59]])
+def test_a_vector_holding_a_boolean_or_a_string_is_refused(v, bad):
+    with pytest.raises(CommandError, match="must be a list of 3 numbers"):
+        v.check("move", {"position": bad}, "enabled")
+
+
+def test_a_payload_of_exactly_4096_bytes_is_taken_and_one_more_refused(v):
+    head = b'{"position": [1.6, 0.35, 0.59], "id": "'
+    exact = head + b"x" * (4096 - len(head) - 2) + b'"}'
+    assert len(exact) == 4096 and v.parse(exact, "move")["position"] == [1.6, 0.35, 0.59]
+    with pytest.raises(CommandError, match="payload of 4097 bytes exceeds 4096 bytes"):
+        v.parse(exact[:-2] + b'x"}', "move")
+
+
+def test_an_unknown_field_is_refused_listing_what_is_allowed(v):
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": [1.6, 0.35, 0.59], "speed": 1}, "enabled")
+    assert str(exc.value) == ("move: field 'speed' is unknown (allowed: max_acceleration, "
+                              "max_velocity, position, rpy, id)")  # fmt: skip
+    with pytest.raises(CommandError) as exc:
+        v.check("enable", {"now": True}, "ready")
+    assert str(exc.value) == "enable: field 'now' is unknown (allowed: none, id)"
+
+
+def test_a_jog_is_refused_beyond_the_linear_limit_on_x_y_z_and_the_angular_one_on_the_rest(rowc):
+    """The first three components against max_velocity (m/s), the last three against
+    max_angular_velocity (rad/s): here 0.3 m/s and 0.5 rad/s."""
+    control = dataclasses.replace(rowc.control, max_angular_velocity=0.5)
+    v = CommandValidator(dataclasses.replace(rowc, control=control), True)
+    assert v.check("jog", {"velocity": [0.0, 0.0, 0.0, 0.4, 0.0, 0.45]}, "enabled")[0] == "jog"
+    with pytest.raises(CommandError, match=r"velocity\[2\] = 0.35 m/s exceeds \[control\] "
+                       r"max_velocity = 0.3 m/s"):  # fmt: skip
+        v.check("jog", {"velocity": [0.0, 0.0, 0.35, 0.0, 0.0, 0.0]}, "enabled")
+    with pytest.raises(CommandError, match=r"velocity\[3\] = 0.55 rad/s exceeds"):
+        v.check("jog", {"velocity": [0.0, 0.0, 0.0, 0.55, 0.0, 0.0]}, "enabled")
+
+
+def test_a_tilt_beyond_the_workspace_is_refused_to_the_tenth_of_a_milliradian(v):
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": [1.5, 0.35, 0.59], "rpy": [0.0, 0.0, 0.212345]}, "enabled")
+    assert str(exc.value) == ("rpy = [0.0, 0.0, 0.2123] rad is 0.212 rad from the home "
+                              "orientation, more than workspace.max_angle = 0.2 rad")  # fmt: skip
+
+
+def test_a_direction_too_short_is_refused(v):
+    with pytest.raises(CommandError, match="must be a non-zero 3-vector"):
+        v.check("set_tda", {"direction": [1e-10, 0, 0]}, "enabled")
+
+
+def test_an_imposition_is_kept_only_by_the_energy_method_and_a_value_from_zero_is_refused_below(
+    rowc,
+):
+    """A robot file's imposition stays when set_tda keeps or chooses the energy method and is
+    dropped for any other; an imposed value is taken from 0 (its unit's)."""
+    from cdprctl.model.control import ImposeConfig
+
+    control = dataclasses.replace(
+        rowc.control, tda_method="energy", impositions=(ImposeConfig(2, "deformation", 0.0),)
+    )
+    v = CommandValidator(dataclasses.replace(rowc, control=control), True)
+    kept = v.check("set_tda", {"method": "energy"}, "enabled")[1]["tda"]
+    assert len(kept.impositions) == 1 and kept.impositions[0].cable == 2
+    for method in ("barycenter", "closed-form", "pinv", "sotda"):
+        out = v.check("set_tda", {"method": method}, "enabled")[1]["tda"]
+        assert out.impositions == (), method
+    imposed = v.check("impose", {"cable": "1", "quantity": "deformation", "value": 0.0},
+                      "enabled")[1]["tda"]  # fmt: skip
+    assert imposed.impositions[0].value == 0.0
+    with pytest.raises(CommandError, match=r"value = -0.001 m must be in \[0, "):
+        v.check("impose", {"cable": "1", "quantity": "deformation", "value": -0.001}, "enabled")
