@@ -362,3 +362,30 @@ def test_run_path_across_processes(tmp_path, sim_process):
         assert f"path {path}: done" not in text, text
     else:
         raise AssertionError("\n----\n".join(texts))
+
+
+def test_an_estop_across_processes_is_the_daemons_estop_state(tmp_path, sim_process):
+    """`cdprctl sim --estop 12` (the chain opens 12 s after the simulated robot started; the
+    daemon is enabled by then, or enables into it) and `cdprctl run --demo` over udp_multicast
+    in real time: the daemon says EMERGENCY STOP and ends in its e-stop state — no FAULT, no
+    traceback, exit 0."""
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")
+    texts = []
+    for attempt in range(2):  # a timing fault of this VM before the e-stop: once more
+        port = random.Random(os.getpid() * 29 + attempt).randrange(40000, 50000)
+        opts = ["--can-option", f"port={port}"]
+        sim = sim_process(config, [*opts, "--estop", "12"])
+        proc = subprocess.run(
+            [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(config), "--demo",
+             "--duration", "22", "--rate", "250", "--status", "0", *opts],
+            capture_output=True, text=True, timeout=180,
+        )  # fmt: skip
+        sim.terminate()
+        text = proc.stdout + proc.stderr
+        texts.append(text)
+        if not stopped_under_load(text.split("EMERGENCY STOP")[0]):
+            break
+    assert proc.returncode == 0, "\n----\n".join(texts)
+    assert "EMERGENCY STOP: the safety chain is open" in text and "0x8A88" in text, text
+    assert "-> estop" in text and "final state estop" in text, text
+    assert "FAULT" not in text and "Traceback" not in text, text
