@@ -19,7 +19,9 @@ STOPS = {
     "winch slips 0.05 m/s",
     "400 N lateral force",
 }
+ESTOPS = {"e-stop mid-move, released after 1 s", "e-stop released at once (20 ms)"}
 RECOVERS = {  # or rode through
+    *ESTOPS,
     "frame loss 5 %",
     "frame loss 20 %",
     "frames corrupted 5 %",
@@ -50,6 +52,10 @@ def test_fault(rowc, scenario):
         assert r.excursion_mm < 10.3, r.excursion_mm  # torque mode's; 25.4 held, 8.5 reeled in
     if name == "cable snaps":
         assert r.excursion_mm < 40.0, r.excursion_mm  # 34.0 measured (torque mode 163)
+    if name in ESTOPS:  # its own state, never a fault; the drop onto the brakes is small
+        assert r.detection_s is not None and r.detection_s < 0.01, r.reaction
+        assert r.reaction.startswith("estop: emergency stop") and r.fault_kind == "", r.reaction
+        assert r.excursion_mm < 3.0, r.excursion_mm
     if name == "daemon SIGKILLed, restarted":
         assert r.detection_s is not None and r.detection_s <= 0.15  # the drives' timeout
         assert r.recovered.startswith("yes"), r.recovered

@@ -72,6 +72,18 @@ SCENARIOS = (
         expected="stop",
     ),
     Scenario(
+        "e-stop mid-move, released after 1 s",
+        "estop",
+        duration=1.0,
+        expected="e-stop state, the drop measured; reset once released",
+    ),
+    Scenario(
+        "e-stop released at once (20 ms)",
+        "estop",
+        duration=0.02,
+        expected="e-stop state; reset, enable",
+    ),
+    Scenario(
         "daemon SIGKILLed, restarted",
         "sigkill",
         duration=2.0,
@@ -130,7 +142,10 @@ class Watch:
             r.tensions_outside_limits_while_healthy += int(bad)
         r.max_tension_n = max(r.max_tension_n, float(np.max(c.data.tensions)))
         if measure_excursion:
-            d = float(np.linalg.norm(p_true - c.trajectory.position[:3])) * 1e3
+            # from the reference while the controller drives it; in the e-stop, from where the
+            # platform was when the chain opened (the reference means nothing there)
+            ref = c.supervisor.estop.start if c.data.state is State.ESTOP else c.trajectory.position
+            d = float(np.linalg.norm(p_true - ref[:3])) * 1e3
             r.excursion_mm = max(r.excursion_mm, d)
 
 
@@ -165,10 +180,11 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
 def _observe(cl: ClosedLoop, watch: Watch, res: Result, t_fault: float, seconds: float) -> None:
     def each(cl: ClosedLoop) -> None:
         c = cl.controller
-        if res.detection_s is None and c.data.state in (State.STOPPING, State.FAULT):
+        if res.detection_s is None and c.data.state in (State.STOPPING, State.FAULT, State.ESTOP):
             res.detection_s = cl.net.time - cl.period - t_fault
-        stopping = c.data.state is State.STOPPING
-        watch.check(c, cl.plant.position, measure_excursion=c.data.state in HEALTHY or stopping)
+        # while the controller drives it, and in the e-stop (the drop onto the brakes)
+        held = c.data.state in (State.STOPPING, State.ESTOP)
+        watch.check(c, cl.plant.position, measure_excursion=c.data.state in HEALTHY or held)
 
     cl.run(seconds, each=each, record=False)
 
@@ -193,8 +209,10 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
         return
     if cl.net.time < t_clear:
         _steps(cl, watch, t_clear - cl.net.time)
-    # a controlled stop ends in FAULT after stop_duration: reset only then
-    _steps(cl, watch, 3.0, until=lambda: c.data.state is not State.STOPPING)
+    # a controlled stop ends in FAULT after stop_duration: reset only then; an e-stop's drop is
+    # measured until the platform rests on the brakes
+    _steps(cl, watch, 3.0, until=lambda: c.data.state is not State.STOPPING
+           and (c.data.state is not State.ESTOP or c.supervisor.estop.settled))  # fmt: skip
     c.submit(Command(CommandKind.RESET))
     _steps(cl, watch, 1.0)
     if c.data.state is not State.READY:
