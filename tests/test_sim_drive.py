@@ -527,8 +527,9 @@ def test_a_bad_estop_time_is_one_line_with_the_rule(bad, capsys):
 
     assert main(["sim", "--config", str(CONFIG / "rowc.toml"), "--estop", bad]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"cdprctl sim: error: --estop = {bad!r}: must be AT or AT:RELEASE in s, "
-                   "0 <= AT < RELEASE (e.g. 8:12)"]  # fmt: skip
+    rule = "must be AT or AT:RELEASE in s, 0 <= AT < RELEASE (e.g. 8:12)"
+    said = f"{bad!r} is not a time: {rule}" if bad == "x" else f"{bad!r}: {rule}"
+    assert err == [f"cdprctl sim: error: --estop = {said}"]
 
 
 def test_an_estop_time_is_the_event_it_says():

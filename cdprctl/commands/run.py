@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import sys
 from typing import Any
@@ -37,9 +38,12 @@ def add_parser(sub: Any) -> None:
     p.add_argument(
         "--estop",
         metavar="AT[:RELEASE]",
-        help="with --sim: the drives' safety chain opens AT s after the start (an e-stop: "
-        "safe torque off, brakes closed) and closes at RELEASE s; the daemon stays in its "
-        "e-stop state until a reset (docs/safety.md)",
+        help="with --sim: the simulated drives' safety chain opens AT s of the simulated "
+        "robot's time (from its start, a few tenths of a second before the loop's t = 0; an "
+        "e-stop: safe torque off, brakes closed) and closes at RELEASE s (without: it stays "
+        "open). The daemon stays in its e-stop state until a reset the drives take once the "
+        "chain is closed; the demo never resets one: the run ends in the e-stop, exit 0 "
+        "(docs/safety.md)",
     )
     p.add_argument(
         "--duration",
@@ -200,15 +204,16 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             print(f"cdprctl run: error: --foxglove = {exc}", file=sys.stderr)
             return 2
-    estop = None
+    estop: Any = None  # a sim_backend.faults.FaultEvent
     if args.estop is not None:
         from cdprctl.commands.sim import estop_event
 
-        estop = estop_event(args.estop, model.drives.driver) if args.sim else (
+        event = estop_event(args.estop, model.drives.driver) if args.sim else (
             "--estop needs --sim: a real robot's safety chain is opened by its e-stop button")
-        if isinstance(estop, str):
-            print(f"cdprctl run: error: {estop}", file=sys.stderr)
+        if isinstance(event, str):
+            print(f"cdprctl run: error: {event}", file=sys.stderr)
             return 2
+        estop = event
     from cdprctl.daemon.startup import interrupt_the_start_up
     from drivers.errors import DriverError
 
@@ -229,6 +234,10 @@ def run(args: argparse.Namespace) -> int:
         demo = (args.sim or args.demo) and not args.no_demo and path is None
         if estop is not None and daemon.sim is not None:
             daemon.sim.schedule([estop])
+            closes = estop.time + estop.duration
+            print(f"simulated robot: its drives' safety chain opens at {estop.time:g} s"
+                  + (f", closes at {closes:g} s" if math.isfinite(closes) else "")
+                  + " of its time", flush=True)  # fmt: skip
         return daemon.run(args.duration, demo, args.disturbance, path)
     except DriverError as exc:
         print(f"cdprctl run: {exc}", file=sys.stderr)

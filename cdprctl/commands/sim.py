@@ -148,6 +148,10 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.config)
     if model is None:
         return 1
+    estop = None if args.estop is None else estop_event(args.estop, model.drives.driver)
+    if isinstance(estop, str):
+        print(f"cdprctl sim: error: {estop}", file=sys.stderr)
+        return 2
     overrides = bus_overrides(args)
     print(
         f"cdprctl sim: {model.name}, {model.n_cables} {model.drives.driver} drives on "
@@ -169,11 +173,7 @@ def run(args: argparse.Namespace) -> int:
             kinds=("frame_loss", "drive_fault", "silent_drive", "external_wrench"),
         )
         print(f"cdprctl sim: {len(faults.events)} faults scheduled (seed {args.fault_seed})")
-    if args.estop is not None:
-        estop = estop_event(args.estop, model.drives.driver)
-        if isinstance(estop, str):
-            print(f"cdprctl sim: error: {estop}", file=sys.stderr)
-            return 2
+    if estop is not None:
         from sim_backend.faults import FaultInjector
 
         faults = faults or FaultInjector([])
@@ -208,14 +208,14 @@ def estop_event(text: str, driver: str) -> Any:
         return (f"--estop: the simulated {driver} drives have no safety chain (CiA 402 "
                 "drives only)")  # fmt: skip
     parts = text.split(":")
+    rule = "must be AT or AT:RELEASE in s, 0 <= AT < RELEASE (e.g. 8:12)"
     try:
         at = float(parts[0])
         release = float(parts[1]) if len(parts) == 2 else math.inf
     except ValueError:
-        at = release = math.nan
+        return f"--estop = {text!r} is not a time: {rule}"
     if len(parts) > 2 or not (math.isfinite(at) and at >= 0.0) or not release > at:
-        return (f"--estop = {text!r}: must be AT or AT:RELEASE in s, 0 <= AT < RELEASE "
-                "(e.g. 8:12)")  # fmt: skip
+        return f"--estop = {text!r}: {rule}"
     return FaultEvent(at, "estop", value=0, duration=release - at)
 
 

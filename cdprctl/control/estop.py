@@ -65,7 +65,7 @@ class EmergencyStop:
         if t - self._rest_since < self.REST_FOR:
             return None
         self.settled = True
-        d = self.drop * 1e3
+        d = np.round(self.drop * 1e3, 1) + 0.0  # + 0.0 after rounding: no "-0.0" in the text
         return (
             f"emergency stop: on the brakes, the platform {math.hypot(*d.tolist()):.1f} mm from "
             f"where the chain opened ([{d[0]:+.1f}, {d[1]:+.1f}, {d[2]:+.1f}] mm), at rest "

@@ -214,7 +214,8 @@ class Supervisor:
             isinstance(err, SafeTorqueOffError) or self.estop.refused(t, err)
         ):
             d.events.append((t, self.estop.enter(t, self.position, err)))
-            d.fault_reason = "emergency stop: the safety chain is open"
+            # the drives do not say when the chain closes (they stay in fault until a reset)
+            d.fault_reason = "emergency stop: the safety chain opened; reset once it is closed"
             d.fault_kind = None
             drv.begin_deactivate()
             self.set_state(State.ESTOP, t, "the drives' safety chain is open")
