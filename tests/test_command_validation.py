@@ -230,3 +230,57 @@ def test_an_imposition_is_kept_only_by_the_energy_method_and_a_value_from_zero_i
     assert imposed.impositions[0].value == 0.0
     with pytest.raises(CommandError, match=r"value = -0.001 m must be in \[0, "):
         v.check("impose", {"cable": "1", "quantity": "deformation", "value": -0.001}, "enabled")
+
+
+def test_a_move_to_the_workspace_box_edge_is_taken_and_beyond_refused(v):
+    for pos in ([2.5, 0.35, 0.59], [0.5, 0.35, 0.59], [1.5, 0.4, 0.59], [1.5, 0.35, 0.7]):
+        assert v.check("move", {"position": pos}, "enabled")[0] == "move", pos
+    with pytest.raises(CommandError, match=r"position.x = 2.5001 m is outside the workspace"):
+        v.check("move", {"position": [2.5001, 0.35, 0.59]}, "enabled")
+
+
+def test_a_jog_at_its_limit_is_taken_and_a_zero_acceleration_refused(v):
+    assert v.check("jog", {"velocity": [0.3, 0.0, 0.0, 0.0, 0.0, -0.3]}, "enabled")[0] == "jog"
+    with pytest.raises(CommandError, match=r"max_acceleration = 0 m/s² must be in \[1e-06, "):
+        v.check("move", {"position": [1.6, 0.35, 0.59], "max_acceleration": 0}, "enabled")
+
+
+def test_an_acceleration_becomes_its_fraction_of_a_limit_other_than_one(rowc):
+    control = dataclasses.replace(rowc.control, max_acceleration=2.0)
+    v = CommandValidator(dataclasses.replace(rowc, control=control), True)
+    out = v.check("move", {"position": [1.6, 0.35, 0.59], "max_acceleration": 0.5}, "enabled")
+    assert out[1]["accel"] == pytest.approx(0.25)
+
+
+def test_a_pose_short_of_the_wrench_margin_is_refused_to_the_tenth_of_a_millimetre(rowc):
+    strict = dataclasses.replace(
+        rowc, workspace=dataclasses.replace(rowc.workspace, wrench_margin=1000.0)
+    )
+    v = CommandValidator(strict, True)
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": [1.512345, 0.35, 0.59], "rpy": [0.0, 0.012345, 0.0]},
+                "enabled")  # fmt: skip
+    assert str(exc.value).startswith(
+        "position = [1.5123, 0.35, 0.59] m, rpy = [0.0, 0.0123, 0.0] rad: "), str(exc.value)
+
+
+def test_a_direction_of_1e_9_becomes_the_options_direction(v):
+    assert v.check("set_tda", {"direction": [1e-9, 0, 0]}, "enabled")[1]["tda"].direction == (
+        1e-9, 0.0, 0.0)  # fmt: skip
+
+
+def test_an_imposed_energy_up_to_1e6_is_taken_and_beyond_refused(v):
+    out = v.check("impose", {"cable": "1", "quantity": "energy", "value": 1e6}, "enabled")
+    assert out[1]["tda"].impositions[0].value == 1e6
+    with pytest.raises(CommandError, match=r"value = 1e\+06 J must be in \[0, 1e\+06\] J"):
+        v.check("impose", {"cable": "1", "quantity": "energy", "value": 1e6 + 0.5}, "enabled")
+
+
+def test_a_gripper_command_on_a_robot_with_one_becomes_that_grippers_and_needs_one_action():
+    """One gripper: it may go unnamed; none of travel, force or release is refused."""
+    g = load_robot(CONFIG / "seed000_grippers.toml")
+    v = CommandValidator(dataclasses.replace(g, grippers=g.grippers[:1]), True)
+    assert v.check("gripper", {"travel": 0.1}, "enabled")[1] == {
+        "gripper": 0, "grip": "travel", "value": 0.1}  # fmt: skip
+    with pytest.raises(CommandError, match="give exactly one of travel"):
+        v.check("gripper", {}, "enabled")
