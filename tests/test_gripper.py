@@ -405,3 +405,34 @@ def test_squeeze_force_command_and_release(grippers):
         assert c.data.state.value == "enabled"
     finally:
         cl.close()
+
+
+def test_a_travel_at_the_ranges_ends_is_taken_and_beyond_refused_with_the_controllers_range(
+    grippers,
+):
+    """The gateway's feasible travel is the controller's, to 20 µm (the same tension limits
+    less the margin), and closed: its ends are taken, a micrometre beyond refused."""
+    from cdprctl.experiments.closed_loop import ClosedLoop
+    from cdprctl.rotation import matrix_to_rpy
+
+    v = CommandValidator(grippers, True)
+    with ClosedLoop(grippers) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5, record=False)
+        c = cl.controller
+        lo, hi = c.grippers.travel_range(0)
+        snap = {
+            "position": c.estimator.position.copy(),
+            "rpy": matrix_to_rpy(c.estimator.rotation),
+            "grip_target": c.data.grip_target.copy(),
+        }
+    # at the snapshot's estimate, the controller's at its working pose: 4 µm apart here
+    assert v._travel_range(0, snap) == pytest.approx((lo, hi), abs=2e-5)
+    lo, hi = v._travel_range(0, snap)
+    for travel in (lo, hi):
+        assert v.check("gripper", {"gripper": "1", "travel": travel}, "enabled", snap)[1][
+            "value"] == travel  # fmt: skip
+    for travel in (lo - 1e-6, hi + 1e-6):
+        with pytest.raises(CommandError, match="outside what the redundancy gives"):
+            v.check("gripper", {"gripper": "1", "travel": travel}, "enabled", snap)
