@@ -289,13 +289,12 @@ def test_bad_gripper_commands_are_rejected(grippers, payload, words):
         assert w in str(exc.value), str(exc.value)
 
 
-def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
-    """The reply itself gives the feasible travel, computed at the snapshot's pose with the
-    other gripper held at its target; the controller computes the same range."""
+def enabled_snapshot(grippers):
+    """Enabled 0.5 s in lock-step: the controller's feasible travel of gripper 0 (m) and the
+    snapshot the gateway checks a command at (the estimate's pose, the grippers' targets)."""
     from cdprctl.experiments.closed_loop import ClosedLoop
     from cdprctl.rotation import matrix_to_rpy
 
-    v = CommandValidator(grippers, True)
     with ClosedLoop(grippers) as cl:
         cl.startup()
         cl.command("enable")
@@ -307,6 +306,14 @@ def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
             "rpy": matrix_to_rpy(c.estimator.rotation),
             "grip_target": c.data.grip_target.copy(),
         }
+    return lo, hi, snap
+
+
+def test_gateway_refuses_a_travel_out_of_range_with_the_range(grippers):
+    """The reply itself gives the feasible travel, computed at the snapshot's pose with the
+    other gripper held at its target; the controller computes the same range."""
+    v = CommandValidator(grippers, True)
+    lo, hi, snap = enabled_snapshot(grippers)
     ok = v.check("gripper", {"gripper": "1", "travel": round((lo + hi) / 2, 4)}, "enabled", snap)
     assert ok[0] == "gripper"
     with pytest.raises(CommandError) as exc:
@@ -412,21 +419,8 @@ def test_a_travel_at_the_ranges_ends_is_taken_and_beyond_refused_with_the_contro
 ):
     """The gateway's feasible travel is the controller's, to 20 µm (the same tension limits
     less the margin), and closed: its ends are taken, a micrometre beyond refused."""
-    from cdprctl.experiments.closed_loop import ClosedLoop
-    from cdprctl.rotation import matrix_to_rpy
-
     v = CommandValidator(grippers, True)
-    with ClosedLoop(grippers) as cl:
-        cl.startup()
-        cl.command("enable")
-        cl.run(0.5, record=False)
-        c = cl.controller
-        lo, hi = c.grippers.travel_range(0)
-        snap = {
-            "position": c.estimator.position.copy(),
-            "rpy": matrix_to_rpy(c.estimator.rotation),
-            "grip_target": c.data.grip_target.copy(),
-        }
+    lo, hi, snap = enabled_snapshot(grippers)
     # at the snapshot's estimate, the controller's at its working pose: 4 µm apart here
     assert v._travel_range(0, snap) == pytest.approx((lo, hi), abs=2e-5)
     lo, hi = v._travel_range(0, snap)

@@ -12,8 +12,9 @@ import pytest
 from conftest import FakeDrives
 
 from cdprctl.control.data import ControlData
+from cdprctl.control.persistence import Persistence
 from cdprctl.control.states import FaultKind, State
-from cdprctl.control.supervisor import Persistence, Supervisor
+from cdprctl.control.supervisor import Supervisor
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model import load_robot
 from drivers.vocabulary import Lifecycle

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from cdprctl.control.persistence import Persistence
 from drivers.errors import DriveFaultError, DriverError, SafeTorqueOffError
 
 
@@ -26,7 +27,7 @@ class EmergencyStop:
         self.drop = np.zeros(3)  # m: where it went from there (at rest: final)
         self.settled = True
         self.reset_at = -math.inf  # s: the last reset from the e-stop
-        self._rest_since = math.nan
+        self._rest = Persistence(self.REST_FOR)
 
     def refused(self, t: float, err: DriverError | None) -> bool:
         """Whether ``err`` at ``t`` is the drives refusing a reset from the e-stop: a drive
@@ -40,7 +41,7 @@ class EmergencyStop:
         self.start[:] = position
         self.drop[:] = 0.0
         self.settled = False
-        self._rest_since = math.nan
+        self._rest.held(t, False)
         who = f"the drive of cable index {err.cable} (node {err.node_id})"
         if not isinstance(err, SafeTorqueOffError):  # a refused reset
             self.reset_at = -math.inf
@@ -57,17 +58,13 @@ class EmergencyStop:
         if self.settled:
             return None
         np.subtract(position, self.start, out=self.drop)
-        if speed >= self.AT_REST:
-            self._rest_since = math.nan
-            return None
-        if math.isnan(self._rest_since):
-            self._rest_since = t
-        if t - self._rest_since < self.REST_FOR:
+        if not self._rest.held(t, speed < self.AT_REST):
             return None
         self.settled = True
+        rest_since = t - self._rest.dose
         d = np.round(self.drop * 1e3, 1) + 0.0  # + 0.0 after rounding: no "-0.0" in the text
         return (
             f"emergency stop: on the brakes, the platform {math.hypot(*d.tolist()):.1f} mm from "
             f"where the chain opened ([{d[0]:+.1f}, {d[1]:+.1f}, {d[2]:+.1f}] mm), at rest "
-            f"{self._rest_since - self.since:.2f} s after"
+            f"{rest_since - self.since:.2f} s after"
         )
