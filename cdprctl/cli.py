@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     run_cmd.add_parser(sub)
     sim.add_parser(sub)
     calibrate.add_parser(sub)
+    from cdprctl.commands import brake_test
+
+    brake_test.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
     from cdprctl.commands import drives

@@ -54,12 +54,14 @@ class BodyState(NamedTuple):
 
 
 class Inputs(NamedTuple):
-    """Motor torques (N·m), brakes, a brake's slip speed (rad/s), cut cables, cable slipped
-    off the drums (m), the external force (N at P) and moment (N·m), base frame."""
+    """Motor torques (N·m), brakes, a brake's slip speed (rad/s), the torque a closed brake
+    holds before it slips (N·m at the motor), cut cables, cable slipped off the drums (m), the
+    external force (N at P) and moment (N·m), base frame."""
 
     motor_torque: np.ndarray
     brake: np.ndarray
     brake_slip: np.ndarray
+    brake_hold: np.ndarray
     cable_cut: np.ndarray
     drum_slip: np.ndarray
     ext_force: np.ndarray
@@ -264,7 +266,7 @@ def physics_kernel(
     com, mass, inertia, g = body
     l_home, drum_ratio, J, visc, coul, coul_v, law, damping, mu_p = winches
     com_pos, R, v, w, theta, theta_dot = state
-    tau_m, brake, slip, cut, drum_slip, f_ext, m_ext = inputs
+    tau_m, brake, slip, hold, cut, drum_slip, f_ext, m_ext = inputs
     g_of_cable, _, g_mass, _, _, _, _, _, g_kjb, g_cjb, _, _, _, _, _ = jaws
     q, qd, g_tb, _ = jaw_state
     _, _, _, _, rbT, _, _, _, wrap, length, W = kin  # KinArrays
@@ -316,13 +318,28 @@ def physics_kernel(
                 M[1] += rz * fx - rx * fz
                 M[2] += rx * fy - ry * fx
             # winch: J θ̈ = τ_m − (r/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)
-            if brake[i]:
-                theta_dot[i] = -slip[i]  # a slipping brake pays cable out
+            if brake[i] and slip[i] != 0.0:
+                theta_dot[i] = -slip[i]  # a slipping brake (a fault) pays cable out
                 theta[i] += theta_dot[i] * dt
+            elif brake[i]:
+                # a closed brake: at rest while the torque on it (the drive's, with the brake
+                # closed while enabled, a brake test's, and the cable's) is within what it
+                # holds; beyond, it slips with that torque as its friction, and sticks again
+                # when the drum stops (Karnopp's stick-slip friction)
+                tau = servo_torque(servo, i, theta[i], theta_dot[i], tau_m[i], dt)
+                load = tau - drum_ratio[i] * t
+                if theta_dot[i] == 0.0 and abs(load) <= hold[i]:
+                    continue
+                moving = theta_dot[i] if theta_dot[i] != 0.0 else load
+                friction = hold[i] if moving > 0.0 else -hold[i]
+                rate = theta_dot[i] + (load - friction - visc[i] * theta_dot[i]) / J[i] * dt
+                if rate * moving < 0.0:
+                    rate = 0.0  # it stopped within the step: held again
+                theta_dot[i] = rate
+                theta[i] += rate * dt
             else:
                 tau = servo_torque(servo, i, theta[i], theta_dot[i], tau_m[i], dt)
-                if following_error(servo, i):
-                    brake[i] = True  # the drive's firmware: from the next step on
+                closes = following_error(servo, i)  # the drive's firmware brakes
                 cap = 1.0
                 if mu_p > 0.0 and wrap[i] > 0.0:
                     cap = math.exp(mu_p * wrap[i] * math.tanh(theta_dot[i] / coul_v))
@@ -334,6 +351,9 @@ def physics_kernel(
                 ) / J[i]
                 theta_dot[i] += acc * dt
                 theta[i] += theta_dot[i] * dt
+                if closes:  # it holds the drum from the next step on (as ``close_brake``)
+                    brake[i] = True
+                    theta_dot[i] = 0.0
         # external wrench at P: moment about the COM adds (P − COM) × f = −Rc × f
         for a in range(3):
             F[a] += mass * g[a] + f_ext[a]

@@ -62,6 +62,15 @@ class PlantOptions:
     stop_stiffness: float = 1.0e5  # N/m
     jaw_damping_ratio: float = 0.3  # of critical, on jB, the stops and the contact
     jaw_friction_velocity: float = 0.002  # m/s, smoothing of the guide's Coulomb friction
+    # a holding brake's torque as a multiple of its motor's torque limit: several times it
+    # (a brake sized for the motor's peak torque, or on the gearbox's output): catching rowc
+    # under a 400 N force beyond its capacity put up to 4.8 times the limit on its brakes
+    # (12.4 N·m, lock-step); a brake test at the drive's limit passes
+    brake_hold_factor: float = 5.0
+    # a worn brake (``weaken_brake``, ``cdprctl brake-test --sim --weak-brake``): it holds this
+    # fraction of its cable's worst-case load (the tension limit on the drum) — the platform at
+    # rest, but not a brake test's 1.3 times that load
+    weak_brake_fraction: float = 0.6
 
 
 class CdprPlant:
@@ -107,6 +116,8 @@ class CdprPlant:
         self.motor_torque = np.zeros(m)  # N·m, what the drives apply
         self.brake = np.ones(m, dtype=np.bool_)  # True: the drum is held
         self.brake_slip = np.zeros(m)  # rad/s at which a held drum slips (fault injection)
+        # N·m at the motor a closed brake holds before it slips
+        self.brake_hold = self.opt.brake_hold_factor * np.array([w.winch.torque_limit for w in c])
         self.cable_cut = np.zeros(m, dtype=np.bool_)
         self.drum_slip = np.zeros(m)  # m of cable slipped off the drum, unseen by the encoder
         self.ext_force = np.zeros(3)  # N at P, base frame
@@ -140,6 +151,7 @@ class CdprPlant:
             self.motor_torque,
             self.brake,
             self.brake_slip,
+            self.brake_hold,
             self.cable_cut,
             self.drum_slip,
             self.ext_force,
@@ -258,6 +270,20 @@ class CdprPlant:
         self.w[:] = 0.0
         self.brake[:] = True
         self.tension[:] = t
+
+    def close_brake(self, c: int) -> None:
+        """Cable index ``c``'s brake closes: the drum stops at once (an ideal brake's
+        engagement; it slips only on a torque beyond ``brake_hold``)."""
+        if not self.brake[c]:
+            self.theta_dot[c] = 0.0
+        self.brake[c] = True
+
+    def weaken_brake(self, c: int) -> None:
+        """Cable index ``c``'s brake worn: it holds ``weak_brake_fraction`` of the cable's
+        worst-case load torque (N·m at the motor: tension limit × drum radius / gear)."""
+        self.brake_hold[c] = (
+            self.opt.weak_brake_fraction * self.model.tension_max[c] * self.drum_ratio[c]
+        )
 
     @property
     def position(self) -> FloatArray:

@@ -93,7 +93,17 @@ class LocalDrive:
         except (KeyError, SdoAbortedError):
             return None
 
+    def _absent(self, index: int, sub: int) -> bool:
+        """A sub-index the file does not declare (``canopen`` makes up array members on
+        access; a drive aborts 0x06090011, CiA 301)."""
+        obj = self.node.object_dictionary[index]
+        return not isinstance(obj, canopen.objectdictionary.ODVariable) and (
+            sub not in obj.subindices
+        )
+
     def _read(self, index: int, subindex: int, od):
+        if self._absent(index, subindex):
+            raise SdoAbortedError(p.SDO_ABORT_NO_SUB)
         if index == p.OD_MODES_DISPLAY:  # the mode in effect: the one written
             return self.value(p.OD_MODES_OF_OPERATION)
         if index == p.OD_STATUSWORD:
@@ -110,6 +120,8 @@ class LocalDrive:
         self.writes.append((index, subindex, value))
 
     def _rules(self, index: int, sub: int, od, value: int) -> None:
+        if self._absent(index, sub):
+            raise SdoAbortedError(p.SDO_ABORT_NO_SUB)
         if od.min is not None and value < od.min:
             raise SdoAbortedError(0x06090032)
         if od.max is not None and value > od.max:

@@ -289,8 +289,9 @@ def test_daemon_sigkilled_mid_motion_then_restarted(tmp_path):
 
 def test_calibrate_then_run_across_processes(tmp_path, sim_process):
     """`cdprctl sim --start-pose` (incremental encoders), `cdprctl calibrate ... self --json`,
-    `cdprctl run --demo` on CAROCA over udp_multicast: the pose `run` prints at ready within
-    2 mm of the simulator's start, and the demo's first move reaches its target."""
+    `cdprctl brake-test --json`, `cdprctl run --demo` on CAROCA over udp_multicast: every
+    brake holds, the pose `run` prints at ready within 2 mm of the simulator's start, and the
+    demo's first move reaches its target."""
     port = random.Random(os.getpid() * 17).randrange(40000, 50000)  # its own port
     config = write_config(tmp_path, "caroca.toml", "cia402", mode="csp", assume_home=False)
     opts = ["--can-option", f"port={port}"]
@@ -307,6 +308,14 @@ def test_calibrate_then_run_across_processes(tmp_path, sim_process):
     found = json.loads(cal.stdout)
     assert found["method"] == "self" and found["condition"] < 1e4
     assert np.linalg.norm(np.array(found["pose"][:3]) - start[:3]) < 3e-3, found
+    # a real robot (no assume_home) is enabled only after a passed brake test: over SDO to
+    # the simulated drives' 0x60FE, the drives enabled against their closed brakes
+    brakes = subprocess.run(
+        [*cli, "brake-test", *common, "--json"], capture_output=True, text=True, timeout=120
+    )
+    assert brakes.returncode == 0, brakes.stderr
+    tested = json.loads(brakes.stdout)
+    assert tested["passed"] and all(c["motion"] == 0.0 for c in tested["cables"]), tested
     daemon = subprocess.Popen(
         [*cli, "run", *common, "--demo", "--rate", "250", "--status", "0"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,

@@ -484,7 +484,7 @@ def test_a_record_is_saved_into_a_new_state_directory_and_a_failed_write_leaves_
         def refused(*_a, **_k):
             raise OSError(28, "No space left on device")
 
-        mp.setattr("cdprctl.calibration.record.os.replace", refused)
+        mp.setattr("cdprctl.state_file.os.replace", refused)
         with pytest.raises(OSError, match="No space left"):
             save(newer, deep)
     assert load(deep) == rec and sorted(p.name for p in deep.iterdir()) == ["calibration.json"]

@@ -13,13 +13,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # bottom → top; the first prefix that matches a module names its layer
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("cdprctl.rotation", "cdprctl.numerics", "cdprctl.realtime")),
+    ("core", ("cdprctl.rotation", "cdprctl.numerics", "cdprctl.realtime", "cdprctl.state_file")),
     (
         "model",
         tuple(
             f"cdprctl.model.{m}"
             for m in ("robot", "control", "drives", "buses", "grippers", "zenoh", "foxglove",
-                      "calibration", "errors", "reader")
+                      "calibration", "safety", "errors", "reader")
         ),
     ),
     (
@@ -37,7 +37,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("hardware", ("drivers", "sim_backend")),
     ("control", ("cdprctl.control",)),
     ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon",
-                  "cdprctl.calibration")),
+                  "cdprctl.calibration", "cdprctl.safety")),
     ("commands", ("cdprctl.commands", "cdprctl.cli")),
 ]
 EXACT = {"cdprctl": 0}  # the package itself: its version string

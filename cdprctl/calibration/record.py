@@ -9,12 +9,11 @@ import datetime
 import hashlib
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
+from cdprctl.state_file import read_json, write_atomically
 
 FILE_NAME = "calibration.json"
 FORMAT = 1
@@ -98,41 +97,15 @@ def now_iso() -> str:
 
 
 def save(record: CalibrationRecord, state_dir: Path) -> Path:
-    """Write atomically: a temporary file in the same directory, fsync, rename, fsync of the
-    directory; a crash leaves the old record or the new one, never half of one."""
-    state_dir = Path(state_dir)
-    state_dir.mkdir(parents=True, exist_ok=True)
-    path = record_path(state_dir)
+    """Written atomically (``state_file.write_atomically``)."""
     text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
-    fd, tmp = tempfile.mkstemp(prefix=".calibration-", suffix=".json", dir=state_dir)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    dfd = os.open(state_dir, os.O_RDONLY)
-    try:
-        os.fsync(dfd)
-    finally:
-        os.close(dfd)
-    return path
+    return write_atomically(record_path(Path(state_dir)), text + "\n")
 
 
 def load(state_dir: Path) -> CalibrationRecord:
     """The record in ``state_dir``; :class:`CalibrationError` saying what is wrong."""
     path = record_path(state_dir)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise CalibrationError(f"no calibration record at {path}") from None
-    except (OSError, ValueError) as exc:
-        raise CalibrationError(f"{path}: unreadable ({exc})") from None
-    if not isinstance(data, dict) or data.pop("format", None) != FORMAT:
-        raise CalibrationError(f"{path}: not a calibration record of format {FORMAT}")
+    data = read_json(path, FORMAT, "calibration record", CalibrationError)
     fields = {f.name for f in dataclasses.fields(CalibrationRecord)}
     try:
         return CalibrationRecord(**{k: v for k, v in data.items() if k in fields})

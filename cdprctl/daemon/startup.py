@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -19,7 +20,7 @@ from cdprctl.daemon.scripts import PathScript
 if TYPE_CHECKING:
     from cdprctl.daemon.service import Daemon
 
-NOT_CALIBRATED = 4  # exit code: no valid calibration record (systemd: no restart)
+NOT_CALIBRATED = 4  # exit code: no valid calibration record or brake test (systemd: no restart)
 
 
 class StartupRefusedError(Exception):
@@ -110,6 +111,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         except CalibrationError as exc:
             raise refused(str(exc)) from None
         dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
+        _brakes_tested(dm)
     dm._print("start-up: loading the compiled kernels (the first run on a machine compiles "
               "them: about a minute), configuring the drives, estimating the pose")  # fmt: skip
     stop_if_interrupted()
@@ -136,6 +138,22 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     if drives:
         dm.links.event(dm.data.time, drives, "drives")
     return None if path is None else _plan_path(dm, *path)
+
+
+def _brakes_tested(dm: Daemon) -> None:
+    """A real robot is enabled only with a passed brake test younger than ``[safety]
+    brake_test_interval`` on record (not with ``--sim`` or ``assume_home_at_start``: the
+    simulated robot)."""
+    from cdprctl.safety.record import BrakeTestError, check_due, due_time, how_to_test
+
+    try:
+        last = check_due(dm.model, dm.state_dir, time.time())
+    except BrakeTestError as exc:
+        why = f"{exc}; {how_to_test(dm.model, dm.state_dir)}"
+        raise StartupRefusedError(
+            f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
+        ) from None
+    dm._print(f"brakes: tested {last.time}, the next test due {due_time(last, dm.model)}")
 
 
 def _calibration(dm: Daemon) -> Any:

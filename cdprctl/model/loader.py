@@ -23,6 +23,7 @@ from cdprctl.model.foxglove import read_foxglove
 from cdprctl.model.grippers import read_grippers
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Platform, Pose, RobotModel, Workspace
+from cdprctl.model.safety import read_safety
 from cdprctl.model.zenoh import read_zenoh
 
 TOP_KEYS = (
@@ -40,6 +41,7 @@ TOP_KEYS = (
     "foxglove",
     "grippers",
     "calibration",
+    "safety",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -123,6 +125,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     grippers = read_grippers(rd, data, cables)
     anchors = np.array([c.anchor for c in cables], float) if cables else None
     calibration = read_calibration(rd, data, len(cables or ()), anchors)
+    safety = read_safety(rd, data)
 
     if (
         rd.errors
@@ -159,6 +162,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         foxglove=foxglove,
         grippers=grippers,
         calibration=calibration,
+        safety=safety,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -16,6 +16,7 @@ from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.model.foxglove import FoxgloveConfig
 from cdprctl.model.grippers import Gripper
+from cdprctl.model.safety import SafetyConfig
 from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.numerics import cable_compliance_py, compliance_terms
 from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
@@ -133,6 +134,7 @@ class RobotModel:
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
     grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

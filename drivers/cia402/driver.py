@@ -23,6 +23,7 @@ from drivers import blocking
 from drivers.canbase import CanWinchDriver
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
+from drivers.cia402.brake import command_brake
 from drivers.cia402.capabilities import Capabilities, read_capabilities
 from drivers.cia402.cyclic import GENERIC_STATE
 from drivers.cia402.drive_setup import OPTIONAL, configure_drive
@@ -31,6 +32,7 @@ from drivers.errors import (
     DriveFaultError,
     DriverError,
     DriverInitializationError,
+    DriverOperationError,
     SafeTorqueOffError,
 )
 from drivers.registry import register_driver
@@ -58,15 +60,11 @@ class Cia402Driver(CanWinchDriver):
         self._position = [mode == p.MODE_CSP for mode in self.modes]  # per drive
         self._csp = any(self._position)
         self._rpdo = [
-            can.Message(
-                arbitration_id=p.RPDO1 + int(self.node[c]),
-                data=bytearray(
-                    p.RPDO1_CSP_STRUCT.size if self._position[c] else p.RPDO1_STRUCT.size
-                ),
-                is_extended_id=False,
-            )
+            can.Message(arbitration_id=p.RPDO1 + int(self.node[c]), is_extended_id=False,
+                        data=bytearray((p.RPDO1_CSP_STRUCT if self._position[c]
+                                        else p.RPDO1_STRUCT).size))
             for c in range(m)
-        ]
+        ]  # fmt: skip
         self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
         self._last_targets = np.zeros(m)  # rad: the last cycle's targets, for their rate
         self._last_targets_t = -math.inf  # s: its time, -inf unless the drives ran (ACTIVE)
@@ -88,7 +86,6 @@ class Cia402Driver(CanWinchDriver):
             ],
             dtype=np.int64,
         )  # fmt: skip
-        # its counter byte runs 1 … SYNC_COUNTER_OVERFLOW (CiA 301 0x1019)
         # 0x6072 of each drive: its winch's torque limit, per mille of the rated torque
         self._max_torque_pm = np.array(
             [min(0xFFFF, round(c.winch.torque_limit / cfg.rated_torque * 1000.0))
@@ -191,6 +188,11 @@ class Cia402Driver(CanWinchDriver):
             lambda index, sub: self.sdo.read(c, index, sub, timeout, signed=False),
             tuple(OPTIONAL),
         )
+
+    def command_brake(self, c: int, closed: bool, timeout: float = 1.0) -> None:
+        if self.lifecycle not in (Lifecycle.INACTIVE, Lifecycle.ERROR):  # SDO: not cyclic
+            raise DriverOperationError(f"brake command while {self.lifecycle.name}: disabled only")
+        command_brake(self.sdo, c, closed, timeout)
 
     def _medium_of(self, c: int) -> int:
         b = int(self.bus_of[c])

@@ -17,6 +17,12 @@ import math
 from typing import Any
 
 from drivers.cia402 import protocol as p
+from drivers.cia402.brake import (
+    OD_DIGITAL_OUTPUTS,
+    SUB_BIT_MASK,
+    SUB_PHYSICAL_OUTPUTS,
+    brake_commanded,
+)
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
@@ -213,13 +219,25 @@ class Cia402Axis:
                 servo.kp[c], servo.kd[c] = self.position_gains
             else:
                 servo.kp[c] = 0.0
-            plant.brake[c] = False
+            if self.brake_set():  # a brake test: enabled, pushing against the closed brake
+                plant.close_brake(c)
+            else:
+                plant.brake[c] = False
         else:  # disabled, quick stop, fault: no torque, the brake holds the drum
             plant.motor_torque[c] = 0.0
             servo.kp[c] = 0.0
             servo.beyond[c] = 0.0
             self.target_counts = None
-            plant.brake[c] = True
+            plant.close_brake(c)
+
+    def brake_set(self) -> bool:
+        """Whether the master closed the brake (0x60FE bit 0 "set brake", enabled by its
+        mask): it stays closed while the drive is enabled."""
+        od = self.od
+        return brake_commanded(
+            od.get((OD_DIGITAL_OUTPUTS, SUB_PHYSICAL_OUTPUTS), 0),
+            od.get((OD_DIGITAL_OUTPUTS, SUB_BIT_MASK)),
+        )
 
     def holds_at(self) -> float:
         """s: when the position target stops going on at its last rate, ``extrapolate_for``

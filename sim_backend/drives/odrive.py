@@ -75,7 +75,7 @@ class ODriveAxis:
             self.plant.brake[c] = False
         else:
             self.plant.motor_torque[c] = 0.0
-            self.plant.brake[c] = True
+            self.plant.close_brake(c)
 
     def tick(self, t: float) -> list[can.Message]:
         if self.state is p.AxisState.CLOSED_LOOP_CONTROL and t - self.last_rx > self.comm_timeout:

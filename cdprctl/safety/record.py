@@ -1,0 +1,109 @@
+"""The last brake test, kept in the state directory beside the calibration record
+(``brake_test.json``, written atomically), and whether a real robot may be enabled: its last
+test passed and is younger than ``[safety] brake_test_interval``."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.state_file import read_json, write_atomically
+
+FILE_NAME = "brake_test.json"
+FORMAT = 1
+
+
+@dataclass
+class CableResult:
+    cable: str
+    passed: bool
+    torque: float  # N·m at the motor: the test torque asked (in the pay-out direction)
+    applied: float  # N·m: the largest torque the drive reported applying (its 0x6077)
+    motion: float  # rad at the motor: the largest motion seen under it
+    counts: float  # that motion in encoder counts
+    capped: bool  # the test torque was the drive's limit, below the configured one
+    stopped_early: bool = False  # the motion passed its bound: the torque taken off at once
+
+
+@dataclass
+class BrakeTestRecord:
+    robot: str
+    time: str  # ISO 8601, UTC
+    unix_time: float  # s since the epoch (the interval's reference)
+    passed: bool
+    max_counts: int  # the bound each cable was held to
+    cables: list[CableResult] = field(default_factory=list)
+    identities: list[Any] = field(default_factory=list)  # the drives' 0x1018, where known
+
+    def summary(self) -> dict[str, Any]:
+        """What ``cdprctl brake-test --json`` prints."""
+        return {
+            "passed": self.passed,
+            "time": self.time,
+            "cables": [dataclasses.asdict(c) for c in self.cables],
+        }
+
+
+class BrakeTestError(Exception):
+    """No usable brake test: missing, unreadable, failed or too old; the message says which."""
+
+
+def record_path(state_dir: Path) -> Path:
+    return Path(state_dir) / FILE_NAME
+
+
+def save(record: BrakeTestRecord, state_dir: Path) -> Path:
+    text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
+    return write_atomically(record_path(state_dir), text + "\n")
+
+
+def load(state_dir: Path) -> BrakeTestRecord:
+    path = record_path(state_dir)
+    data = read_json(path, FORMAT, "brake test record", BrakeTestError)
+    try:
+        cables = [CableResult(**c) for c in data.pop("cables")]
+        return BrakeTestRecord(cables=cables, **data)
+    except (TypeError, KeyError) as exc:
+        raise BrakeTestError(f"{path}: {exc}") from None
+
+
+def check_due(model: RobotModel, state_dir: Path, now: float) -> BrakeTestRecord:
+    """The last brake test of ``model``, if it allows an enable at ``now`` (s since the
+    epoch): passed, for this robot, within ``[safety] brake_test_interval``;
+    :class:`BrakeTestError` otherwise."""
+    record = load(state_dir)
+    if record.robot != model.name:
+        raise BrakeTestError(f"the brake test on record is of robot {record.robot!r}, not "
+                             f"{model.name!r}")  # fmt: skip
+    if not record.passed:
+        failed = ", ".join(c.cable for c in record.cables if not c.passed)
+        raise BrakeTestError(f"the last brake test ({record.time}) failed on cable(s) {failed}")
+    age = now - record.unix_time
+    interval = model.safety.brake_test_interval
+    if age < 0.0:
+        raise BrakeTestError(
+            f"the last brake test is dated {record.time}, after this machine's clock: set "
+            "the clock, then test the brakes again"
+        )
+    if age > interval:
+        raise BrakeTestError(
+            f"the last brake test ({record.time}) is {age / 3600.0:.1f} h old, beyond "
+            f"[safety] brake_test_interval = {interval:g} s ({interval / 3600.0:.1f} h)"
+        )
+    return record
+
+
+def due_time(record: BrakeTestRecord, model: RobotModel) -> str:
+    """ISO time (UTC) the next brake test after ``record`` is due."""
+    due = record.unix_time + model.safety.brake_test_interval
+    return datetime.datetime.fromtimestamp(due, datetime.UTC).isoformat(timespec="seconds")
+
+
+def how_to_test(model: RobotModel, state_dir: Path) -> str:
+    config = model.source_file or "ROBOT.toml"
+    return f"test the brakes: cdprctl brake-test --config {config} --state-dir {state_dir}"
