@@ -635,7 +635,7 @@ def test_the_suspects_are_the_cables_whose_error_alone_explains_it():
     scores best (random wrench matrices, scipy's null space as the reference)."""
     from scipy.linalg import null_space
 
-    from cdprctl.control.supervisor import Supervisor
+    from cdprctl.control.cable_checks import TensionDisagreement
 
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -644,7 +644,7 @@ def test_the_suspects_are_the_cables_whose_error_alone_explains_it():
         P = Ns @ Ns.T
         j = int(rng.integers(8))
         internal = P[:, j] * rng.uniform(-100.0, 100.0)
-        assert Supervisor._suspects(internal, np.diag(P))[0] == j
+        assert TensionDisagreement.suspects(internal, np.diag(P))[0] == j
 
 
 @pytest.mark.parametrize(("kind", "cable", "group"), [

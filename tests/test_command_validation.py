@@ -73,11 +73,29 @@ def test_an_unknown_field_is_refused_whatever_its_name(v, key):
 
 @pytest.mark.parametrize(
     ("kind", "state"),
-    [("enable", "ready"), ("abort", "moving"), ("disable", "enabled"), ("stop", "moving"),
-     ("pause", "moving")],
+    [("enable", "ready"), ("abort", "moving"), ("disable", "enabled"), ("pause", "moving")],
 )  # fmt: skip
 def test_a_command_without_fields_becomes_itself(v, kind, state):
     assert v.check(kind, {}, state) == (kind, {})
+
+
+def test_a_stop_becomes_its_category_2_by_default(v):
+    """IEC 60204-1's stop categories: none given is 2 (decelerate and hold, as `stop` was);
+    0 and 1 are taken, in every state where the controller acts on a stop."""
+    assert v.check("stop", {}, "moving") == ("stop", {"category": 2})
+    for category in (0, 1, 2):
+        for state in ("enabling", "enabled", "moving", "disabling"):
+            assert v.check("stop", {"category": category}, state) == ("stop",
+                                                                       {"category": category})
+
+
+@pytest.mark.parametrize("bad", [3, -1, 1.5, "1", True, None, [1]])
+def test_a_stop_category_other_than_0_1_2_is_refused_naming_each(v, bad):
+    with pytest.raises(CommandError) as exc:
+        v.check("stop", {"category": bad}, "moving")
+    text = str(exc.value)
+    assert text.startswith(f"stop: category = {json.dumps(bad)} must be 0 (the drives off")
+    assert "1 (decelerate, then off) or 2 (decelerate and hold)" in text
 
 
 def test_a_path_name_of_200_characters_is_taken_and_a_longer_one_refused(v):

@@ -102,10 +102,10 @@ CASES = [
      lambda s, d, v: healthy(s, fk_status=FKStatus.BAD_INPUT),
      State.FAULT, FaultKind.FORWARD_KINEMATICS),
     ("the controlled stop ends in FAULT", State.ENABLED, Lifecycle.ACTIVE,
-     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x", True)
+     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x")
      or healthy(s, 1.0 + CFG.stop_duration), State.FAULT, FaultKind.TRACKING),
     ("drives fail during the stop", State.ENABLED, Lifecycle.ACTIVE,
-     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x", True)
+     lambda s, d, v: s.fault(1.0, FaultKind.TRACKING, "x")
      or setattr(v, "lifecycle", Lifecycle.ERROR) or healthy(s, 1.1),
      State.FAULT, FaultKind.TRACKING),
 ]  # fmt: skip
@@ -126,7 +126,7 @@ def test_transition(name, start, lc, act, end, kind):
 
 def test_during_the_stop_is_counted_but_keeps_the_first_reason():
     s, d, drives, stops = rig(State.MOVING)
-    s.fault(1.0, FaultKind.OVER_SPEED, "too fast", hold=True)
+    s.fault(1.0, FaultKind.OVER_SPEED, "too fast")
     assert d.state is State.STOPPING and stops == [True]
     drives.lifecycle = Lifecycle.ERROR
     healthy(s, 1.01)
@@ -159,7 +159,7 @@ def test_a_condition_from_before_a_fault_must_persist_anew():
     s = Supervisor(CFG, d, drives, lambda: None, torque_limits=limits)
     drives.states.torque[1] = 2.6
     healthy(s, 1.0)  # at the limit from 1.0 s
-    s.fault(1.01, FaultKind.DRIVE_FAULT, "another drive", hold=False)
+    s.fault(1.01, FaultKind.DRIVE_FAULT, "another drive")
     s.set_state(State.READY, 3.0, "reset")
     s.set_state(State.ENABLING, 3.0, "enable")
     drives.lifecycle = Lifecycle.ACTIVE

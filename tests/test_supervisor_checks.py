@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import FakeDrives
 
+from cdprctl.control.cable_checks import TensionDisagreement
 from cdprctl.control.data import ControlData
 from cdprctl.control.persistence import Persistence
 from cdprctl.control.states import FaultKind, State
@@ -91,10 +92,10 @@ def test_the_cable_tension_check_faults_on_what_persists_beyond_its_limit():
     s, d, _ = rig(State.ENABLED, position_mode=True)
     d.internal_tension_error[5] = 1.5 * TENSION_LIMITS[5]  # 1.5 times: faster than plain time
     d.internal_leverage[:] = 0.5
-    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    run(s, 1.0, 1.0 + TensionDisagreement.TENSION_FOR)
     assert d.fault_kind is FaultKind.CABLE_TENSION and d.state is State.STOPPING
     assert "index 5:" in d.fault_reason and "+15.0 N at index 5 (> 10.0 N" in d.fault_reason
-    assert f"for {Supervisor.TENSION_FOR * 1e3:.0f} ms;" in d.fault_reason
+    assert f"for {TensionDisagreement.TENSION_FOR * 1e3:.0f} ms;" in d.fault_reason
     s, d, _ = rig(State.ENABLED, position_mode=True)
     d.internal_tension_error[5] = 0.99 * TENSION_LIMITS[5]
     run(s, 1.0, 2.0)
@@ -129,11 +130,11 @@ def test_the_suspects_are_the_cables_that_explain_the_internal_error(
     internal, leverage, suspects, words
 ):
     with np.errstate(all="raise"):  # no 0/0 on the fault path (a leverage of zero)
-        assert Supervisor._suspects(np.array(internal, float), leverage) == suspects
+        assert TensionDisagreement.suspects(np.array(internal, float), leverage) == suspects
     s, d, _ = rig(State.ENABLED, position_mode=True)
     d.internal_tension_error[:] = np.array(internal, float) * 5.0  # N, beyond the 10 N limit
     d.internal_leverage[:] = leverage
-    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    run(s, 1.0, 1.0 + TensionDisagreement.TENSION_FOR)
     assert d.fault_kind is FaultKind.CABLE_TENSION
     assert words in d.fault_reason, d.fault_reason
     assert ("would explain it" in d.fault_reason) == (len(suspects) > 1)
@@ -141,7 +142,7 @@ def test_the_suspects_are_the_cables_that_explain_the_internal_error(
 
 def test_the_controlled_stop_holds_for_stop_duration_then_disables():
     s, d, v = rig(State.MOVING)
-    s.fault(10.0, FaultKind.TRACKING, "x", hold=True)
+    s.fault(10.0, FaultKind.TRACKING, "x")
     run(s, 10.0, 10.0 + CFG.stop_duration - 0.01)
     assert d.state is State.STOPPING and "deactivate" not in v.calls
     run(s, 10.0 + CFG.stop_duration, 10.0 + CFG.stop_duration)
@@ -223,7 +224,7 @@ def test_a_state_change_is_an_event_and_staying_is_not():
 
 def test_the_controlled_stop_ends_at_the_first_cycle_past_its_length():
     s, d, v = rig(State.MOVING)
-    s.fault(10.0, FaultKind.TRACKING, "x", hold=True)
+    s.fault(10.0, FaultKind.TRACKING, "x")
     run(s, 10.0 + CFG.stop_duration + 0.0013, 10.0 + CFG.stop_duration + 0.0013)
     assert d.state is State.FAULT and "deactivate" in v.calls
 
@@ -235,7 +236,7 @@ def test_the_tension_check_stands_alone_without_a_torque_check():
     d.state = State.ENABLED
     s = Supervisor(CFG, d, FakeDrives(M, Lifecycle.ACTIVE), lambda: None, TENSION_LIMITS, None)
     d.internal_tension_error[1] = 2.0 * TENSION_LIMITS[1]
-    run(s, 1.0, 1.0 + Supervisor.TENSION_FOR)
+    run(s, 1.0, 1.0 + TensionDisagreement.TENSION_FOR)
     assert d.fault_kind is FaultKind.CABLE_TENSION
 
 
@@ -337,7 +338,7 @@ def test_saturated_time_drains_to_zero_and_no_further():
 def test_persistence_times_are_reported_in_milliseconds(monkeypatch, name):
     """Each persistent fault's reason says how long it persisted, in ms: checked with the
     constant at 2 s, where a wrong factor shows in the printed figure."""
-    monkeypatch.setattr(Supervisor, name, 2.0)
+    monkeypatch.setattr(TensionDisagreement if name == "TENSION_FOR" else Supervisor, name, 2.0)
     s, d, v = rig(State.MOVING, position_mode=name != "OVER_SPEED_FOR")
     if name == "OVER_SPEED_FOR":
         run(s, 1.0, 3.0, dt=0.01, speed=2.0 * CFG.max_speed)

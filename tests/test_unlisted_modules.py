@@ -71,6 +71,22 @@ def test_telemetry_reports_no_fault_kind_until_there_is_one():
             d.fault_kind = kind
             snap.write(controller_values(d))
             assert state_payload(snap.read(), names, "")["fault_kind"] == kind.value
+        # the safety state: the chain open only in the e-stop, the brakes released only while
+        # the drives are enabled, the stop category through the snapshot (-1: none)
+        from cdprctl.control.states import State
+
+        for state, chain, brakes in [(State.ESTOP, "open", "closed"),
+                                     (State.MOVING, "closed", "released"),
+                                     (State.STOPPING, "closed", "released"),
+                                     (State.FAULT, "closed", "closed"),
+                                     (State.READY, "closed", "closed")]:  # fmt: skip
+            for category in (-1, 0, 1, 2):
+                d.state, d.stop_category = state, category
+                snap.write(controller_values(d))
+                safety = state_payload(snap.read(), names, "", brake_test={"x": 1})["safety"]
+                assert (safety["chain"], safety["brakes"]) == (chain, brakes), state
+                assert safety["stop_category"] == (None if category < 0 else category)
+                assert safety["tripped"] == "tracking" and safety["brake_test"] == {"x": 1}
     finally:
         snap.close()
 

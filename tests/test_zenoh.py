@@ -358,10 +358,19 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     drives = status[0]["config"]["drives"]
     assert [d["node"] for d in drives] == list(range(1, 9))
     assert drives[5]["serial"] == 0x53494D06 and drives[5]["product_code"] == 0x402
+    # the safety state (docs/safety.md): in the state payload and in status; the simulated
+    # robot needs no brake test; each fault kind's stop category as configured (defaults)
+    safety = {"chain": "closed", "brakes": "closed", "stop_category": None, "tripped": ""}
+    assert {k: s["safety"][k] for k in safety} == safety
+    assert s["safety"]["brake_test"]["required"] is False
+    assert {k: status[0]["safety"][k] for k in safety} == safety
+    stops = status[0]["config"]["safety"]["stop_category"]
+    assert stops["drive fault"] == 0 and stops["tracking"] == 1 and len(stops) == 15
 
     client.put("enable", {"id": "e1"})
     assert client.wait(lambda: client.last()["state"] == "enabled"), client.replies
     assert client.reply("e1")["ok"] is True
+    assert client.last()["safety"]["brakes"] == "released"
 
     client.put("move", {"position": [1.8, 0.35, 0.5], "max_velocity": 0.2, "id": "m1"})
     goal = np.array([1.8, 0.35, 0.5])

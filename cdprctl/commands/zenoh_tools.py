@@ -72,13 +72,14 @@ def _value(text: str) -> Any:
 
 def send(args: argparse.Namespace) -> int:
     """Send a command and wait for its reply. Fields as key=value (a comma list is a vector:
-    position=1.8,0.35,0.5) or as one JSON object with --json. Commands: enable, disable,
-    stop, reset, move (position m, rpy rad, max_velocity m/s, max_acceleration m/s²),
-    set_tda (method, nu, direction), impose (cable, quantity energy|tension|deformation,
+    position=1.8,0.35,0.5) or as one JSON object with --json. Commands: enable, disable, stop
+    (category 0: the drives off at once onto the brakes, 1: decelerate then off, 2: decelerate
+    and hold, the default), reset, move (position m, rpy rad, max_velocity m/s, max_acceleration
+    m/s²), set_tda (method, nu, direction), impose (cable, quantity energy|tension|deformation,
     value J|N|m), gripper (gripper = its cable, and travel m, force N or release=true), jog
     (velocity m/s and rad/s, frame base|platform; repeat it, or use ``cdprctl jog``), path
-    (--file FILE: checked whole before it is accepted), pause, resume, abort. Exit 0
-    accepted, 1 rejected, 2 no reply."""
+    (--file FILE: checked whole before it is accepted), pause, resume, abort. Exit 0 accepted, 1
+    rejected, 2 no reply."""
     prefix = key_prefix(args)
     if prefix is None:
         return 2

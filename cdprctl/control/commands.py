@@ -46,6 +46,7 @@ class Command:
     # jog: velocity vx, vy, vz (m/s), ωx, ωy, ωz (rad/s) in ``frame`` ("base" or "platform")
     velocity: FloatArray | None = None
     frame: str = "base"
+    category: int = 2  # stop: IEC 60204-1's stop category (0, 1, 2; docs/safety.md)
     text: str = ""  # path: the file's content (CSV or G-code, motion/path_file.py)
     name: str = ""  # path: where it came from, for the messages
     # move, jog: x, y, z (m) and the rotation vector from home (rad), set by Controller.submit
@@ -66,9 +67,10 @@ _MOTION = frozenset({State.ENABLED, State.MOVING})
 #: the states in which each kind is acted on; in any other it is ignored (with an event)
 ACCEPTED_IN: dict[CommandKind, frozenset[State]] = {
     CommandKind.ENABLE: frozenset({State.READY}),
-    CommandKind.DISABLE: frozenset({State.ENABLED, State.MOVING, State.ENABLING}),
-    CommandKind.STOP: _MOTION,
-    CommandKind.RESET: frozenset({State.FAULT, State.ESTOP}),
+    # STOPPING: after a category 2 stop, holding (desk.py refuses them before)
+    CommandKind.DISABLE: frozenset({State.ENABLED, State.MOVING, State.ENABLING, State.STOPPING}),
+    CommandKind.STOP: _MOTION | {State.ENABLING, State.DISABLING},
+    CommandKind.RESET: frozenset({State.FAULT, State.ESTOP, State.STOPPING}),
     CommandKind.MOVE: _MOTION,
     CommandKind.GRIPPER: _MOTION,
     CommandKind.SET_TDA: frozenset(State),

@@ -80,7 +80,8 @@ class Controller:
         )
         # position mode: a drive sitting at its torque limit is a load beyond the cables
         torque_limits = self.winches.limit if model.drives.holds_lengths else None
-        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits)
+        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits,
+                                     model.safety)  # fmt: skip
         self.supervisor.position = e.position  # the estimate, updated in place
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
@@ -210,7 +211,7 @@ class Controller:
         d = self.data
         d.torques[:] = self.winches.r * d.hold_tensions
         self.supervisor.fault(
-            t, FaultKind.INTERNAL, f"internal error: {type(exc).__name__}: {exc}", hold=True
+            t, FaultKind.INTERNAL, f"internal error: {type(exc).__name__}: {exc}"
         )
 
     def refresh_stretch_tensions(self) -> None:

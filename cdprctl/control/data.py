@@ -29,6 +29,9 @@ class ControlData:
         self.state = State.INIT
         self.fault_reason = ""
         self.fault_kind: FaultKind | None = None
+        # the stop under way or the last one's (IEC 60204-1 category 0, 1, 2; -1: none since
+        # the last enable or reset): docs/safety.md
+        self.stop_category = -1
         self.cycle = 0
         self.time = 0.0  # s, the loop's clock at the last cycle
         # s, the real time since the cycle before (a period, or more after a late or missed

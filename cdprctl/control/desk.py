@@ -167,27 +167,63 @@ class CommandDesk:
         # a fresh start: the saturation of before the fault is not this run's
         d.saturation, d.saturated_for = 1.0, 0.0
         c.grippers.hold()
+        d.stop_category = -1
         c.drives.begin_activate()
         c.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
 
+    def _still_stopping(self, t: float, cmd: Command) -> bool:
+        """A fault's stop under way: a reset or disable waits until a category 2 stop holds."""
+        if self.data.state is not State.STOPPING or self.ctl.supervisor.holding_after_stop(t):
+            return False
+        self.data.events.append((t, f"{cmd.kind.value} refused: the controlled stop (category "
+                                 f"{self.data.stop_category}) is under way"))  # fmt: skip
+        return True
+
     def _disable(self, t: float, cmd: Command) -> None:
         """Decelerate to rest, then disable (the supervisor, once the trajectory stands):
-        the holding brakes are not for stopping a moving platform."""
+        the holding brakes are not for stopping a moving platform (a category 1 stop)."""
+        if self._still_stopping(t, cmd):
+            return
+        if self.data.state is State.STOPPING:  # a category 2 stop holding: taken as its end
+            self.ctl.supervisor.clear_fault()
         self._take_motion(t, "stop")
         self.ctl.trajectory.stop_here()
+        self.data.stop_category = 1
         self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested: decelerating, "
                                       "then the drives disabled")  # fmt: skip
 
     def _stop(self, t: float, cmd: Command) -> None:
-        self._take_motion(t, "stop")
-        self.ctl.trajectory.stop_here()
-        self.ctl.supervisor.set_state(State.ENABLED, t, "stop: decelerating, then holding")
+        """IEC 60204-1's categories: 0 the drives off at once (the brakes stop the platform),
+        1 decelerate then disable (``disable``), 2 decelerate and hold, powered."""
+        d, sup = self.data, self.ctl.supervisor
+        if cmd.category == 0:
+            self._take_motion(t, "stop")
+            sup.off(t, State.READY, "stop category 0: the drives disabled at once, the brakes "
+                     "stop the platform")  # fmt: skip
+        elif cmd.category == 1:
+            if d.state is not State.DISABLING:
+                self._disable(t, cmd)
+        elif d.state in (State.ENABLED, State.MOVING):
+            self._take_motion(t, "stop")
+            self.ctl.trajectory.stop_here()
+            d.stop_category = 2
+            sup.set_state(State.ENABLED, t, "stop: decelerating, then holding")
+        else:
+            d.events.append((t, f"stop category 2 ignored in {d.state.value}"))
 
     def _reset(self, t: float, cmd: Command) -> None:
-        c = self.ctl
+        c, d = self.ctl, self.data
+        if self._still_stopping(t, cmd):
+            return
+        d.stop_category = -1
+        if d.state is State.STOPPING:  # a category 2 stop holding: back to holding, enabled
+            c.supervisor.clear_fault()
+            c.trajectory.reset(c.pose6())
+            c.supervisor.set_state(State.ENABLED, t, "fault reset: holding the pose")
+            return
         # from the e-stop the drives take the reset only once the chain is closed; else they
         # report it again and the e-stop says so
-        if self.data.state is State.ESTOP:
+        if d.state is State.ESTOP:
             c.supervisor.estop.reset_at = t
         c.drives.begin_recover()
         c.supervisor.clear_fault()

@@ -5,11 +5,16 @@
     INIT ─startup→ READY ─enable→ ENABLING ─drives on→ ENABLED ⇄ MOVING (move / finished)
     ENABLED/MOVING ─stop→ ENABLED (decelerated, holding)
     ENABLING/ENABLED/MOVING ─disable→ DISABLING (decelerating) → READY (at rest: brakes off)
+    ENABLING/ENABLED/MOVING/DISABLING ─stop category 0→ READY (drives off at once: brakes)
     any ─fault→ STOPPING (hold the pose with feasible tensions, stop_duration) → FAULT
+    STOPPING (category 2, after stop_duration: holding, powered) ─reset→ ENABLED, ─disable→
+    DISABLING
     FAULT ─reset→ READY (drive faults reset, drives disabled)
     any but INIT ─the drives report safe torque off→ ESTOP ─reset, the chain closed→ READY
 
-A driver fault skips STOPPING: the drives are not to be trusted, their brakes close. An open
+Each fault kind takes its stop category (``[safety.stop_category]``, model/safety.py): 0
+skips STOPPING (a driver fault: the drives are not to be trusted, their brakes close), 1 holds
+then disables, 2 holds powered until a reset or disable, watched meanwhile. An open
 safety chain (``SafeTorqueOffError``) is no fault: the e-stop state (``estop.py``), no FAULT,
 no re-enable until a reset the drives take. Every fault has a ``FaultKind``;
 ``states.PERSISTENCE`` says why it is immediate or what must persist. Nothing here raises or
@@ -23,12 +28,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from cdprctl.control.cable_checks import TensionDisagreement
 from cdprctl.control.data import ControlData
 from cdprctl.control.estop import EmergencyStop
 from cdprctl.control.persistence import Persistence
 from cdprctl.control.states import FaultKind, State
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
+from cdprctl.model.safety import SafetyConfig
 from cdprctl.numerics import worst_ratio
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
 from drivers.vocabulary import Lifecycle, WinchStates
@@ -55,11 +62,11 @@ S = State
 TRANSITIONS: dict[State, frozenset[State]] = {
     S.INIT: frozenset({S.READY, S.FAULT}),
     S.READY: frozenset({S.ENABLING, S.STOPPING, S.FAULT}),
-    S.ENABLING: frozenset({S.ENABLED, S.DISABLING, S.STOPPING, S.FAULT}),
-    S.ENABLED: frozenset({S.ENABLED, S.MOVING, S.DISABLING, S.STOPPING, S.FAULT}),
-    S.MOVING: frozenset({S.MOVING, S.ENABLED, S.DISABLING, S.STOPPING, S.FAULT}),
+    S.ENABLING: frozenset({S.ENABLED, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
+    S.ENABLED: frozenset({S.ENABLED, S.MOVING, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
+    S.MOVING: frozenset({S.MOVING, S.ENABLED, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
     S.DISABLING: frozenset({S.READY, S.STOPPING, S.FAULT}),
-    S.STOPPING: frozenset({S.FAULT}),
+    S.STOPPING: frozenset({S.FAULT, S.ENABLED, S.DISABLING}),
     S.FAULT: frozenset({S.READY}),
     S.ESTOP: frozenset({S.READY}),
 }
@@ -82,9 +89,6 @@ class Supervisor:
     # direction that is a short, false spike of estimated speed (seen across processes after
     # a restart: 2 of 10). A real runaway at the limit goes 30 mm further before the stop.
     OVER_SPEED_FOR = 0.03  # s
-    # The internal tension error must stay over its limit this long (position mode): the
-    # measurement is already low-passed at 5 Hz; this only keeps a single bad frame out
-    TENSION_FOR = 0.05  # s
     # A drive at its torque limit this long (position mode): beyond what the cables hold
     TORQUE_FOR = 0.03  # s
     AT_LIMIT = 0.98  # of the torque limit
@@ -95,13 +99,16 @@ class Supervisor:
 
     def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
                  tension_limits: np.ndarray | None = None,
-                 torque_limits: np.ndarray | None = None):  # fmt: skip
+                 torque_limits: np.ndarray | None = None,
+                 safety: SafetyConfig | None = None):  # fmt: skip
         """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
         ``tension_limits`` (N, per cable): the internal tension error that faults (position
-        mode), None: not checked."""
+        mode), None: not checked; ``safety``: each fault kind's stop category."""
         self.config = config
+        safety = safety or SafetyConfig()
+        self.stop_of = {k: safety.category_of(k.value) for k in FaultKind}
         self.tension_limits = tension_limits
-        self._tension_over = Persistence(self.TENSION_FOR)
+        self._tension = TensionDisagreement(config, tension_limits)
         # N·m per winch: the limit a drive sitting at means the load is beyond the cables
         # (position mode), None: not checked
         self.torque_limits = torque_limits
@@ -130,7 +137,7 @@ class Supervisor:
         # m, base frame: the estimated position (the controller gives the estimator's array)
         self.position = np.zeros(3)
         self._persistences = (
-            self._tension_over, self._torque_at_limit, self._speed_over, self._feedback_old
+            self._tension.over, self._torque_at_limit, self._speed_over, self._feedback_old
         )
 
     @property
@@ -152,9 +159,10 @@ class Supervisor:
         d.state = s
         self.t_state = t
 
-    def fault(self, t: float, kind: FaultKind, reason: str, hold: bool) -> None:
-        """Stop the robot for ``reason``: hold the pose with feasible tensions for
-        ``stop_duration`` when ``hold`` and the drives can, else disable at once."""
+    def fault(self, t: float, kind: FaultKind, reason: str) -> None:
+        """Stop the robot for ``reason`` by the category ``kind`` takes: hold the pose with
+        feasible tensions for ``stop_duration`` (1, then disable; 2, holding on) when the
+        drives can, else disable at once (0)."""
         d = self.data
         if d.state in (State.FAULT, State.STOPPING):
             return
@@ -162,13 +170,26 @@ class Supervisor:
         d.fault_kind = kind
         d.events.append((t, f"FAULT: {reason}"))
         d.faults.append((t, kind))
-        if hold and self.drives.lifecycle is Lifecycle.ACTIVE:
+        category = self.stop_of[kind]
+        if category > 0 and self.drives.lifecycle is Lifecycle.ACTIVE:
+            d.stop_category = category
             self._stop_here()
             self._stop_until = t + self.config.stop_duration
-            self.set_state(State.STOPPING, t, "controlled stop, holding the pose")
+            self.set_state(State.STOPPING, t, f"controlled stop, holding the pose (category "
+                           f"{category})")  # fmt: skip
         else:
-            self.drives.begin_deactivate()
-            self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+            self.off(t, State.FAULT, "drives disabled, brakes closed")
+
+    def off(self, t: float, s: State, why: str) -> None:
+        """Category 0: the drives disabled at once, the brakes stop and hold the platform."""
+        self.data.stop_category = 0
+        self.drives.begin_deactivate()
+        self.set_state(s, t, why)
+
+    def holding_after_stop(self, t: float) -> bool:
+        """A category 2 stop done: holding the pose powered until a reset or disable."""
+        d = self.data
+        return d.state is State.STOPPING and d.stop_category == 2 and t >= self._stop_until
 
     def clear_fault(self) -> None:
         self.data.fault_reason = ""
@@ -197,24 +218,22 @@ class Supervisor:
             # the drives do not say when the chain closes (they stay in fault until a reset)
             d.fault_reason = "emergency stop: the safety chain opened; reset once it is closed"
             d.fault_kind = None
-            drv.begin_deactivate()
-            self.set_state(State.ESTOP, t, "the drives' safety chain is open")
+            self.off(t, State.ESTOP, "the drives' safety chain is open")
             return
         if drv.lifecycle is Lifecycle.ERROR and d.state is not State.FAULT:
             if d.state is State.STOPPING:  # the drives failed during the controlled stop
                 d.events.append((t, f"FAULT during the stop: drives: {drv.error}"))
                 d.faults.append((t, FaultKind.DURING_STOP))
-                drv.begin_deactivate()
-                self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+                self.off(t, State.FAULT, "drives disabled, brakes closed")
             else:
-                self.fault(t, driver_fault_kind(drv.error), f"drives: {drv.error}", hold=False)
+                self.fault(t, driver_fault_kind(drv.error), f"drives: {drv.error}")
             return
         if d.state is State.ENABLING:
             if drv.lifecycle is Lifecycle.ACTIVE:
                 self.set_state(State.ENABLED, t, "drives enabled, holding the pose")
             elif t - self.t_state > self.ENABLE_TIMEOUT:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
-                self.fault(t, FaultKind.ENABLE_TIMEOUT, why, False)
+                self.fault(t, FaultKind.ENABLE_TIMEOUT, why)
             return
         if d.state is State.DISABLING:
             at_rest = trajectory_finished and speed < self.AT_REST
@@ -231,9 +250,17 @@ class Supervisor:
                 self._brake_now(t, beyond)
                 return
         if d.state is State.STOPPING:
-            if t >= self._stop_until:
+            if t < self._stop_until:
+                return
+            if d.stop_category != 2:
                 drv.begin_deactivate()
                 self.set_state(State.FAULT, t, "stopped; drives disabled, brakes closed")
+                return
+            failure = self._motion_failure(t, fk_status, fk_residual, speed)  # SS2: watched
+            if failure is not None:
+                d.events.append((t, f"FAULT during the stop: {failure[1]}"))
+                d.faults.append((t, FaultKind.DURING_STOP))
+                self.off(t, State.FAULT, "drives disabled, brakes closed")
             return
         if d.state not in (State.ENABLED, State.MOVING, State.DISABLING):
             return
@@ -242,7 +269,7 @@ class Supervisor:
             self.set_state(State.ENABLED, t, "path paused, holding" if paused else "target reached")
         failure = self._motion_failure(t, fk_status, fk_residual, speed)
         if failure is not None:
-            self.fault(t, failure[0], failure[1], hold=True)
+            self.fault(t, failure[0], failure[1])
 
     def _motion_failure(
         self, t: float, fk_status: FKStatus, fk_residual: float, speed: float
@@ -281,7 +308,9 @@ class Supervisor:
                 f"feedback {age * 1e3:.1f} ms old > {c.max_feedback_age * 1e3:.0f} ms"
             )
         if self.tension_limits is not None:
-            return self._tension_disagreement(t)
+            why = self._tension.check(t, self.data.internal_tension_error,
+                                      self.data.internal_leverage, self._at_limit)  # fmt: skip
+            return None if why is None else (FaultKind.CABLE_TENSION, why)
         return None
 
     def _beyond_capacity(self, t: float) -> str | None:
@@ -305,57 +334,9 @@ class Supervisor:
         if d.state is State.STOPPING:
             d.events.append((t, f"FAULT during the stop: {reason}"))
             d.faults.append((t, FaultKind.BEYOND_CAPACITY))
-            self.drives.begin_deactivate()
-            self.set_state(State.FAULT, t, "drives disabled, brakes closed")
+            self.off(t, State.FAULT, "drives disabled, brakes closed")
         else:
-            self.fault(t, FaultKind.BEYOND_CAPACITY, reason, hold=False)
-
-    def _tension_disagreement(self, t: float) -> tuple[FaultKind, str] | None:
-        """The cable whose internal tension error has been beyond its limit for
-        ``TENSION_FOR`` (position mode; ``FaultKind.CABLE_TENSION``)."""
-        err, lim = self.data.internal_tension_error, self.tension_limits
-        assert lim is not None
-        i = worst_ratio(err, lim)
-        e = float(err[i])
-        ratio = abs(e) / lim[i]
-        # a drive at its torque limit does not apply its commanded tension: the disagreement
-        # says nothing of a cable's length then, and the beyond-capacity check owns the case
-        # (400 N on rowc, the reference's tensions on a platform pushed off it: the tension
-        # check blamed cable 5 before the drives had been at their limit 30 ms)
-        if not self._tension_over.held(t, ratio > 1.0 and not self._at_limit, ratio):
-            return None
-        limit = self.config.max_tension_disagreement
-        suspects = self._suspects(err, self.data.internal_leverage)
-        who = ", ".join(str(j) for j in suspects[:-1]) + (" or " if len(suspects) > 1 else "")
-        who += str(suspects[-1])
-        alike = (
-            f"; each of cables {who} alone would explain it: the null space the redundant "
-            "cables leave cannot tell them apart"
-            if len(suspects) > 1
-            else ""
-        )
-        return FaultKind.CABLE_TENSION, (
-            f"a cable is not the length its encoder says, index {who}: the cables pull against "
-            f"each other beyond what was commanded, {e:+.1f} N at index {i} (> {lim[i]:.1f} N = "
-            f"max_tension_disagreement {limit:g} of its range, for "
-            f"{self.TENSION_FOR * 1e3:.0f} ms{alike}; an encoder jump, a slipped or broken cable)"
-        )
-
-    #: a cable is named when its error explains the internal part at least this well (of the
-    #: best): rowc's slips and snaps put the struck cable within 0.4 % of the best and the
-    #: cables of the other group below 30 % (lock-step, measured)
-    SUSPECT_SHARE = 0.9
-
-    @classmethod
-    def _suspects(cls, internal: np.ndarray, leverage: np.ndarray) -> list[int]:
-        """Cable indices whose own tension error alone best explains the ``internal`` part
-        (N): an error ``a`` on cable j shows as ``a·p_j`` (``p_j`` the projector's column,
-        ``|p_j|² = leverage[j]``), fitting best where ``|internal[j]| / √leverage[j]`` is
-        largest; those within ``SUSPECT_SHARE`` of the best, best first (on the fault path
-        only)."""
-        score = np.abs(internal) / np.sqrt(np.maximum(leverage, 1e-12))
-        order = np.argsort(-score)
-        return [int(j) for j in order if score[j] >= cls.SUSPECT_SHARE * score[order[0]]]
+            self.fault(t, FaultKind.BEYOND_CAPACITY, reason)
 
     # infeasible wrenches in a row before the supervisor faults (the last feasible tensions
     # are held meanwhile): a one-cycle spike of the PID is not a fault
@@ -382,8 +363,7 @@ class Supervisor:
             return
         if bad_cycles >= self.BAD_CYCLES:
             self.fault(t, FaultKind.TENSION_DISTRIBUTION, f"tension distribution "
-                       f"{out.status.name} (the feed-forward alone): {out.message}",
-                       hold=True)  # fmt: skip
+                       f"{out.status.name} (the feed-forward alone): {out.message}")  # fmt: skip
         elif d.saturated_for > self.config.max_saturation_time:
             self.fault(
                 t,
@@ -391,7 +371,6 @@ class Supervisor:
                 f"feedback wrench saturated for {d.saturated_for:.2f} s "
                 f"(> max_saturation_time {self.config.max_saturation_time:g} s; "
                 f"the cables gave {d.saturation:.0%} of it last)",
-                hold=True,
             )
 
     def _over_speed(self, t: float, speed: float, limit: float) -> bool:

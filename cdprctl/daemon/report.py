@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import collections
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -178,7 +179,26 @@ def skipped_lines(skipped: list[list[str]], nodes: list[int]) -> list[str]:
     return lines
 
 
-def config_summary(model: RobotModel, simulated: bool) -> dict[str, Any]:
+def safety_summary(model: RobotModel, state_dir: Path, required: bool) -> dict[str, Any]:
+    """The brake test on record (``required``: a real robot, which ``run`` enables only with
+    a passed one younger than the interval) and each fault kind's stop category."""
+    from cdprctl.model.safety import STOP_CATEGORIES
+    from cdprctl.safety.record import BrakeTestError, due_time, load
+
+    test: dict[str, Any] = {"required": required, "time": None, "passed": None,
+                            "next_due": None}  # fmt: skip
+    try:
+        rec = load(state_dir)
+        if rec.robot == model.name:
+            test.update(time=rec.time, passed=rec.passed, next_due=due_time(rec, model))
+    except BrakeTestError:
+        pass
+    stops = {k: model.safety.category_of(k) for k in STOP_CATEGORIES}
+    return {"brake_test": test, "stop_category": stops}
+
+
+def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = None,
+                   brake_test_required: bool = False) -> dict[str, Any]:  # fmt: skip
     """What the gateway's status serves of the configuration."""
     import cdprctl
     from cdprctl.telemetry.scene import SceneLayout
@@ -206,6 +226,8 @@ def config_summary(model: RobotModel, simulated: bool) -> dict[str, Any]:
         # what a client needs to draw the robot (cdprctl record --mcap's scene)
         "layout": SceneLayout.from_model(m).to_dict(),
         "simulated": simulated,
+        **({"safety": safety_summary(m, state_dir, brake_test_required)}
+           if state_dir is not None else {}),
         "versions": {"cdprctl": getattr(cdprctl, "__version__", "?"), **_versions()},
     }
 

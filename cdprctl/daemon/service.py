@@ -106,7 +106,9 @@ class Daemon:
         self._stop_wait = self.manager.controller.supervisor.disable_within + 1.0
         self._last_fault = ""  # the fault the links were last told of
         self.links = Links(links_of(model, zenoh, foxglove,
-                                    lambda: config_summary(model, self.sim is not None)))
+                                    lambda: config_summary(model, self.sim is not None,
+                                                           self.state_dir,
+                                                           not self.assume_home)))  # fmt: skip
 
     def _close_buses(self) -> None:
         if self.driver is not None:

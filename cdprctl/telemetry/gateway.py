@@ -21,6 +21,7 @@ from cdprctl.telemetry.schema import (
     encode,
     event_payload,
     pose_payload,
+    safety_payload,
     state_payload,
     timing_payload,
 )
@@ -74,6 +75,7 @@ def gateway_main(
     )
     names = [c.name for c in model.cables]
     grip_names = [g.name for g in model.grippers]
+    brake_test = summary.get("safety", {}).get("brake_test")
     validator = CommandValidator(model, zc.commands)
     warning = UNAUTHENTICATED_WARNING if zc.commands and zc.allow_unauthenticated_commands else ""
     shared: dict[str, Any] = {"fault": "", "state": "init", "last": None}
@@ -156,6 +158,7 @@ def gateway_main(
             "state": shared["state"],
             "fault": shared["fault"],
             "pose": pose_payload(snap_now) if snap_now else None,
+            "safety": safety_payload(snap_now, brake_test) if snap_now else None,
             "config": summary,
             "commands": {
                 "enabled": zc.commands,
@@ -185,7 +188,7 @@ def gateway_main(
                     shared["state"] = STATES[int(s["state"][0])]
                     if s["seq"][0] != last_seq:
                         last_seq = float(s["seq"][0])
-                        body = state_payload(s, names, shared["fault"], grip_names)
+                        body = state_payload(s, names, shared["fault"], grip_names, brake_test)
                         if warning:
                             body["warning"] = warning
                         pub_state.put(encode(body))

@@ -105,6 +105,8 @@ class TelemetryLink:
                 plan = params.get("plan")
                 out.append(Command(CommandKind.PATH, text=params["text"], name=params["name"],
                                    plan=None if plan is None else (plan, 0)))  # fmt: skip
+            elif kind == "stop":
+                out.append(Command(CommandKind.STOP, category=int(params["category"])))
             else:
                 out.append(Command(CommandKind(kind)))
         return out

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.data import MOTIONS, PATH_STATES
+from cdprctl.control.states import ACTIVE_STATES
 from cdprctl.gripper import GraspState
 from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES, TDA_METHODS, TDA_STATUSES, TIMING
 
@@ -45,11 +46,32 @@ def _fault_kind(snap: dict[str, np.ndarray]) -> str:
     return FAULT_KINDS[int(i)] if math.isfinite(i) and 0 <= i < len(FAULT_KINDS) else ""
 
 
+#: the states whose drives are enabled: their brakes released
+POWERED = frozenset(s.value for s in ACTIVE_STATES)
+
+
+def safety_payload(snap: dict[str, np.ndarray], brake_test: Any = None) -> dict[str, Any]:
+    """The safety state (docs/safety.md): the safety chain as the drives report it (open: they
+    report safe torque off, the e-stop state), the brakes as the drives' state implies them,
+    the stop category under way or the last one's, the check that tripped, and the brake
+    test on record (``brake_test``: the daemon's, fixed for the run)."""
+    state = STATES[int(snap["state"][0])]
+    cat = float(snap["stop_category"][0])
+    return {
+        "chain": "open" if state == "estop" else "closed",
+        "brakes": "released" if state in POWERED else "closed",
+        "stop_category": int(cat) if math.isfinite(cat) and cat >= 0 else None,
+        "tripped": _fault_kind(snap),
+        "brake_test": brake_test,
+    }
+
+
 def state_payload(
     snap: dict[str, np.ndarray],
     cable_names: list[str],
     fault: str,
     gripper_names: list[str] | tuple[str, ...] = (),
+    brake_test: Any = None,
 ) -> dict[str, Any]:
     true = snap["true_position"]
     grip = [
@@ -72,6 +94,7 @@ def state_payload(
         "state": STATES[int(snap["state"][0])],
         "fault": fault,
         "fault_kind": _fault_kind(snap),
+        "safety": safety_payload(snap, brake_test),
         "pose": pose_payload(snap),
         "twist": {"velocity": _floats(snap["velocity"]), "omega": _floats(snap["omega"])},
         "reference": _floats(snap["reference"]),

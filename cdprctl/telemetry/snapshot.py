@@ -40,6 +40,7 @@ class Layout:
             ("time", 1),  # s, the loop's monotonic clock
             ("state", 1),
             ("fault_kind", 1),  # index in FAULT_KINDS, −1: none
+            ("stop_category", 1),  # IEC 60204-1's, the stop under way or the last; −1: none
             ("tda_method", 1),
             ("tda_status", 1),
             ("saturation", 1),  # the fraction of the feedback wrench the cables give (1: all)
@@ -132,6 +133,7 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "time": d.time,
         "state": STATES.index(d.state.value),
         "fault_kind": FAULT_KINDS.index(d.fault_kind.value) if d.fault_kind is not None else -1,
+        "stop_category": d.stop_category,
         "tda_method": TDA_METHODS.index(d.tda_method),
         "tda_status": TDA_STATUSES.index(d.tda_status.name),
         "saturation": d.saturation,

@@ -42,7 +42,7 @@ ALLOWED_STATES = {
 FIELDS: dict[str, dict[str, str]] = {  # field → unit, per kind ("id" is always allowed)
     "enable": {},
     "disable": {},
-    "stop": {},
+    "stop": {"category": ""},
     "reset": {},
     "move": {"position": "m", "rpy": "rad", "max_velocity": "m/s", "max_acceleration": "m/s²"},
     "set_tda": {"method": "", "nu": "", "direction": ""},
@@ -86,6 +86,17 @@ def _vector(d: dict[str, Any], key: str, unit: str, n: int = 3) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise CommandError(f"{key} = {json.dumps(v)} must contain only finite numbers ({unit})")
     return a
+
+
+def _stop_category(d: dict[str, Any]) -> int:
+    """``{"category": 0|1|2}`` (IEC 60204-1; default 2: decelerate and hold)."""
+    v = d.get("category", 2)
+    if isinstance(v, bool) or v not in (0, 1, 2):
+        raise CommandError(
+            f"stop: category = {json.dumps(v)} must be 0 (the drives off at once, onto the "
+            "brakes), 1 (decelerate, then off) or 2 (decelerate and hold)"
+        )
+    return int(v)
 
 
 class CommandValidator:
@@ -153,6 +164,8 @@ class CommandValidator:
             return "jog", self._jog(d)
         if kind == "path":
             return "path", self._path(d, snap)
+        if kind == "stop":
+            return "stop", {"category": _stop_category(d)}
         return kind, {}
 
     def _jog(self, d: dict[str, Any]) -> dict[str, Any]:
