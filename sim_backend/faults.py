@@ -194,7 +194,8 @@ class FaultInjector:
         elif ev.kind == "estop":
             for i, d in enumerate(net.drives):
                 if d is not None:
-                    net._send(net.bus_index_of(i), d.open_sto(int(ev.value) or EMCY_STO))
+                    frames = d.open_sto(int(ev.value) or EMCY_STO, net.time)
+                    net._send(net.bus_index_of(i), frames)
 
     def _end(self, net: Any, ev: FaultEvent) -> None:
         c = ev.cable

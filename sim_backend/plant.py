@@ -67,6 +67,11 @@ class PlantOptions:
     # under a 400 N force beyond its capacity put up to 4.8 times the limit on its brakes
     # (12.4 N·m, lock-step); a brake test at the drive's limit passes
     brake_hold_factor: float = 5.0
+    # s a holding brake takes to close once its power is cut (real ones: 10-50 ms); 0: at
+    # once. Only where nothing holds the drum meanwhile — the safety chain's STO, which takes
+    # the torque at once (``Cia402Axis.open_sto``); a drive disabling itself holds its motor
+    # until the brake has closed, as drives sequence it (modelled as closing at once)
+    brake_close_time: float = 0.0
     # a worn brake (``weaken_brake``, ``cdprctl brake-test --sim --weak-brake``): it holds this
     # fraction of its cable's worst-case load (the tension limit on the drum) — the platform at
     # rest, but not a brake test's 1.3 times that load

@@ -366,3 +366,15 @@ def test_the_sdo_abort_codes_the_set_up_tells_apart_are_cia_301s():
     assert theirs["Object does not exist"] == p.SDO_ABORT_NO_OBJECT
     assert theirs["Subindex does not exist"] == p.SDO_ABORT_NO_SUB
     assert theirs["Attempt to write a read only object"] == p.SDO_ABORT_READ_ONLY
+
+
+def test_the_safe_torque_off_codes_are_the_vendors_documented_ones():
+    """STO as each vendor's drive reports it (docs/safety.md's table): maxon EPOS4 0x8A88
+    "STO error", Technosoft iPOS 0x5441, Elmo Gold 0xFF20 — each named as safe torque off; a
+    code one away from each is not (an ordinary drive fault)."""
+    assert p.EMCY_STO == 0x8A88
+    assert set(p.STO_CODES) == {0x8A88, 0x5441, 0xFF20}
+    for code in (0x8A88, 0x5441, 0xFF20):
+        assert "safe torque off" in p.describe_emcy(code) or "STO" in p.describe_emcy(code)
+        for near in (code - 1, code + 1):
+            assert near not in p.STO_CODES

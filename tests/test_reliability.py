@@ -19,7 +19,11 @@ STOPS = {
     "winch slips 0.05 m/s",
     "400 N lateral force",
 }
-ESTOPS = {"e-stop mid-move, released after 1 s", "e-stop released at once (20 ms)"}
+ESTOPS = {"e-stop mid-move, released after 1 s", "e-stop released at once (20 ms)",
+          "e-stop under the 30 N water jet"}  # fmt: skip
+# brakes that take 30 ms to close: the drums free meanwhile (docs/safety.md)
+SLOW_BRAKES = {"e-stop, brakes closing in 30 ms",
+               "e-stop released while the brakes close (10 of 30 ms)"}  # fmt: skip
 RECOVERS = {  # or rode through
     *ESTOPS,
     "frame loss 5 %",
@@ -52,10 +56,18 @@ def test_fault(rowc, scenario):
         assert r.excursion_mm < 10.3, r.excursion_mm  # torque mode's; 25.4 held, 8.5 reeled in
     if name == "cable snaps":
         assert r.excursion_mm < 40.0, r.excursion_mm  # 34.0 measured (torque mode 163)
-    if name in ESTOPS:  # its own state, never a fault; the drop onto the brakes is small
+    if name in ESTOPS | SLOW_BRAKES:  # its own state, never a fault
         assert r.detection_s is not None and r.detection_s < 0.01, r.reaction
         assert r.reaction.startswith("estop: emergency stop") and r.fault_kind == "", r.reaction
-        assert r.excursion_mm < 3.0, r.excursion_mm
+    if name in ESTOPS:  # the drop onto brakes that close at once is small
+        # 1.7 mm measured; under the jet 8.0 (the jet goes on pushing the braked platform)
+        assert r.excursion_mm < (10.0 if "jet" in name else 3.0), r.excursion_mm
+    if name in SLOW_BRAKES:
+        # 30 ms of free drums: the tensions fall to zero within 16 ms, the drums pay out
+        # slack and the platform drops 28 mm (lock-step); re-enabled on slack cables the
+        # encoders fit no pose: refused, as it must be (docs/safety.md, "Stop categories")
+        assert 20.0 < r.excursion_mm < 40.0, r.excursion_mm
+        assert r.recovered.startswith("no: fault the encoders disagree"), r.recovered
     if name == "daemon SIGKILLed, restarted":
         assert r.detection_s is not None and r.detection_s <= 0.15  # the drives' timeout
         assert r.recovered.startswith("yes"), r.recovered

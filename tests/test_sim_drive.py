@@ -521,6 +521,44 @@ def test_an_open_safety_chain_faults_a_drive_only_when_its_power_stage_is_on():
     assert p.describe_emcy(0x8A88).startswith("safe torque off")
 
 
+def test_a_brake_that_takes_time_to_close_leaves_the_drum_free_until_it_has():
+    """``brake_close_time``: the chain opens on an enabled drive at t; its brake closes
+    exactly at t + 30 ms (the physics split there), the drum turning freely before — under
+    the cable's tension, paying out — and held after; a reset node meanwhile closes it at
+    once."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as rig:
+        rig.plant.opt.brake_close_time = 0.03
+        drive, net = rig.net.drives[2], rig.net
+        axis = drive.axis
+        for cw in (0x06, 0x07, 0x0F):
+            axis.apply_controlword(cw)
+        axis.apply()  # as at the next SYNC: the brake released
+        assert axis.state is p.PowerState.OPERATION_ENABLED and not rig.plant.brake[2]
+        t0 = net.time
+        drive.open_sto(p.EMCY_STO, t0)
+        assert axis.state is p.PowerState.FAULT and axis.brake_due == pytest.approx(t0 + 0.03)
+        theta0 = rig.plant.theta[2]
+        net.advance(0.02)
+        assert not rig.plant.brake[2] and rig.plant.motor_torque[2] == 0.0
+        assert rig.plant.theta[2] < theta0  # paid out under the tension
+        net.advance(0.02)
+        assert rig.plant.brake[2] and axis.brake_due == math.inf
+        held = rig.plant.theta[2]
+        net.advance(0.1)
+        assert rig.plant.theta[2] == held
+        # enabled again once the chain closes, a new STO, then a reset node: the brake
+        # closes at once
+        drive.close_sto()
+        for cw in (0x80, 0x06, 0x07, 0x0F):
+            axis.apply_controlword(cw)
+        axis.apply()
+        assert axis.state is p.PowerState.OPERATION_ENABLED
+        drive.open_sto(p.EMCY_STO, net.time)
+        assert not rig.plant.brake[2]
+        axis.reset()
+        assert rig.plant.brake[2] and axis.brake_due == math.inf
+
+
 @pytest.mark.parametrize("bad", ["x", "8:4", "-1", "8:12:14", "nan", "8:8"])
 def test_a_bad_estop_time_is_one_line_with_the_rule(bad, capsys):
     from cdprctl.cli import main
@@ -530,6 +568,27 @@ def test_a_bad_estop_time_is_one_line_with_the_rule(bad, capsys):
     rule = "must be AT or AT:RELEASE in s, 0 <= AT < RELEASE (e.g. 8:12)"
     said = f"{bad!r} is not a time: {rule}" if bad == "x" else f"{bad!r}: {rule}"
     assert err == [f"cdprctl sim: error: --estop = {said}"]
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["sim", "--brake-close-time", "-0.01"], "cdprctl sim: error: --brake-close-time = "
+         "-0.01 s must be in [0, 0.5] s (real holding brakes close in 0.01-0.05 s)"),
+        (["sim", "--brake-close-time", "0.6"], "cdprctl sim: error: --brake-close-time = 0.6 s "
+         "must be in [0, 0.5] s"),
+        (["run", "--brake-close-time", "0.03"], "cdprctl run: error: --brake-close-time needs "
+         "--sim: it sets the simulated brakes"),
+        (["run", "--sim", "--brake-close-time", "1"], "cdprctl run: error: --brake-close-time "
+         "= 1 s must be in [0, 0.5] s"),
+    ],
+)  # fmt: skip
+def test_a_bad_brake_close_time_is_one_line_with_the_rule(args, said, capsys):
+    from cdprctl.cli import main
+
+    assert main([args[0], "--config", str(CONFIG / "rowc.toml"), *args[1:]]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(said), err
 
 
 def test_an_estop_time_is_the_event_it_says():

@@ -79,9 +79,14 @@ def main() -> None:
     all_ok = True
     slowest = 0.0
     rode_through: list[str] = []  # the faults every seed rode through
+    estop_drop = {}  # mm, the e-stops' largest drop: brakes closing at once / in 30 ms
     for sc in SCENARIOS:
         results = [run(model, sc, seed=s) for s in range(args.seeds)]
         ok = all(r.invariants_hold for r in results)
+        if sc.kind == "estop":
+            key = "slow" if sc.brake_close else "jet" if sc.jet else "fast"
+            drop = max(r.excursion_mm for r in results)
+            estop_drop[key] = max(estop_drop.get(key, 0.0), drop)
         if sc.expected.startswith("stop"):  # the faults that must stop the robot
             slowest = max([slowest] + [r.detection_s for r in results if r.detection_s is not None])
         all_ok &= ok
@@ -115,7 +120,13 @@ def main() -> None:
         f"{', '.join(rode_through) or 'no fault'} rode through on every seed; every fault "
         "that needs a stop was detected within "
         f"{slowest * 1e3:.0f} ms and ended in a controlled stop or FAULT with brakes; transient "
-        "faults recover by reset + enable.**",
+        "faults recover by reset + enable; an e-stop (the drives' safety chain open, docs/"
+        "safety.md) is its own state, never a fault: with brakes that close at once the "
+        f"platform {estop_drop.get('fast', 0.0):.1f} mm at most from where the chain opened "
+        f"({estop_drop.get('jet', 0.0):.1f} under the 30 N jet), reset and enabled again once "
+        "it closed; with brakes that take 30 ms, the free drums pay out slack and the platform "
+        f"drops {estop_drop.get('slow', 0.0):.1f} mm, and the encoders then fit no pose: "
+        "re-enabling is refused (an e-stop on a suspended robot wants SS1, docs/safety.md).**",
         "",
         "| fault | expected | detection | fault kind | reaction | excursion mm | max tension N | "
         "max torque N·m / limit | invariants | recovered |",

@@ -46,6 +46,13 @@ def add_parser(sub: Any) -> None:
         "(docs/safety.md)",
     )
     p.add_argument(
+        "--brake-close-time",
+        type=float,
+        metavar="S",
+        help="with --sim: s the simulated holding brakes take to close when the safety "
+        "chain cuts the torque (real ones 0.01-0.05; default 0: at once; docs/safety.md)",
+    )
+    p.add_argument(
         "--duration",
         type=float,
         help="stop after this many seconds (the demo plays again while a round fits)",
@@ -214,6 +221,15 @@ def run(args: argparse.Namespace) -> int:
             print(f"cdprctl run: error: {event}", file=sys.stderr)
             return 2
         estop = event
+    if args.brake_close_time is not None:
+        from cdprctl.commands.sim import BRAKE_CLOSE_MAX, brake_close_rule
+
+        why = ("--brake-close-time needs --sim: it sets the simulated brakes" if not args.sim
+               else "" if 0.0 <= args.brake_close_time <= BRAKE_CLOSE_MAX
+               else brake_close_rule(args.brake_close_time))  # fmt: skip
+        if why:
+            print(f"cdprctl run: error: {why}", file=sys.stderr)
+            return 2
     from cdprctl.daemon.startup import interrupt_the_start_up
     from drivers.errors import DriverError
 
@@ -231,6 +247,8 @@ def run(args: argparse.Namespace) -> int:
             foxglove=args.foxglove,
             as_built=as_built,
         )
+        if daemon.sim is not None and args.brake_close_time is not None:
+            daemon.sim.plant.opt.brake_close_time = args.brake_close_time
         demo = (args.sim or args.demo) and not args.no_demo and path is None
         if estop is not None and daemon.sim is not None:
             daemon.sim.schedule([estop])

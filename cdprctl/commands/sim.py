@@ -80,6 +80,15 @@ def add_parser(sub: Any) -> None:
         "with maxon EPOS4's STO error 0x8A88 until a fault reset after the release "
         "(CiA 402 drives; docs/safety.md)",
     )
+    p.add_argument(
+        "--brake-close-time",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="s the holding brakes take to close when the safety chain cuts the torque "
+        "(real ones 0.01-0.05; default 0: at once): the drums turn freely meanwhile "
+        "(docs/safety.md)",
+    )
     h = p.add_argument_group("start and errors (docs/homing.md)")
     h.add_argument(
         "--start-pose",
@@ -152,6 +161,9 @@ def run(args: argparse.Namespace) -> int:
     if isinstance(estop, str):
         print(f"cdprctl sim: error: {estop}", file=sys.stderr)
         return 2
+    if not 0.0 <= args.brake_close_time <= BRAKE_CLOSE_MAX:
+        print(f"cdprctl sim: error: {brake_close_rule(args.brake_close_time)}", file=sys.stderr)
+        return 2
     overrides = bus_overrides(args)
     print(
         f"cdprctl sim: {model.name}, {model.n_cables} {model.drives.driver} drives on "
@@ -182,6 +194,7 @@ def run(args: argparse.Namespace) -> int:
               + (f", closes at {estop.time + estop.duration:g} s"
                  if math.isfinite(estop.duration) else ""), flush=True)  # fmt: skip
     plant, encoders = start_state(model, args)
+    plant.opt.brake_close_time = args.brake_close_time
     try:
         net = run_realtime(
             model,
@@ -198,6 +211,14 @@ def run(args: argparse.Namespace) -> int:
     net.close()
     print("cdprctl sim: stopped", flush=True)
     return 0
+
+
+BRAKE_CLOSE_MAX = 0.5  # s
+
+
+def brake_close_rule(value: float) -> str:
+    return (f"--brake-close-time = {value:g} s must be in [0, {BRAKE_CLOSE_MAX:g}] s (real "
+            "holding brakes close in 0.01-0.05 s)")  # fmt: skip
 
 
 def estop_event(text: str, driver: str) -> Any:

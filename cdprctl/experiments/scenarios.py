@@ -40,6 +40,8 @@ class Scenario:
     value: Any = 0.0
     duration: float = 1.0  # s; the fault clears after it (math.inf: never)
     expected: str = ""  # what should happen, for the table
+    jet: float = 0.0  # N along y at the platform from the move's start (the water jet)
+    brake_close: float = 0.0  # s the simulated brakes take to close (PlantOptions)
 
 
 SCENARIOS = (
@@ -81,6 +83,27 @@ SCENARIOS = (
         "e-stop released at once (20 ms)",
         "estop",
         duration=0.02,
+        expected="e-stop state; reset, enable",
+    ),
+    Scenario(
+        "e-stop under the 30 N water jet",
+        "estop",
+        duration=1.0,
+        jet=30.0,
+        expected="e-stop state, the drop measured; reset once released",
+    ),
+    Scenario(
+        "e-stop, brakes closing in 30 ms",
+        "estop",
+        duration=1.0,
+        brake_close=0.03,
+        expected="e-stop state; the drums free until the brakes close",
+    ),
+    Scenario(
+        "e-stop released while the brakes close (10 of 30 ms)",
+        "estop",
+        duration=0.01,
+        brake_close=0.03,
         expected="e-stop state; reset, enable",
     ),
     Scenario(
@@ -154,18 +177,25 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
     res = Result(sc)
     watch = Watch(model, res)
     cl = ClosedLoop(model)
+    cl.plant.opt.brake_close_time = sc.brake_close
     try:
         cl.startup()
         cl.command("enable")
         cl.run(0.3)
+        if sc.jet:
+            jet = (0.0, sc.jet, 0.0, 0.0, 0.0, 0.0)
+            FaultInjector([FaultEvent(cl.net.time, "external_wrench", value=jet, ramp=0.3,
+                                      duration=math.inf)]).attach(cl.net)  # fmt: skip
         cl.command("move", pose=np.concatenate([TARGET, model.home.rpy]))
         cl.run(0.5)
         t_fault = cl.net.time
         if sc.kind == "sigkill":
             return _sigkill(model, cl, res, watch, sc)
-        FaultInjector(
-            [FaultEvent(t_fault, sc.kind, sc.cable, sc.value, duration=sc.duration)], seed=seed
-        ).attach(cl.net)
+        fault = FaultEvent(t_fault, sc.kind, sc.cable, sc.value, duration=sc.duration)
+        if cl.net.faults is not None:  # beside the jet's
+            cl.net.faults.events.append(fault)
+        else:
+            FaultInjector([fault], seed=seed).attach(cl.net)
         c = cl.controller
         _observe(cl, watch, res, t_fault, observe)
         d = c.data

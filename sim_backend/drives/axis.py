@@ -63,6 +63,9 @@ class Cia402Axis:
         # (``open_sto``); ``sto_code`` the error it reports, ``emcy_due`` one its node sends
         self.sto_open = False
         self.sto_code = p.EMCY_STO
+        # s: when the brake, released by an opening chain, has closed (inf: not closing);
+        # meanwhile the drum turns freely (``PlantOptions.brake_close_time``)
+        self.brake_due = math.inf
         self.emcy_due: int | None = None
 
     # -- the device profile ------------------------------------------------------------------
@@ -121,13 +124,19 @@ class Cia402Axis:
         self.fault_code = code
         self.apply()
 
-    def open_sto(self, code: int) -> bool:
-        """The safety chain opens (an e-stop): no torque from now on, the brake closes; an
-        energised power stage (switched on, enabled, quick stop) faults with ``code``, as a
-        maxon EPOS4 does (0x8A88; docs/safety.md), and True (its node sends the EMCY); a
-        disabled one stays disabled, no error, until it is switched on."""
+    def open_sto(self, code: int, t: float | None = None) -> bool:
+        """The safety chain opens (an e-stop) at ``t`` (s): no torque from now on, and a
+        released brake closes ``brake_close_time`` later (at once without ``t``): the drum
+        turns freely meanwhile; an energised power stage (switched on, enabled, quick stop)
+        faults with ``code``, as a maxon EPOS4 does (0x8A88; docs/safety.md), and True (its
+        node sends the EMCY); a disabled one stays disabled, no error, until it is switched
+        on."""
         self.sto_open, self.sto_code = True, code
         if self.state in ENERGISED or self.state is p.PowerState.FAULT_REACTION_ACTIVE:
+            released = not self.plant.brake[self.cable]
+            close = self.plant.opt.brake_close_time
+            if released and t is not None and close > 0.0:
+                self.brake_due = t + close
             self.fault(code)
             return True
         return False
@@ -158,6 +167,7 @@ class Cia402Axis:
         zero."""
         self.state = p.PowerState.SWITCH_ON_DISABLED
         self.fault_code = 0
+        self.brake_due = math.inf
         self.apply()
         if self.incremental:
             self.zero_counter()
@@ -228,7 +238,10 @@ class Cia402Axis:
             servo.kp[c] = 0.0
             servo.beyond[c] = 0.0
             self.target_counts = None
-            plant.close_brake(c)
+            if self.brake_due == math.inf:
+                plant.close_brake(c)
+            else:  # cut by the safety chain: closing, the drum free until ``brake_due``
+                plant.brake[c] = False
 
     def brake_set(self) -> bool:
         """Whether the master closed the brake (0x60FE bit 0 "set brake", enabled by its
@@ -240,15 +253,21 @@ class Cia402Axis:
         )
 
     def holds_at(self) -> float:
-        """s: when the position target stops going on at its last rate, ``extrapolate_for``
-        after the last new one (inf: it is not moving)."""
+        """s: the next instant the axis changes by itself: the position target stops going
+        on at its last rate, ``extrapolate_for`` after the last new one, or a closing brake
+        closes (inf: neither)."""
         moving = self.plant.servo.rate[self.cable] != 0.0
-        return self.last_target + self.extrapolate_for if moving else math.inf
+        stops = self.last_target + self.extrapolate_for if moving else math.inf
+        return min(stops, self.brake_due)
 
     def hold_if_due(self, t: float) -> None:
-        """The position target held once ``holds_at`` has passed at ``t`` (s)."""
-        if t >= self.holds_at():
+        """At ``t`` (s): the position target held once it is due, a closing brake closed."""
+        moving = self.plant.servo.rate[self.cable] != 0.0
+        if moving and t >= self.last_target + self.extrapolate_for:
             self.plant.servo.rate[self.cable] = 0.0
+        if t >= self.brake_due:
+            self.brake_due = math.inf
+            self.plant.close_brake(self.cable)
 
     def following_error(self) -> bool:
         """Whether the position loop's following error has been beyond its window for longer

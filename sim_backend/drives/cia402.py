@@ -230,10 +230,10 @@ class Cia402Drive:
             arbitration_id=p.HEARTBEAT + self.node_id, data=bytes([state]), is_extended_id=False
         )
 
-    def open_sto(self, code: int = p.EMCY_STO) -> list[can.Message]:
-        """The safety chain at this drive's STO input opens (``Cia402Axis.open_sto``): the
-        EMCY where the drive faults."""
-        faulted = self.axis.open_sto(code)
+    def open_sto(self, code: int = p.EMCY_STO, t: float | None = None) -> list[can.Message]:
+        """The safety chain at this drive's STO input opens at ``t`` (s;
+        ``Cia402Axis.open_sto``): the EMCY where the drive faults."""
+        faulted = self.axis.open_sto(code, t)
         return [self._emcy(code)] if faulted and not self.silent else []
 
     def close_sto(self) -> None:
