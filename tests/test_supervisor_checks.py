@@ -121,6 +121,8 @@ def test_a_drive_at_its_torque_limit_leaves_the_tension_check_to_the_capacity_ch
         ([4.0, 0, 0, 0, 0, 0, 0, 3.0], np.array([1.0, 1, 1, 1, 1, 1, 1, 0.25]), [7], "index 7:"),
         # at 0.9 of the best a cable is a suspect, at 0.8 it is not
         ([10.0, 9.05, 8.0, 0, 0, 0, 0, 0], np.full(8, 0.5), [0, 1], "index 0 or 1:"),
+        # exactly at SUSPECT_SHARE (0.9 × 4.0 is 3.6 in floating point): "at least" it
+        ([4.0, 3.6, 0, 0, 0, 0, 0, 0], np.ones(8), [0, 1], "index 0 or 1:"),
         # a cable the null space does not reach (leverage 0) with no error: not a suspect
         ([0, 6.0, 0, 0, 0, 0, 0, 0], np.array([0.0, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]), [1],
          "index 1:"),
