@@ -91,6 +91,15 @@ def test_category_2_holds_powered_past_the_stop_duration_until_a_reset():
     assert d.state is State.STOPPING and drives.lifecycle is Lifecycle.ACTIVE
     assert "deactivate" not in drives.calls
     assert s.holding_after_stop(end + 5.0) and not s.holding_after_stop(end - 0.01)
+    assert s.holding_after_stop(end)  # from stop_duration on, not after it
+
+
+def test_a_category_1_stop_is_never_a_hold_a_reset_may_end():
+    """Past stop_duration a category 1 stop is the supervisor's to end (disabled, FAULT): a
+    reset handled before it does so in that cycle must not take it as a category 2 hold."""
+    s, _, _, _ = rig(1)
+    s.fault(1.0, FaultKind.TRACKING, "x")
+    assert not s.holding_after_stop(1.0 + s.config.stop_duration + 1.0)
 
 
 def test_category_1_disables_after_the_stop_duration():

@@ -292,6 +292,31 @@ def test_a_disable_that_never_comes_to_rest_disables_after_disable_within():
     assert d.events[-1][1].endswith(f"(not at rest after {s.disable_within:g} s)")
 
 
+def test_the_disables_bounds_are_strict_at_rest_and_in_time():
+    """At exactly AT_REST m/s a platform is not yet at rest; at exactly disable_within s in
+    DISABLING the deceleration has not yet timed out (both: beyond the bound, not at it)."""
+    s, d, drives, _ = rig(State.ENABLED)
+    s.set_state(State.DISABLING, 1.0, "disable")
+    s.supervise(1.5, FKStatus.CONVERGED, 0.0, s.AT_REST, True)
+    assert d.state is State.DISABLING
+    s.supervise(1.0 + s.disable_within, FKStatus.CONVERGED, 0.0, s.AT_REST, False)
+    assert d.state is State.DISABLING and drives.lifecycle is Lifecycle.ACTIVE
+    s.supervise(1.6, FKStatus.CONVERGED, 0.0, 0.999 * s.AT_REST, True)
+    assert d.state is State.READY
+
+
+@pytest.mark.parametrize("path_state", ["", "running", "stopped", "done", "aborted"])
+def test_a_finished_trajectory_is_a_reached_target_unless_the_path_is_paused(path_state):
+    s, d, _, _ = rig(State.MOVING)
+    d.path_state = path_state
+    s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
+    assert d.state is State.ENABLED and d.events[-1][1].endswith("target reached")
+    s, d, _, _ = rig(State.MOVING)
+    d.path_state = "paused"
+    s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
+    assert d.events[-1][1].endswith("path paused, holding")
+
+
 @pytest.mark.parametrize("limits, within", [
     # (v, a, j, ω, α, ζ): a jerk-limited stop from the top speed takes v/a + a/j; twice the
     # longer of the linear and the angular, at least 3 s — worked out here by hand
