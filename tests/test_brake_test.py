@@ -23,6 +23,7 @@ from cdprctl.safety.record import (
     BrakeTestError,
     BrakeTestRecord,
     CableResult,
+    check_drives,
     check_due,
     load,
     save,
@@ -300,6 +301,10 @@ def test_an_enable_needs_a_passed_brake_test_younger_than_the_interval(tmp_path)
     save(passed_record(model, now + 600.0), tmp_path)
     with pytest.raises(BrakeTestError, match="after this machine's clock"):
         check_due(model, tmp_path, now)
+    simulated = dataclasses.replace(passed_record(model, now - 60.0), simulated=True)
+    save(simulated, tmp_path)
+    with pytest.raises(BrakeTestError, match="was run on the simulated robot, not on these"):
+        check_due(model, tmp_path, now)
     other = dataclasses.replace(passed_record(model, now), robot="caroca")
     save(other, tmp_path)
     with pytest.raises(BrakeTestError, match="of robot 'caroca'"):
@@ -307,6 +312,33 @@ def test_an_enable_needs_a_passed_brake_test_younger_than_the_interval(tmp_path)
     (tmp_path / "brake_test.json").write_text("{not json")
     with pytest.raises(BrakeTestError, match="unreadable"):
         check_due(model, tmp_path, now)
+
+
+def test_a_brake_test_is_of_the_drives_tested():
+    """Once configured, the drives' identities (0x1018) against the test's: an exchanged
+    drive refuses; an identity either side does not know does not."""
+    model = load_robot(ROWC)
+    names = [c.name for c in model.cables]
+    ident = [{"vendor_id": 0, "serial": 0x53494D01 + i} for i in range(8)]
+    record = dataclasses.replace(passed_record(model, 0.0), identities=ident)
+    check_drives(record, list(ident), names)
+    check_drives(record, [None] * 8, names)
+    swapped = list(ident)
+    swapped[3] = {"vendor_id": 0, "serial": 7}
+    with pytest.raises(BrakeTestError, match="the drive of cable 4 is not the one whose brake "
+                       "was tested"):  # fmt: skip
+        check_drives(record, swapped, names)
+
+
+def test_a_sim_brake_test_is_recorded_as_simulated(tmp_path, capsys):
+    """`brake-test --sim` writes its record marked simulated: the state directory of a real
+    robot of the same name would otherwise take it for its brakes' test."""
+    assert main(["brake-test", "--config", str(ROWC), "--sim", "--state-dir",
+                 str(tmp_path)]) == 0  # fmt: skip
+    assert load(tmp_path).simulated
+    with pytest.raises(BrakeTestError, match="simulated robot"):
+        check_due(load_robot(ROWC), tmp_path, load(tmp_path).unix_time + 1.0)
+    assert "(index 5)" in capsys.readouterr().out
 
 
 def test_run_refuses_a_real_robot_without_a_brake_test_in_one_line(tmp_path, capsys):

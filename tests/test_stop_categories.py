@@ -50,15 +50,18 @@ def test_a_stop_category_section_is_read_and_a_bad_one_refused_saying_why(tmp_pa
     assert safety.category_of("encoders disagree") == 0 and safety.category_of("orientation") == 1
     bad = tmp_path / "bad.toml"
     bad.write_text(f'base = "{ROWC}"\n[safety.stop_category]\ndrive_fault = 1\n'
-                   "cable_tension = 2\ntracking = true\ntracking_error = 2\n")  # fmt: skip
+                   "cable_tension = 2\ntracking = true\ntracking_error = 2\n"
+                   "orientation = 2.0\n")  # fmt: skip
     with pytest.raises(ConfigError) as exc:
         load_robot(bad)
     errors = "\n".join(exc.value.errors)
-    assert "safety.stop_category.drive_fault = 1 must be one of 0 (the drive itself has " \
-        "stopped producing torque: its brake holds)" in errors
-    assert "safety.stop_category.cable_tension = 2 must be one of 1, 0 (a slipped or broken " \
-        "cable" in errors
-    assert "safety.stop_category.tracking = true must be one of 1, 0, 2" in errors
+    assert "safety.stop_category.drive_fault = 1 must be an integer, one of 0 (the drive " \
+        "itself has stopped producing torque: its brake holds)" in errors
+    assert "safety.stop_category.cable_tension = 2 must be an integer, one of 0, 1 (a slipped " \
+        "or broken cable" in errors
+    assert "safety.stop_category.tracking = true must be an integer, one of 0, 1, 2" in errors
+    assert "safety.stop_category.orientation = 2 must be an integer, one of 0, 1, 2 (written " \
+        "2.0: a float)" in errors
     assert "safety.stop_category.tracking_error is not a known key (did you mean tracking?" \
         in errors
     assert stop_key("platform speed") == "platform_speed"
@@ -223,3 +226,23 @@ def test_a_faults_category_2_stop_ends_with_a_reset_holding_or_a_disable(tmp_pat
                 assert c.data.stop_category == -1 and not np.any(cl.plant.brake)
             else:
                 assert c.data.state is State.READY and bool(np.all(cl.plant.brake))
+
+
+def test_check_config_and_monitor_say_the_safety_settings_and_state(tmp_path, capsys):
+    from cdprctl.cli import main
+    from cdprctl.commands.zenoh_tools import safety_line
+
+    f = tmp_path / "ss2.toml"
+    f.write_text(f'base = "{ROWC}"\n[safety.stop_category]\ntracking = 2\n')
+    assert main(["check-config", str(f)]) == 0
+    assert ("safety      brake test every 8 h at 1.3 x the worst-case load, at most 4 counts; "
+            "stop categories: tracking 2") in capsys.readouterr().out  # fmt: skip
+    line = safety_line({"chain": "open", "brakes": "closed", "stop_category": 0, "tripped": "",
+                        "brake_test": {"required": False, "time": None}})  # fmt: skip
+    assert line == ("safety   chain open, brakes closed, stop category 0; no brake test on "
+                    "record (not required)")  # fmt: skip
+    line = safety_line({"chain": "closed", "brakes": "released", "stop_category": None,
+                        "tripped": "tracking", "brake_test": {"required": True, "passed": True,
+                        "time": "T0", "next_due": "T1"}})  # fmt: skip
+    assert line == ("safety   chain closed, brakes released, stop category — (tracking); brake "
+                    "test passed T0, next due T1")  # fmt: skip

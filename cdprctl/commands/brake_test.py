@@ -19,7 +19,10 @@ def add_parser(sub: Any) -> None:
         epilog="examples:\n"
         "  cdprctl brake-test --config config/rowc.toml --sim\n"
         "  cdprctl brake-test --config config/rowc.toml --sim --weak-brake 5 --json\n"
-        "  cdprctl brake-test --config ROBOT.toml --can-interface socketcan --can-channel can0",
+        "  cdprctl brake-test --config ROBOT.toml --can-interface socketcan --can-channel can0\n"
+        "\nexit codes: 0 every brake passed, 3 one failed (the record says which), 1 the test "
+        "could not run,\n2 a bad option. A test with --sim is recorded as simulated: a real "
+        "robot's start-up does not take it.",
     )  # fmt: skip
     p.add_argument("--state-dir", metavar="DIR",
                    help="where the result goes (default /var/lib/cdprctl/<robot>)")  # fmt: skip
@@ -75,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         log(f"{who}: {model.name}: configuring the drives")
         driver.configure()
-        record = BrakeTest(model, driver, log).run()
+        record = BrakeTest(model, driver, log, simulated=args.sim).run()
     except (DriverError, BrakeTestFailedError) as exc:
         print(f"{who}: failed: {exc}", file=sys.stderr)
         return 1

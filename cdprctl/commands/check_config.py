@@ -11,6 +11,21 @@ from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import ConfigError, RobotModel, load_robot
 
 
+def safety_summary(model: RobotModel) -> str:
+    """``[safety]``: the brake test's rule and the stop categories that differ from their
+    defaults (docs/safety.md)."""
+    from cdprctl.model.safety import STOP_CATEGORIES, stop_key
+
+    sf = model.safety
+    torque = (f"{sf.brake_test_torque:g} N·m" if sf.brake_test_torque is not None
+              else f"{sf.brake_test_torque_factor:g} x the worst-case load")  # fmt: skip
+    changed = [f"{stop_key(k)} {c}" for k, c in sf.stop_category.items()
+               if c != STOP_CATEGORIES[k][0][0]]  # fmt: skip
+    return (f"safety      brake test every {sf.brake_test_interval / 3600.0:g} h at {torque}, "
+            f"at most {sf.brake_test_max_counts} counts; stop categories: "
+            + (", ".join(changed) if changed else "the defaults"))  # fmt: skip
+
+
 def summary(model: RobotModel) -> str:
     home = model.home
     data = KinematicsData(model)
@@ -27,6 +42,7 @@ def summary(model: RobotModel) -> str:
         f"inertia diag {np.round(np.diag(pf.inertia), 4).tolist()} kg·m²",
         f"gravity     {model.gravity.tolist()} m/s²",
         f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
+        safety_summary(model),
         "",
         f"{'cable':>6} {'t_min N':>9} {'t_max N':>9} {'length m':>9} {'k N/m':>10} "
         f"{'winch max N':>11}",

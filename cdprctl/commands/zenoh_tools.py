@@ -154,6 +154,21 @@ def _bar(t: float, lo: float, hi: float, width: int = 30) -> str:
     return "[" + "#" * n + "." * (width - n) + "]"
 
 
+def safety_line(safety: dict[str, Any]) -> str:
+    """The safety state in one line (docs/safety.md): chain, brakes, stop, the brake test."""
+    cat = safety.get("stop_category")
+    test = safety.get("brake_test") or {}
+    if test.get("time"):
+        tested = (f"brake test {'passed' if test.get('passed') else 'FAILED'} {test['time']}, "
+                  f"next due {test.get('next_due')}")  # fmt: skip
+    else:
+        tested = "no brake test on record" + ("" if test.get("required") else " (not required)")
+    return (f"safety   chain {safety.get('chain')}, brakes {safety.get('brakes')}, stop "
+            f"category {'—' if cat is None else cat}"
+            + (f" ({safety['tripped']})" if safety.get("tripped") else "")
+            + f"; {tested}")  # fmt: skip
+
+
 def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str, Any]) -> str:
     p, rpy = state["pose"]["position"], state["pose"]["rpy"]
     err = state["tracking_error"]
@@ -175,6 +190,7 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
             else ""
         ),
         *([f"WARNING  {state['warning']}"] if state.get("warning") else []),
+        *([safety_line(state["safety"])] if state.get("safety") else []),
         "tensions",
     ]
     lo = meta.get("tension_min") or [0.0] * len(state["tensions"])

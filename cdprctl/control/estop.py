@@ -49,7 +49,7 @@ class EmergencyStop:
                     "after the reset; reset once the chain is closed")  # fmt: skip
         return (
             f"EMERGENCY STOP: the safety chain is open: {who} reports {err.description} "
-            f"(0x{err.code:04X}); no torque, the brakes hold; reset once the chain is closed"
+            f"(0x{err.code:04X}); no torque, the brakes close; reset once the chain is closed"
         )
 
     def watch(self, t: float, position: np.ndarray, speed: float) -> str | None:
@@ -65,6 +65,7 @@ class EmergencyStop:
         d = np.round(self.drop * 1e3, 1) + 0.0  # + 0.0 after rounding: no "-0.0" in the text
         return (
             f"emergency stop: on the brakes, the platform {math.hypot(*d.tolist()):.1f} mm from "
-            f"where the chain opened ([{d[0]:+.1f}, {d[1]:+.1f}, {d[2]:+.1f}] mm), at rest "
+            f"where the chain opened ([{d[0]:+.1f}, {d[1]:+.1f}, {d[2]:+.1f}] mm, as the drums "
+            f"moved: the cables' stretch and swing come on top), at rest "
             f"{rest_since - self.since:.2f} s after"
         )

@@ -72,6 +72,7 @@ class Daemon:
         self.state_dir = Path(state_dir) if state_dir else default_state_dir(model.name)
         self.assume_home = sim or model.drives.assume_home_at_start
         self.record: Any = None
+        self.brake_record: Any = None  # the brake test a real robot's start-up took
         self.out = out if out is not None else sys.stdout
         # first, before the simulated robot is built (its first build compiles for ~10 s)
         self._print(f"cdprctl run: {model.name}, {model.n_cables} {model.drives.driver} drives, "

@@ -130,6 +130,17 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     except Exception as exc:  # start-up failures are reported, never a traceback
         hint = "" if dm.assume_home else f" ({how_to_calibrate(m, dm.state_dir)})"
         raise StartupRefusedError(f"cdprctl run: start-up failed: {exc}{hint}", 1) from None
+    if dm.brake_record is not None:  # the brakes tested are these drives'
+        from cdprctl.safety.record import BrakeTestError, check_drives, how_to_test
+
+        try:
+            check_drives(dm.brake_record, list(getattr(dm.driver, "identities", [])),
+                         [c.name for c in m.cables])  # fmt: skip
+        except BrakeTestError as exc:
+            why = f"{exc}; {how_to_test(m, dm.state_dir)}"
+            raise StartupRefusedError(
+                f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
+            ) from None
     for w in dm.driver.warnings:
         dm._print(f"warning: {w}", err=True)
     lines, drives = identity_lines(m, dm.driver)
@@ -153,6 +164,7 @@ def _brakes_tested(dm: Daemon) -> None:
         raise StartupRefusedError(
             f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
         ) from None
+    dm.brake_record = last
     dm._print(f"brakes: tested {last.time}, the next test due {due_time(last, dm.model)}")
 
 

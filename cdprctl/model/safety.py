@@ -106,10 +106,11 @@ def _read_stops(rd: TableReader, t: dict[str, Any]) -> dict[str, int]:
         if key not in kinds:
             continue
         allowed, why = STOP_CATEGORIES[kinds[key]]
-        if isinstance(value, bool) or value not in allowed:
-            only = ", ".join(map(str, allowed))
-            rd.error(f"safety.stop_category.{key}", value, "",
-                     f"must be one of {only}" + (f" ({why})" if why else ""))  # fmt: skip
+        if not isinstance(value, int) or isinstance(value, bool) or value not in allowed:
+            only = ", ".join(map(str, sorted(allowed)))
+            rule = f"must be an integer, one of {only}" + (f" ({why})" if why else "")
+            rule += f" (written {value!r}: a float)" if isinstance(value, float) else ""
+            rd.error(f"safety.stop_category.{key}", value, "", rule)
             continue
         out[kinds[key]] = int(value)
     return out

@@ -49,8 +49,12 @@ def brake_test_torques(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
 
 
 class BrakeTest:
-    def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None]):
+    def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None],
+                 simulated: bool = False):  # fmt: skip
+        """``simulated``: the drives are the simulated robot's (the record says so, and a
+        real robot's start-up does not take it)."""
         self.model, self.driver, self.log = model, driver, log
+        self.simulated = simulated
         m = model.n_cables
         self.torque, self.capped = brake_test_torques(model)
         cpr = np.array([c.winch.encoder_counts_per_rev for c in model.cables], float)
@@ -82,6 +86,7 @@ class BrakeTest:
             max_counts=self.model.safety.brake_test_max_counts,
             cables=results,
             identities=list(getattr(d, "identities", [None] * self.model.n_cables)),
+            simulated=self.simulated,
         )
 
     def _one(self, c: int, name: str) -> CableResult:
@@ -105,14 +110,16 @@ class BrakeTest:
         held = bool(worst <= self.bound[c])
         # a drive that did not apply the torque tested nothing: a fail, not a pass
         pushed = bool(early or applied >= APPLIED * self.torque[c])
-        counts = worst / self.rad_per_count[c]
+        counts = round(float(worst / self.rad_per_count[c]), 2)
+        bound = self.model.safety.brake_test_max_counts
         verdict = "pass" if held and pushed else "FAIL" + (
             "" if pushed else f": the drive applied only {applied:.3f} N·m")  # fmt: skip
-        self.log(f"  {name}: {self.torque[c]:.3f} N·m"
+        self.log(f"  cable {name} (index {c}): {self.torque[c]:.3f} N·m"
                  + (" (the drive's limit)" if self.capped[c] else "")
-                 + f", moved {counts:.1f} counts: {verdict}")  # fmt: skip
-        return CableResult(name, held and pushed, float(self.torque[c]), applied, worst,
-                           float(counts), bool(self.capped[c]), early)  # fmt: skip
+                 + f", applied {applied:.3f}, moved {counts:.1f} counts (at most {bound}): "
+                 + verdict)  # fmt: skip
+        return CableResult(name, held and pushed, float(self.torque[c]), round(applied, 6),
+                           worst, counts, bool(self.capped[c]), early)  # fmt: skip
 
     def _enable(self, timeout: float = 3.0) -> None:
         d = self.driver

@@ -39,6 +39,7 @@ class BrakeTestRecord:
     max_counts: int  # the bound each cable was held to
     cables: list[CableResult] = field(default_factory=list)
     identities: list[Any] = field(default_factory=list)  # the drives' 0x1018, where known
+    simulated: bool = False  # run on the simulated robot: never a real robot's brake test
 
     def summary(self) -> dict[str, Any]:
         """What ``cdprctl brake-test --json`` prints."""
@@ -80,6 +81,9 @@ def check_due(model: RobotModel, state_dir: Path, now: float) -> BrakeTestRecord
     if record.robot != model.name:
         raise BrakeTestError(f"the brake test on record is of robot {record.robot!r}, not "
                              f"{model.name!r}")  # fmt: skip
+    if record.simulated:
+        raise BrakeTestError(f"the brake test on record ({record.time}) was run on the "
+                             "simulated robot, not on these brakes")  # fmt: skip
     if not record.passed:
         failed = ", ".join(c.cable for c in record.cables if not c.passed)
         raise BrakeTestError(f"the last brake test ({record.time}) failed on cable(s) {failed}")
@@ -96,6 +100,17 @@ def check_due(model: RobotModel, state_dir: Path, now: float) -> BrakeTestRecord
             f"[safety] brake_test_interval = {interval:g} s ({interval / 3600.0:.1f} h)"
         )
     return record
+
+
+def check_drives(record: BrakeTestRecord, identities: list[Any], names: list[str]) -> None:
+    """With the drives configured: the same drives as those tested (0x1018, where both have
+    it): a brake test is of the brakes on these winches; :class:`BrakeTestError` otherwise."""
+    for i, (then, now) in enumerate(zip(record.identities, identities, strict=False)):
+        if then and now and then != now:
+            raise BrakeTestError(
+                f"the drive of cable {names[i]} is not the one whose brake was tested "
+                f"(identity 0x1018 {now}, the brake test has {then}): a drive was exchanged"
+            )
 
 
 def due_time(record: BrakeTestRecord, model: RobotModel) -> str:
