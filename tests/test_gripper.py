@@ -430,3 +430,47 @@ def test_a_travel_at_the_ranges_ends_is_taken_and_beyond_refused_with_the_contro
     for travel in (lo - 1e-6, hi + 1e-6):
         with pytest.raises(CommandError, match="outside what the redundancy gives"):
             v.check("gripper", {"gripper": "1", "travel": travel}, "enabled", snap)
+
+
+def test_the_gateway_refuses_a_travel_inside_the_tension_margin(grippers):
+    """[control] tension_margin narrows the feasible travel from both ends (the TDA keeps it
+    from each tension limit): 20 N moves the lower end up and the upper down by more than
+    1 cm here; a travel between the two lower ends is taken without the margin and refused
+    with it."""
+    import dataclasses
+
+    _, _, snap = enabled_snapshot(grippers)
+    wide = CommandValidator(grippers, True)
+    margined = dataclasses.replace(grippers, control=dataclasses.replace(
+        grippers.control, tension_margin=20.0))  # fmt: skip
+    narrow = CommandValidator(margined, True)
+    lo0, hi0 = wide._travel_range(0, snap)
+    lo1, hi1 = narrow._travel_range(0, snap)
+    assert lo1 > lo0 + 0.01 and hi1 < hi0 - 0.01, ((lo0, hi0), (lo1, hi1))
+    between = round((lo0 + lo1) / 2, 4)
+    assert wide.check("gripper", {"gripper": "1", "travel": between}, "enabled", snap)
+    with pytest.raises(CommandError, match="outside what the redundancy gives"):
+        narrow.check("gripper", {"gripper": "1", "travel": between}, "enabled", snap)
+
+
+def test_the_gateway_refuses_by_the_limits_less_the_margin_at_both_ends(grippers, monkeypatch):
+    """The tension bounds the gateway's range is solved within are [t_min + margin, t_max −
+    margin] (at this pose the upper bound does not bind, so the behaviour above cannot show
+    the upper one: the bounds handed to travel_range are checked)."""
+    import dataclasses
+
+    import cdprctl.telemetry.validate as validate
+
+    _, _, snap = enabled_snapshot(grippers)
+    margined = dataclasses.replace(grippers, control=dataclasses.replace(
+        grippers.control, tension_margin=20.0))  # fmt: skip
+    seen = {}
+
+    def spy(*args):
+        seen["t_min"], seen["t_max"] = args[-2], args[-1]
+        return (0.0, 1.0)
+
+    monkeypatch.setattr(validate, "travel_range", spy)
+    CommandValidator(margined, True)._travel_range(0, snap)
+    np.testing.assert_array_equal(seen["t_min"], grippers.tension_min + 20.0)
+    np.testing.assert_array_equal(seen["t_max"], grippers.tension_max - 20.0)
