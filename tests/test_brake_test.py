@@ -354,8 +354,11 @@ def test_run_refuses_a_real_robot_without_a_brake_test_in_one_line(tmp_path, cap
     assert record.geometry_hash == geometry_hash(model)
     save_calibration(record, state)
     args = ["run", "--config", str(config), "--state-dir", str(state), "--no-realtime",
-            "--duration", "1"]  # fmt: skip
+            "--duration", "1", "--can-interface", "udp_multicast", "--can-channel",
+            "239.74.163.9", "--can-option", "port=43119"]  # fmt: skip
     assert main(args) == 4
     err = capsys.readouterr().err
     assert "refusing to enable the drives: no brake test record at" in err
-    assert f"cdprctl brake-test --config {config} --state-dir {state}" in err
+    # the command to run, with the bus options this run was given
+    assert (f"cdprctl brake-test --config {config} --state-dir {state} --can-interface "
+            "udp_multicast --can-channel 239.74.163.9 --can-option port=43119") in err  # fmt: skip

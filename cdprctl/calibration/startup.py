@@ -16,11 +16,13 @@ from cdprctl.model.robot import RobotModel
 from drivers.base import WinchDriver
 
 
-def how_to_calibrate(model: RobotModel, state_dir: Path) -> str:
+def how_to_calibrate(model: RobotModel, state_dir: Path, bus: str = "") -> str:
+    """The command that calibrates (``bus``: the bus options the run was given)."""
     config = model.source_file or "ROBOT.toml"
     return (
         f"calibrate: cdprctl calibrate --config {config} --state-dir {state_dir} "
-        "known-pose (the platform on its home fixture) or ... self (near home); or, for the "
+        + (f"{bus} " if bus else "")
+        + "known-pose (the platform on its home fixture) or ... self (near home); or, for the "
         "simulated robot started at home only, [drives] assume_home_at_start = true"
     )
 

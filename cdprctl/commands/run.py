@@ -14,6 +14,7 @@ from cdprctl.commands.sim import (
     add_as_built_argument,
     add_bus_arguments,
     as_built_model,
+    bus_options,
     bus_overrides,
 )
 
@@ -247,6 +248,7 @@ def run(args: argparse.Namespace) -> int:
             foxglove=args.foxglove,
             as_built=as_built,
         )
+        daemon.bus_hint = bus_options(bus_overrides(args))
         if daemon.sim is not None and args.brake_close_time is not None:
             daemon.sim.plant.opt.brake_close_time = args.brake_close_time
         demo = (args.sim or args.demo) and not args.no_demo and path is None

@@ -34,6 +34,14 @@ def add_bus_arguments(p: argparse.ArgumentParser, default: Any = None) -> None:
     )
 
 
+def bus_options(overrides: dict[str, Any]) -> str:
+    """``bus_overrides``'s result as the options that give it (for a command to repeat)."""
+    out = [f"--can-interface {overrides['interface']}"] if "interface" in overrides else []
+    out += [f"--can-channel {overrides['channel']}"] if "channel" in overrides else []
+    out += [f"--can-option {k}={v}" for k, v in overrides.get("options", {}).items()]
+    return " ".join(out)
+
+
 def bus_overrides(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if args.can_interface:

@@ -69,6 +69,7 @@ class Daemon:
         from drivers import create_driver
 
         self.model = model
+        self.bus_hint = ""  # the bus options given, as options: the refusals' commands repeat them
         self.state_dir = Path(state_dir) if state_dir else default_state_dir(model.name)
         self.assume_home = sim or model.drives.assume_home_at_start
         self.record: Any = None

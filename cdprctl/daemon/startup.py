@@ -98,8 +98,9 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
             dm._print(text, err=err)
 
     def refused(why: str) -> StartupRefusedError:  # no enable without a valid calibration
-        return StartupRefusedError(f"cdprctl run: refusing to enable the drives: {why}; "
-                              f"{how_to_calibrate(m, dm.state_dir)}", NOT_CALIBRATED)  # fmt: skip
+        how = how_to_calibrate(m, dm.state_dir, dm.bus_hint)
+        return StartupRefusedError(f"cdprctl run: refusing to enable the drives: {why}; {how}",
+                                   NOT_CALIBRATED)  # fmt: skip
 
     if dm.assume_home:
         dm._print("encoders: taken as zero at the home pose ("
@@ -128,7 +129,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     except CalibrationError as exc:
         raise refused(str(exc)) from None
     except Exception as exc:  # start-up failures are reported, never a traceback
-        hint = "" if dm.assume_home else f" ({how_to_calibrate(m, dm.state_dir)})"
+        hint = "" if dm.assume_home else f" ({how_to_calibrate(m, dm.state_dir, dm.bus_hint)})"
         raise StartupRefusedError(f"cdprctl run: start-up failed: {exc}{hint}", 1) from None
     if dm.brake_record is not None:  # the brakes tested are these drives'
         from cdprctl.safety.record import BrakeTestError, check_drives, how_to_test
@@ -137,7 +138,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
             check_drives(dm.brake_record, list(getattr(dm.driver, "identities", [])),
                          [c.name for c in m.cables])  # fmt: skip
         except BrakeTestError as exc:
-            why = f"{exc}; {how_to_test(m, dm.state_dir)}"
+            why = f"{exc}; {how_to_test(m, dm.state_dir, dm.bus_hint)}"
             raise StartupRefusedError(
                 f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
             ) from None
@@ -160,7 +161,7 @@ def _brakes_tested(dm: Daemon) -> None:
     try:
         last = check_due(dm.model, dm.state_dir, time.time())
     except BrakeTestError as exc:
-        why = f"{exc}; {how_to_test(dm.model, dm.state_dir)}"
+        why = f"{exc}; {how_to_test(dm.model, dm.state_dir, dm.bus_hint)}"
         raise StartupRefusedError(
             f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
         ) from None

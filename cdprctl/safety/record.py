@@ -119,6 +119,8 @@ def due_time(record: BrakeTestRecord, model: RobotModel) -> str:
     return datetime.datetime.fromtimestamp(due, datetime.UTC).isoformat(timespec="seconds")
 
 
-def how_to_test(model: RobotModel, state_dir: Path) -> str:
+def how_to_test(model: RobotModel, state_dir: Path, bus: str = "") -> str:
+    """The command that tests the brakes (``bus``: the bus options the run was given)."""
     config = model.source_file or "ROBOT.toml"
-    return f"test the brakes: cdprctl brake-test --config {config} --state-dir {state_dir}"
+    return (f"test the brakes: cdprctl brake-test --config {config} --state-dir {state_dir}"
+            + (f" {bus}" if bus else ""))  # fmt: skip
