@@ -570,6 +570,54 @@ def test_a_bad_estop_time_is_one_line_with_the_rule(bad, capsys):
     assert err == [f"cdprctl sim: error: --estop = {said}"]
 
 
+def csp_axis_enabled(rig, cable: int = 2):
+    """The drive of ``cable`` switched to position mode and enabled, as at a SYNC without a
+    new target: its loop starts where the motor is."""
+    axis = rig.net.drives[cable].axis
+    axis.od[(p.OD_MODES_OF_OPERATION, 0)] = p.MODE_CSP
+    for cw in (0x06, 0x07, 0x0F):
+        axis.apply_controlword(cw)
+    axis.apply(fresh=False)
+    assert axis.state is p.PowerState.OPERATION_ENABLED
+    return axis
+
+
+def test_a_position_loop_enabled_without_a_target_holds_where_the_motor_is():
+    """Enabled in position mode with no target yet: the loop's target is the motor's angle,
+    not moving (no rate), and the motor stays within a count over 0.2 s."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as rig:
+        theta = float(rig.plant.theta[2])
+        axis = csp_axis_enabled(rig)
+        servo = rig.plant.servo
+        assert servo.target[2] == theta and servo.rate[2] == 0.0
+        rig.net.advance(0.2)
+        assert abs(rig.plant.theta[2] - theta) < 2 * math.pi / axis.cpr
+
+
+def test_a_huge_following_error_window_is_capped_below_the_value_that_turns_it_off(tmp_path):
+    """0x6065 = 0xFFFFFFFF means "no following error monitoring" (CiA 402): a window so large
+    it would reach it (here 10^6 m of cable) is written as 0xFFFFFFFE — monitored, never
+    silently off."""
+    f = tmp_path / "wide.toml"
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[drives]\nfollowing_error_window = 1e6\n')
+    with LockStep(load_robot(f), period=0.004) as rig:
+        assert list(rig.driver._following_window) == [p.FOLLOWING_ERROR_OFF - 1] * 8
+        assert p.FOLLOWING_ERROR_OFF == 0xFFFFFFFF
+
+
+def test_an_encoder_jump_moves_the_position_loops_target_the_other_way():
+    """A jump of +1000 counts (fault injection) in position mode: the drive holds the counts
+    it was told, so in the true motor angle its target moves 1000 counts back (0.0959 rad at
+    rowc's 65536 counts a turn), and the position actual reads 1000 counts more."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as rig:
+        axis = csp_axis_enabled(rig)
+        target, before = float(rig.plant.servo.target[2]), axis.counts()
+        axis.jump_encoder(1000)
+        assert axis.cpr == 65536
+        assert rig.plant.servo.target[2] == pytest.approx(target - 0.095873799, abs=1e-9)
+        assert axis.counts() == before + 1000
+
+
 @pytest.mark.parametrize(
     ("args", "said"),
     [
