@@ -300,8 +300,9 @@ def test_base_node_402_enables_and_a_torque_by_rpdo_moves_the_winch(rig):
 def test_an_open_safety_chain_faults_the_drive_until_released_and_reset(rig):
     """The e-stop as canopen's master sees it (``FaultEvent`` "estop", what `cdprctl sim
     --estop` schedules): an enabled drive goes to FAULT with maxon EPOS4's STO error 0x8A88
-    (its EMCY, 0x603F), no torque, the brake closed; a fault reset is refused while the chain
-    is open; once it closes the reset is taken and the drive enables again."""
+    (its EMCY, 0x603F), no torque, the brake closed, its STO inputs (EPOS4's 0x3202:01) read
+    open; a fault reset is refused while the chain is open; once it closes the inputs read
+    energised, the reset is taken and the drive enables again."""
     from sim_backend.faults import FaultEvent, FaultInjector
 
     robot, network, _ = rig
@@ -319,10 +320,12 @@ def test_an_open_safety_chain_faults_the_drive_until_released_and_reset(rig):
             assert not robot.plant.brake[cable]
             estop = FaultEvent(robot.net.time + 0.05, "estop", duration=1.0)
             FaultInjector([estop]).attach(robot.net)
+        assert node.sdo[0x3202][1].raw == 0x03  # EPOS4's "STO input states": energised
         node.emcy.wait(p.EMCY_STO, timeout=2.0)
         node.tpdo[1].wait_for_reception(timeout=1.0)
         assert node.state == "FAULT"
         assert node.sdo[0x603F].raw == p.EMCY_STO
+        assert node.sdo[0x3202][1].raw == 0  # the inputs read open
         with robot.lock:
             assert robot.plant.brake[cable] and robot.plant.motor_torque[cable] == 0.0
         node.controlword = 0x00
@@ -333,6 +336,7 @@ def test_an_open_safety_chain_faults_the_drive_until_released_and_reset(rig):
         node.controlword = 0x00  # bit 7 down again: the master's reset below is an edge
         while robot.net.time < estop.time + estop.duration + 0.05:
             time.sleep(0.05)
+        assert node.sdo[0x3202][1].raw == 0x03  # closed again, though still in fault
         node.state = "SWITCH ON DISABLED"  # canopen's master: the fault reset
         assert node.sdo[0x603F].raw == 0
         for state in ("READY TO SWITCH ON", "SWITCHED ON", "OPERATION ENABLED"):

@@ -26,6 +26,10 @@ from drivers.cia402.brake import (
 from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
 
+# maxon EPOS4's "STO input states" (0x3202:01; its EDS): both inputs energised
+OD_STO_INPUTS = 0x3202
+STO_INPUTS_CLOSED = 0x03
+
 # the states with the power stage on: where an open safety chain faults the drive
 ENERGISED = frozenset((p.PowerState.SWITCHED_ON, p.PowerState.OPERATION_ENABLED,
                        p.PowerState.QUICK_STOP_ACTIVE))  # fmt: skip
@@ -140,6 +144,11 @@ class Cia402Axis:
             self.fault(code)
             return True
         return False
+
+    def sto_inputs(self) -> int:
+        """maxon EPOS4's 0x3202:01 "STO input states", as the simulated drives read it: bits
+        0 and 1 the two STO inputs, set while energised (the chain closed: torque allowed)."""
+        return 0 if self.sto_open else STO_INPUTS_CLOSED
 
     def close_sto(self) -> None:
         """The chain closes: the error stays until a fault reset (the operator's

@@ -21,7 +21,7 @@ from canopen import SdoAbortedError
 
 from drivers.cia402 import protocol as p
 from sim_backend.drives import pdo
-from sim_backend.drives.axis import Cia402Axis
+from sim_backend.drives.axis import OD_STO_INPUTS, Cia402Axis
 from sim_backend.drives.dictionary import Dictionary
 from sim_backend.drives.sync_clock import SyncClock
 from sim_backend.plant import CdprPlant
@@ -158,6 +158,8 @@ class Cia402Drive:
 
     def _read_object(self, index: int, sub: int) -> int | None:
         """A live object's value (an SDO upload), None for the stored ones."""
+        if index == OD_STO_INPUTS and sub == 1:
+            return self.axis.sto_inputs()
         live = self._live.get(index)
         return None if live is None else live()
 
