@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.control.data import PHASES, ControlData
-from cdprctl.control.states import State
+from cdprctl.control.states import ACTIVE_STATES, State
 from cdprctl.model.robot import RobotModel
 
 
@@ -42,10 +42,14 @@ class RunReport:
         if true_position is not None:
             q = true_position
             sim = f" true [{q[0]:.3f} {q[1]:.3f} {q[2]:.3f}]"
+        # commanded tensions only while the drives are on: off, the brakes hold what they hold
+        commanded = (
+            f"t {d.tensions.min():5.1f}..{d.tensions.max():5.1f} N tda {d.tda_status.name}"
+            if d.state in ACTIVE_STATES else "drives off, brakes closed"
+        )  # fmt: skip
         return (
             f"t={now:6.1f}s {d.state.value:<9} P [{p[0]:.3f} {p[1]:.3f} {p[2]:.3f}] m{sim} err "
-            f"{np.linalg.norm(d.pose_error[:3]) * 1e3:5.2f} mm "
-            f"t {d.tensions.min():5.1f}..{d.tensions.max():5.1f} N tda {d.tda_status.name}"
+            f"{np.linalg.norm(d.pose_error[:3]) * 1e3:5.2f} mm {commanded}"
             + (f" sat {d.saturation:.2f}" if d.saturation < 1.0 else "")
             + (f" path {d.path_segment}/{d.path_segments} "
                f"{d.path_fraction:.0%} {d.path_state}" if d.path_segments else "")
