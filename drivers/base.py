@@ -168,11 +168,11 @@ class WinchDriver(ABC):
     def activating(self) -> bool:
         return self._activating
 
-    def command_brake(self, c: int, closed: bool, timeout: float = 1.0) -> None:
+    def command_brake(self, c: int, closed: bool, timeout: float) -> None:
         """Cable index ``c``'s holding brake closed whatever its power stage does
         (``closed``), or given back to the drive's own logic: a brake test pushes an enabled
-        motor against it (docs/safety.md). Configured drives, outside the loop; a
-        DriverError where the drives cannot."""
+        motor against it (docs/safety.md). Configured drives, outside the loop, each SDO
+        answered within ``timeout`` s; a DriverError where the drives cannot."""
         raise DriverOperationError(
             f"the {self.name} driver cannot command a holding brake: test the brakes with "
             "the drives' own tools (docs/safety.md)"

@@ -225,11 +225,11 @@ def test_set_brake_is_written_as_each_vendors_dictionary_has_it(name, mask):
         driver.configure()
         d = drives[3]
         d.node.sdo[0x60FE][1].raw = 0x00010000  # another output the brake must leave alone
-        driver.command_brake(3, True)
+        driver.command_brake(3, True, 1.0)
         assert d.value(0x60FE, 1) == 0x00010001
         assert (d.value(0x60FE, 2) == 1) if mask else d.value(0x60FE, 2) is None
         assert d.value(0x60FE, 1) is not None and drives[2].value(0x60FE, 1) == 0
-        driver.command_brake(3, False)
+        driver.command_brake(3, False, 1.0)
         assert d.value(0x60FE, 1) == 0x00010000
     finally:
         driver.shutdown()

@@ -26,6 +26,7 @@ SETTLE = 0.1  # s at zero torque between cables
 # of the test torque, the drive's own torque actual must have reached: else it did not push
 # (a drive that limits its torque below, or ignores the target) and nothing was tested
 APPLIED = 0.9
+SDO_TIMEOUT = 1.0  # s for each answer of the brake's SDO set-up (the drives' set-up's own)
 
 
 class BrakeTestFailedError(Exception):
@@ -70,7 +71,7 @@ class BrakeTest:
         results: list[CableResult] = []
         try:
             for c in range(self.model.n_cables):
-                d.command_brake(c, True)
+                d.command_brake(c, True, SDO_TIMEOUT)
                 closed.append(c)
             self.log("brakes closed by the master (0x60FE 'set brake'); enabling the drives")
             self._enable()
@@ -156,7 +157,7 @@ class BrakeTest:
             self.log(f"warning: disabling the drives: {exc}")
         for c in closed:
             try:
-                d.command_brake(c, False)
+                d.command_brake(c, False, SDO_TIMEOUT)
             except DriverError as exc:
                 self.log(f"warning: cable index {c}: giving its brake back to the drive: {exc}")
 

@@ -189,7 +189,7 @@ class Cia402Driver(CanWinchDriver):
             tuple(OPTIONAL),
         )
 
-    def command_brake(self, c: int, closed: bool, timeout: float = 1.0) -> None:
+    def command_brake(self, c: int, closed: bool, timeout: float) -> None:
         if self.lifecycle not in (Lifecycle.INACTIVE, Lifecycle.ERROR):  # SDO: not cyclic
             raise DriverOperationError(f"brake command while {self.lifecycle.name}: disabled only")
         command_brake(self.sdo, c, closed, timeout)
