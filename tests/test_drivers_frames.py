@@ -499,3 +499,26 @@ def test_capabilities_judge_the_profile_the_modes_and_the_rated_torque_by_their_
     assert "rated torque 0x6076 is 1011 mN·m, the config says 1000" in (
         rated_torque_problem(1011, 1000.0) or "")  # fmt: skip
     assert "(not set:" in (rated_torque_problem(0, 1000.0) or "")
+
+
+@pytest.mark.parametrize("source", ["pdo", "derived"])
+def test_the_velocity_comes_from_where_the_config_says(tmp_path, source, monkeypatch):
+    """`[drives] velocity_source`: "pdo" takes each drive's own velocity (0x606C in TPDO2,
+    counts/s → rad/s), "derived" differentiates the positions: a drive made to report 12345
+    counts/s while its drum is at rest tells them apart."""
+    from sim_backend.drives.axis import Cia402Axis
+    from sim_backend.network import LockStep
+
+    f = tmp_path / "v.toml"
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[drives]\nvelocity_source = "{source}"\n')
+    monkeypatch.setattr(Cia402Axis, "velocity_counts", lambda self: 12345)
+    with LockStep(load_robot(f), period=0.004) as ls:
+        ls.driver.configure()
+        for _ in range(5):
+            ls.cycle(np.zeros(8))
+        got = ls.driver.read(ls.net.time).velocity
+        reported = 12345 * 2 * math.pi / ls.net.drives[0].axis.cpr  # rad/s
+        if source == "pdo":
+            np.testing.assert_allclose(got, reported, rtol=1e-12)
+        else:
+            np.testing.assert_allclose(got, 0.0, atol=1e-9)  # the brakes hold every drum
