@@ -522,3 +522,18 @@ def test_the_velocity_comes_from_where_the_config_says(tmp_path, source, monkeyp
             np.testing.assert_allclose(got, reported, rtol=1e-12)
         else:
             np.testing.assert_allclose(got, 0.0, atol=1e-9)  # the brakes hold every drum
+
+
+def test_each_drives_heartbeat_is_taken_as_its_heartbeat():
+    """The drives' heartbeats (0x700 + node, producer time set at set-up) mark each drive
+    alive with the time they came, and tell its NMT state (operational: 0x05)."""
+    from sim_backend.network import LockStep
+
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()
+        for _ in range(100):  # 0.4 s: several heartbeat periods
+            ls.cycle(np.zeros(8))
+        ls.driver.read(ls.net.time)
+        last = ls.driver.liveness.last_hb
+        assert np.all(ls.net.time - last < 0.25), (ls.net.time, last)
+        assert list(ls.driver._nmt_state) == [0x05] * 8
