@@ -537,3 +537,19 @@ def test_each_drives_heartbeat_is_taken_as_its_heartbeat():
         last = ls.driver.liveness.last_hb
         assert np.all(ls.net.time - last < 0.25), (ls.net.time, last)
         assert list(ls.driver._nmt_state) == [0x05] * 8
+
+
+def test_an_implausible_position_is_counted_against_its_drive_alone():
+    """A position step no motor can make in a period (10^7 counts: an encoder or a frame gone
+    wrong) is dropped and counted for that drive — what the liveness error reports — and for
+    no other."""
+    from sim_backend.network import LockStep
+
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()
+        for _ in range(5):
+            ls.cycle(np.zeros(8))
+        ls.net.drives[3].axis.encoder_offset += 10**7
+        ls.cycle(np.zeros(8))
+        ls.cycle(np.zeros(8))
+        assert list(ls.driver.liveness.implausible) == [0, 0, 0, 1, 0, 0, 0, 0]

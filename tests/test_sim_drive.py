@@ -603,6 +603,10 @@ def test_a_huge_following_error_window_is_capped_below_the_value_that_turns_it_o
     with LockStep(load_robot(f), period=0.004) as rig:
         assert list(rig.driver._following_window) == [p.FOLLOWING_ERROR_OFF - 1] * 8
         assert p.FOLLOWING_ERROR_OFF == 0xFFFFFFFF
+    # and one smaller than a count is a count: 0 would fault at any error at all
+    f.write_text(f'base = "{CONFIG / "rowc.toml"}"\n[drives]\nfollowing_error_window = 1e-9\n')
+    with LockStep(load_robot(f), period=0.004) as rig:
+        assert list(rig.driver._following_window) == [1] * 8
 
 
 def test_an_encoder_jump_moves_the_position_loops_target_the_other_way():
