@@ -90,6 +90,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(record.summary()))
     else:
-        failed = [c.cable for c in record.cables if not c.passed]
-        log(f"{'passed' if record.passed else 'FAILED: ' + ', '.join(failed)}; record: {path}")
+        failed = ", ".join(c.cable for c in record.cables if not c.passed)
+        log(f"{'passed' if record.passed else 'FAILED: cable ' + failed}; record: {path}")
     return 0 if record.passed else 3
