@@ -553,3 +553,29 @@ def test_an_implausible_position_is_counted_against_its_drive_alone():
         ls.cycle(np.zeros(8))
         ls.cycle(np.zeros(8))
         assert list(ls.driver.liveness.implausible) == [0, 0, 0, 1, 0, 0, 0, 0]
+
+
+def test_a_cycle_held_up_before_its_send_carries_its_targets_to_the_send():
+    """Position mode, targets moving at 2.5 rad/s: a cycle whose send comes 3 ms after its
+    time (the VM took the CPU mid-cycle) sends its targets for the send's instant — 3 ms on at
+    their rate, 0.0075 rad, 78 counts at rowc's 65536 a turn — not for the instant long
+    past."""
+    from sim_backend.network import LockStep
+
+    def sent_target(held: float) -> int:
+        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+            d = ls.driver
+            d.configure()
+            d.activate()
+            base = d.read(ls.net.time).position.copy()
+            for k in range(3):
+                t = ls.net.time  # the cycle's time
+                d.read(t)
+                if k == 2:
+                    ls.net.advance(held)  # held up: the send's clock is later
+                d.write(t, np.zeros(8), targets=base + 0.01 * k)
+                ls.net.advance(0.004 - (held if k == 2 else 0.0))
+            return int(ls.net.drives[0].axis.target_counts)
+
+    moved = sent_target(0.003) - sent_target(0.0)
+    assert moved == pytest.approx(0.0075 * 65536 / (2 * math.pi), abs=2.0), moved
