@@ -5,6 +5,7 @@ line when missing, unreadable or of another format."""
 
 from __future__ import annotations
 
+import datetime
 import json
 import os
 import tempfile
@@ -45,3 +46,11 @@ def read_json(path: Path, fmt: int, what: str, error: type[Exception]) -> dict[s
     if not isinstance(data, dict) or data.pop("format", None) != fmt:
         raise error(f"{path}: not a {what} of format {fmt}")
     return data
+
+
+def iso_utc(t: float | None = None) -> str:
+    """``t`` (s since the epoch; now when None) as the state files write times: ISO 8601,
+    UTC, to the second."""
+    when = datetime.datetime.now(datetime.UTC) if t is None else (
+        datetime.datetime.fromtimestamp(t, datetime.UTC))  # fmt: skip
+    return when.isoformat(timespec="seconds")

@@ -5,7 +5,6 @@ from. Kept as JSON in the robot's state directory, written atomically (docs/homi
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import hashlib
 import json
 import math
@@ -13,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.state_file import read_json, write_atomically
+from cdprctl.state_file import iso_utc, read_json, write_atomically
 
 FILE_NAME = "calibration.json"
 FORMAT = 1
@@ -93,7 +92,7 @@ def record_path(state_dir: Path) -> Path:
 
 
 def now_iso() -> str:
-    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    return iso_utc()
 
 
 def save(record: CalibrationRecord, state_dir: Path) -> Path:

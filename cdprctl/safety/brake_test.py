@@ -17,6 +17,7 @@ import numpy as np
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.safety.record import BrakeTestRecord, CableResult
+from cdprctl.state_file import iso_utc
 from drivers.base import WinchDriver
 from drivers.errors import DriverError
 from drivers.vocabulary import Lifecycle, WinchStates
@@ -26,6 +27,7 @@ SETTLE = 0.1  # s at zero torque between cables
 # of the test torque, the drive's own torque actual must have reached: else it did not push
 # (a drive that limits its torque below, or ignores the target) and nothing was tested
 APPLIED = 0.9
+ENABLE_TIMEOUT = 3.0  # s for every drive to enable against its closed brake
 SDO_TIMEOUT = 1.0  # s for each answer of the brake's SDO set-up (the drives' set-up's own)
 
 
@@ -74,15 +76,17 @@ class BrakeTest:
                 d.command_brake(c, True, SDO_TIMEOUT)
                 closed.append(c)
             self.log("brakes closed by the master (0x60FE 'set brake'); enabling the drives")
-            self._enable()
+            d.activate(ENABLE_TIMEOUT)  # zero torque, the targets where the motors stand
+            self.targets[:] = d.states.position
             for c, name in enumerate(names):
                 results.append(self._one(c, name))
         finally:
             self._finish(closed)
+        done = time.time()
         return BrakeTestRecord(
             robot=self.model.name,
-            time=_iso(time.time()),
-            unix_time=time.time(),
+            time=iso_utc(done),
+            unix_time=done,
             passed=all(r.passed for r in results),
             max_counts=self.model.safety.brake_test_max_counts,
             cables=results,
@@ -122,17 +126,6 @@ class BrakeTest:
         return CableResult(name, held and pushed, float(self.torque[c]), round(applied, 6),
                            worst, counts, bool(self.capped[c]), early)  # fmt: skip
 
-    def _enable(self, timeout: float = 3.0) -> None:
-        d = self.driver
-        self.targets[:] = d.read(d.clock()).position
-        d.begin_activate()
-        waited = 0.0
-        while d.lifecycle is not Lifecycle.ACTIVE:
-            self._cycle()
-            waited += d.period
-            if waited > timeout:
-                raise BrakeTestFailedError(f"the drives did not enable in {timeout:g} s")
-
     def _run(self, duration: float) -> None:
         for _ in range(max(1, round(duration / self.driver.period))):
             self._cycle()
@@ -161,8 +154,3 @@ class BrakeTest:
             except DriverError as exc:
                 self.log(f"warning: cable index {c}: giving its brake back to the drive: {exc}")
 
-
-def _iso(t: float) -> str:
-    import datetime
-
-    return datetime.datetime.fromtimestamp(t, datetime.UTC).isoformat(timespec="seconds")

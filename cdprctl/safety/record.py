@@ -5,14 +5,13 @@ test passed and is younger than ``[safety] brake_test_interval``."""
 from __future__ import annotations
 
 import dataclasses
-import datetime
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.state_file import read_json, write_atomically
+from cdprctl.state_file import iso_utc, read_json, write_atomically
 
 FILE_NAME = "brake_test.json"
 FORMAT = 1
@@ -115,8 +114,7 @@ def check_drives(record: BrakeTestRecord, identities: list[Any], names: list[str
 
 def due_time(record: BrakeTestRecord, model: RobotModel) -> str:
     """ISO time (UTC) the next brake test after ``record`` is due."""
-    due = record.unix_time + model.safety.brake_test_interval
-    return datetime.datetime.fromtimestamp(due, datetime.UTC).isoformat(timespec="seconds")
+    return iso_utc(record.unix_time + model.safety.brake_test_interval)
 
 
 def how_to_test(model: RobotModel, state_dir: Path, bus: str = "") -> str:
