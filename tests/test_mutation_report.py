@@ -36,3 +36,28 @@ def test_kept_results_make_the_report_until_the_module_changes(tmp_path, monkeyp
     module.write_text("def f(x):\n    return x + 2\n")
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | not run (the file changed since its session: `--fresh m`)" in text
+
+
+def test_mutants_outside_a_targets_scope_are_left_out_of_its_score_and_said(tmp_path, monkeypatch):
+    source = "def kept(x):\n    return x + 1\n\n\ndef other(x):\n    return x * 2\n"
+    (tmp_path / "m.py").write_text(source)
+    from mutation_equivalents import scope_lines
+
+    assert scope_lines(source, ["kept"]) == {1, 2}
+    t = mu.Target("m", "m.py", "tests/test_m.py", scope=("kept",), left_out="too slow")
+    monkeypatch.setattr(mu, "OUT", tmp_path / "out")
+    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
+    monkeypatch.setattr(mu, "load_equivalents", lambda: [])
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "m.sqlite").touch()
+    killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
+                       "- return x + 1 / + return x - 1", "killed")  # fmt: skip
+    outside = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Mul_Add", 6, "return x * 2",
+                        "- return x * 2 / + return x + 2", "out_of_scope")  # fmt: skip
+    entry = mu.results_entry(t, tmp_path, [killed, outside, outside], 60)
+    assert entry["killed"] == 1 and entry["out_of_scope"] == 2 and entry["others"] == []
+    mu.RESULTS.write_text(json.dumps({"m": entry}))
+    (tmp_path / "out" / "m.sqlite").unlink()
+    text = mu.report([t], tmp_path)
+    assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
+    assert "- m: 2 mutants outside kept left out — too slow" in text

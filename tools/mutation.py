@@ -42,7 +42,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
-from mutation_equivalents import EQUIVALENT_PREFIX, load_equivalents, skip_known_equivalents  # noqa: E402
+from mutation_equivalents import (  # noqa: E402
+    EQUIVALENT_PREFIX,
+    OUT_OF_SCOPE_PREFIX,
+    load_equivalents,
+    skip_known_equivalents,
+    skip_out_of_scope,
+)
 
 OUT = ROOT / "out" / "mutation"
 REPORT = ROOT / "docs" / "mutation.md"
@@ -58,11 +64,15 @@ class Target:
     tests: str  # pytest arguments: the test files (and selection) that cover the module
     timeout: float = 30.0  # s per mutant's test run at least: a mutant that hangs is killed
     why: str = ""
+    # the functions mutated, where the rest of the module cannot be run per mutant (empty:
+    # the whole module), and why the rest is left out
+    scope: tuple[str, ...] = ()
+    left_out: str = ""
 
 
 TARGETS_FILE = ROOT / "tools" / "mutation.toml"
 _SPEC = tomllib.loads(TARGETS_FILE.read_text())
-TARGETS = [Target(**t) for t in _SPEC["target"]]
+TARGETS = [Target(**{**t, "scope": tuple(t.get("scope", ()))}) for t in _SPEC["target"]]
 EXCLUDE_OPERATORS: list[str] = _SPEC["exclude-operators"]
 
 
@@ -179,6 +189,9 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
         run(tool("cr-filter-pragma"), str(db))
         n = skip_known_equivalents(db, tree, t.module)
         log(f"{t.name}: {n} mutants equivalent by a known rule, not run")
+        n = skip_out_of_scope(db, tree, t.module, list(t.scope), t.left_out)
+        if n:
+            log(f"{t.name}: {n} mutants outside {', '.join(t.scope)}, left out")
     else:
         if survivors:  # their results dropped: exec runs them again, against today's tests
             with sqlite3.connect(db) as con:
@@ -253,6 +266,8 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
             outcome = "skipped"
             if (result.get("output") or "").startswith(EQUIVALENT_PREFIX):
                 outcome = "survived"  # not run: equivalent by a rule known beforehand
+            elif (result.get("output") or "").startswith(OUT_OF_SCOPE_PREFIX):
+                outcome = "out_of_scope"
         elif result.get("test_outcome") == "killed":
             outcome = "timeout" if result.get("output") == "timeout" else "killed"
         else:
@@ -280,10 +295,12 @@ def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | N
     killed = sum(m.outcome in ("killed", "timeout", "incompetent") for m in mutants)
     rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
              "outcome": m.outcome, "equivalent": m.equivalent}
-            for m in mutants if m.outcome not in ("killed", "timeout", "incompetent")]  # fmt: skip
+            for m in mutants
+            if m.outcome not in ("killed", "timeout", "incompetent", "out_of_scope")]  # fmt: skip
     return {"module": t.module, "sha256": module_digest(tree, t.module),
-            "date": session_date(t), "seconds": seconds, "tests": t.tests,
-            "killed": killed, "others": rest}  # fmt: skip
+            "date": session_date(t), "seconds": seconds, "tests": t.tests, "killed": killed,
+            "out_of_scope": sum(m.outcome == "out_of_scope" for m in mutants),
+            "others": rest}  # fmt: skip
 
 
 def session_date(t: Target) -> str:
@@ -295,6 +312,8 @@ def session_date(t: Target) -> str:
 def mutants_of(entry: dict) -> list[Mutant]:
     """The mutants a kept entry stands for (the killed without their text)."""
     killed = [Mutant(entry["module"], "", 0, "", "", "killed")] * entry["killed"]
+    outside = entry.get("out_of_scope", 0)
+    killed += [Mutant(entry["module"], "", 0, "", "", "out_of_scope")] * outside
     rest = [Mutant(entry["module"], o["operator"], o["line"], o["source"], o["diff"],
                    o["outcome"], "", o["equivalent"]) for o in entry["others"]]  # fmt: skip
     return killed + rest
@@ -322,7 +341,7 @@ def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]
 def report(targets: list[Target], tree: Path) -> str:
     """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
-    rows, survivors, totals = [], [], [0, 0, 0, 0]
+    rows, survivors, totals, scoped = [], [], [0, 0, 0, 0], []
     all_mutants: list[Mutant] = []
     kept = load_results()
     seconds: dict[str, int | None] = {}
@@ -349,7 +368,11 @@ def report(targets: list[Target], tree: Path) -> str:
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue
-        run = [m for m in ms if m.outcome not in ("skipped", "pending")]
+        run = [m for m in ms if m.outcome not in ("skipped", "pending", "out_of_scope")]
+        outside = sum(m.outcome == "out_of_scope" for m in ms)
+        if outside:
+            scoped.append(f"- {t.name}: {outside} mutants outside {', '.join(t.scope)} left "
+                          f"out — {t.left_out}")  # fmt: skip
         killed = [m for m in run if m.outcome in ("killed", "timeout", "incompetent")]
         equiv = [m for m in run if m.equivalent]
         alive = [m for m in run if m.outcome == "survived" and not m.equivalent]
@@ -394,6 +417,8 @@ def report(targets: list[Target], tree: Path) -> str:
         "and why). A mutant is killed when a test fails or the tests exceed the module's "
         "timeout; incompetent mutants (that cannot run at all) count as killed.",
         "",
+        *([*["Left out of a module (mutated in part, `scope` in `tools/mutation.toml`):"],
+           *scoped, ""] if scoped else []),
         "Modules outside these targets are checked independently: bugs planted one at a time "
         "in a scratch copy; those no test caught have tests now (`tests/test_unlisted_modules.py`"
         " lists them).",

@@ -74,3 +74,37 @@ def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
                             (EQUIVALENT_PREFIX + why, job))  # fmt: skip
                 marked += 1
     return marked
+
+
+OUT_OF_SCOPE_PREFIX = "out of scope: "
+
+
+def scope_lines(source: str, functions: list[str]) -> set[int]:
+    """The line numbers of the named functions (at any depth), decorators included."""
+    rows: set[int] = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.name in functions:
+            first = min([node.lineno, *(d.lineno for d in node.decorator_list)])
+            rows.update(range(first, (node.end_lineno or node.lineno) + 1))
+    return rows
+
+
+def skip_out_of_scope(db: Path, tree: Path, module: str, scope: list[str], why: str) -> int:
+    """Mark the pending mutants outside the target's ``scope`` (function names) as skipped,
+    with why they are left out: counted apart, never in the score."""
+    if not scope:
+        return 0
+    inside = scope_lines((tree / module).read_text(), scope)
+    marked = 0
+    with sqlite3.connect(db) as con:
+        pending = con.execute(
+            "SELECT m.job_id, m.start_pos_row FROM mutation_specs m LEFT JOIN work_results r "
+            "ON m.job_id = r.job_id WHERE r.job_id IS NULL"
+        ).fetchall()
+        for job, row in pending:
+            if row not in inside:
+                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
+                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
+                            (OUT_OF_SCOPE_PREFIX + why, job))  # fmt: skip
+                marked += 1
+    return marked
