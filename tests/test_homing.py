@@ -321,7 +321,8 @@ def test_a_move_stops_on_a_tension_that_persists_beyond_its_stop_not_on_a_spike(
 
     model = load_robot(CONFIG / "rowc.toml")
     m = model.n_cables
-    driver = SimpleNamespace(period=0.004, states=SimpleNamespace(torque=np.zeros(m)))
+    driver = SimpleNamespace(period=0.004, states=SimpleNamespace(torque=np.zeros(m),
+                                                                   velocity=np.zeros(m)))
     ses = Session(model, driver, lambda _: None)  # type: ignore[arg-type]
     ses.t_stop_low, ses.t_stop_high = np.full(m, 50.0), np.full(m, 500.0)
     ses.states = driver.states
@@ -368,7 +369,8 @@ class _StallingDriver:
 
         self.period, self.now, self.stall = 0.004, 100.0, stall
         self.lifecycle, self.error = Lifecycle.ACTIVE, ""
-        self.states = SimpleNamespace(torque=np.zeros(m), position=np.zeros(m))
+        self.states = SimpleNamespace(torque=np.zeros(m), position=np.zeros(m),
+                                      velocity=np.zeros(m))
         self.writes: list[float] = []
 
     def _held(self, where: str) -> None:

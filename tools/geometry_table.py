@@ -102,10 +102,9 @@ def visit(built, record, ls, targets) -> tuple[list[float], list[float]]:
     goal_of = motor_goals(built, theta_zero, l_home, ses.ratio)
     start = np.r_[record.pose[:3], np.zeros(3)]
     _, t = goal_of(start)
-    ses.torques[:] = ses.ratio * t
     ses.tension_goal[:] = t
     err_p, err_r = [], []
-    opt = GeometryOptions()
+    opt = GeometryOptions.of(built)
     try:
         ses.enable()
         ses.run(1.0)
@@ -135,7 +134,7 @@ def run(robot: str, seed: int, poses: int) -> dict:
     with robot_at(model, p, R, truth) as ls:
         ls.driver.configure()
         try:
-            cal = geometry_calibrate(model, ls.driver, GeometryOptions(poses=poses),
+            cal = geometry_calibrate(model, ls.driver, GeometryOptions.of(model, poses=poses),
                                      log=lambda s: None)  # fmt: skip
         except CalibrationFailedError as exc:
             row.update(stopped=str(exc), wall=time.monotonic() - t0)
@@ -161,7 +160,8 @@ def run(robot: str, seed: int, poses: int) -> dict:
             drum_max=float(np.max(np.abs(r.drum_scale - true_s)) * 100),
             pose_med=float(np.median(err_p)), pose_max=float(np.max(err_p)),
             rot_med=float(np.median(err_r)), rot_max=float(np.max(err_r)),
-            ratio=cal.residuals_over_noise, wall=time.monotonic() - t0,
+            ratio=cal.residuals_over_noise, balance=cal.equilibrium_over_noise,
+            wall=time.monotonic() - t0,
         )  # fmt: skip
     return row
 

@@ -38,6 +38,16 @@ class GeometryOptions:
     max_anchor_std: float = 0.005  # m: refuse a predicted σ beyond, per anchor (3-D)
     max_scale_std: float = 0.001  # refuse a drum's predicted σ beyond (fraction)
 
+    @classmethod
+    def of(cls, model: RobotModel, **given: float | int | None) -> GeometryOptions:
+        """The options for ``model``: ``given`` (None: not given), else the robot file's
+        ``[calibration] geometry_fill``/``geometry_speed``, else the defaults above."""
+        c = model.calibration
+        chosen = {k: v for k, v in (("fill", c.geometry_fill), ("speed", c.geometry_speed))
+                  if v is not None}  # fmt: skip
+        chosen.update({k: v for k, v in given.items() if v is not None})
+        return cls(**chosen)  # type: ignore[arg-type]
+
 
 # What each cable's tension may be at a candidate (CANDIDATE_MARGIN), along a move
 # (PATH_MARGIN) and before a move stops short (STOP_MARGIN): below, a fraction of the way from

@@ -47,7 +47,8 @@ class GeometryCalibration:
     motion_time: float  # s the platform moved
     accepted: bool
     reason: str
-    residuals_over_noise: float
+    residuals_over_noise: float  # RMS of the length closures over the encoders' σ
+    equilibrium_over_noise: float  # RMS of the weighted equilibrium residuals (σ units)
 
 
 def geometry_calibrate(model: RobotModel, driver: WinchDriver,
@@ -58,7 +59,7 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
     here when None), the identification, the test. Raises :class:`CalibrationFailedError`
     (drives disabled) when it cannot run; a refused identification comes back with
     ``accepted`` False and the reason."""
-    opt = opt or GeometryOptions()
+    opt = opt or GeometryOptions.of(model)
     check_robot(model)
     if poses is None:
         poses = plan(model, opt)
@@ -66,7 +67,6 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
     ident = identification_of(model)
     reference = (ident.reference[0], ident.reference[1], ident.reference[2])
     refs = ", ".join(model.cables[i].name for i in reference)
-    noise = ident.sigma_l
     log(f"geometric calibration: {len(poses) - 1} poses over {opt.fill:.0%} of the "
         f"workspace (about {motion_time(poses, opt):.0f} s of motion); the anchors of cables "
         f"{refs} taken as drawn (they fix the frame)")  # fmt: skip
@@ -121,8 +121,25 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
         ses.close()
     samples = GeometrySamples(np.array(theta_all), np.array(tension_all), np.array(guess))
     result = ident.solve(samples)
-    length_res = _length_residuals(ident, result, samples)
-    fits, ratio = model_test(length_res, noise)
+    reason, ratio, eq_ratio = verdict(ident, result, samples, opt)
+    log(f"the residuals: lengths {ratio:.2f}x the encoders' σ, equilibrium {eq_ratio:.2f}x "
+        "the torques' (each must pass a χ² test at 99.9 %)")  # fmt: skip
+    return GeometryCalibration(result, reference, samples, moved, reason == "accepted",
+                               reason, ratio, eq_ratio)  # fmt: skip
+
+
+def verdict(ident: GeometryIdentification, result: GeometryResult, samples: GeometrySamples,
+            opt: GeometryOptions) -> tuple[str, float, float]:  # fmt: skip
+    """Whether the identified geometry is accepted ("accepted", else why not), and the RMS
+    of the length closures and of the equilibrium residuals over their noise. Each set must
+    pass its χ² test: the lengths against the encoders' resolution, the equilibrium against
+    the torques'. A platform heavier than its file bends the fit: rowc 5 % heavier (lock-step,
+    seed 2), anchors 10 mm off whose length closures pass (0.46x) and whose equilibrium does
+    not (1.79x; the right mass: 0.45 mm, 0.06x and 0.07x)."""
+    length_res, equilibrium_res = _residuals(ident, result, samples)
+    fits, ratio = model_test(length_res, ident.sigma_l)
+    balances, eq_ratio = model_test(equilibrium_res, 1.0)  # weighted: in units of σ
+    noise = ident.sigma_l
     worst_anchor = float(np.max(np.linalg.norm(result.std_anchors, axis=1)))
     worst_scale = float(np.max(result.std_drum_scale))
     reason = "accepted"
@@ -138,14 +155,18 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
                   f"{noise * 1e6:.1f} µm; χ² test at 99.9 %): the robot differs from the file "
                   "in more than its anchors and drums (its attachments, a pulley, a cable "
                   "that slips, a wrong cable law)")  # fmt: skip
+    elif not balances:
+        reason = (f"the equilibrium residuals are {eq_ratio:.1f}x what the torque resolution "
+                  f"explains (forces RMS {result.force_rms:.2f} N; χ² test at 99.9 %): the "
+                  "platform's mass or centre of mass differs from the file, or a cable's "
+                  "tension is not what its drive's torque says (friction, a pulley)")  # fmt: skip
     elif worst_anchor > opt.max_anchor_std or worst_scale > opt.max_scale_std:
         reason = (f"ill-conditioned: predicted σ up to {worst_anchor * 1e3:.2f} mm per anchor "
                   f"(limit {opt.max_anchor_std * 1e3:g} mm) and {worst_scale * 100:.3f} % per "
                   f"drum (limit {opt.max_scale_std * 100:g} %), condition "
                   f"{result.condition:.3g}: more poses (--poses) or other reference "
                   "anchors")  # fmt: skip
-    return GeometryCalibration(result, reference, samples, moved, reason == "accepted",
-                               reason, ratio)  # fmt: skip
+    return reason, ratio, eq_ratio
 
 
 def _held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
@@ -178,14 +199,18 @@ def _held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
     return out[0]
 
 
-def _length_residuals(ident: GeometryIdentification, result: GeometryResult,
-                      s: GeometrySamples) -> np.ndarray:  # fmt: skip
-    """m: the length closures at the solution (the equilibrium rows left out)."""
+def _residuals(ident: GeometryIdentification, result: GeometryResult,
+               s: GeometrySamples) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """At the solution: the length closures (m, samples 1..K-1) and the equilibrium
+    residuals, weighted (units of their σ, every sample): ``residuals``' rows are sample 0's
+    six equilibrium rows, then per sample its m lengths and six equilibrium rows."""
     K, m = s.theta.shape
     z = np.r_[result.anchors[ident.free].ravel(), result.drum_scale, result.poses.ravel()]
     r = ident.residuals(z, s)
-    rows = [r[6 + (k - 1) * (m + 6) : 6 + (k - 1) * (m + 6) + m] for k in range(1, K)]
-    return np.concatenate(rows) * ident.sigma_l if rows else np.zeros(0)
+    lengths = [r[6 + (k - 1) * (m + 6) : 6 + (k - 1) * (m + 6) + m] for k in range(1, K)]
+    balance = [r[:6], *(r[6 + (k - 1) * (m + 6) + m : 6 + k * (m + 6)] for k in range(1, K))]
+    return (np.concatenate(lengths) * ident.sigma_l if lengths else np.zeros(0),
+            np.concatenate(balance))  # fmt: skip
 
 
 GoalOf = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # pose -> (rad, N) per cable
@@ -249,18 +274,20 @@ def _move(ses: Session, a: np.ndarray, b: np.ndarray,
             return
         if stop and ses.move_stops():
             reached[1] = True
+            ses.pace = 0.0
             return
         s = 0.5 - 0.5 * math.cos(math.pi * f)
         reached[0] = s
+        ses.pace = math.sin(math.pi * f)
         x = s * (n - 1)
         i = min(int(x), n - 2)
         u = x - i
         waypoint(i + 1)
         ses.base[:] = G[i] + u * (G[i + 1] - G[i])
         ses.tension_goal[:] = T[i] + u * (T[i + 1] - T[i])
-        ses.torques[:] = ses.ratio * ses.tension_goal
 
     ses.run(duration, step)
+    ses.pace = 0.0
     return reached[0], duration
 
 
@@ -283,7 +310,8 @@ def geometry_record(built: RobotModel, cal: GeometryCalibration,
         condition=r.condition,
         std=r.std_pose,
         samples=len(r.poses),
-        notes={"residuals_over_noise": cal.residuals_over_noise, "force_rms": r.force_rms,
+        notes={"residuals_over_noise": cal.residuals_over_noise,
+               "equilibrium_over_noise": cal.equilibrium_over_noise, "force_rms": r.force_rms,
                "motion_time": cal.motion_time,
                "reference_anchors": [built.cables[i].name for i in cal.reference]},
     )  # fmt: skip

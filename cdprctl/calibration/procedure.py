@@ -74,7 +74,7 @@ def known_pose(
     inverse_kinematics(model, kin, pose[:3], R)
     hold = equilibrium_tensions(model, kin)
     lengths = kin.length.copy()
-    ses.torques[:] = ses.ratio * hold
+    ses.tension_goal[:] = hold
     try:
         ses.enable()
         log(f"holding at the known pose with {hold.min():.1f}..{hold.max():.1f} N")
@@ -179,7 +179,6 @@ def sample_around_start(ses: Session, opt: SelfOptions) -> Samples:
         f"(± {opt.travel:g} m, ± {opt.tilt:g} rad); "
         f"cables {names or '(none)'} held by tension, the others by position")  # fmt: skip
     theta_all, tension_all = [], []
-    ses.torques[:] = ses.ratio * plan[0]
     ses.tension_goal[:] = plan[0]
     ses.enable()
     ses.run(1.5)  # the redundant cables to their tensions at the start

@@ -13,6 +13,7 @@ import numpy as np
 from cdprctl.calibration.identify import Identified
 from cdprctl.calibration.record import CalibrationRecord
 from cdprctl.control.loop import periods_missed
+from cdprctl.control.torques import WinchTorques, friction_kernel
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import coordinates_rotation
@@ -38,8 +39,22 @@ class CalibrationFailedError(Exception):
 
 
 class Session:
-    """The drives held at the driver's period: position targets (rad), feed-forward torques
-    (N·m) and, for the ``force`` cables, a tension loop moving their targets."""
+    """The drives held at the driver's period: position targets (rad), the torques (N·m) for
+    ``tension_goal`` (N: the torque law with its friction, as the daemon's; feed-forward in
+    position mode) and, for the ``force`` cables, a tension loop moving their targets.
+
+    The tension loop: each cycle the target moves by ``gain`` of the tension error over the
+    cable's stiffness (the error decays at ``gain`` a cycle, a first-order loop), plus a learnt
+    ``drift`` scaled by the move's ``pace`` (``sin(π f)``: the cosine ramp's speed profile).
+    A ramp planned on a geometry a few mm off asks each force cable for a length rate a little
+    off, in proportion to the pace: the first-order loop alone follows it an error behind
+    (CoGiRo's long moves: 30-60 N, slack cables at the ends); the drift learns that rate
+    (``INTEGRAL_SHARE`` of the correction a cycle, per unit pace), and at rest (pace 0) the
+    loop is the plain one."""
+
+    # of each cycle's correction, per unit pace, added to the drift (a second integrator: a
+    # ramp's constant rate error followed without lag; 0.25 damps it near critically)
+    INTEGRAL_SHARE = 0.25
 
     def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None]):
         self.model, self.driver, self.log = model, driver, log
@@ -49,8 +64,14 @@ class Session:
         self.targets = np.zeros(m)  # rad: base + correction
         self.base = np.zeros(m)  # rad: where the plan puts each motor
         self.correction = np.zeros(m)  # rad: the force cables' tension loop
-        self.torques = np.zeros(m)
-        self.tension_goal = np.zeros(m)  # N, for the force cables
+        self.torques = np.zeros(m)  # N·m: out, from tension_goal every cycle
+        self.tension_goal = np.zeros(m)  # N: every cable's, held by the force cables' loop
+        self.winches = WinchTorques(model)
+        self._all = np.arange(m)
+        self._friction = np.zeros(m)  # N·m, at the measured motor speeds
+        self._no_WT, self._no_acceleration = np.zeros((m, 6)), np.zeros(6)
+        self.pace = 0.0  # the move's speed profile, sin(π f); 0 at rest
+        self.drift = np.zeros(m)  # rad per cycle at pace 1: the force cables' learnt rate
         self.force = np.zeros(m, dtype=bool)
         self.gain = 0.0  # per cycle, of the tension loop
         self.k = np.ones(m)  # N/m, each cable's stiffness (the tension loop's scale)
@@ -80,6 +101,7 @@ class Session:
         self._before[:] = self.tensions()
         self._beyond[:] = 0.0
         self.stopped_by = ""
+        self.drift[:] = 0.0  # another move, another rate
 
     def move_stops(self) -> bool:
         """Called every cycle of a move: whether a tension has stayed beyond ``t_stop_low`` /
@@ -99,8 +121,13 @@ class Session:
         return True
 
     def tensions(self) -> np.ndarray:
-        """N: the tensions the drives' torques hold (at rest, friction neglected)."""
-        return self.states.torque / self.ratio
+        """N: the tensions the drives' torques hold, the winches' friction at the measured
+        motor speeds taken out (moving, friction takes a part of the torque: rowc's samples
+        read it as tension, the identified anchors were off by 1.6-6.9 mm; at rest, speed 0,
+        it is 0). The rotor's inertia is neglected: the moves are slow."""
+        w = self.winches
+        friction_kernel(w.viscous, w.coulomb, self.states.velocity, self._all, self._friction)
+        return (self.states.torque - self._friction) / self.ratio
 
     def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
         """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle.
@@ -133,9 +160,7 @@ class Session:
             if each is not None:
                 each((i + 1) / n)
             if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
-                err = self.tension_goal - self.tensions()
-                correction = self.gain * err / (self.k * self.ratio)
-                self.correction[self.force] += correction[self.force]
+                self._tension_loop()
             np.add(self.base, self.correction, out=self.targets)
             t = self.tensions()
             outside = d.lifecycle is Lifecycle.ACTIVE and bool(
@@ -149,10 +174,19 @@ class Session:
                     f"[{self.t_low[worst]:.1f}, {self.t_high[worst]:.1f}] N for "
                     f"{self.OUTSIDE_FOR:g} s: stopped"
                 )
+            self.winches.update(self.tension_goal, self._no_WT, self._no_acceleration,
+                                self.states.velocity, True, self.torques)  # fmt: skip
             d.write(now, self.torques, targets=self.targets if self.csp else None)
             deadline += period
             i += 1
             d.wait(max(0.0, deadline - d.clock()))
+
+    def _tension_loop(self) -> None:
+        """The force cables' targets moved towards their ``tension_goal`` (class docstring)."""
+        step = self.gain * (self.tension_goal - self.tensions()) / (self.k * self.ratio)
+        self.drift += self.INTEGRAL_SHARE * self.pace * step
+        step += self.pace * self.drift
+        self.correction[self.force] += step[self.force]
 
     def enable(self, timeout: float = 3.0) -> None:
         d = self.driver
@@ -199,14 +233,16 @@ class Session:
                 return
             if self.move_stops():
                 reached[1] = True  # a tension near its limit: the pose goes no further
+                self.pace = 0.0
                 return
             a = 0.5 - 0.5 * math.cos(math.pi * f)
             reached[0] = a
+            self.pace = math.sin(math.pi * f)
             self.base[:] = start + a * (goal - start)
             self.tension_goal[:] = t_start + a * (tensions - t_start)
-            self.torques[:] = self.ratio * self.tension_goal
 
         self.run(duration, ramp)
+        self.pace = 0.0
         return reached[0]
 
     def close(self) -> None:

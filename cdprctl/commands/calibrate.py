@@ -93,9 +93,12 @@ def add_parser(sub: Any) -> None:
     for method in (kp, sp, gp):
         _robot_and_bus(method, default=argparse.SUPPRESS)
     gp.add_argument("--poses", type=int, default=25, help="poses to sample (25; 10..80)")
-    gp.add_argument("--fill", type=float, default=0.8,
-                    help="fraction of the workspace box the poses span (0.8)")  # fmt: skip
-    gp.add_argument("--speed", type=float, default=0.1, help="m/s of the moves (0.1)")
+    gp.add_argument("--fill", type=float, default=None,
+                    help="fraction of the workspace box the poses span (the robot file's "
+                         "[calibration] geometry_fill, else 0.8)")  # fmt: skip
+    gp.add_argument("--speed", type=float, default=None,
+                    help="m/s of the moves (the robot file's [calibration] geometry_speed, "
+                         "else 0.1)")  # fmt: skip
     gp.add_argument("--json", action="store_true", help="print the result as JSON")
     gp.add_argument("--no-realtime", action="store_true",
                     help="do not ask for SCHED_FIFO and CPU pinning while it moves")
@@ -191,12 +194,14 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
     from cdprctl.calibration.record import default_state_dir, now_iso, save
     from cdprctl.calibration.session import CalibrationFailedError
+    from cdprctl.model.calibration import FILL_RANGE, SPEED_RANGE
     from drivers import create_driver
     from drivers.errors import DriverError
 
-    for name, value, lo, hi in (("poses", args.poses, 10, 80), ("fill", args.fill, 0.1, 1.0),
-                                ("speed", args.speed, 0.01, 0.5)):  # fmt: skip
-        if not lo <= value <= hi:
+    for name, value, (lo, hi) in (("poses", args.poses, (10, 80)),
+                                  ("fill", args.fill, FILL_RANGE),
+                                  ("speed", args.speed, SPEED_RANGE)):  # fmt: skip
+        if value is not None and not lo <= value <= hi:
             print(f"cdprctl calibrate: error: --{name} = {value}: must be in [{lo}, {hi}]",
                   file=sys.stderr)  # fmt: skip
             return 2
@@ -206,7 +211,7 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
               "built to another file (it names this one as its base)", file=sys.stderr)  # fmt: skip
         return 2
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    opt = GeometryOptions(poses=args.poses, fill=args.fill, speed=args.speed)
+    opt = GeometryOptions.of(model, poses=args.poses, fill=args.fill, speed=args.speed)
     try:
         log(f"cdprctl calibrate: {model.name}, geometry: planning the poses")
         poses = plan(model, opt)
@@ -239,6 +244,7 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
         "pose": r.pose,
         "residual_rms": r.residual_rms,
         "residuals_over_noise": cal.residuals_over_noise,
+        "equilibrium_over_noise": cal.equilibrium_over_noise,
         "force_rms": r.force_rms,
         "std": {"anchors": np.round(np.linalg.norm(r.std_anchors, axis=1), 6).tolist(),
                 "drum_scale": np.round(r.std_drum_scale, 7).tolist(),

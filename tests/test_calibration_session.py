@@ -1,0 +1,117 @@
+"""The calibration's session (cdprctl/calibration/session.py) against hand-written references:
+the tensions read with the winches' friction taken out, the torques sent as the torque law with
+that friction, and the force cables' tension loop following a ramp that asks for a rate."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from cdprctl.calibration.session import Session
+from cdprctl.model import load_robot
+from drivers.vocabulary import Lifecycle
+
+CONFIG = Path(__file__).resolve().parents[1] / "config"
+
+
+class _Driver:
+    """Answers its states, records each cycle's torques; a clock that moves by its waits."""
+
+    def __init__(self, m: int):
+        self.period, self.now = 0.004, 0.0
+        self.lifecycle, self.error = Lifecycle.ACTIVE, ""
+        self.states = SimpleNamespace(torque=np.zeros(m), position=np.zeros(m),
+                                      velocity=np.zeros(m))  # fmt: skip
+        self.sent: list[np.ndarray] = []
+
+    def clock(self) -> float:
+        return self.now
+
+    def read(self, now: float):
+        return self.states
+
+    def write(self, now: float, torques, targets=None) -> None:
+        self.sent.append(np.array(torques))
+
+    def wait(self, dt: float) -> None:
+        self.now += dt
+
+
+def _friction(model, w: np.ndarray) -> np.ndarray:
+    """N·m: b θ̇ + τ_c tanh(θ̇ / 0.05 rad/s), from the robot file's winches (docs/control.md)."""
+    b = np.array([c.winch.viscous_friction for c in model.cables])
+    tc = np.array([c.winch.coulomb_friction for c in model.cables])
+    return b * w + tc * np.tanh(w / 0.05)
+
+
+@pytest.mark.parametrize("robot", ["rowc", "cogiro"])
+def test_tensions_are_read_with_the_winches_friction_at_their_speed_taken_out(robot):
+    model = load_robot(CONFIG / f"{robot}.toml")
+    m = model.n_cables
+    d = _Driver(m)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    ses.states = d.states
+    rng = np.random.default_rng(7)
+    t_true = rng.uniform(100.0, 400.0, m)
+    d.states.velocity[:] = rng.uniform(-3.0, 3.0, m)  # rad/s: moving
+    d.states.torque[:] = ses.ratio * t_true + _friction(model, d.states.velocity)
+    assert ses.tensions() == pytest.approx(t_true, rel=1e-9)
+    d.states.velocity[:] = 0.0  # at rest: the torque is the tension's alone
+    d.states.torque[:] = ses.ratio * t_true
+    assert ses.tensions() == pytest.approx(t_true, rel=1e-12)
+
+
+def test_the_torques_sent_are_the_torque_law_with_the_friction_at_the_measured_speed():
+    model = load_robot(CONFIG / "cogiro.toml")
+    assert model.control.friction_compensation
+    m = model.n_cables
+    d = _Driver(m)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    goal = np.linspace(150.0, 500.0, m)
+    ses.tension_goal[:] = goal
+    d.states.velocity[:] = np.linspace(-2.0, 2.0, m)
+    d.states.torque[:] = ses.ratio * goal + _friction(model, d.states.velocity)
+    ses.run(2 * d.period)
+    limit = np.array([c.winch.torque_limit for c in model.cables])
+    expected = np.clip(ses.ratio * goal + _friction(model, d.states.velocity), -limit, limit)
+    assert d.sent[-1] == pytest.approx(expected, rel=1e-12)
+
+
+def _ramp_error(pace_on: bool) -> tuple[float, float]:
+    """A force cable as a spring: tension = k r (target − rest), its rest angle moved by a
+    cosine ramp of 0.2 rad over 4 s (the plan's geometry off: the cable needs that much more
+    than planned), the goal tension constant. Returns the largest tension error (N) during
+    the ramp and at its end after 1 s at rest."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    m = model.n_cables
+    d = _Driver(m)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    ses.states = d.states
+    ses.force[0] = True
+    ses.k[:] = 2.0e5  # N/m
+    ses.gain = 1.0 - math.exp(-2.0 * math.pi * 2.0 * d.period)  # 2 Hz, as the procedures
+    ses.tension_goal[0] = 300.0
+    kr = ses.k[0] * ses.ratio[0]  # N/rad
+    rest0 = ses.correction[0] - 300.0 / kr  # the goal held at the start
+    n, worst = 1000, 0.0
+    ses.begin_move()
+    for i in range(n + 250):
+        f = min(1.0, (i + 1) / n)
+        ses.pace = math.sin(math.pi * f) if (pace_on and i < n) else 0.0
+        rest = rest0 + 0.2 * (0.5 - 0.5 * math.cos(math.pi * f))
+        d.states.torque[0] = kr * (ses.correction[0] - rest) * ses.ratio[0]
+        ses._tension_loop()
+        if i < n:
+            worst = max(worst, abs(300.0 - ses.tensions()[0]))
+    return worst, abs(300.0 - ses.tensions()[0])
+
+
+def test_the_tension_loop_learns_a_ramps_rate_and_is_the_plain_loop_at_rest():
+    plain, plain_end = _ramp_error(False)
+    learnt, learnt_end = _ramp_error(True)
+    assert learnt < 0.5 * plain, (plain, learnt)  # the learnt rate halves the lag at least
+    assert plain_end < 1.0 and learnt_end < 1.0  # at rest (pace 0) both settle on the goal
