@@ -115,3 +115,34 @@ def test_the_tension_loop_learns_a_ramps_rate_and_is_the_plain_loop_at_rest():
     learnt, learnt_end = _ramp_error(True)
     assert learnt < 0.5 * plain, (plain, learnt)  # the learnt rate halves the lag at least
     assert plain_end < 1.0 and learnt_end < 1.0  # at rest (pace 0) both settle on the goal
+
+
+def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_held_in_real_time():
+    """Lock-step: the platform held a fixed time after the identification, whatever it took in
+    wall time (the same seed gives the same figures); real time: held cycle by cycle for as
+    long as the identification's thread runs, its error raised in the caller."""
+    import threading
+    import time
+
+    from cdprctl.calibration import geometry_procedure as gp
+
+    held: list[float] = []
+    ses = SimpleNamespace(run=held.append, driver=SimpleNamespace(clock=lambda: 0.0))
+    assert gp._held_while(ses, lambda: np.ones(6)).tolist() == [1.0] * 6  # type: ignore[arg-type]
+    assert held == [gp.HOLD_AFTER_IDENTIFYING]
+    go = threading.Event()
+    held.clear()
+
+    def hold(duration: float) -> None:
+        held.append(duration)
+        if len(held) == 3:
+            go.set()  # the identification ends after three holds
+
+    def compute() -> np.ndarray:
+        go.wait(5.0)
+        raise ValueError("singular")
+
+    ses = SimpleNamespace(run=hold, driver=SimpleNamespace(clock=time.monotonic))
+    with pytest.raises(ValueError, match="singular"):
+        gp._held_while(ses, compute)  # type: ignore[arg-type]
+    assert len(held) >= 3 and set(held) == {0.05}
