@@ -176,7 +176,7 @@ def main() -> None:
     lines = [
         "| robot | accepted | anchors: error, max mm (worst σ mm; worst error/σ) | drums: "
         "error, max % | pose at 10 test poses, median / max: mm, mrad | motion s | "
-        "residuals / resolution |",
+        "residuals / noise: lengths; equilibrium |",
         "| --- | --- | --- | --- | --- | --- | --- |",
     ]
     for robot in args.robots:
@@ -197,7 +197,7 @@ def main() -> None:
             f"{rng('anchor_max', done)} ({rng('anchor_sigma', done)}; {rng('anchor_z', done)}) | "
             f"{rng('drum_max', done, '.3f')} | {rng('pose_med', done)} / {rng('pose_max', done)}"
             f" mm, {rng('rot_med', done)} / {rng('rot_max', done)} mrad | "
-            f"{rng('motion', done, '.0f')} | {rng('ratio', done)} |"
+            f"{rng('motion', done, '.0f')} | {rng('ratio', done)}; {rng('balance', done)} |"
         )
     Path(args.out).write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
