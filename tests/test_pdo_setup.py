@@ -28,6 +28,7 @@ def test_a_mapping_names_each_cia402_object_as_the_standard_does(index, name):
 
 def test_a_mapping_names_vendor_and_unknown_objects_as_such():
     assert ps.describe((0x20300010,)) == "[0x2030:00 vendor's (16 bit)]"
+    assert ps.describe((0x5FFF0108,)) == "[0x5FFF:01 vendor's (8 bit)]"  # the area's last
     assert ps.describe((0x60C20108,)) == "[0x60C2:01 CiA 402 object (8 bit)]"
     assert ps.describe(None) == "no count (sub-index 0 holds no value)"
     assert ps.describe(()) == "nothing"
