@@ -146,3 +146,27 @@ def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_
     with pytest.raises(ValueError, match="singular"):
         gp._held_while(ses, compute)  # type: ignore[arg-type]
     assert len(held) >= 3 and set(held) == {0.05}
+
+
+def test_the_position_held_cables_are_damped_on_their_filtered_tension_after_the_brakes_open():
+    """Integral force feedback on the position-held cables: nothing while the brakes open
+    (the torques are not tensions yet), then each cable 20 N above its goal paid out towards
+    20 N over its stiffness (the leaky integral's rest: error / k), the force cables left to
+    their own loop, the targets moved by the give over the drum ratio."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    m = model.n_cables
+    d = _Driver(m)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    assert ses.iff == pytest.approx(0.5 * model.control.force_feedback * 49.414, rel=1e-3)
+    ses.force[7] = True
+    ses.tension_goal[:] = 300.0
+    d.states.torque[:] = ses.ratio * 320.0
+    ses.states = d.states
+    release = model.drives.brake_release_time
+    ses.run(release - d.period)  # the brakes opening
+    assert np.all(ses.give == 0.0) and np.all(ses.filtered == 300.0)
+    ses.run(3.0)
+    rest = 20.0 / ses.k
+    assert ses.give[:7] == pytest.approx(rest[:7], rel=1e-3) and ses.give[7] == 0.0
+    assert ses.targets[:7] == pytest.approx(ses.base[:7] + ses.correction[:7]
+                                            - ses.give[:7] / ses.ratio[:7])  # fmt: skip

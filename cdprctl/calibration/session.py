@@ -12,11 +12,13 @@ import numpy as np
 
 from cdprctl.calibration.identify import Identified
 from cdprctl.calibration.record import CalibrationRecord
+from cdprctl.control.cable_kernels import force_feedback_kernel
 from cdprctl.control.loop import periods_missed
 from cdprctl.control.torques import WinchTorques, friction_kernel
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import coordinates_rotation
+from cdprctl.stiffness import lowest_mode
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
 from drivers.vocabulary import Lifecycle, WinchStates
@@ -55,6 +57,11 @@ class Session:
     # of each cycle's correction, per unit pace, added to the drift (a second integrator: a
     # ramp's constant rate error followed without lag; 0.25 damps it near critically)
     INTEGRAL_SHARE = 0.25
+    # the damping's rate, × the daemon's (force_feedback × the lowest mode): 0.5 with a 5 Hz
+    # filter and 0.2 with 3 Hz both carried CoGiRo's seed 1 through (anchors within 0.08 and
+    # 0.16 mm; it stopped without); the filter below the servo's own torque, above the ring
+    DAMPING_SHARE = 0.5
+    DAMPING_FILTER = 5.0
 
     def __init__(self, model: RobotModel, driver: WinchDriver, log: Callable[[str], None]):
         self.model, self.driver, self.log = model, driver, log
@@ -74,7 +81,17 @@ class Session:
         self.drift = np.zeros(m)  # rad per cycle at pace 1: the force cables' learnt rate
         self.force = np.zeros(m, dtype=bool)
         self.gain = 0.0  # per cycle, of the tension loop
-        self.k = np.ones(m)  # N/m, each cable's stiffness (the tension loop's scale)
+        kin = KinematicsData(model)
+        inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+        self.k = model.cable_stiffness(kin.length)  # N/m (the tension loops' scale)
+        # the position-held cables damped (integral force feedback, as the daemon's cable
+        # space does: cable_space.py) on their tensions low-passed at DAMPING_FILTER
+        self.iff = self.DAMPING_SHARE * model.control.force_feedback * lowest_mode(model)
+        self.give = np.zeros(m)  # m each position-held cable is paid out
+        self._tension_error = np.zeros(m)  # N: filtered − goal
+        self.filtered = np.zeros(m)  # N: the tensions low-passed
+        self._active_for = 0.0  # s enabled: the torques are tensions once the brakes opened
+        self._release = model.drives.brake_release_time  # s
         self.t_low = 0.3 * model.tension_min  # N: below, a cable is going slack: stop
         self.t_high = model.tension_max  # N
         span = model.tension_max - model.tension_min
@@ -162,6 +179,7 @@ class Session:
             if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
                 self._tension_loop()
             np.add(self.base, self.correction, out=self.targets)
+            self._damp(d.lifecycle is Lifecycle.ACTIVE)
             t = self.tensions()
             outside = d.lifecycle is Lifecycle.ACTIVE and bool(
                 np.any(t > self.t_high) or np.any(t < self.t_low)
@@ -180,6 +198,28 @@ class Session:
             deadline += period
             i += 1
             d.wait(max(0.0, deadline - d.clock()))
+
+    def _damp(self, active: bool) -> None:
+        """The position-held cables' targets paid out by the leaky integral of their tension
+        error (``force_feedback_kernel``, rate ``iff``) on the tensions low-passed at
+        ``DAMPING_FILTER`` Hz — from the brakes' release on. Undamped, CoGiRo's platform rang
+        at ~2 Hz on its drives' position loops (40 kg of reflected inertia per winch), a swing
+        of ±200 N that grew along its 0.2 m/s moves until a cable went slack: 13 of 20 seeded
+        calibrations stopped. On the raw torque readings the same feedback oscillated at half
+        the cycle rate within 30 ms (the servo's own torque fed back)."""
+        self._active_for = self._active_for + self.cycle_time if active else 0.0
+        if self._active_for <= self._release:
+            self.filtered[:] = self.tension_goal
+            return
+        a = 1.0 - math.exp(-2.0 * math.pi * self.DAMPING_FILTER * self.cycle_time)
+        self.filtered += a * (self.tensions() - self.filtered)
+        if self.iff <= 0.0:
+            return
+        np.subtract(self.filtered, self.tension_goal, out=self._tension_error)
+        self._tension_error[self.force] = 0.0  # those follow their own loop
+        force_feedback_kernel(self._tension_error, self.k, math.exp(-self.iff * self.cycle_time),
+                              self.give)  # fmt: skip
+        self.targets -= self.give / self.ratio  # paid out: θ > 0 winds in
 
     def _tension_loop(self) -> None:
         """The force cables' targets moved towards their ``tension_goal`` (class docstring)."""
