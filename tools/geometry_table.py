@@ -169,6 +169,8 @@ def run(robot: str, seed: int, poses: int) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--first", type=int, default=1,
+                    help="the first seed (a table split over processes)")
     ap.add_argument("--poses", type=int, default=25)
     ap.add_argument("--robots", nargs="+", default=["rowc", "caroca", "cogiro"])
     ap.add_argument("--out", default=str(ROOT / "docs" / "geometry_table.md"))
@@ -181,7 +183,7 @@ def main() -> None:
     ]
     for robot in args.robots:
         rows = []
-        for seed in range(1, args.seeds + 1):
+        for seed in range(args.first, args.first + args.seeds):
             row = run(robot, seed, args.poses)
             rows.append(row)
             print(row, flush=True)
