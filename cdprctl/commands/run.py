@@ -95,6 +95,12 @@ def add_parser(sub: Any) -> None:
         help="serve the live 3D view to Foxglove on this WebSocket (host default 127.0.0.1; "
         "[foxglove] listen in the config sets the same; docs/foxglove.md)",
     )
+    p.add_argument(
+        "--ros2",
+        action="store_true",
+        help="publish the robot to ROS 2 over DDS: /tf, /tf_static, joint_states, pose, "
+        "wrench_estimate, state, /diagnostics ([ros2] in the config; docs/ros2.md)",
+    )
     z = p.add_argument_group("Zenoh (see docs/telemetry.md; [zenoh] in the config sets the same)")
     z.add_argument("--zenoh", action="store_true", help="start the Zenoh gateway")
     z.add_argument(
@@ -247,6 +253,7 @@ def run(args: argparse.Namespace) -> int:
             state_dir=args.state_dir,
             foxglove=args.foxglove,
             as_built=as_built,
+            ros2=args.ros2,
         )
         daemon.bus_hint = bus_options(bus_overrides(args))
         if daemon.sim is not None and args.brake_close_time is not None:

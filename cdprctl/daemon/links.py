@@ -29,7 +29,8 @@ class Link(Protocol):
     def close(self) -> None: ...
 
 
-def links_of(model: RobotModel, zenoh: bool, foxglove: str | None, summary: Any) -> list[Link]:
+def links_of(model: RobotModel, zenoh: bool, foxglove: str | None, summary: Any,
+             ros2: bool = False) -> list[Link]:  # fmt: skip
     """The links the configuration and the command line ask for; ``summary()`` gives the
     configuration summary the gateway serves."""
     out: list[Link] = []
@@ -43,6 +44,10 @@ def links_of(model: RobotModel, zenoh: bool, foxglove: str | None, summary: Any)
         from cdprctl.telemetry.foxglove_view import FoxgloveLink
 
         out.append(FoxgloveLink(model, *parse_listen(listen)))
+    if ros2 or model.ros2.enabled:
+        from cdprctl.telemetry.ros2_view import Ros2Link
+
+        out.append(Ros2Link(model))
     return out
 
 

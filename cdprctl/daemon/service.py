@@ -58,13 +58,14 @@ class Daemon:
                  realtime: bool = True, status_every: float = 0.5, out: Any = None,
                  zenoh: bool = False, timing_file: str | None = None,
                  state_dir: str | None = None, foxglove: str | None = None,
-                 as_built: RobotModel | None = None):  # fmt: skip
+                 as_built: RobotModel | None = None, ros2: bool = False):  # fmt: skip
         """``state_dir``: where the calibration record is (default
         ``/var/lib/cdprctl/<robot>``); not read when the encoders are trusted to read zero at
         home (``[drives] assume_home_at_start``, or the simulated robot of ``sim``, which
         starts there). ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove]
-        listen`` in the config). ``as_built``: with ``sim``, the robot the simulated plant is
-        (its geometry; the drives from ``model``)."""
+        listen`` in the config). ``ros2``: publish to ROS 2 (or ``[ros2] enabled``).
+        ``as_built``: with ``sim``, the robot the simulated plant is (its geometry; the drives
+        from ``model``)."""
         from cdprctl.calibration.record import default_state_dir
         from drivers import create_driver
 
@@ -110,7 +111,8 @@ class Daemon:
         self.links = Links(links_of(model, zenoh, foxglove,
                                     lambda: config_summary(model, self.sim is not None,
                                                            self.state_dir,
-                                                           not self.assume_home)))  # fmt: skip
+                                                           not self.assume_home),
+                                    ros2=ros2))  # fmt: skip
 
     def _close_buses(self) -> None:
         if self.driver is not None:

@@ -23,6 +23,7 @@ from cdprctl.model.foxglove import read_foxglove
 from cdprctl.model.grippers import read_grippers
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Platform, Pose, RobotModel, Workspace
+from cdprctl.model.ros2 import read_ros2
 from cdprctl.model.safety import read_safety
 from cdprctl.model.zenoh import read_zenoh
 
@@ -39,6 +40,7 @@ TOP_KEYS = (
     "control",
     "zenoh",
     "foxglove",
+    "ros2",
     "grippers",
     "calibration",
     "safety",
@@ -122,6 +124,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
     zenoh = read_zenoh(rd, data, name or "robot")
     foxglove = read_foxglove(rd, data)
+    ros2 = read_ros2(rd, data)
     grippers = read_grippers(rd, data, cables)
     anchors = np.array([c.anchor for c in cables], float) if cables else None
     calibration = read_calibration(rd, data, len(cables or ()), anchors)
@@ -139,6 +142,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         or control is None
         or zenoh is None
         or foxglove is None
+        or ros2 is None
         or grippers is None
     ):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
@@ -160,6 +164,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         control=control,
         zenoh=zenoh,
         foxglove=foxglove,
+        ros2=ros2,
         grippers=grippers,
         calibration=calibration,
         safety=safety,

@@ -16,6 +16,7 @@ from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.model.foxglove import FoxgloveConfig
 from cdprctl.model.grippers import Gripper
+from cdprctl.model.ros2 import Ros2Config
 from cdprctl.model.safety import SafetyConfig
 from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.numerics import cable_compliance_py, compliance_terms
@@ -132,6 +133,7 @@ class RobotModel:
     control: ControlConfig
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
+    ros2: Ros2Config = field(default_factory=Ros2Config)
     grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)

@@ -14,7 +14,7 @@ import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import HelperProcess, close_queue
+from cdprctl.telemetry.helper import Decimator, HelperProcess, close_queue
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -119,8 +119,8 @@ class FoxgloveLink:
             (model, self.snapshot.name, self.events, self.stop, self.ready, host, port),
             self.ready,
         )
-        self._next = 0.0
         self.period = 1.0 / model.foxglove.rate  # s
+        self._rate = Decimator(self.period)
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the view serves: (line, to stderr)."""
@@ -129,13 +129,7 @@ class FoxgloveLink:
 
     def due(self) -> bool:
         """Whether the view's period has come (then the caller ``write``s)."""
-        now = time.monotonic()
-        # the I/O thread's ticks jitter around the period: a tick a little early still counts
-        slack = 0.3 * self.period
-        if now < self._next - slack:
-            return False
-        self._next = max(self._next + self.period, now - slack)
-        return True
+        return self._rate.due()
 
     def write(self, values: dict[str, Any], stats: Any = None) -> None:
         """The loop's values (``snapshot.controller_values``) into the view's snapshot."""

@@ -74,6 +74,25 @@ class HelperProcess:
             self.process.join(timeout=2.0)
 
 
+class Decimator:
+    """A link's own rate out of the I/O thread's ticks: ``due()`` once a ``period`` (s)."""
+
+    def __init__(self, period: float):
+        self.period = period
+        self._next = 0.0
+
+    def due(self) -> bool:
+        import time
+
+        now = time.monotonic()
+        # the I/O thread's ticks jitter around the period: a tick a little early still counts
+        slack = 0.3 * self.period
+        if now < self._next - slack:
+            return False
+        self._next = max(self._next + self.period, now - slack)
+        return True
+
+
 def close_queue(queue: Any, timeout: float = 2.0) -> None:
     """A ``multiprocessing`` queue closed and its feeder thread (ours, the one that writes
     what we put into the pipe) ended here, within ``timeout`` s. Left to end on its own (as

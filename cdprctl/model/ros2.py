@@ -1,0 +1,77 @@
+"""The ``[ros2]`` section: the robot as a ROS 2 node sees it, over DDS (``cdprctl run
+--ros2``, docs/ros2.md). Publishing only: plain DDS has no authentication, and commands stay
+on the secured Zenoh path."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from cdprctl.model.reader import TableReader
+
+ROS2_KEYS = ("enabled", "domain_id", "namespace", "rate")
+
+# ROS 2's domains that map to valid RTPS ports (0-101 and 215-232; ROS 2's docs, "The ROS
+# DOMAIN ID"): the range DDS itself accepts
+DOMAIN_MAX = 232
+# a ROS 2 name: tokens of letters, digits and underscores, not starting with a digit
+_NAMESPACE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+
+
+@dataclass(frozen=True)
+class Ros2Config:
+    enabled: bool = False
+    domain_id: int | None = None  # None: ROS_DOMAIN_ID, else 0 (``domain``)
+    namespace: str = ""  # "": cdpr/<robot name> (``topic_namespace``)
+    rate: float = 50.0  # Hz of every topic but /tf_static
+
+    def domain(self) -> int:
+        """The DDS domain: the file's, else ``ROS_DOMAIN_ID`` as ROS 2 reads it, else 0."""
+        if self.domain_id is not None:
+            return self.domain_id
+        text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        return int(text) if text.isdigit() and int(text) <= DOMAIN_MAX else 0
+
+    def topic_namespace(self, robot: str) -> str:
+        return self.namespace or f"cdpr/{ros_token(robot)}"
+
+
+def ros_token(name: str) -> str:
+    """``name`` as one token of a ROS 2 name (anything else than letters, digits and
+    underscores becomes an underscore; a leading digit gets one in front)."""
+    out = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    return f"_{out}" if out[:1].isdigit() or not out else out
+
+
+def read_ros2(rd: TableReader, data: dict[str, Any]) -> Ros2Config | None:
+    t = rd.table(data, "ros2", "", required=False)
+    if t is None:
+        return Ros2Config()
+    n0 = len(rd.errors)
+    rd.check_keys(t, ROS2_KEYS, "ros2")
+    vals: dict[str, Any] = {}
+    enabled = t.get("enabled", False)
+    if not isinstance(enabled, bool):
+        rd.error("ros2.enabled", enabled, "", "must be true or false")
+    vals["enabled"] = enabled is True
+    domain = rd.number(t, "domain_id", "ros2", "", required=False, minimum=0,
+                       maximum=DOMAIN_MAX, integer=True)  # fmt: skip
+    if domain is not None:
+        vals["domain_id"] = int(domain)
+    ns = rd.string(t, "namespace", "ros2", required=False, default="")
+    if ns:
+        ns = ns.strip("/")
+        if _NAMESPACE.fullmatch(ns):
+            vals["namespace"] = ns
+        else:
+            rd.error("ros2.namespace", ns, "", "must be a ROS 2 name: tokens of letters, digits "
+                     "and underscores separated by /, none starting with a digit")  # fmt: skip
+    rate = rd.number(t, "rate", "ros2", "Hz", required=False, default=50.0, positive=True,
+                     maximum=500.0)  # fmt: skip
+    if rate is not None:
+        vals["rate"] = rate
+    if len(rd.errors) > n0:
+        return None
+    return Ros2Config(**vals)

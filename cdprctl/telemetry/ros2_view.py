@@ -1,0 +1,189 @@
+"""The robot as ROS 2 sees it: a process beside the loop's (like the Zenoh gateway and the
+Foxglove view) that reads the loop's shared snapshot at ``[ros2] rate`` and publishes ROS 2's
+standard messages over DDS (``ros2_messages.py``; docs/ros2.md). A plain DDS participant that
+follows ROS 2's naming is a ROS 2 publisher to every node on the domain. It takes no commands
+(plain DDS has no authentication). The daemon's side is ``Ros2Link``."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.helper import Decimator, HelperProcess
+from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES, SharedSnapshot
+
+
+def frames(model: RobotModel) -> dict[str, str]:
+    """The TF frames' names: ``<robot>_base``, ``_platform`` (the estimate), ``_target``."""
+    from cdprctl.model.ros2 import ros_token
+
+    r = ros_token(model.name)
+    return {"base": f"{r}_base", "platform": f"{r}_platform", "target": f"{r}_target"}
+
+
+def topics(model: RobotModel) -> dict[str, str]:
+    """Each message's ROS 2 topic (the DDS topic is ``rt`` + it)."""
+    ns = "/" + model.ros2.topic_namespace(model.name)
+    return {"tf": "/tf", "tf_static": "/tf_static", "joint_states": f"{ns}/joint_states",
+            "pose": f"{ns}/pose", "wrench_estimate": f"{ns}/wrench_estimate",
+            "state": f"{ns}/state", "diagnostics": "/diagnostics"}  # fmt: skip
+
+
+class Ros2Frames:
+    """The messages of one snapshot (``build``), with the kinematics they need allocated
+    once: the cables' lengths (m) at the estimated pose by inverse kinematics, their rates
+    (m/s) as ``−Wᵀ`` the estimated twist."""
+
+    def __init__(self, model: RobotModel):
+        from cdprctl.kinematics import KinematicsData
+
+        self.model = model
+        self.kin = KinematicsData(model)
+        self.names = [c.name for c in model.cables]
+        self.frames = frames(model)
+        self.twist = np.zeros(6)
+
+    def static(self, stamp: Any) -> Any:
+        """``/tf_static``: each anchor's frame (``<robot>_anchor_<i>``, 1-based, the base's
+        axes) in the base frame."""
+        from cdprctl.model.ros2 import ros_token
+        from cdprctl.telemetry import ros2_messages as rm
+
+        r = ros_token(self.model.name)
+        return rm.TFMessage([rm.transform(stamp, self.frames["base"], f"{r}_anchor_{i + 1}",
+                                          a, np.eye(3))
+                             for i, a in enumerate(self.model.anchors)])  # fmt: skip
+
+    def build(self, s: dict[str, np.ndarray], stamp: Any) -> dict[str, Any]:
+        from cdprctl.kinematics import inverse_kinematics
+        from cdprctl.motion.trajectory import coordinates_rotation
+        from cdprctl.rotation import rpy_to_matrix
+        from cdprctl.telemetry import ros2_messages as rm
+
+        f = self.frames
+        p = s["position"]
+        R = rpy_to_matrix(*map(float, s["rpy"]))
+        target = s["target"]
+        R_t = coordinates_rotation(self.model.home.rotation, target[3:6])
+        inverse_kinematics(self.model, self.kin, p, R)
+        self.twist[:3], self.twist[3:] = s["velocity"], s["omega"]
+        rates = -(self.kin.W.T @ self.twist)
+        state = STATES[int(s["state"][0])]
+        k = float(s["fault_kind"][0])
+        fault = FAULT_KINDS[int(k)] if np.isfinite(k) and 0 <= k < len(FAULT_KINDS) else ""
+        level = rm.ERROR if state == "FAULT" else rm.OK
+        text = f"{state}: {fault}" if fault else state
+        return {
+            "tf": rm.TFMessage([rm.transform(stamp, f["base"], f["platform"], p, R),
+                                rm.transform(stamp, f["base"], f["target"], target[:3], R_t)]),
+            "joint_states": rm.joint_state(stamp, f["base"], self.names, self.kin.length, rates,
+                                           s["tensions"]),
+            "pose": rm.pose_stamped(stamp, f["base"], p, R),
+            "wrench_estimate": rm.wrench_stamped(stamp, f["base"], s["external_wrench"]),
+            "state": rm.String(text),
+            "diagnostics": rm.DiagnosticArray(rm.Header(stamp, ""), [rm.DiagnosticStatus(
+                level, f"cdprctl: {self.model.name}", text, self.model.name,
+                [rm.KeyValue("state", state), rm.KeyValue("fault_kind", fault)])]),
+        }  # fmt: skip
+
+
+def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> None:
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+
+    from cdprctl.realtime import loop_cpu, yield_to_the_loop
+    from cdprctl.telemetry import ros2_messages as rm
+
+    yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort, as the gateway's
+    snap = SharedSnapshot(model.n_cables, snapshot_name, g=len(model.grippers))
+    dp = DomainParticipant(model.ros2.domain())
+    # ROS 2's defaults: reliable, keep last 10, volatile; /tf_static transient local, keep 1
+    # per publisher (tf2's static broadcaster: a late subscriber gets the anchors)
+    default = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
+                  Policy.History.KeepLast(10), Policy.Durability.Volatile)  # fmt: skip
+    latched = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
+                  Policy.History.KeepLast(1), Policy.Durability.TransientLocal)  # fmt: skip
+    types: dict[str, Any] = {
+             "tf": rm.TFMessage, "tf_static": rm.TFMessage, "joint_states": rm.JointState,
+             "pose": rm.PoseStamped, "wrench_estimate": rm.WrenchStamped, "state": rm.String,
+             "diagnostics": rm.DiagnosticArray}  # fmt: skip
+    writers: dict[str, Any] = {
+        key: DataWriter(dp, Topic(dp, "rt" + name, types[key]),
+                        qos=latched if key == "tf_static" else default)
+        for key, name in topics(model).items()
+    }  # fmt: skip
+    frames_of = Ros2Frames(model)
+    writers["tf_static"].write(frames_of.static(rm.ros_time(time.time())))
+    period = 1.0 / model.ros2.rate
+    ready.set()
+    next_t = time.monotonic()
+    last_seq = -1.0
+    failed = False
+    try:
+        while not stop.is_set():
+            s = snap.read()
+            if s is not None and s["seq"][0] != last_seq:
+                last_seq = s["seq"][0]
+                try:
+                    for key, msg in frames_of.build(s, rm.ros_time(time.time())).items():
+                        writers[key].write(msg)
+                except Exception as exc:  # a bad frame must not end the link; said once
+                    if not failed:
+                        print(f"cdprctl-ros2: a frame failed: {type(exc).__name__}: {exc}",
+                              file=sys.stderr, flush=True)  # fmt: skip
+                    failed = True
+            next_t = max(next_t + period, time.monotonic())
+            time.sleep(max(0.0, next_t - time.monotonic()))
+    finally:
+        snap.close()
+
+
+class Ros2Link:
+    """The daemon's side: starts the ROS 2 process, writes its snapshot. Used by the daemon's
+    I/O thread only — never by the loop."""
+
+    def __init__(self, model: RobotModel):
+        ctx = mp.get_context("spawn")  # never fork a process that has threads
+        self.model = model
+        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
+        self.stop = ctx.Event()
+        self.ready = ctx.Event()
+        self.helper = HelperProcess(
+            ctx, "cdprctl-ros2", "the ROS 2 link", ros2_main,
+            (model, self.snapshot.name, self.stop, self.ready), self.ready,
+        )  # fmt: skip
+        self.period = 1.0 / model.ros2.rate  # s
+        self._rate = Decimator(self.period)
+
+    def announcement(self) -> list[tuple[str, bool]]:
+        t = topics(self.model)
+        return [(f"ros2: domain {self.model.ros2.domain()}, {t['joint_states']}, {t['pose']}, "
+                 f"{t['wrench_estimate']}, {t['state']}, /tf, /tf_static, /diagnostics at "
+                 f"{self.model.ros2.rate:g} Hz (publishing only: docs/ros2.md)",
+                 False)]  # fmt: skip
+
+    def due(self) -> bool:
+        return self._rate.due()
+
+    def write(self, values: dict[str, Any], stats: Any = None) -> None:
+        self.snapshot.write(values)
+
+    def event(self, t: float, text: str, kind: str = "event") -> None:
+        return  # the state and diagnostics topics carry the state; no log topic yet
+
+    def take_commands(self) -> list[Any]:
+        """ROS 2 takes no commands (docs/ros2.md: plain DDS has no authentication)."""
+        return []
+
+    def close(self) -> None:
+        self.stop.set()
+        self.helper.stop()
+        self.snapshot.close()
