@@ -358,3 +358,17 @@ def test_calibrates_options_come_before_or_after_the_method(capsys, tmp_path):
         "--config", rowc, "--can-interface", "virtual"])  # fmt: skip
     assert (args.config, args.state_dir, args.can_channel, args.can_interface) == (
         rowc, str(tmp_path), "a", "virtual")  # fmt: skip
+
+
+def test_the_simulated_robot_says_where_its_drives_are_and_that_virtual_is_this_process_only():
+    """A newcomer ran `calibrate` in another process against `cdprctl sim` on the shipped
+    virtual buses and got "no SDO answer": the start line names every bus and says how to
+    share one."""
+    from cdprctl.commands.sim import buses_text
+
+    model = load_robot(CONFIG / "rowc.toml")
+    text = buses_text(model, {})
+    assert text.startswith("virtual cdpr-rowc-a (4), virtual cdpr-rowc-b (4)")
+    assert "--can-interface udp_multicast" in text
+    shared = buses_text(model, {"interface": "udp_multicast", "channel": "239.74.163.9"})
+    assert shared == "udp_multicast 239.74.163.9"

@@ -10,6 +10,22 @@ from typing import Any
 from cdprctl.commands.common import command_parser, load_or_report
 
 
+def buses_text(model: Any, overrides: dict[str, Any]) -> str:
+    """Where the simulated drives are: every bus (interface, channel, its drives), or the one
+    the command line put them all on; a ``virtual`` bus is this process's alone (a daemon or a
+    calibration in another process reaches the drives only on a shared bus)."""
+    iface, channel = overrides.get("interface"), overrides.get("channel")
+    buses = model.drives.buses
+    if iface or channel:
+        names = {(iface or b.interface, channel or b.channel) for b in buses}
+        text = ", ".join(f"{i} {c}" for i, c in sorted(names))
+    else:
+        text = ", ".join(f"{b.interface} {b.channel} ({len(b.cables)})" for b in buses)
+    if any((iface or b.interface) == "virtual" for b in buses):
+        text += (" — virtual: in this process only; for a daemon or a calibration in another "
+                 "process give both --can-interface udp_multicast --can-channel 239.74.163.9")
+    return text
+
 def add_bus_arguments(p: argparse.ArgumentParser, default: Any = None) -> None:
     """The bus overrides shared by ``cdprctl sim``, ``run``, ``calibrate`` and ``drives
     scan``, so they meet (``default``: ``argparse.SUPPRESS`` on a sub-command that repeats
@@ -173,12 +189,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"cdprctl sim: error: {brake_close_rule(args.brake_close_time)}", file=sys.stderr)
         return 2
     overrides = bus_overrides(args)
-    print(
-        f"cdprctl sim: {model.name}, {model.n_cables} {model.drives.driver} drives on "
-        f"{overrides.get('interface') or model.drives.buses[0].interface} "
-        f"{overrides.get('channel') or model.drives.buses[0].channel}",
-        flush=True,
-    )
+    print(f"cdprctl sim: {model.name}, {model.n_cables} {model.drives.driver} drives on "
+          f"{buses_text(model, overrides)}", flush=True)  # fmt: skip
     print("cdprctl sim: building the simulated robot (the first start on a machine compiles "
           "its physics: about a minute)", flush=True)  # fmt: skip
     faults = None
