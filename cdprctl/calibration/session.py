@@ -219,7 +219,8 @@ class Session:
         self._tension_error[self.force] = 0.0  # those follow their own loop
         force_feedback_kernel(self._tension_error, self.k, math.exp(-self.iff * self.cycle_time),
                               self.give)  # fmt: skip
-        self.targets -= self.give / self.ratio  # paid out: θ > 0 winds in
+        np.divide(self.give, self.ratio, out=self._tension_error)  # rad: the buffer reused
+        self.targets -= self._tension_error  # paid out: θ > 0 winds in
 
     def _tension_loop(self) -> None:
         """The force cables' targets moved towards their ``tension_goal`` (class docstring)."""
