@@ -333,6 +333,12 @@ def test_drive_mode_keys(tmp_path):
     assert any("drives.following_error_window" in e and " m" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + "\n[drives]\nfollowing_error_timeout = 70\n")
     assert any("drives.following_error_timeout" in e and "65.535" in e for e in errs), errs
+    for bad, rule in (("0.009", ">= 0.01"), ("0", ">= 0.01"), ("328", "<= 327.675")):
+        errs = errors_of(tmp_path, BASE + f"\n[drives]\nheartbeat_timeout = {bad}\n")
+        assert any(f"drives.heartbeat_timeout = {bad} s must be {rule}" in e for e in errs), errs
+    for ok in (0.01, 327.675):  # 2 ms and 65535 ms between the drives' heartbeats
+        text = BASE + f"\n[drives]\nheartbeat_timeout = {ok}\n"
+        assert load_robot(write(tmp_path, text, "h.toml")).drives.heartbeat_timeout == ok
     for bad, rule in (("-0.01", ">= 0"), ("2", "<= 1")):
         errs = errors_of(tmp_path, BASE + f"\n[drives]\nbrake_release_time = {bad}\n")
         assert any("drives.brake_release_time" in e and " s" in e and rule in e for e in errs)

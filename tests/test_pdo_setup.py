@@ -74,3 +74,103 @@ def test_a_refused_mapping_write_says_read_only_only_for_that_abort_code(code):
     else:
         assert f"({where} SDO abort 0x{code:08X})" in text and "read-only" not in text, text
     assert "put back as the drive had it" in text
+
+
+def test_the_vendor_area_is_0x2000_to_0x5fff_both_included():
+    """CiA 301 §7.4.1: 0x2000-0x5FFF manufacturer-specific; 0x1FFF is the communication area's
+    last object and 0x6000 the device profile's first."""
+    assert ps.describe((0x20000010,)) == "[0x2000:00 vendor's (16 bit)]"
+    assert ps.describe((0x1FFF0010,)) == "[0x1FFF:00 CiA 402 object (16 bit)]"
+    assert ps.describe((0x60000010,)) == "[0x6000:00 CiA 402 object (16 bit)]"
+
+
+def test_a_mapped_entry_of_an_odd_bit_length_is_named_with_it():
+    assert ps.describe((0x60FD0101,)) == "[0x60FD:01 digital inputs (1 bit)]"
+    assert ps.describe((0x60FD0207,)) == "[0x60FD:02 digital inputs (7 bit)]"
+
+
+def _od(pdo: ps.Pdo, cob: int, transmission: int = 1, entries=None) -> dict:
+    entries = pdo.entries if entries is None else entries
+    od = {(pdo.comm, 1): cob, (pdo.comm, 2): transmission, (pdo.mapping, 0): len(entries)}
+    od.update({(pdo.mapping, k): e for k, e in enumerate(entries, 1)})
+    return od
+
+
+RPDO1_NODE2 = ps.wanted(p.MODE_CSP, 2, False)[0]  # COB-ID 0x202
+
+
+@pytest.mark.parametrize("cob", [0x201, 0x203, 0x202 | p.PDO_NOT_VALID, 0x302])
+def test_a_cob_id_other_than_the_nodes_is_a_difference_lower_or_higher(cob):
+    diff = ps.differences(RPDO1_NODE2, cob, 1, RPDO1_NODE2.entries)
+    assert diff == [f"0x1400:01 COB-ID expected 0x00000202, found 0x{cob:08X}"]
+
+
+def test_the_cob_ids_bits_29_and_30_are_not_a_difference():
+    assert ps.differences(RPDO1_NODE2, 0x40000202, 1, RPDO1_NODE2.entries) == []
+    assert ps.differences(RPDO1_NODE2, 0x20000202, 1, RPDO1_NODE2.entries) == []
+
+
+@pytest.mark.parametrize("transmission", [0, 2, 240, 254, 255])
+def test_any_transmission_type_but_every_sync_is_a_difference(transmission):
+    """CiA 301 Table 72: 0 acyclic synchronous, 2-240 every n-th SYNC, 254/255 event-driven:
+    the codec needs the answer to every SYNC (1)."""
+    diff = ps.differences(RPDO1_NODE2, 0x202, transmission, RPDO1_NODE2.entries)
+    assert diff == [f"0x1400:02 transmission type expected 1 (every SYNC), found {transmission}"]
+
+
+def test_a_pdo_wanted_disabled_is_as_wanted_only_with_its_not_valid_bit():
+    off = ps.Pdo("RPDO1", p.RPDO1_COMM, p.RPDO1_MAP, 0x202, RPDO1_NODE2.entries, enabled=False)
+    assert ps.differences(off, 0x202 | p.PDO_NOT_VALID, 1, off.entries) == []
+    assert ps.differences(off, 0x202, 1, off.entries) == [
+        "0x1400:01 COB-ID expected 0x80000202, found 0x00000202"]
+
+
+def test_a_static_mapping_that_differs_refuses_the_start_naming_what_differs():
+    od = _od(RPDO1_NODE2, 0x202, transmission=255)
+    drive = _Drive(od, (0, 0), 0)
+    with pytest.raises(DriverInitializationError) as exc:
+        ps.set_up(drive.read, drive.write, RPDO1_NODE2, False, "node 2")
+    assert str(exc.value) == (
+        "node 2: RPDO1 is not what cdprctl's codec needs ([drives] pdo_mapping = \"static\": "
+        "set it with the drive's tool, or use \"configure\"): "
+        "0x1400:02 transmission type expected 1 (every SYNC), found 255")
+    assert drive.od == od  # only read
+
+
+def test_a_mapping_written_that_reads_back_otherwise_refuses_the_start():
+    """A drive that takes every write and keeps none (as some do outside PRE-OPERATIONAL)."""
+    od = _od(RPDO1_NODE2, 0x202, transmission=0)
+    reads = dict(od)
+    with pytest.raises(DriverInitializationError) as exc:
+        ps.set_up(lambda i, s: reads[(i, s)], lambda *a: None, RPDO1_NODE2, True, "node 2")
+    assert str(exc.value) == (
+        "node 2: RPDO1 written but reads back differently: "
+        "0x1400:02 transmission type expected 1 (every SYNC), found 0")
+
+
+@pytest.mark.parametrize("bit30", [0, 0x40000000])
+def test_configuring_another_nodes_pdo_writes_this_nodes_cob_id_keeping_bit_30(bit30):
+    """The drive had node 1's COB-ID (0x201, odd); node 2's is written (0x202), bit 30 as the
+    drive had it, the PDO disabled while its mapping changes (CiA 301 §7.5.2.35)."""
+    od = _od(RPDO1_NODE2, 0x201 | bit30)
+    drive = _Drive(od, (0, 0), 0)
+    cobs: list[int] = []
+    record = drive.write
+    drive.write = lambda i, s, v, n: (cobs.append(v) if (i, s) == (0x1400, 1) else None,
+                                      record(i, s, v, n))  # type: ignore[method-assign]
+    assert ps.set_up(drive.read, drive.write, RPDO1_NODE2, True, "node 2") is True
+    assert cobs == [0x202 | bit30 | p.PDO_NOT_VALID, 0x202 | bit30]
+    assert drive.od == _od(RPDO1_NODE2, 0x202 | bit30)
+
+
+@pytest.mark.parametrize("cob", [0x40000181 | p.PDO_NOT_VALID, 0x181 | p.PDO_NOT_VALID,
+                                 0x40000181, 0x181])  # fmt: skip
+def test_a_refused_write_puts_back_the_cob_id_as_it_was_enabled_or_not(cob):
+    """A TPDO1 the drive had (bit 30 as it was, disabled or enabled) comes back bit for bit
+    after its mapping's second entry is refused."""
+    pdo = ps.wanted(p.MODE_CSP, 1, False)[1]
+    od = _od(pdo, cob, entries=(0x60410010,))
+    drive = _Drive(od, (pdo.mapping, 2), p.SDO_ABORT_READ_ONLY)
+    with pytest.raises(DriverInitializationError, match="put back as the drive had it"):
+        ps.set_up(drive.read, drive.write, pdo, True, "node 1")
+    assert drive.od == od

@@ -208,9 +208,12 @@ def read_drives(
             "is replaced by feedback_timeout, a time in s (e.g. feedback_timeout = 0.03): a "
             "count of cycles meant a different time at every rate",
         )
+    # a CiA 402 drive beats five times a timeout (drivers/cia402/drive_setup.py) and 0x1017 is
+    # whole ms in 16 bits: 2 ms to 65.535 s between beats
     hb_to = rd.number(
-        t, "heartbeat_timeout", "drives", "s", required=False, default=0.5, positive=True
-    )
+        t, "heartbeat_timeout", "drives", "s", required=False, default=0.5, minimum=0.01,
+        maximum=327.675,
+    )  # fmt: skip
     hb_p = rd.number(
         t, "heartbeat_period", "drives", "s", required=False, default=0.1, positive=True
     )

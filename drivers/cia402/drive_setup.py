@@ -98,7 +98,7 @@ def configure_drive(
     # two in some windows, and two lost frames in a row at 5 % loss stopped the robot as
     # a lost drive (lock-step reliability matrix, 1 of 3 seeds); five is 10 Hz, the rate
     # the bus-load budget counts
-    hb_ms = max(1, round(drv.config.heartbeat_timeout * 1000 / 5))
+    hb_ms = round(drv.config.heartbeat_timeout * 1000 / 5)  # ≥ 2: [drives] heartbeat_timeout
     # before a DCF can write it
     drv._reset_flags[c] = optional(read, p.OD_PRODUCER_HEARTBEAT) != hb_ms
     dcf = drv._dcf[c]

@@ -79,7 +79,7 @@ def differences(pdo: Pdo, cob: int, transmission: int, entries: tuple[int, ...] 
     return out
 
 
-def write(write_sdo: Write, pdo: Pdo, kept_bits: int = 0) -> None:
+def write(write_sdo: Write, pdo: Pdo, kept_bits: int) -> None:
     """Writes ``pdo`` in CiA 301's order (raises ``SdoAbortError`` if the drive refuses);
     ``kept_bits``: the COB-ID's bits 29-30 (frame format, RTR) as the drive had them."""
     cob_id = pdo.cob_id | kept_bits
