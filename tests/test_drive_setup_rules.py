@@ -138,7 +138,13 @@ def test_a_needed_object_the_drive_refuses_stops_the_start_by_name(index, why):
     assert str(exc.value).endswith("(0x06090030)")
 
 
-@pytest.mark.parametrize("code", sorted(ds.SKIPPABLE))
+# CiA 301 Table 22: object does not exist, sub-index does not exist, read-only, data type /
+# length does not match, value range exceeded, value too high, value too low (written out:
+# not the module's own set, which a wrong code in it would change alike)
+SKIPPABLE = (0x06020000, 0x06090011, 0x06010002, 0x06070010, 0x06090030, 0x06090031, 0x06090032)
+
+
+@pytest.mark.parametrize("code", SKIPPABLE)
 @pytest.mark.parametrize("index", sorted(ds.OPTIONAL))
 def test_an_optional_object_refused_as_absent_read_only_or_out_of_range_is_skipped(index, code):
     drv = set_up(Drive(refuse={(index, 0): code}))
