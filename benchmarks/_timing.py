@@ -6,11 +6,13 @@ median and p99 over all calls, and the lowest round median (the quiet-machine fi
 
 from __future__ import annotations
 
+import argparse
 import gc
 import os
 import socket
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -80,3 +82,75 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+def loop_stats(data: dict, settle: float = 1.0) -> dict[str, float]:
+    """A daemon run's per-cycle timing (``--timing-file``), its first ``settle`` s left out
+    (the start): wake lateness and compute p50/p99 (µs), missed periods, cycles."""
+    t = data["deadline"]
+    keep = t >= t[0] + settle
+    late = data["lateness"][keep] * 1e6
+    comp = data["compute"][keep] * 1e6
+    gaps = np.round(np.diff(t) / float(data["period"])) - 1.0
+    return {"late_p50": float(np.median(late)), "late_p99": float(np.percentile(late, 99)),
+            "late_max": float(late.max()), "compute_p50": float(np.median(comp)),
+            "compute_p99": float(np.percentile(comp, 99)), "missed": float(gaps[gaps > 0].sum()),
+            "cycles": float(keep.sum())}  # fmt: skip
+
+
+def pooled_loop_stats(runs: list[dict]) -> dict[str, float]:
+    """``loop_stats`` of several runs' cycles pooled (each after its first second); missed
+    periods summed run by run (the gaps between runs are none)."""
+    trimmed = []
+    for x in runs:
+        k = x["deadline"] >= x["deadline"][0] + 1.0
+        trimmed.append({f: x[f][k] for f in ("deadline", "lateness", "compute")})
+    merged = {"deadline": np.concatenate([x["deadline"] - x["deadline"][0] + 1e4 * i
+                                          for i, x in enumerate(trimmed)]),
+              "lateness": np.concatenate([x["lateness"] for x in trimmed]),
+              "compute": np.concatenate([x["compute"] for x in trimmed]),
+              "period": runs[0]["period"]}  # fmt: skip
+    out = loop_stats(merged, settle=0.0)
+    out["missed"] = sum(loop_stats(x)["missed"] for x in runs)
+    return out
+
+
+def timed_daemon_run(args: list[str], timing: Path, on_ready: Callable[[], object] | None = None,
+                     env: dict[str, str] | None = None) -> dict:  # fmt: skip
+    """``cdprctl run --sim`` on rowc with ``args``, its per-cycle timing saved to ``timing``
+    and returned (``--timing-file``); ``on_ready()`` called when it prints ``ready:`` (a
+    client started then), its result's ``join()``, if it has one, after the run."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(root / "config/rowc.toml"),
+           "--sim", "--status", "0", "--timing-file", str(timing), *args]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env=env)  # fmt: skip
+    lines, started = [], None
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("ready:") and on_ready is not None:
+            started = on_ready()
+        if line.startswith("summary:"):
+            break
+    lines += proc.stdout.readlines()
+    proc.wait()
+    join = getattr(started, "join", None)
+    if join is not None:
+        join()
+    if proc.returncode != 0 or not timing.exists():
+        raise RuntimeError("the daemon failed:\n" + "".join(lines)[-2000:])
+    with np.load(timing) as z:
+        return {k: z[k] for k in z.files}
+
+
+def ab_arguments() -> argparse.Namespace:
+    """The A/B loop benchmarks' options: rounds, seconds a run, the loop's rate (Hz)."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--rate", type=float, default=500.0)
+    return ap.parse_args()

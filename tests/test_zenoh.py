@@ -435,6 +435,15 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     span = (messages[-1][2].log_time - messages[0][2].log_time) / 1e9
     assert abs(counts["/scene"] - 30.0 * span) <= 0.1 * 30.0 * span + 2, (counts, span)
     assert (run_dir / "scene.png").stat().st_size > 20_000
+    # and as the ROS 2 link's topics (docs/ros2.md): a joint state and a pose per state
+    with open(run_dir / "ros2.mcap", "rb") as f:
+        reader = make_reader(f)
+        ros2 = {reader.get_summary().channels[c].topic: n for c, n in
+                reader.get_summary().statistics.channel_message_counts.items()}  # fmt: skip
+        assert reader.get_header().profile == "ros2"
+    states = sum(1 for _, _, m in messages if json.loads(m.data)["pose"]["position"][0] is not None)
+    assert ros2["/cdpr/rowc/joint_states"] == ros2["/cdpr/rowc/pose"] == states > 100
+    assert ros2["/tf_static"] == 1
     assert robot.stop() == 0
 
 

@@ -51,7 +51,9 @@ def add_parsers(sub: Any) -> None:
         "--mcap",
         action="store_true",
         help="also write DIR/telemetry.mcap: every payload as received and the typed 3D "
-        "scene (frames, cables coloured by tension, platform, log), for Foxglove",
+        "scene (frames, cables coloured by tension, platform, log), for Foxglove; and "
+        "DIR/ros2.mcap: the ROS 2 link's topics (/tf, joint_states, pose, ...), for ros2 bag "
+        "play and Foxglove's ROS 2 panels (docs/ros2.md)",
     )
     p.add_argument("--duration", type=float, help="s; default: until Ctrl-C")
     add_zenoh_arguments(p)
@@ -326,6 +328,7 @@ def record(args: argparse.Namespace) -> int:
         why = "" if heard else why_no_answer(session, args, prefix, command=False)
     finally:
         session.close()
+    mcaps: list[str] = []  # the MCAP files written
     with lock:
         n = _write_csvs(out, rows)
         if args.mcap:
@@ -333,9 +336,15 @@ def record(args: argparse.Namespace) -> int:
 
             layout = status.get("config", {}).get("layout")
             write_mcap(out / "telemetry.mcap", prefix, raw, layout)
+            mcaps.append("telemetry.mcap")
+            if layout:  # the ROS 2 messages need the robot's cables
+                from cdprctl.telemetry.ros2_mcap import write_ros2_mcap
+
+                write_ros2_mcap(out / "ros2.mcap", raw, status)
+                mcaps.append("ros2.mcap")
     print(
         f"cdprctl record: {n['state']} states, {n['timing']} timing, {n['events']} events → {out}"
-        + (" (CSV, telemetry.mcap)" if args.mcap else "")
+        + (f" (CSV, {', '.join(mcaps)})" if mcaps else "")
     )
     if not n["state"]:
         print(f"cdprctl record: no state recorded: {why}", file=sys.stderr)

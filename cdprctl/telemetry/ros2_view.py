@@ -11,85 +11,10 @@ import sys
 import time
 from typing import Any
 
-import numpy as np
-
 from cdprctl.model.robot import RobotModel
 from cdprctl.telemetry.helper import Decimator, HelperProcess
-from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES, SharedSnapshot
-
-
-def frames(model: RobotModel) -> dict[str, str]:
-    """The TF frames' names: ``<robot>_base``, ``_platform`` (the estimate), ``_target``."""
-    from cdprctl.model.ros2 import ros_token
-
-    r = ros_token(model.name)
-    return {"base": f"{r}_base", "platform": f"{r}_platform", "target": f"{r}_target"}
-
-
-def topics(model: RobotModel) -> dict[str, str]:
-    """Each message's ROS 2 topic (the DDS topic is ``rt`` + it)."""
-    ns = "/" + model.ros2.topic_namespace(model.name)
-    return {"tf": "/tf", "tf_static": "/tf_static", "joint_states": f"{ns}/joint_states",
-            "pose": f"{ns}/pose", "wrench_estimate": f"{ns}/wrench_estimate",
-            "state": f"{ns}/state", "diagnostics": "/diagnostics"}  # fmt: skip
-
-
-class Ros2Frames:
-    """The messages of one snapshot (``build``), with the kinematics they need allocated
-    once: the cables' lengths (m) at the estimated pose by inverse kinematics, their rates
-    (m/s) as ``−Wᵀ`` the estimated twist."""
-
-    def __init__(self, model: RobotModel):
-        from cdprctl.kinematics import KinematicsData
-
-        self.model = model
-        self.kin = KinematicsData(model)
-        self.names = [c.name for c in model.cables]
-        self.frames = frames(model)
-        self.twist = np.zeros(6)
-
-    def static(self, stamp: Any) -> Any:
-        """``/tf_static``: each anchor's frame (``<robot>_anchor_<i>``, 1-based, the base's
-        axes) in the base frame."""
-        from cdprctl.model.ros2 import ros_token
-        from cdprctl.telemetry import ros2_messages as rm
-
-        r = ros_token(self.model.name)
-        return rm.TFMessage([rm.transform(stamp, self.frames["base"], f"{r}_anchor_{i + 1}",
-                                          a, np.eye(3))
-                             for i, a in enumerate(self.model.anchors)])  # fmt: skip
-
-    def build(self, s: dict[str, np.ndarray], stamp: Any) -> dict[str, Any]:
-        from cdprctl.kinematics import inverse_kinematics
-        from cdprctl.motion.trajectory import coordinates_rotation
-        from cdprctl.rotation import rpy_to_matrix
-        from cdprctl.telemetry import ros2_messages as rm
-
-        f = self.frames
-        p = s["position"]
-        R = rpy_to_matrix(*map(float, s["rpy"]))
-        target = s["target"]
-        R_t = coordinates_rotation(self.model.home.rotation, target[3:6])
-        inverse_kinematics(self.model, self.kin, p, R)
-        self.twist[:3], self.twist[3:] = s["velocity"], s["omega"]
-        rates = -(self.kin.W.T @ self.twist)
-        state = STATES[int(s["state"][0])]
-        k = float(s["fault_kind"][0])
-        fault = FAULT_KINDS[int(k)] if np.isfinite(k) and 0 <= k < len(FAULT_KINDS) else ""
-        level = rm.ERROR if state == "FAULT" else rm.OK
-        text = f"{state}: {fault}" if fault else state
-        return {
-            "tf": rm.TFMessage([rm.transform(stamp, f["base"], f["platform"], p, R),
-                                rm.transform(stamp, f["base"], f["target"], target[:3], R_t)]),
-            "joint_states": rm.joint_state(stamp, f["base"], self.names, self.kin.length, rates,
-                                           s["tensions"]),
-            "pose": rm.pose_stamped(stamp, f["base"], p, R),
-            "wrench_estimate": rm.wrench_stamped(stamp, f["base"], s["external_wrench"]),
-            "state": rm.String(text),
-            "diagnostics": rm.DiagnosticArray(rm.Header(stamp, ""), [rm.DiagnosticStatus(
-                level, f"cdprctl: {self.model.name}", text, self.model.name,
-                [rm.KeyValue("state", state), rm.KeyValue("fault_kind", fault)])]),
-        }  # fmt: skip
+from cdprctl.telemetry.ros2_frames import Ros2Frames, topics, types
+from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
 def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> None:
@@ -111,16 +36,14 @@ def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> N
                   Policy.History.KeepLast(10), Policy.Durability.Volatile)  # fmt: skip
     latched = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
                   Policy.History.KeepLast(1), Policy.Durability.TransientLocal)  # fmt: skip
-    types: dict[str, Any] = {
-             "tf": rm.TFMessage, "tf_static": rm.TFMessage, "joint_states": rm.JointState,
-             "pose": rm.PoseStamped, "wrench_estimate": rm.WrenchStamped, "state": rm.String,
-             "diagnostics": rm.DiagnosticArray}  # fmt: skip
+    kinds = types()
     writers: dict[str, Any] = {
-        key: DataWriter(dp, Topic(dp, "rt" + name, types[key]),
+        key: DataWriter(dp, Topic(dp, "rt" + name, kinds[key]),
                         qos=latched if key == "tf_static" else default)
-        for key, name in topics(model).items()
+        for key, name in topics(model.ros2.topic_namespace(model.name)).items()
     }  # fmt: skip
-    frames_of = Ros2Frames(model)
+    frames_of = Ros2Frames(model, [c.name for c in model.cables], model.home.rotation,
+                           model.name)  # fmt: skip
     writers["tf_static"].write(frames_of.static(rm.ros_time(time.time())))
     period = 1.0 / model.ros2.rate
     ready.set()
@@ -164,7 +87,7 @@ class Ros2Link:
         self._rate = Decimator(self.period)
 
     def announcement(self) -> list[tuple[str, bool]]:
-        t = topics(self.model)
+        t = topics(self.model.ros2.topic_namespace(self.model.name))
         return [(f"ros2: domain {self.model.ros2.domain()}, {t['joint_states']}, {t['pose']}, "
                  f"{t['wrench_estimate']}, {t['state']}, /tf, /tf_static, /diagnostics at "
                  f"{self.model.ros2.rate:g} Hz (publishing only: docs/ros2.md)",
