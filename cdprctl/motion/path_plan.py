@@ -126,6 +126,8 @@ def plan_path(
     raises PathRejectedError with the first problem. ``durations`` (s, per segment, None: as fast
     as the limits allow) replaces the rows' times (a resumed path keeps its rows' pace)."""
     c = model.control
+    if not waypoints:  # a file has one at least (path_file); a resume past the last has none
+        raise PathRejectedError("the path has no waypoint left to go to")
     lim = limits or SoftLimits(model)
     start = np.asarray(start, dtype=float)
     targets = [coordinates_of(model, w.pose) for w in waypoints]
@@ -257,7 +259,7 @@ def _play_and_check(
             f"{segments[k].where} (segment {k + 1}): at t = {times[i]:.2f} s, position {pose} m: "
             f"{why}"
         )
-    steps_apart = np.linalg.norm(np.diff(P[:, :3], axis=0), axis=1) if len(P) > 1 else [0.0]
+    steps_apart = np.linalg.norm(np.diff(P[:, :3], axis=0), axis=1)  # a segment: 2 samples at least
     j = int(np.argmin(margin))
     return PathPlan(
         segments=segments,
