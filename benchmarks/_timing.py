@@ -147,10 +147,13 @@ def timed_daemon_run(args: list[str], timing: Path, on_ready: Callable[[], objec
         return {k: z[k] for k in z.files}
 
 
-def ab_arguments() -> argparse.Namespace:
-    """The A/B loop benchmarks' options: rounds, seconds a run, the loop's rate (Hz)."""
+def ab_arguments(**more: tuple[type, object]) -> argparse.Namespace:
+    """The A/B loop benchmarks' options: rounds, seconds a run, the loop's rate (Hz), and
+    ``more`` (name → (type, default))."""
     ap = argparse.ArgumentParser()
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--rate", type=float, default=500.0)
+    for name, (kind, default) in more.items():
+        ap.add_argument(f"--{name}", type=kind, default=default)
     return ap.parse_args()

@@ -10,7 +10,8 @@ per-cycle timing (``--timing-file``). Reports per run and pooled: wake lateness 
 compute p50/p99, missed periods, the messages the subscriber received, the B/A ratios and the
 daemon's lateness p99 over the floor's.
 
-Run: ``.venv/bin/python benchmarks/bench_ros2.py [--rounds 3] [--seconds 20] [--rate 500]``.
+Run: ``.venv/bin/python benchmarks/bench_ros2.py [--rounds 3] [--seconds 20] [--rate 500]
+[--domain 37]`` (the DDS domain of B's link and of the subscriber).
 """
 
 from __future__ import annotations
@@ -39,13 +40,14 @@ ROOT = Path(__file__).resolve().parents[1]
 DOMAIN = 37
 
 
-def run_once(seconds: float, ros2: bool, rate: float, timing: Path) -> tuple[dict, dict]:
+def run_once(seconds: float, ros2: bool, rate: float, timing: Path,
+             domain: int = DOMAIN) -> tuple[dict, dict]:  # fmt: skip
     """One daemon run and what the subscriber got (``tests/ros2_subscriber.py``'s line)."""
     got: dict = {}
 
     def subscribe() -> None:  # until the run's end, less its start-up
         out = subprocess.run([sys.executable, str(ROOT / "tests" / "ros2_subscriber.py"),
-                              str(DOMAIN), "cdpr/rowc", str(max(1.0, seconds - 2.0))],
+                              str(domain), "cdpr/rowc", str(max(1.0, seconds - 2.0))],
                              capture_output=True, text=True, timeout=seconds + 60)  # fmt: skip
         lines = out.stdout.strip().splitlines()
         got.update(json.loads(lines[-1]) if lines else {"error": out.stderr[-500:]})
@@ -56,12 +58,12 @@ def run_once(seconds: float, ros2: bool, rate: float, timing: Path) -> tuple[dic
         return th
 
     args = ["--duration", str(seconds), "--rate", str(rate)] + (["--ros2"] if ros2 else [])
-    env = {**os.environ, "ROS_DOMAIN_ID": str(DOMAIN)}
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
     return timed_daemon_run(args, timing, start, env), got
 
 
 def main() -> None:
-    args = ab_arguments()
+    args = ab_arguments(domain=(int, DOMAIN))
     exe = ensure_cyclictest()
     print(machine_line())
     pooled: dict[bool, list[dict]] = {False: [], True: []}
@@ -73,7 +75,8 @@ def main() -> None:
             print(f"round {r + 1} floor   : cyclictest p99 {fl['p99_us']:.0f} max "
                   f"{fl['max_us']:.0f} µs", flush=True)  # fmt: skip
             for ros2 in ((False, True) if r % 2 == 0 else (True, False)):
-                data, got = run_once(args.seconds, ros2, args.rate, Path(d) / f"{r}{ros2}.npz")
+                data, got = run_once(args.seconds, ros2, args.rate, Path(d) / f"{r}{ros2}.npz",
+                                     args.domain)  # fmt: skip
                 s = loop_stats(data)
                 pooled[ros2].append(data)
                 counts = got.get("counts", {})

@@ -7,6 +7,7 @@ rate. The ``[ros2]`` section's checks."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -24,9 +25,17 @@ SUBSCRIBER = ROOT / "tests" / "ros2_subscriber.py"
 DOMAIN = 37
 
 
-def subscribe(namespace: str, seconds: float) -> subprocess.Popen:
+# Cyclone DDS on the loopback interface alone: what rmw_cyclonedds configures a ROS 2 node
+# with under ROS_LOCALHOST_ONLY=1 (written here, not taken from cdprctl)
+LOOPBACK_ONLY = ('<CycloneDDS><Domain><General><Interfaces><NetworkInterface address="127.0.0.1"'
+                 "/></Interfaces></General></Domain></CycloneDDS>")
+
+
+def subscribe(namespace: str, seconds: float, loopback: bool = False) -> subprocess.Popen:
+    env = {**os.environ, **({"CYCLONEDDS_URI": LOOPBACK_ONLY} if loopback else {})}
     return subprocess.Popen([sys.executable, str(SUBSCRIBER), str(DOMAIN), namespace,
-                             str(seconds)], stdout=subprocess.PIPE, text=True)  # fmt: skip
+                             str(seconds)], stdout=subprocess.PIPE, text=True,
+                            env=env)  # fmt: skip
 
 
 def robot_file(tmp_path: Path, namespace: str) -> Path:
@@ -41,8 +50,15 @@ def test_the_ros2_section_is_checked(tmp_path, monkeypatch):
     assert not model.ros2.enabled and model.ros2.topic_namespace("rowc") == "cdpr/rowc"
     monkeypatch.setenv("ROS_DOMAIN_ID", "42")
     assert model.ros2.domain() == 42  # ROS 2's own variable, as a ROS 2 node reads it
-    monkeypatch.setenv("ROS_DOMAIN_ID", "not a number")
-    assert model.ros2.domain() == 0
+    for bad in ("not a number", "233", "-1"):  # ROS 2 refuses these; so does the link
+        monkeypatch.setenv("ROS_DOMAIN_ID", bad)
+        with pytest.raises(ValueError):
+            model.ros2.domain()
+        assert model.ros2.environment_problem() == (
+            f"ROS_DOMAIN_ID = {bad!r} is not a ROS 2 domain (0-232): set it to one, unset it "
+            "(domain 0), or give [ros2] domain_id")
+    monkeypatch.setenv("ROS_DOMAIN_ID", " ")
+    assert model.ros2.domain() == 0 and model.ros2.environment_problem() is None
     f = robot_file(tmp_path, "lab/cdpr_1")
     m = load_robot(f)
     assert (m.ros2.enabled, m.ros2.domain(), m.ros2.topic_namespace("rowc")) == (
@@ -58,10 +74,16 @@ def test_the_ros2_section_is_checked(tmp_path, monkeypatch):
         assert any(words in e for e in exc.value.errors), exc.value.errors
 
 
-def test_an_independent_subscriber_decodes_what_the_link_was_given(tmp_path):
+@pytest.mark.parametrize("localhost", [False, True], ids=["network", "localhost only"])
+def test_an_independent_subscriber_decodes_what_the_link_was_given(tmp_path, monkeypatch,
+                                                                    localhost):
     """The link fed known values (as the daemon's I/O thread feeds it): the pose, the target,
     the tensions, the state decoded by the other process within 0.1 mm, the cables' lengths
-    the inverse kinematics' at that pose, the anchors on /tf_static."""
+    the inverse kinematics' at that pose, the anchors on /tf_static. Under ROS 2's
+    localhost-only setting the link is on the loopback interface, where a subscriber so set
+    hears it (on the machine's other interface it hears nothing)."""
+    if localhost:
+        monkeypatch.setenv("ROS_LOCALHOST_ONLY", "1")
     from cdprctl.kinematics import KinematicsData, inverse_kinematics
     from cdprctl.rotation import rpy_to_matrix
     from cdprctl.telemetry.ros2_view import Ros2Link
@@ -71,7 +93,7 @@ def test_an_independent_subscriber_decodes_what_the_link_was_given(tmp_path):
     sub = None
     try:
         assert link.helper.start(timeout=20.0), link.helper.failure
-        sub = subscribe("test/link", 2.5)
+        sub = subscribe("test/link", 2.5, loopback=localhost)
         position, rpy = [1.4, 0.33, 0.62], [0.01, -0.02, 0.03]
         tensions = np.linspace(100.0, 135.0, 8)
         end = time.monotonic() + 3.0
@@ -127,3 +149,35 @@ def test_the_daemon_on_the_simulated_robot_publishes_to_ros2_at_its_rate(tmp_pat
     assert np.allclose(out["tf"]["rowc_platform"][1:], pose, atol=1e-4)
     assert np.allclose(out["pose"][:3], pose, atol=1e-4)
     assert "ros2: domain 37" in run.stdout
+
+
+def test_run_refuses_a_ros_domain_id_that_is_not_a_domain_in_one_line():
+    run = subprocess.run(
+        [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(CONFIG / "rowc.toml"),
+         "--sim", "--ros2", "--duration", "1"],
+        capture_output=True, text=True, timeout=60, env={**os.environ, "ROS_DOMAIN_ID": "abc"},
+    )  # fmt: skip
+    assert run.returncode == 2
+    assert run.stderr == ("cdprctl run: --ros2: ROS_DOMAIN_ID = 'abc' is not a ROS 2 domain "
+                          "(0-232): set it to one, unset it (domain 0), or give [ros2] "
+                          "domain_id\n")  # fmt: skip
+
+
+@pytest.mark.parametrize(("env", "expected"), [
+    ({}, None),
+    ({"ROS_LOCALHOST_ONLY": "0"}, None),
+    ({"ROS_LOCALHOST_ONLY": "1"}, "LOOPBACK"),
+    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "localhost"}, "LOOPBACK"),
+    ({"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"}, None),
+    ({"ROS_LOCALHOST_ONLY": "1", "CYCLONEDDS_URI": "file:///etc/cyclone.xml"},
+     "file:///etc/cyclone.xml,LOOPBACK"),
+])  # fmt: skip
+def test_the_dds_configuration_follows_ros2s_localhost_setting(monkeypatch, env, expected):
+    from cdprctl.model.ros2 import dds_config
+
+    for k in ("ROS_LOCALHOST_ONLY", "ROS_AUTOMATIC_DISCOVERY_RANGE", "CYCLONEDDS_URI"):
+        monkeypatch.delenv(k, raising=False)
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    want = None if expected is None else expected.replace("LOOPBACK", LOOPBACK_ONLY)
+    assert dds_config() == want

@@ -109,7 +109,8 @@ def bag(tmp_path_factory):
 
 def test_the_file_is_of_the_ros2_profile_with_each_topic_typed_and_its_qos(bag):
     _, _, n, header, summary, decoded = bag
-    assert header.profile == "ros2" and n == len(decoded) == 1 + 6 * 50
+    # /tf_static once; /diagnostics at the first state, and the last's fault (1 Hz else)
+    assert header.profile == "ros2" and n == len(decoded) == 1 + 5 * 50 + 2
     channels = {c.topic: c for c in summary.channels.values()}
     types = {c.topic: summary.schemas[c.schema_id].name for c in channels.values()}
     assert types == {
@@ -190,10 +191,16 @@ def test_the_messages_are_the_recorded_states(bag):
                                                              for i in range(model.n_cables)]
     a = static.transforms[2].transform.translation
     assert np.allclose([a.x, a.y, a.z], model.anchors[2])
-    wrench = by_topic["/cdpr/rowc/wrench_estimate"][0][1].wrench
-    assert (wrench.force.x, wrench.torque.x) == (30.0, 0.1) and math.isnan(wrench.torque.y)
+    # the wrench in the platform's frame: its axes (Rᵀ of the base's), about its origin
+    (ns, s), (_, ws) = states[0], by_topic["/cdpr/rowc/wrench_estimate"][0]
+    R = Rotation.from_euler("xyz", s["pose"]["rpy"]).as_matrix()
+    w = ws.wrench
+    assert ws.header.frame_id == "rowc_platform"
+    assert np.allclose([w.force.x, w.force.y, w.force.z], R.T @ [30.0, 0.0, -1.5])
+    assert all(math.isnan(v) for v in (w.torque.x, w.torque.y, w.torque.z))  # one is unknown
     assert [d.data for _, d in by_topic["/cdpr/rowc/state"]][-2:] == [
         "moving", "fault: cable tension"]
     (status,) = by_topic["/diagnostics"][-1][1].status
     assert status.level == 2 and status.message == "fault: cable tension"
     assert by_topic["/diagnostics"][0][1].status[0].level == 0
+    assert [m.log_time for m, _ in by_topic["/diagnostics"]] == [states[0][0], states[-1][0]]

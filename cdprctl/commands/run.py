@@ -240,6 +240,11 @@ def run(args: argparse.Namespace) -> int:
     from cdprctl.daemon.startup import interrupt_the_start_up
     from drivers.errors import DriverError
 
+    if args.ros2 or model.ros2.enabled:
+        problem = model.ros2.environment_problem()
+        if problem is not None:
+            print(f"cdprctl run: --ros2: {problem}", file=sys.stderr)
+            return 2
     previous = interrupt_the_start_up()
     try:
         daemon = Daemon(

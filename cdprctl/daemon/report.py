@@ -231,7 +231,7 @@ def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = 
         "layout": SceneLayout.from_model(m).to_dict(),
         # the ROS 2 link's topics (docs/ros2.md): a recording's ROS 2 channels name them alike
         "ros2": {"enabled": m.ros2.enabled, "namespace": m.ros2.topic_namespace(m.name),
-                 "domain_id": m.ros2.domain()},
+                 "domain_id": None if m.ros2.environment_problem() else m.ros2.domain()},
         "simulated": simulated,
         **({"safety": safety_summary(m, state_dir, brake_test_required)}
            if state_dir is not None else {}),

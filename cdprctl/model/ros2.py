@@ -28,14 +28,54 @@ class Ros2Config:
     rate: float = 50.0  # Hz of every topic but /tf_static
 
     def domain(self) -> int:
-        """The DDS domain: the file's, else ``ROS_DOMAIN_ID`` as ROS 2 reads it, else 0."""
+        """The DDS domain: the file's, else ``ROS_DOMAIN_ID`` as ROS 2 reads it, else 0.
+        Raises ValueError for a ``ROS_DOMAIN_ID`` that is not a domain (``environment_problem``
+        says so in words): ROS 2 refuses it too, and falling back to the shared domain 0
+        would put the robot where nobody asked."""
         if self.domain_id is not None:
             return self.domain_id
         text = os.environ.get("ROS_DOMAIN_ID", "").strip()
-        return int(text) if text.isdigit() and int(text) <= DOMAIN_MAX else 0
+        if not text:
+            return 0
+        if not text.isdigit() or int(text) > DOMAIN_MAX:
+            raise ValueError(f"ROS_DOMAIN_ID = {text!r} is not a ROS 2 domain (0-{DOMAIN_MAX}):"
+                             " set it to one, unset it (domain 0), or give [ros2] domain_id")
+        return int(text)
+
+    def environment_problem(self) -> str | None:
+        """Why the link cannot start from this environment (None: it can)."""
+        try:
+            self.domain()
+        except ValueError as exc:
+            return str(exc)
+        return None
 
     def topic_namespace(self, robot: str) -> str:
         return self.namespace or f"cdpr/{ros_token(robot)}"
+
+
+def localhost_only() -> bool:
+    """Whether ROS 2's environment keeps DDS on this machine: ``ROS_LOCALHOST_ONLY=1``
+    (Humble, Iron) or ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (Jazzy on)."""
+    return (os.environ.get("ROS_LOCALHOST_ONLY", "").strip() == "1"
+            or os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper()
+            == "LOCALHOST")  # fmt: skip
+
+
+# what rmw_cyclonedds adds to Cyclone DDS's configuration for localhost only: the loopback
+# interface alone (a node so set hears nothing from, and sends nothing to, another interface)
+LOOPBACK_CONFIG = ("<CycloneDDS><Domain><General><Interfaces><NetworkInterface "
+                   'address="127.0.0.1"/></Interfaces></General></Domain></CycloneDDS>')
+
+
+def dds_config() -> str | None:
+    """Cyclone DDS's configuration for the link: ``CYCLONEDDS_URI`` as the user set it (the
+    interface, peers, ...), with the loopback interface added when ROS 2's environment says
+    localhost only; None: Cyclone's defaults (``CYCLONEDDS_URI`` read by Cyclone itself)."""
+    if not localhost_only():
+        return None
+    uri = os.environ.get("CYCLONEDDS_URI", "").strip()
+    return ",".join(x for x in (uri, LOOPBACK_CONFIG) if x)
 
 
 def ros_token(name: str) -> str:

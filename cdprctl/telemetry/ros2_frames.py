@@ -18,6 +18,9 @@ from cdprctl.telemetry.snapshot import FAULT_KINDS, STATES
 # diagnostic_msgs/DiagnosticStatus levels of the states that are not OK: a fault (and the stop
 # that leads to it) an ERROR; the e-stop a WARN — the safety chain is open, nothing is broken
 LEVELS = {State.FAULT.value: 2, State.STOPPING.value: 2, State.ESTOP.value: 1}
+# s between /diagnostics messages while nothing changes (diagnostic_updater's 1 Hz); a change
+# of state or fault is sent at once
+DIAGNOSTICS_PERIOD = 1.0
 
 
 def frames(robot: str) -> dict[str, str]:
@@ -94,6 +97,8 @@ class Ros2Frames:
         self.robot = robot
         self.frames = frames(robot)
         self.twist = np.zeros(6)
+        self._said = ""  # the last /diagnostics' text
+        self._next_diagnostics = -math.inf  # s, the stamps' clock
 
     def static(self, stamp: Any) -> Any:
         """``/tf_static``: each anchor's frame (``<robot>_anchor_<i>``, 1-based, the base's
@@ -106,7 +111,10 @@ class Ros2Frames:
                              for i, a in enumerate(self.layout.anchors)])  # fmt: skip
 
     def build(self, s: dict[str, np.ndarray], stamp: Any) -> dict[str, Any]:
-        """The messages of snapshot ``s`` (or ``snapshot_of_payload``), by topic key."""
+        """The messages of snapshot ``s`` (or ``snapshot_of_payload``) stamped ``stamp``, by
+        topic key; ``diagnostics`` only when due (``DIAGNOSTICS_PERIOD``, or a change). The
+        wrench estimate (N, N·m at the platform's point, base axes) is given in the
+        platform's frame, as ROS reads a WrenchStamped: about its frame's origin, in its axes."""
         from cdprctl.kinematics import inverse_kinematics
         from cdprctl.motion.trajectory import coordinates_rotation
         from cdprctl.rotation import rpy_to_matrix
@@ -126,15 +134,21 @@ class Ros2Frames:
         fault = FAULT_KINDS[int(k)] if np.isfinite(k) and 0 <= k < len(FAULT_KINDS) else ""
         level = LEVELS.get(state, rm.OK)
         text = f"{state}: {fault}" if fault else state
-        return {
+        wrench = np.asarray(s["external_wrench"], dtype=float)
+        local = np.concatenate([R.T @ wrench[:3], R.T @ wrench[3:6]])
+        out = {
             "tf": rm.TFMessage([rm.transform(stamp, f["base"], f["platform"], p, R),
                                 rm.transform(stamp, f["base"], f["target"], target[:3], R_t)]),
             "joint_states": rm.joint_state(stamp, f["base"], self.names, self.kin.length, rates,
                                            s["tensions"]),
             "pose": rm.pose_stamped(stamp, f["base"], p, R),
-            "wrench_estimate": rm.wrench_stamped(stamp, f["base"], s["external_wrench"]),
+            "wrench_estimate": rm.wrench_stamped(stamp, f["platform"], local),
             "state": rm.String(text),
-            "diagnostics": rm.DiagnosticArray(rm.Header(stamp, ""), [rm.DiagnosticStatus(
+        }
+        t = stamp.sec + 1e-9 * stamp.nanosec
+        if text != self._said or t >= self._next_diagnostics:
+            self._said, self._next_diagnostics = text, t + DIAGNOSTICS_PERIOD
+            out["diagnostics"] = rm.DiagnosticArray(rm.Header(stamp, ""), [rm.DiagnosticStatus(
                 level, f"cdprctl: {self.robot}", text, self.robot,
-                [rm.KeyValue("state", state), rm.KeyValue("fault_kind", fault)])]),
-        }  # fmt: skip
+                [rm.KeyValue("state", state), rm.KeyValue("fault_kind", fault)])])  # fmt: skip
+        return out

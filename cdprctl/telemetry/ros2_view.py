@@ -19,7 +19,7 @@ from cdprctl.telemetry.snapshot import SharedSnapshot
 
 def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> None:
     from cyclonedds.core import Policy, Qos
-    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
@@ -29,7 +29,11 @@ def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> N
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort, as the gateway's
     snap = SharedSnapshot(model.n_cables, snapshot_name, g=len(model.grippers))
-    dp = DomainParticipant(model.ros2.domain())
+    from cdprctl.model.ros2 import dds_config
+
+    domain_id, config = model.ros2.domain(), dds_config()
+    domain = Domain(domain_id, config) if config is not None else None  # kept while it runs
+    dp = DomainParticipant(domain_id)
     # ROS 2's defaults: reliable, keep last 10, volatile; /tf_static transient local, keep 1
     # per publisher (tf2's static broadcaster: a late subscriber gets the anchors)
     default = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)),
@@ -67,6 +71,7 @@ def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> N
             time.sleep(max(0.0, next_t - time.monotonic()))
     finally:
         snap.close()
+        del dp, domain  # the participant before its domain
 
 
 class Ros2Link:
@@ -87,8 +92,12 @@ class Ros2Link:
         self._rate = Decimator(self.period)
 
     def announcement(self) -> list[tuple[str, bool]]:
+        from cdprctl.model.ros2 import localhost_only
+
         t = topics(self.model.ros2.topic_namespace(self.model.name))
-        return [(f"ros2: domain {self.model.ros2.domain()}, {t['joint_states']}, {t['pose']}, "
+        where = " (this machine only: ROS 2's localhost setting)" if localhost_only() else ""
+        return [(f"ros2: domain {self.model.ros2.domain()}{where}, {t['joint_states']}, "
+                 f"{t['pose']}, "
                  f"{t['wrench_estimate']}, {t['state']}, /tf, /tf_static, /diagnostics at "
                  f"{self.model.ros2.rate:g} Hz (publishing only: docs/ros2.md)",
                  False)]  # fmt: skip
