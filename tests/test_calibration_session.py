@@ -170,3 +170,64 @@ def test_the_position_held_cables_are_damped_on_their_filtered_tension_after_the
     assert ses.give[:7] == pytest.approx(rest[:7], rel=1e-3) and ses.give[7] == 0.0
     assert ses.targets[:7] == pytest.approx(ses.base[:7] + ses.correction[:7]
                                             - ses.give[:7] / ses.ratio[:7])  # fmt: skip
+
+
+def test_a_run_ends_after_the_cycle_its_step_says_and_says_how_long_it_ran():
+    model = load_robot(CONFIG / "rowc.toml")
+    d = _Driver(model.n_cables)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    fractions: list[float] = []
+
+    def each(f: float) -> bool:
+        fractions.append(f)
+        return len(fractions) == 3
+
+    assert ses.run(1.0, each) == pytest.approx(3 * d.period)
+    assert len(d.sent) == 3 and fractions == pytest.approx([0.004, 0.008, 0.012])
+    assert ses.run(0.02) == pytest.approx(0.02) and len(d.sent) == 8
+
+
+def test_a_move_that_stops_ends_there_and_counts_only_the_time_it_moved():
+    """A tension beyond its stop after 40 cycles of a 10 s move: the move ends on that cycle
+    (the rest of its time was holding still), the fraction done where the ramp had got."""
+    from cdprctl.calibration import geometry_procedure as gp
+    from cdprctl.calibration.geometry_plan import GeometryOptions
+
+    model = load_robot(CONFIG / "rowc.toml")
+    m = model.n_cables
+    d = _Driver(m)
+    ses = Session(model, d, lambda _: None)  # type: ignore[arg-type]
+    ses.states = d.states
+    d.states.torque[:] = ses.ratio * 100.0  # every cable at 100 N, inside its limits
+    calls = [0]
+
+    def stops() -> bool:
+        calls[0] += 1
+        return calls[0] > 40
+
+    ses.move_stops = stops  # type: ignore[method-assign]
+    opt = GeometryOptions.of(model, speed=0.1)
+    a, b = np.zeros(6), np.array([1.0, 0, 0, 0, 0, 0])  # 1 m: 10 s at 0.1 m/s
+
+    def goal_of(x):
+        return np.full(m, x[0]), np.full(m, 100.0)
+
+    done, took = gp._move(ses, a, b, goal_of, opt)
+    assert took == pytest.approx(41 * d.period)
+    f = 40 / round(10.0 / d.period)
+    assert done == pytest.approx(0.5 - 0.5 * math.cos(math.pi * f))
+    assert ses.pace == 0.0
+    calls[0] = -10**9  # a retreat (stop=False) runs its whole way whatever the tensions
+    done, took = gp._move(ses, b, a, goal_of, opt, stop=False)
+    assert (done, took) == (pytest.approx(1.0), pytest.approx(10.0))
+
+
+def test_a_stopped_move_backs_off_a_tenth_of_a_metre_or_to_where_it_came_from():
+    from cdprctl.calibration import geometry_procedure as gp
+
+    origin = np.zeros(6)
+    far = np.array([0.6, 0.8, 0.0, 0.0, 0.0, 0.0])  # 1 m away
+    assert gp.retreat_to(far, origin) == pytest.approx(far * 0.9)
+    near = np.array([0.03, 0.0, 0.0, 0.0, 0.04, 0.0])  # 0.05 (m and rad) away
+    assert gp.retreat_to(near, origin) == pytest.approx(origin)
+    assert gp.RETREAT_DISTANCE == 0.1

@@ -103,18 +103,19 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
             why = f" (stopped: {ses.stopped_by})" if done < 1.0 else ""
             log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move{why}, tensions "
                 f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
-            if done < 1.0:  # a tension near its limit: back the way it came (it held)
+            if done < 1.0:  # a tension near its limit: back a way it came (it held there)
                 why = ses.stopped_by
+                to = retreat_to(here, origin)
                 try:  # stopped only by the session's limits (a slack cable, an overload)
                     back = dataclasses.replace(opt, speed=RETREAT_SPEED * opt.speed)
-                    _, took = _move(ses, here, origin, goal_of, back, stop=False)
+                    _, took = _move(ses, here, to, goal_of, back, stop=False)
                 except CalibrationFailedError as exc:
                     raise CalibrationFailedError(
                         f"the move to pose {k} stopped ({why}) and the way back did too: "
                         f"{exc}; the robot differs from its file more than the plan allows: "
                         "plan closer to home (--fill)") from None  # fmt: skip
                 moved += took
-                here = origin
+                here = to
         _, took = _move(ses, here, start, goal_of, opt)
         moved += took
         ses.run(opt.settle_time)
@@ -174,6 +175,19 @@ def verdict(ident: GeometryIdentification, result: GeometryResult, samples: Geom
 # speed the way back let one go slack (CoGiRo at 0.2 m/s: 4 of 10 seeds stopped so, every one
 # on its way back from pose 11; at 0.4 of it, seed 3 went through, anchors within 0.11 mm)
 RETREAT_SPEED = 0.4
+# m (and rad, the pose's 6-vector): how far a retreat goes back the way it came, the whole
+# way when shorter. The tension that stopped the move fell over its last stretch; going back
+# the whole way made CoGiRo's seed 20 retreat 0.9 m twice (415 s of motion, 5 minutes allowed)
+RETREAT_DISTANCE = 0.1
+
+
+
+def retreat_to(here: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Where a stopped move backs off to: ``RETREAT_DISTANCE`` back towards ``origin`` (the
+    pose it came from, which held), or ``origin`` when that is nearer."""
+    way = float(np.linalg.norm(origin - here))
+    return here + min(1.0, RETREAT_DISTANCE / max(way, 1e-12)) * (origin - here)
+
 
 # s the platform is held after the start is identified in lock-step (below)
 HOLD_AFTER_IDENTIFYING = 1.0
@@ -261,7 +275,8 @@ def _move(ses: Session, a: np.ndarray, b: np.ndarray,
     planned motor angles and tensions every 1 cm (or 0.01 rad), interpolated per cycle.
     Returns the fraction done (a tension near its limit stops it, unless ``stop`` is False:
     a retreat along a way it came, where only the session's hard limits stop it) and the
-    seconds taken."""
+    seconds taken (a stopped move ends where it stopped: holding the rest of its time would
+    only add to the motion's)."""
     dist = float(np.linalg.norm(b - a))
     n = max(2, math.ceil(dist / 0.01) + 1)
     fr = np.linspace(0.0, 1.0, n)
@@ -287,16 +302,13 @@ def _move(ses: Session, a: np.ndarray, b: np.ndarray,
     G_off, T_off = np.zeros(m), np.zeros(m)
     waypoint(0)
     duration = move_duration(dist, opt)
-    reached = [0.0, False]
+    reached = [0.0]  # the fraction of the way
     ses.begin_move()
 
-    def step(f: float) -> None:
-        if reached[1]:
-            return
-        if stop and ses.move_stops():
-            reached[1] = True
+    def step(f: float) -> bool:
+        if stop and ses.move_stops():  # the targets stay where they are; the run ends
             ses.pace = 0.0
-            return
+            return True
         s = 0.5 - 0.5 * math.cos(math.pi * f)
         reached[0] = s
         ses.pace = math.sin(math.pi * f)
@@ -306,10 +318,11 @@ def _move(ses: Session, a: np.ndarray, b: np.ndarray,
         waypoint(i + 1)
         ses.base[:] = G[i] + u * (G[i + 1] - G[i])
         ses.tension_goal[:] = T[i] + u * (T[i + 1] - T[i])
+        return False
 
-    ses.run(duration, step)
+    took = ses.run(duration, step)
     ses.pace = 0.0
-    return reached[0], duration
+    return reached[0], took
 
 
 def geometry_record(built: RobotModel, cal: GeometryCalibration,

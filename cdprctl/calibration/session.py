@@ -146,8 +146,10 @@ class Session:
         friction_kernel(w.viscous, w.coulomb, self.states.velocity, self._all, self._friction)
         return (self.states.torque - self._friction) / self.ratio
 
-    def run(self, duration: float, each: Callable[[float], None] | None = None) -> None:
-        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle.
+    def run(self, duration: float, each: Callable[[float], bool | None] | None = None) -> float:
+        """Hold for ``duration`` s; ``each(fraction)`` sets targets/torques every cycle and
+        ends the run after that cycle by returning True (a move that stopped: the rest would
+        only hold). Returns the seconds run.
 
         A cycle held up more than a period (this process stalled: in the wait, the last
         write or this read) skips the periods it missed instead of running them in a burst
@@ -174,8 +176,7 @@ class Session:
             self.cycle_time = (1 + missed) * period
             if d.lifecycle is Lifecycle.ERROR:
                 raise CalibrationFailedError(f"the drives stopped: {d.error}")
-            if each is not None:
-                each((i + 1) / n)
+            ends = each is not None and bool(each((i + 1) / n))
             if self.force.any() and d.lifecycle is Lifecycle.ACTIVE:
                 self._tension_loop()
             np.add(self.base, self.correction, out=self.targets)
@@ -198,6 +199,9 @@ class Session:
             deadline += period
             i += 1
             d.wait(max(0.0, deadline - d.clock()))
+            if ends:
+                break
+        return i * period
 
     def _damp(self, active: bool) -> None:
         """The position-held cables' targets paid out by the leaky integral of their tension
