@@ -128,6 +128,21 @@ def test_live_objects_read_by_sdo_follow_the_drive(rig):
     assert node.sdo[0x6077].raw == 0  # not enabled: no torque
 
 
+def test_the_sto_state_is_0x3202_01_alone(rig):
+    """maxon EPOS4's STO input states (0x3202:01, 3: both inputs energised) is a live object;
+    the stored objects next to it answer their own values, a sub-index it lacks aborts."""
+    import canopen
+
+    _robot, _, nodes = rig
+    node = nodes[1]
+    assert node.sdo[0x3202][1].raw == 3
+    assert node.sdo[0x60FE][1].raw == 0  # physical outputs: its default, not the STO state
+    node.sdo[0x60FE][1].raw = 0x00010000
+    assert node.sdo[0x60FE][1].raw == 0x00010000
+    with pytest.raises(canopen.SdoAbortedError):
+        node.sdo.upload(0x3202, 2)
+
+
 def test_modes_only_from_0x6502(rig):
     _robot, _, nodes = rig
     node = nodes[1]
