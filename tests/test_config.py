@@ -218,13 +218,20 @@ def test_model_is_frozen(rowc):
         rowc.anchors[0, 0] = 1.0
 
 
-def test_check_config_cli_summary_and_errors(tmp_path, capsys):
+def test_check_config_cli_summary_and_errors(tmp_path, capsys, monkeypatch):
     assert main(["check-config", str(CONFIG / "seed000.toml")]) == 0
     out = capsys.readouterr().out
     assert "cables      8 (redundancy r = 2)" in out
     assert "mass 150 kg" in out
     # the 8 cable lengths at home are printed, cable 1 is 6.4 m long or so
     assert re.search(r"^\s+1\s+50\.0\s+800\.0\s+\d\.\d{4}", out, flags=re.M)
+    monkeypatch.setenv("ROS_DOMAIN_ID", "7")
+    assert main(["check-config", str(CONFIG / "seed000.toml")]) == 0
+    assert ("ros2        off (cdprctl run --ros2 turns it on); domain 7, topics under "
+            "/cdpr/seed000 at 50 Hz (docs/ros2.md)") in capsys.readouterr().out
+    monkeypatch.setenv("ROS_DOMAIN_ID", "x")
+    assert main(["check-config", str(CONFIG / "seed000.toml")]) == 0
+    assert "; ROS_DOMAIN_ID = 'x' is not a ROS 2 domain" in capsys.readouterr().out
     bad = write(tmp_path, sub(r"^mass = 8.0", "mass = -1.0"))
     assert main(["check-config", str(bad)]) == 1
     err = capsys.readouterr().err

@@ -26,6 +26,15 @@ def safety_summary(model: RobotModel) -> str:
             + (", ".join(changed) if changed else "the defaults"))  # fmt: skip
 
 
+def ros2_summary(model: RobotModel) -> str:
+    """The ROS 2 link's line: on or off, domain (or why the environment's is none), topics."""
+    r = model.ros2
+    domain = r.environment_problem() or f"domain {r.domain()}"
+    state = "on" if r.enabled else "off (cdprctl run --ros2 turns it on)"
+    return (f"ros2        {state}; {domain}, topics under /{r.topic_namespace(model.name)} at "
+            f"{r.rate:g} Hz (docs/ros2.md)")
+
+
 def summary(model: RobotModel) -> str:
     home = model.home
     data = KinematicsData(model)
@@ -43,6 +52,7 @@ def summary(model: RobotModel) -> str:
         f"gravity     {model.gravity.tolist()} m/s²",
         f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
         safety_summary(model),
+        ros2_summary(model),
         "",
         f"{'cable':>6} {'t_min N':>9} {'t_max N':>9} {'length m':>9} {'k N/m':>10} "
         f"{'winch max N':>11}",
