@@ -67,6 +67,26 @@ def test_a_kernel_that_hangs_is_killed_with_all_it_started(tmp_path, monkeypatch
     assert left == ""
 
 
+def test_a_kernel_that_cannot_start_init_here_is_not_run_and_said_so(tmp_path, monkeypatch,
+                                                                     capsys):
+    """A stand-in for linux.uml that ends as Debian's 6.1 kernel does on a CPU with AMX state:
+    a panic before its init ran. ``make test`` goes on, saying why; ``make hil`` fails."""
+    fake = tmp_path / "linux.uml"
+    fake.write_text("#!/bin/sh\necho 'Run /tmp/x/init.sh as init process'\n"
+                    "echo 'userspace - ptrace set fp regs failed, errno = 14'\n"
+                    "echo 'Kernel panic - not syncing: Attempted to kill init!'\n")
+    fake.chmod(0o755)
+    monkeypatch.setattr(hil, "UML", str(fake))
+    monkeypatch.setattr(hil, "native_vcan0", never("no vcan0 here"))
+    monkeypatch.setattr(hil, "uml_ready", lambda install: None)
+    assert hil.main(["--if-possible"]) == 0
+    assert hil.main([]) == 1
+    err = capsys.readouterr().err
+    assert err.count("hil: not run: User-Mode Linux could not start a process on this machine "
+                     "(its kernel said: 'userspace - ptrace set fp regs failed, errno = 14'); "
+                     "the tests did not run") == 2
+
+
 def synthetic_log(rate: float = 50.0, cycles: int = 300, change=None) -> str:
     """A `candump -L` log of a fault-free run as CiA 301/402 has it, written out here: each
     drive's boot-up, NMT pre-operational, an SDO exchange and a heartbeat per node, NMT start,
