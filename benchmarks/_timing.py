@@ -10,6 +10,8 @@ import argparse
 import gc
 import os
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -120,9 +122,6 @@ def timed_daemon_run(args: list[str], timing: Path, on_ready: Callable[[], objec
     """``cdprctl run --sim`` on rowc with ``args``, its per-cycle timing saved to ``timing``
     and returned (``--timing-file``); ``on_ready()`` called when it prints ``ready:`` (a
     client started then), its result's ``join()``, if it has one, after the run."""
-    import subprocess
-    import sys
-
     root = Path(__file__).resolve().parents[1]
     cmd = [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(root / "config/rowc.toml"),
            "--sim", "--status", "0", "--timing-file", str(timing), *args]  # fmt: skip

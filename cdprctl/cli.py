@@ -58,10 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     from cdprctl.commands import drives
 
     drives.add_parser(sub)
-    from cdprctl.commands import report, zenoh_tools
+    from cdprctl.commands import record, report, zenoh_tools
     from cdprctl.commands import workspace as workspace_cmd
 
     zenoh_tools.add_parsers(sub)
+    record.add_parser(sub)
     report.add_parser(sub)
     workspace_cmd.add_parser(sub)
     from cdprctl.commands import jog, path
