@@ -116,10 +116,13 @@ def test_a_blend_passes_at_the_mean_cruise_velocity_within_reach_and_caps(rowc):
 def test_a_blend_into_a_segment_of_no_length_is_at_rest_never_nan():
     vmax, amax = np.full(6, 0.3), np.full(6, 1.0)
     zero = np.zeros(6)
-    v = pp._blend_velocity(zero, np.array([0.2, 0, 0, 0, 0, 0.0]), (vmax, amax), (vmax, amax))
-    assert np.array_equal(v, np.zeros(6))
-    v = pp._blend_velocity(np.array([0.2, 0, 0, 0, 0, 0.0]), zero, (vmax, amax), (vmax, amax))
-    assert np.array_equal(v, np.zeros(6))
+    with np.errstate(all="raise"):  # not even a 0/0 on the way, overwritten later
+        v = pp._blend_velocity(zero, np.array([0.2, 0, 0, 0, 0, 0.0]), (vmax, amax),
+                               (vmax, amax))  # fmt: skip
+        assert np.array_equal(v, np.zeros(6))
+        v = pp._blend_velocity(np.array([0.2, 0, 0, 0, 0, 0.0]), zero, (vmax, amax),
+                               (vmax, amax))  # fmt: skip
+        assert np.array_equal(v, np.zeros(6))
 
 
 def test_the_speed_rule_takes_the_configured_maximum_itself(rowc):
@@ -196,17 +199,22 @@ def test_the_summary_says_segments_duration_samples_spacing_in_mm_and_margin(row
 
 
 def test_a_rejected_sample_is_named_by_its_three_coordinates(rowc):
+    """To 0.1 mm: the first refused sample's x, rounded to four decimals."""
     class Refuse(SoftLimits):
         def check(self, coords, acceleration=None, floor=None):
             x = np.asarray(coords, dtype=float).reshape(-1, 6)[:, 0]
             band = (x > 1.55) & (x < 1.57)
+            self.refused = x[band].tolist()
             return np.where(band, -1.0, 50.0), ~band
 
     limits = Refuse(rowc)
     with pytest.raises(pp.PathRejectedError, match=r"x 1\.6 \(segment 2\): at t = [0-9.]+ s, "
-                       r"position \[1\.55\d*, 0\.35, 0\.59\] m: "):  # fmt: skip
+                       r"position \[1\.55\d*, 0\.35, 0\.59\] m: ") as refused:  # fmt: skip
         pp.plan_path(rowc, [wp(1.53, blend=False), wp(1.6, blend=False)], start_of(rowc),
                      rowc.control.period, limits)  # fmt: skip
+    said = str(refused.value).split("position [")[1].split(",")[0]
+    assert len(said.split(".")[1]) <= 4
+    assert float(said) == pytest.approx(limits.refused[0], abs=0.5e-4 + 1e-12)
 
 
 @pytest.mark.parametrize(("units", "hinted"), [("m", True), ("mm", False), ("in", False)])
@@ -228,3 +236,101 @@ def test_a_rows_time_is_met_to_two_periods(rowc):
         else:
             with pytest.raises(pp.PathRejectedError, match=r"x 1\.7: its time cannot be met"):
                 pp.plan_path(rowc, rows, start_of(rowc), period)
+
+
+def test_a_refused_waypoint_is_named_without_negative_zeros(rowc):
+    """``-0.0`` in an error reads as a sign error the file does not have."""
+    far = Waypoint((5.0, -0.00001, 0.59, -0.00002, 0.0, 0.0), None, None, False, 0.0, "row 2")
+    with pytest.raises(pp.PathRejectedError, match=r"row 2: waypoint \[5\.0, 0\.0, 0\.59, 0\.0, "
+                       r"0\.0, 0\.0\]: "):  # fmt: skip
+        pp.plan_path(rowc, [far], start_of(rowc), rowc.control.period)
+
+
+def test_a_rows_dwell_is_not_part_of_the_next_segments_time(rowc):
+    """Times are the file's clock: a row reached at 3 s that dwells 1 s leaves at 4 s, so the
+    next row at 7 s has 3 s to get there."""
+    rows = [wp(1.6, blend=False, time=3.0, dwell=1.0), wp(1.7, blend=False, time=7.0)]
+    plan = pp.plan_path(rowc, rows, start_of(rowc), rowc.control.period)
+    assert [s.minimum_duration for s in plan.segments] == [3.0, 3.0]
+    assert plan.duration == pytest.approx(7.0, abs=2 * rowc.control.period)
+
+
+def test_a_blends_cruise_is_the_slowest_axis_time_over_each_axis():
+    """By hand, caps not reached: in and out (0.2, 0.1) m at 0.3 m/s per axis: x needs 0.667 s,
+    so the cruise is (0.3, 0.15) m/s, and y passes at 0.15 m/s."""
+    vmax, amax = np.full(6, 0.3), np.full(6, 1.0)
+    d = np.array([0.2, 0.1, 0.0, 0.0, 0.0, 0.0])
+    v = pp._blend_velocity(d, d, (vmax, amax), (vmax, amax))
+    assert np.allclose(v, [0.3, 0.15, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_an_axis_that_reverses_passes_at_rest_even_when_the_mean_is_not_zero():
+    vmax, amax = np.full(6, 0.3), np.full(6, 1.0)
+    v = pp._blend_velocity(np.array([0.2, 0.1, 0, 0, 0, 0.0]), np.array([0.2, -0.04, 0, 0, 0, 0]),
+                           (vmax, amax), (vmax, amax))  # fmt: skip
+    assert v[1] == 0.0 and v[0] > 0.0
+
+
+def test_a_blend_is_no_faster_than_the_slower_segments_limit():
+    """In at 0.05 m/s, out at 0.3 m/s: the mean cruise (0.175) is capped at 0.05."""
+    amax = np.full(6, 1.0)
+    d = np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])
+    v = pp._blend_velocity(d, d, (np.full(6, 0.05), amax), (np.full(6, 0.3), amax))
+    assert v[0] == pytest.approx(0.05)
+    v = pp._blend_velocity(d, d, (np.full(6, 0.3), amax), (np.full(6, 0.05), amax))
+    assert v[0] == pytest.approx(0.05)
+
+
+def test_a_plan_holds_at_exactly_its_start_tolerance():
+    plan = pp.PathPlan(segments=[], duration=0.0, samples=0, spacing=0.0, min_margin=0.0,
+                       min_margin_at="", start=np.zeros(6))  # fmt: skip
+    edge = np.zeros(6)
+    edge[2] = pp.START_TOLERANCE
+    assert plan.starts_at(edge) and plan.starts_at(-edge)
+
+
+def test_a_path_of_exactly_the_longest_number_of_periods_is_taken(rowc, monkeypatch):
+    """MAX_DURATION counts the periods the trajectory runs: a path of n periods is taken
+    when n periods fit, and refused when one fewer do."""
+    period = rowc.control.period
+    rows = [wp(1.6, blend=False)]
+    n = round(pp.plan_path(rowc, rows, start_of(rowc), period).duration / period)
+    monkeypatch.setattr(pp, "MAX_DURATION", (n + 0.5) * period)
+    pp.plan_path(rowc, rows, start_of(rowc), period)
+    monkeypatch.setattr(pp, "MAX_DURATION", (n - 0.5) * period)
+    with pytest.raises(pp.PathRejectedError, match=r"x 1\.6: the path lasts longer than"):
+        pp.plan_path(rowc, rows, start_of(rowc), period)
+
+
+def test_a_path_file_is_a_job_of_an_hour_at_most(rowc):
+    """At 0.1 s periods (36 000 of them in an hour): a row timed at 3599.5 s is taken, one at
+    3600.5 s refused, and the error says the hour."""
+    period = 0.1
+    pp.plan_path(rowc, [wp(1.55, blend=False, time=3599.5)], start_of(rowc), period)
+    with pytest.raises(pp.PathRejectedError, match=r"x 1\.55: the path lasts longer than 3600 s"):
+        pp.plan_path(rowc, [wp(1.55, blend=False, time=3600.5)], start_of(rowc), period)
+
+
+def test_a_segments_translation_and_rotation_have_separate_directions(rowc):
+    """The line's direction is taken in position (m) and in rotation (rad) apart: a turn does
+    not slow the translation's axes, nor z share its direction with the rotation's."""
+    v_lim = velocity_limits(rowc.control)
+    d = np.array([0.3, 0.0, 0.4, 0.2, 0.0, 0.0])
+    vmax, _ = pp._limits(rowc, d, None, False)
+    assert np.allclose(vmax, v_lim * [0.6, pp.FLOOR, 0.8, 1.0, pp.FLOOR, pp.FLOOR])
+
+
+def test_a_segment_has_six_coordinates_everywhere():
+    """ruckig's binding would take a list of any length: a segment refuses a wrong one."""
+    six = [0.0] * 6
+    pp.Segment(np.zeros(6), six, six, six, None, 0.0, "row 2")
+    for bad in ([0.0] * 5, [0.0] * 7):
+        with pytest.raises(ValueError, match=r"row 2: a segment's velocity has [57] coordinates"):
+            pp.Segment(np.zeros(6), bad, six, six, None, 0.0, "row 2")
+
+
+def test_a_turn_in_place_is_checked_in_angle_and_does_not_translate(rowc):
+    """spacing is the translation between samples (m): a rotation in place has none."""
+    text = "x, y, z, roll, yaw\n1.5, 0.35, 0.59, 0.1, 0.1\n"
+    plan = pp.plan_path(rowc, parse_path(text, START), start_of(rowc), rowc.control.period)
+    assert plan.spacing == pytest.approx(0.0, abs=1e-12) and plan.samples > 10

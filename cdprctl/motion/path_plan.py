@@ -55,6 +55,14 @@ class Segment:
     dwell: float  # s held at the target
     where: str  # the file's line
 
+    def __post_init__(self) -> None:
+        # ruckig's binding takes a list of any length for its six coordinates (and reads past
+        # a short one): a wrong length is refused here, when the plan is made, not in the loop
+        for name in ("target", "velocity", "max_velocity", "max_acceleration"):
+            n = len(getattr(self, name))
+            if n != 6:
+                raise ValueError(f"{self.where}: a segment's {name} has {n} coordinates, not 6")
+
 
 @dataclass
 class PathPlan:
