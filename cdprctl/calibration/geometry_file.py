@@ -67,4 +67,9 @@ def calibrated_robot_text(model: RobotModel, anchors: np.ndarray, drum_radius: n
                         if name == "winch" and key == "drum_radius" else "")  # fmt: skip
                 lines.append(f"{key} = {_value(value)}{note}")
         lines.append("")
+    if data.get("drives", {}).get("assume_home_at_start", False):
+        # the record written with this file says where the platform stands: a start taken
+        # as home would ignore it (rowc across processes: 31 mm off, the record right)
+        lines += ["[drives]", "assume_home_at_start = false  # the start is the calibration "
+                  "record's (the base file takes the encoders as zero at home)", ""]  # fmt: skip
     return "\n".join(lines)
