@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import signal
 import sys
 from collections.abc import Sequence
@@ -76,12 +77,39 @@ def _stop(signum: int, _frame: object) -> None:
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+def _list_options(parser: argparse.ArgumentParser) -> set[str]:
+    """The options, in every sub-command, whose value is a comma-separated list of numbers
+    (their metavar says so: ``X,Y,Z``)."""
+    found: set[str] = set()
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                found |= _list_options(sub)
+        elif isinstance(action.metavar, str) and "," in action.metavar:
+            found.update(action.option_strings)
+    return found
+
+
+def signed_lists_attached(parser: argparse.ArgumentParser, words: list[str]) -> list[str]:
+    """``--start-pose -0.02,0.01,...`` as ``--start-pose=-0.02,0.01,...``: argparse takes a
+    value that starts with '-' and is not a plain number for an option and refuses it
+    ("expected one argument"), though a pose left of the origin is an ordinary one."""
+    lists = _list_options(parser)
+    out: list[str] = []
+    for word in words:
+        if out and out[-1] in lists and re.match(r"-\.?\d", word):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     previous = signal.signal(signal.SIGTERM, _stop)  # as Ctrl-C, from the first moment
     try:
         parser = build_parser()
-        args = parser.parse_args(words)
+        args = parser.parse_args(signed_lists_attached(parser, words))
         if not getattr(args, "func", None):
             parser.print_help()
             return 2

@@ -362,6 +362,10 @@ def test_path_check_plans_offline_and_hints_at_millimetres(tmp_path, capsys):
     assert "2 segments" in capsys.readouterr().out
     assert main(["path", "check", str(mm), "--config", cfg, "--from", "1.5,0.35"]) == 2
     assert "--from = '1.5,0.35'" in capsys.readouterr().err
+    # a start left of the origin is a pose, not an option argparse cannot find
+    wipe = str(ROOT / "paths" / "rowc_wipe.csv")
+    assert main(["path", "check", wipe, "--config", cfg, "--from", "-1.5,0.35,0.59"]) == 2
+    assert "x = -1.5000 m is outside the workspace box" in capsys.readouterr().err
 
 
 def test_run_takes_units_for_its_path(tmp_path, capsys):
