@@ -49,8 +49,12 @@ def cycle_frames(
     """(what, count, data bytes) of one control cycle on a bus with ``n`` drives, of which
     ``n_position`` in position mode."""
     if driver == "odrive":
-        # Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and Get_Torques (8) in
-        return [("Set_Input_Torque", n, 4), ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
+        # Set_Input_Pos (8: target, velocity and torque feed-forward) or Set_Input_Torque (4)
+        # out; Get_Encoder_Estimates (8) and Get_Torques (8) in
+        frames = [("Set_Input_Pos", n_position, 8)] if n_position else []
+        if n - n_position:
+            frames.append(("Set_Input_Torque", n - n_position, 4))
+        return [*frames, ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
     frames = [("SYNC with its counter", 1, 1)]
     if n_position:
         frames.append(("RPDO1 controlword+position+torque offset", n_position, 8))

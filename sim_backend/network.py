@@ -54,7 +54,10 @@ class SimNetwork:
                 if self.protocol == "odrive":
                     from sim_backend.drives.odrive import ODriveAxis
 
-                    drive: Any = ODriveAxis(n, c, plant, w.torque_limit, self.cfg.comm_timeout)
+                    drive: Any = ODriveAxis(
+                        n, c, plant, w.torque_limit, self.cfg.comm_timeout,
+                        self.cfg.torque_constant,
+                    )  # fmt: skip
                 else:
                     drive = Cia402Drive(
                         n,

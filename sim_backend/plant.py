@@ -132,6 +132,7 @@ class CdprPlant:
             np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
             np.array([w.winch.torque_limit for w in c]), np.zeros(m),
             np.full(m, np.inf), np.full(m, np.inf), np.zeros(m),
+            np.zeros(m), np.full(m, np.inf), np.zeros(m), np.zeros(m),
         )  # fmt: skip
         self._init_grippers()
         # outputs of the last step

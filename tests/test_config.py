@@ -333,7 +333,8 @@ def test_drive_mode_keys(tmp_path):
     errs = errors_of(tmp_path, BASE + '\n[drives]\nmode = "cps"\n')
     assert any("drives.mode" in e and "cps" in e and "cst, csp" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\nmode = "csp"\n')
-    assert any("drives.mode" in e and "cia402" in e for e in errs), errs
+    assert any("drives.torque_constant is missing" in e and "8.27 / KV" in e and "N·m/A" in e
+               and "mode = 'cst'" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + "\n[drives]\nposition_loop_bandwidth = -5\n")
     assert any("drives.position_loop_bandwidth" in e and "Hz" in e for e in errs), errs
     errs = errors_of(tmp_path, BASE + "\n[drives]\nfollowing_error_window = 0\n")
@@ -358,12 +359,13 @@ def test_drive_mode_keys(tmp_path):
 
 
 def test_drive_mode_by_default(tmp_path):
-    """Where the file does not say, position mode (every gain from the model) wherever the
-    drives can do it; torque mode with the ODrive driver (no position mode). A gripper's
-    drive stays in torque mode either way (its cable's tension squeezes the jaw)."""
+    """Where the file does not say, position mode (every gain from the model), with either
+    driver (an ODrive's needs the motors' torque constant). A gripper's drive stays in torque
+    mode either way (its cable's tension squeezes the jaw)."""
     assert load_robot(write(tmp_path, BASE, "plain.toml")).drives.mode == "csp"
-    odrive = load_robot(write(tmp_path, BASE + '\n[drives]\ndriver = "odrive"\n', "od.toml"))
-    assert odrive.drives.mode == "cst"
+    text = BASE + '\n[drives]\ndriver = "odrive"\ntorque_constant = 0.0827\n'
+    odrive = load_robot(write(tmp_path, text, "od.toml"))
+    assert odrive.drives.mode == "csp" and odrive.drives.torque_constant == 0.0827
     d = load_robot(CONFIG / "seed000_grippers.toml").drives  # it does not say
     assert d.mode == "csp" and d.torque_cables == (0, 7)
     assert [d.mode_of(c) for c in range(8)] == ["cst"] + ["csp"] * 6 + ["cst"]

@@ -125,9 +125,22 @@ class RunReport:
         return lines
 
 
-def gains_line(model: RobotModel, data: ControlData) -> str:
-    """Where the loop's gains come from: in position mode all from the model."""
+def gains_line(model: RobotModel, data: ControlData, driver: Any = None) -> str:
+    """Where the loop's gains come from: in position mode all from the model (an ODrive
+    driver's axes: the gains it sent them, ``driver.gains``)."""
     g = data.gains
+    axes = [a for a in getattr(driver, "gains", None) or () if a is not None]
+    if model.drives.holds_lengths and axes:
+        a = axes[0]
+        same = all(x == a for x in axes)
+        return (
+            f"gains from the model: ODrive axes hold the lengths (position control, "
+            f"passthrough; the loop at {a.bandwidth:g} Hz on each rotor's inertia, at most a "
+            f"decade below the control rate; sent by CAN: "
+            + (a.line() if same else f"cable 1 {a.line()}, the others per rotor")
+            + f"), force feedback {g['force_feedback']:.1f} rad/s, external-wrench estimate "
+            f"{g['disturbance_bandwidth']:.3g} Hz"
+        )
     if model.drives.holds_lengths:
         torque = ", ".join(model.cables[i].name for i in model.drives.torque_cables)
         return (

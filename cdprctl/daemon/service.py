@@ -136,7 +136,7 @@ class Daemon:
     def _run(self, duration: float | None, demo: bool, force: float,
              path: tuple[str, str, str] | None) -> int:  # fmt: skip
         m, d = self.model, self.data
-        self._print(gains_line(m, d))
+        self._print(gains_line(m, d, self.driver))
         try:
             script = start_up(self, path)
             # from here a signal is the loop's controlled stop (until now: the start-up's end)

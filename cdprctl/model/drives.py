@@ -23,6 +23,7 @@ DRIVES_KEYS = (
     "target_extrapolation",
     "brake_release_time",
     "rated_torque",
+    "torque_constant",
     "feedback_timeout",
     "missed_feedback_limit",
     "heartbeat_timeout",
@@ -74,6 +75,9 @@ class DrivesConfig:
     # from their datasheet, if longer
     brake_release_time: float = 0.05
     rated_torque: float = 1.0  # N·m that 1000 per-mille stand for (CiA 402 0x6076)
+    # N·m/A of the motors (ODrive: 8.27 / KV): an ODrive axis in position mode gets its
+    # current limit, torque_limit / torque_constant, by CAN (Set_Limits); None: not given
+    torque_constant: float | None = None
     # s of running cycles without feedback from a drive before it is taken as lost: a time,
     # not a count of cycles, so the tolerance is the same at every rate (30 ms; the old count
     # of 5 missed reads was 10-12 ms at 500 Hz, 20 ms at 250 Hz). A stall of the loop itself
@@ -113,20 +117,25 @@ class DrivesConfig:
         the ``torque_cables``."""
         return "cst" if self.mode == "cst" or cable in self.torque_cables else "csp"
 
-    def position_gains(self, rotor_inertia: float) -> tuple[float, float]:
-        """(kp N·m/rad, kd N·m·s/rad) of a simulated drive's position loop: the rotor alone
-        placed at ``position_loop_bandwidth`` with damping ``POSITION_LOOP_DAMPING`` (kp = J ω²,
-        kd = 2 ζ J ω); the cable adds its stiffness on top (sim_backend physics.servo_torque)."""
-        w = 2.0 * math.pi * self.position_loop_bandwidth
+    def position_gains(
+        self, rotor_inertia: float, bandwidth: float | None = None
+    ) -> tuple[float, float]:
+        """(kp N·m/rad, kd N·m·s/rad) of a drive's position loop: the rotor alone placed at
+        ``bandwidth`` (Hz; default ``position_loop_bandwidth``) with damping
+        ``POSITION_LOOP_DAMPING`` (kp = J ω², kd = 2 ζ J ω); the cable adds its stiffness on
+        top (sim_backend physics.servo_torque)."""
+        w = 2.0 * math.pi * (self.position_loop_bandwidth if bandwidth is None else bandwidth)
         return rotor_inertia * w * w, 2.0 * POSITION_LOOP_DAMPING * rotor_inertia * w
 
-    def following_error_window_rad(self, winch: Any) -> float:
+    def following_error_window_rad(self, winch: Any, kp: float | None = None) -> float:
         """rad at the motor: ``following_error_window`` (m of cable) through the drum, or by
         default the error at which the position loop alone asks for the winch's full torque
-        (``torque_limit / kp``; rowc: 0.18 rad, 1.6 mm of cable)."""
+        (``torque_limit / kp``, kp N·m/rad by default ``position_gains``'; rowc: 0.18 rad,
+        1.6 mm of cable)."""
         if self.following_error_window is not None:
             return self.following_error_window * winch.gear_ratio / winch.drum_radius
-        return winch.torque_limit / self.position_gains(winch.rotor_inertia)[0]
+        stiffness = self.position_gains(winch.rotor_inertia)[0] if kp is None else kp
+        return winch.torque_limit / stiffness
 
     def node_of(self, cable: int) -> tuple[int, int]:
         """(bus index, node id) of a cable."""
@@ -141,17 +150,17 @@ ENCODERS = ("incremental", "absolute")
 POSITION_LOOP_DAMPING = 0.7  # of the simulated drives' position loop
 
 
-def default_mode(driver: str) -> str:
-    """``[drives] mode`` where the file does not say: position mode (``csp``), whose gains all
-    come from the robot's model (docs/control.md, "Gains from the model"), wherever the drives
-    can do it; torque mode (``cst``) with the ODrive driver, which has no position mode."""
-    return "csp" if driver == "cia402" else "cst"
+# ``[drives] mode`` where the file does not say: position mode, whose gains all come from the
+# robot's model (docs/control.md, "Gains from the model"); both drivers have it (ODrive:
+# Set_Input_Pos, its cascaded loops' gains set by CAN)
+DEFAULT_MODE = "csp"
+ODRIVE_MAX_TORQUE_FF = 32.767  # N·m: Set_Input_Pos's int16 torque feed-forward × 0.001
 
 
 def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
-    """One bus of all the drives, node ids 1..m, in the mode ``default_mode`` gives."""
+    """One bus of all the drives, node ids 1..m, in ``DEFAULT_MODE``."""
     return DrivesConfig(
-        mode=default_mode("cia402"), rated_torque=rated_torque, buses=default_buses(name, n_cables)
+        mode=DEFAULT_MODE, rated_torque=rated_torque, buses=default_buses(name, n_cables)
     )
 
 
@@ -161,7 +170,9 @@ def read_drives(
     cable_names: list[str],
     name: str,
     rated_default: float,
+    max_torque_limit: float = 0.0,
 ) -> DrivesConfig | None:
+    """``max_torque_limit`` (N·m): the largest of the winches' ``torque_limit``."""
     t = rd.table(data, "drives", "", required=False)
     if t is None:
         return default_drives(name, len(cable_names), rated_default)
@@ -170,13 +181,25 @@ def read_drives(
     driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
     if driver not in DRIVERS:
         rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
-    mode = rd.string(t, "mode", "drives", required=False, default=None) or default_mode(
-        driver or "cia402"
-    )
+    mode = rd.string(t, "mode", "drives", required=False, default=None) or DEFAULT_MODE
     if mode not in MODES:
         rd.error("drives.mode", mode, "", f"must be one of {', '.join(MODES)}")
-    elif mode == "csp" and driver != "cia402":
-        rd.error("drives.mode", mode, "", "csp (position targets) needs driver = 'cia402'")
+    torque_constant = rd.number(
+        t, "torque_constant", "drives", "N·m/A", required=False, default=None, positive=True
+    )
+    if mode == "csp" and driver == "odrive" and "torque_constant" not in t:
+        rd.error_missing(
+            "drives.torque_constant", "N·m/A",
+            "with an ODrive in position mode (mode = 'csp', the default), which gets its "
+            "current limit torque_limit / torque_constant by CAN: the motors' torque constant "
+            "(8.27 / KV), or mode = 'cst' for torque mode",
+        )  # fmt: skip
+    if mode == "csp" and driver == "odrive" and max_torque_limit > ODRIVE_MAX_TORQUE_FF:
+        rd.error(
+            "winch.torque_limit", max_torque_limit, "N·m",
+            f"must be <= {ODRIVE_MAX_TORQUE_FF} with ODrive axes in position mode: "
+            "Set_Input_Pos carries the torque feed-forward as int16 × 0.001 N·m",
+        )  # fmt: skip
     pos_bw = rd.number(
         t, "position_loop_bandwidth", "drives", "Hz", required=False, default=50.0, positive=True
     )
@@ -262,6 +285,7 @@ def read_drives(
         target_extrapolation=float(extrapolation or 0.05),
         brake_release_time=float(0.05 if release is None else release),
         rated_torque=float(rated if rated is not None else rated_default),
+        torque_constant=None if torque_constant is None else float(torque_constant),
         feedback_timeout=float(fb_to or 0.03),
         heartbeat_timeout=float(hb_to or 0.5),
         heartbeat_period=float(hb_p or 0.1),

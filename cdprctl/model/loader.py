@@ -120,7 +120,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     drives = None
     if cables is not None:
         rated = max(c.winch.torque_limit for c in cables)
-        drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated)
+        drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated, rated)
     control = read_control(rd, data, [c.name for c in cables] if cables else [])
     zenoh = read_zenoh(rd, data, name or "robot")
     foxglove = read_foxglove(rd, data)

@@ -13,8 +13,14 @@ GET_ERROR = 0x03
 SET_AXIS_STATE = 0x07  # u32
 GET_ENCODER_ESTIMATES = 0x09  # pos f32 (turns), vel f32 (turns/s)
 SET_CONTROLLER_MODE = 0x0B  # control_mode u32, input_mode u32
+# input position f32 (turns), velocity feed-forward i16 (0.001 turn/s), torque feed-forward
+# i16 (0.001 N·m)
+SET_INPUT_POS = 0x0C
 SET_INPUT_TORQUE = 0x0E  # f32 N·m
+SET_LIMITS = 0x0F  # velocity limit f32 (turns/s), current limit f32 (A)
 CLEAR_ERRORS = 0x18
+SET_POS_GAIN = 0x1A  # f32 (turns/s)/turn
+SET_VEL_GAINS = 0x1B  # velocity gain f32 N·m/(turn/s), velocity integrator gain f32 N·m/turn
 GET_TORQUES = 0x1C  # torque_target f32, torque_estimate f32
 
 
@@ -30,7 +36,12 @@ class AxisState(enum.IntEnum):
 
 
 CONTROL_MODE_TORQUE = 1
+CONTROL_MODE_POSITION = 3
 INPUT_MODE_PASSTHROUGH = 1
+# Set_Input_Pos's feed-forward scales: what one count of its int16 fields stands for
+VEL_FF_SCALE = 0.001  # turn/s
+TORQUE_FF_SCALE = 0.001  # N·m
+INT16_MAX = 32767
 
 AXIS_ERRORS = {  # ODrive 0.6 ODriveError bits (subset)
     0x00000001: "initializing",
@@ -63,6 +74,8 @@ TORQUES_STRUCT = struct.Struct("<ff")
 TORQUE_STRUCT = struct.Struct("<f")
 U32_STRUCT = struct.Struct("<I")
 MODE_STRUCT = struct.Struct("<II")
+INPUT_POS_STRUCT = struct.Struct("<fhh")
+FLOAT_PAIR_STRUCT = struct.Struct("<ff")  # Set_Limits, Set_Vel_Gains
 
 
 def arbitration_id(node: int, cmd: int) -> int:

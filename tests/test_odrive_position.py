@@ -1,0 +1,302 @@
+"""ODrive axes in position mode (``[drives] driver = "odrive"``, ``mode = "csp"``): the gains
+from the model in ODrive's units, the set-up and cyclic frames written out here with struct
+(ODrive's CAN Simple layouts, not the driver's), the following error the driver supervises,
+the simulated axis's cascade against the closed-form response of the loop it claims to be,
+and rowc with ODrive axes in lock-step: its demo and the 30 N jet."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+from conftest import CONFIG
+from test_drivers_frames import frame, make
+
+from cdprctl.model import load_robot
+from drivers import DriveState, Lifecycle
+from drivers.busload import bus_loads
+from drivers.odrive.gains import axis_gains
+from sim_backend.physics import servo_torque
+
+TURN = 2 * math.pi
+# CAN Simple command ids (docs.odriverobotics.com, "CAN Protocol")
+HEARTBEAT, ENCODER, TORQUES = 0x01, 0x09, 0x1C
+SET_AXIS_STATE, SET_CONTROLLER_MODE, SET_INPUT_POS, SET_INPUT_TORQUE = 0x07, 0x0B, 0x0C, 0x0E
+SET_LIMITS, SET_POS_GAIN, SET_VEL_GAINS = 0x0F, 0x1A, 0x1B
+POSITION_CONTROL, PASSTHROUGH, CLOSED_LOOP, IDLE = 3, 1, 8, 1
+
+
+@pytest.fixture(scope="module")
+def rowc_odrive():
+    model = load_robot(CONFIG / "rowc_odrive.toml")
+    assert model.drives.driver == "odrive" and model.drives.mode == "csp"
+    return model
+
+
+def test_the_gains_are_the_cia402_loop_in_odrive_units_a_decade_below_the_rate(rowc_odrive):
+    """kp = J ω², kd = 2 ζ J ω (ζ = 0.7) at min(position_loop_bandwidth, rate / 10), written
+    as ODrive's cascade: vel_gain = kd (per turn/s), pos_gain = kp / kd; no integrator; the
+    velocity limit twice the fastest cable speed a move asks for, the current limit the
+    torque limit over the torque constant. Computed here from the file's numbers."""
+    m, w = rowc_odrive, rowc_odrive.cables[0].winch
+    J, zeta = 1.5e-4, 0.7
+    assert w.rotor_inertia == J and w.torque_limit == 2.6
+    for period, hz in ((1 / 250, 25.0), (1 / 500, 50.0), (1 / 1000, 50.0)):
+        g = axis_gains(m, 0, period)
+        om = 2 * math.pi * hz
+        assert g.bandwidth == pytest.approx(hz)
+        assert g.vel_gain == pytest.approx(2 * zeta * J * om * TURN)  # N·m/(turn/s)
+        assert g.pos_gain == pytest.approx(om / (2 * zeta))  # 1/s
+        assert g.kp == pytest.approx(J * om**2)
+        assert g.pos_gain * g.vel_gain / TURN == pytest.approx(J * om**2)  # N·m/rad
+        assert g.vel_integrator_gain == 0.0
+    b = np.linalg.norm(m.cables[0].attachment)
+    cable_speed = m.control.max_velocity + m.control.max_angular_velocity * b  # m/s
+    g = axis_gains(m, 0, 1 / 250)
+    assert g.vel_limit == pytest.approx(2 * cable_speed * 5.0 / (TURN * 0.045))
+    assert g.current_limit == pytest.approx(2.6 / 0.0827)
+
+
+class PositionAxes:
+    """Eight ODrive axes as a script: they keep what they are sent and, after the last axis's
+    cyclic frame, stream each axis's encoder estimate (``pos`` turns, 0 turn/s), torques and
+    heartbeat."""
+
+    def __init__(self):
+        self.pos = {n: 0.25 * n for n in range(1, 9)}
+        self.state = {n: IDLE for n in range(1, 9)}
+        self.got: dict[int, list[tuple[int, bytes]]] = {n: [] for n in range(1, 9)}
+
+    def __call__(self, msg, t):
+        node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
+        data = bytes(msg.data)
+        self.got[node].append((cmd, data))
+        if cmd == SET_AXIS_STATE:
+            self.state[node] = struct.unpack("<I", data)[0]
+        if cmd in (SET_INPUT_POS, SET_INPUT_TORQUE) and node == 8:
+            out = []
+            for n in self.pos:
+                out.append(frame(n << 5 | ENCODER, struct.pack("<ff", self.pos[n], 0.0)))
+                out.append(frame(n << 5 | TORQUES, struct.pack("<ff", 0.0, 0.5)))
+                out.append(frame(n << 5 | HEARTBEAT, struct.pack("<IBBBx", 0, self.state[n], 0, 0)))
+            return out
+        return []
+
+    def sent(self, node: int, cmd: int) -> list[bytes]:
+        return [d for c, d in self.got[node] if c == cmd]
+
+
+def test_the_set_up_sends_mode_gains_and_limits_and_each_cycle_a_set_input_pos(rowc_odrive):
+    """Set-up: each axis gets position control with passthrough input, its gains and its
+    limits (decoded here as float32s); each cycle one Set_Input_Pos per axis: the middle of
+    the last two targets in turns, their rate as int16 × 0.001 turn/s, the torque as int16 ×
+    0.001 N·m; a rate beyond the int16 saturates and counts as a clamped command."""
+    axes = PositionAxes()
+    drv, peer = make(rowc_odrive, axes, "odrive")
+    g = axis_gains(rowc_odrive, 2, 0.002)  # make() runs the driver at 2 ms
+    with drv:
+        drv.configure()
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        for n in range(1, 9):
+            assert struct.unpack("<II", axes.sent(n, SET_CONTROLLER_MODE)[0]) == (
+                POSITION_CONTROL, PASSTHROUGH)
+        (pos_gain,) = struct.unpack("<f", axes.sent(3, SET_POS_GAIN)[0])
+        vel_gain, integrator = struct.unpack("<ff", axes.sent(3, SET_VEL_GAINS)[0])
+        vel_limit, current = struct.unpack("<ff", axes.sent(3, SET_LIMITS)[0])
+        assert (pos_gain, vel_gain, integrator) == pytest.approx(
+            (g.pos_gain, g.vel_gain, 0.0), rel=1e-6)
+        assert (vel_limit, current) == pytest.approx((g.vel_limit, g.current_limit), rel=1e-6)
+        assert not axes.sent(3, SET_INPUT_TORQUE)
+        drv.read(peer.t)
+        start = drv.states.position.copy()  # 0.25 n turns
+        assert start[2] == pytest.approx(0.75 * TURN)
+        targets = start + 0.01  # rad
+        torques = np.linspace(-1.0, 1.0, 8)
+        drv.write(peer.t, torques, force=True, targets=targets)
+        peer.wait(0.002)
+        pos, vel, tau = struct.unpack("<fhh", axes.sent(3, SET_INPUT_POS)[-1])
+        assert pos == pytest.approx((start[2] + 0.005) / TURN, rel=1e-6)  # the middle
+        assert vel == round(0.01 / 0.002 / TURN / 0.001)  # 796 = 0.796 turn/s
+        assert tau == round(torques[2] / 0.001)
+        clamped = drv.stats.clamped_commands
+        drv.write(peer.t, torques, force=True, targets=targets + 1.0)  # 80 turn/s
+        peer.wait(0.002)
+        _, vel, _ = struct.unpack("<fhh", axes.sent(3, SET_INPUT_POS)[-1])
+        assert vel == 32767 and drv.stats.clamped_commands - clamped == 8
+
+
+def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
+    """The ODrive does not watch its following error; the driver does, as a CiA 402 drive
+    would (0x8611): an axis off its setpoint beyond the window for one read rides through,
+    for longer than [drives] following_error_timeout it faults and every axis is sent IDLE."""
+    axes = PositionAxes()
+    drv, peer = make(rowc_odrive, axes, "odrive")
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        drv.activate()
+        assert drv.lifecycle is Lifecycle.ACTIVE
+        hold = drv.states.position.copy()
+        window = drv._window[4]
+        assert window == pytest.approx(2.6 / axis_gains(rowc_odrive, 4, 0.002).kp)
+
+        def period(off: float) -> None:
+            axes.pos[5] = (hold[4] + off) / TURN
+            drv.write(peer.t, np.zeros(8), targets=hold)
+            peer.wait(0.002)
+            drv.read(peer.t)
+
+        period(0.0)
+        period(1.5 * window)  # one read beyond: a transient
+        period(0.0)
+        assert drv.lifecycle is Lifecycle.ACTIVE, drv.error
+        for _ in range(2):  # 2 ms, then 4 ms beyond: past the 3 ms time-out
+            period(1.5 * window)
+        assert drv.lifecycle is Lifecycle.ERROR
+        assert drv.error.code == 0x8611 and "following error" in str(drv.error)
+        assert DriveState(drv.states.state[4]) is DriveState.FAULT
+        drv.write(peer.t, np.zeros(8), targets=hold)  # the next cycle's frames
+        peer.wait(0.002)
+        assert all(struct.unpack("<I", axes.sent(n, SET_AXIS_STATE)[-1])[0] == IDLE
+                   for n in range(1, 9))
+
+
+def step_response(pos_gain, vel_gain, J, step, vel_limit=math.inf, limit=math.inf, ki=0.0,
+                  load=0.0, seconds=0.2, dt=2e-4):
+    """The simulated axis's cascade (rad units) on a bare rotor ``J``, a position step at
+    t = 0, a constant ``load`` torque against it: (times, angles, integral)."""
+    one = np.ones(1)
+    servo = (np.array([step]), np.zeros(1), one.copy(), np.array([vel_gain]),
+             np.array([limit]), np.zeros(1), np.array([math.inf]), np.array([math.inf]),
+             np.zeros(1), np.array([pos_gain]), np.array([vel_limit]), np.array([ki]),
+             np.zeros(1))  # fmt: skip
+    theta = omega = 0.0
+    out = []
+    for _ in range(int(seconds / dt)):
+        tau = servo_torque(servo, 0, theta, omega, 0.0, dt)
+        omega += (tau - load) / J * dt  # semi-implicit Euler, as the plant
+        theta += omega * dt
+        out.append((theta, omega))
+    return np.array(out), servo[12][0]
+
+
+def test_the_simulated_cascade_is_the_loop_its_gains_say():
+    """On a bare rotor the cascade with vel_gain = 2 ζ J ω and pos_gain = ω / 2ζ is the
+    second-order loop ω, ζ: its step overshoots by exp(−π ζ / √(1 − ζ²)) (4.6 % at 0.7) and
+    peaks at π / (ω √(1 − ζ²)); the velocity it asks for stops at vel_limit; a constant load
+    leaves load / kp of error without the integrator and none with it."""
+    J, zeta, om = 1.5e-4, 0.7, 2 * math.pi * 25.0
+    kd, pg = 2 * zeta * J * om, om / (2 * zeta)
+    x, _ = step_response(pg, kd, J, 0.01)
+    theta = x[:, 0]
+    overshoot = theta.max() / 0.01 - 1.0
+    assert overshoot == pytest.approx(math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2)),
+                                      abs=0.004)
+    t_peak = (np.argmax(theta) + 1) * 2e-4
+    assert t_peak == pytest.approx(math.pi / (om * math.sqrt(1 - zeta**2)), rel=0.03)
+    x, _ = step_response(pg, kd, J, 10.0, vel_limit=20.0, seconds=0.4)
+    assert x[:, 1].max() == pytest.approx(20.0, rel=0.01)  # rad/s: at the limit, not beyond
+    load = 0.05  # N·m
+    x, _ = step_response(pg, kd, J, 0.0, load=load, seconds=0.3)
+    assert x[-1, 0] == pytest.approx(-load / (kd * pg), rel=0.01)
+    x, integral = step_response(pg, kd, J, 0.0, load=load, ki=0.2 * kd * om, seconds=1.0)
+    assert abs(x[-1, 0]) < 1e-3 * load / (kd * pg) and integral == pytest.approx(load, rel=1e-3)
+    # limited: the integral decays by 0.99 a step instead of winding up
+    servo_out = step_response(pg, kd, J, 1.0, limit=0.01, ki=100.0, seconds=0.01)[1]
+    assert abs(servo_out) < 0.01
+
+
+def test_the_simulated_axis_takes_its_limits_and_starts_where_it_stands(rowc_odrive):
+    """The simulated ODrive: Set_Limits' current times the torque constant lowers its torque
+    limit; entering closed loop it holds where the motor stands (no jump); a speed beyond
+    1.2 × vel_limit is its overspeed error (0x8000), the axis IDLE and braked."""
+    from drivers.odrive import protocol as po
+    from sim_backend.drives.odrive import ODriveAxis
+    from sim_backend.plant import CdprPlant
+
+    plant = CdprPlant(rowc_odrive)
+    axis = ODriveAxis(3, 2, plant, 2.6, 0.1, torque_constant=0.0827)
+    send = lambda cmd, data: axis.on_frame(cmd, data, False, 0.0)  # noqa: E731
+    send(SET_CONTROLLER_MODE, struct.pack("<II", POSITION_CONTROL, PASSTHROUGH))
+    send(SET_LIMITS, struct.pack("<ff", 10.0, 20.0))  # turn/s, A
+    assert axis.torque_limit == pytest.approx(20.0 * 0.0827)
+    send(SET_LIMITS, struct.pack("<ff", 10.0, 100.0))  # more than the motor gives
+    assert axis.torque_limit == 2.6
+    plant.theta[2] = 1.234
+    send(SET_AXIS_STATE, struct.pack("<I", CLOSED_LOOP))
+    assert axis.state is po.AxisState.CLOSED_LOOP_CONTROL
+    assert plant.servo.target[2] == pytest.approx(1.234) and not plant.brake[2]
+    plant.theta_dot[2] = 1.21 * 10.0 * TURN
+    axis.tick(0.01)
+    assert axis.error == 0x8000 and axis.state is po.AxisState.IDLE and plant.brake[2]
+
+
+def test_the_bus_load_of_four_axes_in_position_mode():
+    """A cycle of four axes: Set_Input_Pos, encoder estimates and torques, 8 bytes each, 135
+    bits with worst-case stuffing (Davis et al. 2007, eq. (1)): 1,620 bits; with five 8-byte
+    heartbeats at 10 Hz, 41.2 % of 1 Mbit/s at 250 Hz and 81.7 % at 500 Hz."""
+    model = load_robot(CONFIG / "rowc_odrive.toml")
+    bits = 8 * 8 + 47 + (34 + 64 - 1) // 4
+    assert bits == 135
+    for rate, load in ((250.0, 0.412), (500.0, 0.817)):
+        for bl in bus_loads(model.drives, rate):
+            assert bl.bits_per_cycle == 12 * bits
+            assert bl.load == pytest.approx((12 * bits * rate + 5 * bits * 10) / 1e6)
+            assert bl.load == pytest.approx(load, abs=0.001)
+
+
+def test_rowc_with_odrive_axes_runs_its_demo_and_holds_the_jet(rowc_odrive):
+    """Lock-step at 250 Hz: the demo's moves without a fault, the simulated platform within
+    0.3 mm of the reference (CiA 402 drives: 0.04 mm; docs/control.md), then the 30 N jet
+    ramped in over 1 s: its transient within 15 mm and the deflection gone."""
+    from cdprctl.daemon.scripts import demo_targets
+    from cdprctl.experiments.closed_loop import ClosedLoop
+
+    m = rowc_odrive
+    a, b = demo_targets(m)
+    with ClosedLoop(m) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(0.5)
+        c = cl.controller
+        for p in (a, m.home.position, b, m.home.position):
+            cl.command("move", pose=np.concatenate([p, m.home.rpy]))
+            cl.run(3.0)
+            assert c.data.state.value == "enabled", c.data.fault_reason
+        arr = cl.arrays()
+        err = np.linalg.norm(arr["p_true"] - arr["p_des"][:, :3], axis=1)
+        assert err.max() < 3e-4, err.max()
+        y0, t0 = cl.plant.position[1], cl.net.time
+
+        def jet(cl):
+            cl.plant.ext_force[1] = 30.0 * min(1.0, (cl.net.time - t0) / 1.0)
+
+        cl.run(5.0, each=jet)
+        arr = cl.arrays()
+        dy = arr["p_true"][arr["t"] >= t0, 1] - y0
+        assert c.data.state.value == "enabled", c.data.fault_reason
+        assert np.max(np.abs(dy)) < 0.015 and abs(dy[-1]) < 0.001
+
+
+def test_an_odrive_robot_file_needs_what_its_frames_can_carry(tmp_path):
+    """Position mode with ODrive axes: a torque limit beyond Set_Input_Pos's int16 × 0.001
+    N·m is refused, and the torque constant is required (the current limit); torque mode
+    needs neither."""
+    from cdprctl.model import ConfigError
+
+    text = (CONFIG / "rowc.toml").read_text().replace("torque_limit = 2.6", "torque_limit = 40.0")
+    text = text.replace('mode = "csp"', 'mode = "csp"\ndriver = "odrive"\ntorque_constant = 0.2')
+    path = tmp_path / "big.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_robot(path)
+    assert "winch.torque_limit = 40 N·m must be <= 32.767" in str(e.value)
+    assert "int16 × 0.001 N·m" in str(e.value)
+    path.write_text(text.replace("torque_constant = 0.2\n", ""))
+    with pytest.raises(ConfigError) as e:
+        load_robot(path)
+    assert "drives.torque_constant is missing" in str(e.value)
+    path.write_text(text.replace('mode = "csp"', 'mode = "cst"'))
+    assert load_robot(path).drives.mode == "cst"  # torque mode carries it as a float32
