@@ -94,3 +94,12 @@ def test_infeasible_wrench_exit_code(capsys):
     assert code == 3
     assert r["status"] == "INFEASIBLE"
     assert r["max_violation"] > 0
+
+
+def test_a_wrench_with_a_minus_first_is_a_value_not_an_option(capsys):
+    """``--wrench -30,0,...``: argparse took a list starting with '-' for an option and
+    stopped ("expected one argument"); the command line attaches it (cdprctl/cli.py)."""
+    code, r = run_json(capsys, "--config", ROWC, "--wrench", "-30,0,0,0,0,0")
+    assert code == 0 and r["status"] == "OK"
+    code, far = run_json(capsys, "--config", ROWC, "--wrench", "-3000,0,0,0,0,0")
+    assert code == 3 and far["status"] == "INFEASIBLE"  # beyond the cables, as any wrench

@@ -331,7 +331,9 @@ def test_calibrate_geometry_refuses_bad_options_in_one_line(capsys):
     rowc = str(CONFIG / "rowc.toml")
     for opts, words in ((["--poses", "5"], "--poses = 5: must be in [10, 80]"),
                         (["--fill", "1.5"], "--fill = 1.5: must be in [0.1, 1.0]"),
-                        (["--out", rowc], "--out is the robot file itself")):  # fmt: skip
+                        (["--out", rowc], "--out is the robot file itself"),
+                        (["--out", "/nonexistent-dir/built.toml"],
+                         "the directory /nonexistent-dir does not exist")):  # fmt: skip
         assert main(["calibrate", "--config", rowc, "geometry", *opts]) == 2
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1, err
@@ -375,3 +377,15 @@ def test_the_simulated_robot_says_where_its_drives_are_and_that_virtual_is_this_
     assert "--can-interface udp_multicast" in text
     shared = buses_text(model, {"interface": "udp_multicast", "channel": "239.74.163.9"})
     assert shared == "udp_multicast 239.74.163.9"
+
+
+def test_a_known_pose_outside_the_workspace_is_refused_before_any_drive_is_touched():
+    """A newcomer's ``known-pose --pose=-1.52,...`` (a sign slip) wrote a record holding the
+    platform at 10 N: a pose outside the workspace box is refused in one line, naming it."""
+    from cdprctl.cli import main
+
+    rowc = str(CONFIG / "rowc.toml")
+    with pytest.raises(SystemExit) as e:
+        main(["calibrate", "--config", rowc, "known-pose", "--pose", "-1.52,0.36,0.61,0,0,0"])
+    assert str(e.value) == ("--pose: x = -1.52 m is outside the workspace box [0.5, 2.5] m "
+                            f"([workspace] of {rowc})")  # fmt: skip

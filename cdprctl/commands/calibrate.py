@@ -65,7 +65,8 @@ def add_parser(sub: Any) -> None:
         description="Hold the platform where it stands, at a known pose, and record each "
         "cable's motor angle at its unstretched length there.",
     )
-    kp.add_argument("--pose", help="x,y,z,roll,pitch,yaw (m, rad); default: the home pose")
+    kp.add_argument("--pose", metavar="X,Y,Z,ROLL,PITCH,YAW",
+                    help="m, rad; default: the home pose")
     kp.add_argument("--json", action="store_true", help="print the result as JSON")
     sp = methods.add_parser(
         "self",
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     pose = None
     if args.method == "known-pose":
         pose = (
-            parse_pose(args.pose, "--pose")
+            parse_pose(args.pose, "--pose", model)
             if args.pose
             else np.r_[model.home.position, model.home.rpy]
         )
@@ -209,6 +210,11 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     if out is not None and out.resolve() == Path(model.source_file).resolve():
         print("cdprctl calibrate: error: --out is the robot file itself: write the robot as "
               "built to another file (it names this one as its base)", file=sys.stderr)  # fmt: skip
+        return 2
+    if out is not None and not out.resolve().parent.is_dir():
+        # checked before the drives move: found after two minutes of motion, the run is lost
+        print(f"cdprctl calibrate: error: --out {out}: the directory {out.resolve().parent} "
+              "does not exist: create it first", file=sys.stderr)  # fmt: skip
         return 2
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     opt = GeometryOptions.of(model, poses=args.poses, fill=args.fill, speed=args.speed)

@@ -52,8 +52,10 @@ def load_or_report(path: str, who: str = "") -> RobotModel | None:
         return None
 
 
-def parse_pose(text: str, what: str) -> np.ndarray:
-    """``x,y,z,roll,pitch,yaw`` (m, rad) → array; SystemExit naming the rule otherwise."""
+def parse_pose(text: str, what: str, model: Any = None) -> np.ndarray:
+    """``x,y,z,roll,pitch,yaw`` (m, rad) → array; SystemExit naming the rule otherwise, and,
+    given the ``model``, for a position outside its workspace box (where no file of it
+    promises the cables can hold the platform)."""
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
@@ -62,4 +64,13 @@ def parse_pose(text: str, what: str) -> np.ndarray:
         raise SystemExit(
             f"{what} = {text!r}: expected six finite numbers x,y,z,roll,pitch,yaw (m, rad)"
         )
+    if model is not None:
+        ws = model.workspace
+        for k, axis in enumerate("xyz"):
+            if not ws.position_min[k] <= values[k] <= ws.position_max[k]:
+                raise SystemExit(
+                    f"{what}: {axis} = {values[k]:g} m is outside the workspace box "
+                    f"[{ws.position_min[k]:g}, {ws.position_max[k]:g}] m ([workspace] of "
+                    f"{model.source_file})"
+                )
     return np.array(values)

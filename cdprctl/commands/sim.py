@@ -131,8 +131,9 @@ def add_parser(sub: Any) -> None:
         "--plant-errors",
         type=int,
         metavar="SEED",
-        help="the simulated robot differs from the config: anchors offset and drum radii "
-        "scaled at random (seeded)",
+        help="the simulated robot differs from the config: anchors offset (all but the "
+        "reference anchors, which define the robot's frame) and drum radii scaled at random "
+        "(seeded)",
     )
     add_as_built_argument(h)
     h.add_argument("--anchor-error", type=float, default=0.005, help="m, with --plant-errors")
@@ -280,19 +281,26 @@ def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:
             raise SystemExit(1)
         print(f"cdprctl sim: the robot as built: {args.as_built}", flush=True)
     if args.plant_errors is not None:
-        errors = PlantErrors(args.plant_errors, args.anchor_error, args.drum_error)
+        from cdprctl.model.calibration import reference_anchors
+
+        # the reference anchors define the robot's frame (docs/homing.md): moved too, the
+        # platform's pose in the plant's frame is not the one any calibration can find (a
+        # new user's check of `run`'s ready pose against this status line: 5.6 mm apart)
+        ref = reference_anchors(model.calibration, np.array([c.anchor for c in model.cables]))
+        errors = PlantErrors(args.plant_errors, args.anchor_error, args.drum_error, tuple(ref))
         plant_model, drawn = errors.apply(model)
         scales = np.array(drawn["drum_scales"])
         print(
             f"cdprctl sim: plant errors (seed {args.plant_errors}): anchors up to "
-            f"{np.max(np.abs(drawn['anchor_offsets'])) * 1e3:.1f} mm off, drum radii "
-            f"x{scales.min():.4f}..{scales.max():.4f}",
+            f"{np.max(np.abs(drawn['anchor_offsets'])) * 1e3:.1f} mm off (the reference "
+            f"anchors {', '.join(model.cables[i].name for i in ref)} as drawn: they define "
+            f"the robot's frame), drum radii x{scales.min():.4f}..{scales.max():.4f}",
             flush=True,
         )
     plant = CdprPlant(plant_model)
     encoders = args.encoders or "absolute"
     if args.start_pose:
-        pose = parse_pose(args.start_pose, "--start-pose")
+        pose = parse_pose(args.start_pose, "--start-pose", model)
         plant.set_pose(pose[:3], rpy_to_matrix(*pose[3:]), None)
         encoders = args.encoders or "incremental"
         print(f"cdprctl sim: start pose {args.start_pose}, {encoders} encoders", flush=True)

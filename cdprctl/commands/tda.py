@@ -43,11 +43,13 @@ def add_parser(sub: Any) -> None:
     p = command_parser(sub, "tda", "compute cable tensions for one pose and wrench (offline)",
                        run, description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
     p.add_argument(
-        "--pose", help="x,y,z,roll,pitch,yaw in m and rad, base frame (default: the home pose)"
-    )
+        "--pose", metavar="X,Y,Z,ROLL,PITCH,YAW",
+        help="m and rad, base frame (default: the home pose)",
+    )  # fmt: skip
     p.add_argument(
         "--wrench",
         default="0,0,0,0,0,0",
+        metavar="FX,FY,FZ,MX,MY,MZ",
         help="external wrench fx,fy,fz,mx,my,mz in N and N·m on the platform at its reference "
         "point, base frame; the platform's weight is added (default: 0)",
     )

@@ -29,10 +29,12 @@ examples:
 def add_parser(sub: Any) -> None:
     p = command_parser(sub, "workspace", "the wrench-feasible workspace on a grid (JSON, slice "
                        "plots)", run, description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
-    p.add_argument("--rpy", help="orientation roll,pitch,yaw (rad; default: the home one)")
+    p.add_argument("--rpy", metavar="ROLL,PITCH,YAW",
+                   help="orientation (rad; default: the home one)")  # fmt: skip
     p.add_argument(
         "--wrench",
         default="0,0,0,0,0,0",
+        metavar="FX,FY,FZ,MX,MY,MZ",
         help="external wrench fx,fy,fz,mx,my,mz (N, N·m at the platform's reference point, "
         "base frame), added to the weight (default 0)",
     )
