@@ -97,5 +97,6 @@ def check_bus_load(drives: DrivesConfig, rate: float) -> tuple[list[str], list[s
                 "drives over more buses or raise the bitrate"
             )
         elif bl.load > WARN_LOAD:
-            warnings.append(msg + ": above 70 %, little room for retries and SDO traffic")
+            spare = "retries and SDO traffic" if drives.driver == "cia402" else "retries"
+            warnings.append(msg + f": above 70 %, little room for {spare}")
     return warnings, errors

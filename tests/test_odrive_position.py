@@ -139,7 +139,7 @@ def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
         drv.activate()
         assert drv.lifecycle is Lifecycle.ACTIVE
         hold = drv.states.position.copy()
-        window = drv._window[4]
+        window = drv.following_window[4]
         assert window == pytest.approx(2.6 / axis_gains(rowc_odrive, 4, 0.002).kp)
 
         def period(off: float) -> None:
@@ -287,16 +287,37 @@ def test_an_odrive_robot_file_needs_what_its_frames_can_carry(tmp_path):
     from cdprctl.model import ConfigError
 
     text = (CONFIG / "rowc.toml").read_text().replace("torque_limit = 2.6", "torque_limit = 40.0")
-    text = text.replace('mode = "csp"', 'mode = "csp"\ndriver = "odrive"\ntorque_constant = 0.2')
+    text = text.replace('mode = "csp"', 'mode = "csp"\ndriver = "odrive"\ntorque_constant = 0.5')
     path = tmp_path / "big.toml"
     path.write_text(text)
     with pytest.raises(ConfigError) as e:
         load_robot(path)
     assert "winch.torque_limit = 40 N·m must be <= 32.767" in str(e.value)
     assert "int16 × 0.001 N·m" in str(e.value)
-    path.write_text(text.replace("torque_constant = 0.2\n", ""))
+    path.write_text(text.replace("torque_constant = 0.5\n", ""))
     with pytest.raises(ConfigError) as e:
         load_robot(path)
     assert "drives.torque_constant is missing" in str(e.value)
+    for kt, amps in (("100", "0.026 A"), ("0.01", "260 A")):  # the KV typed; too weak a motor
+        path.write_text(text.replace("torque_limit = 40.0", "torque_limit = 2.6")
+                        .replace("torque_constant = 0.5", f"torque_constant = {kt}"))
+        with pytest.raises(ConfigError) as e:
+            load_robot(path)
+        assert f"gives a current limit of {amps}" in str(e.value) and "[1, 120] A" in str(e.value)
     path.write_text(text.replace('mode = "csp"', 'mode = "cst"'))
     assert load_robot(path).drives.mode == "cst"  # torque mode carries it as a float32
+
+
+def test_the_daemon_says_what_it_sent_the_axes(capsys):
+    """`cdprctl run` prints the gains and limits as sent, in ODrive's units (what odrivetool
+    shows), and the following error it supervises, in rad and mm of cable."""
+    from cdprctl.cli import main
+
+    config = str(CONFIG / "rowc_odrive.toml")
+    assert main(["run", "--config", config, "--sim", "--no-demo", "--no-realtime",
+                 "--duration", "0.2"]) == 0  # fmt: skip
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("gains"))
+    assert "the loop at 25 Hz" in line and "pos_gain 112.2 (turn/s)/turn" in line
+    assert "vel_gain 0.2073 N·m/(turn/s), vel_integrator_gain 0" in line
+    assert "vel_limit 12.2 turn/s, current limit 31.4 A" in line
+    assert "beyond 0.702 rad (6.32 mm of cable) for 3 ms" in line

@@ -138,6 +138,7 @@ def gains_line(model: RobotModel, data: ControlData, driver: Any = None) -> str:
             f"passthrough; the loop at {a.bandwidth:g} Hz on each rotor's inertia, at most a "
             f"decade below the control rate; sent by CAN: "
             + (a.line() if same else f"cable 1 {a.line()}, the others per rotor")
+            + f"; following error supervised by cdprctl: {window_text(model, driver)}"
             + f"), force feedback {g['force_feedback']:.1f} rad/s, external-wrench estimate "
             f"{g['disturbance_bandwidth']:.3g} Hz"
         )
@@ -157,6 +158,16 @@ def gains_line(model: RobotModel, data: ControlData, driver: Any = None) -> str:
         + " Hz (x y z roll pitch yaw; set by hand: "
         'docs/control.md, "Gains from the model")'
     )
+
+
+def window_text(model: RobotModel, driver: Any) -> str:
+    """The following-error window of the first cable in position mode (rad at the motor and
+    mm of cable) and its time-out."""
+    c = next(i for i, g in enumerate(driver.gains) if g is not None)
+    w = model.cables[c].winch
+    rad = float(driver.following_window[c])
+    return (f"beyond {rad:.3g} rad ({rad * w.drum_radius / w.gear_ratio * 1e3:.2f} mm of cable) "
+            f"for {model.drives.following_error_timeout * 1e3:g} ms")  # fmt: skip
 
 
 def identity_lines(model: RobotModel, driver: Any) -> tuple[list[str], str]:

@@ -155,6 +155,9 @@ POSITION_LOOP_DAMPING = 0.7  # of the simulated drives' position loop
 # Set_Input_Pos, its cascaded loops' gains set by CAN)
 DEFAULT_MODE = "csp"
 ODRIVE_MAX_TORQUE_FF = 32.767  # N·m: Set_Input_Pos's int16 torque feed-forward × 0.001
+# A: the current limits an ODrive takes for a winch's torque limit: below 1 A no winch holds a
+# cable (a KV typed as the torque constant gives 0.03 A); 120 A is the ODrive Pro's peak
+ODRIVE_CURRENT_RANGE = (1.0, 120.0)
 
 
 def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfig:
@@ -194,6 +197,16 @@ def read_drives(
             "current limit torque_limit / torque_constant by CAN: the motors' torque constant "
             "(8.27 / KV), or mode = 'cst' for torque mode",
         )  # fmt: skip
+    if torque_constant is not None and driver == "odrive" and max_torque_limit > 0.0:
+        current = max_torque_limit / float(torque_constant)  # A, Set_Limits' current limit
+        if not ODRIVE_CURRENT_RANGE[0] <= current <= ODRIVE_CURRENT_RANGE[1]:
+            rd.error(
+                "drives.torque_constant", torque_constant, "N·m/A",
+                f"gives a current limit of {current:.3g} A for the winches' {max_torque_limit:g} "
+                f"N·m (torque_limit / torque_constant), outside [{ODRIVE_CURRENT_RANGE[0]:g}, "
+                f"{ODRIVE_CURRENT_RANGE[1]:g}] A, what an ODrive drives (Kt = 8.27 / KV: a KV "
+                "typed for it gives far below)",
+            )  # fmt: skip
     if mode == "csp" and driver == "odrive" and max_torque_limit > ODRIVE_MAX_TORQUE_FF:
         rd.error(
             "winch.torque_limit", max_torque_limit, "N·m",

@@ -70,7 +70,7 @@ class ODriveDriver(CanWinchDriver):
         self._kp = np.array([g.kp if g else 0.0 for g in self.gains])  # N·m/rad
         # the following error's supervision (rad, s): the window and time-out of CiA 402
         # 0x6065/0x6066, as [drives] sets them; how long each axis has been beyond it
-        self._window = np.array([
+        self.following_window = np.array([
             drives.following_error_window_rad(w.winch, g.kp if g else None)
             for w, g in zip(model.cables, self.gains, strict=True)
         ])  # fmt: skip
@@ -175,7 +175,7 @@ class ODriveDriver(CanWinchDriver):
         timeout = self.config.following_error_timeout
         for c in range(self.m):
             on = self.csp[c] and self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL
-            if on and abs(self._setpoint[c] - self.states.position[c]) > self._window[c]:
+            if on and abs(self._setpoint[c] - self.states.position[c]) > self.following_window[c]:
                 self._beyond[c] += dt
                 if self._beyond[c] > timeout:
                     self.following[c] = True

@@ -47,7 +47,7 @@ class AxisGains:
 
     def line(self) -> str:
         return (
-            f"{self.bandwidth:g} Hz: pos_gain {self.pos_gain:.4g} (turn/s)/turn, vel_gain "
+            f"pos_gain {self.pos_gain:.4g} (turn/s)/turn, vel_gain "
             f"{self.vel_gain:.4g} N·m/(turn/s), vel_integrator_gain "
             f"{self.vel_integrator_gain:g}, vel_limit {self.vel_limit:.3g} turn/s, current limit "
             f"{self.current_limit:.3g} A"
