@@ -116,6 +116,7 @@ def test_the_set_up_sends_mode_gains_and_limits_and_each_cycle_a_set_input_pos(r
         torques = np.linspace(-1.0, 1.0, 8)
         drv.write(peer.t, torques, force=True, targets=targets)
         peer.wait(0.002)
+        assert drv.stats.clamped_commands == 0  # 796 counts: not saturated
         pos, vel, tau = struct.unpack("<fhh", axes.sent(3, SET_INPUT_POS)[-1])
         assert pos == pytest.approx((start[2] + 0.005) / TURN, rel=1e-6)  # the middle
         assert vel == round(0.01 / 0.002 / TURN / 0.001)  # 796 = 0.796 turn/s
@@ -125,6 +126,10 @@ def test_the_set_up_sends_mode_gains_and_limits_and_each_cycle_a_set_input_pos(r
         peer.wait(0.002)
         _, vel, _ = struct.unpack("<fhh", axes.sent(3, SET_INPUT_POS)[-1])
         assert vel == 32767 and drv.stats.clamped_commands - clamped == 8
+        drv.write(peer.t, torques, force=True, targets=targets - 1.0)  # back: −160 turn/s
+        peer.wait(0.002)
+        _, vel, _ = struct.unpack("<fhh", axes.sent(3, SET_INPUT_POS)[-1])
+        assert vel == -32767 and drv.stats.clamped_commands - clamped == 16
 
 
 def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
