@@ -20,7 +20,8 @@ Conventions (docs/simulator.md):
 Integrator: semi-implicit (symplectic) Euler at a fixed physics step (default 0.2 ms = 5 kHz),
 compiled with numba (``physics.py``). Symplectic: for a conservative system the energy error
 stays bounded instead of drifting (tested); the rotation is advanced with the exponential map.
-This module holds the state, the set-up and the energy; ``physics.py`` the compiled steps.
+This module holds the state, the set-up and the energy; ``physics.py`` the compiled steps,
+``servo.py`` the drives' own loops within them.
 """
 
 from __future__ import annotations
@@ -43,10 +44,10 @@ from sim_backend.physics import (
     Inputs,
     Jaws,
     JawState,
-    Servo,
     Winches,
     physics_kernel,
 )
+from sim_backend.servo import Servo
 
 
 @dataclass
@@ -127,7 +128,7 @@ class CdprPlant:
         self.drum_slip = np.zeros(m)  # m of cable slipped off the drum, unseen by the encoder
         self.ext_force = np.zeros(3)  # N at P, base frame
         self.ext_moment = np.zeros(3)  # N·m, base frame
-        # the drives' position loops (CSP; physics.Servo): set by the simulated drives
+        # the drives' position loops (CSP, ODrive's cascade; servo.Servo), set by the drives
         self.servo = Servo(
             np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m),
             np.array([w.winch.torque_limit for w in c]), np.zeros(m),

@@ -19,7 +19,7 @@ from cdprctl.control.cable_space import (
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.reference_pose import ReferencePose
 from cdprctl.control.states import State
-from cdprctl.experiments.closed_loop import ClosedLoop
+from cdprctl.experiments.closed_loop import ClosedLoop, ramped_force
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
 from cdprctl.motion.trajectory import Trajectory
@@ -297,10 +297,7 @@ def test_water_jet_held_by_the_cables_at_250_hz():
         c = cl.controller
         y0 = cl.plant.position[1]
         t0 = cl.net.time
-
-        def jet(cl):
-            cl.plant.ext_force[1] = 30.0 * min(1.0, (cl.net.time - t0) / 1.0)
-
+        jet = ramped_force(t0, 30.0)
         cl.run(5.0, each=jet)
         a = cl.arrays()
         dy = a["p_true"][a["t"] >= t0, 1] - y0

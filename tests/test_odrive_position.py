@@ -18,7 +18,7 @@ from cdprctl.model import load_robot
 from drivers import DriveState, Lifecycle
 from drivers.busload import bus_loads
 from drivers.odrive.gains import axis_gains
-from sim_backend.physics import servo_torque
+from sim_backend.servo import servo_torque
 
 TURN = 2 * math.pi
 # CAN Simple command ids (docs.odriverobotics.com, "CAN Protocol")
@@ -257,7 +257,7 @@ def test_rowc_with_odrive_axes_runs_its_demo_and_holds_the_jet(rowc_odrive):
     0.3 mm of the reference (CiA 402 drives: 0.04 mm; docs/control.md), then the 30 N jet
     ramped in over 1 s: its transient within 15 mm and the deflection gone."""
     from cdprctl.daemon.scripts import demo_targets
-    from cdprctl.experiments.closed_loop import ClosedLoop
+    from cdprctl.experiments.closed_loop import ClosedLoop, ramped_force
 
     m = rowc_odrive
     a, b = demo_targets(m)
@@ -274,11 +274,7 @@ def test_rowc_with_odrive_axes_runs_its_demo_and_holds_the_jet(rowc_odrive):
         err = np.linalg.norm(arr["p_true"] - arr["p_des"][:, :3], axis=1)
         assert err.max() < 3e-4, err.max()
         y0, t0 = cl.plant.position[1], cl.net.time
-
-        def jet(cl):
-            cl.plant.ext_force[1] = 30.0 * min(1.0, (cl.net.time - t0) / 1.0)
-
-        cl.run(5.0, each=jet)
+        cl.run(5.0, each=ramped_force(t0, 30.0))
         arr = cl.arrays()
         dy = arr["p_true"][arr["t"] >= t0, 1] - y0
         assert c.data.state.value == "enabled", c.data.fault_reason

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdprctl.daemon.scripts import demo_targets  # noqa: E402
-from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
+from cdprctl.experiments.closed_loop import ClosedLoop, ramped_force  # noqa: E402
 from cdprctl.model import load_robot  # noqa: E402
 from cdprctl.model.robot import RobotModel  # noqa: E402
 
@@ -42,11 +42,7 @@ def measure(model: RobotModel, force: float) -> dict[str, object]:
         err = np.linalg.norm(arr["p_true"] - arr["p_des"][:, :3], axis=1)
         moved = data.state.value
         y0, t0 = cl.plant.position[1], cl.net.time
-
-        def push(cl: ClosedLoop) -> None:
-            cl.plant.ext_force[1] = force * min(1.0, (cl.net.time - t0) / 1.0)
-
-        cl.run(5.0, each=push)
+        cl.run(5.0, each=ramped_force(t0, force))
         arr = cl.arrays()
         dy = arr["p_true"][arr["t"] >= t0, 1] - y0
         return {

@@ -70,3 +70,13 @@ class ClosedLoop:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def ramped_force(t0: float, force: float, axis: int = 1, seconds: float = 1.0) -> Any:
+    """A ``run(..., each=)`` callback: ``force`` N along base ``axis`` on the simulated
+    platform, ramped in over ``seconds`` from ``t0`` (s of simulated time) — the demo's jet."""
+
+    def push(cl: ClosedLoop) -> None:
+        cl.plant.ext_force[axis] = force * min(1.0, (cl.net.time - t0) / seconds)
+
+    return push

@@ -123,7 +123,7 @@ class DrivesConfig:
         """(kp N·m/rad, kd N·m·s/rad) of a drive's position loop: the rotor alone placed at
         ``bandwidth`` (Hz; default ``position_loop_bandwidth``) with damping
         ``POSITION_LOOP_DAMPING`` (kp = J ω², kd = 2 ζ J ω); the cable adds its stiffness on
-        top (sim_backend physics.servo_torque)."""
+        top (sim_backend servo.servo_torque)."""
         w = 2.0 * math.pi * (self.position_loop_bandwidth if bandwidth is None else bandwidth)
         return rotor_inertia * w * w, 2.0 * POSITION_LOOP_DAMPING * rotor_inertia * w
 

@@ -40,7 +40,7 @@ class AxisGains:
     pos_gain: float  # (turn/s)/turn = 1/s
     vel_gain: float  # N·m/(turn/s)
     # N·m/turn: none. The torque feed-forward carries the load; an integral on every winch's
-    # loop grew rowc's 3 Hz y mode from 0.5 to 9 mrad in 2 s (sim_backend physics.servo_torque)
+    # loop grew rowc's 3 Hz y mode from 0.5 to 9 mrad in 2 s (sim_backend servo.servo_torque)
     vel_integrator_gain: float
     vel_limit: float  # turn/s of the motor
     current_limit: float  # A

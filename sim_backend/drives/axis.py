@@ -4,7 +4,7 @@ the power stage acting on its winch of the plant.
 The power state machine is CiA 402's (the transition table of ``drivers.cia402.protocol``,
 driven by the controlword); the power stage applies the torque (mode 10, cyclic synchronous
 torque) or runs the drive's own position loop towards a target interpolated linearly between
-SYNCs (mode 8, ``physics.Servo``), within the torque limit, and closes the brake whenever the
+SYNCs (mode 8, ``servo.Servo``), within the torque limit, and closes the brake whenever the
 axis is not enabled. The encoder is the motor's angle in counts (32-bit, with its faults: a
 jump, an incremental counter restarting at zero). What the axis is told comes from its node
 (``cia402.Cia402Drive``: the CiA 301 side), and what it reads of the object dictionary it
@@ -23,8 +23,8 @@ from drivers.cia402.brake import (
     SUB_PHYSICAL_OUTPUTS,
     brake_commanded,
 )
-from sim_backend.physics import following_error_py
 from sim_backend.plant import CdprPlant
+from sim_backend.servo import following_error_py
 
 # maxon EPOS4's "STO input states" (0x3202:01; its EDS): both inputs energised
 OD_STO_INPUTS = 0x3202

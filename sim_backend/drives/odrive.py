@@ -7,7 +7,7 @@ Set_Pos_Gain, Set_Vel_Gains, Set_Limits, Clear_Errors, Estop; streams heartbeat 
 estimates and torques at every simulation step it is ticked (the cyclic messages an ODrive is
 configured to send); the watchdog (comm timeout) drops the axis to IDLE with the watchdog
 error bit. In position control the firmware's cascade runs at every physics step
-(``physics._cascade_torque``); entering closed loop it takes the position where the motor
+(``servo._cascade_torque``); entering closed loop it takes the position where the motor
 stands as its input and clears its integrator (firmware ``Axis::run_closed_loop_control_loop``),
 and a speed beyond ``vel_limit_tolerance`` × ``vel_limit`` is its overspeed error.
 """
