@@ -136,6 +136,7 @@ def test_the_sto_state_is_0x3202_01_alone(rig):
     _robot, _, nodes = rig
     node = nodes[1]
     assert node.sdo[0x3202][1].raw == 3
+    assert node.sdo[0x3202][0].raw == 1  # its highest sub-index, stored: not the STO state
     assert node.sdo[0x60FE][1].raw == 0  # physical outputs: its default, not the STO state
     node.sdo[0x60FE][1].raw = 0x00010000
     assert node.sdo[0x60FE][1].raw == 0x00010000

@@ -6,6 +6,7 @@ and rowc with ODrive axes in lock-step: its demo and the 30 N jet."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 
@@ -132,16 +133,30 @@ def test_the_set_up_sends_mode_gains_and_limits_and_each_cycle_a_set_input_pos(r
         assert vel == -32767 and drv.stats.clamped_commands - clamped == 16
 
 
+@contextlib.contextmanager
+def active_axes(model, axes):
+    """The ODrive driver on the scripted ``axes``, configured and enabled: (driver, peer)."""
+    drv, peer = make(model, axes, "odrive")
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        drv.activate()
+        yield drv, peer
+
+
+def hold_for_a_period(drv, peer, hold: np.ndarray) -> None:
+    """One 2 ms cycle of the driver: the targets ``hold`` sent, the axes' answers read."""
+    drv.write(peer.t, np.zeros(8), targets=hold)
+    peer.wait(0.002)
+    drv.read(peer.t)
+
+
 def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
     """The ODrive does not watch its following error; the driver does, as a CiA 402 drive
     would (0x8611): an axis off its setpoint beyond the window for one read rides through,
     for longer than [drives] following_error_timeout it faults and every axis is sent IDLE."""
     axes = PositionAxes()
-    drv, peer = make(rowc_odrive, axes, "odrive")
-    with drv:
-        drv.configure()
-        drv.read(peer.t)
-        drv.activate()
+    with active_axes(rowc_odrive, axes) as (drv, peer):
         assert drv.lifecycle is Lifecycle.ACTIVE
         hold = drv.states.position.copy()
         window = drv.following_window[4]
@@ -149,9 +164,7 @@ def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
 
         def period(off: float) -> None:
             axes.pos[5] = (hold[4] + off) / TURN
-            drv.write(peer.t, np.zeros(8), targets=hold)
-            peer.wait(0.002)
-            drv.read(peer.t)
+            hold_for_a_period(drv, peer, hold)
 
         period(0.0)
         period(1.5 * window)  # one read beyond: a transient
@@ -166,6 +179,35 @@ def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
         peer.wait(0.002)
         assert all(struct.unpack("<I", axes.sent(n, SET_AXIS_STATE)[-1])[0] == IDLE
                    for n in range(1, 9))
+
+
+class StuckAxes(PositionAxes):
+    """As ``PositionAxes``, but node 5 never leaves closed loop: its Set_Axis_State frames
+    are lost."""
+
+    def __call__(self, msg, t):
+        out = super().__call__(msg, t)
+        if msg.arbitration_id == (5 << 5 | SET_AXIS_STATE):
+            self.state[5] = CLOSED_LOOP
+        return out
+
+
+def test_after_a_fault_reset_the_following_error_is_timed_afresh(rowc_odrive):
+    """A fault reset starts the following error's time from zero: an axis that stayed in
+    closed loop (its IDLE lost) and is still off its target faults again once the reset's
+    settling time is over, not a second later."""
+    axes = StuckAxes()
+    with active_axes(rowc_odrive, axes) as (drv, peer):
+        hold = drv.states.position.copy()
+        axes.pos[5] = (hold[4] + 1.5 * drv.following_window[4]) / TURN
+        for _ in range(3):
+            hold_for_a_period(drv, peer, hold)
+        assert drv.lifecycle is Lifecycle.ERROR and drv.error.code == 0x8611
+        drv.begin_recover(settle=0.02)
+        assert drv.lifecycle is Lifecycle.INACTIVE
+        for _ in range(20):  # 40 ms: the 20 ms settle and the 3 ms time-out, with margin
+            hold_for_a_period(drv, peer, hold)
+        assert drv.lifecycle is Lifecycle.ERROR and drv.error.code == 0x8611
 
 
 def step_response(pos_gain, vel_gain, J, step, vel_limit=math.inf, limit=math.inf, ki=0.0,
