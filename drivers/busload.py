@@ -49,9 +49,11 @@ def cycle_frames(
     """(what, count, data bytes) of one control cycle on a bus with ``n`` drives, of which
     ``n_position`` in position mode."""
     if driver == "odrive":
-        # Set_Input_Pos (8: target, velocity and torque feed-forward) or Set_Input_Torque (4)
-        # out; Get_Encoder_Estimates (8) and Get_Torques (8) in
-        frames = [("Set_Input_Pos", n_position, 8)] if n_position else []
+        # Set_Input_Pos (8: target, velocity and torque feed-forward) after an RTR for
+        # Get_Torques (0), or Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and
+        # Get_Torques (8) in
+        frames = [("Get_Torques RTR", n_position, 0), ("Set_Input_Pos", n_position, 8)]
+        frames = frames if n_position else []
         if n - n_position:
             frames.append(("Set_Input_Torque", n - n_position, 4))
         return [*frames, ("Encoder_Estimates", n, 8), ("Torques", n, 8)]

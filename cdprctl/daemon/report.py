@@ -136,7 +136,7 @@ def gains_line(model: RobotModel, data: ControlData, driver: Any = None) -> str:
         return (
             f"gains from the model: ODrive axes hold the lengths (position control, "
             f"passthrough; the loop at {a.bandwidth:g} Hz on each rotor's inertia, at most a "
-            f"decade below the control rate; sent by CAN: "
+            f"fifth of the control rate; sent by CAN: "
             + (a.line() if same else f"cable 1 {a.line()}, the others per rotor")
             + f"; following error supervised by cdprctl: {window_text(model, driver)}"
             + f"), force feedback {g['force_feedback']:.1f} rad/s, external-wrench estimate "

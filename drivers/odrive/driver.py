@@ -5,10 +5,12 @@ Set-up sends Set_Controller_Mode (position or torque, passthrough input) and, in
 (``[drives] mode = "csp"``), the cascaded loops' gains and the limits from the model
 (``gains.py``: Set_Pos_Gain, Set_Vel_Gains, Set_Limits; CAN Simple has no message that reads
 them back); enabling is Set_Axis_State CLOSED_LOOP_CONTROL, disabling IDLE, fault reset
-Clear_Errors. The axes stream their heartbeat, encoder estimates and torques cyclically
-(configured on the ODrive). The cyclic ``write`` sends each axis Set_Input_Pos (the target, its
-rate as velocity feed-forward, the torque as torque feed-forward) in position mode, or
-Set_Input_Torque (a gripper's cable, or torque mode). An ODrive does not supervise its
+Clear_Errors. The axes stream their heartbeat and encoder estimates cyclically (configured on
+the ODrive), and their torques in torque mode. The cyclic ``write`` sends each axis
+Set_Input_Pos (the target, its rate as velocity feed-forward, the torque as torque
+feed-forward) in position mode, its Get_Torques asked for by RTR just before (the torque at the
+end of the setpoint it held: ``_pack_position``), or Set_Input_Torque (a gripper's cable, or
+torque mode). An ODrive does not supervise its
 following error: the driver does, as a CiA 402 drive would (0x8611, ``_following``).
 """
 
@@ -65,9 +67,24 @@ class ODriveDriver(CanWinchDriver):
             )
             for c in range(m)
         ]
+        # Get_Torques asked for by RTR before each Set_Input_Pos (position mode)
+        self._torque_request = [
+            can.Message(
+                arbitration_id=p.arbitration_id(int(self.node[c]), p.GET_TORQUES),
+                is_remote_frame=True, dlc=8, is_extended_id=False,
+            )
+            for c in range(m)
+        ]  # fmt: skip
         self._sent_target = np.zeros(m)  # rad: the last position target each axis was given
         self._setpoint = np.zeros(m)  # rad: the position each axis holds (Set_Input_Pos)
-        self._kp = np.array([g.kp if g else 0.0 for g in self.gains])  # N·m/rad
+        # rad: the targets before the last one and before that: the path of the last two
+        # holds, from where the following error is measured
+        self._hold_from = np.zeros(m)
+        self._path_from = np.zeros(m)
+        # rad: setpoint − target of the hold the last torque asked for ended (its pull)
+        self._held_pull = np.zeros(m)
+        # N·m/rad: the share of the loop's stiffness that pull adds to that torque
+        self._pull_gain = np.array([g.ripple * g.kp if g else 0.0 for g in self.gains])
         # the following error's supervision (rad, s): the window and time-out of CiA 402
         # 0x6065/0x6066, as [drives] sets them; how long each axis has been beyond it
         self.following_window = np.array([
@@ -115,8 +132,9 @@ class ODriveDriver(CanWinchDriver):
             lambda: bool(np.all(np.isfinite(lv.fb_stamp)) and np.all(np.isfinite(lv.last_hb))),
             "encoder estimates (ODrive axes)",
         )
-        self._sent_target[:] = self.states.position
-        self._setpoint[:] = self.states.position
+        for a in (self._sent_target, self._setpoint, self._hold_from, self._path_from):
+            a[:] = self.states.position
+        self._held_pull[:] = 0.0
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable
@@ -142,12 +160,13 @@ class ODriveDriver(CanWinchDriver):
             elif cmd == p.GET_TORQUES and len(data) == 8:
                 tau = p.TORQUES_STRUCT.unpack(data)[1]
                 if self.csp[c]:
-                    # the estimate closes the period the axis held its setpoint (the middle
-                    # of the last two targets, ``_pack_position``), where a drive
-                    # interpolating between them stands at the last target: its loop's pull
-                    # kp (setpoint − target) accelerates the rotor within the staircase, not
-                    # the cable. Taken out: rowc's demo 0.47 → 0.10 mm RMS (lock-step)
-                    tau -= self._kp[c] * (self._setpoint[c] - self._sent_target[c])
+                    # asked for as the next setpoint went out: the estimate closes the period
+                    # the axis held the middle of the last two targets (``_pack_position``),
+                    # where a drive interpolating between them stands at the last target;
+                    # the part of the loop's pull kp (setpoint − target) that accelerates the
+                    # rotor within the staircase, not the cable, taken out (``hold_ripple``):
+                    # rowc's demo 0.47 → 0.011 mm RMS (lock-step, 250 Hz)
+                    tau -= self._pull_gain[c] * self._held_pull[c]
                 self.states.torque[c] = tau
             elif cmd == p.HEARTBEAT and len(data) >= 7:
                 err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
@@ -166,16 +185,23 @@ class ODriveDriver(CanWinchDriver):
         return any([self._cable_fault(c) is not None for c in range(self.m)])
 
     def _following(self, t: float) -> None:
-        """Each enabled axis in position mode off the target it was sent by more than the
-        window: for longer than the time-out, latched as a following-error fault (``FE``). The
-        ODrive has no such supervision of its own; the read after a write measures it, so
-        its resolution is the control period (two reads beyond the window at 250 Hz)."""
+        """Each enabled axis in position mode off its path by more than the window: for
+        longer than the time-out, latched as a following-error fault (``FE``). The ODrive has
+        no such supervision of its own; the read after a write measures it, so its resolution
+        is the control period (two reads beyond the window at 250 Hz). The path is the one an
+        interpolating drive would have followed over the last two holds: the encoder estimate
+        comes on the ODrive's own timer, from either hold and anywhere in it, and the setpoint
+        held is half a period ahead of the path by design (``_pack_position``); measured
+        against the setpoint, rowc's 1.6 mm window at 0.3 m/s tripped in real time."""
         dt = t - self._checked_at if math.isfinite(self._checked_at) else 0.0
         self._checked_at = t
         timeout = self.config.following_error_timeout
         for c in range(self.m):
             on = self.csp[c] and self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL
-            if on and abs(self._setpoint[c] - self.states.position[c]) > self.following_window[c]:
+            a, b, e = self._path_from[c], self._hold_from[c], self._sent_target[c]
+            x = self.states.position[c]
+            off = max(min(a, b, e) - x, x - max(a, b, e))
+            if on and off > self.following_window[c]:
                 self._beyond[c] += dt
                 if self._beyond[c] > timeout:
                     self.following[c] = True
@@ -220,6 +246,8 @@ class ODriveDriver(CanWinchDriver):
         for c in range(self.m):
             msg = self._cyclic_msg[c]
             if self.csp[c]:
+                self._send(int(self.bus_of[c]), self._torque_request[c])
+                self._held_pull[c] = self._setpoint[c] - self._sent_target[c]
                 self._pack_position(c, msg.data, float(torques[c]))
             else:
                 p.TORQUE_STRUCT.pack_into(msg.data, 0, float(torques[c]))
@@ -244,5 +272,7 @@ class ODriveDriver(CanWinchDriver):
         tau = max(-p.INT16_MAX, min(p.INT16_MAX, round(torque / p.TORQUE_FF_SCALE)))
         setpoint = 0.5 * (last + target)
         p.INPUT_POS_STRUCT.pack_into(data, 0, setpoint / TWO_PI, vel, tau)
+        self._path_from[c] = self._hold_from[c]
+        self._hold_from[c] = last
         self._sent_target[c] = target
         self._setpoint[c] = setpoint

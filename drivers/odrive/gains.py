@@ -8,12 +8,17 @@ integrator and the clamp it is the CiA 402 drives' loop ``kp (θ_t − θ) + kd 
 (``DrivesConfig.position_gains``: the rotor at ``position_loop_bandwidth``, damping 0.7) with
 ``vel_gain = kd`` and ``pos_gain = kp / kd``: one rule for both protocols, with one bound.
 A CiA 402 drive interpolates its targets between SYNCs; an ODrive in passthrough holds each
-Set_Input_Pos for a period, a staircase its loop follows step by step when it is fast beside
-the rate: its torque then swings by ``kp · rate · T / 2`` within every period (1 N·m on rowc
-at 0.3 m/s and 50 Hz: 100 N of cable), read as tension. So its loop sits a decade below the
-control rate (``STEPS_PER_LOOP``), as the working pose sits a decade below the drives' loops.
-rowc at 250 Hz, lock-step, its demo's moves: tracking 1.1 mm RMS with the loop at 50 Hz,
-0.10 mm at 25 Hz, 0.05 mm at 12.5 Hz; the 30 N jet's transient 6.5, 8.4 and 17.2 mm.
+Set_Input_Pos for a period: its loop pulls ``kp · rate · (T/2 − τ)`` more than an interpolating
+drive τ into the hold (the driver holds the middle of the period's path), a sawtooth of which
+the rotor's acceleration takes a share and the cable the rest. The torque the driver reads,
+asked for at the end of each hold, is taken less that share (``hold_ripple``): without it the
+reading is off by up to ``kp · rate · T / 2`` (1 N·m on rowc at 0.3 m/s and 50 Hz: 100 N of
+cable). rowc at 250 Hz, lock-step, its demo's moves, the loop at 50 Hz: tracking 0.011 mm RMS
+with the share, 0.47 with all of the pull taken out; the cable's tension swings by 1.8 N at most
+within a period (0.5 N with the loop at 25 Hz, 0.4 N with CiA 402 drives). The loop sits at most
+a fifth of the control rate (``STEPS_PER_LOOP``): rowc at 125 Hz tracked 0.023 mm RMS and took
+the 30 N jet within 8.6 mm with its loop at 25 Hz (a fifth), 0.040 mm and 16.9 mm at 12.5 Hz (a
+tenth, the bound before the share was known).
 """
 
 from __future__ import annotations
@@ -22,13 +27,16 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+from scipy.linalg import expm
+
 TWO_PI = 2.0 * math.pi
 # the velocity limit over the fastest cable speed a planned motion asks for: room for the
 # pose loop's corrections and a disturbance's ride-through; ODrive's overspeed error trips at
 # its vel_limit_tolerance (1.2 by default) times the limit
 VELOCITY_LIMIT_MARGIN = 2.0
-# control periods per period of the axis's position loop, at the least
-STEPS_PER_LOOP = 10.0
+# control periods per period of the axis's position loop, at the least (module docstring)
+STEPS_PER_LOOP = 5.0
 
 
 @dataclass(frozen=True)
@@ -44,6 +52,9 @@ class AxisGains:
     vel_integrator_gain: float
     vel_limit: float  # turn/s of the motor
     current_limit: float  # A
+    # the share of the loop's pull kp (setpoint − target) in the torque sampled at the end of
+    # a hold that accelerates the rotor within the staircase (``hold_ripple``)
+    ripple: float
 
     def line(self) -> str:
         return (
@@ -63,8 +74,38 @@ def fastest_cable_speed(model: Any, cable: int) -> float:
     return float(ctl.max_velocity + ctl.max_angular_velocity * math.sqrt(sum(x * x for x in b)))
 
 
+def hold_ripple(inertia: float, kp: float, kd: float, period: float) -> float:
+    """The share of the pull ``kp (setpoint − target)`` in the torque an axis in passthrough
+    applies at the end of holding a setpoint, over the torque a drive interpolating the same
+    targets would apply: what the staircase spends accelerating the rotor (kg·m² ``inertia``,
+    the loop's ``kp`` N·m/rad and ``kd`` N·m·s/rad, the hold ``period`` s).
+
+    Along a target moving at ``v``, the setpoint held over a period is the middle of the path
+    (``_pack_position``), so the loop pulls ``kp v (T/2 − τ)`` more than an interpolating drive
+    at τ into the hold: a sawtooth. In its periodic steady state the rotor answers it as
+    ``J ẍ + kd ẋ + kp x = kp v (T/2 − τ)``; at τ = T the axis applies
+    ``−kp v T/2 − kp x(T) − kd ẋ(T) = J ẍ(T)`` more than the interpolating drive, returned
+    here as a share of ``−kp v T/2`` (0.707 with the loop at a fifth of the rate, 0.853 at a
+    tenth; it depends on ω T and ζ alone). Solved exactly
+    with the sawtooth as state (``[x, ẋ, f, 1]``, ``ḟ = −1``; one period's transition by the
+    matrix exponential, the periodic start from it). The cable's stiffness at the motor
+    (``k r²``, up to 20 N·m/rad on rowc) moves it by < 1 %: left out, so the axis's own gains
+    are all it needs."""
+    a = np.array([
+        [0.0, 1.0, 0.0, 0.0],
+        [-kp / inertia, -kd / inertia, kp / inertia, 0.0],
+        [0.0, 0.0, 0.0, -1.0],
+        [0.0, 0.0, 0.0, 0.0],
+    ])  # fmt: skip
+    e = expm(a * period)
+    # [x, ẋ] periodic: (I − E₁₁) s = E₁₂ [T/2, 1]
+    s = np.linalg.solve(np.eye(2) - e[:2, :2], e[:2, 2:] @ np.array([0.5 * period, 1.0]))
+    pull = 0.5 * kp * period  # per unit of v: the interpolating drive's setpoint is ahead
+    return float((pull + kp * s[0] + kd * s[1]) / pull)
+
+
 def loop_bandwidth(model: Any, period: float) -> float:
-    """Hz: ``[drives] position_loop_bandwidth``, at most a decade below the control rate."""
+    """Hz: ``[drives] position_loop_bandwidth``, at most a fifth of the control rate."""
     return min(model.drives.position_loop_bandwidth, 1.0 / (STEPS_PER_LOOP * period))
 
 
@@ -83,4 +124,5 @@ def axis_gains(model: Any, cable: int, period: float) -> AxisGains:
         vel_integrator_gain=0.0,
         vel_limit=VELOCITY_LIMIT_MARGIN * fastest_cable_speed(model, cable) * turns_per_metre,
         current_limit=winch.torque_limit / drives.torque_constant,
+        ripple=hold_ripple(winch.rotor_inertia, kp, kd, period),
     )

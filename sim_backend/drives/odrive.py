@@ -4,8 +4,10 @@ Answers Set_Controller_Mode (torque or position control; passthrough input), Set
 (IDLE: brake; CLOSED_LOOP_CONTROL: the loop on), Set_Input_Torque and Set_Input_Pos (applied
 at once: the protocol has no SYNC, and passthrough neither filters nor interpolates),
 Set_Pos_Gain, Set_Vel_Gains, Set_Limits, Clear_Errors, Estop; streams heartbeat and encoder
-estimates and torques at every simulation step it is ticked (the cyclic messages an ODrive is
-configured to send); the watchdog (comm timeout) drops the axis to IDLE with the watchdog
+estimates at every simulation step it is ticked, and its torques in torque control (the cyclic
+messages an ODrive is configured to send: docs/drivers.md), and answers an RTR for encoder
+estimates or torques with them (in position control the driver asks for the torques before
+each setpoint); the watchdog (comm timeout) drops the axis to IDLE with the watchdog
 error bit. In position control the firmware's cascade runs at every physics step
 (``servo._cascade_torque``); entering closed loop it takes the position where the motor
 stands as its input and clears its integrator (firmware ``Axis::run_closed_loop_control_loop``),
@@ -73,6 +75,12 @@ class ODriveAxis:
         )
 
     def on_frame(self, cmd: int, data: bytes, remote: bool, t: float) -> list[can.Message]:
+        if remote:  # a request: answered from where the axis is, before any later frame
+            if cmd == p.GET_TORQUES and not self.silent:
+                return [self._torques()]
+            if cmd == p.GET_ENCODER_ESTIMATES and not self.silent:
+                return [self._estimates()]
+            return []
         self.last_rx = t
         if cmd == p.SET_INPUT_TORQUE and len(data) >= 4:
             self.torque_cmd = p.TORQUE_STRUCT.unpack(data[:4])[0]
@@ -156,19 +164,28 @@ class ODriveAxis:
         self._apply()
         if self.silent:
             return []
-        out = []
-        pos = self.position_turns()
-        out.append(self._msg(p.GET_ENCODER_ESTIMATES, p.ENCODER_STRUCT.pack(pos, vel)))
-        c = self.cable
-        csp = self.plant.servo.kp[c] > 0.0
-        applied = self.plant.servo.applied[c] if csp else self.plant.motor_torque[c]
-        out.append(self._msg(p.GET_TORQUES, p.TORQUES_STRUCT.pack(self.torque_cmd, applied)))
+        out = [self._estimates()]
+        if not position:
+            out.append(self._torques())
         if t - self.last_hb >= HEARTBEAT_PERIOD - 1e-9:
             out.append(
                 self._msg(p.HEARTBEAT, p.HEARTBEAT_STRUCT.pack(self.error, int(self.state), 0, 1))
             )
             self.last_hb = t
         return out
+
+    def _estimates(self) -> can.Message:
+        """Get_Encoder_Estimates: turns and turn/s of the motor."""
+        vel = self.plant.theta_dot[self.cable] / TWO_PI
+        return self._msg(p.GET_ENCODER_ESTIMATES, p.ENCODER_STRUCT.pack(self.position_turns(), vel))
+
+    def _torques(self) -> can.Message:
+        """Get_Torques: the torque asked for and the one applied in the last loop step (N·m;
+        the firmware's step is 125 µs, the physics step here 200 µs)."""
+        c = self.cable
+        csp = self.plant.servo.kp[c] > 0.0
+        applied = self.plant.servo.applied[c] if csp else self.plant.motor_torque[c]
+        return self._msg(p.GET_TORQUES, p.TORQUES_STRUCT.pack(self.torque_cmd, applied))
 
     def inject_fault(self, code: int) -> can.Message:
         self.error |= code
