@@ -56,7 +56,12 @@ def cycle_frames(
         frames = frames if n_position else []
         if n - n_position:
             frames.append(("Set_Input_Torque", n - n_position, 4))
-        return [*frames, ("Encoder_Estimates", n, 8), ("Torques", n, 8)]
+        frames.append(("Encoder_Estimates", n, 8))
+        if n_position:
+            frames.append(("Get_Torques answering the RTR", n_position, 8))
+        if n - n_position:
+            frames.append(("Get_Torques (cyclic)", n - n_position, 8))
+        return frames
     frames = [("SYNC with its counter", 1, 1)]
     if n_position:
         frames.append(("RPDO1 controlword+position+torque offset", n_position, 8))

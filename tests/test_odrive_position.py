@@ -441,3 +441,27 @@ def test_the_daemon_says_what_it_sent_the_axes(capsys):
     assert "vel_gain 0.4145 N·m/(turn/s), vel_integrator_gain 0" in line
     assert "vel_limit 12.2 turn/s, current limit 31.4 A" in line
     assert "beyond 0.176 rad (1.58 mm of cable) for 3 ms" in line
+
+
+def test_node_ids_are_the_protocols_own(tmp_path):
+    """ODrive axes take CAN Simple's 6-bit node ids, 0 to 62 (0x3F is an unaddressed
+    ODrive's); CiA 402 drives CANopen's, 1 to 127 (0 addresses every node)."""
+    from cdprctl.model import ConfigError
+
+    odrive = (CONFIG / "rowc_odrive.toml").read_text()
+    rowc = (CONFIG / "rowc.toml").read_text()
+    path = tmp_path / "rowc.toml"
+    path.write_text(rowc.replace("node_ids = [1, 2, 3, 4]", "node_ids = [0, 2, 3, 4]"))
+    with pytest.raises(ConfigError) as e:
+        load_robot(path)
+    assert "node_ids = 0 must be a CANopen node id in [1, 127]" in str(e.value)
+    for ids, ok in (("[0, 2, 3, 4]", True), ("[63, 2, 3, 4]", False)):
+        path.write_text(rowc.replace("node_ids = [1, 2, 3, 4]", f"node_ids = {ids}"))
+        (tmp_path / "od.toml").write_text(odrive)
+        if ok:
+            assert load_robot(tmp_path / "od.toml").drives.buses[0].node_ids[0] == 0
+        else:
+            with pytest.raises(ConfigError) as e:
+                load_robot(tmp_path / "od.toml")
+            assert "node_ids = 63 must be an ODrive axis's CAN Simple node id" in str(e.value)
+            assert "[0, 62]" in str(e.value)

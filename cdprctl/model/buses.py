@@ -28,6 +28,14 @@ class BusConfig:
         return self.dcf[k] if k < len(self.dcf) else ""
 
 
+# the node ids each protocol can address: CANopen's 7-bit ids (0 is NMT's "all nodes"); CAN
+# Simple's 6-bit axis ids, 0x3F reserved for an ODrive not yet given one
+NODE_IDS = {
+    "cia402": (1, 127, "a CANopen node id"),
+    "odrive": (0, 62, "an ODrive axis's CAN Simple node id (axis0.config.can.node_id)"),
+}
+
+
 def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
     """One simulated bus: node ids 1..m on python-can's ``virtual`` interface."""
     return (
@@ -42,11 +50,12 @@ def default_buses(name: str, n_cables: int) -> tuple[BusConfig, ...]:
 
 
 def read_buses(
-    rd: TableReader, t: dict[str, Any], cable_names: list[str], name: str, ctrl_id: float | None
+    rd: TableReader, t: dict[str, Any], cable_names: list[str], name: str, ctrl_id: float | None,
+    driver: str = "cia402",
 ) -> list[BusConfig]:
     """The ``[[drives.buses]]`` of the ``[drives]`` table ``t``: each cable on exactly one bus,
-    node ids unique on a bus and not the controller's (``ctrl_id``); without any, the default
-    simulated bus."""
+    node ids in the ``driver``'s range (``NODE_IDS``), unique on a bus and not the controller's
+    (``ctrl_id``); without any, the default simulated bus."""
     buses: list[BusConfig] = []
     seen_cable: dict[int, str] = {}
     raw = t.get("buses")
@@ -109,9 +118,10 @@ def read_buses(
             )
             nodes = []
         else:
+            lo, hi, what = NODE_IDS.get(driver, NODE_IDS["cia402"])
             for n in nodes:
-                if not 1 <= n <= 127:
-                    rd.error(f"{path}.node_ids", n, "", "must be a CANopen node id in [1, 127]")
+                if not lo <= n <= hi:
+                    rd.error(f"{path}.node_ids", n, "", f"must be {what} in [{lo}, {hi}]")
             dups = sorted({n for n in nodes if nodes.count(n) > 1})
             if dups:
                 rd.error(

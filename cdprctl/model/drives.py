@@ -286,7 +286,7 @@ def read_drives(
     if not isinstance(assume_home, bool):
         rd.error("drives.assume_home_at_start", assume_home, "", "must be true or false")
     log_file = rd.string(t, "log_file", "drives", required=False, default=None)
-    buses = read_buses(rd, t, cable_names, name, ctrl_id)
+    buses = read_buses(rd, t, cable_names, name, ctrl_id, driver)
     if len(rd.errors) > n0:
         return None
     return DrivesConfig(
