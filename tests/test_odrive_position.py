@@ -289,7 +289,7 @@ def test_the_simulated_cascade_is_the_loop_its_gains_say():
     assert abs(servo_out) < 0.01
 
 
-@pytest.mark.parametrize("hz, rate", [(50.0, 250.0), (25.0, 250.0), (50.0, 500.0)])
+@pytest.mark.parametrize("hz, rate", [(50.0, 250.0), (25.0, 250.0), (50.0, 500.0), (125.0, 250.0)])
 def test_the_torque_at_the_end_of_a_hold_is_the_ripple_share_of_the_pull(hz, rate):
     """A bare rotor on the simulated cascade following a ramp through passthrough's staircase
     (the middle of each period's path held, its rate as velocity feed-forward), run until
@@ -315,7 +315,7 @@ def test_the_torque_at_the_end_of_a_hold_is_the_ripple_share_of_the_pull(hz, rat
             omega += tau / J * dt
             theta += omega * dt
     expected = -hold_ripple(J, kp, kd, T) * kp * v * T / 2
-    assert tau == pytest.approx(expected, rel=0.01)
+    assert tau == pytest.approx(expected, rel=2e-3)  # 0.05-0.08 % measured: the step's
     assert abs(tau) < 0.9 * kp * v * T / 2  # not all of the pull: the rotor takes a share
 
 

@@ -91,13 +91,14 @@ def hold_ripple(inertia: float, kp: float, kd: float, period: float) -> float:
     matrix exponential, the periodic start from it). The cable's stiffness at the motor
     (``k r²``, up to 20 N·m/rad on rowc) moves it by < 1 %: left out, so the axis's own gains
     are all it needs."""
+    T = period  # the generator over one period (time in periods: its entries are all O(1))
     a = np.array([
-        [0.0, 1.0, 0.0, 0.0],
-        [-kp / inertia, -kd / inertia, kp / inertia, 0.0],
-        [0.0, 0.0, 0.0, -1.0],
+        [0.0, T, 0.0, 0.0],
+        [-kp * T / inertia, -kd * T / inertia, kp * T / inertia, 0.0],
+        [0.0, 0.0, 0.0, -T],
         [0.0, 0.0, 0.0, 0.0],
     ])  # fmt: skip
-    e = expm(a * period)
+    e = expm(a)
     # [x, ẋ] periodic: (I − E₁₁) s = E₁₂ [T/2, 1]
     s = np.linalg.solve(np.eye(2) - e[:2, :2], e[:2, 2:] @ np.array([0.5 * period, 1.0]))
     pull = 0.5 * kp * period  # per unit of v: the interpolating drive's setpoint is ahead
