@@ -76,6 +76,8 @@ class PositionAxes:
         node, cmd = msg.arbitration_id >> 5, msg.arbitration_id & 0x1F
         data = bytes(msg.data)
         self.got[node].append((cmd | (0x100 if msg.is_remote_frame else 0), data))
+        if msg.is_remote_frame:
+            self.rtr_dlc = msg.dlc  # the length it asks for
         if cmd == SET_AXIS_STATE:
             self.state[node] = struct.unpack("<I", data)[0]
         if cmd in (SET_INPUT_POS, SET_INPUT_TORQUE) and node == 8:
@@ -126,7 +128,7 @@ def test_the_set_up_sends_mode_gains_and_limits_and_each_cycle_a_set_input_pos(r
         assert tau == round(torques[2] / 0.001)
         # the torques asked for by RTR just before each setpoint: the end of the last hold
         cycle = [c for c, _ in axes.got[3] if c in (SET_INPUT_POS, RTR | TORQUES)]
-        assert cycle[-2:] == [RTR | TORQUES, SET_INPUT_POS]
+        assert cycle[-2:] == [RTR | TORQUES, SET_INPUT_POS] and axes.rtr_dlc == 8
         drv.read(peer.t)  # sampled as the first setpoint went out: the hold at rest
         assert drv.states.torque[2] == pytest.approx(0.5)
         drv.write(peer.t, torques, force=True, targets=targets + 0.01)

@@ -134,7 +134,6 @@ class ODriveDriver(CanWinchDriver):
         )
         for a in (self._sent_target, self._setpoint, self._hold_from, self._path_from):
             a[:] = self.states.position
-        self._held_pull[:] = 0.0
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable
