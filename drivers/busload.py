@@ -52,8 +52,9 @@ def cycle_frames(
         # Set_Input_Pos (8: target, velocity and torque feed-forward) after an RTR for
         # Get_Torques (0), or Set_Input_Torque (4) out; Get_Encoder_Estimates (8) and
         # Get_Torques (8) in
-        frames = [("Get_Torques RTR", n_position, 0), ("Set_Input_Pos", n_position, 8)]
-        frames = frames if n_position else []
+        frames: list[tuple[str, int, int]] = []
+        if n_position:
+            frames += [("Get_Torques RTR", n_position, 0), ("Set_Input_Pos", n_position, 8)]
         if n - n_position:
             frames.append(("Set_Input_Torque", n - n_position, 4))
         frames.append(("Encoder_Estimates", n, 8))

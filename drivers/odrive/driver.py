@@ -76,14 +76,12 @@ class ODriveDriver(CanWinchDriver):
             for c in range(m)
         ]  # fmt: skip
         self._sent_target = np.zeros(m)  # rad: the last position target each axis was given
-        self._setpoint = np.zeros(m)  # rad: the position each axis holds (Set_Input_Pos)
         # rad: the targets before the last one and before that: the path of the last two
-        # holds, from where the following error is measured
+        # holds, from where the following error is measured; the hold before the last one
+        # (the one the last torque asked for ended) held their middle, ``_pack_position``
         self._hold_from = np.zeros(m)
         self._path_from = np.zeros(m)
-        # rad: setpoint − target of the hold the last torque asked for ended (its pull)
-        self._held_pull = np.zeros(m)
-        # N·m/rad: the share of the loop's stiffness that pull adds to that torque
+        # N·m/rad: the share of the loop's stiffness that hold's pull adds to that torque
         self._pull_gain = np.array([g.ripple * g.kp if g else 0.0 for g in self.gains])
         # the following error's supervision (rad, s): the window and time-out of CiA 402
         # 0x6065/0x6066, as [drives] sets them; how long each axis has been beyond it
@@ -132,7 +130,7 @@ class ODriveDriver(CanWinchDriver):
             lambda: bool(np.all(np.isfinite(lv.fb_stamp)) and np.all(np.isfinite(lv.last_hb))),
             "encoder estimates (ODrive axes)",
         )
-        for a in (self._sent_target, self._setpoint, self._hold_from, self._path_from):
+        for a in (self._sent_target, self._hold_from, self._path_from):
             a[:] = self.states.position
 
     def _request_enable(self, enable: bool) -> None:
@@ -165,7 +163,8 @@ class ODriveDriver(CanWinchDriver):
                     # the part of the loop's pull kp (setpoint − target) that accelerates the
                     # rotor within the staircase, not the cable, taken out (``hold_ripple``):
                     # rowc's demo 0.47 → 0.011 mm RMS (lock-step, 250 Hz)
-                    tau -= self._pull_gain[c] * self._held_pull[c]
+                    pull = 0.5 * (self._path_from[c] - self._hold_from[c])  # setpoint − target
+                    tau -= self._pull_gain[c] * pull
                 self.states.torque[c] = tau
             elif cmd == p.HEARTBEAT and len(data) >= 7:
                 err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
@@ -246,7 +245,6 @@ class ODriveDriver(CanWinchDriver):
             msg = self._cyclic_msg[c]
             if self.csp[c]:
                 self._send(int(self.bus_of[c]), self._torque_request[c])
-                self._held_pull[c] = self._setpoint[c] - self._sent_target[c]
                 self._pack_position(c, msg.data, float(torques[c]))
             else:
                 p.TORQUE_STRUCT.pack_into(msg.data, 0, float(torques[c]))
@@ -274,4 +272,3 @@ class ODriveDriver(CanWinchDriver):
         self._path_from[c] = self._hold_from[c]
         self._hold_from[c] = last
         self._sent_target[c] = target
-        self._setpoint[c] = setpoint
