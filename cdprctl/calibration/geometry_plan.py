@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from cdprctl.calibration.geometry import GeometryIdentification, GeometrySamples
-from cdprctl.calibration.identify import Weights, length_noise
+from cdprctl.calibration.identify import Weights, length_noise, quantization_std
 from cdprctl.calibration.session import CalibrationFailedError, hold_tensions
 from cdprctl.kinematics import KinematicsData
 from cdprctl.model.calibration import reference_anchors
@@ -76,7 +76,7 @@ def tension_noise(model: RobotModel) -> float:
     """N: the σ of a tension read at rest: one torque count, quantized (/√12). (With the
     motor's Coulomb friction added, uniform /√3, rowc's anchors came out 4.8 mm off where
     without it 2.4 mm, lock-step: at rest the position loops hold, friction barely acts.)"""
-    return Weights.of(model).tension / math.sqrt(12.0)
+    return quantization_std(Weights.of(model).tension)
 
 
 PATH_STEP = 0.05  # m (and rad) between the checked points of a move

@@ -58,15 +58,15 @@ class Identified:
     std: list[float]  # m, rad: predicted standard deviation of x_0 (position, rotation)
     success: bool
     message: str
-    variance_factor: float = math.nan  # the weighted residuals' Σr²/dof
-    dof: int = 0  # residuals − unknowns
-    length_residuals: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  # m
+    variance_factor: float  # the weighted residuals' Σr²/dof
+    dof: int  # residuals − unknowns, at least 1
+    length_residuals: np.ndarray  # m, (K − 1)·m: every sample's length closures after the fit
 
 
 @dataclasses.dataclass(frozen=True)
 class Weights:
-    length: float = 20e-6  # m: σ of a length closure (stretch model, encoder, rest)
-    tension: float = 2.0  # N: σ of a measured tension (torque resolution, friction at rest)
+    length: float  # m: σ of a length closure (stretch model, encoder, rest)
+    tension: float  # N: σ of a measured tension (torque resolution, friction at rest)
 
     @classmethod
     def of(cls, model: RobotModel) -> Weights:
@@ -84,15 +84,19 @@ class Weights:
         return cls(length=compliance * tension + count, tension=tension)
 
 
+def quantization_std(step: float) -> float:
+    """The σ of a reading rounded to whole steps of ``step`` (the error uniform over one
+    step): step/√12."""
+    return step / math.sqrt(12.0)
+
+
 def length_noise(model: RobotModel) -> float:
-    """m: the σ of a length closure that the drives' resolution explains, quantization's
-    (one count uniformly, σ = count/√12): the encoder's count through the drum, and the
-    stretch of one torque count's tension (``Weights.of`` takes whole counts: weights, not
-    the noise). Measured in lock-step (20 starts without plant errors, docs/homing.md): the
-    closures' RMS stays within it (rowc 3.7-7.9 µm against 7.8 µm, CAROCA 1.2-1.8 against
-    1.9 µm)."""
-    w = Weights.of(model)
-    return w.length / math.sqrt(12.0)
+    """m: the σ of a length closure that the drives' resolution explains, quantization's:
+    the encoder's count through the drum, and the stretch of one torque count's tension
+    (``Weights.of`` takes whole counts: weights, not the noise). Measured in lock-step (20
+    starts without plant errors, docs/homing.md): the closures' RMS stays within it (rowc
+    3.7-7.9 µm against 7.8 µm, CAROCA 1.2-1.8 against 1.9 µm)."""
+    return quantization_std(Weights.of(model).length)
 
 
 def model_test(length_residuals: np.ndarray, sigma: float,
@@ -108,6 +112,9 @@ def model_test(length_residuals: np.ndarray, sigma: float,
         return True, 0.0
     q = float(np.sum((length_residuals / sigma) ** 2))
     return q <= float(chi2.ppf(confidence, n)), math.sqrt(q / n)
+
+
+_TINY = np.finfo(float).tiny
 
 
 class Identification:
@@ -129,7 +136,7 @@ class Identification:
         self.force_weight = np.r_[np.full(3, 1.0 / sigma_f), np.full(3, 1.0 / (sigma_f * reach))]
 
     def _pose(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[:3], exp_so3(x[3:6]) @ self.R_home
+        return x[:3], exp_so3(x[3:]) @ self.R_home
 
     def _at(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         p, R = self._pose(x)
@@ -141,40 +148,42 @@ class Identification:
         scales = z[6 * K :] if self.fit_scales else np.ones(self.m)
         return poses, scales
 
+    def _equilibrium(self, W: np.ndarray, tension: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Weighted: the wrench the tensions and gravity leave on the platform at rest."""
+        return (W @ tension + self.model.gravity_wrench(R)) * self.force_weight
+
     def residuals(self, z: np.ndarray, s: Samples) -> np.ndarray:
+        """Weighted: sample 0's equilibrium (6), then per sample k ≥ 1 its length closures
+        (m) and its equilibrium (6)."""
         K = s.theta.shape[0]
         poses, scales = self._unpack(z, K)
-        out = []
         L0, W0, R0 = self._at(poses[0])
         l0_start = unstretched_lengths(self.law, L0, s.tension[0])
-        for k in range(K):
-            if k == 0:
-                L, W, R = L0, W0, R0
-            else:
-                L, W, R = self._at(poses[k])
-                l0 = l0_start - self.ratio * scales * (s.theta[k] - s.theta[0])
-                # the cable law, on every cable at once (the rule is plain arithmetic)
-                c = cable_compliance_py(*self.law, l0)  # type: ignore[arg-type]
-                out.append((L - (l0 + s.tension[k] * c)) / self.w.length)
-            out.append((W @ s.tension[k] + self.model.gravity_wrench(R)) * self.force_weight)
+        out = [self._equilibrium(W0, s.tension[0], R0)]
+        for k in range(1, K):
+            L, W, R = self._at(poses[k])
+            l0 = l0_start - self.ratio * scales * (s.theta[k] - s.theta[0])
+            # the cable law, on every cable at once (the rule is plain arithmetic)
+            c = cable_compliance_py(*self.law, l0)  # type: ignore[arg-type]
+            out.append((L - (l0 + s.tension[k] * c)) / self.w.length)
+            out.append(self._equilibrium(W, s.tension[k], R))
         return np.concatenate(out)
 
     def _sparsity(self, K: int) -> lil_matrix:
-        """Sample k's residuals depend on x_0, x_k and the scales only."""
+        """Which unknowns each residual depends on (rows as in ``residuals``): a sample's
+        equilibrium on its own pose; its length closure of cable i on x_0, its own pose and
+        drum i's scale."""
         m = self.m
         n = 6 * K + (m if self.fit_scales else 0)
-        rows = (K - 1) * m + 6 * K
-        A = lil_matrix((rows, n), dtype=int)
-        r = 0
-        for k in range(K):
-            if k:
-                A[r : r + m, 0:6] = 1
-                A[r : r + m, 6 * k : 6 * k + 6] = 1
-                if self.fit_scales:
-                    A[r : r + m, 6 * K :] = 1
-                r += m
-            A[r : r + 6, 6 * k : 6 * k + 6] = 1
-            r += 6
+        A = lil_matrix((6 + (K - 1) * (m + 6), n), dtype=int)
+        A[0:6, 0:6] = 1
+        cables = np.arange(m)
+        for k in range(1, K):
+            r = 6 + (k - 1) * (m + 6)
+            A[r : r + m, 0:6] = 1
+            A[r : r + m + 6, 6 * k : 6 * k + 6] = 1
+            if self.fit_scales:
+                A[r + cables, 6 * K + cables] = 1
         return A
 
     def solve(self, s: Samples) -> Identified:
@@ -186,19 +195,17 @@ class Identification:
         )  # fmt: skip
         poses, scales = self._unpack(res.x, K)
         J = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
-        norms = np.linalg.norm(J, axis=0)
-        sv = np.linalg.svd(J / np.where(norms > 0, norms, 1.0), compute_uv=False)
-        condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+        # a column that no residual sees (a drum that never turned) stays zero, and unknowns
+        # beyond the residuals' count are undetermined: singular values of zero, both
+        sv = np.linalg.svd(J / np.maximum(np.linalg.norm(J, axis=0), _TINY), compute_uv=False)
+        sv = np.r_[sv, np.zeros(J.shape[1] - sv.size)]
+        with np.errstate(divide="ignore"):
+            condition = float(sv[0] / sv[-1])
         r = res.fun
-        n_len = (K - 1) * m
-        lengths, forces = [], []
-        i = 0
-        for k in range(K):
-            if k:
-                lengths.append(r[i : i + m] * self.w.length)
-                i += m
-            forces.append(r[i : i + 6] / self.force_weight)
-            i += 6
+        per_sample = r[6:].reshape(K - 1, m + 6)
+        lengths = per_sample[:, :m] * self.w.length  # m: sample k ≥ 1's closures, row k − 1
+        length_res = lengths.ravel()
+        forces = np.concatenate([r[:6], per_sample[:, m:].ravel()]) / np.tile(self.force_weight, K)
         dof = max(1, r.size - res.x.size)
         # the a-posteriori variance factor: the residuals' own scale against the weights'
         # (not below a tenth: a few lucky samples do not make the pose exact)
@@ -213,15 +220,14 @@ class Identification:
         L0 = self._at(poses[0])[0]
         l0_start = unstretched_lengths(self.law, L0, s.tension[0])
         theta_zero = s.theta[0] - (self.l_home - l0_start) / (self.ratio * scales)
-        length_res = np.concatenate(lengths) if lengths else np.zeros(0)
         return Identified(
             pose=[*map(float, p0), *matrix_to_rpy(R0)],
             poses=poses.copy(),
             drum_scale=scales.copy(),
             theta_zero=theta_zero,
-            residual_rms=float(np.sqrt(np.mean(length_res**2))) if n_len else 0.0,
-            sample_residuals=[0.0] + [float(np.sqrt(np.mean(x**2))) for x in lengths],
-            force_rms=float(np.sqrt(np.mean(np.concatenate(forces) ** 2))),
+            residual_rms=float(np.sqrt(np.mean(length_res**2))) if length_res.size else 0.0,
+            sample_residuals=[0.0, *(np.sqrt(np.mean(lengths**2, axis=1))).tolist()],
+            force_rms=float(np.sqrt(np.mean(forces**2))),
             condition=condition,
             std=[float(x) for x in std],
             success=bool(res.success),
