@@ -321,6 +321,39 @@ def test_the_torque_at_the_end_of_a_hold_is_the_ripple_share_of_the_pull(hz, rat
     assert abs(tau) < 0.9 * kp * v * T / 2  # not all of the pull: the rotor takes a share
 
 
+@pytest.mark.parametrize(
+    ("hz", "rate", "zeta"), [(50.0, 250.0, 0.7), (25.0, 250.0, 1.0), (100.0, 500.0, 0.4)]
+)
+def test_the_ripple_is_the_periodic_solution_of_the_rotors_loop_to_nine_digits(hz, rate, zeta):
+    """``hold_ripple``'s matrix exponential against scipy's ODE solver at tight tolerances:
+    ``J ẍ + kd ẋ + kp x = kp (T/2 − τ)`` integrated period by period (per unit of v) until the
+    state at the ends of two periods agrees to 1e-15; the ripple is then
+    ``(kp T/2 + kp x(T) + kd ẋ(T)) / (kp T/2)`` (the firmware cascade's test above holds it
+    only to its step's 0.1 %)."""
+    from scipy.integrate import solve_ivp
+
+    from drivers.odrive.gains import hold_ripple
+
+    J = 1.5e-4  # kg·m²
+    om = 2 * math.pi * hz
+    kp, kd, T = J * om**2, 2 * zeta * J * om, 1.0 / rate
+
+    def rotor(tau, y):
+        return [y[1], (kp * (T / 2 - tau) - kd * y[1] - kp * y[0]) / J]
+
+    y = np.zeros(2)
+    for _ in range(400):
+        end = solve_ivp(rotor, (0.0, T), y, method="DOP853", rtol=1e-13, atol=1e-22).y[:, -1]
+        done = np.allclose(end, y, rtol=1e-12, atol=1e-20)
+        y = end
+        if done:
+            break
+    assert done
+    pull = kp * T / 2
+    expected = (pull + kp * y[0] + kd * y[1]) / pull
+    assert hold_ripple(J, kp, kd, T) == pytest.approx(expected, rel=1e-9)
+
+
 def test_the_simulated_axis_takes_its_limits_and_starts_where_it_stands(rowc_odrive):
     """The simulated ODrive: Set_Limits' current times the torque constant lowers its torque
     limit; entering closed loop it holds where the motor stands (no jump); in position control
