@@ -1,0 +1,133 @@
+"""The CiA 402 driver's own rules at frame level (the scripted peer of test_drivers_frames, in
+simulated time): which frames it takes and which it ignores, a fault the statusword alone
+reports, the NMT start it sends again, the torque limit's object at its ceiling, the targets
+sent again for a SYNC held up after them."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from conftest import CONFIG, in_torque_mode
+from test_drivers_frames import Cia402Script, cycles, frame, make
+
+from cdprctl.model import load_robot
+from drivers import DriveFaultError, Lifecycle
+from drivers.cia402 import protocol as p
+
+
+@pytest.fixture
+def seed():
+    return in_torque_mode(load_robot(CONFIG / "seed000.toml"))
+
+
+def test_a_fault_the_statusword_alone_reports_is_that_drives_fault(seed):
+    """A drive in FAULT that sent no EMCY (lost, or a drive that sends none): a drive fault
+    of its cable all the same, said to come from the statusword."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.activate()
+        script.statusword[3] = 0x0218  # fault, no EMCY
+        cycles(drv, peer, 3)
+        assert drv.lifecycle is Lifecycle.ERROR
+        assert isinstance(drv.error, DriveFaultError)
+        assert drv.error.cable == 2 and drv.error.code == 0
+        assert "fault (statusword)" in str(drv.error)
+
+
+def test_a_short_emcy_is_ignored_and_counted_and_a_padded_heartbeat_is_read_from_its_first_byte(
+    seed,
+):
+    """An EMCY must be 8 bytes (CiA 301 §7.2.7): a 4-byte one is no fault and no velocity
+    (TPDO2's length), one frame ignored; a heartbeat padded to 2 bytes (some devices pad)
+    gives its NMT state from byte 0."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        before = drv.stats.frames_ignored
+        velocity = drv.states.velocity.copy()
+        peer.bus.send(frame(p.EMCY + 2, b"\x10\x23\x01\x00"))
+        peer.bus.send(frame(p.HEARTBEAT + 5, bytes([p.HB_PRE_OPERATIONAL, 0x05])))
+        drv.read(peer.t + 0.001)
+        assert drv.stats.frames_ignored == before + 1
+        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[1]) == 0
+        np.testing.assert_array_equal(drv.states.velocity, velocity)
+        assert drv._nmt_state[4] == p.HB_PRE_OPERATIONAL
+
+
+class LateDrive(Cia402Script):
+    """Drive ``node`` sends nothing until ``after`` s: its NMT start was lost."""
+
+    def __init__(self, node: int, after: float):
+        super().__init__(range(1, 9))
+        self.node, self.after = node, after
+        self.silent.add(node)
+
+    def __call__(self, msg, t):
+        if t >= self.after:
+            self.silent.discard(self.node)
+        return super().__call__(msg, t)
+
+
+def test_a_lost_nmt_start_is_sent_again_every_half_second_until_every_drive_answers(seed):
+    script = LateDrive(5, 1.3)
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure(timeout=3.0)
+        starts = sorted({t for t, arb, d in peer.rx if arb == p.NMT and d[0] == p.NMT_START})
+        assert drv.lifecycle is Lifecycle.INACTIVE
+    again = starts[1:]  # the first: the set-up's own
+    assert len(again) == 2, starts  # at 0.5 and 1.0 s into the wait, then drive 5 answered
+    for a, b in itertools.pairwise(again):
+        assert b - a == pytest.approx(0.5, abs=0.0021)
+    for t in again:  # each in the first period past a half second
+        assert t % 0.5 < 0.0021 + 1e-9, t
+
+
+def test_a_torque_limit_beyond_what_0x6072_holds_is_written_at_its_ceiling(tmp_path):
+    """0x6072 is UNSIGNED16 per mille of the rated torque: a winch limit of 5 N·m over a
+    rated 0.05 N·m (100,000 ‰) is written as 0xFFFF, not wrapped."""
+    f = tmp_path / "r.toml"
+    f.write_text(f'base = "{CONFIG / "seed000.toml"}"\n[drives]\nrated_torque = 0.05\n')
+    model = in_torque_mode(load_robot(f))
+    script = Cia402Script(range(1, 9), rated_mnm=50)
+    drv, _ = make(model, script)
+    with drv:
+        drv.configure()
+    assert {script.objects[n][(p.OD_MAX_TORQUE, 0)] for n in range(1, 9)} == {0xFFFF}
+
+
+def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_them():
+    """Position mode: the SYNC held up past a quarter of a period after the RPDOs (the VM
+    took the CPU between them) sends the targets again for the SYNC's instant; held up less,
+    once only."""
+    from sim_backend.network import LockStep
+
+    def resent(hold: float) -> int:
+        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+            d = ls.driver
+            d.configure()
+            d.activate()
+            base = d.read(ls.net.time).position.copy()
+            calls = []
+            clock = d.clock
+
+            def held_clock():  # the write's first clock read, then ``hold`` s later
+                calls.append(1)
+                return clock() + (hold if len(calls) > 1 else 0.0)
+
+            t = ls.net.time
+            d.read(t)
+            d.clock = held_clock
+            d.write(t, np.zeros(8), targets=base)
+            d.clock = clock
+            return d.resent_targets
+
+    period = 0.004
+    assert resent(0.2 * period) == 0
+    assert resent(0.5 * period) == 1
