@@ -114,3 +114,11 @@ def test_grippers_drives_in_torque_mode_send_the_shorter_rpdo():
     assert bl.bits_per_cycle == frame_bits(1) + 6 * frame_bits(8) + 2 * frame_bits(4) + 8 * 135
     assert "6 x RPDO1 controlword+position+torque offset (8 B)" in bl.frames
     assert "2 x RPDO1 controlword+torque (4 B)" in bl.frames
+
+
+def test_the_heartbeats_are_every_drives_and_the_controllers(seed000):
+    """At 10 Hz each: 8 drives and the controller, 9 one-byte CiA 301 heartbeats (65 bit-times
+    each, worst case) = 5,850 bit/s, 0.585 % of 1 Mbit/s on top of the cyclic frames."""
+    (quiet,) = bus_loads(seed000.drives, 500.0, heartbeat_rate=0.0)
+    (beating,) = bus_loads(seed000.drives, 500.0, heartbeat_rate=10.0)
+    assert beating.load - quiet.load == pytest.approx(9 * 65 * 10 / 1e6, rel=1e-12)

@@ -371,3 +371,43 @@ def test_drive_mode_by_default(tmp_path):
     assert [d.mode_of(c) for c in range(8)] == ["cst"] + ["csp"] * 6 + ["cst"]
     torque = dataclasses.replace(d, mode="cst")
     assert [torque.mode_of(c) for c in range(8)] == ["cst"] * 8
+
+
+def with_key(table: str, line: str) -> str:
+    """BASE with ``line`` in ``[table]``: in place of the key's own line where the file sets
+    it, else at the top of the table (added when the file has none)."""
+    key = line.split(" = ")[0]
+    if re.search(rf"^{key} = ", BASE, re.M):
+        return sub(rf"^{key} = .*$", line)
+    header = f"[{table}]"
+    if re.search(rf"^{re.escape(header)}", BASE, re.M):
+        return sub(rf"^{re.escape(header)}.*$", f"{header}\n{line}")
+    return f"{BASE}\n{header}\n{line}\n"
+
+
+@pytest.mark.parametrize(
+    ("table", "line", "expected"),
+    [
+        ("control", "rate = 20000.0", "control.rate = 20000 Hz must be <= 10000"),
+        ("control", "disturbance_bandwidth = 50.0",
+         "control.disturbance_bandwidth = 50 Hz must be <= 5"),
+        ("control", "force_feedback = 11.0",
+         "control.force_feedback = 11 × the lowest mode must be <= 10"),
+        ("control", "jog_deadman = 6.0", "control.jog_deadman = 6 s must be <= 5"),
+        ("control.tda", "nu = 1.5", "control.tda.nu = 1.5 must be <= 1"),
+        ("control.safety", "max_tension_disagreement = 3.0",
+         "control.safety.max_tension_disagreement = 3 of the tension range must be <= 1"),
+        ("control.realtime", "sleep_margin = 0.02",
+         "control.realtime.sleep_margin = 0.02 s must be <= 0.01"),
+        ("control.realtime", "sched_priority = 100",
+         "control.realtime.sched_priority = 100 must be <= 99"),
+    ],
+    ids=lambda v: v if isinstance(v, str) and "=" not in v else None,
+)
+def test_every_bounded_control_setting_refuses_a_value_above_its_bound(
+    tmp_path, table, line, expected
+):
+    """The upper bounds a setting's rule names (a disagreement beyond the whole tension range
+    would never find a slipped cable; an observer beyond 5 Hz meets the platform's modes)."""
+    errors = errors_of(tmp_path, with_key(table, line))
+    assert any(expected in e for e in errors), errors

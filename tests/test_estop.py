@@ -67,3 +67,23 @@ def test_an_estop_mid_move_is_its_own_state_until_the_chain_closes_and_a_reset()
         assert c.data.state is State.ENABLED
         assert np.linalg.norm(cl.plant.position - [1.6, 0.35, 0.55]) < 2e-3
         assert not any("FAULT" in e for e in events(cl)), events(cl)
+
+
+def test_the_estops_drop_is_where_the_platform_went_with_its_sign():
+    """The e-stop's report: from where the chain opened to where the platform came to rest,
+    signed per axis in the base frame (a platform that sank 3.2 mm reads −3.2 in z), once
+    at rest for REST_FOR s."""
+    from cdprctl.control.estop import EmergencyStop
+    from drivers.errors import SafeTorqueOffError
+
+    stop = EmergencyStop()
+    start = np.array([1.5, 0.35, 0.59])
+    stop.enter(0.0, start, SafeTorqueOffError(2, 3, 0x8A88, "STO"))
+    fell = start + np.array([0.001, 0.0, -0.0032])
+    assert stop.watch(0.1, fell, speed=0.05) is None  # moving
+    t = 0.2
+    while (event := stop.watch(t, fell, speed=0.0)) is None:
+        t += 0.01
+        assert t < 1.0
+    np.testing.assert_allclose(stop.drop, [0.001, 0.0, -0.0032], atol=1e-12)
+    assert "[+1.0, +0.0, -3.2] mm" in event and "3.4 mm from where the chain opened" in event

@@ -396,6 +396,24 @@ def test_the_simulated_axis_takes_its_limits_and_starts_where_it_stands(rowc_odr
     assert axis.error == 0x8000 and axis.state is po.AxisState.IDLE and plant.brake[2]
 
 
+def test_the_simulated_axis_in_torque_control_gives_no_more_than_its_limit(rowc_odrive):
+    """Set_Input_Torque beyond the axis's torque limit (a real ODrive clamps to its current
+    limit): the motor gets the limit, either sign — a simulated drive that gave more would
+    hide a controller asking for it."""
+    from drivers.odrive import protocol as po
+    from sim_backend.drives.odrive import ODriveAxis
+    from sim_backend.plant import CdprPlant
+
+    plant = CdprPlant(rowc_odrive)
+    axis = ODriveAxis(3, 2, plant, 2.6, 0.1)
+    send = lambda cmd, data: axis.on_frame(cmd, data, False, 0.0)  # noqa: E731
+    send(SET_CONTROLLER_MODE, struct.pack("<II", po.CONTROL_MODE_TORQUE, PASSTHROUGH))
+    send(SET_AXIS_STATE, struct.pack("<I", CLOSED_LOOP))
+    for asked, given in ((10.0, 2.6), (-10.0, -2.6), (1.5, 1.5)):  # N·m
+        send(SET_INPUT_TORQUE, struct.pack("<f", asked))
+        assert plant.motor_torque[2] == pytest.approx(given)
+
+
 def test_the_bus_load_of_four_axes_in_position_mode():
     """A cycle of four axes: Set_Input_Pos, encoder estimates and torques, 8 bytes each, 135
     bits with worst-case stuffing (Davis et al. 2007, eq. (1)), and the RTR for the torques, no

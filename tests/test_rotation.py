@@ -48,3 +48,12 @@ def test_exp_matches_axis_rotation():
 def test_skew_is_cross_product():
     a, b = np.array([1.0, -2.0, 0.5]), np.array([0.3, 0.2, -4.0])
     np.testing.assert_allclose(skew(a) @ b, np.cross(a, b))
+
+
+@pytest.mark.parametrize("pitch", [math.pi / 2, -math.pi / 2])
+def test_at_gimbal_lock_the_angles_given_back_make_the_same_rotation(pitch):
+    """At pitch ±90° only roll ± yaw is defined: the angles returned may differ from those
+    given, the rotation they make may not (the record's and the telemetry's pose)."""
+    for roll, yaw in [(0.0, 0.3), (0.4, -1.1), (-2.0, 2.5)]:
+        R = rpy_to_matrix(roll, pitch, yaw)
+        np.testing.assert_allclose(rpy_to_matrix(*matrix_to_rpy(R)), R, atol=1e-9)

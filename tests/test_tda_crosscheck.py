@@ -344,6 +344,21 @@ def test_never_raises_never_nan_never_ok_out_of_limits(rowc, method):
             assert out.residual < 1e-6
 
 
+@pytest.mark.parametrize("method", list(TDAMethod))
+def test_an_unusable_solve_gives_the_last_tensions_within_the_limits(rowc, method):
+    """A wrench no solve can use (NaN): the last tensions, clipped to [t_min, t_max] — last
+    tensions from beyond the limits (the limits lowered since) come back within them."""
+    td = TensionDistributor(rowc, TDAOptions(method=method))
+    d = KinematicsData(rowc)
+    inverse_kinematics(rowc, d, rowc.home.position, rowc.home.rotation)
+    k = rowc.cable_stiffness(d.length)
+    prev = np.r_[1.5 * rowc.tension_max[:4], 0.5 * rowc.tension_min[4:]]  # N
+    out = td.solve(d.W, np.full(6, np.nan), k=k, kin=d, t_prev=prev)
+    assert out.status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR)
+    expected = np.r_[rowc.tension_max[:4], rowc.tension_min[4:]]
+    np.testing.assert_array_equal(out.tensions, expected)
+
+
 def test_options_validated_outside_the_loop(seed000):
     from cdprctl.tda import ImposedQuantity, Imposition
 

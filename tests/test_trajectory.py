@@ -111,3 +111,43 @@ def test_a_stop_decelerates_to_rest_within_the_limits():
     np.testing.assert_allclose(tr.velocity, 0.0, atol=1e-9)
     assert HOME[0] < x[-1, 0] < HOME[0] + 0.8  # stopped short of the target
     check_limits(np.vstack([HOME, x]), C.period, 1.0, 1.0)
+
+
+def run_to_rest(tr: Trajectory, cycles: int = 20000) -> tuple[float, float, int]:
+    """Update until finished: (peak |velocity|, peak |acceleration| along x, cycles)."""
+    v = a = 0.0
+    for n in range(cycles):
+        tr.update()
+        v, a = max(v, abs(tr.velocity[0])), max(a, abs(tr.acceleration[0]))
+        if tr.finished:
+            return v, a, n + 1
+    raise AssertionError("the trajectory never finished")
+
+
+def test_a_speed_or_acceleration_scale_above_one_gives_the_configured_limits():
+    """The scales only slow a move down: 3 is 1 (a command's scale is also checked at the
+    gateway; this is the second line)."""
+    tr = Trajectory(ROWC, C.period)
+    tr.reset(HOME)
+    tr.set_target(HOME + np.array([0.6, 0, 0, 0, 0, 0]), speed_scale=3.0, accel_scale=3.0)
+    v, a, _ = run_to_rest(tr)
+    assert v <= tr.limits[0] * (1 + 1e-9) and a <= tr.acc_limits[0] * (1 + 1e-9)
+    assert v > 0.99 * tr.limits[0]  # it did reach its limit
+
+
+def test_a_stop_brakes_at_the_full_acceleration_whatever_the_moves_scale():
+    """A move at a tenth of the acceleration, stopped at speed: the stop (stop, pause, abort,
+    the controlled stop) brakes at the configured acceleration, well within half the distance
+    the move's own tenth would need."""
+    tr = Trajectory(ROWC, C.period)
+    tr.reset(HOME)
+    tr.set_target(HOME + np.array([0.8, 0, 0, 0, 0, 0]), accel_scale=0.1)
+    for _ in range(400):
+        tr.update()
+    x, v = float(tr.position[0]), float(tr.velocity[0])
+    assert v > 0.1  # m/s: still speeding up
+    tr.stop_here()
+    _, a, _ = run_to_rest(tr)
+    slow = v * v / (2 * 0.1 * tr.acc_limits[0])  # m: braking at the move's tenth
+    assert float(tr.position[0]) - x < 0.5 * slow
+    assert a > 0.5 * tr.acc_limits[0]

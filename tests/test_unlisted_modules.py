@@ -1,8 +1,11 @@
 """Rules of modules outside the mutation targets, each against a reference written out here:
-bugs an independent check planted there (one at a time, in a scratch copy) that no test
-caught — the wrench the cables must hold, the soft limits' inertial load, the telemetry's
-fault kind, the wrench observer's bandwidth, the estimator's sample instants, the
-distribution's tension margin. Each test fails on its planted bug."""
+bugs independent checks planted there (one at a time, in a scratch copy) that no test
+caught — the wrench the cables must hold, the soft limits' inertial load and their batch
+shortcut, the telemetry's fault kind, the wrench observer's bandwidth, the estimator's
+sample instants, the distribution's tension margin, a platform-frame jog, the pose loop's
+anti-windup. Each test fails on its planted bug. (The second check's other finds are held in
+their modules' own test files: rotation, trajectory, config, busload, tda, estop, the
+simulated ODrive.)"""
 
 from __future__ import annotations
 
@@ -203,3 +206,50 @@ def test_the_distribution_keeps_its_tension_margin_from_both_limits():
         assert np.all(t >= lo - 1e-6) and np.all(t <= hi + 1e-6), (out.status, t)
         inside += bool(np.any(t <= lo + 0.5) or np.any(t >= hi - 0.5))
     assert inside > 5  # the bounds were met, not just stayed away from
+
+
+@pytest.mark.parametrize(
+    "change", [[0, 0, 0, 0, 0, 1.0], [0.5, 0, 0.1, 0, 0, 0]], ids=["turn", "move"]
+)
+def test_a_batch_of_samples_is_checked_as_each_sample_alone(change):
+    """``SoftLimits.check`` of a batch (its one-orientation shortcut for a translation at rest)
+    gives each sample the margin it has checked alone: a turn on the spot, and a translation."""
+    model = load_robot(CONFIG / "rowc.toml")
+    lim = SoftLimits(model)
+    home = np.r_[model.home.position, np.zeros(3)]
+    samples = home + np.linspace(0.0, 0.6, 7)[:, None] * np.array(change)
+    batch, _ = lim.check(samples)
+    alone = np.array([lim.check(s[None])[0][0] for s in samples])
+    np.testing.assert_allclose(batch, alone, rtol=1e-12)
+    assert np.ptp(alone) > 1.0  # N: the samples' margins differ
+
+
+def test_a_platform_frame_jog_goes_along_the_platforms_axes():
+    """A jog in the platform frame from a pose turned 0.15 rad about z: +x of the platform is
+    (cos 0.15, sin 0.15, 0) in the base frame."""
+    from cdprctl.control.commands import Command, CommandKind
+    from cdprctl.control.jog import Jog
+    from cdprctl.motion.trajectory import Trajectory
+
+    model = load_robot(CONFIG / "rowc.toml")
+    tr = Trajectory(model, 0.004)
+    tr.reset(np.r_[model.home.position, 0.0, 0.0, 0.15])
+    jog = Jog(model, ControlData(model.n_cables, 0), tr, SoftLimits(model))
+    cmd = Command(CommandKind("jog"), velocity=np.array([0.1, 0, 0, 0, 0, 0]), frame="platform")
+    assert jog.plan(cmd)
+    d = cmd.target[:3] - tr.position[:3]
+    np.testing.assert_allclose(d / np.linalg.norm(d), [np.cos(0.15), np.sin(0.15), 0.0], atol=1e-9)
+
+
+def test_the_pose_loops_integral_term_is_bounded_at_ten_per_second_squared():
+    """Torque mode (the pose loop on): each axis's integral is clamped where its term
+    ki·∫e reaches 10 m/s² (rad/s²) — the anti-windup wrench.py states, whatever the
+    bandwidth; position mode: the loop off, nothing to wind up."""
+    from conftest import in_torque_mode
+
+    model = in_torque_mode(load_robot(CONFIG / "rowc.toml"))
+    pose = _controller_at_home(model).pose
+    assert len(set(pose.bandwidth.tolist())) > 1  # rowc's axes differ (y at 0.6 Hz)
+    np.testing.assert_allclose(pose.ki * pose.integral_limit, 10.0, rtol=1e-12)
+    off = _controller_at_home(load_robot(CONFIG / "rowc.toml")).pose
+    assert not off.ki.any() and not off.integral_limit.any()
