@@ -6,7 +6,16 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test hil lint bench mutation clean
+.PHONY: help run test hil lint bench mutation clean
+
+help:
+	@echo "make run       the daemon on the simulated robot (rowc, 250 Hz; Ctrl-C stops it)"
+	@echo "make test      lint, type check and the whole test suite (what CI runs)"
+	@echo "make hil       the hardware-in-the-loop tests on a kernel vcan0 (docs/hil.md)"
+	@echo "make bench     the kinematics benchmark (benchmarks/ has the others)"
+	@echo "make mutation  mutation testing (hours; MODULES=\"supervisor torques\" JOBS=2 for a"
+	@echo "               selection; docs/mutation.md; tools/mutation.py --help)"
+	@echo "make clean     remove the venv and the caches"
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "cdprctl needs Python >= 3.11, found " + sys.version.split()[0])'
@@ -35,7 +44,7 @@ hil: $(STAMP)
 # Mutation testing of the safety-relevant modules (docs/mutation.md); hours, not part of `test`.
 # MODULES="supervisor torques" JOBS=2 make mutation  runs a selection
 mutation: $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,mutation]'
+	$(BIN)/python -c 'import cosmic_ray' 2>/dev/null || $(BIN)/python -m pip install --quiet -e '.[dev,mutation]'
 	$(BIN)/python tools/mutation.py --jobs $(or $(JOBS),1) $(MODULES)
 
 bench: $(STAMP)

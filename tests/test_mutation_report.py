@@ -61,3 +61,38 @@ def test_mutants_outside_a_targets_scope_are_left_out_of_its_score_and_said(tmp_
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "- m: 2 mutants outside kept left out — too slow" in text
+
+
+def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_printed(
+    tmp_path, monkeypatch
+):
+    """A module whose session is not complete shows its survivors but stays out of the
+    headline score, named with what is left; an equivalent written with the operator as the
+    report prints it (no ``core/``) matches; an entry matching nothing is named by its line."""
+    (tmp_path / "m.py").write_text("def f(x):\n    return x + 1\n")
+    t = mu.Target("m", "m.py", "tests/test_m.py")
+    monkeypatch.setattr(mu, "OUT", tmp_path / "out")
+    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
+    monkeypatch.setattr(mu, "TARGETS", [t])
+    monkeypatch.setattr(mu, "load_equivalents", lambda: [
+        {"module": "m.py", "operator": "NumberReplacer", "line": r"return x \+ 1",
+         "why": "a test of the matching"},
+        {"module": "m.py", "operator": "core/ReplaceTrueWithFalse", "line": "gone", "why": "-"},
+    ])  # fmt: skip
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "m.sqlite").touch()
+    survivor = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
+                         "- return x + 1 / + return x + 2", "survived")  # fmt: skip
+    alive = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Mul", 2, "return x + 1",
+                      "- return x + 1 / + return x * 1", "survived")  # fmt: skip
+    pending = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
+                        "- return x + 1 / + return x - 1", "pending")  # fmt: skip
+    entry = mu.results_entry(t, tmp_path, [survivor, alive, pending], None)
+    mu.RESULTS.write_text(json.dumps({"m": entry}))
+    (tmp_path / "out" / "m.sqlite").unlink()
+    text = mu.report([t], tmp_path)
+    assert "**No module's session is complete yet.**" in text
+    assert "Not yet in the score: m (1 of 3 not run yet)." in text
+    assert "`m.py:2` ReplaceBinaryOperator_Add_Mul: `- return x + 1 / + return x * 1`" in text
+    assert "— a test of the matching" in text  # the NumberReplacer, written without core/
+    assert "- entry 2: `m.py` core/ReplaceTrueWithFalse `gone`" in text

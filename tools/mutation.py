@@ -321,14 +321,15 @@ def mutants_of(entry: dict) -> list[Mutant]:
 
 def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]:
     """Survivors written down as equivalent (module or "*", and regular expressions of the
-    operator and of the line's text, stripped);
+    operator, with or without cosmic-ray's ``core/``, and of the line's text, stripped);
     returns the indices of the entries that matched nothing (stale)."""
     used: set[int] = set()
     for m in mutants:
         if m.outcome != "survived":
             continue
         for i, e in enumerate(equivalents):
-            if (e["module"] in ("*", m.module) and re.fullmatch(e["operator"], m.operator)
+            operator = "core/" + e["operator"].removeprefix("core/")
+            if (e["module"] in ("*", m.module) and re.fullmatch(operator, m.operator)
                     and re.fullmatch(e["line"], m.source)
                     and re.search(e.get("mutant", ""), m.diff.split(" / +")[-1])):  # fmt: skip
                 m.equivalent = e["why"]
@@ -342,6 +343,7 @@ def report(targets: list[Target], tree: Path) -> str:
     """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
     rows, survivors, totals, scoped = [], [], [0, 0, 0, 0], []
+    waiting: list[str] = []  # modules the score does not yet hold, each with why
     all_mutants: list[Mutant] = []
     kept = load_results()
     seconds: dict[str, int | None] = {}
@@ -361,10 +363,12 @@ def report(targets: list[Target], tree: Path) -> str:
         ms = [m for m in all_mutants if m.module == t.module]
         if not ms:
             rows.append(f"| {t.name} | `{t.module}` | not run | | | | | | |")
+            waiting.append(f"{t.name} (not run)")
             continue
         changed = t.name in kept and kept[t.name]["sha256"] != module_digest(tree, t.module)
         if changed or session_is_stale(t, tree, ms):  # figures of a file no longer there
             out_of_date.add(t.module)
+            waiting.append(f"{t.name} (the file changed since its session: `--fresh {t.name}`)")
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue
@@ -384,12 +388,14 @@ def report(targets: list[Target], tree: Path) -> str:
         wall = f"{seconds[t.name] / 60:.0f} min" if seconds.get(t.name) else "?"
         rows.append(f"| {t.name} | `{t.module}` | {len(run)} | {len(killed)} | {len(alive)} | "
                     f"{len(equiv)} | {score} | {wall} | {t.tests} |")  # fmt: skip
+        survivors += [(t, m) for m in alive]
+        if pending:  # a partial session: listed, not yet in the score
+            waiting.append(f"{t.name} ({pending} of {len(ms)} not run yet)")
+            continue
         for i, v in enumerate((len(run), len(killed), len(alive), len(equiv))):
             totals[i] += v
-        survivors += [(t, m) for m in alive]
     denom = totals[0] - totals[3]
-    done = sum(1 for r in rows if "not run |" not in r)
-    complete = sum(1 for r in rows if "not run" not in r)
+    complete = len(targets) - len(waiting)
     lines = [
         "# Mutation testing",
         "",
@@ -402,10 +408,11 @@ def report(targets: list[Target], tree: Path) -> str:
         f"{os.cpu_count()} CPUs, cosmic-ray {cosmic_ray_version()}.",
         "",
         (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
-         f" — over the mutants run so far, in {done} of {len(targets)} modules ({complete} "
-         "complete); a module not run or not complete is not yet held to it") if denom
-        else "**No mutants run yet.**",
+         f" in the {complete} of {len(targets)} modules whose session is complete and of the "
+         "file as it is") if denom
+        else "**No module's session is complete yet.**",
         f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
+        *(["", f"Not yet in the score: {'; '.join(waiting)}."] if waiting else []),
         "",
         "| module | file | run | killed | survived | equivalent | score | wall time | tests |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
@@ -439,9 +446,11 @@ def report(targets: list[Target], tree: Path) -> str:
                      f"— {m.equivalent}")  # fmt: skip
     RESULTS.write_text(json.dumps(kept, indent=1, sort_keys=True) + "\n")
     if stale:
-        stale_list = ", ".join(str(i + 1) for i in sorted(stale))
         lines += ["", "Entries of `tools/mutation_equivalents.toml` that matched no survivor "
-                  f"(the code changed): {stale_list}"]  # fmt: skip
+                  "(the code or the tests changed: delete or correct them):", ""]  # fmt: skip
+        lines += [f"- entry {i + 1}: `{equivalents[i]['module']}` "
+                  f"{equivalents[i]['operator']} `{equivalents[i]['line']}`" for i in sorted(stale)]
+
     return "\n".join(lines) + "\n"
 
 
@@ -455,7 +464,7 @@ def cosmic_ray_version() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+    ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     ap.add_argument("modules", nargs="*", help="module names (--list); default every one")
     ap.add_argument("--jobs", type=int, default=1, help="modules run at once (one tree each)")
