@@ -10,7 +10,7 @@ import itertools
 import numpy as np
 import pytest
 from conftest import CONFIG, in_torque_mode
-from test_drivers_frames import Cia402Script, cycles, frame, make
+from test_drivers_frames import Cia402Script, active_rowc, cycles, frame, make
 
 from cdprctl.model import load_robot
 from drivers import DriveFaultError, Lifecycle
@@ -106,14 +106,10 @@ def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_
     """Position mode: the SYNC held up past a quarter of a period after the RPDOs (the VM
     took the CPU between them) sends the targets again for the SYNC's instant; held up less,
     once only."""
-    from sim_backend.network import LockStep
 
     def resent(hold: float) -> int:
-        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        with active_rowc() as (ls, base):
             d = ls.driver
-            d.configure()
-            d.activate()
-            base = d.read(ls.net.time).position.copy()
             calls = []
             clock = d.clock
 

@@ -3,6 +3,7 @@ that records what the driver sends and answers from a table, in simulated time."
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import struct
@@ -555,19 +556,27 @@ def test_an_implausible_position_is_counted_against_its_drive_alone():
         assert list(ls.driver.liveness.implausible) == [0, 0, 0, 1, 0, 0, 0, 0]
 
 
+@contextlib.contextmanager
+def active_rowc():
+    """rowc's CiA 402 drives in lock-step (250 Hz), configured and enabled: (the lock-step,
+    the positions they stand at, rad)."""
+    from sim_backend.network import LockStep
+
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()
+        ls.driver.activate()
+        yield ls, ls.driver.read(ls.net.time).position.copy()
+
+
 def test_a_cycle_held_up_before_its_send_carries_its_targets_to_the_send():
     """Position mode, targets moving at 2.5 rad/s: a cycle whose send comes 3 ms after its
     time (the VM took the CPU mid-cycle) sends its targets for the send's instant — 3 ms on at
     their rate, 0.0075 rad, 78 counts at rowc's 65536 a turn — not for the instant long
     past."""
-    from sim_backend.network import LockStep
 
     def sent_target(held: float) -> int:
-        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        with active_rowc() as (ls, base):
             d = ls.driver
-            d.configure()
-            d.activate()
-            base = d.read(ls.net.time).position.copy()
             for k in range(3):
                 t = ls.net.time  # the cycle's time
                 d.read(t)

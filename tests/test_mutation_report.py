@@ -12,23 +12,31 @@ sys.path.insert(0, str(ROOT / "tools"))
 import mutation as mu  # noqa: E402
 
 
+def kept_only(tmp_path, monkeypatch, t, mutants, seconds, equivalents=()):
+    """The report's inputs with no session at hand: ``mutants`` kept as ``t``'s results (of
+    a session dated by its file, then gone), ``equivalents`` as the written-down entries;
+    returns the kept entry."""
+    monkeypatch.setattr(mu, "OUT", tmp_path / "out")
+    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
+    monkeypatch.setattr(mu, "load_equivalents", lambda: list(equivalents))
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / f"{t.name}.sqlite").touch()  # the session's day
+    entry = mu.results_entry(t, tmp_path, mutants, seconds)
+    mu.RESULTS.write_text(json.dumps({t.name: entry}))
+    (tmp_path / "out" / f"{t.name}.sqlite").unlink()
+    return entry
+
+
 def test_kept_results_make_the_report_until_the_module_changes(tmp_path, monkeypatch):
     module = tmp_path / "m.py"
     module.write_text("def f(x):\n    return x + 1\n")
     t = mu.Target("m", "m.py", "tests/test_m.py")
-    monkeypatch.setattr(mu, "OUT", tmp_path / "out")  # no session at hand
-    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
-    monkeypatch.setattr(mu, "load_equivalents", lambda: [])
     survivor = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
                          "- return x + 1 / + return x + 2", "survived")  # fmt: skip
     killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
                        "- return x + 1 / + return x - 1", "killed")  # fmt: skip
-    (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "m.sqlite").touch()  # the session's day
-    entry = mu.results_entry(t, tmp_path, [killed, killed, survivor], 60)
+    entry = kept_only(tmp_path, monkeypatch, t, [killed, killed, survivor], 60)
     assert entry["killed"] == 2 and len(entry["others"]) == 1
-    mu.RESULTS.write_text(json.dumps({"m": entry}))
-    (tmp_path / "out" / "m.sqlite").unlink()
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 3 | 2 | 1 | 0 | 66.7 % | 1 min |" in text
     assert "`m.py:2` NumberReplacer: `- return x + 1 / + return x + 2`" in text
@@ -45,19 +53,12 @@ def test_mutants_outside_a_targets_scope_are_left_out_of_its_score_and_said(tmp_
 
     assert scope_lines(source, ["kept"]) == {1, 2}
     t = mu.Target("m", "m.py", "tests/test_m.py", scope=("kept",), left_out="too slow")
-    monkeypatch.setattr(mu, "OUT", tmp_path / "out")
-    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
-    monkeypatch.setattr(mu, "load_equivalents", lambda: [])
-    (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "m.sqlite").touch()
     killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
                        "- return x + 1 / + return x - 1", "killed")  # fmt: skip
     outside = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Mul_Add", 6, "return x * 2",
                         "- return x * 2 / + return x + 2", "out_of_scope")  # fmt: skip
-    entry = mu.results_entry(t, tmp_path, [killed, outside, outside], 60)
+    entry = kept_only(tmp_path, monkeypatch, t, [killed, outside, outside], 60)
     assert entry["killed"] == 1 and entry["out_of_scope"] == 2 and entry["others"] == []
-    mu.RESULTS.write_text(json.dumps({"m": entry}))
-    (tmp_path / "out" / "m.sqlite").unlink()
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "- m: 2 mutants outside kept left out — too slow" in text
@@ -71,25 +72,19 @@ def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_pri
     report prints it (no ``core/``) matches; an entry matching nothing is named by its line."""
     (tmp_path / "m.py").write_text("def f(x):\n    return x + 1\n")
     t = mu.Target("m", "m.py", "tests/test_m.py")
-    monkeypatch.setattr(mu, "OUT", tmp_path / "out")
-    monkeypatch.setattr(mu, "RESULTS", tmp_path / "results.json")
     monkeypatch.setattr(mu, "TARGETS", [t])
-    monkeypatch.setattr(mu, "load_equivalents", lambda: [
+    equivalents = [
         {"module": "m.py", "operator": "NumberReplacer", "line": r"return x \+ 1",
          "why": "a test of the matching"},
         {"module": "m.py", "operator": "core/ReplaceTrueWithFalse", "line": "gone", "why": "-"},
-    ])  # fmt: skip
-    (tmp_path / "out").mkdir()
-    (tmp_path / "out" / "m.sqlite").touch()
+    ]  # fmt: skip
     survivor = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
                          "- return x + 1 / + return x + 2", "survived")  # fmt: skip
     alive = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Mul", 2, "return x + 1",
                       "- return x + 1 / + return x * 1", "survived")  # fmt: skip
     pending = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
                         "- return x + 1 / + return x - 1", "pending")  # fmt: skip
-    entry = mu.results_entry(t, tmp_path, [survivor, alive, pending], None)
-    mu.RESULTS.write_text(json.dumps({"m": entry}))
-    (tmp_path / "out" / "m.sqlite").unlink()
+    kept_only(tmp_path, monkeypatch, t, [survivor, alive, pending], None, equivalents)
     text = mu.report([t], tmp_path)
     assert "**No module's session is complete yet.**" in text
     assert "Not yet in the score: m (1 of 3 not run yet)." in text
