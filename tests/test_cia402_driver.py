@@ -127,3 +127,49 @@ def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_
     period = 0.004
     assert resent(0.2 * period) == 0
     assert resent(0.5 * period) == 1
+
+
+def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed):
+    """Each kind of frame has its length (CiA 301; cdprctl's mapping): a 4-byte TPDO1 is no
+    velocity, an 8-byte TPDO2 no EMCY and no SDO answer, a 6-byte TPDO2 no velocity, an empty
+    heartbeat no sign of life — each one frame ignored, nothing of the drive changed."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        before = drv.stats.frames_ignored
+        velocity, last_hb = drv.states.velocity.copy(), drv.liveness.last_hb.copy()
+        for arb, data in [
+            (p.TPDO1 + 3, b"\x01\x02\x03\x04"),
+            (p.TPDO2 + 3, bytes(range(1, 9))),
+            (p.TPDO2 + 3, bytes(range(1, 7))),
+            (p.HEARTBEAT + 3, b""),
+        ]:
+            peer.bus.send(frame(arb, data))
+        drv.read(peer.t + 0.001)
+        assert drv.stats.frames_ignored == before + 4
+        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[2]) == 0
+        assert 2 not in drv._sdo_reply
+        np.testing.assert_array_equal(drv.states.velocity, velocity)
+        np.testing.assert_array_equal(drv.liveness.last_hb, last_hb)
+
+
+def test_a_cycle_whose_time_is_ahead_of_the_clock_sends_its_targets_for_its_time():
+    """Position mode, targets moving at 2 rad/s: a write whose cycle time is 0.5 ms ahead of
+    the clock (a time from another clock, or a wake-up before it) sends the targets of its
+    time — carried on for a late send, never carried back: a target behind the last one
+    sent is a reversal of the drive's interpolation (0.5 ms: below the quarter period past
+    which they would go out again for the SYNC anyway)."""
+
+    def sent_target(ahead: float) -> int:
+        with active_rowc() as (ls, base):
+            d = ls.driver
+            for k in range(3):
+                t = ls.net.time + (ahead if k == 2 else 0.0)
+                d.read(ls.net.time)
+                d.write(t, np.zeros(8), targets=base + 0.01 * k)
+                ls.net.advance(0.004)
+            return int(ls.net.drives[0].axis.target_counts)
+
+    assert sent_target(0.0005) == sent_target(0.0)

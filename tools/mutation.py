@@ -1,7 +1,8 @@
 """Mutation testing of the modules where a wrong line is unsafe or silent (``make mutation``).
 
 Runs cosmic-ray (https://cosmic-ray.readthedocs.io) module by module, each against the test
-files that cover it, in a scratch copy of the working tree (``out/mutation/tree-N``: cosmic-ray
+files that cover it, in a scratch copy of the working tree (``out/mutation/tree-<module>``, made
+when the module's turn comes, so tests written meanwhile are in it: cosmic-ray
 writes each mutant into the file on disk, so the checkout itself is never touched). Numba
 kernels are mutated like any other code: each mutant's process recompiles the kernels of the
 mutated file (numba's cache is keyed on the source file's stamp), the other files' kernels
@@ -497,20 +498,20 @@ def main(argv: list[str] | None = None) -> int:
         with logfile.open("a") as f:
             f.write(f"{dt.datetime.now().isoformat(timespec='seconds')} {msg}\n")
 
-    trees = [OUT / f"tree-{k}" for k in range(max(1, a.jobs))]
     if not a.report:
-        for tr in trees:
-            sync_tree(tr)
         queue = list(chosen)
 
-        def worker(tree: Path) -> None:
+        def worker(_: int) -> None:
             while queue:
                 t = queue.pop(0)
+                tree = OUT / f"tree-{t.name}"  # its own: runs of other modules may go on
+                sync_tree(tree)
                 log(f"{t.name}: {t.module} against {t.tests}")
                 run_target(t, tree, log, a.fresh, a.survivors)
 
-        with ThreadPoolExecutor(len(trees)) as pool:
-            list(pool.map(worker, trees))
+        jobs = max(1, a.jobs)
+        with ThreadPoolExecutor(jobs) as pool:
+            list(pool.map(worker, range(jobs)))
     # against the working tree: a copy may hold a mutant of a run going on (syncing it for the
     # report had put the original back under that mutant's tests)
     REPORT.write_text(report(TARGETS, ROOT))

@@ -140,7 +140,7 @@ class Cia402Driver(CanWinchDriver):
         self.sdo = SdoClient(self)
         self._enable = False
         self._reset_request = 0  # cycles left sending the fault-reset edge
-        self._last_sync = -math.inf  # s (clock): the last SYNC sent
+        self._last_sync = math.nan  # s (clock): the last SYNC sent (nan: none yet)
         self._write_sync = math.nan  # s (clock): the last write's SYNC (nan: it sent none)
         self._last_cycle_sync = -math.inf  # s (clock): the last one the control loop sent
         self._last_hb_sent = -math.inf
