@@ -650,3 +650,22 @@ def test_an_estop_time_is_the_event_it_says():
     assert (ev.time, ev.kind, ev.duration, ev.value) == (8.0, "estop", 4.0, 0)
     assert math.isinf(estop_event("3", "cia402").duration)
     assert "no safety chain" in estop_event("3", "odrive")
+
+
+def test_an_enabled_drive_gives_no_torque_before_its_first_rpdo_and_reports_what_it_gives():
+    """Enabled in torque mode with no RPDO taken yet: no torque, and 0x6077 says 0. With no
+    mode set (0x6060 = 0, its power-on value) a torque it gives is what 0x6077 reports at
+    once — only position mode reports its loop's torque (of the last physics step)."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as rig:
+        axis = rig.net.drives[2].axis
+        axis.od[(p.OD_MODES_OF_OPERATION, 0)] = p.MODE_CST
+        for cw in (0x06, 0x07, 0x0F):
+            axis.apply_controlword(cw)
+        axis.apply(fresh=False)
+        assert axis.state is p.PowerState.OPERATION_ENABLED
+        assert rig.plant.motor_torque[2] == 0.0 and axis.torque_actual_pm() == 0
+        axis.od[(p.OD_MODES_OF_OPERATION, 0)] = 0
+        axis.take(rig.net.time, 200, None, None)
+        axis.apply(fresh=False)
+        assert rig.plant.motor_torque[2] == pytest.approx(0.2 * axis.rated_torque)
+        assert axis.torque_actual_pm() == 200
