@@ -4,6 +4,7 @@ no session is at hand, and refuses them once the module is no longer the file th
 from __future__ import annotations
 
 import json
+import sqlite3
 import sys
 from pathlib import Path
 
@@ -91,3 +92,49 @@ def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_pri
     assert "`m.py:2` ReplaceBinaryOperator_Add_Mul: `- return x + 1 / + return x * 1`" in text
     assert "— a test of the matching" in text  # the NumberReplacer, written without core/
     assert "- entry 2: `m.py` core/ReplaceTrueWithFalse `gone`" in text
+
+
+def test_a_partial_sessions_kills_are_kept_by_key_and_resumed_only_for_the_same_file_and_tests(
+    tmp_path, monkeypatch
+):
+    """The sessions in out/ do not outlive a checkout: a partial session's kills are kept by
+    key, and a new session of the same file and tests marks exactly those as killed."""
+    module = tmp_path / "m.py"
+    module.write_text("def f(x):\n    return x + 1\n")
+    t = mu.Target("m", "m.py", "tests/test_m.py")
+    add_sub = mu.mutant_key("core/ReplaceBinaryOperator_Add_Sub", 2, 13, 0)
+    killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
+                       "- return x + 1 / + return x - 1", "killed", key=add_sub)  # fmt: skip
+    pending = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
+                        "- return x + 1 / + return x + 2", "pending",
+                        key=mu.mutant_key("core/NumberReplacer", 2, 15, 0))  # fmt: skip
+    entry = kept_only(tmp_path, monkeypatch, t, [killed, pending], None)
+    assert entry["killed_keys"] == {add_sub: "killed"}
+    (tmp_path / "out" / "m.sqlite").touch()
+    complete = mu.results_entry(t, tmp_path, [killed], None)
+    assert "killed_keys" not in complete  # a complete session is never resumed
+
+    def session() -> Path:
+        db = tmp_path / "s.sqlite"
+        db.unlink(missing_ok=True)
+        with sqlite3.connect(db) as con:
+            con.execute("CREATE TABLE mutation_specs (job_id, operator_name, occurrence, "
+                        "start_pos_row, start_pos_col)")  # fmt: skip
+            con.execute("CREATE TABLE work_results (worker_outcome, output, test_outcome, "
+                        "diff, job_id)")  # fmt: skip
+            con.executemany("INSERT INTO mutation_specs VALUES (?, ?, ?, ?, ?)",
+                            [("a", "core/ReplaceBinaryOperator_Add_Sub", 0, 2, 13),
+                             ("b", "core/NumberReplacer", 0, 2, 15),
+                             ("c", "core/ReplaceBinaryOperator_Add_Sub", 1, 2, 13)])  # fmt: skip
+        return db
+
+    db = session()
+    assert mu.resume_killed(db, t, tmp_path) == 1
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT job_id, test_outcome FROM work_results").fetchall() == [
+            ("a", "KILLED")
+        ]
+    other_tests = mu.Target("m", "m.py", "tests/test_m.py tests/test_n.py")
+    assert mu.resume_killed(session(), other_tests, tmp_path) == 0
+    module.write_text("def f(x):\n    return x + 2\n")
+    assert mu.resume_killed(session(), t, tmp_path) == 0

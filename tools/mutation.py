@@ -47,6 +47,7 @@ from mutation_equivalents import (  # noqa: E402
     EQUIVALENT_PREFIX,
     OUT_OF_SCOPE_PREFIX,
     load_equivalents,
+    pending_mutants,
     skip_known_equivalents,
     skip_out_of_scope,
 )
@@ -193,6 +194,9 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
         n = skip_out_of_scope(db, tree, t.module, list(t.scope), t.left_out)
         if n:
             log(f"{t.name}: {n} mutants outside {', '.join(t.scope)}, left out")
+        n = 0 if fresh else resume_killed(db, t, tree)
+        if n:
+            log(f"{t.name}: {n} mutants killed in a kept partial session, not run again")
     else:
         if survivors:  # their results dropped: exec runs them again, against today's tests
             with sqlite3.connect(db) as con:
@@ -247,6 +251,11 @@ class Mutant:
     outcome: str  # killed, survived, timeout, incompetent, skipped
     raw_diff: str = ""  # cosmic-ray's unified diff of the mutant
     equivalent: str = ""  # why, where it is written down as equivalent
+    key: str = ""  # operator@row:col#occurrence: the mutant in any session of the same file
+
+
+def mutant_key(operator: str, row: int, col: int, occurrence: int) -> str:
+    return f"{operator}@{row}:{col}#{occurrence}"
 
 
 def read_session(t: Target, tree: Path) -> list[Mutant]:
@@ -278,8 +287,9 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
         raw = (result or {}).get("diff") or ""
         before = old_lines(raw)  # the line as the session found it, else as it is now
         text = before.get(line, source[line - 1] if line <= len(source) else "").strip()
+        key = mutant_key(mu["operator_name"], line, int(mu["start_pos"][1]), mu["occurrence"])
         mutants.append(Mutant(t.module, mu["operator_name"], line, text,
-                              " / ".join(c.strip() for c in changed), outcome, raw))  # fmt: skip
+                              " / ".join(c.strip() for c in changed), outcome, raw, "", key))
         output = (result or {}).get("output") or ""
         if outcome == "survived" and output.startswith(EQUIVALENT_PREFIX):
             mutants[-1].equivalent = output.removeprefix(EQUIVALENT_PREFIX)
@@ -292,7 +302,9 @@ def load_results() -> dict[str, dict]:
 
 def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | None) -> dict:
     """A module's results for tools/mutation_results.json: the digest of the file they are of,
-    the killed as a count, every other mutant whole (survivors and equivalents are listed)."""
+    the killed as a count, every other mutant whole (survivors and equivalents are listed);
+    for a session not yet complete also the killed by key, so that a later session of the same
+    file and tests need not run them again (``resume_killed``)."""
     killed = sum(m.outcome in ("killed", "timeout", "incompetent") for m in mutants)
     rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
              "outcome": m.outcome, "equivalent": m.equivalent}
@@ -301,7 +313,35 @@ def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | N
     return {"module": t.module, "sha256": module_digest(tree, t.module),
             "date": session_date(t), "seconds": seconds, "tests": t.tests, "killed": killed,
             "out_of_scope": sum(m.outcome == "out_of_scope" for m in mutants),
-            "others": rest}  # fmt: skip
+            "others": rest,
+            **({"killed_keys": {m.key: m.outcome for m in mutants
+                                if m.outcome in ("killed", "timeout", "incompetent") and m.key}}
+               if any(m.outcome == "pending" for m in mutants) else {})}  # fmt: skip
+
+
+RESUMED = "resumed from tools/mutation_results.json: "
+
+
+def resume_killed(db: Path, t: Target, tree: Path) -> int:
+    """Mark the pending mutants that a kept, partial session of the same file and the same
+    tests killed as killed again (the sessions in out/ do not outlive a checkout; a kill by
+    today's tests is a kill tomorrow as long as neither changed). Returns how many."""
+    entry = load_results().get(t.name, {})
+    done = entry.get("killed_keys", {})
+    if not done or entry["sha256"] != module_digest(tree, t.module) or entry["tests"] != t.tests:
+        return 0
+    marked = 0
+    with sqlite3.connect(db) as con:
+        for job, op, row, col, occurrence in pending_mutants(con):
+            outcome = done.get(mutant_key(op, row, col, occurrence))
+            if outcome is None:
+                continue
+            test = "INCOMPETENT" if outcome == "incompetent" else "KILLED"
+            output = "timeout" if outcome == "timeout" else RESUMED + entry["date"]
+            con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, diff, "
+                        "job_id) VALUES ('NORMAL', ?, ?, NULL, ?)", (output, test, job))
+            marked += 1
+    return marked
 
 
 def session_date(t: Target) -> str:

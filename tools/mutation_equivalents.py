@@ -45,6 +45,15 @@ def annotation_operators(source: str) -> set[tuple[int, int]]:
     return spots
 
 
+def pending_mutants(con: sqlite3.Connection) -> list[tuple[str, str, int, int, int]]:
+    """A session's mutants without a result: (job id, operator, row, column, occurrence)."""
+    return con.execute(
+        "SELECT m.job_id, m.operator_name, m.start_pos_row, m.start_pos_col, m.occurrence "
+        "FROM mutation_specs m LEFT JOIN work_results r ON m.job_id = r.job_id "
+        "WHERE r.job_id IS NULL"
+    ).fetchall()
+
+
 def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
     """Mark the pending mutants that are equivalent by a rule known beforehand (``|`` in an
     annotation; the module-independent entries of the equivalents file without a ``mutant``
@@ -55,12 +64,7 @@ def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
     rules = [e for e in load_equivalents() if e["module"] == "*" and "mutant" not in e]
     marked = 0
     with sqlite3.connect(db) as con:
-        pending = con.execute(
-            "SELECT m.job_id, m.operator_name, m.start_pos_row, m.start_pos_col "
-            "FROM mutation_specs m LEFT JOIN work_results r ON m.job_id = r.job_id "
-            "WHERE r.job_id IS NULL"
-        ).fetchall()
-        for job, op, row, col in pending:
+        for job, op, row, col, _ in pending_mutants(con):
             why = ""
             if op.startswith("core/ReplaceBinaryOperator_BitOr_") and (row, col) in bars:
                 why = ANNOTATION
@@ -97,11 +101,7 @@ def skip_out_of_scope(db: Path, tree: Path, module: str, scope: list[str], why: 
     inside = scope_lines((tree / module).read_text(), scope)
     marked = 0
     with sqlite3.connect(db) as con:
-        pending = con.execute(
-            "SELECT m.job_id, m.start_pos_row FROM mutation_specs m LEFT JOIN work_results r "
-            "ON m.job_id = r.job_id WHERE r.job_id IS NULL"
-        ).fetchall()
-        for job, row in pending:
+        for job, _, row, _, _ in pending_mutants(con):
             if row not in inside:
                 con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
                             "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
