@@ -38,15 +38,8 @@ from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args, unstretched_lengths
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.hold import equilibrium_tensions
-from sim_backend.physics import (
-    Body,
-    BodyState,
-    Inputs,
-    Jaws,
-    JawState,
-    Winches,
-    physics_kernel,
-)
+from sim_backend.jaw_dynamics import Jaws, JawState
+from sim_backend.physics import Body, BodyState, Inputs, Winches, physics_kernel
 from sim_backend.servo import Servo
 
 

@@ -63,6 +63,8 @@ def test_mutants_outside_a_targets_scope_are_left_out_of_its_score_and_said(tmp_
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "- m: 2 mutants outside kept left out — too slow" in text
+    monkeypatch.setattr(mu, "LEFT_OUT", [{"module": "n.py", "why": "slower still"}])
+    assert "- `n.py`: slower still" in mu.report([t], tmp_path)
 
 
 def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_printed(

@@ -76,6 +76,7 @@ TARGETS_FILE = ROOT / "tools" / "mutation.toml"
 _SPEC = tomllib.loads(TARGETS_FILE.read_text())
 TARGETS = [Target(**{**t, "scope": tuple(t.get("scope", ()))}) for t in _SPEC["target"]]
 EXCLUDE_OPERATORS: list[str] = _SPEC["exclude-operators"]
+LEFT_OUT: list[dict[str, str]] = _SPEC.get("left-out", [])  # modules not mutated, with why
 
 
 def tool(name: str) -> str:
@@ -467,6 +468,8 @@ def report(targets: list[Target], tree: Path) -> str:
         "",
         *([*["Left out of a module (mutated in part, `scope` in `tools/mutation.toml`):"],
            *scoped, ""] if scoped else []),
+        *(["Left out (not mutated, `left-out` in `tools/mutation.toml`):",
+           *[f"- `{x['module']}`: {x['why']}" for x in LEFT_OUT], ""] if LEFT_OUT else []),
         "Modules outside these targets are checked independently: bugs planted one at a time "
         "in a scratch copy; those no test caught have tests now (`tests/test_unlisted_modules.py`"
         " lists them).",
