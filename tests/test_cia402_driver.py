@@ -173,3 +173,24 @@ def test_a_cycle_whose_time_is_ahead_of_the_clock_sends_its_targets_for_its_time
             return int(ls.net.drives[0].axis.target_counts)
 
     assert sent_target(0.0005) == sent_target(0.0)
+
+
+def test_a_drive_found_in_fault_is_not_reset_until_the_operator_asks(seed):
+    """A drive still in FAULT from before cdprctl started: no RPDO1 carries the fault-reset
+    bit (0x80) on the driver's own — a latched fault is cleared only by ``recover`` (the
+    operator's acknowledgement), then with a rising edge."""
+    script = Cia402Script(range(1, 9))
+    script.state[4] = p.PowerState.FAULT
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        cycles(drv, peer, 6)
+
+        def controlwords():
+            return [int.from_bytes(d[:2], "little") for d in peer.sent(p.RPDO1 + 4)]
+
+        assert len(controlwords()) >= 5 and not any(cw & 0x80 for cw in controlwords())
+        assert script.state[4] is p.PowerState.FAULT
+        assert drv.lifecycle is Lifecycle.ERROR and drv.error.cable == 3
+        drv.recover()
+        assert 0x80 in controlwords() and script.state[4] is not p.PowerState.FAULT

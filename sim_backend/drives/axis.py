@@ -52,7 +52,6 @@ class Cia402Axis:
         self.position_gains = position_gains
         self.extrapolate_for = extrapolate_for
         self.state = p.PowerState.SWITCH_ON_DISABLED  # transitions 0 and 1 done at power-on
-        self.transitions: list[int] = []  # CiA 402 transition numbers taken (for tests)
         self.last_controlword = 0
         self.fault_code = 0
         self.torque_pm = 0  # applied: the target torque (mode 10), the offset (mode 8)
@@ -103,10 +102,8 @@ class Cia402Axis:
         elif nxt is not None:
             if self.state is p.PowerState.READY_TO_SWITCH_ON and cmd is p.Command.ENABLE_OPERATION:
                 self.state = p.PowerState.OPERATION_ENABLED  # 3 then 4 in one step
-                self.transitions += [3, 4]
             else:
-                self.state, number = nxt
-                self.transitions.append(number)
+                self.state = nxt[0]
 
     def take(self, t: float, torque: int | None, position: int | None, offset: int | None) -> bool:
         """The targets of the RPDO a SYNC at ``t`` (s) applies (None: not mapped); True when a
@@ -124,7 +121,6 @@ class Cia402Axis:
     def fault(self, code: int) -> None:
         """A drive fault: FAULT state (transition 13), the code, the brake."""
         self.state = p.PowerState.FAULT
-        self.transitions.append(13)
         self.fault_code = code
         self.apply()
 
@@ -160,14 +156,11 @@ class Cia402Axis:
         disable voltage, 3 quick stop, 1 and the manufacturer-specific codes the fault
         reaction (EMCY 0x8130's code)."""
         if option == 2:
-            self.state = p.PowerState.SWITCH_ON_DISABLED
-            self.transitions.append(9)
+            self.state = p.PowerState.SWITCH_ON_DISABLED  # transition 9
         elif option == p.ABORT_CONNECTION_QUICK_STOP:
-            self.state = p.PowerState.QUICK_STOP_ACTIVE
-            self.transitions.append(11)
+            self.state = p.PowerState.QUICK_STOP_ACTIVE  # transition 11
         else:
-            self.state = p.PowerState.FAULT
-            self.transitions.append(13)
+            self.state = p.PowerState.FAULT  # transition 13
             self.fault_code = 0x8130
         self.apply()
 
