@@ -132,7 +132,8 @@ def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_
 def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed):
     """Each kind of frame has its length (CiA 301; cdprctl's mapping): a 4-byte TPDO1 is no
     velocity, an 8-byte TPDO2 no EMCY and no SDO answer, a 6-byte TPDO2 no velocity, an empty
-    heartbeat no sign of life — each one frame ignored, nothing of the drive changed."""
+    heartbeat no sign of life, a 4-byte SDO answer no answer (CiA 301: always 8) — each one
+    frame ignored, nothing of the drive changed."""
     script = Cia402Script(range(1, 9))
     drv, peer = make(seed, script)
     with drv:
@@ -145,10 +146,11 @@ def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed)
             (p.TPDO2 + 3, bytes(range(1, 9))),
             (p.TPDO2 + 3, bytes(range(1, 7))),
             (p.HEARTBEAT + 3, b""),
+            (p.SDO_TX + 3, b"\x43\x00\x10\x00"),
         ]:
             peer.bus.send(frame(arb, data))
         drv.read(peer.t + 0.001)
-        assert drv.stats.frames_ignored == before + 4
+        assert drv.stats.frames_ignored == before + 5
         assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[2]) == 0
         assert 2 not in drv._sdo_reply
         np.testing.assert_array_equal(drv.states.velocity, velocity)
@@ -194,3 +196,28 @@ def test_a_drive_found_in_fault_is_not_reset_until_the_operator_asks(seed):
         assert drv.lifecycle is Lifecycle.ERROR and drv.error.cable == 3
         drv.recover()
         assert 0x80 in controlwords() and script.state[4] is not p.PowerState.FAULT
+
+
+def test_targets_are_carried_only_between_cycles_of_running_drives():
+    """Position mode, configured but not enabled, within the first second of the clock
+    (lock-step starts at 0): targets stepping 1 rad a cycle have no rate while the drives are
+    not running, so a cycle held up 3 ms before its send sends the same targets as one on
+    time — no last cycle is 'a cycle at t = 0'."""
+    from sim_backend.network import LockStep
+
+    def sent(held: float) -> list[bytes]:
+        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+            d = ls.driver
+            d.configure()
+            base = d.read(ls.net.time).position.copy()
+            for k in range(3):
+                t = ls.net.time
+                assert t < 1.0 and d.lifecycle is Lifecycle.INACTIVE
+                d.read(t)
+                if k == 2:
+                    ls.net.advance(held)
+                d.write(t, np.zeros(8), targets=base + 1.0 * k)
+                ls.net.advance(0.004 - (held if k == 2 else 0.0))
+            return [bytes(msg.data) for msg in d._rpdo]
+
+    assert sent(0.003) == sent(0.0)
