@@ -105,17 +105,18 @@ def test_a_torque_limit_beyond_what_0x6072_holds_is_written_at_its_ceiling(tmp_p
 def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_them():
     """Position mode: the SYNC held up past a quarter of a period after the RPDOs (the VM
     took the CPU between them) sends the targets again for the SYNC's instant; held up less,
-    once only."""
+    once only; held up again at every check, three times at most, then the SYNC goes out (a
+    write's work is bounded)."""
 
-    def resent(hold: float) -> int:
+    def resent(hold: float, again: bool = False) -> int:
         with active_rowc() as (ls, base):
             d = ls.driver
             calls = []
             clock = d.clock
 
-            def held_clock():  # the write's first clock read, then ``hold`` s later
-                calls.append(1)
-                return clock() + (hold if len(calls) > 1 else 0.0)
+            def held_clock():  # the write's first clock read, then ``hold`` s later (again:
+                calls.append(1)  # ``hold`` more at each read)
+                return clock() + hold * (len(calls) - 1 if again else min(len(calls) - 1, 1))
 
             t = ls.net.time
             d.read(t)
@@ -127,6 +128,7 @@ def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_
     period = 0.004
     assert resent(0.2 * period) == 0
     assert resent(0.5 * period) == 1
+    assert resent(0.5 * period, again=True) == 3
 
 
 def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed):

@@ -669,3 +669,17 @@ def test_an_enabled_drive_gives_no_torque_before_its_first_rpdo_and_reports_what
         axis.apply(fresh=False)
         assert rig.plant.motor_torque[2] == pytest.approx(0.2 * axis.rated_torque)
         assert axis.torque_actual_pm() == 200
+
+
+def test_an_absolute_encoder_reads_the_motor_angle_to_half_a_count():
+    """An absolute encoder (the shipped drives') counts from the motor angle's zero, not from
+    where the drive powered on: the master reads each motor within half a count of the
+    plant's angle (a count off is a bias no test of motion would see)."""
+    model = load_robot(CONFIG / "rowc.toml")
+    with LockStep(model, period=0.004) as ls:
+        ls.driver.configure()
+        read = ls.driver.read(ls.net.time).position
+        assert not any(d.axis.incremental for d in ls.net.drives)
+        half = np.array([math.pi / c.winch.encoder_counts_per_rev for c in model.cables])
+        assert np.all(np.abs(read - ls.net.plant.theta) <= half)
+        assert np.any(np.abs(ls.net.plant.theta) > 100 * half)  # not all at the zero itself
