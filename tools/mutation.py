@@ -13,6 +13,11 @@ score (killed / (run − equivalent)), and every survivor that is not written do
 in ``tools/mutation_equivalents.toml`` (with why). A survivor is a bug no test would catch:
 kill it with a test, or explain in that file why no behaviour can change.
 
+A module's session takes up to an hour or two: stopped, it resumes where it stopped (the
+session in out/mutation/); in a new checkout, where out/ is gone, the kills of a partial
+session are taken from ``tools/mutation_results.json`` (commit the report written with
+``--report``) as long as the module and its tests are as they were, so only the rest runs.
+
     .venv/bin/python tools/mutation.py                 # every module (hours: a benchmark-like job)
     .venv/bin/python tools/mutation.py supervisor torques --jobs 2
     .venv/bin/python tools/mutation.py --report        # the report again from the sessions kept
