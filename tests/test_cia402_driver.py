@@ -223,3 +223,22 @@ def test_targets_are_carried_only_between_cycles_of_running_drives():
             return [bytes(msg.data) for msg in d._rpdo]
 
     assert sent(0.003) == sent(0.0)
+
+
+def test_frames_beyond_a_full_batch_are_applied_after_it_and_only_they(seed):
+    """A read held up five periods with one drive silent: 35 TPDO1s, more than a batch of 4
+    per drive (32). The frames beyond it are applied after it and only they — each drive
+    ends at its newest position, none back at a frame the batch already applied."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        script.silent.update(range(1, 9))  # the frames below are the only ones
+        sw = p.STATUSWORD_OF[p.PowerState.SWITCH_ON_DISABLED]
+        for k in range(1, 6):
+            for n in range(1, 8):  # node 8 silent
+                peer.bus.send(frame(p.TPDO1 + n, p.TPDO1_STRUCT.pack(sw, 0, 10 * k + n)))
+        drv.read(peer.t + 0.001)
+        counts = np.round(drv.states.position[:7] / drv.rad_per_count[:7])
+        np.testing.assert_array_equal(counts, [50 + n for n in range(1, 8)])

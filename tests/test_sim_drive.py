@@ -683,3 +683,39 @@ def test_an_absolute_encoder_reads_the_motor_angle_to_half_a_count():
         half = np.array([math.pi / c.winch.encoder_counts_per_rev for c in model.cables])
         assert np.all(np.abs(read - ls.net.plant.theta) <= half)
         assert np.any(np.abs(ls.net.plant.theta) > 100 * half)  # not all at the zero itself
+
+
+def test_a_drive_takes_only_the_modes_its_0x6502_has():
+    """0x6502's bits (CiA 402 §6.4.7): bit 7 cyclic synchronous position, bit 9 torque — a
+    drive with one of them refuses the other."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        axis = ls.net.drives[0].axis
+        for bits, csp, cst in ((1 << 7, True, False), (1 << 9, False, True), (0x280, True, True)):
+            axis.od[(p.OD_SUPPORTED_DRIVE_MODES, 0)] = bits
+            assert (axis.supports_mode(p.MODE_CSP), axis.supports_mode(p.MODE_CST)) == (csp, cst)
+
+
+def test_a_position_target_is_reached_over_a_period_but_after_a_gap_at_once():
+    """Mode 8: a new target within ``extrapolate_for`` of the last SYNC is reached one SYNC
+    period on (a rate); one after a gap of ``extrapolate_for`` or more, or before the drive
+    has a period, is a step — a rate over a stale or unknown period would be made up."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()  # mode 8 set by SDO
+        axis, servo, theta = ls.net.drives[0].axis, ls.net.plant.servo, ls.net.plant.theta
+        axis.state = p.PowerState.OPERATION_ENABLED
+        assert axis.mode == p.MODE_CSP
+        axis.apply(fresh=False)  # just enabled: the loop holds where the motor is
+        start = float(servo.target[0])
+        assert start == theta[0]
+        axis.target_counts = axis.counts() + 100
+        end = theta[0] + 100 * 2.0 * math.pi / axis.cpr
+        gap = axis.extrapolate_for
+        for interval, period, rate in ((0.004, 0.004, (end - start) / 0.004), (gap, 0.004, None),
+                                       (2 * gap, 0.004, None), (0.004, 0.0, None)):  # fmt: skip
+            servo.target[0], servo.rate[0] = start, 0.0
+            axis.apply(interval, fresh=True, period=period)
+            if rate is None:  # a step
+                assert (servo.target[0], servo.rate[0]) == (pytest.approx(end, abs=1e-12), 0.0)
+            else:
+                assert servo.target[0] == start
+                assert servo.rate[0] == pytest.approx(rate, rel=1e-12)
