@@ -5,6 +5,7 @@ sent again for a SYNC held up after them."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -242,3 +243,38 @@ def test_frames_beyond_a_full_batch_are_applied_after_it_and_only_they(seed):
         drv.read(peer.t + 0.001)
         counts = np.round(drv.states.position[:7] / drv.rad_per_count[:7])
         np.testing.assert_array_equal(counts, [50 + n for n in range(1, 8)])
+
+
+def test_the_controllers_heartbeat_goes_out_from_the_first_sync_as_a_standard_frame(seed):
+    """The master's own heartbeat (0x700 + its node id, OPERATIONAL; CiA 301 §7.2.8.3): an
+    11-bit frame — a drive consuming heartbeats (0x1016) matches no 29-bit one — sent with the
+    very first SYNC and then every ``heartbeat_period`` (here longer than the set-up, whose
+    SDO exchanges come first)."""
+    seed = dataclasses.replace(seed, drives=dataclasses.replace(seed.drives, heartbeat_period=0.5))
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    with drv:
+        drv.configure()
+        start = peer.t
+        cycles(drv, peer, 600)
+    assert start < seed.drives.heartbeat_period
+    arb = p.HEARTBEAT + seed.drives.controller_node_id
+    sent = [(t, m) for (t, a, _), m in zip(peer.rx, peer.messages, strict=True) if a == arb]
+    assert all(not m.is_extended_id and bytes(m.data) == bytes([p.HB_OPERATIONAL])
+               for _, m in sent)  # fmt: skip
+    assert sent[0][0] == min(t for t, a, _ in peer.rx if a == p.SYNC)
+    gaps = np.diff([t for t, _ in sent])
+    assert np.all(np.abs(gaps - seed.drives.heartbeat_period) <= 0.002 + 1e-9), gaps
+
+
+def test_feedback_is_stamped_with_the_sync_it_was_sampled_for(seed):
+    """A drive samples its TPDO1 at the SYNC: the feedback read a period later is that SYNC's
+    (``sampled_at``), a period old (``feedback_age``) — not the read's instant."""
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    with drv:
+        drv.configure()
+        cycles(drv, peer, 3)
+        sync_at = max(t for t, a, _ in peer.rx if a == p.SYNC)
+        states = drv.read(peer.t)
+        np.testing.assert_array_equal(states.sampled_at, sync_at)
+        np.testing.assert_allclose(states.feedback_age, peer.t - sync_at, rtol=0, atol=1e-12)
+        assert peer.t - sync_at == pytest.approx(0.002)

@@ -33,6 +33,7 @@ class ScriptedPeer:
         self.bus = can.Bus(interface="virtual", channel=channel)
         self.answer = answer
         self.rx: list[tuple[float, int, bytes]] = []
+        self.messages: list[can.Message] = []  # the same frames whole (their flags)
         self.t = 0.0
 
     def wait(self, dt: float) -> None:  # the driver's wait hook: time passes, the peer works
@@ -45,6 +46,7 @@ class ScriptedPeer:
             if msg is None:
                 break
             self.rx.append((self.t, msg.arbitration_id, bytes(msg.data)))
+            self.messages.append(msg)
             for out in self.answer(msg, self.t) or []:
                 self.bus.send(out)
 
