@@ -719,3 +719,30 @@ def test_a_position_target_is_reached_over_a_period_but_after_a_gap_at_once():
             else:
                 assert servo.target[0] == start
                 assert servo.rate[0] == pytest.approx(rate, rel=1e-12)
+
+
+def test_the_following_error_objects_become_the_loops_window_and_time_out():
+    """0x6065 (counts) and 0x6066 (ms, CiA 402 §6.8.4-5) as the drive's position loop takes
+    them: rad at the motor and s."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        axis, servo = ls.net.drives[2].axis, ls.net.plant.servo
+        axis.od[(p.OD_FOLLOWING_ERROR_WINDOW, 0)] = 1000
+        axis.od[(p.OD_FOLLOWING_ERROR_TIMEOUT, 0)] = 250
+        axis.set_following_error()
+        assert servo.window[2] == pytest.approx(1000 / axis.cpr * 2 * math.pi, rel=1e-15)
+        assert servo.timeout[2] == 0.25
+
+
+def test_a_position_loop_of_low_gain_goes_on_from_its_target():
+    """Only a loop that was off (kp = 0) starts where the motor is: one whose gain is below
+    1 N·m/rad (a small motor) goes on from its target at every SYNC, as any other."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()  # mode 8 set by SDO
+        axis, servo, theta = ls.net.drives[0].axis, ls.net.plant.servo, ls.net.plant.theta
+        axis.position_gains = (0.5, 0.01)  # N·m/rad, N·m·s/rad
+        axis.state = p.PowerState.OPERATION_ENABLED
+        axis.apply(fresh=False)  # just enabled: the loop holds where the motor is
+        assert (servo.target[0], servo.kp[0]) == (theta[0], 0.5)
+        servo.target[0] = theta[0] + 0.1  # where its interpolation has got to
+        axis.apply(fresh=False)
+        assert servo.target[0] == theta[0] + 0.1
