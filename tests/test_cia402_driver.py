@@ -14,7 +14,7 @@ from conftest import CONFIG, in_torque_mode
 from test_drivers_frames import Cia402Script, active_rowc, cycles, frame, make
 
 from cdprctl.model import load_robot
-from drivers import DriveFaultError, Lifecycle
+from drivers import DriveFaultError, DriverOperationError, Lifecycle
 from drivers.cia402 import protocol as p
 
 
@@ -88,6 +88,20 @@ def test_a_lost_nmt_start_is_sent_again_every_half_second_until_every_drive_answ
         assert b - a == pytest.approx(0.5, abs=0.0021)
     for t in again:  # each in the first period past a half second
         assert t % 0.5 < 0.0021 + 1e-9, t
+
+
+def test_0x6072_is_the_winchs_torque_limit_in_per_mille_of_the_rated_torque(seed):
+    """0x6072 (CiA 402 §6.9.3): per mille of the rated torque, here seed000's winch limits
+    over [drives] rated_torque, rounded to the nearest."""
+    script = Cia402Script(range(1, 9))
+    drv, _ = make(seed, script)
+    with drv:
+        drv.configure()
+    for c, cable in enumerate(seed.cables):
+        node = seed.drives.node_of(c)[1]
+        per_mille = cable.winch.torque_limit / seed.drives.rated_torque * 1000.0
+        assert script.objects[node][(p.OD_MAX_TORQUE, 0)] == round(per_mille)
+        assert abs(per_mille - round(per_mille)) < 0.4  # the rounding decides nothing
 
 
 def test_a_torque_limit_beyond_what_0x6072_holds_is_written_at_its_ceiling(tmp_path):
@@ -278,3 +292,44 @@ def test_feedback_is_stamped_with_the_sync_it_was_sampled_for(seed):
         np.testing.assert_array_equal(states.sampled_at, sync_at)
         np.testing.assert_allclose(states.feedback_age, peer.t - sync_at, rtol=0, atol=1e-12)
         assert peer.t - sync_at == pytest.approx(0.002)
+
+
+def test_with_derived_velocity_a_tpdo2_is_not_the_velocity(seed):
+    """``velocity_source = "derived"`` (the default): a TPDO2 a drive sends anyway (its own
+    DCF mapped one) does not replace the velocity from the positions."""
+    assert seed.drives.velocity_source == "derived"
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    with drv:
+        drv.configure()
+        velocity = drv.read(peer.t).velocity.copy()
+        peer.bus.send(frame(p.TPDO2 + 3, p.TPDO2_STRUCT.pack(12345)))
+        np.testing.assert_array_equal(drv.read(peer.t + 0.001).velocity, velocity)
+
+
+def test_an_emcy_is_a_fault_before_the_statusword_says_so(seed):
+    """An EMCY with an error code (CiA 301 §7.2.7) is that drive's fault at once, from its
+    code, even while its statusword still says it is enabled (the EMCY comes first)."""
+    script = Cia402Script(range(1, 9))
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.activate()
+        peer.bus.send(frame(p.EMCY + 6, p.EMCY_STRUCT.pack(0x3210, 1, bytes(5))))
+        cycles(drv, peer, 1)
+        assert script.state[6] is not p.PowerState.FAULT  # its statusword never said fault
+        assert drv.lifecycle is Lifecycle.ERROR and isinstance(drv.error, DriveFaultError)
+        assert (drv.error.cable, drv.error.code) == (5, 0x3210)
+
+
+def test_a_brake_is_commanded_only_while_the_drives_are_not_running():
+    """The master's brake command (0x60FE, a brake test) is an SDO exchange: refused in one
+    line while the drives run, taken while they are inactive."""
+    from sim_backend.network import LockStep
+
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        ls.driver.configure()
+        ls.driver.command_brake(3, True, 1.0)
+        ls.driver.command_brake(3, False, 1.0)
+        ls.driver.activate()
+        with pytest.raises(DriverOperationError, match="brake command while ACTIVE"):
+            ls.driver.command_brake(3, True, 1.0)

@@ -696,9 +696,10 @@ def test_a_drive_takes_only_the_modes_its_0x6502_has():
 
 
 def test_a_position_target_is_reached_over_a_period_but_after_a_gap_at_once():
-    """Mode 8: a new target within ``extrapolate_for`` of the last SYNC is reached one SYNC
-    period on (a rate); one after a gap of ``extrapolate_for`` or more, or before the drive
-    has a period, is a step — a rate over a stale or unknown period would be made up."""
+    """Mode 8: a new target within ``extrapolate_for`` of the last SYNC (at once included: a
+    burst) is reached one SYNC period on (a rate); one after a gap of ``extrapolate_for`` or
+    more, or before the drive has a period, is a step — a rate over a stale or unknown period
+    would be made up."""
     with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
         ls.driver.configure()  # mode 8 set by SDO
         axis, servo, theta = ls.net.drives[0].axis, ls.net.plant.servo, ls.net.plant.theta
@@ -710,8 +711,10 @@ def test_a_position_target_is_reached_over_a_period_but_after_a_gap_at_once():
         axis.target_counts = axis.counts() + 100
         end = theta[0] + 100 * 2.0 * math.pi / axis.cpr
         gap = axis.extrapolate_for
-        for interval, period, rate in ((0.004, 0.004, (end - start) / 0.004), (gap, 0.004, None),
-                                       (2 * gap, 0.004, None), (0.004, 0.0, None)):  # fmt: skip
+        ramp = (end - start) / 0.004
+        for interval, period, rate in ((0.004, 0.004, ramp), (0.0, 0.004, ramp),
+                                       (gap, 0.004, None), (2 * gap, 0.004, None),
+                                       (0.004, 0.0, None)):  # fmt: skip
             servo.target[0], servo.rate[0] = start, 0.0
             axis.apply(interval, fresh=True, period=period)
             if rate is None:  # a step

@@ -210,15 +210,26 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
             log(f"{t.name}: {n} mutants killed in a kept partial session, not run again")
     else:
         if survivors:  # their results dropped: exec runs them again, against today's tests
+            again = survivors_to_run(t, tree)
             with sqlite3.connect(db) as con:
-                n = con.execute("DELETE FROM work_results WHERE test_outcome = 'SURVIVED'")
-                log(f"{t.name}: {n.rowcount} survivors to run again")
+                con.executemany("DELETE FROM work_results WHERE job_id = ?",
+                                [(j,) for j in again])  # fmt: skip
+            log(f"{t.name}: {len(again)} survivors to run again (those not written down as "
+                "equivalent)")
         log(f"{t.name}: resuming the session kept in {db.relative_to(ROOT)}")
     run(tool("cosmic-ray"), "exec", str(cfg), str(db))
     took = time.monotonic() - start
     if fresh or not (OUT / f"{t.name}.seconds").exists():  # a whole session's time
         (OUT / f"{t.name}.seconds").write_text(f"{took:.0f}\n")
     log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s)")
+
+
+def survivors_to_run(t: Target, tree: Path) -> list[str]:
+    """The job ids of the session's survivors that no entry of the equivalents file explains
+    (an explained one would survive again, at the full selection's cost)."""
+    mutants = read_session(t, tree)
+    mark_equivalents(mutants, load_equivalents())
+    return [m.job for m in mutants if m.outcome == "survived" and not m.equivalent and m.job]
 
 
 def module_digest(tree: Path, module: str) -> str:
@@ -263,6 +274,7 @@ class Mutant:
     raw_diff: str = ""  # cosmic-ray's unified diff of the mutant
     equivalent: str = ""  # why, where it is written down as equivalent
     key: str = ""  # operator@row:col#occurrence: the mutant in any session of the same file
+    job: str = ""  # its job id in the session
 
 
 def mutant_key(operator: str, row: int, col: int, occurrence: int) -> str:
@@ -300,7 +312,8 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
         text = before.get(line, source[line - 1] if line <= len(source) else "").strip()
         key = mutant_key(mu["operator_name"], line, int(mu["start_pos"][1]), mu["occurrence"])
         mutants.append(Mutant(t.module, mu["operator_name"], line, text,
-                              " / ".join(c.strip() for c in changed), outcome, raw, "", key))
+                              " / ".join(c.strip() for c in changed), outcome, raw, "", key,
+                              job["job_id"]))  # fmt: skip
         output = (result or {}).get("output") or ""
         if outcome == "survived" and output.startswith(EQUIVALENT_PREFIX):
             mutants[-1].equivalent = output.removeprefix(EQUIVALENT_PREFIX)
