@@ -148,7 +148,7 @@ def test_targets_are_sent_again_when_their_sync_goes_out_a_quarter_period_after_
 
 def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed):
     """Each kind of frame has its length (CiA 301; cdprctl's mapping): a 4-byte TPDO1 is no
-    velocity, an 8-byte TPDO2 no EMCY and no SDO answer, a 6-byte TPDO2 no velocity, an empty
+    velocity, an 8-byte TPDO2 no EMCY and no SDO answer, a 6- or 2-byte TPDO2 no velocity, an empty
     heartbeat no sign of life, a 4-byte SDO answer no answer (CiA 301: always 8) — each one
     frame ignored, nothing of the drive changed."""
     script = Cia402Script(range(1, 9))
@@ -164,10 +164,11 @@ def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed)
             (p.TPDO2 + 3, bytes(range(1, 7))),
             (p.HEARTBEAT + 3, b""),
             (p.SDO_TX + 3, b"\x43\x00\x10\x00"),
+            (p.TPDO2 + 3, b"\x01\x02"),
         ]:
             peer.bus.send(frame(arb, data))
         drv.read(peer.t + 0.001)
-        assert drv.stats.frames_ignored == before + 5
+        assert drv.stats.frames_ignored == before + 6
         assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[2]) == 0
         assert 2 not in drv._sdo_reply
         np.testing.assert_array_equal(drv.states.velocity, velocity)
@@ -333,3 +334,16 @@ def test_a_brake_is_commanded_only_while_the_drives_are_not_running():
         ls.driver.activate()
         with pytest.raises(DriverOperationError, match="brake command while ACTIVE"):
             ls.driver.command_brake(3, True, 1.0)
+
+
+def test_a_bus_with_a_drive_without_the_sync_counter_gets_plain_syncs(seed):
+    """0x1019 (CiA 301 §7.5.2.22) is optional: where a drive lacks it, that bus's SYNC is the
+    plain one — no data byte, an 11-bit frame like every SYNC (a 29-bit 0x080 is no SYNC)."""
+    script = Cia402Script(range(1, 9))
+    del script.objects[3][(p.OD_SYNC_COUNTER_OVERFLOW, 0)]
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        cycles(drv, peer, 3)
+    syncs = [m for m in peer.messages if m.arbitration_id == p.SYNC]
+    assert syncs and all(not m.is_extended_id and bytes(m.data) == b"" for m in syncs)

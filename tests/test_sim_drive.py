@@ -749,3 +749,18 @@ def test_a_position_loop_of_low_gain_goes_on_from_its_target():
         servo.target[0] = theta[0] + 0.1  # where its interpolation has got to
         axis.apply(fresh=False)
         assert servo.target[0] == theta[0] + 0.1
+
+
+def test_the_drive_reports_velocity_in_counts_per_second_and_its_limit_from_0x6072():
+    """0x606C as a master reads it: the motor's speed in counts/s (10 rad/s on 65,536 counts a
+    turn: 104,304); 0x6072 per mille of the rated torque as the limit the power stage keeps,
+    where it is below the winch's own."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        drive, axis = ls.net.drives[1], ls.net.drives[1].axis
+        assert axis.cpr == 65536
+        ls.net.plant.theta_dot[1] = 10.0  # rad/s
+        reply = drive.on_sdo(p.sdo_upload(p.OD_VELOCITY_ACTUAL, 0))
+        assert int.from_bytes(reply.data[4:8], "little", signed=True) == 104304
+        axis.od[(p.OD_MAX_TORQUE, 0)] = 100  # ‰
+        assert axis.effective_torque_limit == pytest.approx(0.1 * axis.rated_torque, rel=1e-12)
+        assert axis.effective_torque_limit < axis.torque_limit
