@@ -10,7 +10,7 @@ from conftest import CONFIG
 
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
-from cdprctl.rotation import log_so3
+from cdprctl.rotation import exp_so3, log_so3
 from cdprctl.stiffness import stiffness_matrix
 from sim_backend.plant import CdprPlant, PlantOptions, equilibrium_tensions
 
@@ -190,3 +190,58 @@ def test_a_cable_paying_out_fast_never_pushes(slip):
         assert np.all(plant.tension >= 0.0), plant.tension
         seen_clamped |= bool(taut and plant.tension[i] == 0.0)
     assert seen_clamped  # the rule acted: taut (stretched) yet no force
+
+
+def test_an_external_force_at_p_on_a_free_platform_is_newton_euler_about_the_com():
+    """Every cable cut, the platform at rest (cogiro: its COM off P on every axis): one
+    physics step of dt under a force F at P gives v = dt (F/m + g) and, about the COM,
+    I_w ω̇ = (P − COM) × F — Newton-Euler written out here, not through the kernel."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    plant = CdprPlant(model)
+    plant.cable_cut[:] = True
+    force = np.array([30.0, -20.0, 10.0])
+    plant.ext_force[:] = force
+    R, dt = plant.R.copy(), plant.opt.physics_dt
+    lever = -(R @ np.array(model.platform.com))  # P − COM, base frame
+    assert np.all(np.abs(lever) > 0.01)
+    plant.step(dt)
+    m, inertia = model.platform.mass, R @ np.array(model.platform.inertia) @ R.T
+    np.testing.assert_allclose(plant.v, dt * (force / m + np.array(model.gravity)), rtol=1e-12)
+    np.testing.assert_allclose(plant.w, dt * np.linalg.solve(inertia, np.cross(lever, force)),
+                               rtol=1e-9)  # fmt: skip
+
+
+def test_cable_damping_acts_on_the_cable_rates_of_the_platforms_twist():
+    """A platform moving and turning (cogiro, COM off P): each cable's tension differs from
+    the platform at rest by its damping times its length's rate — the rate by central
+    differences of the inverse kinematics along P's velocity v − ω × (R c) and ω."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    still, moving = CdprPlant(model), CdprPlant(model)
+    v, w = np.array([0.05, -0.03, 0.04]), np.array([0.02, -0.01, 0.03])
+    moving.v[:], moving.w[:] = v, w
+    R, com_pos = moving.R.copy(), moving.com_pos.copy()
+    com = R @ np.array(model.platform.com)
+    p, v_p = com_pos - com, v - np.cross(w, com)
+    kin, h = KinematicsData(model), 1e-6
+
+    def lengths(s: float) -> np.ndarray:
+        inverse_kinematics(model, kin, p + s * h * v_p, exp_so3(s * h * w) @ R)
+        return kin.length.copy()
+
+    rate = (lengths(1.0) - lengths(-1.0)) / (2 * h)
+    for plant in (still, moving):
+        plant.step(plant.opt.physics_dt)
+    assert np.all(still.tension > 0) and np.all(np.abs(rate) > 1e-3)
+    np.testing.assert_allclose(moving.tension - still.tension, moving.damping * rate,
+                               rtol=1e-6)  # fmt: skip
+
+
+def test_a_slack_cable_takes_the_tension_off_its_jaw_whichever_jaw():
+    """seed000_grippers: jaws on cables 1 and 8; cable 8 cut, its jaw's jB carries nothing
+    from the next step on, the other jaw its weight."""
+    plant = CdprPlant(load_robot(CONFIG / "seed000_grippers.toml"))
+    assert np.all(plant.jb_tension > 50.0)
+    plant.cable_cut[7] = True
+    plant.step(plant.opt.physics_dt)
+    assert plant.jb_tension[1] == 0.0
+    assert plant.jb_tension[0] == pytest.approx(10.2 * 9.8, rel=1e-3)
