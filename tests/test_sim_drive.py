@@ -764,3 +764,17 @@ def test_the_drive_reports_velocity_in_counts_per_second_and_its_limit_from_0x60
         axis.od[(p.OD_MAX_TORQUE, 0)] = 100  # ‰
         assert axis.effective_torque_limit == pytest.approx(0.1 * axis.rated_torque, rel=1e-12)
         assert axis.effective_torque_limit < axis.torque_limit
+
+
+def test_a_moving_target_is_held_extrapolate_for_after_the_last_one_at_any_rate():
+    """Mode 8 without new targets: the target goes on at its last rate until
+    ``extrapolate_for`` after the last one came, then holds — at 1 rad/s as at any rate."""
+    with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+        axis, servo = ls.net.drives[0].axis, ls.net.plant.servo
+        servo.rate[0], axis.last_target = 1.0, 2.0  # rad/s, s
+        due = 2.0 + axis.extrapolate_for
+        assert axis.holds_at() == due
+        axis.hold_if_due(due - 1e-6)
+        assert servo.rate[0] == 1.0
+        axis.hold_if_due(due)
+        assert servo.rate[0] == 0.0
