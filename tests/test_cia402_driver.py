@@ -347,3 +347,33 @@ def test_a_bus_with_a_drive_without_the_sync_counter_gets_plain_syncs(seed):
         cycles(drv, peer, 3)
     syncs = [m for m in peer.messages if m.arbitration_id == p.SYNC]
     assert syncs and all(not m.is_extended_id and bytes(m.data) == b"" for m in syncs)
+
+
+class _LosesTheFirstReset(Cia402Script):
+    """A lossy bus: the first fault-reset controlword (bit 7) to ``node`` never arrives."""
+
+    def __init__(self, nodes, node):
+        super().__init__(nodes)
+        self.node, self.lost = node, False
+
+    def __call__(self, msg, t):
+        if msg.arbitration_id == p.RPDO1 + self.node and msg.data[0] & 0x80 and not self.lost:
+            self.lost = True
+            return []
+        return super().__call__(msg, t)
+
+
+def test_a_fault_reset_survives_one_lost_frame(seed):
+    """The reset edge's 0x0080 goes out in two cycles while the drive still reports its
+    fault: one frame lost on the bus does not lose the operator's reset."""
+    script = _LosesTheFirstReset(range(1, 9), 4)
+    drv, peer = make(seed, script)
+    with drv:
+        drv.configure()
+        drv.activate()
+        script.emcy[4] = 0x2310
+        cycles(drv, peer, 3)
+        assert drv.lifecycle is Lifecycle.ERROR
+        drv.recover()
+        assert script.lost and script.state[4] is not p.PowerState.FAULT
+        assert drv.lifecycle is Lifecycle.INACTIVE

@@ -245,3 +245,20 @@ def test_a_slack_cable_takes_the_tension_off_its_jaw_whichever_jaw():
     plant.step(plant.opt.physics_dt)
     assert plant.jb_tension[1] == 0.0
     assert plant.jb_tension[0] == pytest.approx(10.2 * 9.8, rel=1e-3)
+
+
+def test_a_spinning_free_platform_follows_eulers_equations():
+    """Every cable cut, no force but gravity (at the COM: no moment), the platform spinning
+    about no principal axis: one physics step gives ω + dt I_w⁻¹ (−ω × I_w ω), Euler's
+    equations in the base frame written out here."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    plant = CdprPlant(model)
+    plant.cable_cut[:] = True
+    w = np.array([0.7, -1.1, 0.9])  # rad/s
+    plant.w[:] = w
+    R, dt = plant.R.copy(), plant.opt.physics_dt
+    inertia = R @ np.array(model.platform.inertia) @ R.T
+    gyro = -np.cross(w, inertia @ w)
+    assert np.all(np.abs(gyro) > 1e-3)
+    plant.step(dt)
+    np.testing.assert_allclose(plant.w, w + dt * np.linalg.solve(inertia, gyro), rtol=1e-12)
