@@ -262,3 +262,24 @@ def test_a_spinning_free_platform_follows_eulers_equations():
     assert np.all(np.abs(gyro) > 1e-3)
     plant.step(dt)
     np.testing.assert_allclose(plant.w, w + dt * np.linalg.solve(inertia, gyro), rtol=1e-12)
+
+
+def test_a_slipping_brake_pays_out_at_its_slip_speed_and_a_held_one_slips_past_its_torque():
+    """rowc, brakes closed: a brake slipping at 1 rad/s (a fault) turns its drum at exactly
+    that speed, paying cable out; a held brake whose torque is beyond what it holds slips
+    (Karnopp), within it stays put."""
+    model = load_robot(CONFIG / "rowc.toml")
+    plant = CdprPlant(model)
+    theta0, dt = plant.theta.copy(), plant.opt.physics_dt
+    plant.brake_slip[2] = 1.0  # rad/s
+    plant.step(10 * dt)
+    assert plant.theta_dot[2] == -1.0
+    assert plant.theta[2] - theta0[2] == pytest.approx(-10 * dt, rel=1e-12)
+    load = plant.drum_ratio[5] * plant.tension[5]  # N·m the cable puts on brake 5
+    plant.brake_hold[5] = 1.5
+    plant.motor_torque[5] = -(1.5 - load) * 0.99
+    plant.step(10 * dt)
+    assert plant.theta[5] == theta0[5]
+    plant.motor_torque[5] = -(1.5 - load) * 1.2
+    plant.step(10 * dt)
+    assert plant.theta[5] < theta0[5] and plant.theta_dot[5] < 0.0
