@@ -11,7 +11,14 @@ import itertools
 import numpy as np
 import pytest
 from conftest import CONFIG, in_torque_mode
-from test_drivers_frames import Cia402Script, active_rowc, cycles, frame, make
+from test_drivers_frames import (
+    Cia402Script,
+    active_rowc,
+    cycles,
+    frame,
+    make,
+    over_current_on_node_4,
+)
 
 from cdprctl.model import load_robot
 from drivers import DriveFaultError, DriverOperationError, Lifecycle
@@ -369,10 +376,7 @@ def test_a_fault_reset_survives_one_lost_frame(seed):
     script = _LosesTheFirstReset(range(1, 9), 4)
     drv, peer = make(seed, script)
     with drv:
-        drv.configure()
-        drv.activate()
-        script.emcy[4] = 0x2310
-        cycles(drv, peer, 3)
+        over_current_on_node_4(drv, peer, script)
         assert drv.lifecycle is Lifecycle.ERROR
         drv.recover()
         assert script.lost and script.state[4] is not p.PowerState.FAULT

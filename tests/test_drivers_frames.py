@@ -293,14 +293,20 @@ def test_a_position_step_no_motor_can_make_is_dropped_then_reported(seed):
         assert "no motor can make" in str(drv.error)
 
 
+def over_current_on_node_4(drv, peer, script) -> None:
+    """Configured and enabled, then node 4 sends EMCY 0x2310 (over-current) and faults; three
+    periods later."""
+    drv.configure()
+    drv.activate()
+    script.emcy[4] = 0x2310
+    cycles(drv, peer, 3)
+
+
 def test_cia402_emcy_is_a_typed_fault_and_reset_recovers(seed):
     script = Cia402Script(range(1, 9))
     drv, peer = make(seed, script)
     with drv:
-        drv.configure()
-        drv.activate()
-        script.emcy[4] = 0x2310
-        cycles(drv, peer, 3)
+        over_current_on_node_4(drv, peer, script)
         assert drv.lifecycle is Lifecycle.ERROR
         assert isinstance(drv.error, DriveFaultError)
         assert drv.error.code == 0x2310 and drv.error.cable == 3
