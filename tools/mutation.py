@@ -263,6 +263,10 @@ def session_is_stale(t: Target, tree: Path, mutants: list[Mutant] | None = None)
     return any(n > len(source) or source[n - 1] != text for n, text in lines)
 
 
+# the outcomes that count as killed: a test failed, the tests timed out, the mutant cannot run
+KILLED = ("killed", "timeout", "incompetent")
+
+
 @dataclass
 class Mutant:
     module: str
@@ -329,17 +333,17 @@ def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | N
     the killed as a count, every other mutant whole (survivors and equivalents are listed);
     for a session not yet complete also the killed by key, so that a later session of the same
     file and tests need not run them again (``resume_killed``)."""
-    killed = sum(m.outcome in ("killed", "timeout", "incompetent") for m in mutants)
+    killed = sum(m.outcome in KILLED for m in mutants)
     rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
              "outcome": m.outcome, "equivalent": m.equivalent}
             for m in mutants
-            if m.outcome not in ("killed", "timeout", "incompetent", "out_of_scope")]  # fmt: skip
+            if m.outcome not in (*KILLED, "out_of_scope")]  # fmt: skip
     return {"module": t.module, "sha256": module_digest(tree, t.module),
             "date": session_date(t), "seconds": seconds, "tests": t.tests, "killed": killed,
             "out_of_scope": sum(m.outcome == "out_of_scope" for m in mutants),
             "others": rest,
             **({"killed_keys": {m.key: m.outcome for m in mutants
-                                if m.outcome in ("killed", "timeout", "incompetent") and m.key}}
+                                if m.outcome in KILLED and m.key}}
                if any(m.outcome == "pending" for m in mutants) else {})}  # fmt: skip
 
 
@@ -442,7 +446,7 @@ def report(targets: list[Target], tree: Path) -> str:
         if outside:
             scoped.append(f"- {t.name}: {outside} mutants outside {', '.join(t.scope)} left "
                           f"out — {t.left_out}")  # fmt: skip
-        killed = [m for m in run if m.outcome in ("killed", "timeout", "incompetent")]
+        killed = [m for m in run if m.outcome in KILLED]
         equiv = [m for m in run if m.equivalent]
         alive = [m for m in run if m.outcome == "survived" and not m.equivalent]
         pending = sum(m.outcome == "pending" for m in ms)
