@@ -115,3 +115,13 @@ def end_processes(procs: list[subprocess.Popen], grace: float = 10.0) -> None:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def canopen_network():
+    """The `canopen` package's Network, its receive thread polling every 50 ms: disconnecting
+    waits for one poll, and the package's 1 s poll made each test's teardown a second."""
+    import canopen
+
+    network = canopen.Network()
+    network.NOTIFIER_CYCLE = 0.05  # s: the notifier's receive time-out
+    return network

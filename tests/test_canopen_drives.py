@@ -12,10 +12,9 @@ import re
 import time
 import uuid
 
-import canopen
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, canopen_network
 from local_drives import LocalDrive
 
 from cdprctl.model import load_robot
@@ -78,7 +77,7 @@ def seed000_one_bus():
 
 def bring_up(model, tmp_path, read_only: bool):
     channel = f"localnodes-{uuid.uuid4().hex}"
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     eds = eds_variant(tmp_path, read_only)
     drives = [LocalDrive(network, n, eds) for n in range(1, model.n_cables + 1)]

@@ -18,7 +18,7 @@ import canopen
 import pytest
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
-from conftest import CONFIG
+from conftest import CONFIG, canopen_network
 
 from cdprctl.model import load_robot
 from cdprctl.model.drives import default_drives
@@ -70,7 +70,7 @@ class Robot:
 def rig():
     channel = f"canopen-{uuid.uuid4().hex}"
     robot = Robot(channel)
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     nodes = {n: network.add_node(n, str(EDS)) for n in NODES}
     for node in nodes.values():

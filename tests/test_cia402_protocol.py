@@ -17,6 +17,7 @@ from canopen.nmt import NMT_COMMANDS
 from canopen.profiles.p402 import State402
 from canopen.sdo import constants as sdo
 from canopen.sdo.exceptions import SdoAbortedError
+from conftest import canopen_network
 from local_drives import VENDOR_EDS
 
 from drivers.cia402 import protocol as p
@@ -243,7 +244,7 @@ def test_heartbeat_and_emcy_ids_are_what_a_canopen_master_listens_on():
     heartbeat and its EMCY."""
     import can
 
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="virtual", channel="cia402-protocol-ids")
     drive = can.Bus(interface="virtual", channel="cia402-protocol-ids")
     try:

@@ -18,7 +18,7 @@ import uuid
 import canopen
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, canopen_network
 from local_drives import LocalDrive, vendor_file
 
 from cdprctl.daemon.report import identity_lines
@@ -49,7 +49,7 @@ def bring_up(model, files: list[str], values: dict | None = None, **drive_args):
     holds the rated torque the config says in 0x6076 (what the vendor's tool sets) where its
     file has that object, and ``values``."""
     channel = f"vendor-{uuid.uuid4().hex}"
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     drives = []
     for n in range(1, model.n_cables + 1):
@@ -216,7 +216,7 @@ def test_the_scan_reads_each_vendors_drive_and_judges_it_as_the_set_up_would(cap
     files = [EPOS4, NANOTEC, ELMO, IPOS, PRBT]
     model = rowc("csp")
     channel = f"scan-{uuid.uuid4().hex}"
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     nmt: list[bytes] = []
     network.subscribe(p.NMT, lambda can_id, data, ts: nmt.append(bytes(data)))
@@ -274,7 +274,7 @@ def test_a_drive_with_only_the_cyclic_objects_runs(tmp_path):
     assert all(int(i, 16) not in canopen.import_od(str(eds), 1) for i in gone)
     model = rowc("csp")
     channel = f"minimal-{uuid.uuid4().hex}"
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     rated = {(p.OD_RATED_TORQUE, 0): round(model.drives.rated_torque * 1000)}
     drives = [LocalDrive(network, n, str(eds), values=rated) for n in range(1, 9)]
@@ -302,7 +302,7 @@ def test_the_scan_judges_by_the_set_ups_rules_static_mappings_and_an_unset_rated
     config.write_text((CONFIG / "rowc.toml").read_text().replace(
         "[drives]\n", '[drives]\npdo_mapping = "static"\n', 1))  # fmt: skip
     channel = f"scan-{uuid.uuid4().hex}"
-    network = canopen.Network()
+    network = canopen_network()
     network.connect(interface="inprocess", channel=channel)
     drives = [LocalDrive(network, 1, vendor_file(NANOTEC)),
               LocalDrive(network, 2, vendor_file(ELMO))]  # fmt: skip
