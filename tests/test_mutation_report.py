@@ -140,3 +140,54 @@ def test_a_partial_sessions_kills_are_kept_by_key_and_resumed_only_for_the_same_
     assert mu.resume_killed(session(), other_tests, tmp_path) == 0
     module.write_text("def f(x):\n    return x + 2\n")
     assert mu.resume_killed(session(), t, tmp_path) == 0
+
+
+def test_a_sample_is_the_same_mutants_in_every_session_and_its_size(tmp_path):
+    """``in_sample`` picks by a hash of the mutant's key: the same mutants every time, about
+    the fraction asked, a larger fraction holding the smaller's; ``skip_unsampled`` marks the
+    pending rest in a session (cosmic-ray's tables) but an earlier session's survivors, and drops
+    its own marks when run again."""
+    from mutation_equivalents import in_sample, skip_unsampled
+
+    keys = [mu.mutant_key("core/NumberReplacer", row, col, 0)
+            for row in range(1, 301) for col in range(10)]  # fmt: skip
+    fifth = {k for k in keys if in_sample(k, 0.2)}
+    assert 0.17 * len(keys) < len(fifth) < 0.23 * len(keys)
+    assert fifth == {k for k in keys if in_sample(k, 0.2)}
+    assert fifth < {k for k in keys if in_sample(k, 0.4)}
+    assert all(in_sample(k, 1.0) for k in keys) and not any(in_sample(k, 0.0) for k in keys)
+
+    db = tmp_path / "s.sqlite"
+    with sqlite3.connect(db) as con:
+        con.execute("CREATE TABLE mutation_specs (job_id TEXT, operator_name TEXT, "
+                    "start_pos_row INT, start_pos_col INT, occurrence INT)")  # fmt: skip
+        con.execute("CREATE TABLE work_results (worker_outcome TEXT, output TEXT, "
+                    "test_outcome TEXT, diff TEXT, job_id TEXT)")  # fmt: skip
+        con.executemany("INSERT INTO mutation_specs VALUES (?, 'core/NumberReplacer', ?, 0, 0)",
+                        [(f"j{row}", row) for row in range(1, 201)])  # fmt: skip
+        con.execute("INSERT INTO work_results VALUES ('NORMAL', '', 'KILLED', NULL, 'j1')")
+    out = {f"j{row}" for row in range(2, 201)
+           if not in_sample(mu.mutant_key("core/NumberReplacer", row, 0, 0), 0.3)}  # fmt: skip
+    assert skip_unsampled(db, 0.3, "slow") == len(out) > 100
+    assert skip_unsampled(db, 0.3, "slow") == len(out)  # its own marks dropped first
+    survivor = int(min(out, key=lambda j: int(j[1:]))[1:])  # an earlier session's, unsampled
+    keep = frozenset({("core/NumberReplacer", survivor)})
+    assert skip_unsampled(db, 0.3, "slow", keep) == len(out) - 1
+    assert skip_unsampled(db, 1.0, "") == 0
+    with sqlite3.connect(db) as con:  # only the run one has a result
+        assert con.execute("SELECT job_id FROM work_results").fetchall() == [("j1",)]
+
+
+def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_path, monkeypatch):
+    (tmp_path / "m.py").write_text("def f(x):\n    return x + 1\n")
+    t = mu.Target("m", "m.py", "tests/test_m.py", sample=0.5, sample_why="slow kernels")
+    killed = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
+                       "- return x + 1 / + return x - 1", "killed")  # fmt: skip
+    unsampled = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
+                          "- return x + 1 / + return x + 2", "unsampled")  # fmt: skip
+    entry = kept_only(tmp_path, monkeypatch, t, [killed, unsampled, unsampled], 60)
+    assert entry["killed"] == 1 and entry["unsampled"] == 2 and entry["others"] == []
+    text = mu.report([t], tmp_path)
+    assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
+    assert "in the 1 of 1 modules whose session is complete (1 of them a sample)" in text
+    assert "- m: 1 of 3 mutants in its sample (50 %), 2 not run — slow kernels" in text

@@ -13,6 +13,11 @@ score (killed / (run − equivalent)), and every survivor that is not written do
 in ``tools/mutation_equivalents.toml`` (with why). A survivor is a bug no test would catch:
 kill it with a test, or explain in that file why no behaviour can change.
 
+A module whose every mutant would take many hours here (numba kernels recompiled per mutant,
+closed-loop tests) runs a sample (``sample`` in tools/mutation.toml): the mutants whose key
+hashes below the fraction, the same in every session, plus an earlier session's survivors;
+the report says how many did not run and why.
+
 A module's session takes up to an hour or two: stopped, it resumes where it stopped (the
 session in out/mutation/); in a new checkout, where out/ is gone, the kills of a partial
 session are taken from ``tools/mutation_results.json`` (commit the report written with
@@ -51,10 +56,13 @@ sys.path.insert(0, str(ROOT / "tools"))
 from mutation_equivalents import (  # noqa: E402
     EQUIVALENT_PREFIX,
     OUT_OF_SCOPE_PREFIX,
+    UNSAMPLED_PREFIX,
     load_equivalents,
+    mutant_key,
     pending_mutants,
     skip_known_equivalents,
     skip_out_of_scope,
+    skip_unsampled,
 )
 
 OUT = ROOT / "out" / "mutation"
@@ -75,6 +83,9 @@ class Target:
     # the whole module), and why the rest is left out
     scope: tuple[str, ...] = ()
     left_out: str = ""
+    # the fraction of the mutants run (``in_sample``) where all of them cannot be, and why
+    sample: float = 1.0
+    sample_why: str = ""
 
 
 TARGETS_FILE = ROOT / "tools" / "mutation.toml"
@@ -217,6 +228,10 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
             log(f"{t.name}: {len(again)} survivors to run again (those not written down as "
                 "equivalent)")
         log(f"{t.name}: resuming the session kept in {db.relative_to(ROOT)}")
+    n = skip_unsampled(db, t.sample, t.sample_why, kept_survivors(t, tree))  # after the kept
+    # kills: those stay run
+    if n:
+        log(f"{t.name}: {n} mutants outside its {100 * t.sample:.0f} % sample, not run")
     run(tool("cosmic-ray"), "exec", str(cfg), str(db))
     took = time.monotonic() - start
     if fresh or not (OUT / f"{t.name}.seconds").exists():  # a whole session's time
@@ -281,10 +296,6 @@ class Mutant:
     job: str = ""  # its job id in the session
 
 
-def mutant_key(operator: str, row: int, col: int, occurrence: int) -> str:
-    return f"{operator}@{row}:{col}#{occurrence}"
-
-
 def read_session(t: Target, tree: Path) -> list[Mutant]:
     db = OUT / f"{t.name}.sqlite"
     if not db.exists():
@@ -305,6 +316,8 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
                 outcome = "survived"  # not run: equivalent by a rule known beforehand
             elif (result.get("output") or "").startswith(OUT_OF_SCOPE_PREFIX):
                 outcome = "out_of_scope"
+            elif (result.get("output") or "").startswith(UNSAMPLED_PREFIX):
+                outcome = "unsampled"
         elif result.get("test_outcome") == "killed":
             outcome = "timeout" if result.get("output") == "timeout" else "killed"
         else:
@@ -337,10 +350,11 @@ def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | N
     rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
              "outcome": m.outcome, "equivalent": m.equivalent}
             for m in mutants
-            if m.outcome not in (*KILLED, "out_of_scope")]  # fmt: skip
+            if m.outcome not in (*KILLED, "out_of_scope", "unsampled")]  # fmt: skip
     return {"module": t.module, "sha256": module_digest(tree, t.module),
             "date": session_date(t), "seconds": seconds, "tests": t.tests, "killed": killed,
             "out_of_scope": sum(m.outcome == "out_of_scope" for m in mutants),
+            "unsampled": sum(m.outcome == "unsampled" for m in mutants),
             "others": rest,
             **({"killed_keys": {m.key: m.outcome for m in mutants
                                 if m.outcome in KILLED and m.key}}
@@ -372,6 +386,19 @@ def resume_killed(db: Path, t: Target, tree: Path) -> int:
     return marked
 
 
+def kept_survivors(t: Target, tree: Path) -> frozenset[tuple[str, int]]:
+    """(operator, line) of the survivors a kept session of the same file found and no
+    equivalent explains: a sample runs them again whether it holds them or not (a known
+    survivor never drops out of it)."""
+    entry = load_results().get(t.name, {})
+    if entry.get("sha256") != module_digest(tree, t.module):
+        return frozenset()
+    mutants = mutants_of(entry)
+    mark_equivalents(mutants, load_equivalents())
+    return frozenset((m.operator, m.line) for m in mutants
+                     if m.outcome == "survived" and not m.equivalent)  # fmt: skip
+
+
 def session_date(t: Target) -> str:
     """The day the module's session was last written to."""
     db = OUT / f"{t.name}.sqlite"
@@ -383,6 +410,7 @@ def mutants_of(entry: dict) -> list[Mutant]:
     killed = [Mutant(entry["module"], "", 0, "", "", "killed")] * entry["killed"]
     outside = entry.get("out_of_scope", 0)
     killed += [Mutant(entry["module"], "", 0, "", "", "out_of_scope")] * outside
+    killed += [Mutant(entry["module"], "", 0, "", "", "unsampled")] * entry.get("unsampled", 0)
     rest = [Mutant(entry["module"], o["operator"], o["line"], o["source"], o["diff"],
                    o["outcome"], "", o["equivalent"]) for o in entry["others"]]  # fmt: skip
     return killed + rest
@@ -411,7 +439,7 @@ def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]
 def report(targets: list[Target], tree: Path) -> str:
     """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
-    rows, survivors, totals, scoped = [], [], [0, 0, 0, 0], []
+    rows, survivors, totals, scoped, sampled = [], [], [0, 0, 0, 0], [], []
     waiting: list[str] = []  # modules the score does not yet hold, each with why
     all_mutants: list[Mutant] = []
     kept = load_results()
@@ -441,11 +469,17 @@ def report(targets: list[Target], tree: Path) -> str:
             rows.append(f"| {t.name} | `{t.module}` | not run (the file changed since its "
                         f"session: `--fresh {t.name}`) | | | | | | |")  # fmt: skip
             continue
-        run = [m for m in ms if m.outcome not in ("skipped", "pending", "out_of_scope")]
+        run = [m for m in ms
+               if m.outcome not in ("skipped", "pending", "out_of_scope", "unsampled")]
         outside = sum(m.outcome == "out_of_scope" for m in ms)
         if outside:
             scoped.append(f"- {t.name}: {outside} mutants outside {', '.join(t.scope)} left "
                           f"out — {t.left_out}")  # fmt: skip
+        unsampled = sum(m.outcome == "unsampled" for m in ms)
+        if unsampled:
+            sampled.append(f"- {t.name}: {len(ms) - unsampled} of {len(ms)} mutants in its "
+                           f"sample ({100 * t.sample:.0f} %), {unsampled} not run — "
+                           f"{t.sample_why}")  # fmt: skip
         killed = [m for m in run if m.outcome in KILLED]
         equiv = [m for m in run if m.equivalent]
         alive = [m for m in run if m.outcome == "survived" and not m.equivalent]
@@ -477,8 +511,9 @@ def report(targets: list[Target], tree: Path) -> str:
         f"{os.cpu_count()} CPUs, cosmic-ray {cosmic_ray_version()}.",
         "",
         (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
-         f" in the {complete} of {len(targets)} modules whose session is complete and of the "
-         "file as it is") if denom
+         f" in the {complete} of {len(targets)} modules whose session is complete"
+         f"{f' ({len(sampled)} of them a sample)' if sampled else ''} and of the file as it is")
+        if denom
         else "**No module's session is complete yet.**",
         f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
         *(["", f"Not yet in the score: {'; '.join(waiting)}."] if waiting else []),
@@ -495,6 +530,9 @@ def report(targets: list[Target], tree: Path) -> str:
         "",
         *([*["Left out of a module (mutated in part, `scope` in `tools/mutation.toml`):"],
            *scoped, ""] if scoped else []),
+        *([*["Sampled (a module's mutants whose key — operator, line, column — hashes below "
+             "its `sample` in `tools/mutation.toml`: the same mutants in every session of the "
+             "file; the score is of those run):"], *sampled, ""] if sampled else []),
         *(["Left out (not mutated, `left-out` in `tools/mutation.toml`):",
            *[f"- `{x['module']}`: {x['why']}" for x in LEFT_OUT], ""] if LEFT_OUT else []),
         "Modules outside these targets are checked independently: bugs planted one at a time "

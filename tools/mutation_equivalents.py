@@ -1,10 +1,12 @@
 """Mutants equivalent to the code (no test can kill them), for tools/mutation.py: the entries
 of tools/mutation_equivalents.toml (each with why), and the rules known before running — a
-``|`` inside an annotation, never evaluated — so such mutants cost no test run."""
+``|`` inside an annotation, never evaluated — so such mutants cost no test run; and the
+filters that leave mutants out of a session (a target's scope, its sample)."""
 
 from __future__ import annotations
 
 import ast
+import hashlib
 import re
 import sqlite3
 import tomllib
@@ -106,5 +108,43 @@ def skip_out_of_scope(db: Path, tree: Path, module: str, scope: list[str], why: 
                 con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
                             "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
                             (OUT_OF_SCOPE_PREFIX + why, job))  # fmt: skip
+                marked += 1
+    return marked
+
+
+def mutant_key(operator: str, row: int, col: int, occurrence: int) -> str:
+    """A mutant named in any session of the same file: operator@row:col#occurrence."""
+    return f"{operator}@{row}:{col}#{occurrence}"
+
+
+UNSAMPLED_PREFIX = "not in the sample: "
+
+
+def in_sample(key: str, fraction: float) -> bool:
+    """Whether a mutant is in a module's sample: a hash of its key below ``fraction`` of the
+    range, so the sample is the same in every session of the file (a resumed or re-run
+    session runs the same mutants) and no random state is involved."""
+    return int(hashlib.sha256(key.encode()).hexdigest()[:12], 16) < fraction * 16**12
+
+
+def skip_unsampled(db: Path, fraction: float, why: str,
+                   keep: frozenset[tuple[str, int]] = frozenset()) -> int:  # fmt: skip
+    """Mark the pending mutants outside the module's sample (``in_sample``) as skipped, with
+    why the module is sampled: counted apart, never in the score; those of ``keep``
+    (operator, line: an earlier session's survivors) run whether sampled or not. The marks of
+    an earlier run are dropped first, so a larger fraction runs the mutants it adds. Returns
+    how many."""
+    marked = 0
+    with sqlite3.connect(db) as con:
+        con.execute("DELETE FROM work_results WHERE worker_outcome = 'SKIPPED' AND output LIKE ?",
+                    (UNSAMPLED_PREFIX + "%",))  # fmt: skip
+        if fraction >= 1.0:
+            return 0
+        for job, op, row, col, occurrence in pending_mutants(con):
+            if (op, row) not in keep and not in_sample(mutant_key(op, row, col, occurrence),
+                                                        fraction):  # fmt: skip
+                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
+                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
+                            (UNSAMPLED_PREFIX + why, job))  # fmt: skip
                 marked += 1
     return marked
