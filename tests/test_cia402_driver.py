@@ -248,6 +248,35 @@ def test_targets_are_carried_only_between_cycles_of_running_drives():
     assert sent(0.003) == sent(0.0)
 
 
+def test_the_first_cycle_of_running_drives_carries_no_target_rate():
+    """Position mode, enabled cycle by cycle (``begin_activate``, as the daemon does) within
+    the clock's first second (lock-step starts at 0): the enable's cycles, the drives not
+    yet running, are no last cycle, so the first running cycle's targets, 0.5 rad on and held
+    up 3 ms before their send, go out as they would on time — no rate from the enable's
+    targets over the time since t = 0."""
+    from sim_backend.network import LockStep
+
+    def sent(held: float) -> list[bytes]:
+        with LockStep(load_robot(CONFIG / "rowc.toml"), period=0.004) as ls:
+            d = ls.driver
+            d.configure()
+            base = d.read(ls.net.time).position.copy()
+            d.begin_activate()
+            for _ in range(100):
+                t = ls.net.time
+                d.read(t)
+                if d.lifecycle is Lifecycle.ACTIVE:
+                    break
+                d.write(t, np.zeros(8), targets=base)
+                ls.net.advance(0.004)
+            assert 0.0 < t < 1.0 and d.lifecycle is Lifecycle.ACTIVE
+            ls.net.advance(held)
+            d.write(t, np.zeros(8), targets=base + 0.5)
+            return [bytes(msg.data) for msg in d._rpdo]
+
+    assert sent(0.003) == sent(0.0)
+
+
 def test_frames_beyond_a_full_batch_are_applied_after_it_and_only_they(seed):
     """A read held up five periods with one drive silent: 35 TPDO1s, more than a batch of 4
     per drive (32). The frames beyond it are applied after it and only they — each drive

@@ -191,3 +191,41 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "in the 1 of 1 modules whose session is complete (1 of them a sample)" in text
     assert "- m: 1 of 3 mutants in its sample (50 %), 2 not run — slow kernels" in text
+
+
+def test_a_survivors_only_run_moves_the_killed_out_of_the_kept_survivors_once(tmp_path):
+    """In a new checkout a complete session's survivors run alone (``skip_all_but`` marks the
+    rest as counted in the kept results); each that dies moves to the killed, once, however
+    often the report is written; one that survives again stays."""
+    from mutation_equivalents import skip_all_but
+
+    db = tmp_path / "s.sqlite"
+    with sqlite3.connect(db) as con:
+        con.execute("CREATE TABLE mutation_specs (job_id TEXT, operator_name TEXT, "
+                    "start_pos_row INT, start_pos_col INT, occurrence INT)")  # fmt: skip
+        con.execute("CREATE TABLE work_results (worker_outcome TEXT, output TEXT, "
+                    "test_outcome TEXT, diff TEXT, job_id TEXT)")  # fmt: skip
+        con.executemany("INSERT INTO mutation_specs VALUES (?, ?, ?, 0, 0)",
+                        [("a", "core/NumberReplacer", 2), ("b", "core/NumberReplacer", 3),
+                         ("c", "core/AddNot", 2)])  # fmt: skip
+    assert skip_all_but(db, frozenset({("core/NumberReplacer", 2)})) == 2
+    with sqlite3.connect(db) as con:
+        assert sorted(con.execute("SELECT job_id FROM work_results").fetchall()) == [
+            ("b",), ("c",)]  # fmt: skip
+
+    def mutant(line: int, diff: str, outcome: str) -> mu.Mutant:
+        return mu.Mutant("m.py", "core/NumberReplacer", line, "x = 1", diff, outcome)
+
+    def kept(m: mu.Mutant) -> dict:
+        return {"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
+                "outcome": m.outcome, "equivalent": ""}  # fmt: skip
+
+    dies, lives = mutant(2, "- x = 1 / + x = 2", "survived"), mutant(3, "- y = 1 / + y = 2",
+                                                                     "survived")  # fmt: skip
+    entry = {"killed": 10, "others": [kept(dies), kept(lives)], "date": "2026-12-01"}
+    run = [mutant(2, dies.diff, "killed"), mutant(3, lives.diff, "survived"),
+           mutant(4, "- z = 1 / + z = 2", "kept")]  # fmt: skip
+    once = mu.merge_survivors_run(entry, run, "2026-12-06")
+    assert once["killed"] == 11 and once["others"] == [kept(lives)]
+    assert once["date"] == "2026-12-06" and entry["killed"] == 10  # the kept one untouched
+    assert mu.merge_survivors_run(once, run, "2026-12-07") == once

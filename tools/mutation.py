@@ -55,11 +55,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 from mutation_equivalents import (  # noqa: E402
     EQUIVALENT_PREFIX,
+    KEPT_PREFIX,
     OUT_OF_SCOPE_PREFIX,
     UNSAMPLED_PREFIX,
     load_equivalents,
     mutant_key,
     pending_mutants,
+    skip_all_but,
     skip_known_equivalents,
     skip_out_of_scope,
     skip_unsampled,
@@ -219,6 +221,10 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
         n = 0 if fresh else resume_killed(db, t, tree)
         if n:
             log(f"{t.name}: {n} mutants killed in a kept partial session, not run again")
+        if survivors and not fresh and kept_is_complete(t, tree):
+            n = skip_all_but(db, kept_survivors(t, tree))
+            log(f"{t.name}: only the kept session's survivors again ({n} mutants counted as "
+                "kept)")
     else:
         if survivors:  # their results dropped: exec runs them again, against today's tests
             again = survivors_to_run(t, tree)
@@ -318,6 +324,8 @@ def read_session(t: Target, tree: Path) -> list[Mutant]:
                 outcome = "out_of_scope"
             elif (result.get("output") or "").startswith(UNSAMPLED_PREFIX):
                 outcome = "unsampled"
+            elif (result.get("output") or "").startswith(KEPT_PREFIX):
+                outcome = "kept"
         elif result.get("test_outcome") == "killed":
             outcome = "timeout" if result.get("output") == "timeout" else "killed"
         else:
@@ -399,6 +407,31 @@ def kept_survivors(t: Target, tree: Path) -> frozenset[tuple[str, int]]:
                      if m.outcome == "survived" and not m.equivalent)  # fmt: skip
 
 
+def kept_is_complete(t: Target, tree: Path) -> bool:
+    """Whether tools/mutation_results.json holds a complete session of this file and tests."""
+    entry = load_results().get(t.name, {})
+    return (entry.get("sha256") == module_digest(tree, t.module) and entry["tests"] == t.tests
+            and "killed_keys" not in entry)  # fmt: skip
+
+
+def merge_survivors_run(entry: dict, mutants: list[Mutant], date: str) -> dict:
+    """A kept complete session's results with a survivors-only session's outcomes: each
+    kept survivor that now dies moves to the killed (idempotent: one already moved is not
+    found among the survivors again)."""
+    entry = {**entry, "others": list(entry["others"])}
+    for m in mutants:
+        if m.outcome not in KILLED:
+            continue
+        for o in entry["others"]:
+            if o["outcome"] == "survived" and (o["operator"], o["line"], o["diff"]) == (
+                    m.operator, m.line, m.diff):  # fmt: skip
+                entry["others"].remove(o)
+                entry["killed"] += 1
+                entry["date"] = date
+                break
+    return entry
+
+
 def session_date(t: Target) -> str:
     """The day the module's session was last written to."""
     db = OUT / f"{t.name}.sqlite"
@@ -447,7 +480,11 @@ def report(targets: list[Target], tree: Path) -> str:
     for t in targets:
         took = OUT / f"{t.name}.seconds"
         ms = read_session(t, tree)
-        if ms and not session_is_stale(t, tree, ms):  # a session at hand: its results kept
+        if any(m.outcome == "kept" for m in ms) and t.name in kept:  # survivors only
+            kept[t.name] = merge_survivors_run(kept[t.name], ms, session_date(t))
+            ms = mutants_of(kept[t.name])
+            seconds[t.name] = kept[t.name]["seconds"]
+        elif ms and not session_is_stale(t, tree, ms):  # a session at hand: its results kept
             seconds[t.name] = int(took.read_text()) if took.exists() else None
             kept[t.name] = results_entry(t, tree, ms, seconds[t.name])
         elif not ms and t.name in kept:

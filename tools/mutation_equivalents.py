@@ -148,3 +148,21 @@ def skip_unsampled(db: Path, fraction: float, why: str,
                             (UNSAMPLED_PREFIX + why, job))  # fmt: skip
                 marked += 1
     return marked
+
+
+KEPT_PREFIX = "counted in the kept results: "
+
+
+def skip_all_but(db: Path, run: frozenset[tuple[str, int]]) -> int:
+    """Mark every pending mutant but those of ``run`` (operator, line) as skipped, their
+    outcome being the kept results' (a complete session's survivors run again in a new
+    checkout, where the session itself is gone). Returns how many."""
+    marked = 0
+    with sqlite3.connect(db) as con:
+        for job, op, row, _, _ in pending_mutants(con):
+            if (op, row) not in run:
+                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
+                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
+                            (KEPT_PREFIX + "survivors only", job))  # fmt: skip
+                marked += 1
+    return marked
