@@ -28,6 +28,18 @@ def kept_only(tmp_path, monkeypatch, t, mutants, seconds, equivalents=()):
     return entry
 
 
+def session_db(path: Path, specs: list[tuple[str, str, int]]) -> Path:
+    """A session's two tables as cosmic-ray makes them (the columns the filters read), with
+    ``specs`` (job id, operator, line) at column 0, occurrence 0, none with a result."""
+    with sqlite3.connect(path) as con:
+        con.execute("CREATE TABLE mutation_specs (job_id TEXT, operator_name TEXT, "
+                    "start_pos_row INT, start_pos_col INT, occurrence INT)")  # fmt: skip
+        con.execute("CREATE TABLE work_results (worker_outcome TEXT, output TEXT, "
+                    "test_outcome TEXT, diff TEXT, job_id TEXT)")  # fmt: skip
+        con.executemany("INSERT INTO mutation_specs VALUES (?, ?, ?, 0, 0)", specs)
+    return path
+
+
 def test_kept_results_make_the_report_until_the_module_changes(tmp_path, monkeypatch):
     module = tmp_path / "m.py"
     module.write_text("def f(x):\n    return x + 1\n")
@@ -157,14 +169,9 @@ def test_a_sample_is_the_same_mutants_in_every_session_and_its_size(tmp_path):
     assert fifth < {k for k in keys if in_sample(k, 0.4)}
     assert all(in_sample(k, 1.0) for k in keys) and not any(in_sample(k, 0.0) for k in keys)
 
-    db = tmp_path / "s.sqlite"
+    db = session_db(tmp_path / "s.sqlite",
+                    [(f"j{row}", "core/NumberReplacer", row) for row in range(1, 201)])
     with sqlite3.connect(db) as con:
-        con.execute("CREATE TABLE mutation_specs (job_id TEXT, operator_name TEXT, "
-                    "start_pos_row INT, start_pos_col INT, occurrence INT)")  # fmt: skip
-        con.execute("CREATE TABLE work_results (worker_outcome TEXT, output TEXT, "
-                    "test_outcome TEXT, diff TEXT, job_id TEXT)")  # fmt: skip
-        con.executemany("INSERT INTO mutation_specs VALUES (?, 'core/NumberReplacer', ?, 0, 0)",
-                        [(f"j{row}", row) for row in range(1, 201)])  # fmt: skip
         con.execute("INSERT INTO work_results VALUES ('NORMAL', '', 'KILLED', NULL, 'j1')")
     out = {f"j{row}" for row in range(2, 201)
            if not in_sample(mu.mutant_key("core/NumberReplacer", row, 0, 0), 0.3)}  # fmt: skip
@@ -199,15 +206,9 @@ def test_a_survivors_only_run_moves_the_killed_out_of_the_kept_survivors_once(tm
     often the report is written; one that survives again stays."""
     from mutation_equivalents import skip_all_but
 
-    db = tmp_path / "s.sqlite"
-    with sqlite3.connect(db) as con:
-        con.execute("CREATE TABLE mutation_specs (job_id TEXT, operator_name TEXT, "
-                    "start_pos_row INT, start_pos_col INT, occurrence INT)")  # fmt: skip
-        con.execute("CREATE TABLE work_results (worker_outcome TEXT, output TEXT, "
-                    "test_outcome TEXT, diff TEXT, job_id TEXT)")  # fmt: skip
-        con.executemany("INSERT INTO mutation_specs VALUES (?, ?, ?, 0, 0)",
-                        [("a", "core/NumberReplacer", 2), ("b", "core/NumberReplacer", 3),
-                         ("c", "core/AddNot", 2)])  # fmt: skip
+    db = session_db(tmp_path / "s.sqlite", [("a", "core/NumberReplacer", 2),
+                                            ("b", "core/NumberReplacer", 3),
+                                            ("c", "core/AddNot", 2)])  # fmt: skip
     assert skip_all_but(db, frozenset({("core/NumberReplacer", 2)})) == 2
     with sqlite3.connect(db) as con:
         assert sorted(con.execute("SELECT job_id FROM work_results").fetchall()) == [
