@@ -205,6 +205,8 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     subprocess.run(command, shell=True, cwd=tree, env=env, capture_output=True, text=True)
     baseline = time.monotonic() - warm
     cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline), command))
+    if db.exists() and not has_mutants(db):  # made by a look into it before init, say
+        db.unlink()
     if db.exists() and not fresh and session_is_stale(t, tree):
         log(f"{t.name}: {t.module} changed since its session was made: starting it anew")
         fresh = True
@@ -243,6 +245,15 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     if fresh or not (OUT / f"{t.name}.seconds").exists():  # a whole session's time
         (OUT / f"{t.name}.seconds").write_text(f"{took:.0f}\n")
     log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s)")
+
+
+def has_mutants(db: Path) -> bool:
+    """Whether the file is a session that cosmic-ray's init filled."""
+    try:
+        with sqlite3.connect(db) as con:
+            return con.execute("SELECT count(*) FROM mutation_specs").fetchone()[0] > 0
+    except sqlite3.Error:
+        return False
 
 
 def survivors_to_run(t: Target, tree: Path) -> list[str]:
@@ -473,6 +484,7 @@ def report(targets: list[Target], tree: Path) -> str:
     """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
     rows, survivors, totals, scoped, sampled = [], [], [0, 0, 0, 0], [], []
+    samples = 0  # complete modules that ran a sample
     waiting: list[str] = []  # modules the score does not yet hold, each with why
     all_mutants: list[Mutant] = []
     kept = load_results()
@@ -532,6 +544,7 @@ def report(targets: list[Target], tree: Path) -> str:
         if pending:  # a partial session: listed, not yet in the score
             waiting.append(f"{t.name} ({pending} of {len(ms)} not run yet)")
             continue
+        samples += bool(unsampled)
         for i, v in enumerate((len(run), len(killed), len(alive), len(equiv))):
             totals[i] += v
     denom = totals[0] - totals[3]
@@ -549,7 +562,7 @@ def report(targets: list[Target], tree: Path) -> str:
         "",
         (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
          f" in the {complete} of {len(targets)} modules whose session is complete"
-         f"{f' ({len(sampled)} of them a sample)' if sampled else ''} and of the file as it is")
+         f"{f' ({samples} of them a sample)' if samples else ''} and of the file as it is")
         if denom
         else "**No module's session is complete yet.**",
         f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
