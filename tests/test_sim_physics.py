@@ -283,3 +283,71 @@ def test_a_slipping_brake_pays_out_at_its_slip_speed_and_a_held_one_slips_past_i
     plant.motor_torque[5] = -(1.5 - load) * 1.2
     plant.step(10 * dt)
     assert plant.theta[5] < theta0[5] and plant.theta_dot[5] < 0.0
+
+
+def test_the_cables_moment_turns_the_platform_about_its_com():
+    """cogiro (its COM off P on every axis), the platform held 0.5 mm off its home at rest, the
+    brakes closed: one physics step gives, about the COM, I_w ω̇ = Σ t_i (R b_i − R c) × u_i
+    = Σ t_i W[3:, i] − (R c) × Σ t_i u_i — the moment from the inverse kinematics' wrench
+    matrix (about P) moved to the COM here, not through the kernel."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    plant = CdprPlant(model)
+    plant.com_pos[:] += [4e-4, -3e-4, 2e-4]  # m: off the equilibrium (a moment), every cable taut
+    R, dt = plant.R.copy(), plant.opt.physics_dt
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, plant.position.copy(), R)
+    rc = R @ np.array(model.platform.com)
+    assert np.all(np.abs(rc) > 0.01) and len(set(np.round(rc, 6))) == 3
+    plant.step(dt)
+    t = plant.tension
+    assert np.all(t > 0.0)
+    moment = kin.W[3:] @ t - np.cross(rc, kin.W[:3] @ t)
+    inertia = R @ np.array(model.platform.inertia) @ R.T
+    assert np.linalg.norm(moment) > 1.0  # N·m: a turn worth checking
+    np.testing.assert_allclose(plant.w, dt * np.linalg.solve(inertia, moment), rtol=1e-9)
+
+
+def test_a_brake_slipping_either_way_sticks_again_once_its_torque_is_within_the_hold():
+    """rowc, brake 5 closed holding 1.5 N·m: a motor torque beyond it turns the drum either
+    way (Karnopp's slip); brought back within the hold, the friction stops the drum within a
+    few steps and it stays put — reeling in (θ̇ > 0) as paying out."""
+    model = load_robot(CONFIG / "rowc.toml")
+    for sign in (1.0, -1.0):
+        plant = CdprPlant(model)
+        dt = plant.opt.physics_dt
+        load = plant.drum_ratio[5] * plant.tension[5]  # N·m the cable puts on the brake
+        plant.brake_hold[5] = 1.5
+        plant.motor_torque[5] = load + sign * 1.5 * 1.3
+        plant.step(10 * dt)
+        assert sign * plant.theta_dot[5] > 0.0
+        plant.motor_torque[5] = plant.drum_ratio[5] * plant.tension[5]  # no load on it
+        plant.step(50 * dt)
+        assert plant.theta_dot[5] == 0.0
+        theta = plant.theta[5]
+        plant.step(10 * dt)
+        assert plant.theta[5] == theta
+
+
+@pytest.mark.parametrize("config", ["cogiro.toml", "seed000_grippers.toml"])
+def test_the_compiled_step_is_the_kernel_run_as_python(config):
+    """The physics kernel compiled (numba: no bounds checks) and as Python over numpy (its
+    ``py_func``: every index checked, an array one short raises) agree over 20 steps of a
+    platform moving and turning under an external wrench, one brake slipping — and with the
+    seed000 jaws' dynamics."""
+    from sim_backend.physics import physics_kernel
+
+    model = load_robot(CONFIG / config)
+    plants = [CdprPlant(model), CdprPlant(model)]
+    for plant in plants:
+        plant.v[:], plant.w[:] = [0.05, -0.03, 0.04], [0.02, -0.01, 0.03]
+        plant.ext_force[:], plant.ext_moment[:] = [5.0, -3.0, 2.0], [0.2, 0.1, -0.3]
+        plant.brake_slip[2] = 0.5  # rad/s
+    compiled, python = plants
+    compiled.step(20 * compiled.opt.physics_dt)
+    body, winches, state, inputs, servo = python._args
+    physics_kernel.py_func(20, python.opt.physics_dt, python._step_kin.arrays, body, winches,
+                           state, inputs, servo, python.tension, *python._jaw_args)  # fmt: skip
+    for name in ("com_pos", "R", "v", "w", "theta", "theta_dot", "tension"):
+        np.testing.assert_allclose(getattr(python, name), getattr(compiled, name), rtol=1e-9,
+                                   atol=1e-12, err_msg=name)  # fmt: skip
+    assert np.linalg.norm(python.w - [0.02, -0.01, 0.03]) > 1e-6  # the step did turn it
