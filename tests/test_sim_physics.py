@@ -309,8 +309,9 @@ def test_the_cables_moment_turns_the_platform_about_its_com():
 
 def test_a_brake_slipping_either_way_sticks_again_once_its_torque_is_within_the_hold():
     """rowc, brake 5 closed holding 1.5 N·m: a motor torque beyond it turns the drum either
-    way (Karnopp's slip); brought back within the hold, the friction stops the drum within a
-    few steps and it stays put — reeling in (θ̇ > 0) as paying out."""
+    way (Karnopp's slip), its first step from rest at J θ̈ = τ_net − sign(τ_net) τ_hold, the
+    brake's friction against the net torque; brought back within the hold, the friction
+    stops the drum within a few steps and it stays put — reeling in (θ̇ > 0) as paying out."""
     model = load_robot(CONFIG / "rowc.toml")
     for sign in (1.0, -1.0):
         plant = CdprPlant(model)
@@ -318,7 +319,10 @@ def test_a_brake_slipping_either_way_sticks_again_once_its_torque_is_within_the_
         load = plant.drum_ratio[5] * plant.tension[5]  # N·m the cable puts on the brake
         plant.brake_hold[5] = 1.5
         plant.motor_torque[5] = load + sign * 1.5 * 1.3
-        plant.step(10 * dt)
+        plant.step(dt)
+        breakaway = sign * (1.5 * 1.3 - 1.5) / plant.rotor_inertia[5] * dt
+        assert plant.theta_dot[5] == pytest.approx(breakaway, rel=1e-9)
+        plant.step(9 * dt)
         assert sign * plant.theta_dot[5] > 0.0
         plant.motor_torque[5] = plant.drum_ratio[5] * plant.tension[5]  # no load on it
         plant.step(50 * dt)
