@@ -192,8 +192,10 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
                        "- return x + 1 / + return x - 1", "killed")  # fmt: skip
     unsampled = mu.Mutant("m.py", "core/NumberReplacer", 2, "return x + 1",
                           "- return x + 1 / + return x + 2", "unsampled")  # fmt: skip
-    entry = kept_only(tmp_path, monkeypatch, t, [killed, unsampled, unsampled], 60)
-    assert entry["killed"] == 1 and entry["unsampled"] == 2 and entry["others"] == []
+    left_out = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Pow", 2, "return x + 1", "",
+                         "skipped")  # an operator left out: in no sample  # fmt: skip
+    entry = kept_only(tmp_path, monkeypatch, t, [killed, unsampled, unsampled, left_out], 60)
+    assert entry["killed"] == 1 and entry["unsampled"] == 2 and len(entry["others"]) == 1
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "in the 1 of 1 modules whose session is complete (1 of them a sample)" in text
