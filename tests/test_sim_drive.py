@@ -778,3 +778,58 @@ def test_a_moving_target_is_held_extrapolate_for_after_the_last_one_at_any_rate(
         assert servo.rate[0] == 1.0
         axis.hold_if_due(due)
         assert servo.rate[0] == 0.0
+
+
+def test_switching_on_with_the_safety_chain_open_faults_with_the_sto_error():
+    """A drive disabled when the chain opened stays so; the master's shutdown (to ready, the
+    power stage still off) is taken, its switch-on (energising it) faults the drive with the
+    STO error and an EMCY due."""
+    with enabled_rig("rowc.toml") as rig:
+        axis = rig.net.drives[2].axis
+        axis.state = p.PowerState.SWITCH_ON_DISABLED
+        assert axis.open_sto(p.EMCY_STO) is False
+        axis.apply_controlword(0x06)  # shutdown
+        assert axis.state is p.PowerState.READY_TO_SWITCH_ON and axis.emcy_due is None
+        axis.apply_controlword(0x07)  # switch on
+        assert axis.state is p.PowerState.FAULT
+        assert axis.fault_code == axis.emcy_due == p.EMCY_STO
+
+
+def test_a_reset_node_clears_the_error_code():
+    """A faulted drive's reset node (NMT): the state machine restarts and 0x603F reads 0."""
+    with enabled_rig("rowc.toml") as rig:
+        axis = rig.net.drives[1].axis
+        axis.fault(p.EMCY_FOLLOWING_ERROR)
+        assert axis.fault_code == p.EMCY_FOLLOWING_ERROR
+        axis.reset()
+        assert axis.state is p.PowerState.SWITCH_ON_DISABLED and axis.fault_code == 0
+
+
+def test_a_negative_target_torque_is_applied_and_clamped_at_minus_the_limit():
+    """Torque mode: a target torque paying cable out (negative) is applied as it is within
+    the limit, at −limit beyond it; and 0x6077 reports the torque applied since the SYNC that
+    set it, before any physics step (the servo's last applied torque is the one before)."""
+    with enabled_rig("seed000.toml", torque_mode=True) as rig:
+        axis, c = rig.net.drives[0].axis, rig.net.drives[0].axis.cable
+        limit, rated = axis.effective_torque_limit, axis.rated_torque
+        axis.torque_pm = -round(0.5 * limit / rated * 1000)
+        axis.apply()
+        assert rig.plant.motor_torque[c] == pytest.approx(-0.5 * limit, rel=1e-3)
+        assert rig.plant.servo.applied[c] != rig.plant.motor_torque[c]  # no step since
+        assert axis.torque_actual_pm() == axis.torque_pm
+        axis.torque_pm = -32000
+        axis.apply()
+        assert rig.plant.motor_torque[c] == -limit
+
+
+def test_a_closing_brake_is_closed_at_any_instant_from_its_due_time_on():
+    """A brake released by an opening chain closes at ``brake_due``: checked at an instant
+    just past it (a tick need not land on it exactly), it is closed; just before, still open."""
+    with enabled_rig("rowc.toml") as rig:
+        axis, c = rig.net.drives[4].axis, rig.net.drives[4].axis.cable
+        rig.plant.brake[c] = False
+        axis.brake_due = 1.0  # s
+        axis.hold_if_due(1.0 - 1e-9)
+        assert not rig.plant.brake[c]
+        axis.hold_if_due(1.0 + 1e-9)
+        assert rig.plant.brake[c] and axis.brake_due == math.inf

@@ -355,3 +355,48 @@ def test_the_compiled_step_is_the_kernel_run_as_python(config):
         np.testing.assert_allclose(getattr(python, name), getattr(compiled, name), rtol=1e-9,
                                    atol=1e-12, err_msg=name)  # fmt: skip
     assert np.linalg.norm(python.w - [0.02, -0.01, 0.03]) > 1e-6  # the step did turn it
+
+
+def test_a_jaws_cable_jb_is_damped_on_its_cables_rate():
+    """seed000_grippers, the platform moving, the jaws at rest: each jaw's cable jB differs
+    from the platform at rest by its damping times its cable's length rate (central
+    differences of the inverse kinematics along P's velocity), the jaw's own rate being 0."""
+    model = load_robot(CONFIG / "seed000_grippers.toml")
+    still, moving = CdprPlant(model), CdprPlant(model)
+    v = np.array([0.04, -0.03, 0.05])  # m/s, no turn
+    moving.v[:] = v
+    kin, h, p, R = KinematicsData(model), 1e-6, moving.position.copy(), moving.R.copy()
+
+    def lengths(s: float) -> np.ndarray:
+        inverse_kinematics(model, kin, p + s * h * v, R)
+        return kin.length.copy()
+
+    rate = ((lengths(1.0) - lengths(-1.0)) / (2 * h))[moving.g_cable]
+    assert np.all(moving.jaw_speed == 0.0) and np.all(np.abs(rate) > 1e-3)
+    for plant in (still, moving):
+        plant.step(plant.opt.physics_dt)
+    assert np.all(still.jb_tension > 0.0)
+    np.testing.assert_allclose(moving.jb_tension - still.jb_tension, moving.g_c_jb * rate,
+                               rtol=1e-6)  # fmt: skip
+
+
+def test_a_drive_braking_on_its_following_error_stops_its_drum_in_that_step():
+    """rowc, brakes open, the motors holding the cables' torque: drive 0's position loop
+    pulls toward a target 1 rad away with a 10 mrad window and a 1 ms time-out; once past
+    it the firmware closes the brake within the physics step — the drum stopped there (θ̇ =
+    0), and held from then on."""
+    plant = CdprPlant(load_robot(CONFIG / "rowc.toml"))
+    plant.brake[:] = False
+    plant.motor_torque[:] = plant.drum_ratio * plant.tension
+    s = plant.servo
+    s.kp[0], s.target[0], s.window[0], s.timeout[0] = 2.0, plant.theta[0] + 1.0, 0.01, 0.001
+    dt = plant.opt.physics_dt
+    for _ in range(100):
+        plant.step(dt)
+        if plant.brake[0]:
+            break
+    assert plant.brake[0] and not np.any(plant.brake[1:])
+    assert plant.theta_dot[0] == 0.0
+    theta = plant.theta[0]
+    plant.step(10 * dt)
+    assert plant.theta[0] == theta
