@@ -833,3 +833,17 @@ def test_a_closing_brake_is_closed_at_any_instant_from_its_due_time_on():
         assert not rig.plant.brake[c]
         axis.hold_if_due(1.0 + 1e-9)
         assert rig.plant.brake[c] and axis.brake_due == math.inf
+
+
+def test_no_position_loop_runs_outside_mode_8():
+    """Enabled with 0x6060 at its default 0 (no mode: the master set none), the drive runs no
+    position loop; set to 8 (cyclic synchronous position), it does."""
+    with enabled_rig("seed000.toml", torque_mode=True) as rig:
+        axis, c = rig.net.drives[3].axis, rig.net.drives[3].axis.cable
+        assert axis.state is p.PowerState.OPERATION_ENABLED
+        axis.od[(p.OD_MODES_OF_OPERATION, 0)] = 0
+        axis.apply()
+        assert rig.plant.servo.kp[c] == 0.0
+        axis.od[(p.OD_MODES_OF_OPERATION, 0)] = p.MODE_CSP
+        axis.apply()
+        assert rig.plant.servo.kp[c] > 0.0

@@ -400,3 +400,21 @@ def test_a_drive_braking_on_its_following_error_stops_its_drum_in_that_step():
     theta = plant.theta[0]
     plant.step(10 * dt)
     assert plant.theta[0] == theta
+
+
+def test_a_cable_pulling_half_a_newton_pulls_the_platform():
+    """cogiro, every cable cut but one, slipped on its drum until it pulls ~0.5 N: one physics
+    step gives v = dt (t u / m + g), its small force counted like any other."""
+    model = load_robot(CONFIG / "cogiro.toml")
+    plant = CdprPlant(model)
+    stretch = plant.drum_ratio[0] * plant.theta[0] - plant.drum_slip[0]  # m, at home
+    plant.cable_cut[1:] = True
+    plant.drum_slip[0] += stretch * (1.0 - 0.5 / plant.tension[0])  # the law near-linear
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    u, dt = kin.W[:3, 0].copy(), plant.opt.physics_dt
+    plant.step(dt)
+    t = plant.tension[0]
+    assert 0.3 < t < 0.7
+    g = np.array(model.gravity)
+    np.testing.assert_allclose(plant.v, dt * (t * u / model.platform.mass + g), rtol=1e-9)
