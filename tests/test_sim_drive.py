@@ -847,3 +847,50 @@ def test_no_position_loop_runs_outside_mode_8():
         axis.od[(p.OD_MODES_OF_OPERATION, 0)] = p.MODE_CSP
         axis.apply()
         assert rig.plant.servo.kp[c] > 0.0
+
+
+def test_a_held_fault_reset_bit_resets_once():
+    """A fault reset is bit 7's rising edge (CiA 402 §6.3.1.1): held high, it reset the drive
+    once; a fault meanwhile stays until the bit falls and rises again."""
+    with enabled_rig("rowc.toml") as rig:
+        axis = rig.net.drives[0].axis
+        axis.fault(p.EMCY_FOLLOWING_ERROR)
+        axis.apply_controlword(0x80)
+        assert axis.state is p.PowerState.SWITCH_ON_DISABLED
+        axis.fault(p.EMCY_FOLLOWING_ERROR)
+        axis.apply_controlword(0x80)  # still high
+        assert axis.state is p.PowerState.FAULT
+        axis.apply_controlword(0x00)
+        axis.apply_controlword(0x80)
+        assert axis.state is p.PowerState.SWITCH_ON_DISABLED
+
+
+def test_an_opening_chain_lets_only_a_released_brake_take_its_closing_time():
+    """The chain opens at t = 1 s with brakes that take 30 ms to close: a drive enabled with
+    its brake released lets the drum turn until 1.03 s; one enabled against its closed brake
+    (a brake test) keeps it closed."""
+    with enabled_rig("rowc.toml") as rig:
+        rig.plant.opt.brake_close_time = 0.03  # s
+        free, held = rig.net.drives[0].axis, rig.net.drives[1].axis
+        rig.plant.close_brake(held.cable)
+        assert not rig.plant.brake[free.cable] and rig.plant.brake[held.cable]
+        assert free.open_sto(p.EMCY_STO, t=1.0) and held.open_sto(p.EMCY_STO, t=1.0)
+        assert free.brake_due == pytest.approx(1.03) and not rig.plant.brake[free.cable]
+        assert held.brake_due == math.inf and rig.plant.brake[held.cable]
+
+
+def test_a_target_moving_at_any_rate_is_held_after_the_extrapolation_time():
+    """A position target moving (at −1 rad/s, say) holds ``extrapolate_for`` after the last
+    new one (``holds_at`` says when, ``hold_if_due`` holds it); a still one never needs
+    holding."""
+    with enabled_rig("rowc.toml") as rig:
+        axis, rate = rig.net.drives[6].axis, rig.plant.servo.rate
+        axis.last_target = 2.0  # s
+        rate[axis.cable] = -1.0  # rad/s
+        due = axis.holds_at()
+        assert due == 2.0 + axis.extrapolate_for
+        axis.hold_if_due(due - 1e-9)
+        assert rate[axis.cable] == -1.0
+        axis.hold_if_due(due)
+        assert rate[axis.cable] == 0.0
+        assert axis.holds_at() == math.inf
