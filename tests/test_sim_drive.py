@@ -894,3 +894,18 @@ def test_a_target_moving_at_any_rate_is_held_after_the_extrapolation_time():
         axis.hold_if_due(due)
         assert rate[axis.cable] == 0.0
         assert axis.holds_at() == math.inf
+
+
+def test_a_position_rpdo_without_a_torque_offset_applies_none():
+    """Mode 8 with an RPDO that maps no torque offset (0x60B2): the offset is 0, not a
+    leftover; and a drive disabled starts its following-error time from 0 again."""
+    with enabled_rig("rowc.toml") as rig:
+        axis, servo = rig.net.drives[5].axis, rig.plant.servo
+        axis.od[(p.OD_MODES_OF_OPERATION, 0)] = p.MODE_CSP
+        axis.torque_pm = 250
+        assert axis.take(1.0, None, 1000, None) is True
+        assert axis.torque_pm == 0
+        servo.beyond[axis.cable] = 0.05  # s beyond the window so far
+        axis.state = p.PowerState.SWITCH_ON_DISABLED
+        axis.apply()
+        assert servo.beyond[axis.cable] == 0.0
