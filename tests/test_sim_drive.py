@@ -909,3 +909,16 @@ def test_a_position_rpdo_without_a_torque_offset_applies_none():
         axis.state = p.PowerState.SWITCH_ON_DISABLED
         axis.apply()
         assert servo.beyond[axis.cable] == 0.0
+
+
+def test_a_reset_node_keeps_an_absolute_encoders_count():
+    """A reset node restarts an incremental encoder's counter at zero, never an absolute
+    one's: with the motor a radian off its start, the count reads the same after."""
+    with enabled_rig("rowc.toml") as rig:
+        axis = rig.net.drives[2].axis
+        assert not axis.incremental
+        rig.plant.theta[axis.cable] += 1.0  # rad
+        before = axis.counts()
+        assert before != 0
+        axis.reset()
+        assert axis.counts() == before
