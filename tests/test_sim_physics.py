@@ -418,3 +418,15 @@ def test_a_cable_pulling_half_a_newton_pulls_the_platform():
     assert 0.3 < t < 0.7
     g = np.array(model.gravity)
     np.testing.assert_allclose(plant.v, dt * (t * u / model.platform.mass + g), rtol=1e-9)
+
+
+def test_a_closed_brake_holds_a_drum_with_no_load_at_all():
+    """rowc, cable 3 cut (no tension), no motor torque, its brake closed: nothing acts on the
+    drum, and it stays exactly where it is."""
+    plant = CdprPlant(load_robot(CONFIG / "rowc.toml"))
+    plant.cable_cut[3] = True
+    plant.motor_torque[:] = 0.0
+    theta = plant.theta[3]
+    plant.step(20 * plant.opt.physics_dt)
+    assert plant.tension[3] == 0.0 and plant.brake[3]
+    assert plant.theta_dot[3] == 0.0 and plant.theta[3] == theta
