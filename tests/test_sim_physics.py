@@ -319,10 +319,15 @@ def test_a_brake_slipping_either_way_sticks_again_once_its_torque_is_within_the_
         load = plant.drum_ratio[5] * plant.tension[5]  # N·m the cable puts on the brake
         plant.brake_hold[5] = 1.5
         plant.motor_torque[5] = load + sign * 1.5 * 1.3
+        J, b = plant.rotor_inertia[5], plant.viscous[5]
         plant.step(dt)
-        breakaway = sign * (1.5 * 1.3 - 1.5) / plant.rotor_inertia[5] * dt
+        breakaway = sign * (1.5 * 1.3 - 1.5) / J * dt
         assert plant.theta_dot[5] == pytest.approx(breakaway, rel=1e-9)
-        plant.step(9 * dt)
+        plant.step(dt)  # slipping: the friction and the viscous drag against the motion
+        net = plant.motor_torque[5] - plant.drum_ratio[5] * plant.tension[5] - sign * 1.5
+        slipping = breakaway + (net - b * breakaway) / J * dt
+        assert b > 0.0 and plant.theta_dot[5] == pytest.approx(slipping, rel=1e-9)
+        plant.step(8 * dt)
         assert sign * plant.theta_dot[5] > 0.0
         plant.motor_torque[5] = plant.drum_ratio[5] * plant.tension[5]  # no load on it
         plant.step(50 * dt)
