@@ -545,9 +545,10 @@ def report(targets: list[Target], tree: Path) -> str:
         # the mutants a session runs: not those of the operators left out nor outside a scope
         eligible = len(ms) - outside - sum(m.outcome == "skipped" for m in ms)
         if unsampled:
-            sampled.append(f"- {t.name}: {eligible - unsampled} of {eligible} mutants in its "
-                           f"sample ({100 * t.sample:.0f} %), {unsampled} not run — "
-                           f"{t.sample_why}")  # fmt: skip
+            sampled.append(f"- {t.name}: {eligible - unsampled} of {eligible} mutants run, "
+                           f"{unsampled} not: its {100 * t.sample:.0f} % sample and those an "
+                           "earlier partial session ran or that share an operator and line "
+                           f"with a survivor — {t.sample_why}")  # fmt: skip
         killed = [m for m in run if m.outcome in KILLED]
         equiv = [m for m in run if m.equivalent]
         alive = [m for m in run if m.outcome == "survived" and not m.equivalent]
