@@ -195,12 +195,20 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
     left_out = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Pow", 2, "return x + 1", "",
                          "skipped")  # an operator left out: in no sample  # fmt: skip
     entry = kept_only(tmp_path, monkeypatch, t, [killed, unsampled, unsampled, left_out], 60)
-    assert entry["killed"] == 1 and entry["unsampled"] == 2 and len(entry["others"]) == 1
+    assert entry["killed"] == 1 and len(entry["others"]) == 3  # the unsampled kept whole
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "in the 1 of 1 modules whose session is complete (1 of them a sample)" in text
     assert "- m: 1 of 3 mutants run, 2 not: its 50 % sample and those an earlier" in text
     assert text.count("slow kernels") == 1
+    # an entry for a mutant the sample left out is not stale: it may be of that one
+    entry_of_unsampled = {"module": "m.py", "operator": "NumberReplacer",
+                          "line": r"return x \+ 1", "why": "y"}  # fmt: skip
+    monkeypatch.setattr(mu, "load_equivalents", lambda: [entry_of_unsampled])
+    monkeypatch.setattr(mu, "TARGETS", [t])
+    assert "matched no survivor" not in mu.report([t], tmp_path)
+    entry_of_unsampled["line"] = r"return x \+ 3"  # of no mutant at all: stale
+    assert "matched no survivor" in mu.report([t], tmp_path)
 
 
 def test_a_survivors_only_run_moves_the_killed_out_of_the_kept_survivors_once(tmp_path):

@@ -386,11 +386,10 @@ def results_entry(t: Target, tree: Path, mutants: list[Mutant], seconds: int | N
     rest = [{"operator": m.operator, "line": m.line, "source": m.source, "diff": m.diff,
              "outcome": m.outcome, "equivalent": m.equivalent}
             for m in mutants
-            if m.outcome not in (*KILLED, "out_of_scope", "unsampled")]  # fmt: skip
+            if m.outcome not in (*KILLED, "out_of_scope")]  # fmt: skip
     return {"module": t.module, "sha256": module_digest(tree, t.module),
             "date": session_date(t), "seconds": seconds, "tests": t.tests, "killed": killed,
             "out_of_scope": sum(m.outcome == "out_of_scope" for m in mutants),
-            "unsampled": sum(m.outcome == "unsampled" for m in mutants),
             "others": rest,
             **({"killed_keys": {m.key: m.outcome for m in mutants
                                 if m.outcome in KILLED and m.key}}
@@ -471,7 +470,6 @@ def mutants_of(entry: dict) -> list[Mutant]:
     killed = [Mutant(entry["module"], "", 0, "", "", "killed")] * entry["killed"]
     outside = entry.get("out_of_scope", 0)
     killed += [Mutant(entry["module"], "", 0, "", "", "out_of_scope")] * outside
-    killed += [Mutant(entry["module"], "", 0, "", "", "unsampled")] * entry.get("unsampled", 0)
     rest = [Mutant(entry["module"], o["operator"], o["line"], o["source"], o["diff"],
                    o["outcome"], "", o["equivalent"]) for o in entry["others"]]  # fmt: skip
     return killed + rest
@@ -480,16 +478,20 @@ def mutants_of(entry: dict) -> list[Mutant]:
 def mark_equivalents(mutants: list[Mutant], equivalents: list[dict]) -> set[int]:
     """Survivors written down as equivalent (module or "*", and regular expressions of the
     operator, with or without cosmic-ray's ``core/``, and of the line's text, stripped);
-    returns the indices of the entries that matched nothing (stale)."""
+    returns the indices of the entries that matched nothing (stale) — an entry that may be of
+    a mutant a sample left out (its operator and line) is not stale."""
     used: set[int] = set()
     for m in mutants:
-        if m.outcome != "survived":
+        if m.outcome not in ("survived", "unsampled"):
             continue
         for i, e in enumerate(equivalents):
             operator = "core/" + e["operator"].removeprefix("core/")
-            if (e["module"] in ("*", m.module) and re.fullmatch(operator, m.operator)
-                    and re.fullmatch(e["line"], m.source)
-                    and re.search(e.get("mutant", ""), m.diff.split(" / +")[-1])):  # fmt: skip
+            if not (e["module"] in ("*", m.module) and re.fullmatch(operator, m.operator)
+                    and re.fullmatch(e["line"], m.source)):  # fmt: skip
+                continue
+            if m.outcome == "unsampled":  # not run: its mutant's text is not known
+                used.add(i)
+            elif re.search(e.get("mutant", ""), m.diff.split(" / +")[-1]):
                 m.equivalent = e["why"]
                 used.add(i)
                 break
