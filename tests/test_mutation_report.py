@@ -198,7 +198,8 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
     assert entry["killed"] == 1 and len(entry["others"]) == 3  # the unsampled kept whole
     text = mu.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
-    assert "in the 1 of 1 modules whose session is complete (1 of them a sample)" in text
+    assert "in the 1 of 1 modules whose session is complete (1 of them a sample: 2 mutants " \
+        "not run)" in text
     assert "- m: 1 of 3 mutants run, 2 not: its 50 % sample and those an earlier" in text
     assert text.count("slow kernels") == 1
     # an entry for a mutant the sample left out is not stale: it may be of that one

@@ -191,6 +191,10 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)
 
+    if survivors and not db.exists() and not fresh and kept_is_complete(t, tree) and not (
+            kept_survivors(t, tree)):  # fmt: skip
+        log(f"{t.name}: its kept session has no survivors left: nothing to run")
+        return
     start = time.monotonic()
     base_run = subprocess.run(  # compiles every kernel into the cache
         f"{sys.executable} -m pytest -x -q -p no:cacheprovider {t.tests}", shell=True, cwd=tree,
@@ -503,7 +507,8 @@ def report(targets: list[Target], tree: Path) -> str:
     """The report's text; the sessions at hand are kept in tools/mutation_results.json."""
     equivalents = load_equivalents()
     rows, survivors, totals, scoped, sampled = [], [], [0, 0, 0, 0], [], []
-    samples = 0  # complete modules that ran a sample
+    samples, not_sampled = 0, 0  # complete modules that ran a sample, the mutants they left
+    by_rule = 0  # equivalent by a rule known beforehand: counted, never run
     waiting: list[str] = []  # modules the score does not yet hold, each with why
     all_mutants: list[Mutant] = []
     kept = load_results()
@@ -567,6 +572,8 @@ def report(targets: list[Target], tree: Path) -> str:
             waiting.append(f"{t.name} ({pending} of {eligible} not run yet)")
             continue
         samples += bool(unsampled)
+        not_sampled += unsampled
+        by_rule += sum(bool(m.equivalent) and not m.diff for m in run)
         for i, v in enumerate((len(run), len(killed), len(alive), len(equiv))):
             totals[i] += v
     denom = totals[0] - totals[3]
@@ -590,13 +597,14 @@ def report(targets: list[Target], tree: Path) -> str:
         "",
         (f"**Score: {100.0 * totals[1] / denom:.1f} % of {denom} non-equivalent mutants killed**"
          f" in the {complete} of {len(targets)} modules whose session is complete"
-         f"{f' ({samples} of them a sample)' if samples else ''} and of the file as it is")
-        if denom
+         f"{f' ({samples} of them a sample: {not_sampled} mutants not run)' if samples else ''}"
+         " and of the file as it is") if denom
         else "**No module's session is complete yet.**",
-        f"({totals[0]} run, {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent).",
+        f"({totals[0]} mutants: {totals[1]} killed, {totals[2]} survived, {totals[3]} equivalent, "
+        f"{by_rule} of those by a rule known beforehand and not run).",
         *(["", f"Not yet in the score: {'; '.join(waiting)}."] if waiting else []),
         "",
-        "| module | file | run | killed | survived | equivalent | score | wall time | tests |",
+        "| module | file | mutants | killed | survived | equivalent | score | wall time | tests |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         *rows,
         "",
