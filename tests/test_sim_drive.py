@@ -922,3 +922,14 @@ def test_a_reset_node_keeps_an_absolute_encoders_count():
         assert before != 0
         axis.reset()
         assert axis.counts() == before
+
+
+def test_the_torque_actual_saturates_at_its_16_bit_range():
+    """0x6077 is an INTEGER16 per mille of the rated torque: with a rated torque written as
+    1 mN·m (0x6076), a torque of ±1 N·m reads ±32767, never wrapped or short of it."""
+    with enabled_rig("seed000.toml", torque_mode=True) as rig:
+        axis, c = rig.net.drives[2].axis, rig.net.drives[2].axis.cable
+        axis.rated_torque = 0.001  # N·m
+        for sign in (1.0, -1.0):
+            rig.plant.motor_torque[c] = sign * 1.0
+            assert axis.torque_actual_pm() == sign * 32767
