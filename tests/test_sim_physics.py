@@ -435,3 +435,33 @@ def test_a_closed_brake_holds_a_drum_with_no_load_at_all():
     plant.step(20 * plant.opt.physics_dt)
     assert plant.tension[3] == 0.0 and plant.brake[3]
     assert plant.theta_dot[3] == 0.0 and plant.theta[3] == theta
+
+
+def test_a_cable_at_exactly_its_unstretched_length_carries_nothing_even_lengthening():
+    """rowc, cable 2's drum set so the cable is exactly its unstretched length (a stretch of
+    0.0), the platform moving to lengthen it: no tension — its damping acts only on a
+    stretched cable."""
+    model = load_robot(CONFIG / "rowc.toml")
+    plant = CdprPlant(model)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    plant.theta[2], plant.drum_slip[2] = 0.0, kin.length[2] - plant.l_home[2]
+    assert kin.length[2] - plant.unstretched_length()[2] == 0.0
+    plant.v[:] = -0.1 * kin.W[:3, 2]  # m/s, away from its exit point
+    plant.step(plant.opt.physics_dt)
+    assert plant.tension[2] == 0.0
+
+
+def test_a_jaws_cable_jb_never_pushes():
+    """seed000_grippers: a jaw held 0.5 N's worth of jB stretch beyond its cable's (jB
+    compressed), at rest: jB carries nothing, not −0.5 N."""
+    model = load_robot(CONFIG / "seed000_grippers.toml")
+    plant = CdprPlant(model)
+    j, i = 0, int(plant.g_cable[0])
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    e = kin.length[i] - plant.unstretched_length()[i]  # m, the cable's stretch
+    assert e > 0.0
+    plant.jaw_travel[j] = e + 0.5 / plant.g_k_jb[j]
+    plant.step(plant.opt.physics_dt)
+    assert plant.jb_tension[j] == 0.0
