@@ -330,6 +330,11 @@ def test_a_brake_slipping_either_way_sticks_again_once_its_torque_is_within_the_
         plant.step(8 * dt)
         assert sign * plant.theta_dot[5] > 0.0
         plant.motor_torque[5] = plant.drum_ratio[5] * plant.tension[5]  # no load on it
+        speed = plant.theta_dot[5]
+        plant.step(dt)  # the friction against the motion slows the drum, whatever the load
+        net = plant.motor_torque[5] - plant.drum_ratio[5] * plant.tension[5] - sign * 1.5
+        slowed = speed + (net - b * speed) / J * dt
+        assert sign * slowed > 0.0 and plant.theta_dot[5] == pytest.approx(slowed, rel=1e-9)
         plant.step(50 * dt)
         assert plant.theta_dot[5] == 0.0
         theta = plant.theta[5]
