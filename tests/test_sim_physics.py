@@ -459,7 +459,8 @@ def test_a_cable_at_exactly_its_unstretched_length_carries_nothing_even_lengthen
 
 def test_a_jaws_cable_jb_never_pushes():
     """seed000_grippers: a jaw held 0.5 N's worth of jB stretch beyond its cable's (jB
-    compressed), at rest: jB carries nothing, not −0.5 N."""
+    compressed), at rest: jB carries nothing, not −0.5 N; held that much short of it, jB
+    carries its 0.5 N."""
     model = load_robot(CONFIG / "seed000_grippers.toml")
     plant = CdprPlant(model)
     j, i = 0, int(plant.g_cable[0])
@@ -470,3 +471,7 @@ def test_a_jaws_cable_jb_never_pushes():
     plant.jaw_travel[j] = e + 0.5 / plant.g_k_jb[j]
     plant.step(plant.opt.physics_dt)
     assert plant.jb_tension[j] == 0.0
+    plant = CdprPlant(model)
+    plant.jaw_travel[j] = e - 0.5 / plant.g_k_jb[j]
+    plant.step(plant.opt.physics_dt)
+    assert plant.jb_tension[j] == pytest.approx(0.5, rel=1e-6)
