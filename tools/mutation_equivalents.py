@@ -10,6 +10,7 @@ import hashlib
 import re
 import sqlite3
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 EQUIVALENTS = Path(__file__).resolve().parent / "mutation_equivalents.toml"
@@ -56,6 +57,18 @@ def pending_mutants(con: sqlite3.Connection) -> list[tuple[str, str, int, int, i
     ).fetchall()
 
 
+def skip_pending(db: Path, why_of: Callable[[str, int, int, int], str]) -> int:
+    """Mark each pending mutant that ``why_of(operator, row, column, occurrence)`` gives a
+    reason for as skipped, that reason its output (how the report tells the kinds apart).
+    Returns how many."""
+    with sqlite3.connect(db) as con:
+        marks = [(why, job) for job, op, row, col, occurrence in pending_mutants(con)
+                 if (why := why_of(op, row, col, occurrence))]  # fmt: skip
+        con.executemany("INSERT INTO work_results (worker_outcome, output, test_outcome, diff, "
+                        "job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)", marks)  # fmt: skip
+    return len(marks)
+
+
 def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
     """Mark the pending mutants that are equivalent by a rule known beforehand (``|`` in an
     annotation; the module-independent entries of the equivalents file without a ``mutant``
@@ -64,22 +77,16 @@ def skip_known_equivalents(db: Path, tree: Path, module: str) -> int:
     lines = source.splitlines()
     bars = annotation_operators(source)
     rules = [e for e in load_equivalents() if e["module"] == "*" and "mutant" not in e]
-    marked = 0
-    with sqlite3.connect(db) as con:
-        for job, op, row, col, _ in pending_mutants(con):
-            why = ""
-            if op.startswith("core/ReplaceBinaryOperator_BitOr_") and (row, col) in bars:
-                why = ANNOTATION
-            else:
-                text = lines[row - 1].strip()
-                why = next((e["why"] for e in rules if re.fullmatch(e["operator"], op)
-                            and re.fullmatch(e["line"], text)), "")  # fmt: skip
-            if why:
-                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
-                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
-                            (EQUIVALENT_PREFIX + why, job))  # fmt: skip
-                marked += 1
-    return marked
+
+    def why_of(op: str, row: int, col: int, _: int) -> str:
+        if op.startswith("core/ReplaceBinaryOperator_BitOr_") and (row, col) in bars:
+            return EQUIVALENT_PREFIX + ANNOTATION
+        text = lines[row - 1].strip()
+        why = next((e["why"] for e in rules if re.fullmatch(e["operator"], op)
+                    and re.fullmatch(e["line"], text)), "")  # fmt: skip
+        return EQUIVALENT_PREFIX + why if why else ""
+
+    return skip_pending(db, why_of)
 
 
 OUT_OF_SCOPE_PREFIX = "out of scope: "
@@ -101,15 +108,8 @@ def skip_out_of_scope(db: Path, tree: Path, module: str, scope: list[str], why: 
     if not scope:
         return 0
     inside = scope_lines((tree / module).read_text(), scope)
-    marked = 0
-    with sqlite3.connect(db) as con:
-        for job, _, row, _, _ in pending_mutants(con):
-            if row not in inside:
-                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
-                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
-                            (OUT_OF_SCOPE_PREFIX + why, job))  # fmt: skip
-                marked += 1
-    return marked
+    return skip_pending(db, lambda _, row, __, ___: "" if row in inside
+                        else OUT_OF_SCOPE_PREFIX + why)  # fmt: skip
 
 
 def mutant_key(operator: str, row: int, col: int, occurrence: int) -> str:
@@ -134,20 +134,15 @@ def skip_unsampled(db: Path, fraction: float, why: str,
     (operator, line: an earlier session's survivors) run whether sampled or not. The marks of
     an earlier run are dropped first, so a larger fraction runs the mutants it adds. Returns
     how many."""
-    marked = 0
     with sqlite3.connect(db) as con:
         con.execute("DELETE FROM work_results WHERE worker_outcome = 'SKIPPED' AND output LIKE ?",
                     (UNSAMPLED_PREFIX + "%",))  # fmt: skip
-        if fraction >= 1.0:
-            return 0
-        for job, op, row, col, occurrence in pending_mutants(con):
-            if (op, row) not in keep and not in_sample(mutant_key(op, row, col, occurrence),
-                                                        fraction):  # fmt: skip
-                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
-                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
-                            (UNSAMPLED_PREFIX + why, job))  # fmt: skip
-                marked += 1
-    return marked
+
+    def why_of(op: str, row: int, col: int, occurrence: int) -> str:
+        sampled = (op, row) in keep or in_sample(mutant_key(op, row, col, occurrence), fraction)
+        return "" if sampled else UNSAMPLED_PREFIX + why
+
+    return 0 if fraction >= 1.0 else skip_pending(db, why_of)
 
 
 KEPT_PREFIX = "counted in the kept results: "
@@ -157,12 +152,5 @@ def skip_all_but(db: Path, run: frozenset[tuple[str, int]]) -> int:
     """Mark every pending mutant but those of ``run`` (operator, line) as skipped, their
     outcome being the kept results' (a complete session's survivors run again in a new
     checkout, where the session itself is gone). Returns how many."""
-    marked = 0
-    with sqlite3.connect(db) as con:
-        for job, op, row, _, _ in pending_mutants(con):
-            if (op, row) not in run:
-                con.execute("INSERT INTO work_results (worker_outcome, output, test_outcome, "
-                            "diff, job_id) VALUES ('SKIPPED', ?, NULL, NULL, ?)",
-                            (KEPT_PREFIX + "survivors only", job))  # fmt: skip
-                marked += 1
-    return marked
+    return skip_pending(db, lambda op, row, _, __: "" if (op, row) in run
+                        else KEPT_PREFIX + "survivors only")  # fmt: skip
