@@ -20,6 +20,14 @@ def model(request):
     return load_robot(CONFIG / request.param)
 
 
+def kinematics_at(plant: CdprPlant) -> KinematicsData:
+    """The inverse kinematics at the plant's pose now (its lengths, W): what its next physics
+    step starts from, computed here rather than read from the plant."""
+    kin = KinematicsData(plant.model)
+    inverse_kinematics(plant.model, kin, plant.position.copy(), plant.R.copy())
+    return kin
+
+
 def test_gravity_equilibrium_with_tda_tensions(model):
     plant = CdprPlant(model)
     t0 = plant.tension.copy()
@@ -294,8 +302,7 @@ def test_the_cables_moment_turns_the_platform_about_its_com():
     plant = CdprPlant(model)
     plant.com_pos[:] += [4e-4, -3e-4, 2e-4]  # m: off the equilibrium (a moment), every cable taut
     R, dt = plant.R.copy(), plant.opt.physics_dt
-    kin = KinematicsData(model)
-    inverse_kinematics(model, kin, plant.position.copy(), R)
+    kin = kinematics_at(plant)
     rc = R @ np.array(model.platform.com)
     assert np.all(np.abs(rc) > 0.01) and len(set(np.round(rc, 6))) == 3
     plant.step(dt)
@@ -420,8 +427,7 @@ def test_a_cable_pulling_half_a_newton_pulls_the_platform():
     stretch = plant.drum_ratio[0] * plant.theta[0] - plant.drum_slip[0]  # m, at home
     plant.cable_cut[1:] = True
     plant.drum_slip[0] += stretch * (1.0 - 0.5 / plant.tension[0])  # the law near-linear
-    kin = KinematicsData(model)
-    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    kin = kinematics_at(plant)
     u, dt = kin.W[:3, 0].copy(), plant.opt.physics_dt
     plant.step(dt)
     t = plant.tension[0]
@@ -448,8 +454,7 @@ def test_a_cable_at_exactly_its_unstretched_length_carries_nothing_even_lengthen
     stretched cable."""
     model = load_robot(CONFIG / "rowc.toml")
     plant = CdprPlant(model)
-    kin = KinematicsData(model)
-    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    kin = kinematics_at(plant)
     plant.theta[2], plant.drum_slip[2] = 0.0, kin.length[2] - plant.l_home[2]
     assert kin.length[2] - plant.unstretched_length()[2] == 0.0
     plant.v[:] = -0.1 * kin.W[:3, 2]  # m/s, away from its exit point
@@ -464,8 +469,7 @@ def test_a_jaws_cable_jb_never_pushes():
     model = load_robot(CONFIG / "seed000_grippers.toml")
     plant = CdprPlant(model)
     j, i = 0, int(plant.g_cable[0])
-    kin = KinematicsData(model)
-    inverse_kinematics(model, kin, plant.position.copy(), plant.R.copy())
+    kin = kinematics_at(plant)
     e = kin.length[i] - plant.unstretched_length()[i]  # m, the cable's stretch
     assert e > 0.0
     plant.jaw_travel[j] = e + 0.5 / plant.g_k_jb[j]
