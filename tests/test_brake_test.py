@@ -250,7 +250,7 @@ def test_the_odrive_driver_says_it_cannot_command_a_brake(tmp_path, capsys):
 # -- the command line ----------------------------------------------------------------------------
 def test_brake_test_sim_json_and_weak_brake(tmp_path, capsys):
     """`cdprctl brake-test --sim --json`: every cable passes, exit 0, the record in the state
-    directory; `--weak-brake 5`: cable index 5 alone fails, exit 3; the JSON as documented."""
+    directory; `--weak-brake 6`: cable 6 (index 5) alone fails, exit 3; the JSON as documented."""
     state = str(tmp_path / "s")
     assert main(["brake-test", "--config", str(ROWC), "--sim", "--json", "--state-dir",
                  state]) == 0  # fmt: skip
@@ -259,7 +259,7 @@ def test_brake_test_sim_json_and_weak_brake(tmp_path, capsys):
     assert set(out["cables"][0]) >= {"cable", "passed", "torque", "motion"}
     assert load(tmp_path / "s").passed
     assert main(["brake-test", "--config", str(ROWC), "--sim", "--json", "--state-dir", state,
-                 "--weak-brake", "5"]) == 3  # fmt: skip
+                 "--weak-brake", "6"]) == 3  # fmt: skip
     out = json.loads(capsys.readouterr().out)
     assert [c["passed"] for c in out["cables"]] == [i != 5 for i in range(8)]
     assert not load(tmp_path / "s").passed
@@ -269,8 +269,8 @@ def test_brake_test_sim_json_and_weak_brake(tmp_path, capsys):
     ("extra", "says"),
     [
         (["--weak-brake", "5"], "--weak-brake 5: only with --sim"),
-        (["--sim", "--weak-brake", "8"], "--weak-brake 8: must be a cable index in 0..7"),
-        (["--sim", "--weak-brake", "-1"], "--weak-brake -1: must be a cable index in 0..7"),
+        (["--sim", "--weak-brake", "9"], "--weak-brake 9: not a cable of rowc (its cables: 1, 2,"),
+        (["--sim", "--weak-brake", "0"], "--weak-brake 0: not a cable of rowc"),
     ],
 )
 def test_brake_test_refuses_a_bad_option_in_one_line(tmp_path, capsys, extra, says):

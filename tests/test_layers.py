@@ -13,7 +13,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # bottom → top; the first prefix that matches a module names its layer
 LAYERS: list[tuple[str, tuple[str, ...]]] = [
-    ("core", ("cdprctl.rotation", "cdprctl.numerics", "cdprctl.realtime", "cdprctl.state_file")),
+    ("core", ("cdprctl.rotation", "cdprctl.numerics", "cdprctl.realtime", "cdprctl.state_file",
+              "cdprctl.state_dir")),
     (
         "model",
         tuple(

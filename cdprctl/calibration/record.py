@@ -12,7 +12,10 @@ from pathlib import Path
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
+from cdprctl.state_dir import default_state_dir
 from cdprctl.state_file import iso_utc, read_json, write_atomically
+
+__all__ = ["default_state_dir"]  # re-exported: where the daemon and the commands look
 
 FILE_NAME = "calibration.json"
 FORMAT = 1
@@ -21,11 +24,6 @@ FORMAT = 1
 class CalibrationError(Exception):
     """A record that is missing, unreadable or does not fit the robot: the message says what
     and how to calibrate."""
-
-
-def default_state_dir(robot: str) -> Path:
-    """``/var/lib/cdprctl/<robot>``: the systemd unit's ``StateDirectory=cdprctl``."""
-    return Path("/var/lib/cdprctl") / robot
 
 
 def geometry_hash(model: RobotModel) -> str:
@@ -67,6 +65,7 @@ class CalibrationRecord:
     samples: int = 1
     sample_residuals: list[float] = dataclasses.field(default_factory=list)  # m, RMS each
     notes: dict[str, Any] = dataclasses.field(default_factory=dict)
+    simulated: bool = False  # taken on a simulated robot: never a real robot's calibration
 
     def check(self, model: RobotModel) -> None:
         """Raise :class:`CalibrationError` when the record does not fit ``model``."""

@@ -27,10 +27,14 @@ def how_to_calibrate(model: RobotModel, state_dir: Path, bus: str = "") -> str:
     )
 
 
-def load_record(model: RobotModel, state_dir: Path) -> CalibrationRecord:
-    """The record for ``model`` in ``state_dir``; :class:`CalibrationError` otherwise."""
+def load_record(model: RobotModel, state_dir: Path, simulated: bool = False) -> CalibrationRecord:
+    """The record for ``model`` in ``state_dir``; :class:`CalibrationError` otherwise (a real
+    robot, not ``simulated``, never takes a simulated robot's record)."""
     record = load(state_dir)
     record.check(model)
+    if record.simulated and not simulated:
+        raise CalibrationError(f"the calibration on record ({record.time}) was taken on a "
+                               "simulated robot, not on these drives")  # fmt: skip
     return record
 
 

@@ -4,13 +4,15 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
+from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from drivers.simulated import simulated_robot
 
 
 def add_parser(sub: Any) -> None:
@@ -18,21 +20,41 @@ def add_parser(sub: Any) -> None:
         sub, "brake-test", "test each winch's holding brake against a torque", run,
         epilog="examples:\n"
         "  cdprctl brake-test --config config/rowc.toml --sim\n"
-        "  cdprctl brake-test --config config/rowc.toml --sim --weak-brake 5 --json\n"
+        "  cdprctl brake-test --config config/rowc.toml --sim --weak-brake 6 --json\n"
         "  cdprctl brake-test --config ROBOT.toml --can-interface socketcan --can-channel can0\n"
         "\nexit codes: 0 every brake passed, 3 one failed (the record says which), 1 the test "
-        "could not run,\n2 a bad option. A test with --sim is recorded as simulated: a real "
-        "robot's start-up does not take it.",
+        "could not run,\n2 a bad option, 4 the state directory cannot take the record. A "
+        "simulated robot's test\n(--sim, or drives on udp_multicast) is recorded as simulated, "
+        "in its own directory\n(~/.local/state/cdprctl/simulated/<robot>): never where a real "
+        "robot's records live.",
     )  # fmt: skip
     p.add_argument("--state-dir", metavar="DIR",
-                   help="where the result goes (default /var/lib/cdprctl/<robot>)")  # fmt: skip
+                   help="where the result goes (default /var/lib/cdprctl/<robot>; a simulated "
+                   "robot's: ~/.local/state/cdprctl/simulated/<robot>)")  # fmt: skip
     add_bus_arguments(p)
     p.add_argument("--sim", action="store_true",
                    help="on the simulated robot, in this process (lock-step)")  # fmt: skip
-    p.add_argument("--weak-brake", type=int, metavar="INDEX",
-                   help="with --sim: the brake of this cable (0-based index) worn, holding "
-                   "less than the test torque")  # fmt: skip
+    p.add_argument("--weak-brake", metavar="CABLE",
+                   help="with --sim: the brake of this cable (its name in the robot file, as "
+                   "every report names it) worn, holding less than the test torque")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+
+
+def _weak_brake_index(who: str, name: str | None, sim: bool, model: Any) -> int | None:
+    """The cable index ``--weak-brake NAME`` wears (None: none); -1 after saying in one line
+    why the option is refused."""
+    if name is None:
+        return None
+    if not sim:
+        print(f"{who}: error: --weak-brake {name}: only with --sim (it wears a simulated "
+              "brake)", file=sys.stderr)  # fmt: skip
+        return -1
+    names = [c.name for c in model.cables]
+    if name not in names:
+        print(f"{who}: error: --weak-brake {name}: not a cable of {model.name} (its cables: "
+              f"{', '.join(names)})", file=sys.stderr)  # fmt: skip
+        return -1
+    return names.index(name)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,7 +64,6 @@ def run(args: argparse.Namespace) -> int:
     brake that lets it turn more than [safety] brake_test_max_counts fails. `cdprctl run`
     refuses to enable a real robot whose last passed test is older than [safety]
     brake_test_interval (8 h)."""
-    from cdprctl.calibration.record import default_state_dir
     from cdprctl.safety.brake_test import BrakeTest, BrakeTestFailedError
     from cdprctl.safety.record import save
     from drivers.errors import DriverError
@@ -51,34 +72,38 @@ def run(args: argparse.Namespace) -> int:
     model = load_or_report(args.config, who)
     if model is None:
         return 1
-    m = model.n_cables
-    if args.weak_brake is not None and not args.sim:
-        print(f"{who}: error: --weak-brake {args.weak_brake}: only with --sim (it wears a "
-              "simulated brake)", file=sys.stderr)  # fmt: skip
+    weak = _weak_brake_index(who, args.weak_brake, args.sim, model)
+    if weak == -1:
         return 2
-    if args.weak_brake is not None and not 0 <= args.weak_brake < m:
-        print(f"{who}: error: --weak-brake {args.weak_brake}: must be a cable index in "
-              f"0..{m - 1} (0-based; {model.name} has {m} cables)", file=sys.stderr)  # fmt: skip
-        return 2
-    state_dir = Path(args.state_dir) if args.state_dir else default_state_dir(model.name)
+    overrides = bus_overrides(args)
+    simulated = args.sim or simulated_robot(model, overrides)
+    state_dir = records_dir(who, model.name, args.state_dir, simulated)
+    if state_dir is None:
+        return EXIT_STATE_DIR
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     sim = None
     if args.sim:
         from sim_backend.network import LockStep
 
         sim = LockStep(model)
-        if args.weak_brake is not None:
-            sim.plant.weaken_brake(args.weak_brake)
+        if weak is not None:
+            sim.plant.weaken_brake(weak)
         driver = sim.driver
     else:
         from drivers import create_driver
 
-        driver = create_driver(model, period=model.control.period,
-                               bus_overrides=bus_overrides(args))  # fmt: skip
+        driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
     try:
         log(f"{who}: {model.name}: configuring the drives")
         driver.configure()
-        record = BrakeTest(model, driver, log, simulated=args.sim).run()
+        if not simulated and simulated_robot(model, overrides, driver):
+            simulated = True  # simulated drives behind a kernel CAN interface (HIL)
+            state_dir = records_dir(who, model.name, args.state_dir, simulated)
+            if state_dir is None:
+                return EXIT_STATE_DIR
+        if simulated:
+            log(f"{who}: a simulated robot: the record goes to {state_dir}")
+        record = BrakeTest(model, driver, log, simulated=simulated).run()
     except (DriverError, BrakeTestFailedError) as exc:
         print(f"{who}: failed: {exc}", file=sys.stderr)
         return 1
@@ -86,9 +111,11 @@ def run(args: argparse.Namespace) -> int:
         driver.shutdown()
         if sim is not None:
             sim.net.close()
-    path = save(record, state_dir)
+    path = save_or_keep(who, save, record, state_dir, dataclasses.asdict(record))
+    if path is None:
+        return EXIT_STATE_DIR
     if args.json:
-        print(json.dumps(record.summary()))
+        print(json.dumps({**record.summary(), "record": str(path)}))
     else:
         failed = ", ".join(c.cable for c in record.cables if not c.passed)
         log(f"{'passed' if record.passed else 'FAILED: cable ' + failed}; record: {path}")

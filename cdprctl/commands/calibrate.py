@@ -8,13 +8,16 @@ import contextlib
 import json
 import sys
 from collections.abc import Callable, Iterator
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
+from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from drivers.simulated import simulated_robot
 
 
 def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
@@ -50,6 +53,24 @@ def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterat
         if realtime:
             rt.leave_realtime()
         rt.restore_gc()
+
+
+WHO = "cdprctl calibrate"
+
+
+def _simulated_after_configure(model: Any, overrides: dict[str, Any], driver: Any,
+                               args: argparse.Namespace, simulated: bool,
+                               state_dir: Path | None,
+                               log: Callable[[str], None]) -> tuple[bool, Path | None]:  # fmt: skip
+    """(simulated, the record's directory) once the drives have said who they are: simulated
+    drives behind a kernel CAN interface (HIL) write where a simulated robot's records go
+    (None: refused, said)."""
+    if not simulated and simulated_robot(model, overrides, driver):
+        simulated = True
+        state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
+    if simulated and state_dir is not None:
+        log(f"{WHO}: a simulated robot: the record goes to {state_dir}")
+    return simulated, state_dir
 
 
 def add_parser(sub: Any) -> None:
@@ -114,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     (known-pose) or moved near its start (self), the drives disabled (brakes on), and the
     record written atomically to the state directory, where ``cdprctl run`` reads it."""
     from cdprctl.calibration.procedure import SelfOptions, known_pose, self_calibrate
-    from cdprctl.calibration.record import default_state_dir, save
+    from cdprctl.calibration.record import save
     from cdprctl.calibration.session import CalibrationFailedError
     from drivers import create_driver
     from drivers.errors import DriverError
@@ -128,7 +149,6 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if args.method == "geometry":
         return run_geometry(args, model)
-    state_dir = Path(args.state_dir) if args.state_dir else default_state_dir(model.name)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     pose = None
     if args.method == "known-pose":
@@ -142,11 +162,20 @@ def run(args: argparse.Namespace) -> int:
             value = getattr(args, name)
             if not 0.0 < value <= 0.3:
                 raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
-    driver = create_driver(model, period=model.control.period, bus_overrides=bus_overrides(args))
+    overrides = bus_overrides(args)
+    simulated = simulated_robot(model, overrides)
+    state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
+    if state_dir is None:
+        return EXIT_STATE_DIR
+    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
     ident = None
     try:
         log(f"cdprctl calibrate: {model.name}, {args.method}: configuring the drives")
         driver.configure()
+        simulated, state_dir = _simulated_after_configure(model, overrides, driver, args,
+                                                          simulated, state_dir, log)  # fmt: skip
+        if state_dir is None:
+            return EXIT_STATE_DIR
         with moves_held(model, False, log):
             if pose is not None:
                 record = known_pose(model, driver, pose, log)
@@ -160,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     finally:
         driver.shutdown()
-    path = save(record, state_dir)
+    record.simulated = simulated
     result = {
         "pose": record.pose,
         "residual_rms": record.residual_rms,
@@ -169,8 +198,11 @@ def run(args: argparse.Namespace) -> int:
         "std": record.std,
         "sample_residuals": record.sample_residuals,
         "drum_scale": record.drum_scale,
-        "record": str(path),
     }
+    path = save_or_keep(WHO, save, record, state_dir, {**result, "record": asdict(record)})
+    if path is None:
+        return EXIT_STATE_DIR
+    result["record"] = str(path)
     if args.json:
         print(json.dumps(result))
     else:
@@ -193,7 +225,7 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     from cdprctl.calibration.geometry_file import calibrated_robot_text
     from cdprctl.calibration.geometry_plan import GeometryOptions, plan
     from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
-    from cdprctl.calibration.record import default_state_dir, now_iso, save
+    from cdprctl.calibration.record import now_iso, save
     from cdprctl.calibration.session import CalibrationFailedError
     from cdprctl.model.calibration import FILL_RANGE, SPEED_RANGE
     from drivers import create_driver
@@ -216,6 +248,11 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
         print(f"cdprctl calibrate: error: --out {out}: the directory {out.resolve().parent} "
               "does not exist: create it first", file=sys.stderr)  # fmt: skip
         return 2
+    overrides = bus_overrides(args)
+    simulated = simulated_robot(model, overrides)
+    state_dir = records_dir(WHO, model.name, args.state_dir, simulated) if out else None
+    if out is not None and state_dir is None:
+        return EXIT_STATE_DIR
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     opt = GeometryOptions.of(model, poses=args.poses, fill=args.fill, speed=args.speed)
     try:
@@ -224,10 +261,16 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     except CalibrationFailedError as exc:
         print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
         return 1
-    driver = create_driver(model, period=model.control.period, bus_overrides=bus_overrides(args))
+    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
     try:
         log(f"cdprctl calibrate: {model.name}, geometry: configuring the drives")
         driver.configure()
+        if out is not None:
+            found = _simulated_after_configure(model, overrides, driver, args, simulated,
+                                               state_dir, log)  # fmt: skip
+            simulated, state_dir = found
+            if state_dir is None:
+                return EXIT_STATE_DIR
         with moves_held(model, not args.no_realtime, log):
             cal = geometry_calibrate(model, driver, opt, log, poses)
     except (DriverError, CalibrationFailedError) as exc:
@@ -267,11 +310,15 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
         built = load_or_report(str(out), "cdprctl calibrate")
         if built is None:
             return 1
-        state_dir = Path(args.state_dir) if args.state_dir else default_state_dir(built.name)
         record = geometry_record(built, cal, list(getattr(driver, "identities",
                                                           [None] * model.n_cables)))  # fmt: skip
+        record.simulated = simulated
         result["robot_file"] = str(out)
-        result["record"] = str(save(record, state_dir))
+        assert state_dir is not None  # checked before the motion, with --out
+        path = save_or_keep(WHO, save, record, state_dir, {**result, "record": asdict(record)})
+        if path is None:
+            return EXIT_STATE_DIR
+        result["record"] = str(path)
     if args.json:
         print(json.dumps(result))
     else:

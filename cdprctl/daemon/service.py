@@ -60,18 +60,23 @@ class Daemon:
                  state_dir: str | None = None, foxglove: str | None = None,
                  as_built: RobotModel | None = None, ros2: bool = False):  # fmt: skip
         """``state_dir``: where the calibration record is (default
-        ``/var/lib/cdprctl/<robot>``); not read when the encoders are trusted to read zero at
-        home (``[drives] assume_home_at_start``, or the simulated robot of ``sim``, which
-        starts there). ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove]
-        listen`` in the config). ``ros2``: publish to ROS 2 (or ``[ros2] enabled``).
+        ``/var/lib/cdprctl/<robot>``, a simulated robot's apart from it: ``state_dir.py``);
+        not read when the encoders are trusted to read zero at home (``[drives]
+        assume_home_at_start``, or the simulated robot of ``sim``, which starts there).
+        ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove] listen`` in the
+        config). ``ros2``: publish to ROS 2 (or ``[ros2] enabled``).
         ``as_built``: with ``sim``, the robot the simulated plant is (its geometry; the drives
         from ``model``)."""
-        from cdprctl.calibration.record import default_state_dir
+        from cdprctl.state_dir import default_state_dir, simulated_state_dir
         from drivers import create_driver
+        from drivers.simulated import simulated_robot
 
         self.model = model
         self.bus_hint = ""  # the bus options given, as options: the refusals' commands repeat them
-        self.state_dir = Path(state_dir) if state_dir else default_state_dir(model.name)
+        # a simulated robot's records are apart from a real robot's (cdprctl/state_dir.py)
+        self.simulated_robot = sim or simulated_robot(model, overrides)
+        self.state_dir = Path(state_dir) if state_dir else (
+            simulated_state_dir if self.simulated_robot else default_state_dir)(model.name)
         self.assume_home = sim or model.drives.assume_home_at_start
         self.record: Any = None
         self.brake_record: Any = None  # the brake test a real robot's start-up took

@@ -108,7 +108,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
                      "[drives] assume_home_at_start = true") + ")")  # fmt: skip
     else:
         try:
-            dm.record = load_record(m, dm.state_dir)
+            dm.record = load_record(m, dm.state_dir, dm.simulated_robot)
         except CalibrationError as exc:
             raise refused(str(exc)) from None
         dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
@@ -159,7 +159,7 @@ def _brakes_tested(dm: Daemon) -> None:
     from cdprctl.safety.record import BrakeTestError, check_due, due_time, how_to_test
 
     try:
-        last = check_due(dm.model, dm.state_dir, time.time())
+        last = check_due(dm.model, dm.state_dir, time.time(), dm.simulated_robot)
     except BrakeTestError as exc:
         why = f"{exc}; {how_to_test(dm.model, dm.state_dir, dm.bus_hint)}"
         raise StartupRefusedError(

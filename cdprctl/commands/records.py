@@ -1,0 +1,44 @@
+"""What a procedure (calibration, brake test) does with its record: decide whether the robot it
+drove is simulated (a simulation never writes where a real robot's records live), check the
+directory before anything moves, and, when the write still fails after the motion, say so in
+one line and keep the result on standard output."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from cdprctl.state_dir import StateDirError, check_writable, state_dir_for
+
+EXIT_STATE_DIR = 4  # docs/operating.md, "Exit codes"
+
+
+def records_dir(who: str, robot: str, given: str | None, simulated: bool) -> Path | None:
+    """The writable directory the record of ``robot`` goes to, or None after saying in one
+    line why not (the caller exits :data:`EXIT_STATE_DIR`)."""
+    try:
+        path = state_dir_for(robot, given, simulated)
+        check_writable(path)
+    except StateDirError as exc:
+        print(f"{who}: error: {exc}", file=sys.stderr)
+        return None
+    return path
+
+
+def save_or_keep(who: str, save: Callable[[Any, Path], Path], record: Any, state_dir: Path,
+                 result: dict[str, Any]) -> Path | None:  # fmt: skip
+    """``save(record, state_dir)``; when it fails (the directory checked before the motion
+    went away, a full disk), one line and ``result`` as JSON on standard output: what the
+    motion measured is kept. None then (the caller exits :data:`EXIT_STATE_DIR`)."""
+    try:
+        return save(record, state_dir)
+    except OSError as exc:
+        why = exc.strerror or str(exc)
+        print(f"{who}: error: the record could not be written to {state_dir} ({why}); the "
+              "result follows as JSON on standard output: keep it, fix the directory (or "
+              "give --state-dir) and run again", file=sys.stderr)  # fmt: skip
+        print(json.dumps(result))
+        return None
