@@ -11,6 +11,8 @@ from drivers.buses import bus_medium
 
 # python-can's media that reach no wire: only a simulated robot answers on them
 SIMULATED_MEDIA = frozenset({"virtual", "udp_multicast", "inprocess"})
+# those of them no other process reaches: python-can's virtual bus, cdprctl's lock-step one
+IN_PROCESS_MEDIA = frozenset({"virtual", "inprocess"})
 # the simulated drives' 0x1018 serial number: node id + 'SIM\0' (sim_backend/drives/*.eds)
 SIMULATED_SERIAL = 0x53494D00
 
@@ -22,6 +24,13 @@ def simulated_identities(identities: list[Any]) -> bool:
         and (int(i.get("serial", 0)) & 0xFFFFFF00) == SIMULATED_SERIAL
         for i in identities
     )  # fmt: skip
+
+
+def in_process_only(model: RobotModel, overrides: dict[str, Any]) -> bool:
+    """Every bus of ``model`` (after ``overrides``) is one no other process can reach: nothing
+    but a simulated robot built in this very process (``--sim``) can answer there."""
+    media = {bus_medium(b, overrides, i)[0] for i, b in enumerate(model.drives.buses)}
+    return bool(media) and media <= IN_PROCESS_MEDIA
 
 
 def simulated_robot(model: RobotModel, overrides: dict[str, Any], driver: Any = None) -> bool:

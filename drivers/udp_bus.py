@@ -16,6 +16,7 @@ packed as python-can packs them, sent together by ``sendmmsg`` (Linux; elsewhere
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import socket
@@ -65,6 +66,25 @@ def _libc_sendmmsg() -> Any:
     return fn
 
 
+# Linux's <linux/in.h> IP_MULTICAST_ALL and <linux/in6.h> IPV6_MULTICAST_ALL (Python names
+# neither): 0 delivers a socket only the groups it joined itself
+IP_MULTICAST_ALL = 49
+IPV6_MULTICAST_ALL = 29
+
+
+def _own_group_only(sock: socket.socket) -> None:
+    """Only the datagrams of the group this socket joined. python-can binds its socket to the
+    port on every address, and Linux then delivers it the datagrams of every group that any
+    socket of the machine joined on that port (IP_MULTICAST_ALL is 1 by default): two
+    simulated robots on groups .97 and .98 of one port heard each other's node ids 1-8. With
+    it 0, a channel (group and port) is one robot. Elsewhere, where there is no such option,
+    nothing changes (give each robot its own port there)."""
+    v6 = sock.family == socket.AF_INET6
+    with contextlib.suppress(OSError):
+        sock.setsockopt(socket.IPPROTO_IPV6 if v6 else socket.IPPROTO_IP,
+                        IPV6_MULTICAST_ALL if v6 else IP_MULTICAST_ALL, 0)  # fmt: skip
+
+
 class CyclicUdpMulticastBus(UdpMulticastBus):
     """``UdpMulticastBus`` (same arguments) with the control cycle's path: ``drain_frames``
     to read, ``stage`` and ``flush`` to send."""
@@ -74,6 +94,7 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
         # A second handle on the same socket (its receive queue, its options): reading it by
         # MSG_DONTWAIT never changes the blocking mode python-can's send relies on.
         self._raw = socket.socket(fileno=os.dup(self.fileno()))
+        _own_group_only(self._raw)
         self._unpack = msgpack.unpackb
         self._fd_frames = self.protocol is can.CanProtocol.CAN_FD
         #: datagrams that were no python-can frame (not msgpack, a field missing or of the wrong

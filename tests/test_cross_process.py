@@ -398,3 +398,22 @@ def test_an_estop_across_processes_is_the_daemons_estop_state(tmp_path, sim_proc
     assert "EMERGENCY STOP: the safety chain is open" in text and "0x8A88" in text, text
     assert "-> estop" in text and "final state estop" in text, text
     assert "FAULT" not in text and "Traceback" not in text, text
+
+
+def test_a_scan_on_another_group_finds_none_of_a_robots_drives(tmp_path, sim_process, capsys):
+    """`cdprctl sim` on group .97; `drives scan` on .98 of the same port finds nothing (it
+    found the eight drives of .97 before the bus joined its own group alone), on .97 all
+    eight."""
+    from cdprctl.cli import main
+
+    port = random.Random(os.getpid() * 31).randrange(40000, 50000)
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")
+    sim_process(config, ["--can-channel", "239.74.163.97", "--can-option", f"port={port}"])
+    found = {}
+    for group in ("239.74.163.98", "239.74.163.97"):
+        code = main(["drives", "scan", "--config", str(config), "--can-channel", group,
+                     "--can-option", f"port={port}", "--listen", "0.5", "--json"])  # fmt: skip
+        found[group] = (code, json.loads(capsys.readouterr().out)["summary"])
+    assert found["239.74.163.98"] == (1, "0 of 8 configured drives found, 0 can run their "
+                                         "configured mode"), found  # fmt: skip
+    assert found["239.74.163.97"][1].startswith("8 of 8 configured drives found"), found

@@ -276,7 +276,8 @@ def test_run_refuses_without_a_record_and_with_a_stale_one(tmp_path, capsys):
     config = tmp_path / "real.toml"
     config.write_text(f'base = "{base}"\n[drives]\nassume_home_at_start = false\n')
     args = ["run", "--config", str(config), "--state-dir", str(tmp_path / "state"),
-            "--no-realtime", "--duration", "1"]  # fmt: skip
+            "--no-realtime", "--duration", "1", "--can-interface", "udp_multicast",
+            "--can-channel", "239.74.163.9", "--can-option", "port=43119"]  # fmt: skip
     assert main(args) == 4
     err = capsys.readouterr().err
     assert "refusing to enable the drives: no calibration record at" in err

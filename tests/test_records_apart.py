@@ -14,11 +14,13 @@ from conftest import CONFIG
 
 import cdprctl.safety.record as brake_record
 import cdprctl.state_dir as state_dir
-from cdprctl.calibration.record import CalibrationError, load as load_calibration
+from cdprctl.calibration.record import CalibrationError
+from cdprctl.calibration.record import load as load_calibration
 from cdprctl.calibration.startup import load_record
 from cdprctl.cli import main
 from cdprctl.model import load_robot
-from cdprctl.safety.record import BrakeTestError, check_due, load as load_brakes
+from cdprctl.safety.record import BrakeTestError, check_due
+from cdprctl.safety.record import load as load_brakes
 from drivers.simulated import simulated_identities, simulated_robot
 
 ROWC = str(CONFIG / "rowc.toml")
@@ -104,7 +106,8 @@ def test_calibrate_on_udp_multicast_refuses_a_real_record_before_the_bus_opens(t
     ["brake-test", "--config", ROWC, "--sim"],
     ["calibrate", "--config", ROWC, "--can-interface", "socketcan", "--can-channel", "can9",
      "known-pose"],
-    ["calibrate", "--config", ROWC, "geometry", "--out", "OUT"],
+    ["calibrate", "--config", ROWC, "--can-interface", "socketcan", "--can-channel", "can9",
+     "geometry", "--out", "OUT"],
 ])  # fmt: skip
 def test_an_unwritable_state_directory_is_refused_before_motion_in_one_line(tmp_path, capsys,
                                                                             argv):  # fmt: skip
@@ -186,3 +189,20 @@ def test_the_simulated_default_is_the_users_own(monkeypatch):
     assert state_dir.state_dir_for("rowc", None, False) == Path("/var/lib/cdprctl/rowc")
     assert state_dir.state_dir_for("rowc", "/srv/x", False) == Path("/srv/x")
     assert not os.fspath(state_dir.state_dir_for("rowc", None, True)).startswith("/var/lib")
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--config", ROWC, "--duration", "1"],
+    ["drives", "scan", "--config", ROWC],
+    ["brake-test", "--config", ROWC],
+    ["calibrate", "--config", ROWC, "known-pose"],
+])  # fmt: skip
+def test_the_in_process_bus_without_sim_is_named_not_searched(argv, capsys):
+    """rowc's file puts its drives on python-can's in-process `virtual` bus: without --sim
+    nothing can answer there; one line says what it is and what to do (it said "0 of 8 ...
+    powered? wired?" after a second of listening)."""
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "in-process 'virtual' bus: no drive and no other process can answer there; use " \
+        "--sim" in err[0] and "cdprctl sim --config" in err[0] and "udp_multicast" in err[0]

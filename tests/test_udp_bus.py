@@ -223,3 +223,25 @@ def test_the_driver_keeps_the_cycles_order_when_a_batch_fills(monkeypatch):
     finally:
         peer.shutdown()
         drv._close()
+
+
+def test_a_channel_is_one_robot_groups_on_one_port_never_mix():
+    """Two robots' buses on groups .97 and .98 of one port, and a python-can peer sending on
+    .97: only .97's bus hears it, by the cycle's path and by python-can's ``recv`` (Linux
+    delivers a socket bound to the port every joined group's datagrams unless
+    IP_MULTICAST_ALL is off: ``drives scan`` on .98 found .97's eight drives)."""
+    port = random.Random(os.getpid() * 29).randrange(40000, 50000)
+    a = CyclicUdpMulticastBus("239.74.163.97", port=port, fd=False)
+    b = CyclicUdpMulticastBus("239.74.163.98", port=port, fd=False)
+    peer = UdpMulticastBus("239.74.163.97", port=port, fd=False)
+    try:
+        for k in range(3):
+            peer.send(can.Message(arbitration_id=0x181 + k, data=[k], is_extended_id=False))
+        assert [f[0] for f in drained(a, 3)] == [0x181, 0x182, 0x183]
+        peer.send(can.Message(arbitration_id=0x701, data=[5], is_extended_id=False))
+        assert a.recv(2.0).arbitration_id == 0x701
+        time.sleep(0.05)  # loopback is delivered within the send: this is only margin
+        assert list(b.drain_frames()) == [] and b.recv(0.0) is None
+    finally:
+        for bus in (a, b, peer):
+            bus.shutdown()

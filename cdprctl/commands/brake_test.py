@@ -11,7 +11,7 @@ from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
 from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 from drivers.simulated import simulated_robot
 
 
@@ -76,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if weak == -1:
         return 2
     overrides = bus_overrides(args)
+    if refuse_in_process_bus(who, model, overrides, args.sim):
+        return 2
     simulated = args.sim or simulated_robot(model, overrides)
     state_dir = records_dir(who, model.name, args.state_dir, simulated)
     if state_dir is None:

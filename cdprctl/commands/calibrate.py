@@ -16,7 +16,7 @@ import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
 from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 from drivers.simulated import simulated_robot
 
 
@@ -163,6 +163,8 @@ def run(args: argparse.Namespace) -> int:
             if not 0.0 < value <= 0.3:
                 raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
     overrides = bus_overrides(args)
+    if refuse_in_process_bus(WHO, model, overrides, False):
+        return 2
     simulated = simulated_robot(model, overrides)
     state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
     if state_dir is None:
@@ -249,6 +251,8 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
               "does not exist: create it first", file=sys.stderr)  # fmt: skip
         return 2
     overrides = bus_overrides(args)
+    if refuse_in_process_bus(WHO, model, overrides, False):
+        return 2
     simulated = simulated_robot(model, overrides)
     state_dir = records_dir(WHO, model.name, args.state_dir, simulated) if out else None
     if out is not None and state_dir is None:

@@ -10,7 +10,7 @@ import sys
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides
+from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 
 EXAMPLES = """examples:
   cdprctl drives scan --config config/rowc.toml
@@ -61,6 +61,8 @@ def scan(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
             return 2
     overrides = bus_overrides(args)
+    if refuse_in_process_bus("cdprctl drives scan", model, overrides, False):
+        return 2
     out: list[dict[str, Any]] = []
     found = able = wanted = 0
     for b in media_of(cfg.buses, overrides):

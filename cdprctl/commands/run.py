@@ -16,6 +16,7 @@ from cdprctl.commands.sim import (
     as_built_model,
     bus_options,
     bus_overrides,
+    refuse_in_process_bus,
 )
 
 
@@ -245,6 +246,8 @@ def run(args: argparse.Namespace) -> int:
         if problem is not None:
             print(f"cdprctl run: --ros2: {problem}", file=sys.stderr)
             return 2
+    if refuse_in_process_bus("cdprctl run", model, bus_overrides(args), args.sim):
+        return 2
     previous = interrupt_the_start_up()
     try:
         daemon = Daemon(

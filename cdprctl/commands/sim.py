@@ -26,6 +26,25 @@ def buses_text(model: Any, overrides: dict[str, Any]) -> str:
                  "process give both --can-interface udp_multicast --can-channel 239.74.163.9")
     return text
 
+
+def refuse_in_process_bus(who: str, model: Any, overrides: dict[str, Any], sim: bool) -> bool:
+    """True after one line when, without ``--sim``, every bus of ``model`` is in-process
+    (python-can's ``virtual``): no drive and no ``cdprctl sim`` of another process can answer
+    there, and a scan or a start-up would only time out on silent node ids."""
+    from drivers.simulated import in_process_only
+
+    if sim or not in_process_only(model, overrides):
+        return False
+    config = model.source_file or "ROBOT.toml"
+    print(f"{who}: error: the buses of {config} are python-can's in-process 'virtual' bus: no "
+          f"drive and no other process can answer there; use --sim (the simulated robot in "
+          f"this process), or start `cdprctl sim --config {config} --can-interface "
+          f"udp_multicast --can-channel 239.74.163.9` and give these same two options here, "
+          f"or a real robot's bus (--can-interface socketcan --can-channel can0)",
+          file=sys.stderr)  # fmt: skip
+    return True
+
+
 def add_bus_arguments(p: argparse.ArgumentParser, default: Any = None) -> None:
     """The bus overrides shared by ``cdprctl sim``, ``run``, ``calibrate`` and ``drives
     scan``, so they meet (``default``: ``argparse.SUPPRESS`` on a sub-command that repeats
