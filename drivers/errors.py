@@ -39,6 +39,17 @@ class DriverTimeoutError(DriverError):
         self.cable = cable
 
 
+def following_error_text(off: float, window: float, m_per_rad: float, timeout: float,
+                         checked_by: str) -> str:  # fmt: skip
+    """A following error as a user reads it: how far the motor was off its position target
+    (``off`` rad at the motor; in mm of cable by ``m_per_rad``), against the window (rad) and
+    time-out (s) of [drives], and who checked it (the drive's 0x6065/0x6066, or cdprctl)."""
+    return (f"following error: {off * m_per_rad * 1e3:.2f} mm of cable ({off:.4f} rad at the "
+            f"motor) off its position target, beyond [drives] following_error_window = "
+            f"{window * m_per_rad * 1e3:.2f} mm ({window:.4f} rad) for more than "
+            f"following_error_timeout = {timeout * 1e3:.0f} ms ({checked_by})")  # fmt: skip
+
+
 class DriveFaultError(DriverError):
     """A drive reported a fault; ``code`` is the drive's error code, ``description`` decodes it."""
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -437,6 +438,16 @@ def test_beyond_capacity_the_brakes_close_at_once(drives_watch):
         if drives_watch:
             d = c.data
             assert d.fault_kind.value == "drive fault" and "following error" in d.fault_reason
+            # how far, against the window the driver wrote to 0x6065 (one count's rounding)
+            found = re.search(r"following error: ([\d.]+) mm of cable \(([\d.]+) rad at the "
+                              r"motor\) off its position target, beyond \[drives\] "
+                              r"following_error_window = ([\d.]+) mm", d.fault_reason)  # fmt: skip
+            assert found, d.fault_reason
+            w = model.cables[0].winch
+            window_mm = 1e3 * model.drives.following_error_window_rad(w) * w.drum_radius / (
+                w.gear_ratio)  # fmt: skip
+            assert float(found[3]) == pytest.approx(window_mm, rel=0.02)
+            assert float(found[1]) > 0.0
         else:
             assert c.data.fault_kind.value == "beyond capacity", c.data.fault_reason
         assert cl.net.time - t0 < 0.2

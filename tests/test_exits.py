@@ -179,8 +179,10 @@ def test_no_calibration_record_is_one_line_with_the_command_and_exit_4(tmp_path)
     exit 4 (systemd does not restart it), and no leak report after it."""
     config = tmp_path / "real.toml"
     config.write_text(f'base = "{ROWC}"\n[drives]\nassume_home_at_start = false\n')
+    # on udp_multicast: the file's in-process bus is refused first (nothing could answer there)
     code, out, _ = cdprctl("run", "--config", str(config), "--state-dir", str(tmp_path / "s"),
-                           "--duration", "2")  # fmt: skip
+                           "--duration", "2", "--can-interface", "udp_multicast", "--can-channel",
+                           "239.74.163.9", "--can-option", "port=43119")  # fmt: skip
     assert code == 4, out
     assert "cdprctl run: refusing to enable the drives:" in out
     assert "cdprctl calibrate" in out
@@ -233,4 +235,19 @@ def test_ctrl_c_to_the_group_while_it_starts_with_helpers_is_clean(after, group)
     assert code == 0, out
     assert ("stopped by SIGINT during the start-up" in rest
             or "stop requested by SIGINT" in rest), out  # fmt: skip
+    assert_clean(out)
+
+
+def test_the_demo_stops_at_an_estop_and_says_so():
+    """The safety chain opened mid-move (2 s, the demo's first move runs 1-4 s): the demo
+    sends none of its remaining commands to the stopped robot — it sent three moves that were
+    "ignored in state fault" — and one line says why it stopped; exit 0 (an e-stop is no
+    fault of the controller's)."""
+    code, out, _ = cdprctl("run", "--config", ROWC, "--sim", "--estop", "2", "--no-realtime",
+                           "--status", "0")  # fmt: skip
+    assert code == 0, out
+    assert "state moving -> estop" in out, out
+    assert "demo: stopped at the estop (emergency stop: the safety chain opened" in out, out
+    assert "remaining 4 commands not sent" in out, out
+    assert "ignored in state" not in out and "final state estop" in out, out
     assert_clean(out)

@@ -187,6 +187,13 @@ def test_a_following_error_faults_only_when_it_persists(rowc_odrive):
             period(1.5 * window)
         assert drv.lifecycle is Lifecycle.ERROR
         assert drv.error.code == 0x8611 and "following error" in str(drv.error)
+        # the line says how far (measured) against the window and time-out, in both units
+        w = rowc_odrive.cables[4].winch
+        mm = 1e3 * w.drum_radius / w.gear_ratio
+        assert (f"{1.5 * window * mm:.2f} mm of cable ({1.5 * window:.4f} rad at the motor) off "
+                f"its position target, beyond [drives] following_error_window = "
+                f"{window * mm:.2f} mm ({window:.4f} rad) for more than following_error_timeout "
+                f"= 3 ms") in str(drv.error)  # fmt: skip
         assert DriveState(drv.states.state[4]) is DriveState.FAULT
         drv.write(peer.t, np.zeros(8), targets=hold)  # the next cycle's frames
         peer.wait(0.002)

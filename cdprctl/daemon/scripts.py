@@ -69,7 +69,7 @@ class PathScript:
 
     def step(self, d: ControlData) -> Command | None:
         """The next command to submit, if any; sets ``done`` once the path ended."""
-        if d.state in (State.FAULT, State.ESTOP):
+        if d.state in (State.FAULT, State.ESTOP):  # said at the end (Daemon.run)
             self.done = True
             return None
         if not self._path_sent:

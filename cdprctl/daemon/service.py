@@ -47,6 +47,7 @@ from cdprctl.tda import tda_options_of
 DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
 # where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
 DEMO_ENDS = frozenset({State.READY, State.FAULT, State.ESTOP})  # what a stop waits for
+SCRIPT_STOPS = frozenset({State.FAULT, State.ESTOP})  # a scripted client sends nothing more
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -189,13 +190,28 @@ class Daemon:
         for line in self.report.finish(self.driver.stats.as_dict()):
             self._print(line)
         if path is not None and not self.stop_requested.is_set():
-            self._print(f"path {path[0]}: {d.path_state or 'not run'}")
+            why = (f" (stopped at the {d.state.value}: {d.fault_reason})"
+                   if d.state in SCRIPT_STOPS else "")  # fmt: skip
+            self._print(f"path {path[0]}: {d.path_state or 'not run'}{why}")
             code = 0 if d.path_state == "done" else 3
         else:
             code = 0 if d.state is not State.FAULT or self.stop_requested.is_set() else 3
         for s, h in old.items():  # a signal during the shut-down above only asked again
             signal.signal(s, h)
         return code
+
+    def _script_stopped(self, script: list[Any]) -> list[Any]:
+        """The demo at a fault or an e-stop: its remaining commands are not sent (a faulted
+        robot ignores them; a script talking to it misleads its reader), said in one line.
+        With --duration the round after the fault's reset starts afresh."""
+        d = self.data
+        left = sum(not isinstance(step, Disturbance) for _, step in script)
+        why = f" ({d.fault_reason})" if d.fault_reason else ""
+        self._print(f"[t={d.time:9.3f}] demo: stopped at the {d.state.value}{why}; its "
+                    f"remaining {left} commands not sent")  # fmt: skip
+        if self.sim is not None and any(isinstance(step, Disturbance) for _, step in script):
+            self.sim.disturb(0.0)  # the demo's own lateral force, due off later, off now
+        return []
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if not self.stop_requested.is_set():
@@ -252,6 +268,8 @@ class Daemon:
                 if submit(taken) is FULL:  # a refusal's reason is an event already
                     self.links.event(d.time, f"command {taken.kind} dropped: mailbox full",
                                      "reject")  # fmt: skip
+            if script and d.state in SCRIPT_STOPS:
+                script = self._script_stopped(script)
             while script and script[0][0] <= now:
                 step = script.pop(0)[1]
                 if isinstance(step, Disturbance):

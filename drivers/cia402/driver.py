@@ -34,6 +34,7 @@ from drivers.errors import (
     DriverInitializationError,
     DriverOperationError,
     SafeTorqueOffError,
+    following_error_text,
 )
 from drivers.registry import register_driver
 from drivers.vocabulary import Lifecycle
@@ -319,12 +320,16 @@ class Cia402Driver(CanWinchDriver):
         code = int(self._emcy[c])
         if code != 0 or self._ps[c] == p.PowerState.FAULT:
             kind = SafeTorqueOffError if code in p.STO_CODES else DriveFaultError
-            return kind(
-                c,
-                int(self.node[c]),
-                code,
-                p.describe_emcy(code) if code else "fault (statusword)",
-            )
+            text = p.describe_emcy(code) if code else "fault (statusword)"
+            if code == p.EMCY_FOLLOWING_ERROR:  # how far, by the last target and feedback
+                w = self.model.cables[c].winch
+                text = following_error_text(
+                    abs(float(self.targets[c] - self.states.position[c])),
+                    self._following_window[c] * 2.0 * math.pi / self.encoder_cpr[c],
+                    w.drum_radius / w.gear_ratio, self.config.following_error_timeout,
+                    "the drive's 0x6065/0x6066; the distance is cdprctl's, from its last "
+                    "target and feedback")  # fmt: skip
+            return kind(c, int(self.node[c]), code, text)
         return None
 
     def _write_frames(self, t: float, torques: np.ndarray, setup: bool) -> DriverError | None:

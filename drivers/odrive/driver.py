@@ -24,7 +24,7 @@ import numpy as np
 
 from drivers import blocking
 from drivers.canbase import CanWinchDriver
-from drivers.errors import DriveFaultError, DriverError
+from drivers.errors import DriveFaultError, DriverError, following_error_text
 from drivers.odrive import protocol as p
 from drivers.odrive.gains import AxisGains, axis_gains
 from drivers.registry import register_driver
@@ -32,10 +32,7 @@ from drivers.vocabulary import DriveState
 
 TWO_PI = 2.0 * math.pi
 FE = 0x8611  # CiA 402's code for a following error, the same fault for the same rule
-FE_TEXT = (
-    "following error: off its position target beyond [drives] following_error_window past "
-    "following_error_timeout (checked by cdprctl: the ODrive does not)"
-)
+FE_BY = "checked by cdprctl: the ODrive does not"
 
 
 @register_driver
@@ -90,6 +87,9 @@ class ODriveDriver(CanWinchDriver):
             for w, g in zip(model.cables, self.gains, strict=True)
         ])  # fmt: skip
         self._beyond = np.zeros(m)
+        self._following_off = np.zeros(m)  # rad: how far off each axis was when it latched
+        self._m_per_rad = np.array([w.winch.drum_radius / w.winch.gear_ratio
+                                    for w in model.cables])  # fmt: skip
         self._checked_at = math.nan
         self.following = np.zeros(m, dtype=np.bool_)  # latched until a fault reset
         self.axis_state = [p.AxisState.UNDEFINED] * m
@@ -201,8 +201,9 @@ class ODriveDriver(CanWinchDriver):
             off = max(min(a, b, e) - x, x - max(a, b, e))
             if on and off > self.following_window[c]:
                 self._beyond[c] += dt
-                if self._beyond[c] > timeout:
+                if self._beyond[c] > timeout and not self.following[c]:
                     self.following[c] = True
+                    self._following_off[c] = off  # rad: what the fault line reports
             else:
                 self._beyond[c] = 0.0
 
@@ -213,7 +214,9 @@ class ODriveDriver(CanWinchDriver):
         if self.following[c]:
             st.state[c] = DriveState.FAULT
             st.fault_code[c] = FE
-            return DriveFaultError(c, int(self.node[c]), FE, FE_TEXT)
+            return DriveFaultError(c, int(self.node[c]), FE, following_error_text(
+                float(self._following_off[c]), float(self.following_window[c]),
+                float(self._m_per_rad[c]), self.config.following_error_timeout, FE_BY))
         if code:
             st.state[c] = DriveState.FAULT
         elif self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL:
