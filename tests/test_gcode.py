@@ -157,6 +157,7 @@ def test_a_gcode_file_in_metres_gets_the_hint(tmp_path, capsys):
     metres = "G90\nG0 X1.5 Y0.35 Z0.6\nG1 X1.6 F600\n"
     why = "x = 0.0015 m is outside the workspace box [0.5, 2.5] m"
     assert "a file in metres? G-code's lengths are mm unless G20" in units_hint(metres, "m", why)
+    assert units_hint(f"%\n{metres}%\n", "m", why) != ""  # a program between % lines
     assert units_hint(metres, "mm", why) != ""  # --units is a CSV's: G-code has its own
     assert units_hint("G21\n" + metres, "m", why) == ""
     assert units_hint(metres.replace("X1.6", "X5"), "m", why) == ""

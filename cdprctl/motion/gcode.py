@@ -361,7 +361,7 @@ def looks_like_metres(text: str) -> bool:
     lengths, units = [], False
     for no, raw in enumerate(text.splitlines(), 1):
         try:
-            words = _words(strip_comments(raw, no).strip(), no)
+            words = _words(strip_comments(raw, no).strip().strip("%"), no)
         except PathFileError:
             return False  # not G-code, or its error says more
         lengths += [v for letter, v, _ in words if letter in "XYZ"]
