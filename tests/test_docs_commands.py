@@ -105,12 +105,13 @@ def test_the_docs_have_commands_to_run():
 @pytest.mark.parametrize("where, text", RUNNABLE, ids=[w for w, _ in RUNNABLE])
 def test_a_documented_offline_command_runs_as_written(where, text, tmp_path, monkeypatch,
                                                       capsys):  # fmt: skip
-    """Run, not only parsed: from a directory like a checkout's (its config/ and paths/), so
-    what it writes (plots) lands in a temporary one; exit 0, no traceback, what it says it
-    wrote is there."""
+    """Run, not only parsed: from a directory like a checkout's (its config/, paths/ and the
+    tests' example files), so what it writes (plots) lands in a temporary one; exit 0, no
+    traceback, what it says it wrote is there."""
     from cdprctl.cli import main
 
-    for d in ("config", "paths"):
+    for d in ("config", "paths", "tests/data"):
+        (tmp_path / d).parent.mkdir(exist_ok=True)
         (tmp_path / d).symlink_to(ROOT / d)
     monkeypatch.chdir(tmp_path)
     argv = shlex.split(text)

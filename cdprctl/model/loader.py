@@ -21,6 +21,7 @@ from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
 from cdprctl.model.foxglove import read_foxglove
 from cdprctl.model.grippers import read_grippers
+from cdprctl.model.paths import read_paths
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Platform, Pose, RobotModel, Workspace
 from cdprctl.model.ros2 import read_ros2
@@ -44,6 +45,7 @@ TOP_KEYS = (
     "grippers",
     "calibration",
     "safety",
+    "paths",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia")
 HOME_KEYS = ("position", "rpy")
@@ -129,6 +131,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     anchors = np.array([c.anchor for c in cables], float) if cables else None
     calibration = read_calibration(rd, data, len(cables or ()), anchors)
     safety = read_safety(rd, data)
+    paths = read_paths(rd, data)
 
     if (
         rd.errors
@@ -168,6 +171,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         grippers=grippers,
         calibration=calibration,
         safety=safety,
+        paths=paths,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -8,12 +8,8 @@ CSV — a header naming the columns, then one waypoint per row; ``#`` starts a c
     mm, mm, deg, ...``; ``UNITS`` lists them) converts its columns; without one, ``units``
     (``--units``) says the lengths' (m, mm or in) and the speeds' (per s).
 
-G-code — one block per line, words ``G0`` (at the configured speed), ``G1`` (at the feed
-``F``), ``G4 P<s>`` (dwell), ``G20``/``G21`` (inches/mm: converted), ``G90``/``G91``
-(absolute/relative), ``G61``/``G64`` (exact stop/blend through the following waypoints),
-axes ``X Y Z`` (mm or in, base frame) and ``A B C`` (degrees, roll pitch yaw), ``F``
-(mm/min or in/min), ``N`` (block numbers, ignored), ``M2``/``M30`` (end), comments in
-``( )`` or after ``;``, ``%`` lines. Anything else is refused with its line and column.
+G-code — read by ``gcode.py`` (modal motion, feed, units, distances, planes, G2/G3 arcs as
+chords; every other word taken, ignored or refused there, one by one).
 """
 
 from __future__ import annotations
@@ -42,11 +38,14 @@ class PathFileError(ValueError):
     the unit and the rule."""
 
 
-def parse_path(text: str, start: FloatArray, units: str = "m") -> list[Waypoint]:
+def parse_path(
+    text: str, start: FloatArray, units: str = "m", arc_tolerance: float = 1e-4
+) -> list[Waypoint]:
     """The waypoints of a CSV or G-code path; ``start`` (x, y, z, roll, pitch, yaw; m, rad) is
     where it starts (the axes a file leaves out, G91's origin); ``units`` (m, mm or in): a
     CSV's lengths and speeds (per s) where it has no row of units (G-code says its own with
-    G20/G21). Raises PathFileError."""
+    G20/G21); ``arc_tolerance`` (m): G2/G3's chords' largest distance to the arc (``[paths]
+    arc_tolerance``). Raises PathFileError."""
     if units not in LENGTH_UNITS:
         raise PathFileError(f"units = {units!r}: must be one of {', '.join(LENGTH_UNITS)}")
     start = np.asarray(start, dtype=float)
@@ -55,7 +54,9 @@ def parse_path(text: str, start: FloatArray, units: str = "m") -> list[Waypoint]
         raise PathFileError("the path file is empty")
     if _CSV_HEADER.match(lines[0]):
         return _csv(text, start, LENGTH_UNITS[units])
-    return _gcode(text, start)
+    from cdprctl.motion.gcode import read_gcode  # late: gcode reads into this module's types
+
+    return read_gcode(text, start, arc_tolerance)
 
 
 _CSV_HEADER = re.compile(r"^[a-zA-Z_]+\s*,")  # a CSV's first line; G-code words carry numbers
@@ -176,141 +177,4 @@ def _csv(text: str, start: FloatArray, length_unit: float) -> list[Waypoint]:
         out.append(Waypoint(pose, speed, t, blend == 1.0, dwell, where))  # type: ignore[arg-type]
     if not out:
         raise PathFileError("the path file has a header but no waypoint")
-    return out
-
-
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(\d+\.?\d*|\.\d+))")
-_AXES = {"X": 0, "Y": 1, "Z": 2, "A": 3, "B": 4, "C": 5}
-_G_CODES = {0, 1, 4, 20, 21, 61, 64, 90, 91}
-
-
-def _strip_comments(line: str, no: int) -> str:
-    """The line with ``( … )`` and ``; …`` blanked (columns kept for the messages)."""
-    out = list(line)
-    depth_start = -1
-    for i, ch in enumerate(line):
-        if depth_start < 0 and ch == ";":
-            for j in range(i, len(line)):
-                out[j] = " "
-            break
-        if ch == "(":
-            if depth_start >= 0:
-                raise PathFileError(f"line {no}, column {i + 1}: nested comment")
-            depth_start = i
-        if depth_start >= 0:
-            out[i] = " "
-        if ch == ")":
-            if depth_start < 0:
-                raise PathFileError(f"line {no}, column {i + 1}: ')' without '('")
-            depth_start = -1
-    if depth_start >= 0:
-        raise PathFileError(f"line {no}, column {depth_start + 1}: comment not closed")
-    return "".join(out)
-
-
-def _gcode(text: str, start: FloatArray) -> list[Waypoint]:
-    pos = np.array(start, dtype=float)
-    unit = 1e-3  # m per file unit (G21: mm)
-    relative = False
-    blend = False
-    feed: float | None = None  # m/s
-    out: list[Waypoint] = []
-    pending_dwell = 0.0  # a G4 before any motion: held at the start
-    for no, raw in enumerate(text.splitlines(), 1):
-        line = _strip_comments(raw, no)
-        if not line.strip() or line.strip() == "%":
-            continue
-        words: list[tuple[str, float, int]] = []
-        i = 0
-        while i < len(line):
-            if line[i].isspace():
-                i += 1
-                continue
-            m = _WORD.match(line, i)
-            if m is None:
-                raise PathFileError(f"line {no}, column {i + 1}: {line[i:].split()[0]!r} is "
-                                    f"not a G-code word (a letter and a number)")  # fmt: skip
-            words.append((m.group(1).upper(), float(m.group(2)), i + 1))
-            i = m.end()
-        motion: int | None = None
-        dwell: float | None = None
-        axes: dict[int, float] = {}
-        end = False
-        for letter, value, col in words:
-            if letter == "N":
-                continue
-            if letter == "G":
-                code = int(value) if value == int(value) else -1
-                if code not in _G_CODES:
-                    raise PathFileError(
-                        f"line {no}, column {col}: G{value:g} is not supported (supported: "
-                        "G0 G1 G4 G20 G21 G61 G64 G90 G91)"
-                    )
-                if code in (0, 1):
-                    if motion is not None or dwell is not None:
-                        raise PathFileError(f"line {no}, column {col}: two motions in a block")
-                    motion = code
-                elif code == 4:
-                    dwell = math.nan  # P follows
-                elif code in (20, 21):
-                    unit = 0.0254 if code == 20 else 1e-3
-                elif code in (90, 91):
-                    relative = code == 91
-                else:
-                    blend = code == 64
-            elif letter in _AXES:
-                if _AXES[letter] in axes:
-                    raise PathFileError(f"line {no}, column {col}: {letter} given twice")
-                axes[_AXES[letter]] = value
-            elif letter == "F":
-                if not value > 0:
-                    raise PathFileError(f"line {no}, column {col}: F{value:g} must be > 0 "
-                                        f"({'in' if unit > 1e-3 else 'mm'}/min)")  # fmt: skip
-                feed = value * unit / 60.0
-            elif letter == "P":
-                if dwell is None:
-                    raise PathFileError(f"line {no}, column {col}: P belongs to G4 (dwell)")
-                if not 0.0 <= value <= 3600.0:
-                    raise PathFileError(f"line {no}, column {col}: P{value:g} must be a dwell "
-                                        f"in [0, 3600] s")  # fmt: skip
-                dwell = value
-            elif letter == "M":
-                if value not in (2, 30):
-                    raise PathFileError(f"line {no}, column {col}: M{value:g} is not supported "
-                                        f"(only M2, M30: end of program)")  # fmt: skip
-                end = True
-            else:
-                raise PathFileError(f"line {no}, column {col}: word {letter}{value:g} is not "
-                                    f"supported")  # fmt: skip
-        if dwell is not None:
-            if math.isnan(dwell):
-                raise PathFileError(f"line {no}: G4 needs P, the dwell in seconds")
-            if axes:
-                raise PathFileError(f"line {no}: G4 takes no axis words")
-            if out:
-                w = out[-1]
-                out[-1] = Waypoint(w.pose, w.speed, w.time, False, w.dwell + dwell, w.where)
-            else:
-                pending_dwell += dwell
-        if axes and motion is None:
-            raise PathFileError(f"line {no}: axis words need G0 or G1 in the same block "
-                                f"(modal motion is not supported)")  # fmt: skip
-        if motion is not None:
-            if not axes:
-                raise PathFileError(f"line {no}: G{motion} without an axis word")
-            if motion == 1 and feed is None:
-                raise PathFileError(f"line {no}: G1 needs a feed rate F (mm/min or in/min) "
-                                    f"first")  # fmt: skip
-            for k, v in axes.items():
-                scale = unit if k < 3 else math.pi / 180.0
-                pos[k] = pos[k] + v * scale if relative else v * scale
-            if pending_dwell and not out:
-                s = tuple(float(x) for x in start)
-                out.append(Waypoint(s, None, None, False, pending_dwell, f"line {no}"))  # type: ignore[arg-type]
-            out.append(Waypoint(tuple(float(x) for x in pos), feed if motion == 1 else None,  # type: ignore[arg-type]
-                                None, blend, 0.0, f"line {no}"))  # fmt: skip
-        if end:
-            break
-    if not out:
-        raise PathFileError("the G-code has no motion (G0/G1 with axis words)")
     return out

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.gcode import looks_like_metres
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_file import Waypoint, csv_without_units, parse_path
 from cdprctl.motion.trajectory import (
@@ -182,17 +183,26 @@ def plan_text(
 ) -> PathPlan:
     """A path file's content planned and checked from the trajectory coordinates ``start``
     (at rest; the axes a file leaves out keep its values); ``units``: a CSV's lengths without
-    a row of units (``path_file.parse_path``). Raises PathFileError or PathRejectedError."""
+    a row of units (``path_file.parse_path``); G-code arcs within the robot's ``[paths]
+    arc_tolerance``. Raises PathFileError or PathRejectedError."""
     start = np.asarray(start, dtype=float)
-    waypoints = parse_path(text, coordinates_pose(model, start), units)
+    waypoints = parse_path(text, coordinates_pose(model, start), units,
+                           model.paths.arc_tolerance)  # fmt: skip
     return plan_path(model, waypoints, start, period, limits, name)
 
 
 def units_hint(text: str, units: str, why: str) -> str:
-    """A hint for a CSV in metres rejected outside the workspace: its numbers may be mm."""
-    if units == "m" and "outside the workspace box" in why and csv_without_units(text):
+    """A hint for a file rejected outside the workspace whose units may not be what it was
+    read in: a CSV read in metres (its numbers may be mm), G-code without G20/G21 read in mm
+    (its numbers may be metres)."""
+    if "outside the workspace box" not in why:
+        return ""
+    if units == "m" and csv_without_units(text):
         return (" (a file in millimetres? add a row of units under the header, such as "
                 "'mm, mm, mm', or give --units mm)")
+    if looks_like_metres(text):
+        return (" (a file in metres? G-code's lengths are mm unless G20 says inches: write "
+                "them in mm, with G21)")
     return ""
 
 
