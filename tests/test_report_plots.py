@@ -1,10 +1,11 @@
 """``cdprctl report``'s figures from a recording written by the recorder's own CSV writer
 (``record._write_csvs``, the payloads as the daemon sends them): the tracking error only where
-the robot tracks, the run's events on every time plot, and the command's answers to a run it
-cannot draw."""
+the robot tracks, the run's events on every time plot, the scene at the two poses farthest
+apart, and the command's answers to a run it cannot draw."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import matplotlib.pyplot as plt
@@ -14,7 +15,7 @@ import pytest
 from cdprctl.cli import main
 from cdprctl.commands.record import _write_csvs
 from cdprctl.telemetry import report_plots as rp
-from cdprctl.telemetry.recording import load_recording
+from cdprctl.telemetry.recording import farthest_pair, load_recording
 from cdprctl.telemetry.scene import SceneLayout
 
 T0 = 500.0  # s, the robot's clock at the first recorded state
@@ -171,6 +172,56 @@ def test_every_time_plot_marks_the_runs_events(run):
 )  # fmt: skip
 def test_event_labels_are_short(label, kind, text):
     assert rp.event_label(rp.Event(0.0, kind, text)) == label
+
+
+def _brute_force(p: np.ndarray) -> float:
+    ok = np.all(np.isfinite(p), axis=1)
+    return max((float(np.linalg.norm(p[i] - p[j])) for i, j in
+                itertools.combinations(np.flatnonzero(ok), 2)), default=0.0)  # fmt: skip
+
+
+def _old_rule(p: np.ndarray) -> tuple[int, int]:
+    """The pair the scene drew as "the two farthest points" before: the farthest from the
+    start, then the farthest from both."""
+    far = int(np.nanargmax(np.linalg.norm(p - p[0], axis=1)))
+    both = np.minimum(np.linalg.norm(p - p[0], axis=1), np.linalg.norm(p - p[far], axis=1))
+    return far, int(np.nanargmax(both))
+
+
+def test_the_farthest_pair_is_the_farthest_by_brute_force():
+    rng = np.random.default_rng(65)
+    # a run from the middle to the left, up and over to the right: the old rule took the
+    # right end (farthest from the start) and the top (farthest from both), 0.94 m apart,
+    # while the two ends are 1.9 m apart
+    corners = np.array([[0.0, 0, 0], [-0.9, 0, 0], [0.5, 0.8, 0], [1.0, 0, 0]])
+    run = np.vstack([np.linspace(a, b, 40) for a, b in itertools.pairwise(corners)])
+    old = _old_rule(run)
+    assert np.linalg.norm(run[old[0]] - run[old[1]]) < 0.6 * _brute_force(run)
+    sets = [run,
+            rng.normal(size=(300, 3)),
+            rng.uniform(size=(250, 3)) * [1.0, 1.0, 0.0],  # planar
+            np.repeat(rng.normal(size=(20, 3)), 15, axis=0),  # at rest, repeated
+            np.vstack([rng.normal(size=(100, 3)), [[np.nan] * 3], [[50.0, 0, 0]]]),
+            np.array([[0.0, 0, 0], [0, 0, 0]])]  # fmt: skip
+    for p in sets:
+        i, j = farthest_pair(p)
+        assert i < j or (i == j == 0)
+        assert float(np.linalg.norm(p[i] - p[j])) == pytest.approx(_brute_force(p), abs=1e-12)
+    assert farthest_pair(np.array([[1.0, 2, 3]])) == (0, 0)
+    assert farthest_pair(np.full((4, 3), np.nan)) == (0, 0)
+
+
+def test_the_scene_draws_the_farthest_pair(run, tmp_path):
+    """The recording's stills: the start, the end and the two rows farthest apart (the start
+    of the move and its end here), each titled with why it is drawn."""
+    picks = dict(rp.scene_picks(run))
+    p = run.positions()
+    i, j = [k for k, why in picks.items() if "farthest pair" in why]
+    assert float(np.linalg.norm(p[i] - p[j])) == pytest.approx(_brute_force(p[::7]), abs=0.01)
+    assert float(np.linalg.norm(p[i] - p[j])) == pytest.approx(0.3)
+    assert picks[0].startswith("start") and picks[N - 1].endswith("end")
+    assert rp.scene_figure(run, str(tmp_path / "scene.png"))
+    assert (tmp_path / "scene.png").stat().st_size > 20_000
 
 
 def test_report_writes_every_figure(run, capsys):

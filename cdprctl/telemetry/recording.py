@@ -131,3 +131,33 @@ def load_recording(run: Path) -> Recording | str:
     t = column(head, rows, "time")
     return Recording(run, head, rows, t - t[0], float(t[0]), meta)
 
+
+def farthest_pair(points: np.ndarray) -> tuple[int, int]:
+    """The indices (i < j) of the two rows of ``points`` (n, 3) farthest apart (Euclidean;
+    rows with a NaN are never chosen; of equal rows the first; on a tie between pairs, one of
+    them); (0, 0) with fewer than two finite rows. Exact: equal rows are merged, a lower
+    bound from a double sweep keeps only the rows that could end a longer pair, and those
+    are compared pair by pair in blocks."""
+    p = np.asarray(points, dtype=float)
+    finite = np.flatnonzero(np.all(np.isfinite(p), axis=1))
+    if len(finite) < 2:
+        return (0, 0)
+    uniq, first = np.unique(p[finite], axis=0, return_index=True)
+    index = finite[first]  # each distinct position's first row
+    # a pair at least this long exists (farthest from a point, then from that one) ...
+    a = int(np.argmax(np.linalg.norm(uniq - uniq[0], axis=1)))
+    best = float(np.max(np.linalg.norm(uniq - uniq[a], axis=1)))
+    # ... and a pair's ends each lie at least `best - R` from the centre c, R the largest
+    c = 0.5 * (uniq.min(axis=0) + uniq.max(axis=0))
+    r = np.linalg.norm(uniq - c, axis=1)
+    keep = np.flatnonzero(r >= best - float(r.max()) - 1e-12)
+    q = uniq[keep]
+    found, pair = -1.0, (0, 0)
+    for s in range(0, len(q), 512):
+        d = np.linalg.norm(q[s : s + 512, None, :] - q[None, :, :], axis=2)
+        k = np.unravel_index(int(np.argmax(d)), d.shape)
+        if d[k] > found:
+            found = float(d[k])
+            pair = (int(index[keep[s + k[0]]]), int(index[keep[k[1]]]))
+    i, j = sorted(pair)
+    return (i, j)

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from cdprctl.telemetry.recording import Event, Recording, column, read_csv
+from cdprctl.telemetry.recording import Event, Recording, column, farthest_pair, read_csv
 
 #: the colour of an event's line by its kind; a state change into these states is red too
 EVENT_COLOURS = {"fault": "red", "reject": "darkorange", "event": "0.35"}
@@ -317,13 +317,17 @@ def timing_figure(rec: Recording) -> Figure | None:
 
 
 def scene_picks(rec: Recording) -> list[tuple[int, str]]:
-    """The rows drawn in 3-D: the start, the farthest from it, the farthest from both, the
-    end."""
-    xyz = rec.positions()
-    far = int(np.nanargmax(np.linalg.norm(xyz - xyz[0], axis=1))) if len(xyz) > 1 else 0
-    both = np.minimum(np.linalg.norm(xyz - xyz[0], axis=1), np.linalg.norm(xyz - xyz[far], axis=1))
-    third = int(np.nanargmax(both)) if np.any(np.isfinite(both)) else 0
-    return [(k, "") for k in sorted({0, far, third, len(rec.rows) - 1})]
+    """The rows drawn in 3-D and why: the start, the end, and the two poses of the run
+    farthest apart (exactly, over every row's estimated position: ``farthest_pair``),
+    in time order; a row that is two of these is drawn once, named for both."""
+    i, j = farthest_pair(rec.positions())
+    d = float(np.linalg.norm(rec.positions()[i] - rec.positions()[j]))
+    pair = f"farthest pair ({d:.3f} m apart)"
+    why: dict[int, list[str]] = {}
+    for k, name in ((0, "start"), (i, pair), (j, pair), (len(rec.rows) - 1, "end")):
+        if name not in why.setdefault(k, []):
+            why[k].append(name)
+    return [(k, ", ".join(why[k])) for k in sorted(why)]
 
 
 def scene_figure(rec: Recording, path: str) -> bool:
@@ -336,11 +340,11 @@ def scene_figure(rec: Recording, path: str) -> bool:
 
     layout = SceneLayout.from_dict(rec.meta["layout"])
     names = list(layout.names)
-    states = [(f"t = {rec.t[k]:.1f} s, {rec.states[k]}", _scene_state(rec, k, names))
+    states = [(f"{why}: t = {rec.t[k]:.1f} s, {rec.states[k]}", _scene_state(rec, k, names))
               for k, why in scene_picks(rec)]  # fmt: skip
     scene_stills(path, layout, states,
-                 f"{rec.meta.get('robot', '')}: the robot at the start, the end and the run's "
-                 "two farthest points", trace=rec.positions())  # fmt: skip
+                 f"{rec.meta.get('robot', '')}: the robot at the start, the end and the two "
+                 "poses of the run farthest apart", trace=rec.positions())  # fmt: skip
     return True
 
 
