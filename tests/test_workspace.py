@@ -127,3 +127,43 @@ def test_cli_json_and_plot(tmp_path, capsys):
     rc = main(["workspace", "--config", str(ROOT / "config" / "rowc.toml"), "--wrench", "1,2"])
     assert rc == 2
     assert "--wrench = '1,2' must be 6 finite numbers (N, N·m)" in capsys.readouterr().err
+
+
+def _homes(fig) -> list[str]:
+    """The titles of the slices that draw the home star."""
+    return [ax.get_title() for ax in fig.axes
+            if any(line.get_marker() == "*" for line in ax.get_lines())]  # fmt: skip
+
+
+def test_the_home_star_only_on_the_slice_through_home(rowc):
+    """A slice 1 m above home draws no home star (it was drawn on every slice, as if home lay
+    on each); the slice through home (within half a spacing) draws it; and the slice through
+    home is among those drawn even when the spread of picks would step over it."""
+    import matplotlib.pyplot as plt
+
+    from cdprctl.plots.workspace_plot import slices_figure
+
+    hx, _, hz = rowc.home.position
+    # x slices 0.5 m apart, through home and 1 m either side of it
+    grid = Grid((hx - 1.0, 0.3, 0.3), (hx + 1.0, 0.4, 0.7), (5, 3, 3))
+    res = wrench_feasible_workspace(rowc, grid, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(3, 3, 5), 0, "t")
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title().startswith("x =")]
+    assert f"x = {hx - 1.0:.3g} m" in titles and f"x = {hx + 1.0:.3g} m" in titles
+    assert _homes(fig) == [f"x = {hx:.3g} m (home)"]  # not on the slices 1 m away
+    plt.close(fig)
+    # the grid starts 0.3 m past home (spacing 0.5 m): home is on none of its slices
+    off = Grid((hx + 0.3, 0.3, 0.3), (hx + 1.3, 0.4, 0.7), (3, 3, 3))
+    res = wrench_feasible_workspace(rowc, off, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(3, 3, 3), 0, "t")
+    assert [ax for ax in fig.axes if ax.get_title().startswith("x =")]
+    assert _homes(fig) == []
+    plt.close(fig)
+    # 40 z slices of which 9 are drawn: the one through home is one of them
+    fine = Grid((1.0, 0.3, 0.0), (2.0, 0.4, 1.4), (3, 3, 40))
+    res = wrench_feasible_workspace(rowc, fine, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(40, 3, 3), 2, "t")
+    step = 1.4 / 39
+    near = fine.axes()[2][round(hz / step)]
+    assert _homes(fig) == [f"z = {near:.3g} m (home)"]
+    plt.close(fig)

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         from cdprctl.plots.workspace_plot import plot_workspace
 
         title = (f"{model.name}: rpy {np.round(rpy, 3).tolist()} rad, external wrench "
-                 f"{np.round(wrench, 2).tolist()}")  # fmt: skip
+                 f"{np.round(wrench, 2).tolist()} N, N·m")  # fmt: skip
         for path in plot_workspace(args.plot, model, res, title):
             print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
     if args.json:

@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from cdprctl.model import RobotModel
 from cdprctl.tda.workspace import WorkspaceResult
@@ -43,68 +45,106 @@ def plot_workspace(out_dir: str, model: RobotModel, res: WorkspaceResult, title:
 
 def _slices(d: Path, model: RobotModel, res: WorkspaceResult, margin: np.ndarray, k: int,
             title: str) -> Path:  # fmt: skip
-    g = res.grid
-    axes = g.axes()
+    fig = slices_figure(model, res, margin, k, title)
     a, b = [i for i in range(3) if i != k]
-    count = g.n[k]
-    # slices through the feasible part only (one all grey says nothing), spread over it
-    some = [i for i in range(count) if np.any(np.take(margin, i, axis=2 - k) >= 0.0)]
-    lo, hi = (some[0], some[-1]) if some else (0, count - 1)
-    picks = np.unique(np.linspace(lo, hi, min(hi - lo + 1, 9)).round().astype(int))
-    cols = min(3, len(picks))
-    rows = math.ceil(len(picks) / cols)
-    feasible = margin[np.isfinite(margin) & (margin >= 0.0)]  # the colours are theirs
-    top = float(feasible.max()) if feasible.size else 1.0
-    top = top or 1.0
-    fig, axs = plt.subplots(rows, cols, figsize=(4.2 * cols + 1.2, 3.6 * rows + 0.6), squeeze=False,
-                            layout="constrained")  # fmt: skip
-    ws = model.workspace
-    im = None
-    for ax, idx in zip(axs.ravel(), picks, strict=False):
-        sl = np.take(margin, idx, axis=2 - k)  # array order is [z, y, x]
-        # after np.take the remaining array axes are in [z, y, x] order without k: rows = the
-        # higher of (a, b), columns = the lower
-        img = np.where(np.isfinite(sl), sl, np.nan)
-        shown = np.ma.masked_where(~(img >= 0.0), img)
-        # pixels centred on the grid points, so the boundary contour sits between them
-        ha, hb = _half_step(axes[a]), _half_step(axes[b])
-        extent = (axes[a][0] - ha, axes[a][-1] + ha, axes[b][0] - hb, axes[b][-1] + hb)
-        grey = np.where(img >= 0, np.nan, 0.0)
-        ax.imshow(grey, origin="lower", extent=extent, cmap="Greys", vmin=-1, vmax=1,
-                  aspect="auto", interpolation="nearest")  # fmt: skip
-        im = ax.imshow(shown, origin="lower", extent=extent, cmap="viridis", vmin=0.0,
-                       vmax=top, aspect="auto", interpolation="nearest")  # fmt: skip
-        if np.nanmax(img) >= 0.0 > np.nanmin(img) and g.n[a] > 1 and g.n[b] > 1:
-            # the feasibility (1/0) at level 0.5: halfway between a feasible point and an
-            # infeasible one, i.e. on the edge between their cells (the margin's own zero
-            # crossing, interpolated, sat up to half a cell off the coloured cells)
-            ax.contour(axes[a], axes[b], (img >= 0.0).astype(float), levels=[0.5],
-                       colors="red", linewidths=1.2)  # fmt: skip
-        ax.add_patch(plt.Rectangle((ws.position_min[a], ws.position_min[b]),
-                                   ws.position_max[a] - ws.position_min[a],
-                                   ws.position_max[b] - ws.position_min[b],
-                                   fill=False, ls="--", color="black", lw=1))  # fmt: skip
-        ax.plot(model.anchors[:, a], model.anchors[:, b], "k^", ms=5)
-        home = model.home.position
-        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="white", mew=1.5)
-        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="black", mew=0.7)
-        ax.set_title(f"{AXES[k]} = {axes[k][idx]:.3g} m", fontsize=9)
-        ax.set_xlabel(f"{AXES[a]} (m)")
-        ax.set_ylabel(f"{AXES[b]} (m)")
-    for ax in axs.ravel()[len(picks):]:
-        ax.axis("off")
-    if im is not None:
-        fig.colorbar(im, ax=axs.ravel().tolist(), label="tension margin (N)")
-    fig.suptitle(
-        f"{title}\nfeasible: coloured by margin, red: boundary, grey: infeasible, "
-        f"dashed: configured workspace, ▲ anchors, ☆ home "
-        f"({AXES[k]} = {model.home.position[k]:.3g} m)",
-        fontsize=9,
-    )
     path = d / f"slices_{AXES[a]}{AXES[b]}.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def slice_picks(res: WorkspaceResult, margin: np.ndarray, k: int, home: np.ndarray) -> list[int]:
+    """Up to 9 indices along axis ``k`` spread over the slices with a feasible point (one all
+    grey says nothing), the slice through home among them when the grid holds one."""
+    count = res.grid.n[k]
+    some = [i for i in range(count) if np.any(np.take(margin, i, axis=2 - k) >= 0.0)]
+    lo, hi = (some[0], some[-1]) if some else (0, count - 1)
+    picks = np.unique(np.linspace(lo, hi, min(hi - lo + 1, 9)).round().astype(int)).tolist()
+    axis = res.grid.axes()[k]
+    at_home = [i for i in range(count) if on_slice(float(home[k]), axis, i)]
+    if at_home and at_home[0] not in picks:  # the nearest pick gives way to it
+        nearest = min(range(len(picks)), key=lambda j: abs(picks[j] - at_home[0]))
+        picks[nearest] = at_home[0]
+    return sorted(set(picks))
+
+
+def on_slice(value: float, axis: np.ndarray, i: int) -> bool:
+    """Whether ``value`` (m) lies in slice ``i`` of ``axis``: within half the spacing of its
+    plane (a one-slice axis: within 1 mm)."""
+    half = _half_step(axis) if len(axis) > 1 else 1e-3
+    return abs(value - float(axis[i])) <= half + 1e-12
+
+
+def slices_figure(model: RobotModel, res: WorkspaceResult, margin: np.ndarray, k: int,
+                  title: str) -> Figure:  # fmt: skip
+    """Slices normal to axis ``k`` (``slice_picks``), coloured by the margin (N); the home
+    star only on the slice through home, the configured box only on the slices it spans."""
+    picks = slice_picks(res, margin, k, np.asarray(model.home.position, dtype=float))
+    cols = min(3, len(picks))
+    rows = math.ceil(len(picks) / cols)
+    feasible = margin[np.isfinite(margin) & (margin >= 0.0)]  # the colours are theirs
+    top = float(feasible.max()) if feasible.size else 1.0
+    fig, axs = plt.subplots(rows, cols, figsize=(4.2 * cols + 1.2, 3.6 * rows + 0.6), squeeze=False,
+                            layout="constrained")  # fmt: skip
+    im = None
+    for ax, idx in zip(axs.ravel(), picks, strict=False):
+        im = _draw_slice(ax, model, res, np.take(margin, idx, axis=2 - k), k, idx, top or 1.0)
+    for ax in axs.ravel()[len(picks):]:
+        ax.axis("off")
+    if im is not None:
+        fig.colorbar(im, ax=axs.ravel().tolist(), label="tension margin (N)")
+    home_k = model.home.position[k]
+    fig.suptitle(
+        f"{title}\nfeasible: coloured by margin, red: boundary, grey: infeasible, "
+        f"dashed: configured workspace (where the slice cuts it), ▲ anchors (projected), "
+        f"☆ home (on its slice only, {AXES[k]} = {home_k:.3g} m)",
+        fontsize=9,
+    )
+    return fig
+
+
+def _draw_slice(ax: Any, model: RobotModel, res: WorkspaceResult, sl: np.ndarray, k: int,
+                idx: int, top: float) -> Any:  # fmt: skip
+    """Slice ``idx`` normal to axis ``k`` (``sl``: its margins, N) into ``ax``."""
+    axes = res.grid.axes()
+    a, b = [i for i in range(3) if i != k]
+    # after np.take the remaining array axes are in [z, y, x] order without k: rows = the
+    # higher of (a, b), columns = the lower
+    img = np.where(np.isfinite(sl), sl, np.nan)
+    shown = np.ma.masked_where(~(img >= 0.0), img)
+    # pixels centred on the grid points, so the boundary contour sits between them
+    ha, hb = _half_step(axes[a]), _half_step(axes[b])
+    extent = (axes[a][0] - ha, axes[a][-1] + ha, axes[b][0] - hb, axes[b][-1] + hb)
+    grey = np.where(img >= 0, np.nan, 0.0)
+    ax.imshow(grey, origin="lower", extent=extent, cmap="Greys", vmin=-1, vmax=1,
+              aspect="auto", interpolation="nearest")  # fmt: skip
+    im = ax.imshow(shown, origin="lower", extent=extent, cmap="viridis", vmin=0.0,
+                   vmax=top, aspect="auto", interpolation="nearest")  # fmt: skip
+    if np.nanmax(img) >= 0.0 > np.nanmin(img) and res.grid.n[a] > 1 and res.grid.n[b] > 1:
+        # the feasibility (1/0) at level 0.5: halfway between a feasible point and an
+        # infeasible one, i.e. on the edge between their cells (the margin's own zero
+        # crossing, interpolated, sat up to half a cell off the coloured cells)
+        ax.contour(axes[a], axes[b], (img >= 0.0).astype(float), levels=[0.5],
+                   colors="red", linewidths=1.2)  # fmt: skip
+    ws = model.workspace
+    half = _half_step(axes[k]) if len(axes[k]) > 1 else 1e-3
+    if ws.position_min[k] - half <= axes[k][idx] <= ws.position_max[k] + half:
+        ax.add_patch(plt.Rectangle((ws.position_min[a], ws.position_min[b]),
+                                   ws.position_max[a] - ws.position_min[a],
+                                   ws.position_max[b] - ws.position_min[b],
+                                   fill=False, ls="--", color="black", lw=1))  # fmt: skip
+    ax.plot(model.anchors[:, a], model.anchors[:, b], "k^", ms=5)
+    home = model.home.position
+    if on_slice(float(home[k]), axes[k], idx):
+        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="white", mew=1.5,
+                gid="home")  # fmt: skip
+        ax.plot(home[a], home[b], marker="*", ms=12, mfc="none", mec="black", mew=0.7,
+                gid="home")  # fmt: skip
+    ax.set_title(f"{AXES[k]} = {axes[k][idx]:.3g} m" + (" (home)" if on_slice(
+        float(home[k]), axes[k], idx) else ""), fontsize=9)  # fmt: skip
+    ax.set_xlabel(f"{AXES[a]} (m)")
+    ax.set_ylabel(f"{AXES[b]} (m)")
+    return im
 
 
 def _half_step(x: np.ndarray) -> float:
