@@ -20,7 +20,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         tuple(
             f"cdprctl.model.{m}"
             for m in ("robot", "control", "drives", "buses", "grippers", "zenoh", "foxglove",
-                      "ros2", "calibration", "safety", "errors", "reader")
+                      "ros2", "calibration", "safety", "errors", "reader", "paths")
         ),
     ),
     (
