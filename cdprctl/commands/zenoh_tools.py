@@ -11,7 +11,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from cdprctl.commands.common import command_parser
+from cdprctl.commands.parsing import command_parser
 from cdprctl.commands.zenoh_session import (
     add_zenoh_arguments,
     key_prefix,
@@ -110,14 +110,15 @@ def send(args: argparse.Namespace) -> int:
     if session is None:
         return 2
     try:
+        # declared before the status query: the gateway's answer to it, on the same route,
+        # comes after the declaration reached it (this was a fixed 0.3 s sleep)
+        sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
         early = not_there(session, args, prefix)  # known now: not after the reply's timeout
         if not early:
-            sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
-            time.sleep(0.3)  # let the subscription reach the gateway before asking
             session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
             done.wait(args.timeout)
-            sub.undeclare()
             why = "" if got else why_no_answer(session, args, prefix)
+        sub.undeclare()
     finally:
         session.close()
     if early:
