@@ -156,6 +156,21 @@ def safety_line(safety: dict[str, Any]) -> str:
             + f"; {tested}")  # fmt: skip
 
 
+def path_line(path: dict[str, Any]) -> str:
+    """A path's progress in one line: segment k of n, the share of its planned time played
+    (of its segments, from a daemon that does not say the times) and the time left."""
+    k, n, state = path.get("segment", 0), path.get("segments", 0), path.get("state", "")
+    played, left = path.get("elapsed"), path.get("time_left")
+    if isinstance(played, (int, float)) and isinstance(left, (int, float)) and played + left > 0:
+        done = played / (played + left)
+    else:
+        done = ((k - 1) + (path.get("fraction") or 0.0)) / n if n else 0.0
+    line = f"path     segment {k} of {n} ({state}), {done:.0%}"
+    if isinstance(left, (int, float)) and state in ("running", "dwell", "paused"):
+        line += f", {left:.1f} s left"
+    return line + (f", {_bar(done, 0.0, 1.0)}" if state in ("running", "dwell") else "")
+
+
 def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str, Any]) -> str:
     p, rpy = state["pose"]["position"], state["pose"]["rpy"]
     err = state["tracking_error"]
@@ -178,6 +193,7 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
         ),
         *([f"WARNING  {state['warning']}"] if state.get("warning") else []),
         *([safety_line(state["safety"])] if state.get("safety") else []),
+        *([path_line(state["path"])] if state.get("path") else []),
         "tensions",
     ]
     lo = meta.get("tension_min") or [0.0] * len(state["tensions"])
