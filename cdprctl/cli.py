@@ -36,7 +36,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 #: the tools that talk to robots over Zenoh and import neither numpy nor the robot model: run
 #: alone, only their parsers are built (the others' imports took a second of each ``send``)
-LIGHT = {"send": "zenoh_tools", "monitor": "zenoh_tools", "jog": "jog", "record": "record"}
+LIGHT = {"send": "zenoh_tools", "monitor": "zenoh_tools", "robots": "fleet",
+         "zenoh-router": "fleet", "jog": "jog", "record": "record"}  # fmt: skip
 
 
 def _light_parser(command: str) -> argparse.ArgumentParser:
@@ -84,8 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     record.add_parser(sub)
     report.add_parser(sub)
     workspace_cmd.add_parser(sub)
-    from cdprctl.commands import jog, path
+    from cdprctl.commands import fleet, jog, path
 
+    fleet.add_parsers(sub)
     jog.add_parser(sub)
     path.add_parser(sub)
     return parser
