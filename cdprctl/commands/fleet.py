@@ -112,11 +112,19 @@ def _robot(reply: Any, addresses: dict[str, str]) -> dict[str, Any] | None:
         "fault": body.get("fault") or "",
         "prefix": str(reply.ok.key_expr).rsplit("/", 1)[0],
         "zid": zid,
-        "reached_at": addresses.get(zid, ""),  # direct: the link's endpoint; else via a router
+        "reached_at": _reached_at(addresses.get(zid, ""), net.get("listen", [])),
         "listen": net.get("listen", []),
         "connect": net.get("connect", []),
         "simulated": (body.get("config") or {}).get("simulated"),
     }
+
+
+def _reached_at(dst: str, listen: list[str]) -> str:
+    """The endpoint of this session's own link to the robot when the session opened it (its
+    port one the robot listens on); "" when the link is the robot's to this session (its
+    outgoing port says nothing of where it is) or there is none (through a router)."""
+    port = dst.rpartition(":")[2]
+    return dst if dst and any(str(e).rpartition(":")[2] == port for e in listen) else ""
 
 
 def robot_line(r: dict[str, Any]) -> str:
