@@ -34,13 +34,32 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return run()
 
 
-def build_parser() -> argparse.ArgumentParser:
+#: the tools that talk to robots over Zenoh and import neither numpy nor the robot model: run
+#: alone, only their parsers are built (the others' imports took a second of each ``send``)
+LIGHT = {"send": "zenoh_tools", "monitor": "zenoh_tools", "robots": "fleet",
+         "zenoh-router": "fleet", "jog": "jog", "record": "record"}  # fmt: skip
+
+
+def _light_parser(command: str) -> argparse.ArgumentParser:
+    import importlib
+
+    parser, sub = _top_parser()
+    module = importlib.import_module(f"cdprctl.commands.{LIGHT[command]}")
+    (getattr(module, "add_parsers", None) or module.add_parser)(sub)
+    return parser
+
+
+def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
     parser = argparse.ArgumentParser(
         prog="cdprctl",
         description="Controller and tools for cable-driven parallel robots (SI units throughout).",
     )
     parser.add_argument("--version", action="version", version=f"cdprctl {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    return parser, parser.add_subparsers(dest="command", metavar="COMMAND")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser, sub = _top_parser()
     _add_check_config(sub)
     p = sub.add_parser("demo", help="the offline TDA tools on the papers' robots (plots into out/)")
     p.set_defaults(func=_cmd_demo)
@@ -66,8 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     record.add_parser(sub)
     report.add_parser(sub)
     workspace_cmd.add_parser(sub)
-    from cdprctl.commands import jog, path
+    from cdprctl.commands import fleet, jog, path
 
+    fleet.add_parsers(sub)
     jog.add_parser(sub)
     path.add_parser(sub)
     return parser
@@ -108,7 +128,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
     previous = signal.signal(signal.SIGTERM, _stop)  # as Ctrl-C, from the first moment
     try:
-        parser = build_parser()
+        light = bool(words) and words[0] in LIGHT
+        parser = _light_parser(words[0]) if light else build_parser()
         args = parser.parse_args(signed_lists_attached(parser, words))
         if not getattr(args, "func", None):
             parser.print_help()

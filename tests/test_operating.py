@@ -61,7 +61,8 @@ def test_gcode_square_with_dwell_is_traced(rowc):
         seen = []
         cl.run(30.0, each=lambda cl: seen.append((cl.net.time, c.data.path_segment,
                                                    c.data.path_state, c.data.path_fraction,
-                                                   c.trajectory.position[:3].copy())),
+                                                   c.trajectory.position[:3].copy(),
+                                                   c.data.path_elapsed, c.data.path_time_left)),
                until=lambda cl: c.data.path_state == "done" and c.data.state.value == "enabled")
         assert c.data.path_state == "done" and c.data.state.value == "enabled", events(cl)[-5:]
         a = cl.arrays()
@@ -79,6 +80,13 @@ def test_gcode_square_with_dwell_is_traced(rowc):
         assert dwell[-1] - dwell[0] == pytest.approx(0.5, abs=2 * cl.period)
         fractions = [s[3] for s in seen if s[1] == 3]
         assert fractions[0] < 0.05 and fractions[-1] > 0.999 and np.all(np.diff(fractions) >= 0)
+        # the time played and the time left add up to the plan's, the dwell counted; 0 left
+        playing = [s for s in seen if s[2] in ("running", "dwell")]
+        for s in playing[::25]:
+            assert s[5] + s[6] == pytest.approx(plan.duration, abs=1e-9), s
+        assert playing[0][5] < 2 * cl.period and playing[-1][6] < 2 * cl.period
+        assert c.data.path_time_left == 0.0
+        assert c.data.path_elapsed == pytest.approx(plan.duration, abs=2 * cl.period)
 
 
 def test_infeasible_waypoint_rejected_before_any_motion(rowc):
@@ -129,10 +137,13 @@ def test_pause_resume_abort(rowc):
         cl.run(0.5)
         assert np.array_equal(c.trajectory.position, held)
         assert "jog ignored: a path is running (pause or abort it first)" in events(cl)
-        segment = c.data.path_segment
+        segment, played, left = c.data.path_segment, c.data.path_elapsed, c.data.path_time_left
+        assert played > 1.5 and left > 0.0
         cl.command("resume")
         cl.run(0.5)
         assert c.data.path_state == "running" and c.data.path_segment == segment
+        # the time played goes on from the pause's (the 1.5 s held not counted)
+        assert played + 0.4 < c.data.path_elapsed < played + 0.5 + cl.period
         cl.run(30.0, until=lambda cl: c.data.path_state == "done")
         assert c.data.path_state == "done"
         end = np.array([1.5, 0.35, 0.59])

@@ -2,38 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from cdprctl.commands.parsing import command_parser as command_parser  # re-exported
 from cdprctl.model import ConfigError, RobotModel, load_robot
-
-
-def command_parser(
-    sub: Any,
-    name: str,
-    help: str,
-    func: Callable[[argparse.Namespace], int],
-    config: bool = True,
-    description: str | None = None,
-    epilog: str | None = None,
-) -> argparse.ArgumentParser:
-    """The parser of sub-command ``name``, run by ``func``, described by ``func``'s docstring
-    (or ``description``); with ``config`` its ``--config FILE`` (the robot description). An
-    ``epilog`` (examples) is printed as written, and so is the description then."""
-    extra: dict[str, Any] = {}
-    if epilog is not None:
-        extra = {"epilog": epilog, "formatter_class": argparse.RawDescriptionHelpFormatter}
-    p: argparse.ArgumentParser = sub.add_parser(
-        name, help=help, description=description or func.__doc__, **extra
-    )
-    if config:
-        p.add_argument("--config", required=True, help="robot description (TOML)")
-    p.set_defaults(func=func, cmd=name)
-    return p
 
 
 def os_error_text(exc: Exception) -> str:

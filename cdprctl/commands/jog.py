@@ -15,7 +15,7 @@ import time
 import tty
 from typing import Any
 
-from cdprctl.commands.common import command_parser
+from cdprctl.commands.parsing import command_parser
 from cdprctl.commands.zenoh_session import (
     add_zenoh_arguments,
     key_prefix,

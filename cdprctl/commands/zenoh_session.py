@@ -10,10 +10,11 @@ import time
 from typing import Any
 
 
-def add_zenoh_arguments(p: argparse.ArgumentParser) -> None:
+def add_zenoh_arguments(p: argparse.ArgumentParser, robot: bool = True) -> None:
     g = p.add_argument_group("Zenoh")
-    g.add_argument("--robot", default="", help="robot name: key prefix cdpr/NAME")
-    g.add_argument("--prefix", default="", help="key prefix (instead of --robot)")
+    if robot:
+        g.add_argument("--robot", default="", help="robot name: key prefix cdpr/NAME")
+        g.add_argument("--prefix", default="", help="key prefix (instead of --robot)")
     g.add_argument("--connect", action="append", metavar="ENDPOINT", help="e.g. tcp/host:7447")
     g.add_argument("--listen", action="append", metavar="ENDPOINT")
     g.add_argument(
@@ -80,6 +81,21 @@ def robot_status(session: Any, prefix: str, timeout: float = 3.0) -> dict[str, A
         time.sleep(0.1)
 
 
+def unreached(args: argparse.Namespace) -> str:
+    """Why a session reached no peer: nothing found by scouting, nothing listens at the
+    endpoints, or what listens there refused this session (its credentials)."""
+    endpoints = list(args.connect or ())
+    if not endpoints:
+        return ("no Zenoh peer found (multicast scouting finds none, or is off): give "
+                "--connect ENDPOINT, the robot's --zenoh-listen")  # fmt: skip
+    refused = [e for e in endpoints if _reachable(e)]
+    if refused:
+        return (f"{', '.join(refused)} accepts connections but refused this session: "
+                "authentication failed (the user/password or certificate of "
+                "--zenoh-config), or it is not a Zenoh peer")  # fmt: skip
+    return f"cannot connect to {', '.join(endpoints)}: {NOTHING_THERE}"
+
+
 NOTHING_THERE = "nothing listens there (is the daemon running, with --zenoh-listen on it?)"
 
 
@@ -105,9 +121,9 @@ def not_there(session: Any, args: argparse.Namespace, prefix: str) -> str:
     session: its credentials) or no robot under ``prefix``; "" when the robot answers its
     status. A wrong password or robot name costs the second, not the reply's timeout."""
     deadline = time.monotonic() + PEER_WAIT
-    while not _peers(session) and time.monotonic() < deadline:
+    while not peers(session) and time.monotonic() < deadline:
         time.sleep(0.05)
-    if _peers(session) and robot_status(session, prefix, timeout=2.0):
+    if peers(session) and robot_status(session, prefix, timeout=2.0):
         return ""
     return why_no_answer(session, args, prefix)
 
@@ -115,7 +131,7 @@ def not_there(session: Any, args: argparse.Namespace, prefix: str) -> str:
 PEER_WAIT = 1.0  # s: a session reaches its --connect peers within this (measured: < 0.1 s)
 
 
-def _peers(session: Any) -> list[Any]:
+def peers(session: Any) -> list[Any]:
     return [*session.info.peers_zid(), *session.info.routers_zid()]
 
 
@@ -125,17 +141,8 @@ def why_no_answer(session: Any, args: argparse.Namespace, prefix: str,
     there, or a peer listens and refused this session: its credentials), reached but no robot
     under ``prefix``, or the robot is there and took no ``command`` (its ACL, or commands
     off) or, waiting for its state, publishes none."""
-    if not _peers(session):
-        endpoints = list(args.connect or ())
-        if not endpoints:
-            return ("no Zenoh peer found (multicast scouting finds none, or is off): give "
-                    "--connect ENDPOINT, the robot's --zenoh-listen")  # fmt: skip
-        refused = [e for e in endpoints if _reachable(e)]
-        if refused:
-            return (f"{', '.join(refused)} accepts connections but refused this session: "
-                    "authentication failed (the user/password or certificate of "
-                    "--zenoh-config), or it is not a Zenoh peer")  # fmt: skip
-        return f"cannot connect to {', '.join(endpoints)}: {NOTHING_THERE}"
+    if not peers(session):
+        return unreached(args)
     status = robot_status(session, prefix, timeout=1.5)
     if not status:
         seen = sorted({str(r.ok.key_expr).rsplit("/", 1)[0] for r in

@@ -11,7 +11,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from cdprctl.commands.common import command_parser
+from cdprctl.commands.parsing import command_parser
 from cdprctl.commands.zenoh_session import (
     add_zenoh_arguments,
     key_prefix,
@@ -110,14 +110,15 @@ def send(args: argparse.Namespace) -> int:
     if session is None:
         return 2
     try:
+        # declared before the status query: the gateway's answer to it, on the same route,
+        # comes after the declaration reached it (this was a fixed 0.3 s sleep)
+        sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
         early = not_there(session, args, prefix)  # known now: not after the reply's timeout
         if not early:
-            sub = session.declare_subscriber(f"{prefix}/reply/{args.kind}", on_reply)
-            time.sleep(0.3)  # let the subscription reach the gateway before asking
             session.put(f"{prefix}/cmd/{args.kind}", json.dumps(payload))
             done.wait(args.timeout)
-            sub.undeclare()
             why = "" if got else why_no_answer(session, args, prefix)
+        sub.undeclare()
     finally:
         session.close()
     if early:
@@ -155,6 +156,21 @@ def safety_line(safety: dict[str, Any]) -> str:
             + f"; {tested}")  # fmt: skip
 
 
+def path_line(path: dict[str, Any]) -> str:
+    """A path's progress in one line: segment k of n, the share of its planned time played
+    (of its segments, from a daemon that does not say the times) and the time left."""
+    k, n, state = path.get("segment", 0), path.get("segments", 0), path.get("state", "")
+    played, left = path.get("elapsed"), path.get("time_left")
+    if isinstance(played, (int, float)) and isinstance(left, (int, float)) and played + left > 0:
+        done = played / (played + left)
+    else:
+        done = ((k - 1) + (path.get("fraction") or 0.0)) / n if n else 0.0
+    line = f"path     segment {k} of {n} ({state}), {done:.0%}"
+    if isinstance(left, (int, float)) and state in ("running", "dwell", "paused"):
+        line += f", {left:.1f} s left"
+    return line + (f", {_bar(done, 0.0, 1.0)}" if state in ("running", "dwell") else "")
+
+
 def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str, Any]) -> str:
     p, rpy = state["pose"]["position"], state["pose"]["rpy"]
     err = state["tracking_error"]
@@ -177,6 +193,7 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
         ),
         *([f"WARNING  {state['warning']}"] if state.get("warning") else []),
         *([safety_line(state["safety"])] if state.get("safety") else []),
+        *([path_line(state["path"])] if state.get("path") else []),
         "tensions",
     ]
     lo = meta.get("tension_min") or [0.0] * len(state["tensions"])

@@ -98,3 +98,5 @@ class ControlData:
         self.path_segment = 0  # 1-based, 0: no path
         self.path_segments = 0
         self.path_fraction = 0.0  # of the segment's distance covered
+        self.path_elapsed = 0.0  # s the path has moved (or dwelt), pauses not counted
+        self.path_time_left = 0.0  # s of the plan still to play (as planned)

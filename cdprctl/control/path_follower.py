@@ -1,6 +1,7 @@
 """Plays a checked path plan (``motion.path_plan``) in the loop: each segment handed to the
 trajectory when the last one ends (or its dwell has passed), the progress written into
-``ControlData`` (``path_segment``, ``path_fraction``, ``path_state``). Pause brakes onto the
+``ControlData`` (``path_segment``, ``path_fraction``, ``path_state``, ``path_elapsed``,
+``path_time_left``: the plan's duration less the time it has played). Pause brakes onto the
 path and holds; resume continues with a plan ``Controller.submit`` made from where it stands;
 abort brakes and forgets the path; a fault or a stop ends it ("stopped")."""
 
@@ -33,6 +34,9 @@ class PathFollower(MotionSource):
         self._dwell_until = math.nan
         self._seg_start = np.zeros(6)
         self._seg_length = 0.0
+        self._ends_at = math.nan  # s: when the plan under way ends, as planned
+        self._played = 0.0  # s the path had played before the plan under way (a resume)
+        self._started = 0.0  # s: when the plan under way started
 
     # -- outside the loop (Controller.submit) ----------------------------------------------------
     def plan_path(self, cmd: Command) -> bool:
@@ -76,6 +80,10 @@ class PathFollower(MotionSource):
 
     def start(self, t: float, plan: PathPlan, offset: int = 0) -> None:
         d = self.data
+        resumed = self.paused and self.plan is not None
+        self._played = d.path_elapsed if resumed else 0.0
+        self._started, self._ends_at = t, t + plan.duration
+        d.path_elapsed, d.path_time_left = self._played, plan.duration
         self.plan, self.offset, self.paused = plan, offset, False
         self.k = -1
         d.motion = "path"
@@ -104,6 +112,8 @@ class PathFollower(MotionSource):
         self.plan = None
         self.paused = False
         d.path_state = state
+        if state == "done":
+            d.path_time_left = 0.0
         d.events.append((t, why))
 
     def update(self, t: float) -> None:
@@ -115,6 +125,8 @@ class PathFollower(MotionSource):
             self._end(t, "stopped", f"path stopped at segment {d.path_segment} "
                                     f"(state {d.state.value})")  # fmt: skip
             return
+        d.path_elapsed = self._played + t - self._started
+        d.path_time_left = max(0.0, self._ends_at - t)
         tr = self.trajectory
         s = plan.segments[self.k]
         total = self._seg_length

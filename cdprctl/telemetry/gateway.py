@@ -38,11 +38,14 @@ def gateway_main(
     stop: Any,
     ready: Any,
     summary: dict[str, Any],
+    said: Any = None,
 ) -> None:
-    """Runs until ``stop`` is set or the daemon's process is gone."""
+    """Runs until ``stop`` is set or the daemon's process is gone; whom its session reached
+    goes to ``said`` (a queue: the daemon says it) before ``ready`` is set."""
     import zenoh
 
     from cdprctl.realtime import loop_cpu, yield_to_the_loop
+    from cdprctl.telemetry.reach import connection_line, identity
     from cdprctl.telemetry.session import open_session
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort: a warning changes nothing
@@ -63,6 +66,7 @@ def gateway_main(
         config_file=zc.config_file,
     )
     JSON = zenoh.Encoding.APPLICATION_JSON
+    network = identity(session, zc)
     pub_state = session.declare_publisher(
         f"{P}/state", encoding=JSON, congestion_control=zenoh.CongestionControl.DROP
     )
@@ -166,11 +170,14 @@ def gateway_main(
                 **counts,
             },
             **({"warning": warning} if warning else {}),
+            "zenoh": network,
         }
         query.reply(f"{P}/status", encode(body), encoding=JSON)
 
     sub = session.declare_subscriber(f"{P}/cmd/*", on_command)
     qbl = session.declare_queryable(f"{P}/status", on_status)
+    if said is not None:
+        said.put(connection_line(session, zc))
     ready.set()
     if zc.commands:  # after ready: a first run's compiles here are not the start's to wait for
         validator.warm_up()

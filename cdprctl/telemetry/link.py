@@ -28,11 +28,12 @@ class TelemetryLink:
         self.events: Any = ctx.Queue(maxsize=1000)
         self.stop = ctx.Event()
         self.ready = ctx.Event()
+        self.said = ctx.SimpleQueue()  # the gateway's line on whom it reached
         self.dropped_events = 0
         self.helper = HelperProcess(
             ctx, "cdprctl-zenoh", "the Zenoh gateway", gateway_main,
             (model, self.snapshot.name, self.commands, self.events, self.stop, self.ready,
-             summary), self.ready,
+             summary, self.said), self.ready,
         )  # fmt: skip
         self._next_timing = 0.0
         self.period = 1.0 / model.zenoh.state_rate  # s: the state's rate
@@ -45,9 +46,12 @@ class TelemetryLink:
         out = []
         if zc.commands and zc.allow_unauthenticated_commands:
             out.append((f"warning: {UNAUTHENTICATED_WARNING}", True))
-        listening = f", listening on {', '.join(zc.listen)}" if zc.listen else ""
+        reached = "" if self.said.empty() else self.said.get()  # it says where it listens
+        listening = f", listening on {', '.join(zc.listen)}" if zc.listen and not reached else ""
         out.append((f"zenoh: {zc.key_prefix(self.model.name)}/{{state,timing,events,status}}, "
                     f"commands {'on' if zc.commands else 'off'}{listening}", False))  # fmt: skip
+        if reached:
+            out.append((reached, False))
         return out
 
     def due(self) -> bool:
@@ -116,4 +120,5 @@ class TelemetryLink:
         self.helper.stop()
         for q in (self.commands, self.events):
             close_queue(q)
+        self.said.close()
         self.snapshot.close()

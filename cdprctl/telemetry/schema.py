@@ -122,14 +122,16 @@ def state_payload(
 
 
 def _motion(snap: dict[str, np.ndarray]) -> dict[str, Any]:
-    """What moves the reference, and a path's progress (segment 1-based, fraction of it)."""
+    """What moves the reference, and a path's progress (segment 1-based, fraction of it, s
+    played and s left as planned)."""
     m, p = snap["motion"][0], snap["path"]
     if not (math.isfinite(m) and np.all(np.isfinite(p))):
         return {"motion": "", "path": None}
     path = None
     if p[1] > 0:
         path = {"segment": int(p[0]), "segments": int(p[1]), "fraction": round(float(p[2]), 4),
-                "state": PATH_STATES[int(p[3])]}  # fmt: skip
+                "state": PATH_STATES[int(p[3])], "elapsed": round(float(p[4]), 3),
+                "time_left": round(float(p[5]), 3)}  # fmt: skip
     return {"motion": MOTIONS[int(m)], "path": path}
 
 

@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import json
 import re
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from cdprctl.model.zenoh import ZenohConfig
+if TYPE_CHECKING:  # the tools import this module: the robot model (numpy) only for the daemon
+    from cdprctl.model.zenoh import ZenohConfig
 
 EXAMPLE = "config/zenoh/gateway-acl.json5 (user/password) or config/zenoh/gateway-tls.json5"
 BENCH = (

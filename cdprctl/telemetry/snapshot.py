@@ -47,7 +47,9 @@ class Layout:
             ("saturated_cycles", 1),
             ("cycle", 1),
             ("motion", 1),  # index in MOTIONS
-            ("path", 4),  # segment (1-based), segments, fraction of the segment, PATH_STATES index
+            # segment (1-based), segments, fraction of the segment, PATH_STATES index, s played
+            # (pauses not counted), s left as planned
+            ("path", 6),
             ("position", 3),  # m, P in the base frame
             ("rpy", 3),  # rad, roll-pitch-yaw of the platform in the base frame
             ("velocity", 3),  # m/s
@@ -140,7 +142,8 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         "saturated_cycles": d.saturated_cycles,
         "cycle": d.cycle,
         "motion": MOTIONS.index(d.motion),
-        "path": (d.path_segment, d.path_segments, d.path_fraction, PATH_STATES.index(d.path_state)),
+        "path": (d.path_segment, d.path_segments, d.path_fraction,
+                 PATH_STATES.index(d.path_state), d.path_elapsed, d.path_time_left),
         "position": d.position,
         "rpy": matrix_to_rpy(d.rotation),
         "velocity": d.velocity,
