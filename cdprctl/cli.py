@@ -28,12 +28,6 @@ def _add_check_config(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_check_config)
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from cdprctl.commands.demo import run
-
-    return run()
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cdprctl",
@@ -42,12 +36,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"cdprctl {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     _add_check_config(sub)
-    p = sub.add_parser("demo", help="the offline TDA tools on the papers' robots (plots into out/)")
-    p.set_defaults(func=_cmd_demo)
-    from cdprctl.commands import bus_load, calibrate, sim
+    from cdprctl.commands import bus_load, calibrate, demo, sim
     from cdprctl.commands import run as run_cmd
     from cdprctl.commands import tda as tda_cmd
 
+    demo.add_parser(sub)
     run_cmd.add_parser(sub)
     sim.add_parser(sub)
     calibrate.add_parser(sub)
