@@ -1,5 +1,5 @@
 # Two commands for a fresh machine with Python >= 3.11 (see README):
-#   make run   - set up .venv and run the main job
+#   make run   - set up .venv and run the daemon on the simulated robot (one demo round)
 #   make test  - set up .venv and run the whole test suite (what CI runs)
 PYTHON ?= python3
 VENV ?= .venv
@@ -9,7 +9,8 @@ STAMP := $(VENV)/.installed-stamp
 .PHONY: help run test hil lint bench mutation clean
 
 help:
-	@echo "make run       the daemon on the simulated robot (rowc, 250 Hz; Ctrl-C stops it)"
+	@echo "make run       the daemon on the simulated robot (rowc, 250 Hz): one demo round of"
+	@echo "               moves (~20 s), a summary, then it exits; Ctrl-C stops it sooner"
 	@echo "make test      lint, type check and the whole test suite (what CI runs)"
 	@echo "make hil       the hardware-in-the-loop tests on a kernel vcan0 (docs/hil.md)"
 	@echo "make bench     the kinematics benchmark (benchmarks/ has the others)"

@@ -28,12 +28,6 @@ def _add_check_config(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_check_config)
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from cdprctl.commands.demo import run
-
-    return run()
-
-
 #: the tools that talk to robots over Zenoh and import neither numpy nor the robot model: run
 #: alone, only their parsers are built (the others' imports took a second of each ``send``)
 LIGHT = {"send": "zenoh_tools", "monitor": "zenoh_tools", "robots": "fleet",
@@ -61,12 +55,11 @@ def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
 def build_parser() -> argparse.ArgumentParser:
     parser, sub = _top_parser()
     _add_check_config(sub)
-    p = sub.add_parser("demo", help="the offline TDA tools on the papers' robots (plots into out/)")
-    p.set_defaults(func=_cmd_demo)
-    from cdprctl.commands import bus_load, calibrate, sim
+    from cdprctl.commands import bus_load, calibrate, demo, sim
     from cdprctl.commands import run as run_cmd
     from cdprctl.commands import tda as tda_cmd
 
+    demo.add_parser(sub)
     run_cmd.add_parser(sub)
     sim.add_parser(sub)
     calibrate.add_parser(sub)

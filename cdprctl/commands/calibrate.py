@@ -75,7 +75,7 @@ def _simulated_after_configure(model: Any, overrides: dict[str, Any], driver: An
 
 def add_parser(sub: Any) -> None:
     p = command_parser(
-        sub, "calibrate", "find the encoders' zero (homing): known-pose or self", run,
+        sub, "calibrate", "homing (known-pose, self) or geometric calibration (geometry)", run,
         config=False,
     )  # fmt: skip
     _robot_and_bus(p)

@@ -4,14 +4,38 @@ on the simulated robot)."""
 from __future__ import annotations
 
 import argparse
+import inspect
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from cdprctl.commands import tda as tda_cmd
 from cdprctl.commands.check_config import summary
+from cdprctl.commands.common import command_parser
 from cdprctl.model import load_robot
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
+
+EXAMPLES = """example:
+  cdprctl demo            # prints both tables, writes out/energy.png and out/sotda_polygon.png
+"""
+
+
+def add_parser(sub: Any) -> None:
+    command_parser(
+        sub, "demo", "the offline TDA tools on the papers' robots (plots into out/)", command,
+        config=False, description=inspect.cleandoc(command.__doc__ or ""), epilog=EXAMPLES,
+    )  # fmt: skip
+
+
+def command(args: argparse.Namespace) -> int:
+    """Two tension distributions from the papers, offline (no robot, no daemon; a few seconds):
+    the Sensors 2019 suspended robot (config/seed000.toml) with cable 8 held at 100 J and the
+    least total energy, and the ARK 2020 window-cleaning robot (config/rowc.toml) under a 50 N
+    water jet by SOTDA, ν = 0.9. Prints each robot's summary and the tensions; writes the
+    plots to out/ under the current directory. The daemon on the simulated robot is make run
+    (cdprctl run --config config/rowc.toml --sim)."""
+    return run()
 
 
 def cli_main(argv: Sequence[str]) -> int:
