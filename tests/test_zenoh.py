@@ -870,11 +870,11 @@ def test_path_and_pause_resume_over_zenoh(robot_and_client, tmp_path):
     assert client.wait(lambda: client.states and client.last()["state"] == "ready")
     client.put("enable", {"id": "e"})
     assert client.wait(lambda: client.last()["state"] == "enabled"), "\n".join(robot.lines)
-    client.put("path", {"id": "bad", "name": "bad.ngc", "text": "G21\nG2 X1 Y1 F100\n"})
+    client.put("path", {"id": "bad", "name": "bad.ngc", "text": "G21\nG28 X1 Y1\n"})
     assert client.wait(lambda: client.reply("bad") is not None)
     assert client.reply("bad")["reason"] == (
-        "path bad.ngc: line 2, column 1: G2 is not supported (supported: G0 G1 G4 G20 G21 "
-        "G61 G64 G90 G91)")
+        "path bad.ngc: line 2, column 1: G28 is refused: it goes to a stored home position; "
+        "the robot's home is not a G-code one")
     text = (ROOT / "paths" / "rowc_wipe.csv").read_text()
     client.put("path", {"id": "p", "name": "wipe", "text": text})
     assert client.wait(lambda: (client.reply("p") or {}).get("ok")), client.replies
