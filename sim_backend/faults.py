@@ -3,7 +3,8 @@
 Kinds (``FaultEvent.kind``) and their ``value``:
 
 * ``frame_loss`` — probability (0-1) that a frame is lost, both directions;
-* ``frame_delay`` — extra latency (s) of the drives' frames;
+* ``frame_delay`` — extra latency (s) of the drives' frames (with ``cable``: of that drive's
+  alone, as when one drive's answers to a SYNC arrive after the next SYNC on a busy bus);
 * ``frame_corruption`` — probability that a drive frame arrives with a wrong length or byte;
 * ``drive_fault`` — the drive of ``cable`` faults with error ``value`` (CiA 402 EMCY code, or
   ODrive error bits);
@@ -64,6 +65,14 @@ class FaultEvent:
             raise ValueError(f"fault kind {self.kind!r}: one of {', '.join(KINDS)}")
 
 
+def _cia402_node(arbitration_id: int) -> int:
+    return arbitration_id & 0x7F  # CiA 301: function code << 7 | node id
+
+
+def _odrive_node(arbitration_id: int) -> int:
+    return arbitration_id >> 5  # CAN Simple: node id << 5 | command
+
+
 class FaultInjector:
     """Applies :class:`FaultEvent` s to a :class:`~sim_backend.network.SimNetwork`."""
 
@@ -72,6 +81,8 @@ class FaultInjector:
         self.rng = random.Random(seed)
         self.loss = 0.0
         self.delay = 0.0
+        self.delay_node: int | None = None  # the one node whose frames are delayed (None: all)
+        self._node_of_frame = _cia402_node
         self.corruption = 0.0
         self._delayed: list[tuple[float, int, can.Message]] = []  # (due, bus, frame)
         self.counts: dict[str, int] = {"lost": 0, "delayed": 0, "corrupted": 0}
@@ -133,7 +144,8 @@ class FaultInjector:
                 data=bytes(data),
                 is_extended_id=msg.is_extended_id,
             )
-        if self.delay > 0:
+        node = self.delay_node
+        if self.delay > 0 and (node is None or self._node_of_frame(msg.arbitration_id) == node):
             self.counts["delayed"] += 1
             self._delayed.append((t + self.delay, bus, msg))
             return []
@@ -176,6 +188,8 @@ class FaultInjector:
             self.loss = float(ev.value)
         elif ev.kind == "frame_delay":
             self.delay = float(ev.value)
+            self.delay_node = None if c is None else net.node_of(c)
+            self._node_of_frame = _odrive_node if net.protocol == "odrive" else _cia402_node
         elif ev.kind == "frame_corruption":
             self.corruption = float(ev.value)
         elif ev.kind == "drive_fault":

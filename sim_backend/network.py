@@ -94,6 +94,10 @@ class SimNetwork:
     def bus_index_of(self, cable: int) -> int:
         return self._bus_of[cable]
 
+    def node_of(self, cable: int) -> int:
+        """The node id of ``cable``'s drive (its frames' low 7 bits)."""
+        return int(self.drives[cable].node_id)
+
     def power_cycle(self, cable: int) -> None:
         """Fault injection: the drive of ``cable`` loses power and boots (its boot-up message
         on its bus)."""

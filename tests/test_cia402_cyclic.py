@@ -44,9 +44,11 @@ class Codec:
         s; returns how many were dropped."""
         f = np.array(frames, dtype=np.int64).reshape(-1, 4)
         self.fresh[:] = False
-        return int(cyclic.tpdo1_kernel(
-            len(f), f, stamp, PERIOD, np.full(self.m, MAX_SPEED), np.full(self.m, RAD), RATED,
-            cyclic.POWER_STATE_OF_SW7, self.decoded, self.torque, self.fresh, self.fb_stamp,
+        # no SYNC sent (sequence 0): every frame stamped at ``stamp``
+        return int(cyclic.tpdo1_synced_kernel(
+            len(f), f, np.zeros(8), 0, np.zeros(self.m, dtype=np.int64), 2, stamp, PERIOD,
+            np.full(self.m, MAX_SPEED), np.full(self.m, RAD), RATED, cyclic.POWER_STATE_OF_SW7,
+            self.decoded, self.torque, self.fresh, self.fb_stamp, np.zeros(self.m),
         ))  # fmt: skip
 
 
@@ -205,3 +207,34 @@ def test_position_targets_carried_on_and_in_32_bit_counts():
     cyclic.target_counts_kernel(np.array([101 * RAD, -(2**31 + 3) * RAD, (2**32 + 7) * RAD]),
                                 np.full(3, RAD), counts)  # fmt: skip
     assert list(counts) == [101, 2**31 - 3, 7]
+
+
+def sync_case(answered: int, step: int, rate: float, seq: int = 10, period: float = 0.004):
+    """``sync_instant`` for cable 0 whose last sample (position 1000) was at SYNC 5's instant,
+    moving at ``rate`` counts/s, its new frame ``step`` counts on: (the SYNC chosen, its
+    instant)."""
+    syncs = np.full(8, np.nan)
+    for k in range(seq - 7, seq + 1):
+        syncs[k % 8] = k * period
+    raw = np.array([[1000, 1, 0]], dtype=np.int64)
+    ans = np.array([answered], dtype=np.int64)
+    stamp = cyclic.sync_instant(0, 1000 + step, syncs, seq, ans, 4, raw, np.array([5 * period]),
+                                np.array([rate]), -1.0)  # fmt: skip
+    return int(ans[0]), stamp
+
+
+def test_a_tpdo_is_stamped_at_the_sync_it_answers():
+    """One TPDO1 per SYNC: the next answer is to the SYNC after the last answered; one lost
+    (a moving drive's step fits a newer SYNC) is found by the drive's rate; at rest the
+    sequence decides; a SYNC already answered is never chosen again, whatever the rate says
+    (after a stall the rate is of before it)."""
+    rate = 250_000.0  # counts/s: 1000 counts a 4 ms period
+    assert sync_case(answered=5, step=1000, rate=rate) == (6, 6 * 0.004)  # late by 4 SYNCs
+    assert sync_case(answered=5, step=3000, rate=rate) == (8, 8 * 0.004)  # two lost
+    assert sync_case(answered=5, step=1, rate=0.0)[0] == 6  # at rest: the sequence
+    assert sync_case(answered=9, step=0, rate=rate)[0] == 10  # the stopped drive after a stall
+    assert sync_case(answered=10, step=5000, rate=rate)[0] == 10  # never past the newest
+    assert sync_case(answered=1, step=5000, rate=rate)[0] == 10  # lag_max 4: from SYNC 6 on
+    assert cyclic.sync_instant(0, 0, np.zeros(8), 0, np.zeros(1, dtype=np.int64), 4,
+                               np.zeros((1, 3), dtype=np.int64), np.zeros(1), np.zeros(1),
+                               -1.0) == -1.0  # before the first SYNC: the fallback  # fmt: skip

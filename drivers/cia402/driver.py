@@ -142,6 +142,12 @@ class Cia402Driver(CanWinchDriver):
         self._enable = False
         self._reset_request = 0  # cycles left sending the fault-reset edge
         self._last_sync = math.nan  # s (clock): the last SYNC sent (nan: none yet)
+        # the SYNCs' instants by sequence number (a ring), the newest's number, and the one
+        # each drive's last TPDO1 answered: each frame is stamped at its own SYNC's instant
+        self._syncs = np.full(self.SYNC_RING, math.nan)
+        self._sync_seq = 0
+        self._answered = np.zeros(m, dtype=np.int64)
+        self._rate = np.zeros(m)  # counts/s: each drive's last step over its time
         self._write_sync = math.nan  # s (clock): the last write's SYNC (nan: it sent none)
         self._last_cycle_sync = -math.inf  # s (clock): the last one the control loop sent
         self._last_hb_sent = -math.inf
@@ -232,6 +238,8 @@ class Cia402Driver(CanWinchDriver):
         cyclic.carry_targets_kernel(self.targets, self._target_rate, 0.0, self._carried.copy())
         cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
 
+    SYNC_RING = 8  # SYNC instants kept
+    SYNC_LAG_MAX = 4  # SYNCs a late TPDO1 may answer behind the newest (``sync_instant``)
     # of a period: targets this much older than their SYNC are sent again (``_write_frames``)
     RESEND_AFTER = 0.25
     # times the targets may go out again before one SYNC (each check costs a clock read)
@@ -298,11 +306,11 @@ class Cia402Driver(CanWinchDriver):
             self._apply_tpdo1(n, t)
 
     def _apply_tpdo1(self, n: int, t: float) -> None:
-        stamp = self._last_sync if math.isfinite(self._last_sync) else t
-        dropped = cyclic.tpdo1_kernel(
-            n, self._tpdo1, stamp, self.period, self.liveness.max_motor_speed,
-            self.rad_per_count, self.rated_torque, cyclic.POWER_STATE_OF_SW7, self._decoded,
-            self.states.torque, self.liveness.fresh, self.liveness.fb_stamp,
+        dropped = cyclic.tpdo1_synced_kernel(
+            n, self._tpdo1, self._syncs, self._sync_seq, self._answered, self.SYNC_LAG_MAX, t,
+            self.period, self.liveness.max_motor_speed, self.rad_per_count, self.rated_torque,
+            cyclic.POWER_STATE_OF_SW7, self._decoded, self.states.torque, self.liveness.fresh,
+            self.liveness.fb_stamp, self._rate,
         )  # fmt: skip
         self.stats.implausible_frames += dropped
 
@@ -396,6 +404,8 @@ class Cia402Driver(CanWinchDriver):
             for b in self.media:
                 self._send(b, self._sync if self._sync_counted[b] else self._sync_plain)
             self._last_sync = self._write_sync = now
+            self._sync_seq += 1
+            self._syncs[self._sync_seq % self.SYNC_RING] = now
             if not setup:
                 self._last_cycle_sync = now
         if t - self._last_hb_sent >= self.config.heartbeat_period:
