@@ -104,6 +104,29 @@ def helper_thread(loop_cpu_index: int | None, loop_priority: int) -> None:
             os.sched_setaffinity(0, others)
 
 
+def simulator_realtime(loop_cpu_index: int | None, loop_priority: int) -> list[str]:
+    """For the simulated robot's process (``cdprctl sim``), which stands for drives that have
+    processors of their own: ``SCHED_FIFO`` one below the daemon's loop, so the machine's
+    other work (two busy processes at normal priority) never holds it up, and the CPUs but
+    the loop's where there is another, so it never holds the loop up either. Returns one
+    warning per setting that could not be applied."""
+    warnings: list[str] = []
+    priority = max(1, loop_priority - 1)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError, AttributeError) as exc:
+        warnings.append(f"SCHED_FIFO priority {priority} not permitted ({exc}): the simulated "
+                        "robot shares the CPU with the machine's other work and may be late; "
+                        "it says so when it is")  # fmt: skip
+    others = ALLOWED_CPUS - {loop_cpu_index}
+    if loop_cpu_index is not None and others:
+        try:
+            os.sched_setaffinity(0, others)
+        except (OSError, AttributeError) as exc:
+            warnings.append(f"CPU affinity away from the loop's CPU not applied ({exc})")
+    return warnings
+
+
 def yield_to_the_loop(loop_cpu_index: int | None, niceness: int = 10) -> list[str]:
     """For a helper process (the Zenoh gateway): run at a lower priority and, when there is
     another CPU, away from the loop's, so the helper's bursts (a command flood) never take the

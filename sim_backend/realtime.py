@@ -23,6 +23,44 @@ from sim_backend.network import SimNetwork
 from sim_backend.plant import CdprPlant
 
 
+class LateSteps:
+    """The simulated robot's own word when it was not run in time: a real drive has its own
+    processor, a simulated one shares the machine, and a starved simulator must never pass
+    for a broken drive (its drives were deaf meanwhile: the daemon's feedback timeouts). A
+    step later than ``SAY_AFTER`` is said, at most once a second, and all of them at the
+    end."""
+
+    SAY_AFTER = 0.010  # s beyond the step: 2.5 periods at 250 Hz, what no drive would miss
+
+    def __init__(self, print_fn: Any = print):
+        self.print = print_fn
+        self.count = 0  # steps later than SAY_AFTER
+        self.worst = 0.0  # s
+        self._said_at = -math.inf  # s of simulated time
+        self._unsaid = 0
+
+    def step(self, t: float, elapsed: float) -> None:
+        """A step at ``t`` s that came ``elapsed`` s after the last one."""
+        if elapsed <= self.SAY_AFTER:
+            return
+        self.count += 1
+        self.worst = max(self.worst, elapsed)
+        self._unsaid += 1
+        if t - self._said_at >= 1.0:
+            more = f" ({self._unsaid - 1} more since the last said)" if self._unsaid > 1 else ""
+            self.print(f"cdprctl sim: the simulated robot stepped {elapsed * 1e3:.1f} ms late "
+                       f"at t={t:.2f} s{more}: this process was not run (a busy machine), its "
+                       "drives deaf meanwhile — the simulator's lateness, not a drive's fault",
+                       flush=True)  # fmt: skip
+            self._said_at, self._unsaid = t, 0
+
+    def summary(self) -> str:
+        if not self.count:
+            return f"cdprctl sim: every step within {self.SAY_AFTER * 1e3:.0f} ms"
+        return (f"cdprctl sim: {self.count} steps later than {self.SAY_AFTER * 1e3:.0f} ms, "
+                f"the latest {self.worst * 1e3:.1f} ms (the simulator starved, not the drives)")
+
+
 def run_realtime(
     model: RobotModel,
     bus_overrides: dict[str, Any] | None = None,
@@ -33,9 +71,11 @@ def run_realtime(
     print_fn: Any = print,
     plant: CdprPlant | None = None,
     encoders: str = "absolute",
+    late: LateSteps | None = None,
 ) -> SimNetwork:
     """``plant``: the physics (default: the model's, at rest at home); ``encoders``:
-    ``SimNetwork``'s."""
+    ``SimNetwork``'s; ``late``: where its late steps are counted and said."""
+    late = late if late is not None else LateSteps(print_fn)
     plant = plant if plant is not None else CdprPlant(model)
     net = SimNetwork(model, plant, bus_overrides, encoders=encoders)
     if faults is not None:
@@ -50,6 +90,11 @@ def run_realtime(
         stop["flag"] = True
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
+    # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf;
+    # before the clock starts, or it was the first step's lateness (50 ms)
+    gc.collect()
+    gc.freeze()
     t0 = time.monotonic()
     next_status = status_every
     woke_on: Any = None
@@ -67,15 +112,12 @@ def run_realtime(
         return msg.timestamp - wall_minus_mono - t0 - lag
 
     try:
-        # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
-        # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf
-        gc.collect()
-        gc.freeze()
         last = t0
         while not stop["flag"]:
             now = time.monotonic()
             elapsed = now - last
             if elapsed > 0 or woke_on is not None:
+                late.step(now - t0, elapsed)
                 lag += max(0.0, elapsed - net.MAX_CATCH_UP)
                 wall_minus_mono = time.time() - time.monotonic()
                 net.advance_until(now - t0 - lag, arrival, first=woke_on)

@@ -417,3 +417,23 @@ def test_a_scan_on_another_group_finds_none_of_a_robots_drives(tmp_path, sim_pro
     assert found["239.74.163.98"] == (1, "0 of 8 configured drives found, 0 can run their "
                                          "configured mode"), found  # fmt: skip
     assert found["239.74.163.97"][1].startswith("8 of 8 configured drives found"), found
+
+
+def test_a_starved_simulated_robot_says_so_itself(tmp_path, sim_process):
+    """`cdprctl sim` held up (SIGSTOP for 0.15 s: what a busy machine does to it) says
+    it stepped late, and how late, in its own words — not as a drive fault — and counts it
+    at the end."""
+    port = random.Random(os.getpid() * 37).randrange(40000, 50000)
+    config = write_config(tmp_path, "rowc.toml", "cia402", mode="csp")
+    sim = sim_process(config, ["--can-option", f"port={port}", "--no-realtime"])
+    time.sleep(0.3)
+    sim.send_signal(signal.SIGSTOP)
+    time.sleep(0.15)
+    sim.send_signal(signal.SIGCONT)
+    time.sleep(0.3)
+    sim.send_signal(signal.SIGTERM)
+    out, _ = sim.communicate(timeout=20)
+    said = re.search(r"the simulated robot stepped ([\d.]+) ms late at t=[\d.]+ s: this "
+                     r"process was not run \(a busy machine\)", out)  # fmt: skip
+    assert said and float(said[1]) >= 140.0, out
+    assert re.search(r"cdprctl sim: [1-9]\d* steps? later than 10 ms, the latest", out), out

@@ -135,3 +135,21 @@ def test_random_schedule_is_reproducible():
 def test_unknown_fault_kind_is_refused():
     with pytest.raises(ValueError, match="fault kind 'gremlins'"):
         FaultEvent(0.0, "gremlins")
+
+
+def test_late_steps_are_said_once_a_second_and_counted():
+    from sim_backend.realtime import LateSteps
+
+    said: list[str] = []
+    late = LateSteps(lambda text, **_: said.append(text))
+    late.step(1.0, 0.0005)
+    late.step(1.1, 0.010)  # at the bound: a step a drive could take
+    assert said == [] and late.count == 0
+    late.step(2.0, 0.0382)
+    late.step(2.5, 0.050)  # within the second: counted, said with the next
+    late.step(3.1, 0.020)
+    assert len(said) == 2 and "stepped 38.2 ms late at t=2.00 s" in said[0]
+    assert "stepped 20.0 ms late at t=3.10 s (1 more since the last said)" in said[1]
+    assert late.count == 3 and late.worst == 0.050
+    assert late.summary() == ("cdprctl sim: 3 steps later than 10 ms, the latest 50.0 ms (the "
+                              "simulator starved, not the drives)")  # fmt: skip

@@ -100,6 +100,10 @@ def add_parser(sub: Any) -> None:
     p = command_parser(sub, "sim", "run the simulated robot in real time on a CAN bus", run)
     add_bus_arguments(p)
     p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--no-realtime", action="store_true",
+                   help="do not ask for SCHED_FIFO (one below the daemon's [control] "
+                   "sched_priority) on the CPUs but the daemon's: a simulated robot that the "
+                   "machine's other work holds up says so, 'stepped N ms late'")  # fmt: skip
     p.add_argument(
         "--status",
         type=float,
@@ -196,7 +200,7 @@ def run(args: argparse.Namespace) -> int:
     platform physics, in real time. The platform starts at rest at the home pose, cables
     pre-tensioned to the equilibrium. Stop with Ctrl-C or SIGTERM."""
     from drivers.errors import DriverError
-    from sim_backend.realtime import run_realtime
+    from sim_backend.realtime import LateSteps, run_realtime
 
     model = load_or_report(args.config)
     if model is None:
@@ -235,6 +239,13 @@ def run(args: argparse.Namespace) -> int:
                  if math.isfinite(estop.duration) else ""), flush=True)  # fmt: skip
     plant, encoders = start_state(model, args)
     plant.opt.brake_close_time = args.brake_close_time
+    if not args.no_realtime:
+        from cdprctl import realtime as rt
+
+        ctl = model.control
+        for w in rt.simulator_realtime(rt.loop_cpu(ctl.cpu), ctl.sched_priority):
+            print(f"cdprctl sim: warning: {w}", file=sys.stderr, flush=True)
+    late = LateSteps()
     try:
         net = run_realtime(
             model,
@@ -244,11 +255,13 @@ def run(args: argparse.Namespace) -> int:
             status_every=args.status,
             plant=plant,
             encoders=encoders,
+            late=late,
         )
     except DriverError as exc:
         print(f"cdprctl sim: error: {exc}", file=sys.stderr)
         return 1
     net.close()
+    print(late.summary(), flush=True)
     print("cdprctl sim: stopped", flush=True)
     return 0
 
