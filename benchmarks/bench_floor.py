@@ -41,6 +41,16 @@ GROUP = "239.74.163.2"  # udp_multicast group of --across
 STARTUP = 6.0  # s: the daemon's start-up before the concurrent floor starts
 
 
+# a bus listener in its own process, as candump on a real bus: every frame received, counted
+SNIFFER = (
+    "import sys, can\n"
+    "bus = can.Bus(interface='udp_multicast', channel=sys.argv[1], port=int(sys.argv[2]))\n"
+    "n = 0\n"
+    "while True:\n"
+    "    n += bus.recv(1.0) is not None\n"
+)
+
+
 def ensure_cyclictest() -> str:
     exe = shutil.which("cyclictest")
     if exe is None and os.geteuid() == 0:
@@ -87,16 +97,22 @@ def floor(
 
 
 def daemon(
-    rate: float, seconds: float, across: bool = False, during: Any = None, config: str = ""
+    rate: float, seconds: float, across: bool = False, during: Any = None, config: str = "",
+    extra_args: tuple[str, ...] = (), sniffer: bool = False,
 ) -> tuple[dict[str, float], str]:
     """The daemon's run (``--sim``, or ``--across`` against ``cdprctl sim``) on the robot of
-    ``config`` (rowc by default); ``during()`` runs while it does (after its start-up) and its
-    result is returned in ``"during"``."""
+    ``config`` (rowc by default), with ``extra_args`` (``--disturbance 30``: the water jet);
+    ``during()`` runs while it does (after its start-up) and its result is returned in
+    ``"during"``; ``sniffer``: across processes, a python-can listener on the bus too (as
+    candump would be)."""
     config = config or str(ROOT / "config" / "rowc.toml")
     cli = [sys.executable, "-m", "cdprctl.cli"]
     bus = ["--can-interface", "udp_multicast", "--can-channel", GROUP, "--can-option",
            f"port={random.randint(20000, 60000)}"]  # fmt: skip
-    sim = None
+    sim = sniff = None
+    if across and sniffer:
+        port = bus[-1].split("=")[1]
+        sniff = subprocess.Popen([sys.executable, "-c", SNIFFER, GROUP, port])
     if across:
         sim_cmd = [*cli, "sim", "--config", config, "--status", "0", *bus]
         sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -108,7 +124,8 @@ def daemon(
         f = Path(tmp) / "timing.npz"
         where = [*bus, "--demo"] if across else ["--sim"]
         cmd = [*cli, "run", "--config", config, *where, "--rate", str(rate),
-               "--duration", str(seconds), "--status", "0", "--timing-file", str(f)]  # fmt: skip
+               "--duration", str(seconds), "--status", "0", "--timing-file", str(f),
+               *extra_args]  # fmt: skip
         run = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                cwd=ROOT)  # fmt: skip
         extra: dict[str, Any] = {}
@@ -116,9 +133,10 @@ def daemon(
             time.sleep(STARTUP)  # the daemon's start-up (kernels cached: a few seconds)
             extra = during()
         text = run.communicate(timeout=seconds + 300)[0]
-        if sim is not None:
-            sim.terminate()
-            sim.wait(timeout=10)
+        for proc in (sim, sniff):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(timeout=10)
         if not f.is_file():
             sys.exit(f"bench_floor: the daemon saved no timing:\n{text[-2000:]}")
         z = np.load(f)

@@ -1,0 +1,85 @@
+"""Benchmark: real time where a robot lives — the daemon beside the machine's other work,
+against the machine's floor measured in the same run (issue 64's table).
+
+For each load (quiet, two busy processes, four: Python loops at normal priority, as a camera
+node or a build would be), each way of running (in-process ``--sim`` with the 30 N water jet;
+across processes against ``cdprctl sim`` over udp_multicast with a bus listener beside them)
+and each rate (250, 500 Hz on rowc; 1 kHz on ``config/rowc_1khz.toml``): C's ``cyclictest``
+at the loop's period, priority and CPU, the daemon, ``cyclictest`` again (``bench_floor``'s
+``measure``), then one table: the floor's share of wake-ups later than 1 ms, the daemon's
+missed periods and overruns, their ratio to the floor, compute p50/p99, FAULT lines, and
+whether the goal holds (missed <= 2 x the floor's share + 0.05 %; 0 FAULT).
+
+Run: ``.venv/bin/python benchmarks/bench_load_matrix.py [--seconds 60] [--loads 0,2,4]
+[--rates 250,500,1000] [--ways sim,across]``: 3 loads x 2 ways x 3 rates x ~3 runs of
+``--seconds``: about 20 minutes at 20 s. Needs ``cyclictest`` (installed as bench_floor does).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import machine_line
+from bench_floor import PRIORITY, daemon, ensure_cyclictest, floor
+
+ROOT = Path(__file__).resolve().parents[1]
+ONE_KHZ = str(ROOT / "config" / "rowc_1khz.toml")
+
+
+def row(exe: str, load: int, way: str, rate: float, seconds: float, cpu: int) -> dict:
+    """One cell of the table: floor before, the daemon, floor after, at ``rate`` Hz."""
+    period = 1.0 / rate
+    config = ONE_KHZ if rate >= 1000 else ""
+    before = floor(exe, period, seconds, cpu)
+    extra = ("--disturbance", "30") if way == "sim" else ()
+    d, final = daemon(rate, seconds, way == "across", None, config, extra, sniffer=True)
+    after = floor(exe, period, seconds, cpu)
+    fl = max(before["late_1ms_pct"], after["late_1ms_pct"])
+    bound = 2.0 * fl + 0.05
+    return {"load": load, "way": way, "rate": rate, "floor": fl, "missed": d["missed_pct"],
+            "ratio": d["missed_pct"] / max(fl, 1e-3), "c50": d["compute_p50_us"],
+            "c99": d["compute_p99_us"], "faults": int(d["faults"]),
+            "met": d["missed_pct"] <= bound and d["faults"] == 0, "final": final}  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--loads", default="0,2,4", help="busy processes beside it, per row")
+    ap.add_argument("--rates", default="250,500,1000")
+    ap.add_argument("--ways", default="sim,across")
+    args = ap.parse_args()
+    exe = ensure_cyclictest()
+    print(machine_line())
+    cpu = max(os.sched_getaffinity(0))
+    print(f"loop's CPU {cpu}, SCHED_FIFO {PRIORITY}; {args.seconds:g} s a run", flush=True)
+    rows = []
+    for load in (int(x) for x in args.loads.split(",")):
+        hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(load)]
+        try:
+            for way in args.ways.split(","):
+                for rate in (float(r) for r in args.rates.split(",")):
+                    r = row(exe, load, way, rate, args.seconds, cpu)
+                    rows.append(r)
+                    print(f"{load} hogs, {way}, {rate:g} Hz: floor {r['floor']:.3f} %, missed "
+                          f"{r['missed']:.3f} %, faults {r['faults']}", flush=True)  # fmt: skip
+        finally:
+            for h in hogs:
+                h.kill()
+                h.wait()
+    print("\n| hogs | run | Hz | floor > 1 ms | missed | missed / floor | compute p50/p99 us "
+          "| FAULT | goal |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        way = "in-process, jet" if r["way"] == "sim" else "across, sniffer"
+        print(f"| {r['load']} | {way} | {r['rate']:g} | {r['floor']:.3f} % | {r['missed']:.3f} % "
+              f"| {r['ratio']:.1f} | {r['c50']:.0f}/{r['c99']:.0f} | {r['faults']} | "
+              f"{'met' if r['met'] else 'NOT met'} |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
