@@ -65,7 +65,9 @@ def state_dir_for(robot: str, given: str | None, simulated: bool) -> Path:
         return Path(given) if given else default_state_dir(robot)
     if not given:
         return simulated_state_dir(robot)
-    path = Path(given)
+    # resolved: "/var/lib/cdprctl/../../tmp/y" is /var/tmp/y, and the directory made and
+    # written is the one checked (made as given, its ".." made /var/lib/cdprctl on the way)
+    path = Path(given).resolve()
     fix = (f"leave --state-dir out (a simulation writes to {simulated_state_dir(robot)}) or "
            "give a directory of its own")  # fmt: skip
     if _under_real_root(path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import queue
 import threading
 from typing import Any
@@ -59,8 +60,19 @@ def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int
     except Exception as exc:  # python-can raises CanError, OSError, ImportError, ValueError...
         raise DriverInitializationError(
             f"cannot open CAN bus interface={interface!r} channel={channel!r}: "
-            f"{type(exc).__name__}: {exc}"
+            f"{type(exc).__name__}: {exc}{_hint(interface, exc)}"
         ) from exc
+
+
+def _hint(interface: str, exc: Exception) -> str:
+    """What to do about a bus that would not open, where the error alone does not say."""
+    if interface == "socketcan" and getattr(exc, "errno", None) == errno.EAFNOSUPPORT:
+        return ("; this kernel has no SocketCAN (modprobe can can_raw vcan; a container or a VM "
+                "without it: docs/hil.md), or reach a simulated robot on udp_multicast "
+                "(docs/drivers.md)")  # fmt: skip
+    if interface == "socketcan" and getattr(exc, "errno", None) == errno.ENODEV:
+        return "; no such interface: `ip link` lists them (bring it up: docs/drivers.md)"
+    return ""
 
 
 class TrafficLog:

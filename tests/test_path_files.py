@@ -415,3 +415,32 @@ def test_a_rejected_waypoint_is_named_to_the_tenth_of_a_millimetre(rowc):
     with pytest.raises(PathRejectedError, match=r"line 2: waypoint \[2\.6123, 0\.35, 0\.59, "):
         plan_path(rowc, parse_path("x, y, z\n2.61234, 0.35, 0.59\n", START), start,
                   rowc.control.period)  # fmt: skip
+
+
+def test_run_path_is_planned_once_the_loop_serves_the_drives():
+    """``--path``'s plan is made by the I/O thread at the first READY, the loop running and
+    the drives served (planned during the start-up, a 105-segment program took 3 s and the
+    started drives were lost on their heartbeats), before any enable; rejected, nothing else
+    is sent."""
+    from conftest import CONFIG
+
+    from cdprctl.control.data import ControlData
+    from cdprctl.control.states import State
+    from cdprctl.daemon.scripts import PathScript
+
+    model = load_robot(CONFIG / "rowc.toml")
+    seen = []
+
+    def planner(start):
+        seen.append(start.copy())
+        return (None, "a segment leaves the workspace") if len(seen) > 1 else ("plan", "")
+
+    d = ControlData(model.n_cables, 0)
+    d.state = State.INIT
+    script = PathScript("p.ngc", "G1 X1", planner)
+    assert script.step(d) is None and seen == []  # not before the start-up's end
+    d.state = State.READY
+    assert script.step(d) is None and len(seen) == 1 and script.plan == "plan"
+    assert script.step(d).kind.value == "enable"
+    bad = PathScript("q.ngc", "G1 X9", planner)
+    assert bad.step(d) is None and bad.done and bad.rejected == "a segment leaves the workspace"

@@ -241,3 +241,15 @@ def test_report_without_a_recording_says_why(tmp_path, capsys):
     (tmp_path / "meta.json").write_text("[1, 2]")
     assert main(["report", str(tmp_path)]) == 1
     assert "meta.json is not the robot's status" in capsys.readouterr().err
+
+
+def test_a_state_from_before_the_loop_is_left_out(tmp_path, rowc):
+    """A recording started with the daemon gets one state stamped 0.0 (before the loop's
+    first cycle; the loop's clock is thousands of s on): it squeezed every plot's run into
+    its right edge. state.csv starts at the loop's first state."""
+    cables = list(SceneLayout.from_model(rowc).names)
+    early = {**_state(0, cables), "time": 0.0, "state": "init"}
+    _write_csvs(tmp_path, {"state": [early] + [_state(i, cables) for i in range(5)],
+                           "timing": [], "events": []})  # fmt: skip
+    lines = (tmp_path / "state.csv").read_text().splitlines()
+    assert len(lines) == 6 and lines[1].startswith(f"{T0},")

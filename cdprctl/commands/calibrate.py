@@ -77,6 +77,17 @@ def add_parser(sub: Any) -> None:
     p = command_parser(
         sub, "calibrate", "homing (known-pose, self) or geometric calibration (geometry)", run,
         config=False,
+        epilog="examples:\n"
+        "  cdprctl calibrate --config ROBOT.toml --can-interface socketcan --can-channel can0 "
+        "known-pose\n"
+        "  cdprctl calibrate --config config/caroca.toml --can-interface udp_multicast "
+        "--can-channel 239.74.163.9 self --json\n"
+        "  cdprctl calibrate --config config/rowc.toml --can-interface udp_multicast "
+        "--can-channel 239.74.163.9 geometry --out built.toml\n"
+        "\nexit codes: 0 calibrated (the record written), 1 refused or stopped (the reason in "
+        "one line),\n2 a bad option, 4 the state directory cannot take the record. A simulated "
+        "robot's record\n(drives on udp_multicast) goes to "
+        "~/.local/state/cdprctl/simulated/<robot> (docs/homing.md).",
     )  # fmt: skip
     _robot_and_bus(p)
     methods = p.add_subparsers(dest="method", required=True, metavar="METHOD")

@@ -13,8 +13,10 @@ from cdprctl.commands.common import command_parser, load_or_report
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 
 EXAMPLES = """examples:
-  cdprctl drives scan --config config/rowc.toml
   cdprctl drives scan --config robot.toml --can-interface socketcan --can-channel can0 --json
+  # the simulated robot in another process (cdprctl sim ... with the same two options):
+  cdprctl drives scan --config config/rowc.toml --can-interface udp_multicast \\
+      --can-channel 239.74.163.9
 """
 
 
@@ -61,7 +63,7 @@ def scan(args: argparse.Namespace) -> int:
                   file=sys.stderr)  # fmt: skip
             return 2
     overrides = bus_overrides(args)
-    if refuse_in_process_bus("cdprctl drives scan", model, overrides, False):
+    if refuse_in_process_bus("cdprctl drives scan", model, overrides, False, has_sim=False):
         return 2
     out: list[dict[str, Any]] = []
     found = able = wanted = 0

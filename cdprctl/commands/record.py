@@ -122,7 +122,12 @@ def record(args: argparse.Namespace) -> int:
 
 
 def _write_csvs(out: Path, rows: dict[str, list[Any]]) -> dict[str, int]:
-    states = rows["state"]
+    # a state stamped 0.0 is from before the loop's first cycle (a recording started with the
+    # daemon): the loop's clock is the monotonic one, thousands of s on, and that one row
+    # squeezed every plot's run into its right edge. Left out; the start-up's events (0.0
+    # too) are kept in events.csv, before the recording's first state as they were.
+    states = [s for s in rows["state"] if s.get("time")]
+    rows = {**rows, "state": states}
     if states:
         m = len(states[0]["tensions"])
         names = states[0]["cables"]

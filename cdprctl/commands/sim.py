@@ -27,18 +27,21 @@ def buses_text(model: Any, overrides: dict[str, Any]) -> str:
     return text
 
 
-def refuse_in_process_bus(who: str, model: Any, overrides: dict[str, Any], sim: bool) -> bool:
+def refuse_in_process_bus(who: str, model: Any, overrides: dict[str, Any], sim: bool,
+                          has_sim: bool = True) -> bool:  # fmt: skip
     """True after one line when, without ``--sim``, every bus of ``model`` is in-process
     (python-can's ``virtual``): no drive and no ``cdprctl sim`` of another process can answer
-    there, and a scan or a start-up would only time out on silent node ids."""
+    there, and a scan or a start-up would only time out on silent node ids. ``has_sim``: the
+    command takes ``--sim`` (``drives scan`` does not: it is offered no such way)."""
     from drivers.simulated import in_process_only
 
     if sim or not in_process_only(model, overrides):
         return False
     config = model.source_file or "ROBOT.toml"
+    sim_way = "use --sim (the simulated robot in this process), or " if has_sim else ""
     print(f"{who}: error: the buses of {config} are python-can's in-process 'virtual' bus: no "
-          f"drive and no other process can answer there; use --sim (the simulated robot in "
-          f"this process), or start `cdprctl sim --config {config} --can-interface "
+          f"drive and no other process can answer there; {sim_way}start `cdprctl sim --config "
+          f"{config} --can-interface "
           f"udp_multicast --can-channel 239.74.163.9` and give these same two options here, "
           f"or a real robot's bus (--can-interface socketcan --can-channel can0)",
           file=sys.stderr)  # fmt: skip

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -13,6 +14,7 @@ from cdprctl.control.commands import Command, CommandKind
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import State
 from cdprctl.model.robot import RobotModel
+from cdprctl.realtime import sharing_the_interpreter
 
 
 @dataclass(frozen=True)
@@ -58,11 +60,14 @@ def demo_script(model: RobotModel, force: float = 0.0) -> list[Step]:
 
 
 class PathScript:
-    """``cdprctl run --path``: enable, then the path (planned and checked before the drives
-    were enabled), and done once it ended, or a fault ended it."""
+    """``cdprctl run --path``: the path planned and checked whole from where the robot stands
+    (``planner(start pose)`` → (plan, "") or (None, why not)), then enable, the path, and done
+    once it ended, or a fault ended it; ``rejected`` says why when the check refused it."""
 
-    def __init__(self, name: str, text: str, plan: Any):
-        self.name, self.text, self.plan = name, text, plan
+    def __init__(self, name: str, text: str, planner: Callable[[np.ndarray], tuple[Any, str]]):
+        self.name, self.text, self.planner = name, text, planner
+        self.plan: Any = None
+        self.rejected = ""
         self._enable_sent = self._path_sent = False
         self._sent_cycle = 0
         self.done = False
@@ -71,6 +76,13 @@ class PathScript:
         """The next command to submit, if any; sets ``done`` once the path ended."""
         if d.state in (State.FAULT, State.ESTOP):  # said at the end (Daemon.run)
             self.done = True
+            return None
+        if self.plan is None and d.state is State.READY:  # planned before any enable
+            with sharing_the_interpreter():  # the loop keeps its period meanwhile
+                self.plan, self.rejected = self.planner(d.reference.copy())
+            self.done = self.plan is None
+            return None
+        if self.plan is None:
             return None
         if not self._path_sent:
             if d.state is State.READY and not self._enable_sent:

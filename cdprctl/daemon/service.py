@@ -189,7 +189,10 @@ class Daemon:
         self.links.close()
         for line in self.report.finish(self.driver.stats.as_dict()):
             self._print(line)
-        if path is not None and not self.stop_requested.is_set():
+        if script is not None and script.rejected:  # checked whole: the drives never enabled
+            self._print(f"cdprctl run: path {script.name} rejected: {script.rejected}", err=True)
+            code = 2
+        elif path is not None and not self.stop_requested.is_set():
             why = (f" (stopped at the {d.state.value}: {d.fault_reason})"
                    if d.state in SCRIPT_STOPS else "")  # fmt: skip
             self._print(f"path {path[0]}: {d.path_state or 'not run'}{why}")

@@ -182,17 +182,22 @@ def _calibration(dm: Daemon) -> Any:
 
 
 def _plan_path(dm: Daemon, name: str, text: str, units: str) -> PathScript:
-    """The whole path from the pose start-up found, checked before any motion (``units``: a
-    CSV's lengths without a row of units)."""
+    """The script of the path: planned whole from the pose start-up found and checked before
+    the drives are enabled (``units``: a CSV's lengths without a row of units) — by the I/O
+    thread once the loop runs: planned here, a long path (100 segments: 3 s) left the started
+    drives unserved and they were lost ("no heartbeat for 0.510 s")."""
     from cdprctl.motion.limits import SoftLimits
     from cdprctl.motion.path_file import PathFileError
     from cdprctl.motion.path_plan import PathRejectedError, plan_text, units_hint
 
-    try:
-        plan = plan_text(dm.model, text, dm.data.reference.copy(), dm.model.control.period,
-                         SoftLimits(dm.model), name, units)  # fmt: skip
-    except (PathFileError, PathRejectedError) as exc:
-        why = f"{exc}{units_hint(text, units, str(exc))}"
-        raise StartupRefusedError(f"cdprctl run: path {name} rejected: {why}", 2) from None
-    dm._print(f"path {name}: {plan.summary()}")
-    return PathScript(name, text, plan)
+    def planner(start: np.ndarray) -> tuple[Any, str]:
+        """(the plan, "") or (None, why it was rejected)."""
+        try:
+            plan = plan_text(dm.model, text, start, dm.model.control.period,
+                             SoftLimits(dm.model), name, units)  # fmt: skip
+        except (PathFileError, PathRejectedError) as exc:
+            return None, f"{exc}{units_hint(text, units, str(exc))}"
+        dm._print(f"path {name}: {plan.summary()}")
+        return plan, ""
+
+    return PathScript(name, text, planner)

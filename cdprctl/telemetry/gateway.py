@@ -11,6 +11,7 @@ import math
 import os
 import queue
 import sys
+import threading
 import time
 from typing import Any
 
@@ -128,9 +129,22 @@ def gateway_main(
         except zenoh.ZError:  # the session is closing: nobody to answer
             pass
 
+    reading = threading.Lock()  # the snapshot's copy buffer is one: one reader at a time
+
+    def read_snapshot() -> Any:
+        with reading:
+            s = snap.read()
+        if s is not None:
+            shared["last"] = s
+            shared["state"] = STATES[int(s["state"][0])]
+        return s
+
     def on_command(sample: Any) -> None:
         if stop.is_set():
             return
+        # the state now, not at the last publication: the first command after "ready:" was
+        # refused as "in state init" for seconds while a first run's warm-up held the loop
+        read_snapshot()
         kind = str(sample.key_expr).rsplit("/", 1)[-1]
         request_id = None
         try:
@@ -189,16 +203,13 @@ def gateway_main(
         while not stop.is_set() and os.getppid() == parent:
             now = time.monotonic()
             if now >= next_state:
-                s = snap.read()
-                if s is not None:
-                    shared["last"] = s
-                    shared["state"] = STATES[int(s["state"][0])]
-                    if s["seq"][0] != last_seq:
-                        last_seq = float(s["seq"][0])
-                        body = state_payload(s, names, shared["fault"], grip_names, brake_test)
-                        if warning:
-                            body["warning"] = warning
-                        pub_state.put(encode(body))
+                s = read_snapshot()
+                if s is not None and s["seq"][0] != last_seq:
+                    last_seq = float(s["seq"][0])
+                    body = state_payload(s, names, shared["fault"], grip_names, brake_test)
+                    if warning:
+                        body["warning"] = warning
+                    pub_state.put(encode(body))
                 next_state += state_dt
                 if next_state < now:  # a stall: no burst
                     next_state = now + state_dt

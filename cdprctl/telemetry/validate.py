@@ -139,7 +139,8 @@ class CommandValidator:
         """``snap``: the loop's last snapshot (pose, grippers' targets), for the checks that
         depend on where the robot is now (a gripper's feasible travel)."""
         if not self.enabled:
-            raise CommandError("commands are disabled in the config (zenoh.commands = false)")
+            raise CommandError("commands are disabled: the daemon was started without "
+                               "--accept-commands ([zenoh] commands = false; docs/telemetry.md)")
         if kind not in KINDS:
             raise CommandError(f"command {kind!r} is unknown (known: {', '.join(KINDS)})")
         allowed = FIELDS[kind]
