@@ -97,6 +97,21 @@ def add_parser(sub: Any) -> None:
                    "results in the state directory), the next one first")  # fmt: skip
 
 
+def _drivers(args: argparse.Namespace, model: Any, weak: int | None,
+             overrides: dict[str, Any]) -> tuple[Any, Any]:  # fmt: skip
+    """(the lock-step simulated robot with --sim, else None; the driver)."""
+    if args.sim:
+        from sim_backend.network import LockStep
+
+        sim = LockStep(model)
+        if weak is not None:
+            sim.plant.weaken_brake(weak)
+        return sim, sim.driver
+    from drivers import create_driver
+
+    return None, create_driver(model, period=model.control.period, bus_overrides=overrides)
+
+
 def _weak_brake_index(who: str, name: str | None, sim: bool, model: Any) -> int | None:
     """The cable index ``--weak-brake NAME`` wears (None: none); -1 after saying in one line
     why the option is refused."""
@@ -151,18 +166,7 @@ def run(args: argparse.Namespace) -> int:
     if resumed is None:
         return 2
     kept, started, identities = resumed
-    sim = None
-    if args.sim:
-        from sim_backend.network import LockStep
-
-        sim = LockStep(model)
-        if weak is not None:
-            sim.plant.weaken_brake(weak)
-        driver = sim.driver
-    else:
-        from drivers import create_driver
-
-        driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
+    sim, driver = _drivers(args, model, weak, overrides)
     try:
         log(f"{WHO}: {model.name}: configuring the drives")
         driver.configure()

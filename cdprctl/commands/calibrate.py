@@ -159,18 +159,7 @@ def run(args: argparse.Namespace) -> int:
 
         return run_geometry(args, model)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    pose = None
-    if args.method == "known-pose":
-        pose = (
-            parse_pose(args.pose, "--pose", model)
-            if args.pose
-            else np.r_[model.home.position, model.home.rpy]
-        )
-    else:
-        for name in ("travel", "tilt"):
-            value = getattr(args, name)
-            if not 0.0 < value <= 0.3:
-                raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
+    pose = _pose_or_checked(args, model)
     overrides = bus_overrides(args)
     if refuse_in_process_bus(WHO, model, overrides, False):
         return 2
@@ -219,6 +208,20 @@ def run(args: argparse.Namespace) -> int:
             "removed")  # fmt: skip
     record.simulated = simulated
     return _report_homing(args, record, ident, state_dir, log)
+
+
+def _pose_or_checked(args: argparse.Namespace, model: Any) -> np.ndarray | None:
+    """known-pose: the pose (``--pose``, else home); self: None, its options checked
+    (SystemExit naming a refused one)."""
+    if args.method == "known-pose":
+        if args.pose:
+            return parse_pose(args.pose, "--pose", model)
+        return np.r_[model.home.position, model.home.rpy]
+    for name in ("travel", "tilt"):
+        value = getattr(args, name)
+        if not 0.0 < value <= 0.3:
+            raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
+    return None
 
 
 def _report_homing(args: argparse.Namespace, record: Any, ident: Any, state_dir: Path,
