@@ -13,7 +13,9 @@ import tempfile
 from pathlib import Path
 
 REAL_ROOT = Path("/var/lib/cdprctl")
-RECORD_FILES = ("calibration.json", "brake_test.json")  # what the procedures keep
+# what the procedures keep: their records and the samples of a stop midway (partial_session)
+RECORD_FILES = ("calibration.json", "brake_test.json", "calibration-geometry.partial.json",
+                "calibration-self.partial.json", "brake_test.partial.json")
 
 
 class StateDirError(Exception):

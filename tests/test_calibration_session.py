@@ -124,11 +124,11 @@ def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_
     import threading
     import time
 
-    from cdprctl.calibration import geometry_procedure as gp
+    from cdprctl.calibration import geometry_moves as gp
 
     held: list[float] = []
     ses = SimpleNamespace(run=held.append, driver=SimpleNamespace(clock=lambda: 0.0))
-    assert gp._held_while(ses, lambda: np.ones(6)).tolist() == [1.0] * 6  # type: ignore[arg-type]
+    assert gp.held_while(ses, lambda: np.ones(6)).tolist() == [1.0] * 6  # type: ignore[arg-type]
     assert held == [gp.HOLD_AFTER_IDENTIFYING]
     go = threading.Event()
     held.clear()
@@ -144,7 +144,7 @@ def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_
 
     ses = SimpleNamespace(run=hold, driver=SimpleNamespace(clock=time.monotonic))
     with pytest.raises(ValueError, match="singular"):
-        gp._held_while(ses, compute)  # type: ignore[arg-type]
+        gp.held_while(ses, compute)  # type: ignore[arg-type]
     assert len(held) >= 3 and set(held) == {0.05}
 
 
@@ -190,7 +190,7 @@ def test_a_run_ends_after_the_cycle_its_step_says_and_says_how_long_it_ran():
 def test_a_move_that_stops_ends_there_and_counts_only_the_time_it_moved():
     """A tension beyond its stop after 40 cycles of a 10 s move: the move ends on that cycle
     (the rest of its time was holding still), the fraction done where the ramp had got."""
-    from cdprctl.calibration import geometry_procedure as gp
+    from cdprctl.calibration import geometry_moves as gp
     from cdprctl.calibration.geometry_plan import GeometryOptions
 
     model = load_robot(CONFIG / "rowc.toml")
@@ -212,18 +212,18 @@ def test_a_move_that_stops_ends_there_and_counts_only_the_time_it_moved():
     def goal_of(x):
         return np.full(m, x[0]), np.full(m, 100.0)
 
-    done, took = gp._move(ses, a, b, goal_of, opt)
+    done, took = gp.move(ses, a, b, goal_of, opt)
     assert took == pytest.approx(41 * d.period)
     f = 40 / round(10.0 / d.period)
     assert done == pytest.approx(0.5 - 0.5 * math.cos(math.pi * f))
     assert ses.pace == 0.0
     calls[0] = -10**9  # a retreat (stop=False) runs its whole way whatever the tensions
-    done, took = gp._move(ses, b, a, goal_of, opt, stop=False)
+    done, took = gp.move(ses, b, a, goal_of, opt, stop=False)
     assert (done, took) == (pytest.approx(1.0), pytest.approx(10.0))
 
 
 def test_a_stopped_move_backs_off_a_tenth_of_a_metre_or_to_where_it_came_from():
-    from cdprctl.calibration import geometry_procedure as gp
+    from cdprctl.calibration import geometry_moves as gp
 
     origin = np.zeros(6)
     far = np.array([0.6, 0.8, 0.0, 0.0, 0.0, 0.0])  # 1 m away

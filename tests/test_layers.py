@@ -38,7 +38,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("hardware", ("drivers", "sim_backend")),
     ("control", ("cdprctl.control",)),
     ("services", ("cdprctl.experiments", "cdprctl.telemetry", "cdprctl.daemon",
-                  "cdprctl.calibration", "cdprctl.safety")),
+                  "cdprctl.calibration", "cdprctl.safety", "cdprctl.partial_session")),
     ("commands", ("cdprctl.commands", "cdprctl.cli")),
 ]
 EXACT = {"cdprctl": 0}  # the package itself: its version string

@@ -25,12 +25,11 @@ sys.path.insert(0, str(ROOT / "tests"))
 from test_homing import robot_at  # noqa: E402
 
 from cdprctl.calibration.geometry_file import calibrated_robot_text  # noqa: E402
+from cdprctl.calibration.geometry_moves import motor_goals, move  # noqa: E402
 from cdprctl.calibration.geometry_plan import GeometryOptions  # noqa: E402
 from cdprctl.calibration.geometry_procedure import (  # noqa: E402
-    _move,
     geometry_calibrate,
     geometry_record,
-    motor_goals,
 )
 from cdprctl.calibration.procedure import force_cables  # noqa: E402
 from cdprctl.calibration.session import CalibrationFailedError, Session  # noqa: E402
@@ -111,14 +110,14 @@ def visit(built, record, ls, targets) -> tuple[list[float], list[float]]:
         here = start
         for p, R in targets:
             x = np.r_[p, log_so3(R @ built.home.rotation.T)]
-            done, _ = _move(ses, here, x, goal_of, opt)
+            done, _ = move(ses, here, x, goal_of, opt)
             here = here + done * (x - here)
             ses.run(1.0)
             theta, tension, _ = ses.average(0.3)
             ep, eR = estimate(built, record, theta, tension, ls.plant.position, ls.plant.R)
             err_p.append(float(np.linalg.norm(ep - ls.plant.position) * 1e3))
             err_r.append(float(np.linalg.norm(log_so3(eR @ ls.plant.R.T)) * 1e3))
-        _move(ses, here, start, goal_of, opt)
+        move(ses, here, start, goal_of, opt)
     finally:
         ses.close()
     return err_p, err_r

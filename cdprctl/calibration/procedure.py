@@ -22,6 +22,7 @@ import dataclasses
 import itertools
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +34,7 @@ from cdprctl.calibration.identify import (
     length_noise,
     model_test,
 )
+from cdprctl.calibration.progress import Progress, stopped
 from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
 from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
@@ -41,6 +43,7 @@ from cdprctl.numerics import compliance_of, unstretched_lengths
 from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
+from drivers.errors import DriverError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -157,11 +160,15 @@ def sample_poses(model: RobotModel, opt: SelfOptions) -> np.ndarray:
 TENSION_MARGIN = (0.0, 0.3)
 
 
-def sample_around_start(ses: Session, opt: SelfOptions) -> Samples:
+def sample_around_start(ses: Session, opt: SelfOptions,
+                        progress: Progress | None = None) -> Samples:  # fmt: skip
     """``self``'s samples, on ``ses`` (not enabled yet; left enabled, back at the start): the
     start and the moves of ``sample_poses`` away from it, six cables by position and the
-    redundant ones by tension (module docstring)."""
-    model, driver, log = ses.model, ses.driver, ses.log
+    redundant ones by tension (module docstring). Each sample goes to ``progress``; one that
+    holds samples already (a resume) goes on from the first pose it lacks, enabled where the
+    platform stopped: the moves are planned from sample 0, on the same encoder reference."""
+    model, log = ses.model, ses.log
+    progress = progress if progress is not None else Progress()
     kin = KinematicsData(model)
     poses = sample_poses(model, opt)
     guess = poses.copy()
@@ -169,41 +176,69 @@ def sample_around_start(ses: Session, opt: SelfOptions) -> Samples:
     for x in guess:
         plan.append(hold_tensions(model, kin, x))  # leaves kin at x
         lengths.append(kin.length.copy())
-    k_axial = model.cable_stiffness(lengths[0])
-    force = force_cables(model)
-    ses.force[force] = True
-    ses.k[:] = k_axial
-    ses.gain = 1.0 - math.exp(-2.0 * math.pi * opt.force_bandwidth * driver.period)
+    force = hold_by_tension(ses, opt)
+    k_axial = ses.k.copy()
     names = ", ".join(model.cables[i].name for i in force)
     log(f"self-calibration: the start pose and {len(poses) - 1} moves away from it "
         f"(± {opt.travel:g} m, ± {opt.tilt:g} rad); "
         f"cables {names or '(none)'} held by tension, the others by position")  # fmt: skip
-    theta_all, tension_all = [], []
-    ses.tension_goal[:] = plan[0]
+    first = progress.samples
+    ses.tension_goal[:] = plan[max(0, min(first, len(poses)) - 1)]
     ses.enable()
-    ses.run(1.5)  # the redundant cables to their tensions at the start
-    theta0, t0, _ = ses.average(opt.sample_time)
-    theta_all.append(theta0)
-    tension_all.append(t0)
-    start_targets = ses.base.copy()
+    ses.run(1.5)  # the redundant cables to their tensions (at the start, or where it stopped)
+    if first == 0:
+        theta0, t0, _ = ses.average(opt.sample_time)
+        progress.add(theta0, t0, guess[0])
+        progress.start_targets = ses.base.copy()
+    else:
+        log(f"  resumed: {first} of {len(poses)} samples kept, from where the platform stopped")
+    theta0, t0 = progress.theta[0], progress.tension[0]
     comp = 1.0 / k_axial  # m/N
-    for k in range(1, len(poses)):
+    for k in range(max(1, first), len(poses)):
         # the position cables: unstretched length change from the nominal geometry and the
         # planned tensions; the force cables: their planned tension
         dl0 = (lengths[k] - lengths[0]) - (plan[k] - t0) * comp
         goal = theta0 - dl0 / ses.ratio
         done = ses.move(goal, plan[k], opt.move_time)
-        if done < 1.0:  # the guess: where the ramp stopped
-            guess[k] = guess[0] + done * (guess[k] - guess[0])
+        # the guess: where the ramp stopped
+        g = guess[k] if done >= 1.0 else guess[0] + done * (guess[k] - guess[0])
         ses.run(opt.settle_time)
         th, t, speed = ses.average(opt.sample_time)
-        theta_all.append(th)
-        tension_all.append(t)
+        progress.add(th, t, g)
         log(f"  pose {k}/{len(poses) - 1}: {done:.0%} of the move, tensions "
             f"{t.min():.1f}..{t.max():.1f} N, motors at most {speed:.2g} rad/s")  # fmt: skip
-    ses.move(start_targets, plan[0], opt.move_time)
+    assert progress.start_targets is not None
+    ses.move(progress.start_targets, plan[0], opt.move_time)
     ses.run(opt.settle_time)
-    return Samples(np.array(theta_all), np.array(tension_all), guess)
+    return Samples(*progress.arrays(len(poses)))
+
+
+def hold_by_tension(ses: Session, opt: SelfOptions) -> list[int]:
+    """``ses``'s redundant cables (``force_cables``) held by their tension, at
+    ``opt.force_bandwidth``, the loops scaled by the cables' stiffness at home; those cables."""
+    model = ses.model
+    kin = KinematicsData(model)
+    hold_tensions(model, kin, np.r_[model.home.position, 0.0, 0.0, 0.0])
+    force = force_cables(model)
+    ses.force[force] = True
+    ses.k[:] = model.cable_stiffness(kin.length.copy())
+    ses.gain = 1.0 - math.exp(-2.0 * math.pi * opt.force_bandwidth * ses.driver.period)
+    return force
+
+
+def where_around_start(samples: int, total: int) -> str:
+    """Where ``self``'s pattern of ``total`` samples stopped with ``samples`` taken, in the
+    log's words ("pose k/K" is the sample after the move to pose k)."""
+    if samples == 0:
+        return "the start, before its sample"
+    if samples < total:
+        return f"pose {samples} of {total - 1} (around the start)"
+    return "the way back to the start"
+
+
+def self_options(opt: SelfOptions) -> dict[str, Any]:
+    """What ``self``'s samples and identification follow, by name (a partial session's plan)."""
+    return {k: v for k, v in dataclasses.asdict(opt).items() if k != "weights"}
 
 
 def self_calibrate(
@@ -211,10 +246,13 @@ def self_calibrate(
     driver: WinchDriver,
     opt: SelfOptions | None = None,
     log: Callable[[str], None] = print,
+    progress: Progress | None = None,
 ) -> tuple[CalibrationRecord, Identified]:
     """From an unknown pose near home: the samples (module docstring), the identification,
     the record. Raises :class:`CalibrationFailedError` (drives disabled) when the drives are not in
-    position mode, the platform cannot be held, or the data do not decide the pose."""
+    position mode, the platform cannot be held, or the data do not decide the pose; stopped
+    midway, :class:`CalibrationStoppedError` with the samples taken (``progress``: those of a
+    stopped run to go on from)."""
     opt = opt or SelfOptions()
     if not model.drives.holds_lengths:
         raise CalibrationFailedError(
@@ -224,8 +262,12 @@ def self_calibrate(
     if model.grippers:
         raise CalibrationFailedError("self-calibration of a robot with grippers is not supported")
     ses = Session(model, driver, log)
+    progress = progress if progress is not None else Progress()
     try:
-        samples = sample_around_start(ses, opt)
+        samples = sample_around_start(ses, opt, progress)
+    except (CalibrationFailedError, DriverError) as exc:
+        at = where_around_start(progress.samples, len(sample_poses(model, opt)))
+        raise stopped(exc, progress, ses, at) from None
     finally:
         ses.close()
     poses = samples.guess

@@ -100,6 +100,7 @@ class Session:
         self.states: WinchStates = driver.states
         self.stopped_by = ""  # why the last move stopped short (a cable, its tension)
         self.missed_periods = 0  # cycles skipped: this process held up beyond a period
+        self.cycles = 0  # periods the session ran, the missed ones included
         self.cycle_time = driver.period  # s the cycle under way stands for (missed included)
         self._outside = 0.0  # s a tension has been outside its bounds
         self._before = np.zeros(m)  # N: the tensions a move started from
@@ -174,6 +175,7 @@ class Session:
                 if i > 0:  # a ramp under way: the drives went on along it
                     i = min(i + min(missed, extrapolated), n - 1)
             self.cycle_time = (1 + missed) * period
+            self.cycles += 1 + missed
             if d.lifecycle is Lifecycle.ERROR:
                 raise CalibrationFailedError(f"the drives stopped: {d.error}")
             ends = each is not None and bool(each((i + 1) / n))

@@ -14,6 +14,60 @@ from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 from drivers.simulated import simulated_robot
 
+WHO = "cdprctl brake-test"
+KIND = "brake-test"
+# what a stopped test's kept results were measured with, and where each is set
+WHERE = {"torque": "[safety] brake_test_torque or brake_test_torque_factor",
+         "max_counts": "[safety] brake_test_max_counts", "hold": "[safety] brake_test_hold"}
+
+
+def plan_of(model: Any) -> dict[str, Any]:
+    """What each cable's test follows: its torque (N·m), the bound (counts), the hold (s)."""
+    from cdprctl.safety.brake_test import brake_test_torques
+
+    return {"torque": [float(x) for x in brake_test_torques(model)[0]],
+            "max_counts": model.safety.brake_test_max_counts,
+            "hold": model.safety.brake_test_hold}  # fmt: skip
+
+
+def _kept(args: argparse.Namespace, model: Any, state_dir: Any,
+          log: Any) -> tuple[list[Any], float | None, list[Any]] | None:  # fmt: skip
+    """(the cables kept, when the first was tested, the drives' identities then) with
+    ``--resume``, ([], None, []) without; None after one line when it cannot resume."""
+    from cdprctl.calibration.record import geometry_hash
+    from cdprctl.commands.resume import load_to_resume, replaced_warning
+    from cdprctl.safety.record import CableResult
+
+    if not args.resume:
+        replaced_warning(state_dir, KIND, log, WHO)
+        return [], None, []
+    partial = load_to_resume(WHO, state_dir, KIND, model.name, geometry_hash(model),
+                             plan_of(model), WHERE)  # fmt: skip
+    if partial is None:
+        return None
+    kept = [CableResult(**c) for c in partial.data["cables"]]
+    log(f"{WHO}: {model.name}: resuming the test stopped at {partial.stopped_at} (cables "
+        f"{', '.join(c.cable for c in kept)} kept)")  # fmt: skip
+    return kept, partial.started, partial.identities
+
+
+def _stopped(args: argparse.Namespace, model: Any, exc: Any, state_dir: Any, simulated: bool,
+             driver: Any, overrides: dict[str, Any]) -> None:  # fmt: skip
+    """A test stopped midway: the cables tested kept, one line."""
+    from cdprctl.commands.resume import keep, new_partial, resume_command, stopped_line
+
+    n = model.n_cables
+    at = f"cable {model.cables[min(exc.at, n - 1)].name} of {n}" if exc.at < n else "the end"
+    data = {"cables": [dataclasses.asdict(r) for r in exc.results]}
+    partial = new_partial(KIND, model, plan_of(model), str(exc), at, len(exc.results), data,
+                          exc.started, simulated,
+                          list(getattr(driver, "identities", [])))  # fmt: skip
+    words = f"cables {', '.join(r.cable for r in exc.results)} ({len(exc.results)} of {n})"
+    kept = keep(WHO, state_dir, partial, words)
+    resume = resume_command(WHO, args, overrides, "--sim" if args.sim else "")
+    print(stopped_line(WHO, at, str(exc), kept, exc.cause, resume,
+                       kept.startswith(words + " kept")), file=sys.stderr)  # fmt: skip
+
 
 def add_parser(sub: Any) -> None:
     p = command_parser(
@@ -38,6 +92,24 @@ def add_parser(sub: Any) -> None:
                    help="with --sim: the brake of this cable (its name in the robot file, as "
                    "every report names it) worn, holding less than the test torque")  # fmt: skip
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--resume", action="store_true",
+                   help="go on from a test stopped midway: the cables it tested kept (their "
+                   "results in the state directory), the next one first")  # fmt: skip
+
+
+def _drivers(args: argparse.Namespace, model: Any, weak: int | None,
+             overrides: dict[str, Any]) -> tuple[Any, Any]:  # fmt: skip
+    """(the lock-step simulated robot with --sim, else None; the driver)."""
+    if args.sim:
+        from sim_backend.network import LockStep
+
+        sim = LockStep(model)
+        if weak is not None:
+            sim.plant.weaken_brake(weak)
+        return sim, sim.driver
+    from drivers import create_driver
+
+    return None, create_driver(model, period=model.control.period, bus_overrides=overrides)
 
 
 def _weak_brake_index(who: str, name: str | None, sim: bool, model: Any) -> int | None:
@@ -64,11 +136,18 @@ def run(args: argparse.Namespace) -> int:
     brake that lets it turn more than [safety] brake_test_max_counts fails. `cdprctl run`
     refuses to enable a real robot whose last passed test is older than [safety]
     brake_test_interval (8 h)."""
-    from cdprctl.safety.brake_test import BrakeTest, BrakeTestFailedError
+    from cdprctl.partial_session import (
+        PartialSessionError,
+        check_identities,
+        clear_latched_fault,
+        path_of,
+        remove,
+    )
+    from cdprctl.safety.brake_test import BrakeTest, BrakeTestFailedError, BrakeTestStoppedError
     from cdprctl.safety.record import save
     from drivers.errors import DriverError
 
-    who = "cdprctl brake-test"
+    who = WHO
     model = load_or_report(args.config, who)
     if model is None:
         return 1
@@ -83,36 +162,43 @@ def run(args: argparse.Namespace) -> int:
     if state_dir is None:
         return EXIT_STATE_DIR
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    sim = None
-    if args.sim:
-        from sim_backend.network import LockStep
-
-        sim = LockStep(model)
-        if weak is not None:
-            sim.plant.weaken_brake(weak)
-        driver = sim.driver
-    else:
-        from drivers import create_driver
-
-        driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
+    resumed = _kept(args, model, state_dir, log)
+    if resumed is None:
+        return 2
+    kept, started, identities = resumed
+    sim, driver = _drivers(args, model, weak, overrides)
     try:
-        log(f"{who}: {model.name}: configuring the drives")
+        log(f"{WHO}: {model.name}: configuring the drives")
         driver.configure()
         if not simulated and simulated_robot(model, overrides, driver):
             simulated = True  # simulated drives behind a kernel CAN interface (HIL)
-            state_dir = records_dir(who, model.name, args.state_dir, simulated)
+            state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
             if state_dir is None:
                 return EXIT_STATE_DIR
         if simulated:
-            log(f"{who}: a simulated robot: the record goes to {state_dir}")
-        record = BrakeTest(model, driver, log, simulated=simulated).run()
+            log(f"{WHO}: a simulated robot: the record goes to {state_dir}")
+        if kept:
+            clear_latched_fault(driver, log, WHO)
+            check_identities(identities, list(getattr(driver, "identities", [])),
+                             [c.name for c in model.cables], path_of(state_dir, KIND))
+        test = BrakeTest(model, driver, log, simulated=simulated)
+        record = test.run(kept, started)
+    except BrakeTestStoppedError as exc:
+        _stopped(args, model, exc, state_dir, simulated, driver, overrides)
+        return 1
+    except PartialSessionError as exc:
+        print(f"{WHO}: error: cannot resume: {exc}", file=sys.stderr)
+        return 1
     except (DriverError, BrakeTestFailedError) as exc:
-        print(f"{who}: failed: {exc}", file=sys.stderr)
+        print(f"{WHO}: failed: {exc}", file=sys.stderr)
         return 1
     finally:
         driver.shutdown()
         if sim is not None:
             sim.net.close()
+    if remove(state_dir, KIND):
+        log(f"{WHO}: completed: the stopped test's results ({path_of(state_dir, KIND)}) "
+            "removed")  # fmt: skip
     path = save_or_keep(who, save, record, state_dir, dataclasses.asdict(record))
     if path is None:
         return EXIT_STATE_DIR

@@ -125,7 +125,13 @@ def add_parser(sub: Any) -> None:
     )
     for method in (kp, sp, gp):
         _robot_and_bus(method, default=argparse.SUPPRESS)
-    gp.add_argument("--poses", type=int, default=25, help="poses to sample (25; 10..80)")
+    for method in (sp, gp):
+        method.add_argument(
+            "--resume", action="store_true",
+            help="go on from the samples of a run stopped midway (kept in the state "
+            "directory), on the same robot file and options, the drives not reset since",
+        )  # fmt: skip
+    gp.add_argument("--poses", type=int, default=None, help="poses to sample (25; 10..80)")
     gp.add_argument("--fill", type=float, default=None,
                     help="fraction of the workspace box the poses span (the robot file's "
                          "[calibration] geometry_fill, else 0.8)")  # fmt: skip
@@ -146,8 +152,9 @@ def run(args: argparse.Namespace) -> int:
     (known-pose) or moved near its start (self), the drives disabled (brakes on), and the
     record written atomically to the state directory, where ``cdprctl run`` reads it."""
     from cdprctl.calibration.procedure import SelfOptions, known_pose, self_calibrate
-    from cdprctl.calibration.record import save
+    from cdprctl.calibration.progress import CalibrationStoppedError, check_reference
     from cdprctl.calibration.session import CalibrationFailedError
+    from cdprctl.partial_session import clear_latched_fault, path_of, remove
     from drivers import create_driver
     from drivers.errors import DriverError
 
@@ -159,20 +166,11 @@ def run(args: argparse.Namespace) -> int:
     if model is None:
         return 1
     if args.method == "geometry":
+        from cdprctl.commands.calibrate_geometry import run_geometry
+
         return run_geometry(args, model)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    pose = None
-    if args.method == "known-pose":
-        pose = (
-            parse_pose(args.pose, "--pose", model)
-            if args.pose
-            else np.r_[model.home.position, model.home.rpy]
-        )
-    else:
-        for name in ("travel", "tilt"):
-            value = getattr(args, name)
-            if not 0.0 < value <= 0.3:
-                raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
+    pose = _pose_or_checked(args, model)
     overrides = bus_overrides(args)
     if refuse_in_process_bus(WHO, model, overrides, False):
         return 2
@@ -180,6 +178,12 @@ def run(args: argparse.Namespace) -> int:
     state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
     if state_dir is None:
         return EXIT_STATE_DIR
+    opt = None if pose is not None else SelfOptions(
+        travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales)  # fmt: skip
+    resumed = _self_progress(args, model, opt, state_dir, log)
+    if isinstance(resumed, int):
+        return resumed
+    progress, identities = resumed
     driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
     ident = None
     try:
@@ -189,20 +193,53 @@ def run(args: argparse.Namespace) -> int:
                                                           simulated, state_dir, log)  # fmt: skip
         if state_dir is None:
             return EXIT_STATE_DIR
+        if progress is not None:
+            clear_latched_fault(driver, log, WHO)
+            if why := check_reference(model, driver, progress, identities,
+                                      path_of(state_dir, "self")):  # fmt: skip
+                print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+                return 1
         with moves_held(model, False, log):
             if pose is not None:
                 record = known_pose(model, driver, pose, log)
-            else:
-                opt = SelfOptions(
-                    travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales
-                )
-                record, ident = self_calibrate(model, driver, opt, log)
+            elif opt is not None:
+                record, ident = self_calibrate(model, driver, opt, log, progress)
+    except CalibrationStoppedError as exc:
+        _self_stopped(args, model, exc, opt, state_dir, simulated, driver, overrides)
+        return 1
     except (DriverError, CalibrationFailedError) as exc:
+        if isinstance(exc, CalibrationFailedError) and exc.record is not None:
+            remove(state_dir, "self")  # every sample taken, the identification refused
         print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
         return 1
     finally:
         driver.shutdown()
+    if opt is not None and remove(state_dir, "self"):
+        log(f"{WHO}: completed: the stopped run's samples ({path_of(state_dir, 'self')}) "
+            "removed")  # fmt: skip
     record.simulated = simulated
+    return _report_homing(args, record, ident, state_dir, log)
+
+
+def _pose_or_checked(args: argparse.Namespace, model: Any) -> np.ndarray | None:
+    """known-pose: the pose (``--pose``, else home); self: None, its options checked
+    (SystemExit naming a refused one)."""
+    if args.method == "known-pose":
+        if args.pose:
+            return parse_pose(args.pose, "--pose", model)
+        return np.r_[model.home.position, model.home.rpy]
+    for name in ("travel", "tilt"):
+        value = getattr(args, name)
+        if not 0.0 < value <= 0.3:
+            raise SystemExit(f"--{name} = {value}: must be in (0, 0.3] (m or rad)")
+    return None
+
+
+def _report_homing(args: argparse.Namespace, record: Any, ident: Any, state_dir: Path,
+                   log: Callable[[str], None]) -> int:  # fmt: skip
+    """``known-pose``'s or ``self``'s record written, the result said (JSON or lines)."""
+    from cdprctl.calibration.record import save
+
     result = {
         "pose": record.pose,
         "residual_rms": record.residual_rms,
@@ -232,127 +269,45 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_geometry(args: argparse.Namespace, model: Any) -> int:
-    """``calibrate geometry``: exit 0 accepted (with --out: the file and its record written),
-    1 refused or stopped (the reason in one line), 2 bad options."""
-    from cdprctl.calibration.geometry_file import calibrated_robot_text
-    from cdprctl.calibration.geometry_plan import GeometryOptions, plan
-    from cdprctl.calibration.geometry_procedure import geometry_calibrate, geometry_record
-    from cdprctl.calibration.record import now_iso, save
-    from cdprctl.calibration.session import CalibrationFailedError
-    from cdprctl.model.calibration import FILL_RANGE, SPEED_RANGE
-    from drivers import create_driver
-    from drivers.errors import DriverError
+def _self_progress(args: argparse.Namespace, model: Any, opt: Any, state_dir: Path,
+                   log: Callable[[str], None]) -> Any:  # fmt: skip
+    """(progress, the drives' identities then) of a stopped ``self`` with ``--resume``,
+    (None, []) otherwise; the exit code after one line when it cannot resume."""
+    from cdprctl.calibration.procedure import self_options
+    from cdprctl.calibration.progress import Progress
+    from cdprctl.calibration.record import geometry_hash
+    from cdprctl.commands.resume import load_to_resume, replaced_warning
 
-    for name, value, (lo, hi) in (("poses", args.poses, (10, 80)),
-                                  ("fill", args.fill, FILL_RANGE),
-                                  ("speed", args.speed, SPEED_RANGE)):  # fmt: skip
-        if value is not None and not lo <= value <= hi:
-            print(f"cdprctl calibrate: error: --{name} = {value}: must be in [{lo}, {hi}]",
-                  file=sys.stderr)  # fmt: skip
-            return 2
-    out = Path(args.out) if args.out else None
-    if out is not None and out.resolve() == Path(model.source_file).resolve():
-        print("cdprctl calibrate: error: --out is the robot file itself: write the robot as "
-              "built to another file (it names this one as its base)", file=sys.stderr)  # fmt: skip
+    if opt is None:
+        return None, []
+    if not args.resume:
+        replaced_warning(state_dir, "self", log, WHO)
+        return None, []
+    where = {"travel": "--travel", "tilt": "--tilt", "fit_drum_scales": "--fit-drum-scales"}
+    partial = load_to_resume(WHO, state_dir, "self", model.name, geometry_hash(model),
+                             self_options(opt), where)  # fmt: skip
+    if partial is None:
         return 2
-    if out is not None and not out.resolve().parent.is_dir():
-        # checked before the drives move: found after two minutes of motion, the run is lost
-        print(f"cdprctl calibrate: error: --out {out}: the directory {out.resolve().parent} "
-              "does not exist: create it first", file=sys.stderr)  # fmt: skip
-        return 2
-    overrides = bus_overrides(args)
-    if refuse_in_process_bus(WHO, model, overrides, False):
-        return 2
-    simulated = simulated_robot(model, overrides)
-    state_dir = records_dir(WHO, model.name, args.state_dir, simulated) if out else None
-    if out is not None and state_dir is None:
-        return EXIT_STATE_DIR
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    opt = GeometryOptions.of(model, poses=args.poses, fill=args.fill, speed=args.speed)
-    try:
-        log(f"cdprctl calibrate: {model.name}, geometry: planning the poses")
-        poses = plan(model, opt)
-    except CalibrationFailedError as exc:
-        print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
-        return 1
-    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
-    try:
-        log(f"cdprctl calibrate: {model.name}, geometry: configuring the drives")
-        driver.configure()
-        if out is not None:
-            found = _simulated_after_configure(model, overrides, driver, args, simulated,
-                                               state_dir, log)  # fmt: skip
-            simulated, state_dir = found
-            if state_dir is None:
-                return EXIT_STATE_DIR
-        with moves_held(model, not args.no_realtime, log):
-            cal = geometry_calibrate(model, driver, opt, log, poses)
-    except (DriverError, CalibrationFailedError) as exc:
-        print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        driver.shutdown()
-    r = cal.result
-    drawn = model.anchors
-    radius = np.array([c.winch.drum_radius for c in model.cables]) * r.drum_scale
-    result: dict[str, Any] = {
-        "accepted": cal.accepted,
-        "reason": cal.reason,
-        "reference_anchors": [model.cables[i].name for i in cal.reference],
-        "anchors": np.round(r.anchors, 6).tolist(),
-        "anchor_moved": np.round(np.linalg.norm(r.anchors - drawn, axis=1), 6).tolist(),
-        "drum_scale": np.round(r.drum_scale, 7).tolist(),
-        "drum_radius": np.round(radius, 8).tolist(),
-        "theta_zero": np.round(r.theta_zero, 6).tolist(),
-        "pose": r.pose,
-        "residual_rms": r.residual_rms,
-        "residuals_over_noise": cal.residuals_over_noise,
-        "equilibrium_over_noise": cal.equilibrium_over_noise,
-        "force_rms": r.force_rms,
-        "std": {"anchors": np.round(np.linalg.norm(r.std_anchors, axis=1), 6).tolist(),
-                "drum_scale": np.round(r.std_drum_scale, 7).tolist(),
-                "pose": r.std_pose},
-        "condition": r.condition,
-        "poses": len(r.poses),
-        "motion_time": cal.motion_time,
-    }
-    if cal.accepted and out is not None:
-        how = (f"{now_iso()}: {len(r.poses)} poses, {cal.motion_time:.0f} s of motion, "
-               f"residuals {cal.residuals_over_noise:.2f}x the drives' resolution, anchors "
-               f"of cables {', '.join(result['reference_anchors'])} as drawn")  # fmt: skip
-        out.write_text(calibrated_robot_text(model, r.anchors, radius, how), encoding="utf-8")
-        built = load_or_report(str(out), "cdprctl calibrate")
-        if built is None:
-            return 1
-        record = geometry_record(built, cal, list(getattr(driver, "identities",
-                                                          [None] * model.n_cables)))  # fmt: skip
-        record.simulated = simulated
-        result["robot_file"] = str(out)
-        assert state_dir is not None  # checked before the motion, with --out
-        path = save_or_keep(WHO, save, record, state_dir, {**result, "record": asdict(record)})
-        if path is None:
-            return EXIT_STATE_DIR
-        result["record"] = str(path)
-    if args.json:
-        print(json.dumps(result))
-    else:
-        moved = np.linalg.norm(r.anchors - drawn, axis=1) * 1e3
-        sig = np.linalg.norm(r.std_anchors, axis=1) * 1e3
-        for i, c in enumerate(model.cables):
-            a = r.anchors[i]
-            ref = "  (reference: as drawn)" if i in cal.reference else (
-                f"  {moved[i]:.2f} mm from the drawing, σ {sig[i]:.2f} mm")  # fmt: skip
-            log(f"cable {c.name}: anchor [{a[0]:.4f}, {a[1]:.4f}, {a[2]:.4f}] m, drum "
-                f"x{r.drum_scale[i]:.5f}{ref}")  # fmt: skip
-        log(f"residual {r.residual_rms * 1e6:.1f} µm RMS ({cal.residuals_over_noise:.2f}x the "
-            f"drives' resolution), condition {r.condition:.3g}, {len(r.poses)} poses, "
-            f"{cal.motion_time:.0f} s of motion")  # fmt: skip
-        log(("accepted" if cal.accepted else "refused: ") + ("" if cal.accepted else
-                                                              cal.reason))  # fmt: skip
-        if "robot_file" in result:
-            log(f"robot file: {result['robot_file']}; record: {result['record']} — run it "
-                f"with `cdprctl run --config {result['robot_file']}`")  # fmt: skip
-        elif cal.accepted:
-            log("(nothing written: give --out FILE for the robot file and its record)")
-    return 0 if cal.accepted else 1
+    log(f"{WHO}: {model.name}, self: resuming the run stopped at {partial.stopped_at} "
+        f"({partial.kept} samples kept)")  # fmt: skip
+    return Progress.from_data(partial.data, partial.started), partial.identities
+
+
+def _self_stopped(args: argparse.Namespace, model: Any, exc: Any, opt: Any,
+                  state_dir: Path | None,
+                  simulated: bool, driver: Any, overrides: dict[str, Any]) -> None:  # fmt: skip
+    """``self`` stopped midway: its samples kept, one line."""
+    from cdprctl.calibration.procedure import self_options
+    from cdprctl.commands.resume import keep, new_partial, resume_command, stopped_line
+
+    p = exc.progress
+    partial = new_partial("self", model, self_options(opt), str(exc), exc.at, p.samples,
+                          p.to_data(), p.started, simulated,
+                          list(getattr(driver, "identities", [])))  # fmt: skip
+    words = f"{p.samples} samples"
+    kept = keep(WHO, state_dir, partial, words)
+    tail = (f"self --travel {args.travel:g} --tilt {args.tilt:g}"
+            + (" --fit-drum-scales" if args.fit_drum_scales else ""))  # fmt: skip
+    resume = resume_command("cdprctl calibrate", args, overrides, tail)
+    print(stopped_line(WHO, exc.at, str(exc), kept, exc.cause, resume,
+                       kept.startswith(words + " kept")), file=sys.stderr)  # fmt: skip

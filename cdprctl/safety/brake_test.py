@@ -36,6 +36,18 @@ class BrakeTestFailedError(Exception):
     brakes given back."""
 
 
+class BrakeTestStoppedError(BrakeTestFailedError):
+    """Stopped midway with cables tested: ``results`` theirs (kept: ``--resume`` goes on with
+    the next), ``at`` the index of the cable under test, ``cause`` what points at the
+    machine's load ("": nothing does; ``partial_session.timing_cause``), ``started`` when the
+    first of them was tested (s since the epoch)."""
+
+    def __init__(self, message: str, results: list[CableResult], at: int, cause: str,
+                 started: float):  # fmt: skip
+        super().__init__(message)
+        self.results, self.at, self.cause, self.started = results, at, cause, started
+
+
 def brake_test_torques(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
     """N·m at each motor: ``brake_test_torque``, else ``brake_test_torque_factor`` × the
     torque the cable's worst-case load (its tension limit) puts on the brake, r/G · t_max;
@@ -67,10 +79,16 @@ class BrakeTest:
         self.targets = np.zeros(m)  # rad: position mode holds each motor where it stood
         self.csp = model.drives.holds_lengths
 
-    def run(self) -> BrakeTestRecord:
+    def run(self, kept: list[CableResult] | None = None,
+            started: float | None = None) -> BrakeTestRecord:  # fmt: skip
+        """Every cable's brake tested in turn — after those of ``kept`` (a stopped test's,
+        resumed: the next cable first). The record is dated ``started`` (s since the epoch:
+        the first cable's test, whose age the interval counts), now when None. Stopped
+        midway with cables tested: :class:`BrakeTestStoppedError` holding their results."""
         d, names = self.driver, [c.name for c in self.model.cables]
         closed: list[int] = []
-        results: list[CableResult] = []
+        results: list[CableResult] = list(kept or [])
+        started = time.time() if started is None else started
         try:
             for c in range(self.model.n_cables):
                 d.command_brake(c, True, SDO_TIMEOUT)
@@ -78,15 +96,24 @@ class BrakeTest:
             self.log("brakes closed by the master (0x60FE 'set brake'); enabling the drives")
             d.activate(ENABLE_TIMEOUT)  # zero torque, the targets where the motors stand
             self.targets[:] = d.states.position
-            for c, name in enumerate(names):
+            if results:
+                self.log(f"resumed: cables {', '.join(r.cable for r in results)} kept from "
+                         "the stopped test")  # fmt: skip
+            for c, name in enumerate(names[len(results):], start=len(results)):
                 results.append(self._one(c, name))
+        except (BrakeTestFailedError, DriverError) as exc:
+            if not results:
+                raise
+            from cdprctl.partial_session import timing_cause
+
+            raise BrakeTestStoppedError(str(exc), results, len(results),
+                                        timing_cause(d.error, 0, 0), started) from None
         finally:
             self._finish(closed)
-        done = time.time()
         return BrakeTestRecord(
             robot=self.model.name,
-            time=iso_utc(done),
-            unix_time=done,
+            time=iso_utc(started),
+            unix_time=started,
             passed=all(r.passed for r in results),
             max_counts=self.model.safety.brake_test_max_counts,
             cables=results,
