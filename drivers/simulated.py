@@ -11,8 +11,10 @@ from drivers.buses import bus_medium
 
 # python-can's media that reach no wire: only a simulated robot answers on them
 SIMULATED_MEDIA = frozenset({"virtual", "udp_multicast", "inprocess"})
-# those of them no other process reaches: python-can's virtual bus, cdprctl's lock-step one
-IN_PROCESS_MEDIA = frozenset({"virtual", "inprocess"})
+# of them, what a robot file names and no other process reaches: python-can's virtual bus
+# (cdprctl's lock-step "inprocess" one is the tests' harness: the canopen package's nodes in
+# the same process answer there)
+IN_PROCESS_MEDIA = frozenset({"virtual"})
 # the simulated drives' 0x1018 serial number: node id + 'SIM\0' (sim_backend/drives/*.eds)
 SIMULATED_SERIAL = 0x53494D00
 
