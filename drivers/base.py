@@ -24,9 +24,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import clamp
+from cdprctl.numerics import clamp, cycle_kernel
 from drivers import blocking
 from drivers.errors import DriverError, DriverOperationError
 from drivers.liveness import PLAUSIBLE_CABLE_SPEED, Liveness
@@ -375,7 +374,7 @@ class WinchDriver(ABC):
         write of the set-up's own cycling, not of the control loop."""
 
 
-@njit(cache=True)
+@cycle_kernel
 def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
     """``out`` ← ``torques`` (N·m) within ±``limit``, a non-finite one replaced by ``last``
     (the last valid command); returns the counts of replaced and clamped commands."""
@@ -392,7 +391,7 @@ def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
     return rejected, clamped
 
 
-@njit(cache=True)
+@cycle_kernel
 def finite_into(values, out):  # pragma: no cover - compiled
     """``out[i]`` ← ``values[i]`` where it is finite; the others keep their last value."""
     for i in range(len(out)):

@@ -35,7 +35,7 @@ from cdprctl.control.estimator import Estimator
 from cdprctl.control.pd_kernel import Platform, PoseEstimate
 from cdprctl.control.torques import WinchTorques, applied_tension
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import kernel_args
+from cdprctl.numerics import cycle_kernel, kernel_args
 
 
 class ObserverState(NamedTuple):
@@ -48,7 +48,7 @@ class ObserverState(NamedTuple):
     scratch: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def momentum_kernel(mass, inertia, R, v, w, out):  # pragma: no cover - compiled
     """``out`` (6,) ← ``[m v; R I Rᵀ ω]`` (kg·m/s, kg·m²/s; base frame)."""
     for i in range(3):

@@ -9,8 +9,8 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
 
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.energy import cable_energies, impose, minimum_energy
 from cdprctl.tda.nullspace import NullSpace
@@ -167,7 +167,7 @@ class EnergyMethod:
         return TDAStatus.OK
 
 
-@njit(cache=True)
+@cycle_kernel
 def energy_line_kernel(
     N, t0, c, target, lo, hi, k, lam, t, ends, erange, f
 ):  # pragma: no cover - compiled

@@ -15,10 +15,9 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
 
 from cdprctl.kinematics import KinematicsData
-from cdprctl.numerics import kernel_args
+from cdprctl.numerics import cycle_kernel, kernel_args, total
 from cdprctl.rotation import FloatArray
 from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
@@ -145,7 +144,7 @@ class TensionDistributor(EnergyMethod):
     def _solve(self) -> TDAStatus:
         out, ns, method, i = self.out, self.ns, self.options.method, self._in
         W, w, lo, hi = i.W, i.w, i.lo, i.hi
-        if not ns.update(W, w) or not math.isfinite(sum(w.tolist())):
+        if not ns.update(W, w) or not math.isfinite(total(w)):
             out.message = "wrench matrix rank-deficient or non-finite input"
             return TDAStatus.DEGENERATE
         if method is TDAMethod.PINV:
@@ -271,7 +270,7 @@ class TensionDistributor(EnergyMethod):
         out, i = self.out, self._in
         W, w, lo, hi, k, t_prev = i.W, i.w, i.lo, i.hi, i.k, i.t_prev
         t = out.tensions
-        finite = math.isfinite(sum(t.tolist()))  # NaN and inf survive a sum
+        finite = math.isfinite(total(t))  # NaN and inf survive a sum
         if status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR) or not finite:
             if status not in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR):
                 status = TDAStatus.INTERNAL_ERROR
@@ -298,7 +297,7 @@ class TensionDistributor(EnergyMethod):
             np.multiply(t, t, out=out.energies)
             out.energies /= k
             out.energies *= 0.5  # U_i = t_i²/(2 k_i), Sensors 2019 eq. (4)
-            out.energy_total = sum(out.energies.tolist())
+            out.energy_total = total(out.energies)
         out.status = status
         return out
 
@@ -320,7 +319,7 @@ def _qp_least_violating(
     return x[:r]
 
 
-@njit(cache=True)
+@cycle_kernel
 def check_kernel(W, w, t, lo, hi):  # pragma: no cover - compiled
     """(largest bound violation in N, ‖W t − w‖ / max(1, ‖w‖))."""
     viol = -math.inf

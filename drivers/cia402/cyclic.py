@@ -11,9 +11,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import clamp, plausible_step
+from cdprctl.numerics import clamp, cycle_kernel, plausible_step
 from drivers.cia402 import protocol as p
 from drivers.vocabulary import DriveState
 
@@ -54,7 +53,7 @@ class Decoded(NamedTuple):
     prev: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def tpdo1_kernel(
     n, frames, stamp, period, max_speed, rad_per_count, rated_torque, ps_table, decoded,
     torque, fresh, fb_stamp,
@@ -96,7 +95,7 @@ def tpdo1_kernel(
     return dropped
 
 
-@njit(cache=True)
+@cycle_kernel
 def state_kernel(
     fresh, fb_stamp, rad_per_count, derived, generic, decoded, feedback
 ):  # pragma: no cover - compiled
@@ -126,7 +125,7 @@ def state_kernel(
     return fault
 
 
-@njit(cache=True)
+@cycle_kernel
 def controlword_kernel(
     torques, ps, emcy, reset, enable, rated_torque, towards, out
 ):  # pragma: no cover - compiled
@@ -150,7 +149,7 @@ def controlword_kernel(
         out[c, 1] = int(clamp(pm, -32767.0, 32767.0))
 
 
-@njit(cache=True)
+@cycle_kernel
 def target_rates_kernel(targets, t, last, last_t, max_speed, rate):  # pragma: no cover - compiled
     """``rate`` (rad/s) ← each position target's rate since the last cycle's (``last`` at
     ``last_t``; within ``max_speed``, rad/s; 0 without a last cycle). ``last`` ← ``targets``."""
@@ -164,7 +163,7 @@ def target_rates_kernel(targets, t, last, last_t, max_speed, rate):  # pragma: n
         last[c] = targets[c]
 
 
-@njit(cache=True)
+@cycle_kernel
 def carry_targets_kernel(targets, rate, late, out):  # pragma: no cover - compiled
     """``out`` (rad) ← each position target carried ``late`` s on at its ``rate``: the target
     for the instant its SYNC leaves, not the instant the cycle started."""
@@ -172,7 +171,7 @@ def carry_targets_kernel(targets, rate, late, out):  # pragma: no cover - compil
         out[c] = targets[c] + rate[c] * late
 
 
-@njit(cache=True)
+@cycle_kernel
 def target_counts_kernel(targets, rad_per_count, out):  # pragma: no cover - compiled
     """``out[c]`` ← the position target (rad) of each drive in encoder counts, as the 32-bit
     signed value of 0x607A (the drive unwraps it against its own position actual)."""
