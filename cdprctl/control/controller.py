@@ -29,7 +29,15 @@ from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.path_follower import PathFollower
 from cdprctl.control.reference_pose import ReferencePose, WorkingPose
-from cdprctl.control.states import ACTIVE_STATES, HEALTHY_STATES, FaultKind, State
+from cdprctl.control.states import (
+    ACTIVE_STATES,
+    DISABLING,
+    ENABLED,
+    HEALTHY_STATES,
+    MOVING,
+    STOPPING,
+    FaultKind,
+)
 from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
 from cdprctl.control.wrench import PoseController
@@ -42,7 +50,7 @@ from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.vocabulary import WinchStates
 
 # the states in which the external wrench is observed (the drives apply what is computed)
-OBSERVED_STATES = frozenset({State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING})
+OBSERVED_STATES = (ENABLED, MOVING, DISABLING, STOPPING)  # a tuple: states.py says why
 
 
 class Controller:
@@ -132,23 +140,23 @@ class Controller:
         d.time = t
         d.cycle += 1
         if not self.grippers.n:  # the known external wrench, whoever set it, from now on
-            d.ext_total[:] = self.ext_wrench
-        d.motor_position[:] = st.position
+            np.copyto(d.ext_total, self.ext_wrench)  # copyto: a slice would build a view
+        np.copyto(d.motor_position, st.position)
         self.desk.handle(t)
         cs = self.cable_space
         if cs.enabled and d.state in OBSERVED_STATES:
             # the drives hold the lengths stretched by the commanded tensions (no pose feedback
             # in position mode, so no algebraic loop): the same tensions for the estimate
-            d.stretch_tensions[:] = d.tensions
+            np.copyto(d.stretch_tensions, d.tensions)
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
             cs.estimate_disturbance(
                 self.at.kin.W,
-                d.state is not State.STOPPING
+                d.state is not STOPPING
                 and d.saturation >= 1.0
                 and self.distribution.bad_cycles == 0,
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
-            cs.force_feedback(stopping=d.state is State.STOPPING)
+            cs.force_feedback(stopping=d.state is STOPPING)
         elif d.cycle % self.stretch_every == 0:
             self.refresh_stretch_tensions()
         e = self.estimator

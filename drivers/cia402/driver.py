@@ -37,7 +37,7 @@ from drivers.errors import (
     following_error_text,
 )
 from drivers.registry import register_driver
-from drivers.vocabulary import Lifecycle
+from drivers.vocabulary import ACTIVE, ERROR, INACTIVE
 
 
 @register_driver
@@ -191,7 +191,7 @@ class Cia402Driver(CanWinchDriver):
         )
 
     def command_brake(self, c: int, closed: bool, timeout: float) -> None:
-        if self.lifecycle not in (Lifecycle.INACTIVE, Lifecycle.ERROR):  # SDO: not cyclic
+        if self.lifecycle not in (INACTIVE, ERROR):  # SDO: not cyclic
             raise DriverOperationError(f"brake command while {self.lifecycle.name}: disabled only")
         command_brake(self.sdo, c, closed, timeout)
 
@@ -356,7 +356,7 @@ class Cia402Driver(CanWinchDriver):
             # faulted on their following error. The targets go out for the SYNC's instant.
             # Only between two cycles of running drives: the step at an enable is no rate.
             late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
-            running = self.lifecycle is Lifecycle.ACTIVE
+            running = self.lifecycle is ACTIVE
             since = self._last_targets_t if running else -math.inf
             cyclic.target_rates_kernel(
                 self.targets, t, self._last_targets, since, self.liveness.max_motor_speed,
