@@ -205,3 +205,38 @@ def test_position_targets_carried_on_and_in_32_bit_counts():
     cyclic.target_counts_kernel(np.array([101 * RAD, -(2**31 + 3) * RAD, (2**32 + 7) * RAD]),
                                 np.full(3, RAD), counts)  # fmt: skip
     assert list(counts) == [101, 2**31 - 3, 7]
+
+
+def test_the_rpdo1_kernel_packs_as_struct_does():
+    """``pack_rpdo1_kernel`` writes each RPDO1 in place as ``RPDO1_CSP_STRUCT`` (position
+    mode) or ``RPDO1_STRUCT`` (torque mode) packs it: the fields' extremes, signs, random."""
+    rng = np.random.default_rng(1)
+    position = np.array([True, False, True, False])
+    frames = [bytearray(8 if s else 4) for s in position]
+    views = tuple(np.frombuffer(b, dtype=np.uint8) for b in frames)
+    extremes = [(0xFFFF, -32767, -(2**31)), (0, 32767, 2**31 - 1), (0x80, -1, -1)]
+    draws = [
+        (int(rng.integers(0, 0x10000)), int(rng.integers(-32767, 32768)),
+         int(rng.integers(-(2**31), 2**31)))
+        for _ in range(200)
+    ]  # fmt: skip
+    for cw, pm, n in extremes + draws:
+        fields = np.array([[cw, pm]] * 4, dtype=np.int64)
+        cyclic.pack_rpdo1_kernel(fields, np.full(4, n, dtype=np.int64), position, views)
+        assert bytes(frames[0]) == p.RPDO1_CSP_STRUCT.pack(cw, n, pm)
+        assert bytes(frames[1]) == p.RPDO1_STRUCT.pack(cw, pm)
+
+
+def test_the_tpdo1_decoding_kernel_unpacks_as_struct_does():
+    """``decode_tpdo1_kernel`` reads TPDO1 bytes as ``TPDO1_STRUCT`` unpacks them: the
+    fields' extremes, signs, random bytes; only the first ``n`` rows written."""
+    rng = np.random.default_rng(2)
+    raw = rng.integers(0, 256, size=(40, 8), dtype=np.uint8)
+    raw[0] = [0xFF, 0xFF, 0x00, 0x80, 0x00, 0x00, 0x00, 0x80]  # 0xFFFF, -32768, -2**31
+    raw[1] = [0x00, 0x00, 0xFF, 0x7F, 0xFF, 0xFF, 0xFF, 0x7F]  # 0, 32767, 2**31 - 1
+    cables = np.arange(40, dtype=np.int64) % 8
+    frames = np.full((40, 4), -7, dtype=np.int64)
+    cyclic.decode_tpdo1_kernel(39, raw, cables, frames)
+    for i in range(39):
+        assert frames[i].tolist() == [int(cables[i]), *p.TPDO1_STRUCT.unpack(raw[i].tobytes())]
+    assert frames[39].tolist() == [-7] * 4

@@ -96,6 +96,21 @@ def tpdo1_kernel(
 
 
 @cycle_kernel
+def decode_tpdo1_kernel(n, raw, cables, frames):  # pragma: no cover - compiled
+    """``frames[i]`` ← (cable, statusword, torque per-mille, 32-bit position) of the first
+    ``n`` TPDO1s: ``cables[i]`` and the 8 bytes ``raw[i]`` as ``protocol.TPDO1_STRUCT``
+    (<Hhi, little-endian, two's complement) unpacks them."""
+    for i in range(n):
+        b = raw[i]
+        frames[i, 0] = cables[i]
+        frames[i, 1] = np.int64(b[0]) | np.int64(b[1]) << 8
+        torque = np.int64(b[2]) | np.int64(b[3]) << 8
+        frames[i, 2] = torque - 0x10000 if torque >= 0x8000 else torque
+        pos = np.int64(b[4]) | np.int64(b[5]) << 8 | np.int64(b[6]) << 16 | np.int64(b[7]) << 24
+        frames[i, 3] = pos - 0x100000000 if pos >= 0x80000000 else pos
+
+
+@cycle_kernel
 def state_kernel(
     fresh, fb_stamp, rad_per_count, derived, generic, decoded, feedback
 ):  # pragma: no cover - compiled
@@ -178,3 +193,23 @@ def target_counts_kernel(targets, rad_per_count, out):  # pragma: no cover - com
     for c in range(len(targets)):
         n = np.int64(np.rint(targets[c] / rad_per_count[c]))
         out[c] = ((n + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+
+@cycle_kernel
+def pack_rpdo1_kernel(fields, counts, position, data):  # pragma: no cover - compiled
+    """``data[c]`` (the bytes of drive ``c``'s RPDO1) ← its controlword and, in position mode
+    (``position[c]``), its target ``counts`` and torque offset, else its target torque:
+    ``protocol.RPDO1_CSP_STRUCT`` (<Hih) and ``RPDO1_STRUCT`` (<Hh), little-endian, two's
+    complement. Packed here, no Python int is built per value (the values are within their
+    fields: ``controlword_kernel``, ``target_counts_kernel``)."""
+    for c in range(fields.shape[0]):
+        d = data[c]
+        cw, pm = fields[c, 0], fields[c, 1]
+        d[0], d[1] = cw & 0xFF, (cw >> 8) & 0xFF
+        k = 2
+        if position[c]:
+            n = counts[c]
+            for b in range(4):
+                d[k + b] = (n >> (8 * b)) & 0xFF
+            k = 6
+        d[k], d[k + 1] = pm & 0xFF, (pm >> 8) & 0xFF
