@@ -158,11 +158,12 @@ class LineProbe:
         return self.local
 
     def _global(self, frame: Any, event: str, arg: Any) -> Any:
-        if not ours(frame.f_code.co_filename) and frame.f_code.co_filename != __file__:
-            return None
         self.rose_at_call = rose = self._rose() - self.frame_bytes
         if rose > 0 and self.where:  # the calling line's, before the call
             self.sites[self.where] += rose
+        if not ours(frame.f_code.co_filename) and frame.f_code.co_filename != __file__:
+            self._restart(self.where)  # Python code of a library: its blocks are the caller's
+            return None
         self._restart(f"{_short(frame.f_code.co_filename)}:{frame.f_lineno}")
         return self.local
 
