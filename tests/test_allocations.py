@@ -26,6 +26,7 @@ from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model import load_robot
 
 CYCLES = 1000
+SLACK = 2  # blocks a site may gain over CYCLES cycles: free-list reuse, not growth
 # What still takes blocks within a cycle (each given back in it): the kernels that build
 # arrays (the estimator's forward kinematics: np.eye and @; the planar TDA's) keep numba's
 # reference counting, a block per array argument; ruckig's binding returns a new list per
@@ -34,7 +35,14 @@ CYCLES = 1000
 # an int per increment; the ODrive frames are packed through Python ints; the energy TDA's
 # options are rebuilt (dataclasses.replace) while a gripper ramps.
 REMAINING = "the cycle still takes (and gives back) blocks: see the comment at the top"
-RAMP_GROWS = "while a gripper ramps, blocks of grippers.py's impositions accumulate slowly"
+# Slow growths found by this test, there on main too (blocks in 1000 cycles there): kept as
+# expected failures, strictly, until they go.
+GROWS = {
+    # the gripper planner's impositions, a new options object each cycle (grippers.py _apply)
+    "grippers-energy": "while a gripper ramps, its impositions' blocks accumulate (+73)",
+    # the ints of the velocity feed-forward (odrive/driver.py _pack_position, round(rate))
+    "rowc-odrive": "blocks of the ODrive's feed-forward ints accumulate (+26)",
+}
 
 
 def _sotda(model):
@@ -121,7 +129,9 @@ def measured(request):
             later = tracemalloc.take_snapshot().filter_traces(_filters())
             state = cl.controller.data.state
             assert state in (State.MOVING, State.ENABLED), cl.controller.data.fault_reason
-            kept = [s for s in later.compare_to(first, "lineno") if s.size_diff > 0]
+            # a block or two may move between sites as the free lists are reused (a float
+            # held by an attribute keeps the site of its first allocation): more is growth
+            kept = [s for s in later.compare_to(first, "lineno") if s.count_diff > SLACK]
             found = peak.any() or kept
             sites = _temporaries(cl, window) if found else ""
             return name, Measured(grew, peak, held, kept, sites)
@@ -141,10 +151,8 @@ def test_the_control_cycle_keeps_nothing(measured, request):
     """Nothing accumulates: no site of cdprctl/ or drivers/ (anywhere in the allocation's
     stack) holds more after 2000 cycles than after 1000, the collector run before each count."""
     name, m = measured
-    if name == "grippers-energy":
-        # as on main (+73 blocks in 1000 cycles there): the gripper planner's impositions,
-        # a new options object each cycle (grippers.py _apply, dataclasses.replace)
-        request.applymarker(pytest.mark.xfail(strict=True, reason=RAMP_GROWS))
+    if name in GROWS:  # as on main, where they were found
+        request.applymarker(pytest.mark.xfail(strict=True, reason=GROWS[name]))
     assert not m.kept, _why(name, m)
 
 
@@ -159,10 +167,15 @@ def _filters() -> list[tracemalloc.Filter]:
 
 
 def test_a_planted_temporary_is_caught():
-    """The probe is not blind: a list built in the cycle (the update's step wrapped) shows
-    in the peak, and a list kept per cycle in the bytes held and in the snapshot's lines."""
+    """The probe is not blind: a temporary built in the cycle (the update wrapped; larger
+    than what the cycle takes today, so that it shows above it) raises the peak, and a list
+    kept per cycle shows in the bytes held and in the snapshot, at its line."""
     with _moving("rowc") as cl:
         update, kept = cl.controller.update, []
+
+        def temporary(t, st):
+            update(t, st)
+            return [0.0] * 2000  # 16 kB, dropped at once
 
         def leaky(t, st):
             update(t, st)
@@ -171,15 +184,15 @@ def test_a_planted_temporary_is_caught():
         tracemalloc.start(25)
         try:
             window = Window(cl)
-            window.run(20)
-            cl.controller.update = lambda t, st: update(t, st) or st.position.tolist()
+            _, before = window.run(20)
+            cl.controller.update = temporary
             _, peak = window.run(20)
-            assert (peak > 0).all()
+            assert (peak > before.max() + 10_000).all()
             cl.controller.update = leaky
             first = tracemalloc.take_snapshot()
             grew, _ = window.run(20)
             later = tracemalloc.take_snapshot()
-            assert (grew > 0).all()
+            assert grew.sum() > 20 * 100
             top = later.compare_to(first, "lineno")[0]
             assert top.count_diff >= 20 and top.traceback[0].filename == __file__
         finally:
