@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import FloatArray
 
 UP = np.array([0.0, 0.0, 1.0])  # k̂: the vertical (base frame); gravity along −k̂
@@ -151,7 +152,7 @@ def _turn(R, v, i, out):  # pragma: no cover - compiled
         out[a] = R[a, 0] * v[i, 0] + R[a, 1] * v[i, 1] + R[a, 2] * v[i, 2]
 
 
-@njit(cache=True)
+@cycle_kernel
 def _jaw_loads_kernel(
     p_b, L1_b, k_b, mass, g, R, acc, vel, w, par, p, L1, k, f
 ):  # pragma: no cover - compiled

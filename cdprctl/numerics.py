@@ -19,6 +19,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+#: A kernel the control loop calls from Python, which allocates nothing itself: compiled
+#: without numba's reference counting, so that its array arguments are passed as they are —
+#: with it, each one took a block from the allocator at every call (issue 64). A kernel that
+#: builds an array (``np.eye``, ``@``) cannot be one: it does not compile so.
+cycle_kernel = njit(cache=True, _nrt=False)  # type: ignore[call-overload]  # not in the stubs
+
 
 def _clamp(v: float, lo: float, hi: float) -> float:
     return min(hi, max(lo, v))
@@ -125,7 +131,28 @@ def stiffness_kernel(lengths, law, out):  # pragma: no cover - compiled
         out[i] = 1.0 / compliance_at(law, i, lengths[i])
 
 
-@njit(cache=True)
+@cycle_kernel
+def total(values):  # pragma: no cover - compiled
+    """The sum, left to right from 0.0: Python 3.11's ``sum(values.tolist())`` of floats
+    without the list and its floats (NaN and inf survive it: a finiteness check)."""
+    s = 0.0
+    for i in range(values.shape[0]):
+        s += values[i]
+    return s
+
+
+@cycle_kernel
+def largest(values):  # pragma: no cover - compiled
+    """``max(values.tolist())`` without the list: the first greatest; a NaN is passed over
+    unless it comes first, as by ``max``."""
+    best = values[0]
+    for i in range(1, values.shape[0]):
+        if values[i] > best:
+            best = values[i]
+    return best
+
+
+@cycle_kernel
 def worst_ratio(values, limits):  # pragma: no cover - compiled
     """The index of the largest ``|values[i]| / limits[i]`` (limits > 0): the element nearest
     or furthest beyond its limit, without the arrays a numpy expression would build."""

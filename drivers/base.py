@@ -24,13 +24,22 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import clamp
+from cdprctl.numerics import clamp, cycle_kernel
 from drivers import blocking
 from drivers.errors import DriverError, DriverOperationError
 from drivers.liveness import PLAUSIBLE_CABLE_SPEED, Liveness
-from drivers.vocabulary import DriverStats, DriveState, Lifecycle, WinchStates
+from drivers.vocabulary import (
+    ACTIVE,
+    ERROR,
+    FINALIZED,
+    INACTIVE,
+    UNCONFIGURED,
+    DriverStats,
+    DriveState,
+    Lifecycle,
+    WinchStates,
+)
 
 _LOG = logging.getLogger("cdprctl.drivers")
 
@@ -69,7 +78,7 @@ class WinchDriver(ABC):
         self.clock = clock
         self.wait = wait if wait is not None else time.sleep
         self.bus_overrides = dict(bus_overrides or {})
-        self.lifecycle = Lifecycle.UNCONFIGURED
+        self.lifecycle = UNCONFIGURED
         self.error: DriverError | None = None
         self.warnings: list[str] = []
         self.states = WinchStates(self.m)
@@ -104,7 +113,7 @@ class WinchDriver(ABC):
         from drivers.busload import check_bus_load
         from drivers.errors import DriverConfigurationError
 
-        self._require(Lifecycle.UNCONFIGURED)
+        self._require(UNCONFIGURED)
         self._warm_up()
         self.warnings, errors = check_bus_load(self.config, 1.0 / self.period)
         for w in self.warnings:
@@ -117,7 +126,7 @@ class WinchDriver(ABC):
         except DriverError:
             self._close()
             raise
-        self.lifecycle = Lifecycle.INACTIVE
+        self.lifecycle = INACTIVE
 
     def activate(self, timeout: float = 2.0) -> None:
         """Enable every drive (zero torque, targets where the motors stand) → ``ACTIVE``;
@@ -140,7 +149,7 @@ class WinchDriver(ABC):
         reports enabled. Torques written meanwhile are passed on (a drive applies them from
         the moment it is enabled: send the holding torques, so releasing the brake is not a
         fall)."""
-        self._require(Lifecycle.INACTIVE)
+        self._require(INACTIVE)
         self._activating = True
         self.targets[:] = self.states.position  # held where they stand until targets come
         self._request_enable(True)
@@ -149,20 +158,20 @@ class WinchDriver(ABC):
         """Disable the drives (brakes hold) → ``INACTIVE`` at once; zero torque from now on."""
         self._activating = False
         self._request_enable(False)
-        if self.lifecycle is Lifecycle.ACTIVE:
-            self.lifecycle = Lifecycle.INACTIVE
+        if self.lifecycle is ACTIVE:
+            self.lifecycle = INACTIVE
 
     def begin_recover(self, settle: float = 0.5) -> None:
         """From ``ERROR``: fault reset, drives disabled; faults still latched during ``settle``
         seconds are ignored; back in ``INACTIVE`` at once (``ERROR`` again if they persist)."""
-        if self.lifecycle is not Lifecycle.ERROR:
+        if self.lifecycle is not ERROR:
             return
         self.error = None
         self._activating = False
         self._request_enable(False)
         self._fault_reset()
         self._recover_until = self.clock() + settle
-        self.lifecycle = Lifecycle.INACTIVE
+        self.lifecycle = INACTIVE
 
     @property
     def activating(self) -> bool:
@@ -180,13 +189,13 @@ class WinchDriver(ABC):
 
     def shutdown(self) -> None:
         """Disable the drives if possible and close the buses; safe to call twice."""
-        if self.lifecycle is Lifecycle.FINALIZED:
+        if self.lifecycle is FINALIZED:
             return
-        if self.lifecycle in (Lifecycle.ACTIVE, Lifecycle.ERROR):
+        if self.lifecycle in (ACTIVE, ERROR):
             with contextlib.suppress(Exception):
                 self.deactivate(timeout=0.2)
         self._close()
-        self.lifecycle = Lifecycle.FINALIZED
+        self.lifecycle = FINALIZED
 
     def __enter__(self) -> WinchDriver:
         return self
@@ -197,7 +206,7 @@ class WinchDriver(ABC):
     # -- the cyclic path (never raises) ------------------------------------------------------
     def read(self, t: float | None = None) -> WinchStates:
         """Drain the feedback received so far; SI states, ages, faults. Never raises."""
-        if self.lifecycle in (Lifecycle.UNCONFIGURED, Lifecycle.FINALIZED):
+        if self.lifecycle in (UNCONFIGURED, FINALIZED):
             return self.states
         now = self.clock() if t is None else t
         self.states.stamp = now
@@ -211,11 +220,11 @@ class WinchDriver(ABC):
             self._fail(err)
         elif (
             self._activating
-            and self.lifecycle is Lifecycle.INACTIVE
+            and self.lifecycle is INACTIVE
             and bool(np.all(self.states.state == DriveState.ENABLED))
         ):
             self._activating = False
-            self.lifecycle = Lifecycle.ACTIVE
+            self.lifecycle = ACTIVE
         return self.states
 
     def write(
@@ -230,7 +239,7 @@ class WinchDriver(ABC):
         the drives being disabled). In position mode also each winch's position ``targets``
         (rad; a non-finite one keeps the last valid target, none keeps them all): the
         torques are their feed-forward. Never raises."""
-        if self.lifecycle in (Lifecycle.UNCONFIGURED, Lifecycle.FINALIZED):
+        if self.lifecycle in (UNCONFIGURED, FINALIZED):
             return
         now = self.clock() if t is None else t
         cmd = self._command
@@ -240,12 +249,12 @@ class WinchDriver(ABC):
         rejected, clamped = clamp_kernel(torques, self._last_command, self.torque_limit, cmd)
         self.stats.rejected_commands += rejected
         self.stats.clamped_commands += clamped
-        if self.lifecycle is not Lifecycle.ACTIVE and not force and not self._activating:
+        if self.lifecycle is not ACTIVE and not force and not self._activating:
             cmd[:] = 0.0
-        self._last_command[:] = cmd
+        np.copyto(self._last_command, cmd)  # no view built, as a slice would
         if targets is not None and targets.shape == self.targets.shape:
             finite_into(targets, self.targets)
-        elif self.lifecycle is not Lifecycle.ACTIVE and not self._activating:
+        elif self.lifecycle is not ACTIVE and not self._activating:
             # the drives are off: the targets follow the motors, so that an enable without
             # targets given holds each motor where it stands instead of driving it to zero
             self.targets[:] = self.states.position
@@ -263,8 +272,8 @@ class WinchDriver(ABC):
         self._activating = False
         if self.error is None:
             self.error = err
-        if self.lifecycle in (Lifecycle.INACTIVE, Lifecycle.ACTIVE):
-            self.lifecycle = Lifecycle.ERROR
+        if self.lifecycle in (INACTIVE, ACTIVE):
+            self.lifecycle = ERROR
             self._request_enable(False)
 
     def _require(self, state: Lifecycle) -> None:
@@ -279,7 +288,7 @@ class WinchDriver(ABC):
         liveness (compiled, once per cycle); when one is wrong, the first error in cable order,
         a cable's drive fault before its timeout."""
         lv = self.liveness
-        lv.fresh[:] = False
+        lv.fresh.fill(False)
         self._drain(t)
         gap = lv.read_gap(t)
         fault = self._update_states()
@@ -375,7 +384,7 @@ class WinchDriver(ABC):
         write of the set-up's own cycling, not of the control loop."""
 
 
-@njit(cache=True)
+@cycle_kernel
 def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
     """``out`` ← ``torques`` (N·m) within ±``limit``, a non-finite one replaced by ``last``
     (the last valid command); returns the counts of replaced and clamped commands."""
@@ -392,7 +401,7 @@ def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
     return rejected, clamped
 
 
-@njit(cache=True)
+@cycle_kernel
 def finite_into(values, out):  # pragma: no cover - compiled
     """``out[i]`` ← ``values[i]`` where it is finite; the others keep their last value."""
     for i in range(len(out)):

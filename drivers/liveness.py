@@ -11,9 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import plausible_step_py
+from cdprctl.numerics import cycle_kernel, plausible_step_py
 from drivers.errors import DriverError, DriverTimeoutError
 from drivers.vocabulary import DriverStats, WinchStates
 
@@ -120,7 +119,7 @@ class Liveness:
         return None
 
 
-@njit(cache=True)
+@cycle_kernel
 def liveness_kernel(
     fresh, fb_stamp, missed, silent, last_hb, t, gap, started, fb_timeout, hb_timeout, age,
     sampled,

@@ -19,6 +19,13 @@ class Lifecycle(enum.Enum):
     FINALIZED = "finalized"
 
 
+# Each lifecycle state bound to a name once: on Python 3.11 reading ``Lifecycle.X`` goes
+# through ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped
+# it): the control cycle reads these (tests/test_allocations.py).
+UNCONFIGURED, INACTIVE, ACTIVE = Lifecycle.UNCONFIGURED, Lifecycle.INACTIVE, Lifecycle.ACTIVE
+ERROR, FINALIZED = Lifecycle.ERROR, Lifecycle.FINALIZED
+
+
 class DriveState(enum.IntEnum):
     """Protocol-independent drive state."""
 

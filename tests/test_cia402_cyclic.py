@@ -238,3 +238,38 @@ def test_a_tpdo_is_stamped_at_the_sync_it_answers():
     assert cyclic.sync_instant(0, 0, np.zeros(8), 0, np.zeros(1, dtype=np.int64), 4,
                                np.zeros((1, 3), dtype=np.int64), np.zeros(1), np.zeros(1),
                                -1.0) == -1.0  # before the first SYNC: the fallback  # fmt: skip
+
+
+def test_the_rpdo1_kernel_packs_as_struct_does():
+    """``pack_rpdo1_kernel`` writes each RPDO1 in place as ``RPDO1_CSP_STRUCT`` (position
+    mode) or ``RPDO1_STRUCT`` (torque mode) packs it: the fields' extremes, signs, random."""
+    rng = np.random.default_rng(1)
+    position = np.array([True, False, True, False])
+    frames = [bytearray(8 if s else 4) for s in position]
+    views = tuple(np.frombuffer(b, dtype=np.uint8) for b in frames)
+    extremes = [(0xFFFF, -32767, -(2**31)), (0, 32767, 2**31 - 1), (0x80, -1, -1)]
+    draws = [
+        (int(rng.integers(0, 0x10000)), int(rng.integers(-32767, 32768)),
+         int(rng.integers(-(2**31), 2**31)))
+        for _ in range(200)
+    ]  # fmt: skip
+    for cw, pm, n in extremes + draws:
+        fields = np.array([[cw, pm]] * 4, dtype=np.int64)
+        cyclic.pack_rpdo1_kernel(fields, np.full(4, n, dtype=np.int64), position, views)
+        assert bytes(frames[0]) == p.RPDO1_CSP_STRUCT.pack(cw, n, pm)
+        assert bytes(frames[1]) == p.RPDO1_STRUCT.pack(cw, pm)
+
+
+def test_the_tpdo1_decoding_kernel_unpacks_as_struct_does():
+    """``decode_tpdo1_kernel`` reads TPDO1 bytes as ``TPDO1_STRUCT`` unpacks them: the
+    fields' extremes, signs, random bytes; only the first ``n`` rows written."""
+    rng = np.random.default_rng(2)
+    raw = rng.integers(0, 256, size=(40, 8), dtype=np.uint8)
+    raw[0] = [0xFF, 0xFF, 0x00, 0x80, 0x00, 0x00, 0x00, 0x80]  # 0xFFFF, -32768, -2**31
+    raw[1] = [0x00, 0x00, 0xFF, 0x7F, 0xFF, 0xFF, 0xFF, 0x7F]  # 0, 32767, 2**31 - 1
+    cables = np.arange(40, dtype=np.int64) % 8
+    frames = np.full((40, 4), -7, dtype=np.int64)
+    cyclic.decode_tpdo1_kernel(39, raw, cables, frames)
+    for i in range(39):
+        assert frames[i].tolist() == [int(cables[i]), *p.TPDO1_STRUCT.unpack(raw[i].tobytes())]
+    assert frames[39].tolist() == [-7] * 4

@@ -1,13 +1,16 @@
 """The scalar rules of ``cdprctl/numerics.py`` at the unit level, compiled and plain, against
 numbers worked by hand and numpy: a motor step's plausibility at its bound, each term of the
 cable law, a cable's terms from its file's fields, the unstretched length the law inverts, the
-stiffness per cable, and the worst element against its limit (mutation testing found these
-held only through the closed loops, or not at all: tools/mutation_results.json)."""
+stiffness per cable, the worst element against its limit, the sum and the largest (mutation
+testing found these held only through the closed loops, or not at all:
+tools/mutation_results.json)."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import operator
 from types import SimpleNamespace
 
 import numpy as np
@@ -23,9 +26,11 @@ from cdprctl.numerics import (
     compliance_terms,
     forward_substitution,
     kernel_args,
+    largest,
     plausible_step,
     plausible_step_py,
     stiffness_kernel,
+    total,
     unstretched_lengths,
     worst_ratio,
 )
@@ -128,3 +133,19 @@ def test_the_worst_element_against_its_limit_is_numpys_first_argmax():
     assert worst_ratio(np.array([0.2, -0.5, 1.0, 0.1]), limits) == 1  # all < 1 of their limit
     assert worst_ratio(np.array([1.0, -0.5, 2.0, 0.5]), limits) == 0  # tied at 0.5: the first
     assert worst_ratio(np.array([0.0, 0.0, 0.0, -0.3]), limits) == 3
+
+
+def test_the_sum_and_the_largest_are_pythons_of_the_list():
+    """``total`` and ``largest`` replace ``sum`` and ``max`` of ``tolist()`` in the cycle:
+    the same floats, bit for bit (left to right from 0, as ``sum`` up to Python 3.11), the
+    first greatest, a NaN passed over unless first, and inf or NaN surviving the sum."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        v = rng.normal(size=int(rng.integers(1, 12))) * 10.0 ** rng.integers(-3, 4)
+        assert total(v) == functools.reduce(operator.add, v.tolist(), 0.0)
+        assert largest(v) == max(v.tolist())
+    assert total(np.array([1e16, 1.0, -1e16])) == 0.0  # not compensated: as 3.11's sum
+    assert largest(np.array([1.0, 3.0, 2.0])) == 3.0
+    assert largest(np.array([1.0, math.nan, 0.5])) == 1.0
+    assert math.isnan(largest(np.array([math.nan, 2.0])))
+    assert math.isinf(total(np.array([1.0, math.inf]))) and math.isnan(total(np.array([math.nan])))

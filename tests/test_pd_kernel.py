@@ -58,6 +58,7 @@ def test_kernel_matches_the_numpy_law(seed):
         ext,
         np.zeros((3, 3)),
         np.zeros((3, 3)),
+        np.zeros(15),
         err,
         wrench,
         feedback,

@@ -7,13 +7,11 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
-
 from cdprctl.control.torques import applied_tension
-from cdprctl.numerics import compliance_at
+from cdprctl.numerics import compliance_at, cycle_kernel
 
 
-@njit(cache=True)
+@cycle_kernel
 def motor_target_kernel(
     length, tensions, law, l_zero, drum_ratio, give, out
 ):  # pragma: no cover - compiled
@@ -27,7 +25,7 @@ def motor_target_kernel(
         out[i] = (l_zero[i] - l0 - give[i]) / drum_ratio[i]
 
 
-@njit(cache=True)
+@cycle_kernel
 def after_stall_kernel(
     target, sent, drive_rate, dev, dev_rate, dt, period, reach, late, tau
 ):  # pragma: no cover - compiled
@@ -55,7 +53,7 @@ def after_stall_kernel(
         target[i] = out
 
 
-@njit(cache=True)
+@cycle_kernel
 def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
     """``give`` (m) per cable ← ``decay · give + (1 − decay) · error / k``: the cable paid out
     by the leaky integral of its tension ``error`` (N) over its stiffness ``k`` (N/m), gain =
@@ -67,7 +65,7 @@ def force_feedback_kernel(error, k, decay, give):  # pragma: no cover - compiled
         give[i] = decay * give[i] + (1.0 - decay) * error[i] / k[i]
 
 
-@njit(cache=True)
+@cycle_kernel
 def tension_hold_kernel(
     error, k, gain_dt, step_max, tension, slack, give
 ):  # pragma: no cover - compiled
@@ -81,7 +79,7 @@ def tension_hold_kernel(
             give[i] += max(gain_dt * error[i] / k[i], -step_max)
 
 
-@njit(cache=True)
+@cycle_kernel
 def measured_tension_kernel(
     torque, velocity, sampled, winches, commanded, f_slow, f_fast, state, out, error
 ):  # pragma: no cover - compiled  # fmt: skip
@@ -121,7 +119,7 @@ def measured_tension_kernel(
         error[i] = out[i] - commanded_f[i]
 
 
-@njit(cache=True)
+@cycle_kernel
 def internal_part_kernel(N, error, out, leverage):  # pragma: no cover - compiled
     """``out`` ← ``N Nᵀ error``: the part of the tension ``error`` (N) in the null space of W
     (``N`` an orthonormal basis, m × r): tensions the cables pull against each other with,
@@ -141,7 +139,7 @@ def internal_part_kernel(N, error, out, leverage):  # pragma: no cover - compile
             out[i] += N[i, j] * s
 
 
-@njit(cache=True)
+@cycle_kernel
 def disturbance_kernel(W, error, gain_dt, w_hat):  # pragma: no cover - compiled
     """``w_hat`` (6,) ← ``w_hat − gain_dt · W error``: the external wrench (N, N·m at P, base
     frame) as the integral of what the cables exert beyond what was commanded (``W error``:

@@ -217,8 +217,8 @@ class CableSpace:
             self._settle_time += d.dt
         x = self._settle_time / self.ENABLE_SETTLE
         if x >= 1.0:  # settled: the targets as they are, the commanded tensions expected
-            self.settle[:] = 0.0
-            self.expected[:] = d.tensions
+            self.settle.fill(0.0)  # fill, copyto: no view built, as a slice would
+            np.copyto(self.expected, d.tensions)
             return
         np.multiply(self._settle0, 1.0 - x * x * (3.0 - 2.0 * x), out=self.settle)
         # paid out like the force feedback's give: the motor angle less settle / (r/G)

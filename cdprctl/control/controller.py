@@ -29,7 +29,15 @@ from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.path_follower import PathFollower
 from cdprctl.control.reference_pose import ReferencePose, WorkingPose
-from cdprctl.control.states import ACTIVE_STATES, HEALTHY_STATES, FaultKind, State
+from cdprctl.control.states import (
+    ACTIVE_STATES,
+    DISABLING,
+    ENABLED,
+    HEALTHY_STATES,
+    MOVING,
+    STOPPING,
+    FaultKind,
+)
 from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
 from cdprctl.control.wrench import PoseController
@@ -42,7 +50,7 @@ from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.vocabulary import WinchStates
 
 # the states in which the external wrench is observed (the drives apply what is computed)
-OBSERVED_STATES = frozenset({State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING})
+OBSERVED_STATES = (ENABLED, MOVING, DISABLING, STOPPING)  # a tuple: states.py says why
 
 
 class Controller:
@@ -96,7 +104,9 @@ class Controller:
         # y direction turned its 0.2 mm of stretch into 6 mm of estimate (lock-step, measured).
         self._ff_wrench = np.zeros(6)
         self.stretch_every = max(1, round(self.STRETCH_PERIOD / self.period))
-        self._clock_ns = time.perf_counter_ns
+        # s as a float: the ns counter's ints are past the small ones Python keeps, a block
+        # each (the cycle allocates nothing: tests/test_allocations.py)
+        self._clock = time.perf_counter
         self._last_t = -math.inf  # s, the last cycle's time
         # s: position mode, the most the reference moves on across a stall of the loop
         self._extrapolation = model.drives.target_extrapolation
@@ -119,7 +129,7 @@ class Controller:
     def update(self, t: float, st: WinchStates) -> None:
         """One cycle at time ``t`` (s) from the drives' feedback ``st``: every output into
         ``data`` (phases 1-5 of ``PHASES`` timed)."""
-        clock, d = self._clock_ns, self.data
+        clock, d = self._clock, self.data
         ph = d.phase_us
         t1 = clock()
         # the real elapsed time: after a late or missed period the integral, the trajectory,
@@ -130,23 +140,23 @@ class Controller:
         d.time = t
         d.cycle += 1
         if not self.grippers.n:  # the known external wrench, whoever set it, from now on
-            d.ext_total[:] = self.ext_wrench
-        d.motor_position[:] = st.position
+            np.copyto(d.ext_total, self.ext_wrench)  # copyto: a slice would build a view
+        np.copyto(d.motor_position, st.position)
         self.desk.handle(t)
         cs = self.cable_space
         if cs.enabled and d.state in OBSERVED_STATES:
             # the drives hold the lengths stretched by the commanded tensions (no pose feedback
             # in position mode, so no algebraic loop): the same tensions for the estimate
-            d.stretch_tensions[:] = d.tensions
+            np.copyto(d.stretch_tensions, d.tensions)
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
             cs.estimate_disturbance(
                 self.at.kin.W,
-                d.state is not State.STOPPING
+                d.state is not STOPPING
                 and d.saturation >= 1.0
                 and self.distribution.bad_cycles == 0,
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
-            cs.force_feedback(stopping=d.state is State.STOPPING)
+            cs.force_feedback(stopping=d.state is STOPPING)
         elif d.cycle % self.stretch_every == 0:
             self.refresh_stretch_tensions()
         e = self.estimator
@@ -156,7 +166,7 @@ class Controller:
         if self.grippers.n:
             self.grippers.update(st, sense=True)  # ext_total: + the jaws' weight
         t2 = clock()
-        ph[1] = (t2 - t1) / 1e3
+        ph[1] = (t2 - t1) * 1e6
         last = e.last_fk
         self.jog.update(t)
         self.path.update(t)
@@ -164,7 +174,7 @@ class Controller:
             t,
             fk.status,
             last.residual if last is not None else 0.0,
-            math.hypot(*e.velocity.tolist()),
+            math.hypot(e.velocity.item(0), e.velocity.item(1), e.velocity.item(2)),
             self.trajectory.finished and not self.path.holds_motion,
         )
         if d.motion and self.trajectory.finished and not self.path.holds_motion:
@@ -173,25 +183,25 @@ class Controller:
         if cs.enabled:
             self.reference.update(e)
         t3 = clock()
-        ph[2] = (t3 - t2) / 1e3
+        ph[2] = (t3 - t2) * 1e6
         active = d.state in ACTIVE_STATES
         if active:
             # anti-windup: the integral holds while the feedback is saturated
             self.pose.update(d.state in HEALTHY_STATES and d.saturation >= 1.0)
         t4 = clock()
-        ph[3] = (t4 - t3) / 1e3
+        ph[3] = (t4 - t3) * 1e6
         if active:
             out = self.distribution.distribute()
             self.supervisor.distribution(t, self.distribution.bad_cycles, out)
         t5 = clock()
-        ph[4] = (t5 - t4) / 1e3
+        ph[4] = (t5 - t4) * 1e6
         self.winches.update(
             d.tensions, self.at.kin.WT, self.trajectory.acceleration, st.velocity, active,
             d.torques,
         )  # fmt: skip
         if cs.enabled:
             cs.targets(active, st.position)
-        ph[5] = (clock() - t5) / 1e3
+        ph[5] = (clock() - t5) * 1e6
 
     def _reference_step(self, gap: float) -> float:
         """s the reference moves on this cycle, ``gap`` s after the last. Position mode: as

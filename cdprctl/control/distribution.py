@@ -30,13 +30,14 @@ from cdprctl.tda import (
     TensionDistributor,
 )
 from cdprctl.tda.planar import feasible_scale_kernel
+from cdprctl.tda.types import ENERGY, IMPOSITION_INFEASIBLE, INFEASIBLE, OK
 
 BANKS = 2
 
 
 def usable(status: TDAStatus) -> bool:
     """Tensions the loop may command: feasible, or feasible with an imposition saturated."""
-    return status is TDAStatus.OK or status is TDAStatus.IMPOSITION_INFEASIBLE
+    return status is OK or status is IMPOSITION_INFEASIBLE
 
 
 class Distribution:
@@ -125,10 +126,10 @@ class Distribution:
         for the loop's and the stretch estimate's distribution alike (a tension planner calls
         it every cycle; values are the caller's to keep feasible and to ramp)."""
         base = self.current.options
-        opts = dataclasses.replace(base, method=TDAMethod.ENERGY, impositions=impositions)
-        if base.method is not TDAMethod.ENERGY:  # once: the energy TDA's set-up
-            self.current, self.static = self._pool[self._bank][TDAMethod.ENERGY]
-            self.data.tda_method = TDAMethod.ENERGY.value
+        opts = dataclasses.replace(base, method=ENERGY, impositions=impositions)
+        if base.method is not ENERGY:  # once: the energy TDA's set-up
+            self.current, self.static = self._pool[self._bank][ENERGY]
+            self.data.tda_method = ENERGY.value
         self.current.options = opts
         self.static.options = opts
 
@@ -154,7 +155,7 @@ class Distribution:
 
     def total(self, spring: FloatArray, out: FloatArray) -> None:
         """Cable tensions (N) into ``out`` from the springs' ``spring``: ``τ = τ_A + τ_B``."""
-        out[:] = spring
+        np.copyto(out, spring)  # no view built, as a slice would
         if self.grippers.n:
             out[self.grippers.cables] += self.data.jb_load
 
@@ -194,7 +195,7 @@ class Distribution:
         t_prev = None if blending else d.tensions
         out = self.solve(self.current, d.wrench, t_prev)
         d.saturation = 1.0
-        if out.status is TDAStatus.INFEASIBLE:
+        if out.status is INFEASIBLE:
             saturated = self._saturate(t_prev)
             if saturated is not None:
                 out = saturated
@@ -202,7 +203,7 @@ class Distribution:
         if usable(out.status):
             self.total(out.tensions, d.tensions)
             self.blend(self.old, d.wrench, None, d.tensions)
-            d.hold_tensions[:] = d.tensions
+            np.copyto(d.hold_tensions, d.tensions)
             self.bad_cycles = 0
         else:
             d.tensions[:] = d.hold_tensions

@@ -131,12 +131,16 @@ class Estimator:
             self._state,
         )
         res = self._result
-        res.residual, res.iterations = float(self._info[0]), int(self._info[1])
-        res.status = FKStatus(int(self._info[2]))
+        # plain floats and a table: a numpy scalar and the enum's call each built objects
+        info = self._info
+        res.residual, res.iterations = info.item(0), int(info.item(1))
+        res.status = _FK_STATUS[int(info.item(2))]
         self.last_fk = res
         return res
 
 
+# each FKStatus by its code: the kernel's code read without calling the enum
+_FK_STATUS = tuple(sorted(FKStatus))
 # FKStatus codes for the compiled kernel
 CONVERGED, MAX_ITERATIONS, INCONSISTENT = (
     int(FKStatus.CONVERGED),

@@ -28,19 +28,19 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.pd_kernel import Platform, PoseEstimate
 from cdprctl.control.torques import WinchTorques, applied_tension
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import kernel_args
+from cdprctl.numerics import cycle_kernel, kernel_args
 
 
 class ObserverState(NamedTuple):
     """The estimate ``w_hat`` (6,), the momentum at the start ``p0`` (6,), the integral of the
-    known and estimated wrenches ``integral`` (6,), and ``scratch`` (m,): the applied tensions."""
+    known and estimated wrenches ``integral`` (6,), and ``scratch`` (m + 15,): the applied
+    tensions, then the kernel's vectors (none built in the loop)."""
 
     w_hat: np.ndarray
     p0: np.ndarray
@@ -48,7 +48,7 @@ class ObserverState(NamedTuple):
     scratch: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def momentum_kernel(mass, inertia, R, v, w, out):  # pragma: no cover - compiled
     """``out`` (6,) ← ``[m v; R I Rᵀ ω]`` (kg·m/s, kg·m²/s; base frame)."""
     for i in range(3):
@@ -63,7 +63,7 @@ def momentum_kernel(mass, inertia, R, v, w, out):  # pragma: no cover - compiled
         out[3 + i] = s
 
 
-@njit(cache=True)
+@cycle_kernel
 def observer_kernel(
     dt, gain, platform, est, W, torque, velocity, accel_term, winches, state
 ):  # pragma: no cover - compiled  # fmt: skip
@@ -72,20 +72,19 @@ def observer_kernel(
     ``accel_term`` (N·m, per winch), the wrench they exert with gravity, the integral, and
     ``w_hat`` from the momentum now. ``platform``: a ``Platform``; ``est``: the estimate, a
     ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``."""
-    w_hat, p0, integral, t_a = state
+    w_hat, p0, integral, scratch = state
     r, viscous, coulomb = winches[0], winches[1], winches[2]
     _, mass, inertia, com, gravity = platform
     R, v, w = est[1], est[2], est[3]
     m = torque.shape[0]
+    t_a, rc, f, p = scratch[:m], scratch[m : m + 3], scratch[m + 3 : m + 9], scratch[m + 9 :]
     for i in range(m):
         t_a[i] = applied_tension(
             torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
         )
     # known forces on the platform: cables and gravity (moment about P: (R c) × m g)
-    rc = np.empty(3)
     for i in range(3):
         rc[i] = R[i, 0] * com[0] + R[i, 1] * com[1] + R[i, 2] * com[2]
-    f = np.empty(6)
     for a in range(3):
         f[a] = mass * gravity[a]
     f[3] = rc[1] * f[2] - rc[2] * f[1]
@@ -96,7 +95,6 @@ def observer_kernel(
         for i in range(m):
             s += W[a, i] * t_a[i]
         integral[a] += s * dt
-    p = np.empty(6)
     momentum_kernel(mass, inertia, R, v, w, p)
     for a in range(6):
         w_hat[a] = gain * (p[a] - p0[a] - integral[a])
@@ -129,7 +127,9 @@ class WrenchObserver:
         self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
         self._rotor_term = winches.rotor_term
         self._accel_term = np.zeros(m)  # N·m: J θ̈_d of the torques' feedforward
-        self._state = kernel_args(ObserverState(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(m)))
+        self._state = kernel_args(
+            ObserverState(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(m + 15))
+        )
         self._last_t = math.nan
 
     def warm_up(self) -> None:
@@ -171,4 +171,4 @@ class WrenchObserver:
             dt, self.gain, self._platform, self._est, e.kin.W, torque, velocity,
             self._accel_term, self._winches, self._state,
         )  # fmt: skip
-        self.data.ext_estimate[:] = self._state[0]
+        np.copyto(self.data.ext_estimate, self._state[0])  # no view built

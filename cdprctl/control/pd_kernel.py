@@ -10,8 +10,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import log_relative_kernel, rotated_kernel
 
 
@@ -55,15 +55,16 @@ class Platform(NamedTuple):
     gravity: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def pd_wrench_kernel(
-    ref, est, pid, integrate, dt, platform, ext_wrench, Rd, E, err, wrench, feedback
+    ref, est, pid, integrate, dt, platform, ext_wrench, Rd, E, S, err, wrench, feedback
 ):  # pragma: no cover - compiled
     """``err`` (6,) ← reference − estimate; ``wrench`` (6,) ← what the cables must exert (N,
     N·m at P, base frame), the known ``ext_wrench`` fed forward; ``feedback`` (6,) ← the part
     of ``wrench`` the PID adds to the feed-forward (``M (kp e + ki ∫e + kd ė)``: what a
     saturation may scale, the rest must be held); the integral grows by ``err dt`` when
-    ``integrate``. ``Rd``, ``E``: (3, 3) scratch."""
+    ``integrate``. ``Rd``, ``E``: (3, 3) scratch; ``S`` (15,): scratch, the vectors (none is
+    built in the loop)."""
     ref_x, ref_v, ref_a = ref
     p, R, v, w = est
     kp, kd, ki, integral, integral_limit = pid
@@ -76,7 +77,7 @@ def pd_wrench_kernel(
         for i in range(6):
             lim = integral_limit[i]
             integral[i] = min(lim, max(-lim, integral[i] + err[i] * dt))
-    acc = np.empty(6)
+    acc, Iwa, Iww, r = S[:6], S[6:9], S[9:12], S[12:15]
     for i in range(3):
         j = 3 + i
         acc[i] = ref_a[i] + kp[i] * err[i] + ki[i] * integral[i] + kd[i] * (ref_v[i] - v[i])
@@ -89,13 +90,10 @@ def pd_wrench_kernel(
                 for m in range(3):
                     s += R[i, k] * inertia[k, m] * R[j, m]
             E[i, j] = s
-    Iwa = np.empty(3)
-    Iww = np.empty(3)
     for i in range(3):
         Iwa[i] = E[i, 0] * acc[3] + E[i, 1] * acc[4] + E[i, 2] * acc[5]
         Iww[i] = E[i, 0] * w[0] + E[i, 1] * w[1] + E[i, 2] * w[2]
     # gravity: f = m g at the COM r = R com; the cables hold −(w_g + w_e)
-    r = np.empty(3)
     for i in range(3):
         r[i] = R[i, 0] * com[0] + R[i, 1] * com[1] + R[i, 2] * com[2]
     f0, f1, f2 = mass * gravity[0], mass * gravity[1], mass * gravity[2]

@@ -37,7 +37,7 @@ from cdprctl.control.pd_kernel import PoseEstimate, Reference
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import Trajectory
-from cdprctl.numerics import kernel_args, stiffness_kernel
+from cdprctl.numerics import cycle_kernel, kernel_args, stiffness_kernel
 from cdprctl.rotation import FloatArray, log_relative_kernel, rotated_kernel
 
 # the working pose's low-pass, below the drives' position loops by this factor (a decade)
@@ -56,7 +56,7 @@ class WorkingPose(Protocol):
     k: FloatArray  # N/m, each cable's stiffness there
 
 
-@njit(cache=True)
+@cycle_kernel
 def reference_pose_kernel(
     ref, R_home, est_p, est_R, alpha, offset, law, ref_kin, kin, pose, k, work
 ):  # pragma: no cover - compiled  # fmt: skip

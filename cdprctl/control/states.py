@@ -18,13 +18,21 @@ class State(enum.Enum):
     ESTOP = "estop"  # the drives' safety chain open (safe torque off): not a fault; estop.py
 
 
+# Each state bound to a name once: on Python 3.11 reading ``State.X`` goes
+# through ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped
+# it): the control cycle reads these (tests/test_allocations.py).
+INIT, READY, ENABLING, ENABLED, MOVING = (
+    State.INIT, State.READY, State.ENABLING, State.ENABLED, State.MOVING
+)  # fmt: skip
+DISABLING, STOPPING, FAULT, ESTOP = State.DISABLING, State.STOPPING, State.FAULT, State.ESTOP
+
+# The sets of states are tuples: ``in`` finds a member by identity, where a frozenset hashed
+# it by Enum's Python ``__hash__`` and built an int each time.
 #: the states in which the controller commands tensions (DISABLING: decelerating to rest)
-ACTIVE_STATES = frozenset(
-    {State.ENABLING, State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING}
-)
+ACTIVE_STATES = (ENABLING, ENABLED, MOVING, DISABLING, STOPPING)
 #: the states in which the pose loop integrates and a TDA switch is blended (the supervisor
 #: also watches DISABLING and STOPPING)
-HEALTHY_STATES = frozenset({State.ENABLED, State.MOVING})
+HEALTHY_STATES = (ENABLED, MOVING)
 
 
 class FaultKind(enum.StrEnum):

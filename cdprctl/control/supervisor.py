@@ -32,13 +32,27 @@ from cdprctl.control.cable_checks import TensionDisagreement
 from cdprctl.control.data import ControlData
 from cdprctl.control.estop import EmergencyStop
 from cdprctl.control.persistence import Persistence
-from cdprctl.control.states import FaultKind, State
+from cdprctl.control.states import (
+    DISABLING,
+    ENABLED,
+    ENABLING,
+    ESTOP,
+    FAULT,
+    MOVING,
+    READY,
+    STOPPING,
+    FaultKind,
+    State,
+)
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.safety import SafetyConfig
-from cdprctl.numerics import worst_ratio
+from cdprctl.numerics import largest, worst_ratio
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
-from drivers.vocabulary import Lifecycle, WinchStates
+from drivers.vocabulary import ACTIVE, ERROR, Lifecycle, WinchStates
+
+# bound once (on 3.11 reading an enum member builds a method wrapper: states.py)
+_FK_FAILED = (FKStatus.DEGENERATE, FKStatus.BAD_INPUT)
 
 
 class DrivePort(Protocol):
@@ -151,7 +165,7 @@ class Supervisor:
             return
         if s is not d.state:
             d.events.append((t, f"state {d.state.value} -> {s.value}: {why}"))
-        if s not in (State.ENABLED, State.MOVING, State.DISABLING, State.STOPPING):
+        if s not in (ENABLED, MOVING, DISABLING, STOPPING):
             # unsupervised from here on: what held before must persist anew once enabled (a
             # drive at its limit before a fault tripped the check at the next enable at once)
             for p in self._persistences:
@@ -164,21 +178,21 @@ class Supervisor:
         feasible tensions for ``stop_duration`` (1, then disable; 2, holding on) when the
         drives can, else disable at once (0)."""
         d = self.data
-        if d.state in (State.FAULT, State.STOPPING):
+        if d.state in (FAULT, STOPPING):
             return
         d.fault_reason = reason
         d.fault_kind = kind
         d.events.append((t, f"FAULT: {reason}"))
         d.faults.append((t, kind))
         category = self.stop_of[kind]
-        if category > 0 and self.drives.lifecycle is Lifecycle.ACTIVE:
+        if category > 0 and self.drives.lifecycle is ACTIVE:
             d.stop_category = category
             self._stop_here()
             self._stop_until = t + self.config.stop_duration
-            self.set_state(State.STOPPING, t, f"controlled stop, holding the pose (category "
+            self.set_state(STOPPING, t, f"controlled stop, holding the pose (category "
                            f"{category})")  # fmt: skip
         else:
-            self.off(t, State.FAULT, "drives disabled, brakes closed")
+            self.off(t, FAULT, "drives disabled, brakes closed")
 
     def off(self, t: float, s: State, why: str) -> None:
         """Category 0: the drives disabled at once, the brakes stop and hold the platform."""
@@ -189,7 +203,7 @@ class Supervisor:
     def holding_after_stop(self, t: float) -> bool:
         """A category 2 stop done: holding the pose powered until a reset or disable."""
         d = self.data
-        return d.state is State.STOPPING and d.stop_category == 2 and t >= self._stop_until
+        return d.state is STOPPING and d.stop_category == 2 and t >= self._stop_until
 
     def clear_fault(self) -> None:
         self.data.fault_reason = ""
@@ -205,68 +219,68 @@ class Supervisor:
     ) -> None:
         """One cycle's checks, in order of precedence (``speed``: m/s, estimated)."""
         d, drv = self.data, self.drives
-        if d.state is State.ESTOP:
+        if d.state is ESTOP:
             said = self.estop.watch(t, self.position, speed)
             if said is not None:
                 d.events.append((t, said))
             return
         err = drv.error
-        if drv.lifecycle is Lifecycle.ERROR and isinstance(err, DriveFaultError) and (
+        if drv.lifecycle is ERROR and isinstance(err, DriveFaultError) and (
             isinstance(err, SafeTorqueOffError) or self.estop.refused(t, err)
         ):
             d.events.append((t, self.estop.enter(t, self.position, err)))
             # the drives do not say when the chain closes (they stay in fault until a reset)
             d.fault_reason = "emergency stop: the safety chain opened; reset once it is closed"
             d.fault_kind = None
-            self.off(t, State.ESTOP, "the drives' safety chain is open")
+            self.off(t, ESTOP, "the drives' safety chain is open")
             return
-        if drv.lifecycle is Lifecycle.ERROR and d.state is not State.FAULT:
-            if d.state is State.STOPPING:  # the drives failed during the controlled stop
+        if drv.lifecycle is ERROR and d.state is not FAULT:
+            if d.state is STOPPING:  # the drives failed during the controlled stop
                 d.events.append((t, f"FAULT during the stop: drives: {drv.error}"))
                 d.faults.append((t, FaultKind.DURING_STOP))
-                self.off(t, State.FAULT, "drives disabled, brakes closed")
+                self.off(t, FAULT, "drives disabled, brakes closed")
             else:
                 self.fault(t, driver_fault_kind(drv.error), f"drives: {drv.error}")
             return
-        if d.state is State.ENABLING:
-            if drv.lifecycle is Lifecycle.ACTIVE:
-                self.set_state(State.ENABLED, t, "drives enabled, holding the pose")
+        if d.state is ENABLING:
+            if drv.lifecycle is ACTIVE:
+                self.set_state(ENABLED, t, "drives enabled, holding the pose")
             elif t - self.t_state > self.ENABLE_TIMEOUT:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
                 self.fault(t, FaultKind.ENABLE_TIMEOUT, why)
             return
-        if d.state is State.DISABLING:
+        if d.state is DISABLING:
             at_rest = trajectory_finished and speed < self.AT_REST
             if at_rest or t - self.t_state > self.disable_within:  # else: decelerating
                 drv.begin_deactivate()
                 why = "" if at_rest else f" (not at rest after {self.disable_within:g} s)"
-                self.set_state(State.READY, t, f"drives disabled, brakes closed{why}")
+                self.set_state(READY, t, f"drives disabled, brakes closed{why}")
                 return
         if self.torque_limits is not None and d.state in (
-            State.ENABLED, State.MOVING, State.STOPPING, State.DISABLING
+            ENABLED, MOVING, STOPPING, DISABLING
         ):
             beyond = self._beyond_capacity(t)
             if beyond is not None:
                 self._brake_now(t, beyond)
                 return
-        if d.state is State.STOPPING:
+        if d.state is STOPPING:
             if t < self._stop_until:
                 return
             if d.stop_category != 2:
                 drv.begin_deactivate()
-                self.set_state(State.FAULT, t, "stopped; drives disabled, brakes closed")
+                self.set_state(FAULT, t, "stopped; drives disabled, brakes closed")
                 return
             failure = self._motion_failure(t, fk_status, fk_residual, speed)  # SS2: watched
             if failure is not None:
                 d.events.append((t, f"FAULT during the stop: {failure[1]}"))
                 d.faults.append((t, FaultKind.DURING_STOP))
-                self.off(t, State.FAULT, "drives disabled, brakes closed")
+                self.off(t, FAULT, "drives disabled, brakes closed")
             return
-        if d.state not in (State.ENABLED, State.MOVING, State.DISABLING):
+        if d.state not in (ENABLED, MOVING, DISABLING):
             return
-        if d.state is State.MOVING and trajectory_finished:
+        if d.state is MOVING and trajectory_finished:
             paused = d.path_state == "paused"  # braked onto the path: not its target
-            self.set_state(State.ENABLED, t, "path paused, holding" if paused else "target reached")
+            self.set_state(ENABLED, t, "path paused, holding" if paused else "target reached")
         failure = self._motion_failure(t, fk_status, fk_residual, speed)
         if failure is not None:
             self.fault(t, failure[0], failure[1])
@@ -276,12 +290,12 @@ class Supervisor:
     ) -> tuple[FaultKind, str] | None:
         """The first check that fails while holding or moving, in order of precedence."""
         c = self.config
-        # plain floats: five numpy reductions here cost ~15 µs a cycle
-        age = max(self.drives.states.feedback_age.tolist())
-        pe = self.data.pose_error.tolist()
-        position_error = math.hypot(pe[0], pe[1], pe[2])
-        angle_error = math.hypot(pe[3], pe[4], pe[5])
-        if fk_status in (FKStatus.DEGENERATE, FKStatus.BAD_INPUT):
+        # plain floats: five numpy reductions here cost ~15 µs a cycle; no list either
+        age = largest(self.drives.states.feedback_age)
+        pe = self.data.pose_error
+        position_error = math.hypot(pe.item(0), pe.item(1), pe.item(2))
+        angle_error = math.hypot(pe.item(3), pe.item(4), pe.item(5))
+        if fk_status in _FK_FAILED:
             return FaultKind.FORWARD_KINEMATICS, f"forward kinematics {fk_status.name}"
         if fk_residual > c.max_fk_residual:
             return FaultKind.ENCODERS_DISAGREE, (
@@ -331,10 +345,10 @@ class Supervisor:
     def _brake_now(self, t: float, reason: str) -> None:
         """Disable at once (the brakes hold more than the motors), also during a stop."""
         d = self.data
-        if d.state is State.STOPPING:
+        if d.state is STOPPING:
             d.events.append((t, f"FAULT during the stop: {reason}"))
             d.faults.append((t, FaultKind.BEYOND_CAPACITY))
-            self.off(t, State.FAULT, "drives disabled, brakes closed")
+            self.off(t, FAULT, "drives disabled, brakes closed")
         else:
             self.fault(t, FaultKind.BEYOND_CAPACITY, reason)
 
@@ -359,7 +373,7 @@ class Supervisor:
             d.saturated_cycles += 1
         else:
             d.saturated_for = max(0.0, d.saturated_for - self.SATURATION_LEAK * d.dt)
-        if d.state is State.STOPPING:
+        if d.state is STOPPING:
             return
         if bad_cycles >= self.BAD_CYCLES:
             self.fault(t, FaultKind.TENSION_DISTRIBUTION, f"tension distribution "

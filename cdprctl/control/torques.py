@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import clamp, kernel_args
+from cdprctl.numerics import clamp, cycle_kernel, kernel_args
 from cdprctl.rotation import FloatArray
 
 #: rad/s: the Coulomb friction model's ``tanh(θ̇/ω_ε)`` smoothing of the sign
@@ -41,7 +41,7 @@ def friction_kernel(viscous, coulomb, velocity, cables, out):  # pragma: no cove
         out[j] = friction_torque(viscous[i], coulomb[i], velocity[i])
 
 
-@njit(cache=True)
+@cycle_kernel
 def winch_torque_kernel(
     tensions, winches, WT, acceleration, velocity, friction, out
 ):  # pragma: no cover - compiled

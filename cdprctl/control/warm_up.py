@@ -22,7 +22,7 @@ from cdprctl.control.cable_kernels import (
     tension_hold_kernel,
 )
 from cdprctl.control.estimator import Estimator
-from cdprctl.numerics import worst_ratio
+from cdprctl.numerics import largest, worst_ratio
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.planar import feasible_scale_kernel
@@ -104,6 +104,7 @@ def warm_up(controller: Controller) -> None:
     force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
     tension_hold_kernel(zeros, np.ones(m), 0.5, 0.0, zeros, zeros, np.zeros(m))
     worst_ratio(zeros, np.ones(m))  # the supervisor's position-mode checks
+    largest(zeros)  # the supervisor's feedback age
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
     d.wrench[:] = 0.0

@@ -55,6 +55,7 @@ class PoseController:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._Rd = np.zeros((3, 3))
         self._E = np.zeros((3, 3))
+        self._S = np.zeros(15)  # the kernel's vectors
         # the pose the feed-forward is computed at and the feedback closed on (position mode:
         # the reference, reference_pose.py says why; the feedback is off there)
         tr, e = trajectory, at
@@ -87,6 +88,7 @@ class PoseController:
             d.ext_total,
             self._Rd,
             self._E,
+            self._S,
             d.pose_error,
             d.wrench,
             d.feedback_wrench,

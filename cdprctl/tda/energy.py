@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import quadprog  # at import: an import statement in a solve looked the module up each time
 
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.polygon import feasible_polygon, min_quadratic
@@ -147,8 +148,6 @@ def minimum_energy(
 def _qp_min_energy(
     B: FloatArray, alpha: FloatArray, inv_k: FloatArray, t_lo: FloatArray, t_hi: FloatArray
 ) -> FloatArray | None:
-    import quadprog
-
     H = (B.T * inv_k) @ B
     g = (B.T * inv_k) @ alpha
     C = np.hstack([B.T, -B.T])

@@ -9,12 +9,19 @@ import math
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numba import njit
 
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.energy import cable_energies, impose, minimum_energy
 from cdprctl.tda.nullspace import NullSpace
-from cdprctl.tda.types import TDAOptions, TDAOutput, TDAStatus
+from cdprctl.tda.types import (
+    DEGENERATE,
+    IMPOSITION_INFEASIBLE,
+    OK,
+    TDAOptions,
+    TDAOutput,
+    TDAStatus,
+)
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
@@ -40,7 +47,7 @@ class EnergyMethod:
         out, ns, opt = self.out, self.ns, self.options
         if k is None:
             out.message = "energy needs the cable stiffness k"
-            return TDAStatus.DEGENERATE
+            return DEGENERATE
         cables = [imp.cable for imp in opt.impositions]
         targets = [imp.tension(float(k[imp.cable])) for imp in opt.impositions]
         if self.r == 2 and len(cables) == 1:
@@ -53,7 +60,7 @@ class EnergyMethod:
                 return fast
         free = impose(ns.N, ns.t0, cables, targets)
         sol = minimum_energy(ns.N, ns.t0, k, lo, hi, free) if free.ok else None
-        status = TDAStatus.OK
+        status = OK
         if (sol is None or not sol.feasible) and free.ok:
             # Saturate: the last imposition clamped into the range the others leave it (a
             # planner ramping to the end of the range meets it there, not a jump to none)
@@ -67,7 +74,7 @@ class EnergyMethod:
                         f"imposition on cable {self.model.cables[cables[-1]].name} saturated "
                         f"at {targets[-1]:.6g} N"
                     )
-                    return self._energy_done(sol, free, cables, k, TDAStatus.IMPOSITION_INFEASIBLE)
+                    return self._energy_done(sol, free, cables, k, IMPOSITION_INFEASIBLE)
         if sol is None or not sol.feasible:
             # Keep the platform's wrench: drop the impositions, report why.
             unconstrained = impose(ns.N, ns.t0, [], [])
@@ -75,7 +82,7 @@ class EnergyMethod:
             out.message = "impositions unreachable within the tension limits: dropped"
             if not sol.feasible:
                 return self._least_violating(lo, hi)
-            status = TDAStatus.IMPOSITION_INFEASIBLE
+            status = IMPOSITION_INFEASIBLE
             out.free_directions = ns.N.copy()
             return self._energy_done(sol, None, cables, k, status)
         return self._energy_done(sol, free, cables, k, status)
@@ -135,7 +142,7 @@ class EnergyMethod:
         if not ok:
             return None
         out.free_directions = ns.N @ self._f[:, None]
-        return TDAStatus.OK
+        return OK
 
     def _energy_point_r2(
         self, cables: list[int], targets: list[float], lo: FloatArray, hi: FloatArray, k: FloatArray
@@ -164,10 +171,10 @@ class EnergyMethod:
         e[cables] = math.nan
         out.energy_range[:, 0] = e
         out.energy_range[:, 1] = e
-        return TDAStatus.OK
+        return OK
 
 
-@njit(cache=True)
+@cycle_kernel
 def energy_line_kernel(
     N, t0, c, target, lo, hi, k, lam, t, ends, erange, f
 ):  # pragma: no cover - compiled

@@ -16,9 +16,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import forward_substitution
+from cdprctl.numerics import cycle_kernel, forward_substitution
 from cdprctl.rotation import FloatArray
 
 
@@ -35,27 +34,28 @@ class NullSpace:
         self._Q = np.zeros((n_cables, n_cables))
         self._A = np.zeros((n_cables, dof))
         self._info = np.zeros(1)
+        self._v = np.zeros(n_cables)  # the kernels' scratch: a reflector, then R⁻ᵀ w
 
     def update(self, W: FloatArray, w: FloatArray, rcond: float = 1e-10) -> bool:
         """Factorise ``W`` (6×m) and solve for ``w`` (6,). Returns False when ``W`` is
         (numerically) rank deficient or not finite; ``N`` and ``t0`` are then not valid."""
-        ok = nullspace_kernel(W, w, rcond, self._A, self._Q, self.N, self.t0, self._info)
+        ok = nullspace_kernel(W, w, rcond, self._A, self._Q, self.N, self.t0, self._info, self._v)
         self.rank_ok = bool(ok)
-        self.condition = float(self._info[0]) if ok else math.inf
+        self.condition = self._info.item(0) if ok else math.inf  # a float, not a numpy scalar
         return self.rank_ok
 
     def particular(self, w: FloatArray, out: FloatArray) -> None:
         """``out`` (m,) ← ``W⁺ w`` for another wrench ``w`` (6,) with the factorisation of the
         last :meth:`update` (which must have succeeded)."""
-        particular_kernel(self._A, self._Q, w, out)
+        particular_kernel(self._A, self._Q, w, out, self._v)
 
 
-@njit(cache=True)
-def particular_kernel(A, Q, w, out):  # pragma: no cover - compiled
+@cycle_kernel
+def particular_kernel(A, Q, w, out, scratch):  # pragma: no cover - compiled
     """``out = Q₆ R₆⁻ᵀ w`` from ``nullspace_kernel``'s factorisation (``A`` holds ``R``):
-    ``Rᵀ y = w`` by forward substitution, then ``Q₆ y``."""
+    ``Rᵀ y = w`` by forward substitution, then ``Q₆ y`` (``y``: the first d of ``scratch``)."""
     d = A.shape[1]
-    y = np.empty(d)
+    y = scratch[:d]
     forward_substitution(A.T, w, y)
     for i in range(out.shape[0]):
         s = 0.0
@@ -64,15 +64,15 @@ def particular_kernel(A, Q, w, out):  # pragma: no cover - compiled
         out[i] = s
 
 
-@njit(cache=True)
-def nullspace_kernel(W, w, rcond, A, Q, N, t0, info):  # pragma: no cover - compiled
+@cycle_kernel
+def nullspace_kernel(W, w, rcond, A, Q, N, t0, info, v):  # pragma: no cover - compiled
+    """``v`` (m,): scratch, the Householder reflector (no array built in the loop)."""
     d, m = W.shape
     for i in range(m):
         for j in range(d):
             A[i, j] = W[j, i]
         for j in range(m):
             Q[i, j] = 1.0 if i == j else 0.0
-    v = np.empty(m)
     for j in range(d):
         s = 0.0
         for i in range(j, m):
@@ -112,7 +112,7 @@ def nullspace_kernel(W, w, rcond, A, Q, N, t0, info):  # pragma: no cover - comp
     if not (dmin > rcond * dmax and dmax < math.inf):  # False for NaN too
         return False
     info[0] = dmax / dmin
-    particular_kernel(A, Q, w, t0)
+    particular_kernel(A, Q, w, t0, v)
     for i in range(m):
         for j in range(m - d):
             N[i, j] = Q[i, d + j]

@@ -15,25 +15,43 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numba import njit
+import quadprog  # at import: an import statement in a solve looked the module up each time
 
 from cdprctl.kinematics import KinematicsData
-from cdprctl.numerics import kernel_args
+from cdprctl.numerics import cycle_kernel, kernel_args, total
 from cdprctl.rotation import FloatArray
 from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
 from cdprctl.tda.energy_method import EnergyMethod
 from cdprctl.tda.nullspace import NullSpace
-from cdprctl.tda.types import TDAMethod, TDAOptions, TDAOutput, TDAStatus
+from cdprctl.tda.types import (
+    BARYCENTER,
+    CLOSED_FORM,
+    DEGENERATE,
+    ENERGY,
+    IMPOSITION_INFEASIBLE,
+    INFEASIBLE,
+    INTERNAL_ERROR,
+    MIN_1NORM,
+    MIN_2NORM,
+    OK,
+    OUT_OF_LIMITS,
+    PINV,
+    QP,
+    SOTDA,
+    TDAOptions,
+    TDAOutput,
+    TDAStatus,
+)
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
 
 _PLANAR_CODE = {
-    TDAMethod.BARYCENTER: planar.BARYCENTER,
-    TDAMethod.MIN_2NORM: planar.MIN_2NORM,
-    TDAMethod.MIN_1NORM: planar.MIN_1NORM,
-    TDAMethod.SOTDA: planar.SOTDA,
+    BARYCENTER: planar.BARYCENTER,
+    MIN_2NORM: planar.MIN_2NORM,
+    MIN_1NORM: planar.MIN_1NORM,
+    SOTDA: planar.SOTDA,
 }
 BOUND_TOLERANCE = 1e-6  # N: round-off accepted on a bound, then clipped onto it
 
@@ -74,6 +92,10 @@ class TensionDistributor(EnergyMethod):
         self._planar_work = planar.PlanarWork.of(self.m)
         self._planar = kernel_args(self._planar_work)  # the same arrays, as the kernel takes them
         self._verts = self._planar_work.verts
+        # the polygon of each vertex count, a view each, built once: none per solve
+        self._polygons = tuple(self._verts[:n] for n in range(len(self._verts) + 1))
+        self._code_of: TDAOptions | None = None  # the options _planar_code is for
+        self._planar_code = planar.BARYCENTER
         self._ones = np.ones(self.m)
         self._dt = self.options.period  # s, the rate limit's step of this solve
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
@@ -128,7 +150,7 @@ class TensionDistributor(EnergyMethod):
         out.barycenter = (math.nan, math.nan)
         out.sotda_displacement = math.nan
         out.energy_total = math.nan
-        if self.options.method is TDAMethod.ENERGY:
+        if self.options.method is ENERGY:
             out.energy_range[:] = math.nan
             out.segment_ends[:] = math.nan
         if k is None:
@@ -137,7 +159,7 @@ class TensionDistributor(EnergyMethod):
             self._dt = dt if dt is not None else self.options.period
             status = self._solve()
         except Exception as exc:
-            status = TDAStatus.INTERNAL_ERROR
+            status = INTERNAL_ERROR
             out.message = f"{type(exc).__name__}: {exc}"
         return self._finish(status)
 
@@ -145,18 +167,18 @@ class TensionDistributor(EnergyMethod):
     def _solve(self) -> TDAStatus:
         out, ns, method, i = self.out, self.ns, self.options.method, self._in
         W, w, lo, hi = i.W, i.w, i.lo, i.hi
-        if not ns.update(W, w) or not math.isfinite(sum(w.tolist())):
+        if not ns.update(W, w) or not math.isfinite(total(w)):
             out.message = "wrench matrix rank-deficient or non-finite input"
-            return TDAStatus.DEGENERATE
-        if method is TDAMethod.PINV:
+            return DEGENERATE
+        if method is PINV:
             out.tensions[:] = ns.t0
             out.lam[:] = 0.0
-            return TDAStatus.OK
-        if method is TDAMethod.CLOSED_FORM:
+            return OK
+        if method is CLOSED_FORM:
             return self._closed_form(W, w, lo, hi)
-        if method is TDAMethod.ENERGY:
+        if method is ENERGY:
             return self._energy(lo, hi, i.k, i.t_prev)
-        if method is TDAMethod.QP or (method is TDAMethod.MIN_2NORM and self.r != 2):
+        if method is QP or (method is MIN_2NORM and self.r != 2):
             return self._qp(lo, hi, np.zeros(self.r))
         return self._polygon_method()
 
@@ -164,15 +186,17 @@ class TensionDistributor(EnergyMethod):
         """The r = 2 polygon methods in one compiled call (``planar.planar_kernel``)."""
         out, ns, opt, i = self.out, self.ns, self.options, self._in
         lo, hi, k, kin, t_prev = i.lo, i.hi, i.k, i.kin, i.t_prev
-        sotda = opt.method is TDAMethod.SOTDA
+        sotda = opt.method is SOTDA
         if sotda and (k is None or kin is None):
             out.message = "sotda needs the cable stiffness k and the kinematics"
-            return TDAStatus.DEGENERATE
+            return DEGENERATE
         info = self._planar_work.info
         kd = kin if kin is not None else self._no_kin
         rate = t_prev is not None and opt.max_tension_rate is not None
+        if opt is not self._code_of:  # hashing the method (a Python __hash__) built an int
+            self._code_of, self._planar_code = opt, _PLANAR_CODE.get(opt.method, planar.BARYCENTER)
         ok = planar.planar_kernel(
-            _PLANAR_CODE.get(opt.method, planar.BARYCENTER),
+            self._planar_code,
             ns.N,
             ns.t0,
             lo,
@@ -191,16 +215,17 @@ class TensionDistributor(EnergyMethod):
         )
         if not ok:
             return self._least_violating(lo, hi)
-        out.polygon = self._verts[: int(info[planar.NV])]
-        out.area = float(info[planar.AREA])
-        out.barycenter = (float(info[planar.BX]), float(info[planar.BY]))
-        out.sotda_displacement = float(info[planar.SOTDA_DP])
-        flag = int(info[planar.RATE_FLAG])
+        # item(): plain floats, not numpy scalars
+        out.polygon = self._polygons[int(info.item(planar.NV))]
+        out.area = info.item(planar.AREA)
+        out.barycenter = (info.item(planar.BX), info.item(planar.BY))
+        out.sotda_displacement = info.item(planar.SOTDA_DP)
+        flag = int(info.item(planar.RATE_FLAG))
         if flag == 1:
             out.rate_limited = True
         elif flag == 2:
             out.message = "tension rate limit cannot hold the wrench: not applied"
-        return TDAStatus.OK
+        return OK
 
     def _least_violating(self, lo: FloatArray, hi: FloatArray) -> TDAStatus:
         out, ns = self.out, self.ns
@@ -215,13 +240,11 @@ class TensionDistributor(EnergyMethod):
             s = float(np.max(np.maximum(lo - out.tensions, out.tensions - hi)))
         out.max_violation = max(0.0, s)
         out.message = f"wrench infeasible: least-violating tensions, {s:.3g} N beyond a bound"
-        return TDAStatus.INFEASIBLE
+        return INFEASIBLE
 
     def _qp(self, lo: FloatArray, hi: FloatArray, lam_target: FloatArray) -> TDAStatus:
         """Nearest tensions to ``t0 + N lam_target`` within the bounds (a QP in λ: with
         orthonormal N, ``‖t − t_target‖ = ‖λ − lam_target‖``)."""
-        import quadprog
-
         ns, out = self.ns, self.out
         N, t0 = ns.N, ns.t0
         C = np.hstack([N.T, -N.T])
@@ -232,7 +255,7 @@ class TensionDistributor(EnergyMethod):
             return self._least_violating(lo, hi)
         out.lam[:] = lam
         out.tensions[:] = t0 + N @ lam
-        return TDAStatus.OK
+        return OK
 
     def _closed_form(
         self, W: FloatArray, w: FloatArray, lo: FloatArray, hi: FloatArray
@@ -256,12 +279,12 @@ class TensionDistributor(EnergyMethod):
             if viol[worst] <= BOUND_TOLERANCE:
                 out.tensions[:] = t
                 out.lam[:] = self.ns.N.T @ (t - self.ns.t0)
-                return TDAStatus.OK
+                return OK
             if len(active) <= 6:
                 out.tensions[:] = t
                 out.max_violation = float(viol[worst])
                 out.message = "closed form: no feasible tensions found"
-                return TDAStatus.INFEASIBLE
+                return INFEASIBLE
             i = active.pop(worst)
             fixed[i] = True
             t[i] = lo[i] if ta[worst] < lo[i] else hi[i]
@@ -271,10 +294,10 @@ class TensionDistributor(EnergyMethod):
         out, i = self.out, self._in
         W, w, lo, hi, k, t_prev = i.W, i.w, i.lo, i.hi, i.k, i.t_prev
         t = out.tensions
-        finite = math.isfinite(sum(t.tolist()))  # NaN and inf survive a sum
-        if status in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR) or not finite:
-            if status not in (TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR):
-                status = TDAStatus.INTERNAL_ERROR
+        finite = math.isfinite(total(t))  # NaN and inf survive a sum
+        if status in (DEGENERATE, INTERNAL_ERROR) or not finite:
+            if status not in (DEGENERATE, INTERNAL_ERROR):
+                status = INTERNAL_ERROR
                 out.message = out.message or "non-finite tensions"
             fallback = t_prev if t_prev is not None and np.all(np.isfinite(t_prev)) else lo
             t[:] = np.clip(fallback, lo, hi)
@@ -282,12 +305,12 @@ class TensionDistributor(EnergyMethod):
             out.status = status
             return out
         viol, residual = check_kernel(W, w, t, lo, hi)
-        if status in (TDAStatus.OK, TDAStatus.IMPOSITION_INFEASIBLE):
+        if status in (OK, IMPOSITION_INFEASIBLE):
             if viol > BOUND_TOLERANCE:
                 status = (
-                    TDAStatus.OUT_OF_LIMITS
-                    if self.options.method is TDAMethod.PINV
-                    else TDAStatus.INFEASIBLE
+                    OUT_OF_LIMITS
+                    if self.options.method is PINV
+                    else INFEASIBLE
                 )
                 out.max_violation = viol
             elif viol > 0.0:  # round-off: onto the bound
@@ -298,7 +321,7 @@ class TensionDistributor(EnergyMethod):
             np.multiply(t, t, out=out.energies)
             out.energies /= k
             out.energies *= 0.5  # U_i = t_i²/(2 k_i), Sensors 2019 eq. (4)
-            out.energy_total = sum(out.energies.tolist())
+            out.energy_total = total(out.energies)
         out.status = status
         return out
 
@@ -307,8 +330,6 @@ def _qp_least_violating(
     N: FloatArray, t0: FloatArray, lo: FloatArray, hi: FloatArray
 ) -> FloatArray:
     """min s subject to lo − s <= t0 + N λ <= hi + s (a tiny regularisation makes it a QP)."""
-    import quadprog
-
     r = N.shape[1]
     G = np.eye(r + 1) * 1e-9
     a = np.zeros(r + 1)
@@ -320,7 +341,7 @@ def _qp_least_violating(
     return x[:r]
 
 
-@njit(cache=True)
+@cycle_kernel
 def check_kernel(W, w, t, lo, hi):  # pragma: no cover - compiled
     """(largest bound violation in N, ‖W t − w‖ / max(1, ‖w‖))."""
     viol = -math.inf

@@ -43,6 +43,18 @@ class TDAStatus(enum.IntEnum):
     INTERNAL_ERROR = 5  # an unexpected exception, caught: no tensions
 
 
+# Each member bound to a name once: on Python 3.11 reading ``TDAStatus.X`` goes through
+# ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped it): the
+# control cycle's solve reads these (tests/test_allocations.py).
+OK, OUT_OF_LIMITS, INFEASIBLE = TDAStatus.OK, TDAStatus.OUT_OF_LIMITS, TDAStatus.INFEASIBLE
+IMPOSITION_INFEASIBLE, DEGENERATE, INTERNAL_ERROR = (
+    TDAStatus.IMPOSITION_INFEASIBLE, TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR
+)  # fmt: skip
+PINV, CLOSED_FORM, BARYCENTER = TDAMethod.PINV, TDAMethod.CLOSED_FORM, TDAMethod.BARYCENTER
+MIN_2NORM, MIN_1NORM, SOTDA = TDAMethod.MIN_2NORM, TDAMethod.MIN_1NORM, TDAMethod.SOTDA
+ENERGY, QP = TDAMethod.ENERGY, TDAMethod.QP
+
+
 class ImposedQuantity(enum.StrEnum):
     ENERGY = "energy"  # J, U_i = t_i²/(2 k_i)  (Sensors 2019, eq. (4))
     TENSION = "tension"  # N

@@ -11,9 +11,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from cdprctl.numerics import clamp, plausible_step
+from cdprctl.numerics import clamp, cycle_kernel, plausible_step
 from drivers.cia402 import protocol as p
 from drivers.vocabulary import DriveState
 
@@ -57,7 +56,7 @@ class Decoded(NamedTuple):
     prev: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def tpdo1_frame(
     c, sw, pm, pos, stamp, period, max_speed, rad_per_count, rated_torque, ps_table, decoded,
     torque, fresh, fb_stamp, rate,
@@ -95,7 +94,7 @@ def tpdo1_frame(
     return 0
 
 
-@njit(cache=True)
+@cycle_kernel
 def sync_instant(c, pos, syncs, seq, answered, lag_max, raw, fb_stamp, rate, fallback):
     """The instant (s) of the SYNC a TPDO1 of cable ``c`` (32-bit position ``pos``) answers.
     Transmission type 1: one TPDO1 per SYNC, so a drive's next answer is to the SYNC after the
@@ -130,7 +129,7 @@ def sync_instant(c, pos, syncs, seq, answered, lag_max, raw, fb_stamp, rate, fal
     return syncs[chosen % len(syncs)]
 
 
-@njit(cache=True)
+@cycle_kernel
 def tpdo1_synced_kernel(
     n, frames, syncs, seq, answered, lag_max, fallback, period, max_speed, rad_per_count,
     rated_torque, ps_table, decoded, torque, fresh, fb_stamp, rate,
@@ -152,7 +151,22 @@ def tpdo1_synced_kernel(
     return dropped
 
 
-@njit(cache=True)
+@cycle_kernel
+def decode_tpdo1_kernel(n, raw, cables, frames):  # pragma: no cover - compiled
+    """``frames[i]`` ← (cable, statusword, torque per-mille, 32-bit position) of the first
+    ``n`` TPDO1s: ``cables[i]`` and the 8 bytes ``raw[i]`` as ``protocol.TPDO1_STRUCT``
+    (<Hhi, little-endian, two's complement) unpacks them."""
+    for i in range(n):
+        b = raw[i]
+        frames[i, 0] = cables[i]
+        frames[i, 1] = np.int64(b[0]) | np.int64(b[1]) << 8
+        torque = np.int64(b[2]) | np.int64(b[3]) << 8
+        frames[i, 2] = torque - 0x10000 if torque >= 0x8000 else torque
+        pos = np.int64(b[4]) | np.int64(b[5]) << 8 | np.int64(b[6]) << 16 | np.int64(b[7]) << 24
+        frames[i, 3] = pos - 0x100000000 if pos >= 0x80000000 else pos
+
+
+@cycle_kernel
 def state_kernel(
     fresh, fb_stamp, rad_per_count, derived, generic, decoded, feedback
 ):  # pragma: no cover - compiled
@@ -182,7 +196,7 @@ def state_kernel(
     return fault
 
 
-@njit(cache=True)
+@cycle_kernel
 def controlword_kernel(
     torques, ps, emcy, reset, enable, rated_torque, towards, out
 ):  # pragma: no cover - compiled
@@ -206,7 +220,7 @@ def controlword_kernel(
         out[c, 1] = int(clamp(pm, -32767.0, 32767.0))
 
 
-@njit(cache=True)
+@cycle_kernel
 def target_rates_kernel(targets, t, last, last_t, max_speed, rate):  # pragma: no cover - compiled
     """``rate`` (rad/s) ← each position target's rate since the last cycle's (``last`` at
     ``last_t``; within ``max_speed``, rad/s; 0 without a last cycle). ``last`` ← ``targets``."""
@@ -220,7 +234,7 @@ def target_rates_kernel(targets, t, last, last_t, max_speed, rate):  # pragma: n
         last[c] = targets[c]
 
 
-@njit(cache=True)
+@cycle_kernel
 def carry_targets_kernel(targets, rate, late, out):  # pragma: no cover - compiled
     """``out`` (rad) ← each position target carried ``late`` s on at its ``rate``: the target
     for the instant its SYNC leaves, not the instant the cycle started."""
@@ -228,10 +242,30 @@ def carry_targets_kernel(targets, rate, late, out):  # pragma: no cover - compil
         out[c] = targets[c] + rate[c] * late
 
 
-@njit(cache=True)
+@cycle_kernel
 def target_counts_kernel(targets, rad_per_count, out):  # pragma: no cover - compiled
     """``out[c]`` ← the position target (rad) of each drive in encoder counts, as the 32-bit
     signed value of 0x607A (the drive unwraps it against its own position actual)."""
     for c in range(len(targets)):
         n = np.int64(np.rint(targets[c] / rad_per_count[c]))
         out[c] = ((n + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+
+
+@cycle_kernel
+def pack_rpdo1_kernel(fields, counts, position, data):  # pragma: no cover - compiled
+    """``data[c]`` (the bytes of drive ``c``'s RPDO1) ← its controlword and, in position mode
+    (``position[c]``), its target ``counts`` and torque offset, else its target torque:
+    ``protocol.RPDO1_CSP_STRUCT`` (<Hih) and ``RPDO1_STRUCT`` (<Hh), little-endian, two's
+    complement. Packed here, no Python int is built per value (the values are within their
+    fields: ``controlword_kernel``, ``target_counts_kernel``)."""
+    for c in range(fields.shape[0]):
+        d = data[c]
+        cw, pm = fields[c, 0], fields[c, 1]
+        d[0], d[1] = cw & 0xFF, (cw >> 8) & 0xFF
+        k = 2
+        if position[c]:
+            n = counts[c]
+            for b in range(4):
+                d[k + b] = (n >> (8 * b)) & 0xFF
+            k = 6
+        d[k], d[k + 1] = pm & 0xFF, (pm >> 8) & 0xFF

@@ -37,7 +37,7 @@ from drivers.errors import (
     following_error_text,
 )
 from drivers.registry import register_driver
-from drivers.vocabulary import Lifecycle
+from drivers.vocabulary import ACTIVE, ERROR, INACTIVE
 
 
 @register_driver
@@ -66,6 +66,9 @@ class Cia402Driver(CanWinchDriver):
                                         else p.RPDO1_STRUCT).size))
             for c in range(m)
         ]  # fmt: skip
+        # the RPDOs' bytes as arrays (views): cyclic.pack_rpdo1_kernel writes them in place
+        self._rpdo_bytes = tuple(np.frombuffer(msg.data, dtype=np.uint8) for msg in self._rpdo)
+        self._position_flags = np.array(self._position, dtype=bool)
         self._target_counts = np.zeros(m, dtype=np.int64)  # CSP: 0x607A of each drive
         self._last_targets = np.zeros(m)  # rad: the last cycle's targets, for their rate
         self._last_targets_t = -math.inf  # s: its time, -inf unless the drives ran (ACTIVE)
@@ -127,6 +130,10 @@ class Cia402Driver(CanWinchDriver):
         self.liveness.implausible = self._raw[:, 2]  # a view: what the liveness error reports
         self._prev = np.full((m, 2), -math.inf)  # last position (rad) and its instant (s)
         self._tpdo1 = np.zeros((4 * m, 4), dtype=np.int64)  # the cycle's TPDO1s, decoded
+        # ... and as received: their bytes (copied in, decoded by a kernel) and their cables
+        self._tpdo1_bytes = bytearray(8 * 4 * m)
+        self._tpdo1_raw = np.frombuffer(self._tpdo1_bytes, dtype=np.uint8).reshape(4 * m, 8)
+        self._tpdo1_cable = np.zeros(4 * m, dtype=np.int64)
         self._rpdo_fields = np.zeros((m, 2), dtype=np.int64)  # controlword, torque per-mille
         self._generic = np.array([int(GENERIC_STATE[s]) for s in sorted(p.PowerState)])
         st = self.states
@@ -197,7 +204,7 @@ class Cia402Driver(CanWinchDriver):
         )
 
     def command_brake(self, c: int, closed: bool, timeout: float) -> None:
-        if self.lifecycle not in (Lifecycle.INACTIVE, Lifecycle.ERROR):  # SDO: not cyclic
+        if self.lifecycle not in (INACTIVE, ERROR):  # SDO: not cyclic
             raise DriverOperationError(f"brake command while {self.lifecycle.name}: disabled only")
         command_brake(self.sdo, c, closed, timeout)
 
@@ -237,6 +244,10 @@ class Cia402Driver(CanWinchDriver):
         )  # fmt: skip
         cyclic.carry_targets_kernel(self.targets, self._target_rate, 0.0, self._carried.copy())
         cyclic.target_counts_kernel(self.targets, self.rad_per_count, self._target_counts.copy())
+        cyclic.pack_rpdo1_kernel(
+            self._rpdo_fields, self._target_counts, self._position_flags,
+            tuple(b.copy() for b in self._rpdo_bytes),
+        )  # fmt: skip
 
     SYNC_RING = 8  # SYNC instants kept
     SYNC_LAG_MAX = 4  # SYNCs a late TPDO1 may answer behind the newest (``sync_instant``)
@@ -263,32 +274,28 @@ class Cia402Driver(CanWinchDriver):
         its controlword and torque."""
         cyclic.carry_targets_kernel(self.targets, self._target_rate, late, self._carried)
         cyclic.target_counts_kernel(self._carried, self.rad_per_count, self._target_counts)
-        pack, send, bus_of = p.RPDO1_CSP_STRUCT.pack_into, self._send, self._bus_of_list
-        pack_torque, position = p.RPDO1_STRUCT.pack_into, self._position
-        for c, ((cw, pm), n) in enumerate(
-            zip(fields.tolist(), self._target_counts.tolist(), strict=True)
-        ):
-            msg = self._rpdo[c]
-            if position[c]:
-                pack(msg.data, 0, cw, n, pm)
-            else:
-                pack_torque(msg.data, 0, cw, pm)
-            send(bus_of[c], msg)
+        self._send_rpdos(fields)
+
+    def _send_rpdos(self, fields: np.ndarray) -> None:
+        """Each drive's RPDO1, packed by a kernel (no list, no int per value), then sent."""
+        cyclic.pack_rpdo1_kernel(fields, self._target_counts, self._position_flags,
+                                 self._rpdo_bytes)  # fmt: skip
+        send, bus_of, rpdo = self._send, self._bus_of_list, self._rpdo
+        for c in range(self.m):
+            send(bus_of[c], rpdo[c])
 
     def _drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
-        applied together, in their order of arrival (``cyclic.tpdo1_kernel``)."""
-        tp1, tp2 = p.TPDO1_STRUCT.unpack, p.TPDO2_STRUCT.unpack
-        rows, n = self._tpdo1, 0
+        applied together, in their order of arrival (``cyclic.tpdo1_synced_kernel``)."""
+        tp2, raw, cables, n = p.TPDO2_STRUCT.unpack, self._tpdo1_bytes, self._tpdo1_cable, 0
         pdo_velocity = self.config.velocity_source == "pdo"
         for kind, c, data in self._frames():
             if kind == 1 and len(data) == 8:
-                if n == len(rows):  # more than 4 per drive since the last read: apply them
+                if n == len(cables):  # more than 4 per drive since the last read: apply them
                     self._apply_tpdo1(n, t)
                     n = 0
-                row = rows[n]
-                row[0] = c
-                row[1], row[2], row[3] = tp1(data)
+                cables[n] = c
+                raw[8 * n : 8 * n + 8] = data  # unpacked, its fields were an int each
                 n += 1
             elif kind == 2 and len(data) == 4:
                 if pdo_velocity:
@@ -306,6 +313,7 @@ class Cia402Driver(CanWinchDriver):
             self._apply_tpdo1(n, t)
 
     def _apply_tpdo1(self, n: int, t: float) -> None:
+        cyclic.decode_tpdo1_kernel(n, self._tpdo1_raw, self._tpdo1_cable, self._tpdo1)
         dropped = cyclic.tpdo1_synced_kernel(
             n, self._tpdo1, self._syncs, self._sync_seq, self._answered, self.SYNC_LAG_MAX, t,
             self.period, self.liveness.max_motor_speed, self.rad_per_count, self.rated_torque,
@@ -356,7 +364,6 @@ class Cia402Driver(CanWinchDriver):
             cyclic.CONTROLWORD_TOWARDS_ENABLED,
             fields,
         )
-        send, bus_of = self._send, self._bus_of_list
         if self._csp:
             # A cycle held up between its start and this send (the VM taking the CPU for
             # 4-10 ms mid-cycle, across processes) sent targets for an instant long past with
@@ -364,7 +371,7 @@ class Cia402Driver(CanWinchDriver):
             # faulted on their following error. The targets go out for the SYNC's instant.
             # Only between two cycles of running drives: the step at an enable is no rate.
             late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
-            running = self.lifecycle is Lifecycle.ACTIVE
+            running = self.lifecycle is ACTIVE
             since = self._last_targets_t if running else -math.inf
             cyclic.target_rates_kernel(
                 self.targets, t, self._last_targets, since, self.liveness.max_motor_speed,
@@ -373,11 +380,7 @@ class Cia402Driver(CanWinchDriver):
             self._last_targets_t = t if running else -math.inf
             self._send_targets(late, fields)
         else:
-            pack = p.RPDO1_STRUCT.pack_into
-            for c, (cw, pm) in enumerate(fields.tolist()):
-                msg = self._rpdo[c]
-                pack(msg.data, 0, cw, pm)
-                send(bus_of[c], msg)
+            self._send_rpdos(fields)
         # The SYNC is the drives' time base: the control loop never sends two within half a
         # period (on the clock: a late cycle's time is not when it sends). A late cycle
         # followed at once by the next one (a loaded machine) sent SYNCs 0 ms apart, then
