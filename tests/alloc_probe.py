@@ -61,6 +61,11 @@ class DeferredBus:
         self.outbox[self.n_out] = msg
         self.n_out += 1
 
+    def shutdown(self) -> None:
+        """The driver's shut-down reaches the bus (left open, each was shut at the
+        interpreter's exit: a traceback per bus in the suite's output)."""
+        self.bus.shutdown()
+
 
 def defer_buses(driver: Any) -> list[DeferredBus]:
     """Wrap each distinct bus of ``driver`` (buses on one medium share one)."""
