@@ -209,16 +209,18 @@ def test_position_targets_carried_on_and_in_32_bit_counts():
     assert list(counts) == [101, 2**31 - 3, 7]
 
 
-def sync_case(answered: int, step: int, rate: float, seq: int = 10, period: float = 0.004):
-    """``sync_instant`` for cable 0 whose last sample (position 1000) was at SYNC 5's instant,
-    moving at ``rate`` counts/s, its new frame ``step`` counts on: (the SYNC chosen, its
-    instant)."""
+def sync_case(answered: int, step: int, rate: float, seq: int = 10, period: float = 0.004,
+              last: int = 1000):  # fmt: skip
+    """``sync_instant`` for cable 0 whose last sample (32-bit position ``last``) was at SYNC
+    5's instant, moving at ``rate`` counts/s, its new frame ``step`` counts on (wrapping at
+    32 bits): (the SYNC chosen, its instant)."""
     syncs = np.full(8, np.nan)
     for k in range(seq - 7, seq + 1):
         syncs[k % 8] = k * period
-    raw = np.array([[1000, 1, 0]], dtype=np.int64)
+    raw = np.array([[last, 1, 0]], dtype=np.int64)
     ans = np.array([answered], dtype=np.int64)
-    stamp = cyclic.sync_instant(0, 1000 + step, syncs, seq, ans, 4, raw, np.array([5 * period]),
+    pos = (last + step + 2**31) % 2**32 - 2**31
+    stamp = cyclic.sync_instant(0, pos, syncs, seq, ans, 4, raw, np.array([5 * period]),
                                 np.array([rate]), -1.0)  # fmt: skip
     return int(ans[0]), stamp
 
@@ -235,6 +237,12 @@ def test_a_tpdo_is_stamped_at_the_sync_it_answers():
     assert sync_case(answered=9, step=0, rate=rate)[0] == 10  # the stopped drive after a stall
     assert sync_case(answered=10, step=5000, rate=rate)[0] == 10  # never past the newest
     assert sync_case(answered=1, step=5000, rate=rate)[0] == 10  # lag_max 4: from SYNC 6 on
+    # the sequence's SYNC fits 2 counts worse than the next: within SYNC_FIT_COUNTS, kept
+    assert sync_case(answered=5, step=1501, rate=rate)[0] == 6
+    assert sync_case(answered=5, step=1506, rate=rate)[0] == 7  # 12 counts worse: the fit wins
+    # across the 32-bit wrap of the position, the step is still 1000 counts: SYNC 6
+    assert sync_case(answered=5, step=1000, rate=rate, last=2**31 - 500)[0] == 6
+    assert sync_case(answered=5, step=3000, rate=rate, last=2**31 - 500)[0] == 8
     assert cyclic.sync_instant(0, 0, np.zeros(8), 0, np.zeros(1, dtype=np.int64), 4,
                                np.zeros((1, 3), dtype=np.int64), np.zeros(1), np.zeros(1),
                                -1.0) == -1.0  # before the first SYNC: the fallback  # fmt: skip
