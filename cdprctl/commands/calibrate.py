@@ -8,14 +8,13 @@ import contextlib
 import json
 import sys
 from collections.abc import Callable, Iterator
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
-from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
+from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
 from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
 from drivers.simulated import simulated_robot
 
@@ -250,10 +249,8 @@ def _report_homing(args: argparse.Namespace, record: Any, ident: Any, state_dir:
         "sample_residuals": record.sample_residuals,
         "drum_scale": record.drum_scale,
     }
-    path = save_or_keep(WHO, save, record, state_dir, {**result, "record": asdict(record)})
-    if path is None:
+    if not keep_record(WHO, save, record, state_dir, result):
         return EXIT_STATE_DIR
-    result["record"] = str(path)
     if args.json:
         print(json.dumps(result))
     else:
@@ -266,7 +263,7 @@ def _report_homing(args: argparse.Namespace, record: Any, ident: Any, state_dir:
                 f"samples, condition {ident.condition:.3g}, predicted σ "
                 f"{np.round(std[:3], 2).tolist()} mm, "
                 f"{np.round(std[3:], 2).tolist()} mrad")  # fmt: skip
-        log(f"record: {path}")
+        log(f"record: {result['record']}")
     return 0
 
 

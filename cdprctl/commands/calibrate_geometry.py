@@ -17,7 +17,7 @@ import numpy as np
 
 from cdprctl.commands.calibrate import WHO, moves_held
 from cdprctl.commands.common import load_or_report
-from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
+from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
 from cdprctl.commands.resume import (
     keep,
     load_to_resume,
@@ -209,10 +209,8 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, state_dir: Path | No
         record.simulated = simulated
         result["robot_file"] = str(out)
         assert state_dir is not None  # checked before the motion, with --out
-        path = save_or_keep(WHO, save, record, state_dir, {**result, "record": asdict(record)})
-        if path is None:
+        if not keep_record(WHO, save, record, state_dir, result):
             return EXIT_STATE_DIR
-        result["record"] = str(path)
     if args.json:
         print(json.dumps(result))
     else:

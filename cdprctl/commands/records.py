@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +27,18 @@ def records_dir(who: str, robot: str, given: str | None, simulated: bool) -> Pat
         print(f"{who}: error: {exc}", file=sys.stderr)
         return None
     return path
+
+
+def keep_record(who: str, save: Callable[[Any, Path], Path], record: Any, state_dir: Path,
+                result: dict[str, Any]) -> bool:  # fmt: skip
+    """``save_or_keep`` of a dataclass ``record`` beside the command's ``result``: True with
+    the record's file in ``result["record"]``, False when it could not be written (then the
+    result and the whole record were printed as JSON)."""
+    path = save_or_keep(who, save, record, state_dir, {**result, "record": asdict(record)})
+    if path is None:
+        return False
+    result["record"] = str(path)
+    return True
 
 
 def save_or_keep(who: str, save: Callable[[Any, Path], Path], record: Any, state_dir: Path,
