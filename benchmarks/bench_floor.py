@@ -141,8 +141,9 @@ def daemon(
             sys.exit(f"bench_floor: the daemon saved no timing:\n{text[-2000:]}")
         z = np.load(f)
         late = z["lateness"] * 1e6
-        n, missed = len(late), int(z["missed"])
-    faults = sum("FAULT" in x for x in text.splitlines())
+        n, missed, overruns = len(late), int(z["missed"]), int(z["overruns"])
+    fault_lines = [x.strip() for x in text.splitlines() if "FAULT" in x]
+    faults = len(fault_lines)
     final = next((x for x in text.splitlines() if "final state" in x), "").strip()
     return {
         "p99_us": float(np.percentile(late, 99)),
@@ -152,7 +153,9 @@ def daemon(
         "compute_p50_us": float(np.median(z["compute"]) * 1e6),
         "compute_p99_us": float(np.percentile(z["compute"], 99) * 1e6),
         "faults": float(faults),
+        "overruns_pct": 100.0 * overruns / max(1, n),
         **({"during": extra} if extra else {}),
+        **({"fault_lines": fault_lines} if fault_lines else {}),
     }, final
 
 

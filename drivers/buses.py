@@ -11,6 +11,7 @@ import can
 
 from cdprctl.model.drives import BusConfig
 from drivers.errors import DriverInitializationError
+from drivers.pair_bus import PairBus
 from drivers.udp_bus import CyclicUdpMulticastBus
 
 
@@ -51,11 +52,13 @@ def open_bus(cfg: BusConfig, overrides: dict[str, Any] | None = None, index: int
     """A python-can bus for ``cfg`` (any interface: socketcan, virtual, udp_multicast, ...)
     on the medium ``bus_medium`` gives."""
     interface, channel, kwargs = bus_medium(cfg, overrides, index)
-    if interface not in ("virtual", "udp_multicast", "inprocess"):
+    if interface not in ("virtual", "udp_multicast", "inprocess", "socketpair"):
         kwargs.setdefault("bitrate", cfg.bitrate)
     try:
         if interface == "udp_multicast":  # python-can's, with a cyclic path (udp_bus.py)
             return CyclicUdpMulticastBus(channel, **kwargs)
+        if interface == "socketpair":  # run --sim's simulated robot in its own process
+            return PairBus(channel, **kwargs)
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except Exception as exc:  # python-can raises CanError, OSError, ImportError, ValueError...
         raise DriverInitializationError(

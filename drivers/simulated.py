@@ -10,7 +10,7 @@ from cdprctl.model.robot import RobotModel
 from drivers.buses import bus_medium
 
 # python-can's media that reach no wire: only a simulated robot answers on them
-SIMULATED_MEDIA = frozenset({"virtual", "udp_multicast", "inprocess"})
+SIMULATED_MEDIA = frozenset({"virtual", "udp_multicast", "inprocess", "socketpair"})
 # of them, what a robot file names and no other process reaches: python-can's virtual bus
 # (cdprctl's lock-step "inprocess" one is the tests' harness: the canopen package's nodes in
 # the same process answer there)

@@ -29,6 +29,8 @@ import msgpack
 from can.interfaces.udp_multicast import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message
 
+from drivers.cyclic_path import StagedFrames
+
 MAX_DATAGRAM = 4096  # bytes: python-can's own receive buffer
 MAX_STANDARD_ID = 0x7FF
 MAX_STAGED = 64  # frames a flush sends at most in one call (a cycle of rowc: 9-17)
@@ -85,7 +87,7 @@ def _own_group_only(sock: socket.socket) -> None:
                         IPV6_MULTICAST_ALL if v6 else IP_MULTICAST_ALL, 0)  # fmt: skip
 
 
-class CyclicUdpMulticastBus(UdpMulticastBus):
+class CyclicUdpMulticastBus(StagedFrames, UdpMulticastBus):
     """``UdpMulticastBus`` (same arguments) with the control cycle's path: ``drain_frames``
     to read, ``stage`` and ``flush`` to send."""
 
@@ -144,16 +146,11 @@ class CyclicUdpMulticastBus(UdpMulticastBus):
         self._staged = k + 1
         return True
 
-    @property
-    def staged(self) -> int:
-        """Frames staged for the next ``flush``."""
-        return self._staged
-
     def flush(self) -> int:
         """Send every staged frame, in order, in one ``sendmmsg``; the number sent (the rest,
         after a send that failed — a full socket buffer, like a full TX queue — are dropped).
         Never raises."""
-        n, self._staged = self._staged, 0
+        n = self._take_staged()
         if n == 0:
             return 0
         if self._sendmmsg is None:

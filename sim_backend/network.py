@@ -41,6 +41,9 @@ class SimNetwork:
         self.buses: list[can.BusABC] = [
             open_bus(b, bus_overrides, i) for i, b in enumerate(self.cfg.buses)
         ]
+        # the media that send a step's frames together (drivers/pair_bus.py, udp_bus.py)
+        self._stage_of = [getattr(bus, "stage", None) for bus in self.buses]
+        self._batching = False
         self.protocol = self.cfg.driver
         self.nodes: list[dict[int, Any]] = []
         self.drives: list[Any] = [None] * model.n_cables
@@ -122,6 +125,10 @@ class SimNetwork:
                 self._put(b, m)
 
     def _put(self, b: int, msg: can.Message) -> None:
+        stage = self._stage_of[b] if self._batching else None
+        # staged (counted when flushed); a full batch flushed first
+        if stage is not None and (stage(msg) or (self._flush(b) >= 0 and stage(msg))):
+            return
         try:
             self.buses[b].send(msg)
         except can.CanError:  # the link down: the frame is lost, as on a real bus
@@ -202,7 +209,31 @@ class SimNetwork:
                 out += d.tick(self.time)
             self._send(b, out)
 
+    def _flush(self, b: int) -> int:
+        """Send bus ``b``'s staged frames (one datagram on a socket pair); the number sent."""
+        bus: Any = self.buses[b]
+        n = bus.staged
+        sent = bus.flush() if n else 0
+        self.frames_out += sent
+        self.frames_refused += n - sent
+        return sent
+
     def advance_until(
+        self, t_end: float, arrival: Callable[[can.Message], float], first: can.Message | None
+    ) -> None:
+        """(Real time: every frame this step sends goes out together at its end, on a medium
+        that batches them — the daemon reads a SYNC's answers in one system call, not one per
+        drive.)"""
+        self._batching = True
+        try:
+            self._advance_until(t_end, arrival, first)
+        finally:
+            self._batching = False
+            for b, stage in enumerate(self._stage_of):
+                if stage is not None:
+                    self._flush(b)
+
+    def _advance_until(
         self, t_end: float, arrival: Callable[[can.Message], float], first: can.Message | None
     ) -> None:
         """Real time: up to ``t_end`` (s), each waiting frame handled at the instant it

@@ -13,6 +13,7 @@ import gc
 import math
 import signal
 import time
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -72,9 +73,13 @@ def run_realtime(
     plant: CdprPlant | None = None,
     encoders: str = "absolute",
     late: LateSteps | None = None,
+    between: Callable[[SimNetwork], bool] | None = None,
+    signals: bool = True,
 ) -> SimNetwork:
     """``plant``: the physics (default: the model's, at rest at home); ``encoders``:
-    ``SimNetwork``'s; ``late``: where its late steps are counted and said."""
+    ``SimNetwork``'s; ``late``: where its late steps are counted and said; ``between(net)``:
+    called after each step (``run --sim``'s requests and true pose), False to stop;
+    ``signals``: SIGINT and SIGTERM stop it (else only ``duration`` or ``between``)."""
     late = late if late is not None else LateSteps(print_fn)
     plant = plant if plant is not None else CdprPlant(model)
     net = SimNetwork(model, plant, bus_overrides, encoders=encoders)
@@ -89,7 +94,7 @@ def run_realtime(
     def _stop(*_: object) -> None:
         stop["flag"] = True
 
-    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM) if signals}
     # what exists now (the compiled kernels' ~10⁵ objects) is never scanned again: a full
     # collection of it was ~80 ms here, several times that on one slow CPU, the drives deaf;
     # before the clock starts, or it was the first step's lateness (50 ms)
@@ -123,6 +128,8 @@ def run_realtime(
                 net.advance_until(now - t0 - lag, arrival, first=woke_on)
                 woke_on = None
                 last = now
+                if between is not None and not between(net):
+                    break
             sim_t = now - t0
             if duration is not None and sim_t >= duration:
                 break

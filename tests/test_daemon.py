@@ -239,40 +239,27 @@ def test_after_hook_runs_once_per_cycle_after_the_step():
     assert order == ["step", "after"] * 10
 
 
-def test_the_simulated_robots_step_is_timed_apart_from_the_controllers():
-    """run_loop(plant_step=...): the simulated robot (``--sim``) steps first, at the cycle's
-    time; its duration is recorded apart, the compute figure is the controller's alone, and
-    an overrun counts both (a simulated clock: each read advances it by 10 µs, each call by
-    a known amount)."""
+def test_compute_is_the_step_and_an_overrun_a_step_longer_than_a_period():
+    """run_loop's figures on a simulated clock (each read advances it by 10 µs, each step by
+    a known amount): compute is the step's duration, an overrun a step beyond the period.
+    (``--sim``'s simulated robot runs in a process of its own: nothing else is timed.)"""
     now = [0.0]
-    order: list[tuple[str, float]] = []
+    steps: list[float] = []
 
     def clock() -> float:
         now[0] += 10e-6
         return now[0]
 
-    def plant(t: float) -> None:
-        order.append(("plant", t))
-        now[0] += 300e-6
-
     def step(t: float) -> None:
-        order.append(("step", t))
-        now[0] += 200e-6 if len(order) < 12 else 1900e-6  # the last cycle: both > a period
+        steps.append(t)
+        now[0] += 200e-6 if len(steps) < 6 else 2100e-6  # the last cycle: beyond a period
 
-    st = run_loop(0.002, step, lambda: len(order) >= 12, 0.0, stats=LoopStats(size=10),
-                  clock=clock, plant_step=plant)  # fmt: skip
-    assert [k for k, _ in order] == ["plant", "step"] * 6
-    assert all(a[1] == b[1] for a, b in zip(order[::2], order[1::2], strict=True))
+    st = run_loop(0.002, step, lambda: len(steps) >= 6, 0.0, stats=LoopStats(size=10),
+                  clock=clock)  # fmt: skip
     tick = 10e-6
     assert st.compute[:5] == pytest.approx(200e-6 + tick, abs=tick)
-    assert st.plant[:6] == pytest.approx(300e-6 + tick, abs=tick)
-    assert st.compute[5] == pytest.approx(1900e-6 + tick, abs=tick) and st.overruns == 1
-    s = st.summary()
-    assert s["compute_p50_us"] == pytest.approx(210.0, abs=10.0)
-    assert s["sim_step_p50_us"] == pytest.approx(310.0, abs=10.0)
-    real = LoopStats(size=4)  # no simulated robot: no such figure
-    real.record(1e-6, 2e-4, None)
-    assert "sim_step_p50_us" not in real.summary()
+    assert st.compute[5] == pytest.approx(2100e-6 + tick, abs=tick) and st.overruns == 1
+    assert st.summary()["compute_p50_us"] == pytest.approx(210.0, abs=10.0)
 
 
 def test_helper_thread_leaves_the_loop_cpu_and_priority():

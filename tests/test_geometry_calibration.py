@@ -6,6 +6,7 @@ read them; and the model test (identify.model_test) against scipy's χ² distrib
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -207,7 +208,7 @@ def test_the_calibrated_robot_file_is_the_robot_as_identified(tmp_path):
 
 def test_the_simulated_robot_as_built_is_another_files_geometry(tmp_path, capsys):
     from cdprctl.cli import main
-    from cdprctl.daemon.sim_step import SimStepper
+    from sim_backend.process import Start, plant_of
 
     model = load_robot(CONFIG / "rowc.toml")
     truth_file = tmp_path / "truth.toml"
@@ -217,11 +218,11 @@ def test_the_simulated_robot_as_built_is_another_files_geometry(tmp_path, capsys
     radius = np.array([c.winch.drum_radius for c in model.cables]) * 1.005
     truth_file.write_text(calibrated_robot_text(model, anchors, radius, "truth"))
     truth = load_robot(truth_file)
-    sim = SimStepper(model, truth)
-    try:
-        assert np.allclose(sim.plant.model.anchors, anchors)
-    finally:
-        sim.close()
+    # run --sim --as-built: the child's physics is the truth's, its drives the model's
+    start = Start(model, truth, [], -1, -1, None, 80, False)
+    assert np.allclose(plant_of(start).model.anchors, anchors)
+    assert np.allclose(plant_of(dataclasses.replace(start, as_built=None)).model.anchors,
+                       model.anchors)  # fmt: skip
     other = tmp_path / "other.toml"
     other.write_text(f'base = "{CONFIG / "caroca.toml"}"\n')
     with pytest.raises(SystemExit) as exc:

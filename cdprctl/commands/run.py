@@ -129,8 +129,9 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """The controller daemon: drives configured, pose estimated and checked, then the fixed-
     rate loop (read, estimate, trajectory, PID + feedforward, tension distribution, winch
-    torques, write). With --sim the simulated robot runs in this process and a demo motion
-    is played (--disturbance N adds a lateral force; --no-demo: none). SIGTERM or Ctrl-C:
+    torques, write). With --sim the simulated robot runs in a process of its own (on the
+    other CPU, as drives have processors of their own) and a demo motion is played
+    (--disturbance N adds a lateral force; --no-demo: none). SIGTERM or Ctrl-C:
     controlled stop, drives disabled, exit 0."""
     from cdprctl.daemon.service import Daemon
 
@@ -265,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
         )
         daemon.bus_hint = bus_options(bus_overrides(args))
         if daemon.sim is not None and args.brake_close_time is not None:
-            daemon.sim.plant.opt.brake_close_time = args.brake_close_time
+            daemon.sim.set_brake_close_time(args.brake_close_time)
         demo = (args.sim or args.demo) and not args.no_demo and path is None
         if estop is not None and daemon.sim is not None:
             daemon.sim.schedule([estop])

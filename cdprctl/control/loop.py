@@ -22,7 +22,6 @@ class LoopStats:
         self.deadline = np.zeros(size)  # s, monotonic clock: each cycle's deadline
         self.lateness = np.zeros(size)  # s, wake-up after the deadline
         self.compute = np.zeros(size)  # s, step duration (the controller's)
-        self.plant = np.zeros(size)  # s, the simulated robot's step before it (``--sim``)
         self.phases = np.zeros((size, phases))  # µs per phase (from the controller)
         self.count = 0
         self.overruns = 0  # steps longer than a period
@@ -34,20 +33,18 @@ class LoopStats:
         compute: float,
         phases: np.ndarray | None,
         deadline: float = math.nan,
-        plant: float = 0.0,
     ) -> None:
         i = self.count % self.size
         self.deadline[i] = deadline
         self.lateness[i] = late
         self.compute[i] = compute
-        self.plant[i] = plant
         if phases is not None:
             self.phases[i] = phases
         self.count += 1
 
     def save(self, path: str, period: float) -> None:
         """The recorded cycles, oldest first, to ``path`` (numpy ``.npz``): ``deadline`` (s,
-        monotonic clock), ``lateness``, ``compute`` and ``plant`` (s), ``phases`` (µs, the
+        monotonic clock), ``lateness`` and ``compute`` (s), ``phases`` (µs, the
         controller's), ``period`` (s), and the totals ``overruns`` and ``missed``."""
         n = min(self.count, self.size)
         order = np.arange(self.count - n, self.count) % self.size
@@ -56,7 +53,6 @@ class LoopStats:
             deadline=self.deadline[order],
             lateness=self.lateness[order],
             compute=self.compute[order],
-            plant=self.plant[order],
             phases=self.phases[order],
             period=period,
             overruns=self.overruns,
@@ -74,12 +70,6 @@ class LoopStats:
         idx = np.arange(self.count - n, self.count) % self.size
         late = self.lateness[idx] * 1e6
         comp = self.compute[idx] * 1e6
-        plant = self.plant[idx] * 1e6
-        simulated = (
-            {"sim_step_p50_us": float(np.percentile(plant, 50)),
-             "sim_step_p99_us": float(np.percentile(plant, 99))}
-            if plant.any() else {}
-        )  # fmt: skip
         return {
             "cycles": float(self.count),
             "lateness_p50_us": float(np.percentile(late, 50)),
@@ -90,7 +80,6 @@ class LoopStats:
             "overruns": float(self.overruns),
             "missed": float(self.missed),
             "missed_percent": 100.0 * self.missed / max(1, self.count + self.missed),
-            **simulated,
         }
 
 
@@ -111,13 +100,9 @@ def run_loop(
     phases: Callable[[], np.ndarray] | None = None,
     clock: Callable[[], float] = time.monotonic,
     after: Callable[[], None] | None = None,
-    plant_step: Callable[[float], None] | None = None,
 ) -> LoopStats:
     """Call ``step(t)`` every ``period`` seconds until ``should_stop()``; ``after()`` at the
-    end of each cycle (the daemon's I/O thread works in the idle rest of the period).
-    ``plant_step(t)`` (``--sim``: the simulated robot up to ``t``) runs first, timed apart:
-    the compute figure is the controller's, what runs on a real robot; an overrun counts
-    both."""
+    end of each cycle (the daemon's I/O thread works in the idle rest of the period)."""
     st = stats or LoopStats()
     deadline = clock() + period
     while not should_stop():
@@ -135,16 +120,11 @@ def run_loop(
         # are for the instant its SYNC goes out (for its deadline, up to a period behind,
         # the drives reversed out of their extrapolation and faulted on their following error
         # across processes on a loaded machine)
-        started = now
-        if plant_step is not None:
-            plant_step(now)
-            started = clock()
-        plant = started - now
         step(now)
-        compute = clock() - started
-        if plant + compute > period:
+        compute = clock() - now
+        if compute > period:
             st.overruns += 1
-        st.record(late, compute, phases() if phases is not None else None, deadline, plant)
+        st.record(late, compute, phases() if phases is not None else None, deadline)
         if after is not None:
             after()
         deadline += period

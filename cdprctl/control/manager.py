@@ -79,10 +79,8 @@ class ControllerManager:
         should_stop: Callable[[], bool],
         stats: LoopStats,
         after: Callable[[], None] | None = None,
-        plant_step: Callable[[float], None] | None = None,
     ) -> LoopStats:
-        """The fixed-rate loop (``loop.run_loop``) until ``should_stop()``; ``plant_step``
-        (the daemon's simulated robot) runs before each cycle, timed apart."""
+        """The fixed-rate loop (``loop.run_loop``) until ``should_stop()``."""
         return run_loop(
             self.period,
             self.step,
@@ -91,7 +89,6 @@ class ControllerManager:
             stats=stats,
             phases=self._phases,
             after=after,
-            plant_step=plant_step,
         )
 
     def _phases(self) -> np.ndarray:

@@ -93,11 +93,6 @@ class RunReport:
             f"us; overruns {int(s.get('overruns', 0))}, missed periods "
             f"{int(s.get('missed', 0))} ({s.get('missed_percent', 0):.3f} %)",
         ]
-        if "sim_step_p50_us" in s:
-            lines.append(
-                f"  the simulated robot's step before each cycle (not in compute): p50 "
-                f"{s['sim_step_p50_us']:.0f} us, p99 {s['sim_step_p99_us']:.0f} us"
-            )
         if phases:
             lines.append("  per phase (median/p99 us): "
                          + ", ".join(f"{k} {v[0]:.0f}/{v[1]:.0f}" for k, v in phases.items()))

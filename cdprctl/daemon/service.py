@@ -6,9 +6,9 @@ events the loop queued, the links (``links.py``), the scripted clients (``script
 status line (``report.py``), the systemd watchdog. SIGTERM/SIGINT: a controlled stop
 (decelerate, disable the drives: the brakes hold), exit code 0.
 
-With ``--sim`` the simulated robot of ``sim_backend`` runs in this process on the ``inprocess``
-CAN interface (built as lock-step builds it), stepped by the loop before each cycle: what a
-newcomer runs to see the whole system. Without it the drives are real (or ``cdprctl sim`` in
+With ``--sim`` the simulated robot of ``sim_backend`` runs in a child process, on the other CPU
+as drives run on processors of their own, over socket pairs (``sim_backend/process.py``): what
+a newcomer runs to see the whole system. Without it the drives are real (or ``cdprctl sim`` in
 another process, met through ``--can-interface/--can-channel``). The daemon reads the loop
 only through ``ControlData`` and talks to it only through the command mailbox.
 """
@@ -20,7 +20,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cdprctl import realtime as rt
 from cdprctl.control.commands import Command, CommandKind
@@ -33,7 +33,6 @@ from cdprctl.daemon.links import Links, links_of
 from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script
 from cdprctl.daemon.sdnotify import Watchdog, notify, watchdog_interval
-from cdprctl.daemon.sim_step import SimStepper
 from cdprctl.daemon.startup import (
     StartupInterrupted,
     StartupRefusedError,
@@ -43,6 +42,9 @@ from cdprctl.daemon.startup import (
 )
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import tda_options_of
+
+if TYPE_CHECKING:
+    from sim_backend.process import SimulatedRobotProcess
 
 DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
 # where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
@@ -67,7 +69,7 @@ class Daemon:
         ``foxglove``: ``[HOST:]PORT`` of the live 3D view (or ``[foxglove] listen`` in the
         config). ``ros2``: publish to ROS 2 (or ``[ros2] enabled``).
         ``as_built``: with ``sim``, the robot the simulated plant is (its geometry; the drives
-        from ``model``)."""
+        from ``model``), in a process of its own (``sim_backend/process.py``)."""
         from cdprctl.state_dir import default_state_dir, simulated_state_dir
         from drivers import create_driver
         from drivers.simulated import simulated_robot
@@ -92,12 +94,14 @@ class Daemon:
         self.status_every, self.timing_file, self.realtime = status_every, timing_file, realtime
         self._cycle_done = threading.Event()  # set by the loop after each cycle
         period = model.control.period
-        self.sim: SimStepper | None = None
+        self.sim: SimulatedRobotProcess | None = None
         self.driver: Any = None
         try:
             if sim:
-                self.sim = SimStepper(model, as_built)
-                self.driver = self.sim.driver(period)
+                from sim_backend.process import SimulatedRobotProcess
+
+                self.sim = SimulatedRobotProcess(model, as_built, realtime, self._print)
+                self.driver = create_driver(model, period=period, bus_overrides=self.sim.overrides)
             else:
                 self.driver = create_driver(model, period=period, bus_overrides=overrides)
         except BaseException:  # a stop signal while they were built: their buses closed
@@ -170,9 +174,7 @@ class Daemon:
             wd.start()
         io.start()
         try:
-            plant_step = self.sim.step if self.sim is not None else None
-            self.manager.run(self._should_stop, self.stats, after=self._cycle_done.set,
-                             plant_step=plant_step)  # fmt: skip
+            self.manager.run(self._should_stop, self.stats, after=self._cycle_done.set)
         finally:
             if self.realtime:
                 rt.leave_realtime()
@@ -264,7 +266,9 @@ class Daemon:
         next_tick = time.monotonic()
         while True:
             now = time.monotonic() - t0
-            true = sim.plant.position if sim is not None else None
+            true = sim.position if sim is not None else None
+            if sim is not None:
+                sim.poll()
             self._drain_events()
             self.links.publish(d, self.stats, true)
             for taken in self.links.take_commands():
