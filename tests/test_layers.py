@@ -20,13 +20,15 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
         tuple(
             f"cdprctl.model.{m}"
             for m in ("robot", "control", "drives", "buses", "grippers", "zenoh", "foxglove",
-                      "ros2", "calibration", "safety", "errors", "reader", "paths")
+                      "ros2", "calibration", "safety", "errors", "reader", "paths",
+                      "interference")
         ),
     ),
     (
         "geometry",  # and the loader, whose checks need the geometry
         (
             "cdprctl.kinematics",
+            "cdprctl.interference",
             "cdprctl.forward_kinematics",
             "cdprctl.stiffness",
             "cdprctl.gripper",

@@ -21,6 +21,7 @@ from cdprctl.model.drives import read_drives
 from cdprctl.model.errors import ConfigError
 from cdprctl.model.foxglove import read_foxglove
 from cdprctl.model.grippers import read_grippers
+from cdprctl.model.interference import read_interference
 from cdprctl.model.paths import read_paths
 from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Platform, Pose, RobotModel, Workspace
@@ -46,8 +47,10 @@ TOP_KEYS = (
     "calibration",
     "safety",
     "paths",
+    "cell",
+    "interference",
 )
-PLATFORM_KEYS = ("mass", "com", "inertia")
+PLATFORM_KEYS = ("mass", "com", "inertia", "body")  # body: model/interference.py
 HOME_KEYS = ("position", "rpy")
 WORKSPACE_KEYS = ("position_min", "position_max", "max_angle", "wrench_margin")
 
@@ -132,6 +135,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     calibration = read_calibration(rd, data, len(cables or ()), anchors)
     safety = read_safety(rd, data)
     paths = read_paths(rd, data)
+    interference = read_interference(rd, data)
 
     if (
         rd.errors
@@ -172,6 +176,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         calibration=calibration,
         safety=safety,
         paths=paths,
+        interference=interference,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

@@ -16,6 +16,7 @@ from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
 from cdprctl.model.foxglove import FoxgloveConfig
 from cdprctl.model.grippers import Gripper
+from cdprctl.model.interference import InterferenceConfig
 from cdprctl.model.paths import PathsConfig
 from cdprctl.model.ros2 import Ros2Config
 from cdprctl.model.safety import SafetyConfig
@@ -139,6 +140,8 @@ class RobotModel:
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     paths: PathsConfig = field(default_factory=PathsConfig)  # how path files are read
+    # the platform's body, the cell's obstacles, the clearance (cdprctl/interference.py)
+    interference: InterferenceConfig = field(default_factory=InterferenceConfig)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame
