@@ -16,7 +16,7 @@ from typing import Any
 import can
 
 from cdprctl.model.robot import RobotModel
-from drivers.buses import open_bus
+from drivers.buses import media_key, open_bus
 from drivers.cia402 import protocol as p402
 from sim_backend.drives.cia402 import Cia402Drive
 from sim_backend.plant import CdprPlant
@@ -38,9 +38,18 @@ class SimNetwork:
         self.plant = plant
         self.cfg = model.drives
         self.time = start_time
-        self.buses: list[can.BusABC] = [
-            open_bus(b, bus_overrides, i) for i, b in enumerate(self.cfg.buses)
-        ]
+        # buses that an override puts on one medium share its one socket: each frame read once
+        # and handled for every bus on it (with four sockets on one udp_multicast group, a
+        # 1 kHz rowc decoded each frame four times, its own echoes too: the simulated robot
+        # was late by 10-65 ms every second and the daemon faulted on silent drives)
+        keys = [media_key(b, bus_overrides, i) for i, b in enumerate(self.cfg.buses)]
+        self.buses: list[can.BusABC] = []
+        for i, bus_cfg in enumerate(self.cfg.buses):
+            first = keys.index(keys[i])
+            self.buses.append(self.buses[first] if first < i
+                              else open_bus(bus_cfg, bus_overrides, i))  # fmt: skip
+        self._media = [(i, [b for b, k in enumerate(keys) if k == keys[i]])
+                       for i in range(len(keys)) if keys.index(keys[i]) == i]  # fmt: skip
         # the media that send a step's frames together (drivers/pair_bus.py, udp_bus.py)
         self._stage_of = [getattr(bus, "stage", None) for bus in self.buses]
         self._batching = False
@@ -107,8 +116,8 @@ class SimNetwork:
         self._send(self._bus_of[cable], self.drives[cable].power_cycle())
 
     def close(self) -> None:
-        for bus in self.buses:
-            bus.shutdown()
+        for m, _ in self._media:
+            self.buses[m].shutdown()
         self.buses = []
 
     def __enter__(self) -> SimNetwork:
@@ -143,11 +152,13 @@ class SimNetwork:
             self._handle(b, msg)
 
     def _waiting(self, first: can.Message | None) -> list[tuple[int, can.Message]]:
+        """Every frame waiting, as ``(bus, frame)`` for each bus on the medium it came on."""
         out: list[tuple[int, can.Message]] = []
-        for b, bus in enumerate(self.buses):
+        for m, sharing in self._media:
+            bus = self.buses[m]
             while True:
                 msg: can.Message | None
-                if first is not None and b == 0:
+                if first is not None and m == 0:
                     msg, first = first, None
                 else:
                     try:
@@ -156,11 +167,11 @@ class SimNetwork:
                         msg = None
                 if msg is None:
                     break
-                out.append((b, msg))
+                self.frames_in += 1
+                out += [(b, msg) for b in sharing]
         return out
 
     def _handle(self, b: int, msg: can.Message) -> None:
-        self.frames_in += 1
         if self.rx_filter is not None and not self.rx_filter(msg, self.time):
             return
         if self.protocol == "odrive":
@@ -229,9 +240,9 @@ class SimNetwork:
             self._advance_until(t_end, arrival, first)
         finally:
             self._batching = False
-            for b, stage in enumerate(self._stage_of):
-                if stage is not None:
-                    self._flush(b)
+            for m, _ in self._media:
+                if self._stage_of[m] is not None:
+                    self._flush(m)
 
     def _advance_until(
         self, t_end: float, arrival: Callable[[can.Message], float], first: can.Message | None
