@@ -4,10 +4,10 @@ midway resumes and completes").
 
 For each robot: ``cdprctl sim`` on a udp_multicast group of its own, N busy Python processes
 at normal priority beside (``--hog``), then ``cdprctl calibrate geometry`` in a third
-process; its exit, its wall time, its missed periods and its first line of trouble. With
-``--interrupt S`` the simulated robot is stopped S seconds into the calibration (as a drive
-that lost power: the calibration stops, keeping its samples), started again, and the
-calibration resumed with ``--resume``: both runs reported, the resumed one to completion.
+process; its exit, its wall time, its missed periods and its first line of trouble. A
+calibration that stops (a fault: it keeps its samples) is resumed with ``--resume`` up to
+``--resumes`` times, each run reported. With ``--interrupt S`` the simulated robot is stopped S
+seconds into the first calibration (as a drive that lost power) and started again.
 
 Run: ``.venv/bin/python benchmarks/bench_procedures_load.py [--robots rowc,caroca] [--hog 2]
 [--interrupt 40]``: a few minutes a robot.
@@ -94,6 +94,8 @@ def main() -> None:
     ap.add_argument("--hog", type=int, default=2, help="busy processes beside everything")
     ap.add_argument("--interrupt", type=float, default=0.0,
                     help="s into the calibration the simulated robot is stopped (0: never)")
+    ap.add_argument("--resumes", type=int, default=2,
+                    help="times a stopped calibration is resumed (--resume)")
     args = ap.parse_args()
     print(machine_line())
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
@@ -111,9 +113,11 @@ def main() -> None:
                     first = calibrate(config, bus, tmp, out, False, args.interrupt, config,
                                       sim_box)  # fmt: skip
                     print(f"{robot}, {args.hog} hogs: {summary(*first)}", flush=True)
-                    if args.interrupt > 0 and first[0] != 0:
-                        again = calibrate(config, bus, tmp, out, True, 0.0, config, sim_box)
-                        print(f"{robot}, resumed: {summary(*again)}", flush=True)
+                    for attempt in range(args.resumes):  # stopped: resumed from its samples
+                        if first[0] == 0:
+                            break
+                        first = calibrate(config, bus, tmp, out, True, 0.0, config, sim_box)
+                        print(f"{robot}, resumed ({attempt + 1}): {summary(*first)}", flush=True)
                     print(f"{robot}: record written: {Path(out).is_file()}", flush=True)
                 finally:
                     stop(sim_box[0])

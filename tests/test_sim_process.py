@@ -106,7 +106,8 @@ def test_a_starved_simulated_robot_says_so_and_ignores_ctrl_c():
     said = re.search(r"stepped (\d+\.\d) ms late", out)
     assert said is not None and 40.0 <= float(said.group(1)) <= 2000.0, out
     assert "the simulator's lateness, not a drive's fault" in out
-    assert "1 steps later than 10 ms" in out
+    # the stall at least (a loaded machine holds it up more often: each counted)
+    assert re.search(r"the simulated robot: [1-9]\d* steps later than 10 ms", out), out
     # the daemon's own word (the drives were silent), and its exit: it ended in that fault
     assert "final state fault (drives: drive of cable index" in out and "no feedback for" in out
 
