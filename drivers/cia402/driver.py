@@ -20,7 +20,7 @@ import numpy as np
 
 from cdprctl.numerics import kernel_args
 from drivers import blocking
-from drivers.canbase import CanWinchDriver
+from drivers.base import WinchDriver
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
 from drivers.cia402.brake import command_brake
@@ -37,25 +37,31 @@ from drivers.errors import (
     following_error_text,
 )
 from drivers.registry import register_driver
+from drivers.transport import CanTransport
 from drivers.vocabulary import ACTIVE, ERROR, INACTIVE
 
 
 @register_driver
-class Cia402Driver(CanWinchDriver):
+class Cia402Driver(WinchDriver):
     name = "cia402"
+    transport: CanTransport
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         cfg = self.config
         m = self.m
+        self.transport = t = CanTransport(m, cfg, self.bus_overrides, self.stats,
+                                          lambda: self.clock())  # fmt: skip
+        self.buses, self.media, self.node, self.bus_of = t.buses, t.media, t.node, t.bus_of
+        self._send = t.send  # an attribute: one call a frame (a test may wrap it)
         # (bus, arbitration id) → (kind, cable)
         for c in range(m):
             b, n = int(self.bus_of[c]), int(self.node[c])
-            self._dispatch[(b, p.TPDO1 + n)] = (1, c)
-            self._dispatch[(b, p.TPDO2 + n)] = (2, c)
-            self._dispatch[(b, p.EMCY + n)] = (3, c)
-            self._dispatch[(b, p.HEARTBEAT + n)] = (4, c)
-            self._dispatch[(b, p.SDO_TX + n)] = (5, c)
+            t.dispatch[(b, p.TPDO1 + n)] = (1, c)
+            t.dispatch[(b, p.TPDO2 + n)] = (2, c)
+            t.dispatch[(b, p.EMCY + n)] = (3, c)
+            t.dispatch[(b, p.HEARTBEAT + n)] = (4, c)
+            t.dispatch[(b, p.SDO_TX + n)] = (5, c)
         # each drive's mode (0x6060): [drives] mode, but torque mode for its torque_cables
         self.modes = [p.MODES[cfg.mode_of(c)] for c in range(m)]
         self._position = [mode == p.MODE_CSP for mode in self.modes]  # per drive
@@ -209,8 +215,7 @@ class Cia402Driver(CanWinchDriver):
         command_brake(self.sdo, c, closed, timeout)
 
     def _medium_of(self, c: int) -> int:
-        b = int(self.bus_of[c])
-        return self._shared.get(b, b)
+        return self.transport.medium_of(int(self.bus_of[c]))
 
     def _request_enable(self, enable: bool) -> None:
         self._enable = enable
@@ -289,7 +294,7 @@ class Cia402Driver(CanWinchDriver):
         applied together, in their order of arrival (``cyclic.tpdo1_synced_kernel``)."""
         tp2, raw, cables, n = p.TPDO2_STRUCT.unpack, self._tpdo1_bytes, self._tpdo1_cable, 0
         pdo_velocity = self.config.velocity_source == "pdo"
-        for kind, c, data in self._frames():
+        for kind, c, data in self.transport.frames():
             if kind == 1 and len(data) == 8:
                 if n == len(cables):  # more than 4 per drive since the last read: apply them
                     self._apply_tpdo1(n, t)
@@ -415,4 +420,4 @@ class Cia402Driver(CanWinchDriver):
             for b in self.media:
                 self._send(b, self._hb)
             self._last_hb_sent = t
-        return self._sends_failing()
+        return self.transport.sends_failing()
