@@ -1,7 +1,10 @@
 """The hardware abstraction for a set of winch drives.
 
-Modelled on python-can's ``BusABC`` (the public methods live here, subclasses override only the
-``_``-prefixed hooks) and ros2_control's hardware-interface lifecycle:
+Modelled on python-can's ``BusABC`` (the public methods live here; a protocol subclasses it once
+and overrides only the ``_``-prefixed hooks: one layer) and ros2_control's hardware-interface
+lifecycle. The medium is not a hook: the driver is composed with a :class:`Transport` object
+(``drivers/transport.py``: python-can buses) that it opens, closes and brackets each cycle's
+frames with; the protocol sends and reads through it.
 
 ``UNCONFIGURED --configure()--> INACTIVE --activate()--> ACTIVE --deactivate()--> INACTIVE``;
 ``shutdown()`` from any state ends in ``FINALIZED`` (safe twice). A fault seen in ``read`` or
@@ -25,10 +28,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cdprctl.numerics import clamp, cycle_kernel
 from drivers import blocking
+from drivers.command_kernels import clamp_kernel, finite_into
 from drivers.errors import DriverError, DriverOperationError
-from drivers.liveness import PLAUSIBLE_CABLE_SPEED, Liveness
+from drivers.liveness import Liveness
 from drivers.vocabulary import (
     ACTIVE,
     ERROR,
@@ -46,6 +49,7 @@ _LOG = logging.getLogger("cdprctl.drivers")
 if TYPE_CHECKING:
     from cdprctl.model.drives import DrivesConfig
     from cdprctl.model.robot import RobotModel
+    from drivers.transport import Transport
 
 
 class WinchDriver(ABC):
@@ -56,6 +60,8 @@ class WinchDriver(ABC):
     #: what the drive is called in messages, and what its cyclic feedback is
     drive_label = "drive"
     feedback_label = "feedback"
+    #: the medium, set by the protocol's constructor (``drivers/transport.CanTransport``)
+    transport: Transport
 
     def __init__(
         self,
@@ -96,14 +102,7 @@ class WinchDriver(ABC):
         self.reset_since_setup: list[bool] | None = None
         self._activating = False
         self._recover_until = -math.inf
-        # the feedback's liveness; a position step faster than PLAUSIBLE_CABLE_SPEED is a
-        # corrupted frame (or a failing encoder), dropped like a lost one: the liveness check
-        # then stops the robot if it persists
-        r = np.array([w.winch.drum_radius / w.winch.gear_ratio for w in model.cables])
-        self.liveness = Liveness(
-            self.m, period, PLAUSIBLE_CABLE_SPEED / r, self.stats,
-            self.config.feedback_timeout, self.config.heartbeat_timeout,
-        )  # fmt: skip
+        self.liveness = Liveness.of_winches(model.cables, period, self.stats, self.config)
 
     # -- lifecycle (outside the loop: may block, may raise) -----------------------------------
     def configure(self, timeout: float = 2.0) -> None:
@@ -113,7 +112,7 @@ class WinchDriver(ABC):
         from drivers.busload import check_bus_load
         from drivers.errors import DriverConfigurationError
 
-        self._require(UNCONFIGURED)
+        self.require(UNCONFIGURED)
         self._warm_up()
         self.warnings, errors = check_bus_load(self.config, 1.0 / self.period)
         for w in self.warnings:
@@ -149,7 +148,7 @@ class WinchDriver(ABC):
         reports enabled. Torques written meanwhile are passed on (a drive applies them from
         the moment it is enabled: send the holding torques, so releasing the brake is not a
         fall)."""
-        self._require(INACTIVE)
+        self.require(INACTIVE)
         self._activating = True
         self.targets[:] = self.states.position  # held where they stand until targets come
         self._request_enable(True)
@@ -276,12 +275,26 @@ class WinchDriver(ABC):
             self.lifecycle = ERROR
             self._request_enable(False)
 
-    def _require(self, state: Lifecycle) -> None:
+    def require(self, state: Lifecycle) -> None:
+        """DriverOperationError unless the driver is in ``state``."""
         if self.lifecycle is not state:
             raise DriverOperationError(
                 f"{self.name}: this call needs the {state.value} state, the driver is "
                 f"{self.lifecycle.value}"
             )
+
+    def zero_commands(self) -> None:
+        """The command and the last valid one zero: what an enable starts from."""
+        self._command[:] = 0.0
+        self._last_command[:] = 0.0
+
+    def setup_cycle(self, now: float) -> DriverError | None:
+        """One cycle of the set-up's own (zero torque, drives disabled; outside the
+        lifecycle: no state change, no error latched): the feedback drained, the frames sent.
+        The first error of either."""
+        err = self._read_cycle(now)
+        sent = self._write_cycle(now, np.zeros(self.m), setup=True)
+        return err or sent
 
     def _read_cycle(self, t: float) -> DriverError | None:
         """Drain the feedback (``_drain``), then every cable's state (``_update_states``) and
@@ -306,17 +319,39 @@ class WinchDriver(ABC):
     def _write_cycle(
         self, t: float, torques: np.ndarray, setup: bool = False
     ) -> DriverError | None:
-        """The cycle's frames (``_write_frames``) between ``_begin_frames`` and ``_end_frames``
-        (a medium that batches them sends them there). ``setup``: the set-up's own cycling."""
-        self._begin_frames(setup)
+        """The cycle's frames (``_write_frames``) between the transport's ``begin_frames``
+        and ``end_frames`` (a medium that batches them sends them there). ``setup``: the
+        set-up's own cycling."""
+        transport = self.transport
+        transport.begin_frames(setup)
         err = self._write_frames(t, torques, setup)
-        self._end_frames()
+        transport.end_frames()
         return err
 
     def _where(self, c: int) -> str:
-        return f"{self.drive_label} of cable index {c}"
+        return f"{self.drive_label} of cable index {c}{self.transport.where(c)}"
 
-    # -- hooks: the one layer a driver implements (transport, then protocol) -----------------
+    # -- the transport, driven from here ------------------------------------------------------
+    def _open(self) -> None:
+        self.transport.open()
+
+    def _close(self) -> None:
+        self.transport.close()
+
+    @property
+    def _batching(self) -> bool:
+        """Whether the transport stages the frames now (``begin_frames``); set by hand, a
+        test stages frames outside a cycle (tests/test_udp_bus.py)."""
+        return self.transport.batching
+
+    @_batching.setter
+    def _batching(self, on: bool) -> None:
+        self.transport.batching = on
+
+    def _flush_staged(self) -> None:
+        self.transport.flush_staged()
+
+    # -- hooks: the one layer a protocol implements --------------------------------------------
     def _warm_up(self) -> None:
         """Call the cyclic path's compiled kernels once, on copies, before the drives start:
         a first call compiles (seconds) or loads from numba's cache (ms), neither of which
@@ -329,25 +364,6 @@ class WinchDriver(ABC):
         """s (clock): when the drives take the last write's frames: by default now, after
         them (``sent_at``)."""
         return self.clock()
-
-    # the transport (drivers/canbase.py: python-can buses)
-    @abstractmethod
-    def _open(self) -> None:
-        """Open the buses (raise DriverInitializationError)."""
-
-    @abstractmethod
-    def _close(self) -> None:
-        """Close the buses; idempotent."""
-
-    @abstractmethod
-    def _begin_frames(self, setup: bool) -> None:
-        """A cycle's frames are about to be sent (``setup``: the set-up's, each of which waits
-        for its answer, so none may be held back)."""
-
-    @abstractmethod
-    def _end_frames(self) -> None:
-        """The cycle's frames were all given (``_write_frames`` returned): send what was held
-        back, in its order."""
 
     # the protocol: set-up (outside the loop), then the cyclic path
     @abstractmethod
@@ -382,28 +398,3 @@ class WinchDriver(ABC):
         """Encode and send the cycle's frames for the torques (N·m; in position mode with
         ``self.targets``); an error when sending keeps failing, never raise. ``setup``: a
         write of the set-up's own cycling, not of the control loop."""
-
-
-@cycle_kernel
-def clamp_kernel(torques, last, limit, out):  # pragma: no cover - compiled
-    """``out`` ← ``torques`` (N·m) within ±``limit``, a non-finite one replaced by ``last``
-    (the last valid command); returns the counts of replaced and clamped commands."""
-    rejected = 0
-    clamped = 0
-    for i in range(len(out)):
-        v = torques[i]
-        if not np.isfinite(v):
-            rejected += 1
-            v = last[i]
-        out[i] = clamp(v, -limit[i], limit[i])
-        if out[i] != v:
-            clamped += 1
-    return rejected, clamped
-
-
-@cycle_kernel
-def finite_into(values, out):  # pragma: no cover - compiled
-    """``out[i]`` ← ``values[i]`` where it is finite; the others keep their last value."""
-    for i in range(len(out)):
-        if np.isfinite(values[i]):
-            out[i] = values[i]

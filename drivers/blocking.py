@@ -2,35 +2,59 @@
 set-up and tools outside a running loop, each written on the non-blocking one: its ``begin_*``,
 then ``read``/``write`` cycles letting time pass with the driver's ``wait`` until the
 lifecycle says it is done or the timeout passes. The control loop itself uses ``begin_*``.
-``await_first_feedback`` is the set-up's own cycling, for a protocol's ``_configure_drives``."""
+``await_first_feedback`` is the set-up's own cycling, for a protocol's ``_configure_drives``.
+Written on the driver's public interface alone (:class:`Stepped`, which
+``drivers.base.WinchDriver`` is): this module imports no driver."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-from drivers.errors import DriverOperationError, DriverTimeoutError
-from drivers.vocabulary import DriveState, Lifecycle
-
-if TYPE_CHECKING:
-    from drivers.base import WinchDriver
+from drivers.errors import DriverError, DriverOperationError, DriverTimeoutError
+from drivers.liveness import Liveness
+from drivers.vocabulary import DriveState, Lifecycle, WinchStates
 
 
-def activate(drv: WinchDriver, timeout: float = 2.0) -> None:
+class Stepped(Protocol):
+    """The part of a driver the blocking calls step through (``drivers/base.py``)."""
+
+    m: int
+    period: float
+    lifecycle: Lifecycle
+    error: DriverError | None
+    states: WinchStates
+    liveness: Liveness
+
+    def clock(self) -> float: ...
+    def wait(self, dt: float) -> None: ...
+    def require(self, state: Lifecycle) -> None: ...
+    def zero_commands(self) -> None: ...
+    def begin_activate(self) -> None: ...
+    def begin_deactivate(self) -> None: ...
+    def begin_recover(self, settle: float = 0.5) -> None: ...
+    def setup_cycle(self, now: float) -> DriverError | None: ...
+    def read(self, t: float | None = None) -> WinchStates: ...
+
+    def write(self, t: float | None, torques: np.ndarray, force: bool = False,
+              targets: np.ndarray | None = None) -> None: ...  # fmt: skip
+
+
+def activate(drv: Stepped, timeout: float = 2.0) -> None:
     """Enable every drive (zero torque, targets where the motors stand) → ``ACTIVE``;
     blocks with ``wait``: ``begin_activate`` and the cycles it needs (``read`` alone says
     when every drive is enabled)."""
-    drv._require(Lifecycle.INACTIVE)
-    drv._command[:] = 0.0
-    drv._last_command[:] = 0.0
+    drv.require(Lifecycle.INACTIVE)
+    drv.zero_commands()
     drv.begin_activate()
+    zeros = np.zeros(drv.m)
     deadline = drv.clock() + timeout
     while True:
         now = drv.clock()
         drv.read(now)
-        drv.write(now, drv._command)
+        drv.write(now, zeros)
         if drv.lifecycle is Lifecycle.ERROR:
             raise drv.error or DriverOperationError("activation failed")
         if drv.lifecycle is Lifecycle.ACTIVE:
@@ -45,7 +69,7 @@ def activate(drv: WinchDriver, timeout: float = 2.0) -> None:
         drv.wait(drv.period)
 
 
-def deactivate(drv: WinchDriver, timeout: float = 1.0) -> None:
+def deactivate(drv: Stepped, timeout: float = 1.0) -> None:
     """Disable the drives (brakes hold) → ``INACTIVE``: ``begin_deactivate``, then cycles of
     zero torque until no drive reports enabled (or ``timeout`` s)."""
     if drv.lifecycle not in (Lifecycle.ACTIVE, Lifecycle.ERROR):
@@ -61,7 +85,7 @@ def deactivate(drv: WinchDriver, timeout: float = 1.0) -> None:
         drv.wait(drv.period)
 
 
-def recover(drv: WinchDriver, timeout: float = 1.0) -> None:
+def recover(drv: Stepped, timeout: float = 1.0) -> None:
     """From ``ERROR``: ``begin_recover`` (fault reset, drives disabled; faults still latched
     are not counted for ``timeout`` s), then cycles until every drive answers again without a
     fault → ``INACTIVE``; a fault still there after ``timeout`` is raised."""
@@ -86,7 +110,7 @@ def recover(drv: WinchDriver, timeout: float = 1.0) -> None:
 
 
 def await_first_feedback(
-    drv: WinchDriver, timeout: float, heard: Callable[[], bool], what: str,
+    drv: Stepped, timeout: float, heard: Callable[[], bool], what: str,
     on_tick: Callable[[float], None] | None = None,
 ) -> None:  # fmt: skip
     """Cycle (zero torque, drives disabled) until ``heard()`` says every drive has sent
@@ -95,8 +119,7 @@ def await_first_feedback(
     deadline = drv.clock() + timeout
     while True:
         now = drv.clock()
-        drv._read_cycle(now)
-        drv._write_cycle(now, np.zeros(drv.m), setup=True)
+        drv.setup_cycle(now)
         if heard():
             return
         if on_tick is not None:

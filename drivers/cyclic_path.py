@@ -1,4 +1,4 @@
-"""The control cycle's path through a medium that can batch (``drivers/canbase.py`` looks for
+"""The control cycle's path through a medium that can batch (``drivers/transport.py`` looks for
 it): ``stage`` a frame, ``flush`` the staged ones together, ``drain_frames`` what came. Here
 the part both media share: the count of staged frames."""
 

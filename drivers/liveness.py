@@ -9,6 +9,8 @@ cycle, compiled, and :meth:`Liveness.error` words the timeout of a cable past it
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +49,17 @@ class Liveness:
         # position samples no motor can make, in a row, per cable (a protocol may replace it
         # by a view of its own decoding state)
         self.implausible = np.zeros(m, dtype=np.int64)
+
+    @classmethod
+    def of_winches(cls, cables: Sequence[Any], period: float, stats: DriverStats,
+                   config: Any) -> Liveness:  # fmt: skip
+        """The liveness of ``cables``' drives (the model's: a winch each) at the control
+        ``period`` (s), by ``config``'s (``[drives]``) timeouts. A position step faster than
+        ``PLAUSIBLE_CABLE_SPEED`` of cable is a corrupted frame (or a failing encoder),
+        dropped like a lost one: the liveness check then stops the robot if it persists."""
+        r = np.array([w.winch.drum_radius / w.winch.gear_ratio for w in cables])
+        return cls(len(cables), period, PLAUSIBLE_CABLE_SPEED / r, stats,
+                   config.feedback_timeout, config.heartbeat_timeout)  # fmt: skip
 
     def plausible(self, c: int, step: float, stamp: float) -> bool:
         """Whether motor ``c`` can have turned by ``step`` (rad) since its last accepted

@@ -10,7 +10,7 @@ SocketCAN lays them out (``struct can_frame``: 32-bit id with the EFF/RTR/ERR fl
 looped back, nobody else is on the medium.
 
 python-can's interface (``recv``/``send``, for the set-up, SDO and the ``canopen`` package)
-plus the control cycle's path that ``drivers/canbase.py`` looks for: ``drain_frames`` to read,
+plus the control cycle's path that ``drivers/transport.py`` looks for: ``drain_frames`` to read,
 ``stage``/``flush`` to send. The channel is the socket's file descriptor (the bus owns it).
 Classic CAN frames only.
 """
@@ -128,7 +128,7 @@ class PairBus(StagedFrames, can.BusABC):
             return None
         return HEADER.unpack_from(self._in, 0)[0] + (time.time() - time.monotonic())
 
-    # -- the control cycle's path (drivers/canbase.py) ------------------------------------------
+    # -- the control cycle's path (drivers/transport.py) ----------------------------------------
     def stage(self, msg: can.Message) -> bool:
         """``msg`` into the next ``flush``'s datagram; False if it is full or ``msg`` is a CAN
         FD frame (then nothing is staged)."""

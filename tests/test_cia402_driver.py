@@ -63,9 +63,9 @@ def test_a_short_emcy_is_ignored_and_counted_and_a_padded_heartbeat_is_read_from
         peer.bus.send(frame(p.HEARTBEAT + 5, bytes([p.HB_PRE_OPERATIONAL, 0x05])))
         drv.read(peer.t + 0.001)
         assert drv.stats.frames_ignored == before + 1
-        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[1]) == 0
+        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv.feedback.emcy[1]) == 0
         np.testing.assert_array_equal(drv.states.velocity, velocity)
-        assert drv._nmt_state[4] == p.HB_PRE_OPERATIONAL
+        assert drv.feedback.nmt_state[4] == p.HB_PRE_OPERATIONAL
 
 
 class LateDrive(Cia402Script):
@@ -176,8 +176,8 @@ def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed)
             peer.bus.send(frame(arb, data))
         drv.read(peer.t + 0.001)
         assert drv.stats.frames_ignored == before + 6
-        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv._emcy[2]) == 0
-        assert 2 not in drv._sdo_reply
+        assert drv.lifecycle is Lifecycle.INACTIVE and int(drv.feedback.emcy[2]) == 0
+        assert 2 not in drv.feedback.sdo_reply
         np.testing.assert_array_equal(drv.states.velocity, velocity)
         np.testing.assert_array_equal(drv.liveness.last_hb, last_hb)
 

@@ -5,8 +5,6 @@ write and a drive in another mode make of the start."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import pytest
 
 from drivers.cia402 import drive_setup as ds
@@ -59,25 +57,25 @@ class Drive:
 
 
 def set_up(drive: Drive, *, dcf: str | None = None, rated: int | None = 1200,
-           pdo_mapping: str = "configure", heartbeat: float = 0.5) -> SimpleNamespace:  # fmt: skip
+           pdo_mapping: str = "configure", heartbeat: float = 0.5) -> ds.DriveRecord:  # fmt: skip
     """``configure_drive`` on cable index 0 (node 3, csp, velocity by TPDO2) against ``drive``;
-    ``rated``: 0x6076 as the capabilities read it before (mN·m). Returns the driver's state."""
-    config = SimpleNamespace(heartbeat_timeout=heartbeat, pdo_mapping=pdo_mapping,
-                             velocity_source="pdo", following_error_timeout=0.003)  # fmt: skip
-    drv = SimpleNamespace(
-        node=[NODE], modes=[p.MODE_CSP], skipped=[[]], identities=[None], config=config,
-        _reset_flags=[None], _dcf=[dcf], rated_torque=RATED, pdos_written=0,
-        _max_torque_pm=[2500], _position=[True], _following_window=[400],
+    ``rated``: 0x6076 as the capabilities read it before (mN·m). Returns what it recorded."""
+    plan = ds.DrivePlan(
+        cable=0, node=NODE, mode=p.MODE_CSP, dcf=dcf or "",
+        heartbeat_ms=round(heartbeat * 1000 / 5), rated_torque=RATED, max_torque_pm=2500,
+        following_window=400, following_timeout_ms=3,
+        configure_pdos=pdo_mapping == "configure", velocity_pdo=True,
     )  # fmt: skip
+    record = ds.DriveRecord()
     caps = Capabilities(None, 0x00020192, 1 << 7, rated, present={})
-    ds.configure_drive(drv, drive, 0, 0.1, caps, True)  # type: ignore[arg-type]
-    return drv
+    ds.configure_drive(drive, plan, record, 0.1, caps, True)  # type: ignore[arg-type]
+    return record
 
 
 def test_a_drive_set_up_as_wanted_gets_only_cdprctls_settings():
     drive = Drive()
     drv = set_up(drive)
-    assert drv.pdos_written == 0 and drv.skipped == [[]]
+    assert drv.pdos_written == 0 and drv.skipped == []
     assert drive.value(p.OD_MODES_OF_OPERATION) == p.MODE_CSP
     assert drive.value(p.OD_PRODUCER_HEARTBEAT) == 100  # 0.5 s / 5, ms
     assert drive.value(p.OD_FOLLOWING_ERROR_TIMEOUT) == 3  # ms
@@ -90,9 +88,9 @@ def test_a_drive_whose_heartbeat_is_not_cdprctls_was_reset_since_its_last_set_up
     what cdprctl writes, the drive was reset (the homing it held is gone); found as written,
     it was not."""
     drive = Drive()
-    assert set_up(drive)._reset_flags == [True]  # 0: the drive's default
-    assert set_up(drive)._reset_flags == [False]  # as the first set-up left it
-    assert set_up(drive, heartbeat=0.6)._reset_flags == [True]
+    assert set_up(drive).reset is True  # 0: the drive's default
+    assert set_up(drive).reset is False  # as the first set-up left it
+    assert set_up(drive, heartbeat=0.6).reset is True
 
 
 def test_a_static_mapping_that_differs_refuses_the_start_and_writes_no_pdo():
@@ -148,7 +146,7 @@ SKIPPABLE = (0x06020000, 0x06090011, 0x06010002, 0x06070010, 0x06090030, 0x06090
 @pytest.mark.parametrize("index", sorted(ds.OPTIONAL))
 def test_an_optional_object_refused_as_absent_read_only_or_out_of_range_is_skipped(index, code):
     drv = set_up(Drive(refuse={(index, 0): code}))
-    (line,) = drv.skipped[0]
+    (line,) = drv.skipped
     assert line.startswith(f"0x{index:04X} {ds.OPTIONAL[index][0]} := "), line
     assert f"(0x{code:08X})" in line
     assert line.endswith(ds.OPTIONAL[index][1])
@@ -165,8 +163,8 @@ def test_an_optional_object_refused_for_any_other_reason_stops_the_start(code):
 
 def test_a_drive_without_a_rated_torque_is_noted_with_the_configs():
     drv = set_up(Drive(), rated=None)
-    assert drv.skipped == [["0x6076 motor rated torque: the drive has none to check; torques in "
-                            "per mille of 1200 mN·m ([drives] rated_torque) as the config says"]]
+    assert drv.skipped == ["0x6076 motor rated torque: the drive has none to check; torques in "
+                           "per mille of 1200 mN·m ([drives] rated_torque) as the config says"]
 
 
 def test_a_rated_torque_other_than_the_configs_refuses_the_start():

@@ -246,9 +246,9 @@ def test_cia402_write_is_stamped_at_its_sync(seed):
             n = len(held)
             drv.write(peer.t, np.zeros(8))
             if len(held) > n:
-                assert drv.sent_at == drv._last_sync == pytest.approx(peer.t - 0.001)
+                assert drv.sent_at == drv.sync.last == pytest.approx(peer.t - 0.001)
             else:
-                assert drv.sent_at == drv._last_sync == peer.t
+                assert drv.sent_at == drv.sync.last == peer.t
             peer.wait(0.002)
         assert len(held) >= 2
 
@@ -545,7 +545,7 @@ def test_each_drives_heartbeat_is_taken_as_its_heartbeat():
         ls.driver.read(ls.net.time)
         last = ls.driver.liveness.last_hb
         assert np.all(ls.net.time - last < 0.25), (ls.net.time, last)
-        assert list(ls.driver._nmt_state) == [0x05] * 8
+        assert list(ls.driver.feedback.nmt_state) == [0x05] * 8
 
 
 def test_an_implausible_position_is_counted_against_its_drive_alone():

@@ -16,8 +16,9 @@ from drivers.errors import DriverInitializationError, DriverTimeoutError, SdoAbo
 
 
 class ScriptedDrive:
-    """The part of a CAN driver the SDO client uses, with a clock that ``wait`` advances and
-    a drive that answers each request by ``answer(request) -> bytes | None`` (None: silent)."""
+    """An ``SdoPort`` (the part of a CAN driver the SDO client uses) with a clock that
+    ``wait`` advances and a drive that answers each request by ``answer(request) -> bytes |
+    None`` (None: silent)."""
 
     def __init__(self, answer):
         self.answer = answer
@@ -26,7 +27,7 @@ class ScriptedDrive:
         self.bus_of = [0, 0]
         self.node = [1, 2]
         self.media = [0]
-        self._sdo_reply: dict[int, bytes] = {}
+        self.replies: dict[int, bytes] = {}
         self.sent: list[tuple[float, bytes]] = []
 
     def clock(self) -> float:
@@ -37,13 +38,13 @@ class ScriptedDrive:
         if self.now > 10.0:  # every time-out here is shorter: the client missed it
             raise AssertionError(f"still waiting at {self.now:g} s")
 
-    def _send(self, b: int, msg) -> None:
+    def send(self, b: int, msg) -> None:
         self.sent.append((self.now, bytes(msg.data)))
         reply = self.answer(bytes(msg.data))
         if reply is not None:
-            self._sdo_reply[msg.arbitration_id - p.SDO_RX - 1] = reply
+            self.replies[msg.arbitration_id - p.SDO_RX - 1] = reply
 
-    def _drain(self, t: float) -> None:
+    def poll(self, t: float) -> None:
         pass
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from cdprctl.numerics import clamp, cycle_kernel, plausible_step
 from drivers.cia402 import protocol as p
+from drivers.cia402.sync_clock import sync_instant
 from drivers.vocabulary import DriveState
 
 # each CiA 402 power state as the control side's protocol-independent drive state
@@ -34,9 +35,6 @@ POWER_STATE_OF_SW7 = np.array([int(p.decode_statusword(sw)) for sw in range(128)
 CONTROLWORD_TOWARDS_ENABLED = np.array(
     [int(p.TOWARDS_ENABLED[s]) for s in sorted(p.PowerState)], dtype=np.int64
 )
-# counts: a SYNC fits a late TPDO1 better than the sequence's only by more than this (the
-# encoder's quantisation and a period's change of rate at rest are below it)
-SYNC_FIT_COUNTS = 4.0
 _FAULT = int(p.PowerState.FAULT)
 _FAULT_REACTION = int(p.PowerState.FAULT_REACTION_ACTIVE)
 _FAULT_RESET = int(p.Command.FAULT_RESET)
@@ -95,49 +93,14 @@ def tpdo1_frame(
 
 
 @cycle_kernel
-def sync_instant(c, pos, syncs, seq, answered, lag_max, raw, fb_stamp, rate, fallback):
-    """The instant (s) of the SYNC a TPDO1 of cable ``c`` (32-bit position ``pos``) answers.
-    Transmission type 1: one TPDO1 per SYNC, so a drive's next answer is to the SYNC after the
-    one it last answered (``answered[c]``, a sequence number; ``syncs``: the instants of the
-    last SYNCs, a ring by sequence number, ``seq`` the newest) — unless an answer was lost.
-    So every SYNC since the one it answered (at most ``lag_max`` back) is a candidate, and
-    the one whose instant fits the drive's last rate best wins (``rate``, counts/s, since its
-    last sample ``raw[c, 0]`` at ``fb_stamp[c]``) where it fits better than the sequence's
-    by more than ``SYNC_FIT_COUNTS``; at rest they fit alike and the sequence decides, where
-    a wrong instant costs nothing. An answer later than ``lag_max`` SYNCs is taken as of the
-    oldest candidate. Stamped at its arrival's SYNC instead, an
-    answer late on a busy bus read a period fresher than it was: the forward kinematics mixed
-    two instants (a 5 mm residual fault across processes beside two busy processes).
-    ``fallback`` (s) before the first SYNC."""
-    if seq <= 0:
-        return fallback
-    # never a SYNC it answered already: after a stall the drive's rate says nothing of when
-    lo = min(max(answered[c] + 1, seq - lag_max, seq - len(syncs) + 1, 1), seq)
-    chosen = lo
-    if lo < seq and raw[c, 1] != 0 and np.isfinite(fb_stamp[c]):
-        step = ((pos - raw[c, 0] + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-        ring = len(syncs)
-        err_chosen = abs(step - rate[c] * (syncs[chosen % ring] - fb_stamp[c]))
-        best, err_best = chosen, err_chosen
-        for a in range(lo, seq + 1):
-            err = abs(step - rate[c] * (syncs[a % ring] - fb_stamp[c]))
-            if err < err_best:
-                err_best, best = err, a
-        if err_chosen - err_best > SYNC_FIT_COUNTS:
-            chosen = best
-    answered[c] = chosen
-    return syncs[chosen % len(syncs)]
-
-
-@cycle_kernel
 def tpdo1_synced_kernel(
     n, frames, syncs, seq, answered, lag_max, fallback, period, max_speed, rad_per_count,
     rated_torque, ps_table, decoded, torque, fresh, fb_stamp, rate,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Apply ``n`` TPDO1 frames in their order of arrival (``tpdo1_frame``), ``frames[i]`` =
     (cable, statusword, torque per-mille, 32-bit position), each stamped at the instant of
-    the SYNC it answers (``sync_instant``); ``decoded``: the :class:`Decoded` state. Returns
-    the number of frames dropped."""
+    the SYNC it answers (``sync_clock.sync_instant``); ``decoded``: the :class:`Decoded`
+    state. Returns the number of frames dropped."""
     raw = decoded[0]
     dropped = 0
     for i in range(n):

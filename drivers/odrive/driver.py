@@ -23,11 +23,12 @@ import can
 import numpy as np
 
 from drivers import blocking
-from drivers.canbase import CanWinchDriver
+from drivers.base import WinchDriver
 from drivers.errors import DriveFaultError, DriverError, following_error_text
 from drivers.odrive import protocol as p
 from drivers.odrive.gains import AxisGains, axis_gains
 from drivers.registry import register_driver
+from drivers.transport import CanTransport
 from drivers.vocabulary import DriveState
 
 TWO_PI = 2.0 * math.pi
@@ -36,18 +37,23 @@ FE_BY = "checked by cdprctl: the ODrive does not"
 
 
 @register_driver
-class ODriveDriver(CanWinchDriver):
+class ODriveDriver(WinchDriver):
     name = "odrive"
     drive_label = "ODrive axis"
     feedback_label = "encoder estimate"
+    transport: CanTransport
 
     def __init__(self, model: Any, **kwargs: Any):
         super().__init__(model, **kwargs)
         m = self.m
+        self.transport = t = CanTransport(m, self.config, self.bus_overrides, self.stats,
+                                          lambda: self.clock())  # fmt: skip
+        self.buses, self.media, self.node, self.bus_of = t.buses, t.media, t.node, t.bus_of
+        self._send = t.send  # an attribute: one call a frame (a test may wrap it)
         for c in range(m):
             b, n = int(self.bus_of[c]), int(self.node[c])
             for cmd in (p.HEARTBEAT, p.GET_ENCODER_ESTIMATES, p.GET_TORQUES):
-                self._dispatch[(b, p.arbitration_id(n, cmd))] = (cmd, c)
+                t.dispatch[(b, p.arbitration_id(n, cmd))] = (cmd, c)
         drives = self.config
         # per cable: its axis holds a position (csp; a gripper's cable stays in torque mode)
         self.csp = [drives.mode_of(c) == "csp" for c in range(m)]
@@ -142,7 +148,7 @@ class ODriveDriver(CanWinchDriver):
         self._beyond[:] = 0.0
 
     def _drain(self, t: float) -> None:
-        for cmd, c, data in self._frames():
+        for cmd, c, data in self.transport.frames():
             if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
                 pos, vel = p.ENCODER_STRUCT.unpack(data)
                 step = pos * TWO_PI - self.states.position[c]
@@ -252,7 +258,7 @@ class ODriveDriver(CanWinchDriver):
             else:
                 p.TORQUE_STRUCT.pack_into(msg.data, 0, float(torques[c]))
             self._send(int(self.bus_of[c]), msg)
-        return self._sends_failing()
+        return self.transport.sends_failing()
 
     def _pack_position(self, c: int, data: bytearray, torque: float) -> None:
         """Set_Input_Pos for the period to come: the target's rate over the last period as
