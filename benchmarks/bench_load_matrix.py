@@ -5,8 +5,11 @@ For each load (quiet, two busy processes, four: Python loops at normal priority,
 node or a build would be), each way of running (``--sim`` with the 30 N water jet;
 across processes against ``cdprctl sim`` over udp_multicast with a bus listener beside them)
 and each rate (250, 500 Hz on rowc; 1 kHz on ``config/rowc_1khz.toml``): C's ``cyclictest``
-at the loop's period, priority and CPU, the daemon, ``cyclictest`` again (``bench_floor``'s
-``measure``), then one table: the floor's share of wake-ups later than 1 ms, the daemon's
+at the loop's period, priority and CPU, the daemon with one more ``cyclictest`` during it (on
+the loop's CPU, priority above the loop: the floor under the very same load — this VM's host
+deschedules a vCPU for 3-8 ms on a 100 ms grid when the guest is busy enough, which no
+cyclictest run beside an idle machine sees), ``cyclictest`` again, then one table: the floor's
+share of wake-ups later than 1 ms (the worst of the three), the daemon's
 missed periods and overruns, their ratio to the floor, compute p50/p99, FAULT lines, and
 whether the goal holds (missed <= 2 x the floor's share + 0.05 %; 0 FAULT; quiet at 1 kHz
 also overruns <= 0.1 % and compute p99 <= 300 µs). ``--sim``'s simulated robot is a child
@@ -27,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line
-from bench_floor import PRIORITY, daemon, ensure_cyclictest, floor
+from bench_floor import PRIORITY, STARTUP, daemon, ensure_cyclictest, floor
 
 ROOT = Path(__file__).resolve().parents[1]
 ONE_KHZ = str(ROOT / "config" / "rowc_1khz.toml")
@@ -39,14 +42,20 @@ def row(exe: str, load: int, way: str, rate: float, seconds: float, cpu: int) ->
     config = ONE_KHZ if rate >= 1000 else ""
     before = floor(exe, period, seconds, cpu)
     extra = ("--disturbance", "30") if way == "sim" else ()
-    d, final = daemon(rate, seconds, way == "across", None, config, extra, sniffer=True)
+
+    def during() -> dict[str, float]:  # the floor under the very same load, above the loop
+        return floor(exe, period, max(2.0, seconds - STARTUP - 2.0), cpu, PRIORITY + 10)
+
+    d, final = daemon(rate, seconds, way == "across", during, config, extra, sniffer=True)
     after = floor(exe, period, seconds, cpu)
-    fl = max(before["late_1ms_pct"], after["late_1ms_pct"])
+    quiet_floor = max(before["late_1ms_pct"], after["late_1ms_pct"])
+    fl = max(quiet_floor, d["during"]["late_1ms_pct"])
     bound = 2.0 * fl + 0.05
     met = d["missed_pct"] <= bound and d["faults"] == 0
     if rate >= 1000 and load == 0:  # the 1 kHz goal, quiet: overruns and compute too
         met = met and d["overruns_pct"] <= 0.1 and d["compute_p99_us"] <= 300.0
     return {"load": load, "way": way, "rate": rate, "floor": fl, "missed": d["missed_pct"],
+            "quiet_floor": quiet_floor, "during": d["during"]["late_1ms_pct"],
             "ratio": d["missed_pct"] / max(fl, 1e-3), "c50": d["compute_p50_us"],
             "c99": d["compute_p99_us"], "faults": int(d["faults"]),
             "overruns": d["overruns_pct"], "met": met, "final": final,
@@ -78,14 +87,15 @@ def main() -> None:
             for h in hogs:
                 h.kill()
                 h.wait()
-    print("\n| hogs | run | Hz | floor > 1 ms | missed | missed / floor | overruns | compute "
-          "p50/p99 us | FAULT | goal |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- "
-          "| --- |")  # fmt: skip
+    print("\n| hogs | run | Hz | floor > 1 ms: before/after, during | missed | missed / floor | "
+          "overruns | compute p50/p99 us | FAULT | goal |\n| --- | --- | --- | --- | --- | --- "
+          "| --- | --- | --- | --- |")  # fmt: skip
     for r in rows:
         way = "--sim, jet" if r["way"] == "sim" else "across, sniffer"
-        print(f"| {r['load']} | {way} | {r['rate']:g} | {r['floor']:.3f} % | {r['missed']:.3f} % "
-              f"| {r['ratio']:.1f} | {r['overruns']:.2f} % | {r['c50']:.0f}/{r['c99']:.0f} | "
-              f"{r['faults']} | {'met' if r['met'] else 'NOT met'} |")  # fmt: skip
+        print(f"| {r['load']} | {way} | {r['rate']:g} | {r['quiet_floor']:.3f} %, "
+              f"{r['during']:.3f} % | {r['missed']:.3f} % | {r['ratio']:.1f} | "
+              f"{r['overruns']:.2f} % | {r['c50']:.0f}/{r['c99']:.0f} | {r['faults']} | "
+              f"{'met' if r['met'] else 'NOT met'} |")  # fmt: skip
     for r in rows:
         if r["why"]:
             print(f"{r['load']} hogs, {r['way']}, {r['rate']:g} Hz, first fault: {r['why']}")

@@ -53,6 +53,7 @@ class Start:
     loop_cpu: int | None
     loop_priority: int
     realtime: bool
+    daemon_pid: int = 0  # the daemon's process: the child ends when it is no longer its parent
 
 
 class SimulatedRobotProcess:
@@ -73,7 +74,7 @@ class SimulatedRobotProcess:
         self._pose = np.frombuffer(self._page, dtype=np.float64, count=POSE_FLOATS)
         fds = [s.fileno() for s in theirs] + [child_control.fileno(), pose_fd]
         start = Start(model, as_built, fds[:-2], fds[-2], pose_fd, rt.loop_cpu(model.control.cpu),
-                      model.control.sched_priority, realtime)  # fmt: skip
+                      model.control.sched_priority, realtime, os.getpid())  # fmt: skip
         try:
             self.proc = subprocess.Popen([sys.executable, "-m", "sim_backend.process"],
                                          stdin=subprocess.PIPE, pass_fds=fds,
@@ -174,7 +175,9 @@ def serve(start: Start) -> int:
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
-    parent = os.getppid()
+    # the daemon's pid as it sent it: read here, a daemon already dead (a Ctrl-C during the
+    # child's imports) gave init's, and the child ran on holding the daemon's output open
+    parent = start.daemon_pid or os.getppid()
     control = socket.socket(fileno=start.control_fd)
     page = mmap.mmap(start.pose_fd, mmap.PAGESIZE)
     pose = np.frombuffer(page, dtype=np.float64, count=POSE_FLOATS)
@@ -192,6 +195,8 @@ def serve(start: Start) -> int:
         with contextlib.suppress(OSError):
             control.send(pickle.dumps((kind, text)), socket.MSG_DONTWAIT)
 
+    if os.getppid() != parent:
+        return 0  # the daemon is gone already
     if start.realtime:
         for w in rt.simulator_realtime(start.loop_cpu, start.loop_priority):
             say(f"cdprctl run: warning: the simulated robot: {w}")
