@@ -46,11 +46,6 @@ class Gripper:
     guide_friction: float  # N, Coulomb friction of the jaw on its guide (the paper's F_jBA)
     travel_max: float  # m, the guide's upper end stop (the lower one is at zero travel)
 
-    @property
-    def contact_stiffness(self) -> float:
-        """N/m, K_B in series with the object."""
-        return in_series(self.k_b, self.object_stiffness)
-
 
 def in_series(k1: float, k2: float) -> float:
     """Stiffness (N/m) of two springs in series; an infinite one is rigid."""
