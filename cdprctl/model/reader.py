@@ -10,6 +10,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -196,3 +197,112 @@ class TableReader:
             self.error(full, value, unit, "must contain only finite numbers")
             return None
         return arr
+
+
+# -- declarative fields ---------------------------------------------------------------------
+# A section's plain keys as data: ``TableReader.fields`` reads each with the accessor its kind
+# names, its rules and its default (the config's own, from ``defaults``), and puts what it
+# read into ``into`` under the config's field name, so a section's reader keeps only what
+# relates one key to another.
+
+
+@dataclass(frozen=True)
+class Number:
+    """A number in ``unit``, with ``TableReader.number``'s rules; an integer is kept as one."""
+
+    key: str
+    unit: str = ""
+    field: str = ""  # the config's attribute, where it is not named as the key
+    minimum: float | None = None
+    positive: bool = False
+    maximum: float | None = None
+    integer: bool = False
+
+
+@dataclass(frozen=True)
+class Vector:
+    """``length`` numbers in ``unit``, kept as a tuple of floats; ``positive``: each > 0."""
+
+    key: str
+    unit: str = ""
+    field: str = ""
+    length: int = 3
+    positive: bool = False
+
+
+@dataclass(frozen=True)
+class Choice:
+    """A string among ``choices``; ``rule`` the words of a refusal ("must be one of …" by
+    default). ``lenient``: a string that is no string (already refused) is taken as the
+    default, so that the checks relating it to other keys still read a value."""
+
+    key: str
+    choices: tuple[str, ...]
+    rule: str = ""
+    field: str = ""
+    lenient: bool = False
+
+
+@dataclass(frozen=True)
+class Flag:
+    """true or false."""
+
+    key: str
+    field: str = ""
+
+
+@dataclass(frozen=True)
+class Text:
+    """A non-empty string."""
+
+    key: str
+    field: str = ""
+
+
+Field = Number | Vector | Choice | Flag | Text
+
+
+def _field_read(rd: TableReader, t: dict[str, Any], path: str, spec: Field,
+                default: Any) -> Any:  # fmt: skip
+    """What ``spec`` reads from table ``t`` (None: absent without a default, or refused)."""
+    full = f"{path}.{spec.key}"
+    if isinstance(spec, Number):
+        v = rd.number(t, spec.key, path, spec.unit, required=False, default=default,
+                      minimum=spec.minimum, positive=spec.positive, maximum=spec.maximum,
+                      integer=spec.integer)  # fmt: skip
+        return int(v) if v is not None and spec.integer else v
+    if isinstance(spec, Vector):
+        vec = rd.vector(t, spec.key, path, spec.unit, length=spec.length, required=False)
+        if vec is None:
+            return None
+        if spec.positive and np.any(vec <= 0.0):
+            rd.error(full, vec.tolist(), spec.unit, "must contain only values > 0")
+            return None
+        return tuple(float(x) for x in vec)
+    if isinstance(spec, Choice):
+        s = rd.string(t, spec.key, path, required=False, default=default)
+        if spec.lenient:
+            s = s or default
+        if s not in spec.choices:
+            rd.error(full, s, "", spec.rule or f"must be one of {', '.join(spec.choices)}")
+        return s
+    if isinstance(spec, Flag):
+        if spec.key not in t:
+            return None
+        if not isinstance(t[spec.key], bool):
+            rd.error(full, t[spec.key], "", "must be true or false")
+            return None
+        return t[spec.key]
+    return rd.string(t, spec.key, path, required=False, default=default)
+
+
+def read_fields(rd: TableReader, t: dict[str, Any], path: str, specs: Iterable[Field],
+                defaults: Any, into: dict[str, Any]) -> None:  # fmt: skip
+    """Each of ``specs`` read from table ``t`` (at ``path``) in order, its refusals recorded
+    in ``rd``; what was read (not None) into ``into[field]``. A key absent takes
+    ``defaults``' attribute of the field's name."""
+    for spec in specs:
+        name = spec.field or spec.key
+        v = _field_read(rd, t, path, spec, getattr(defaults, name, None))
+        if v is not None:
+            into[name] = v
