@@ -6,7 +6,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from cdprctl.model.reader import Choice, Flag, Number, TableReader, Vector, read_fields
+from cdprctl.model.reader import (
+    Choice,
+    Flag,
+    Number,
+    TableReader,
+    Vector,
+    read_fields,
+    read_section,
+)
 
 CONTROL_KEYS = (
     "rate",
@@ -164,28 +172,22 @@ REALTIME_FIELDS = (
 def read_control(
     rd: TableReader, data: dict[str, Any], cable_names: list[str]
 ) -> ControlConfig | None:
-    t = rd.table(data, "control", "", required=False)
-    if t is None:
-        return ControlConfig()
-    n0 = len(rd.errors)
-    rd.check_keys(t, CONTROL_KEYS, "control")
-    d = ControlConfig()
-    vals: dict[str, Any] = {}
-    read_fields(rd, t, "control", CONTROL_FIELDS, d, vals)
-    tda = rd.table(t, "tda", "control", required=False)
-    if tda is not None:
-        rd.check_keys(tda, TDA_KEYS, "control.tda")
-        read_fields(rd, tda, "control.tda", TDA_FIELDS, d, vals)
-        vals["impositions"] = read_impositions(rd, tda, cable_names)
-    for key, keys, fields in (("safety", SAFETY_KEYS, SAFETY_FIELDS),
-                              ("realtime", REALTIME_KEYS, REALTIME_FIELDS)):  # fmt: skip
-        sub = rd.table(t, key, "control", required=False)
-        if sub is not None:
-            rd.check_keys(sub, keys, f"control.{key}")
-            read_fields(rd, sub, f"control.{key}", fields, d, vals)
-    if len(rd.errors) > n0:
-        return None
-    return ControlConfig(**vals)
+    def read(t: dict[str, Any], vals: dict[str, Any]) -> None:
+        d = ControlConfig()
+        read_fields(rd, t, "control", CONTROL_FIELDS, d, vals)
+        tda = rd.table(t, "tda", "control", required=False)
+        if tda is not None:
+            rd.check_keys(tda, TDA_KEYS, "control.tda")
+            read_fields(rd, tda, "control.tda", TDA_FIELDS, d, vals)
+            vals["impositions"] = read_impositions(rd, tda, cable_names)
+        for key, keys, fields in (("safety", SAFETY_KEYS, SAFETY_FIELDS),
+                                  ("realtime", REALTIME_KEYS, REALTIME_FIELDS)):  # fmt: skip
+            sub = rd.table(t, key, "control", required=False)
+            if sub is not None:
+                rd.check_keys(sub, keys, f"control.{key}")
+                read_fields(rd, sub, f"control.{key}", fields, d, vals)
+
+    return read_section(rd, data, "control", CONTROL_KEYS, ControlConfig, read)
 
 
 def read_impositions(

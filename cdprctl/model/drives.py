@@ -211,11 +211,10 @@ def read_drives(
     max_torque_limit: float = 0.0,
 ) -> DrivesConfig | None:
     """``max_torque_limit`` (N·m): the largest of the winches' ``torque_limit``."""
-    t = rd.table(data, "drives", "", required=False)
+    n0 = len(rd.errors)
+    t = rd.section(data, "drives", DRIVES_KEYS)
     if t is None:
         return default_drives(name, len(cable_names), rated_default)
-    n0 = len(rd.errors)
-    rd.check_keys(t, DRIVES_KEYS, "drives")
     defaults = DrivesConfig(mode=DEFAULT_MODE, rated_torque=rated_default)
     vals: dict[str, Any] = {}
     read_fields(rd, t, "drives", DRIVES_FIRST, defaults, vals)

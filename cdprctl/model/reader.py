@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -69,15 +69,32 @@ class TableReader:
                     f"{', '.join(sorted(allowed))})"
                 )
 
+    def section(
+        self, data: dict[str, Any], key: str, allowed: Iterable[str]
+    ) -> dict[str, Any] | None:
+        """The optional top-level table ``key`` with its keys checked against ``allowed``;
+        None where it is absent (or no table: reported)."""
+        t = self.table(data, key, "", required=False)
+        if t is not None:
+            self.check_keys(t, allowed, key)
+        return t
+
     # -- accessors --------------------------------------------------------------------------
+    def _given(self, parent: dict[str, Any], key: str, path: str, unit: str, what: str,
+               required: bool) -> tuple[str, Any]:  # fmt: skip
+        """(the key's full path, its value: ``_MISSING`` where absent, reported as missing
+        ``what`` when ``required``)."""
+        full = f"{path}.{key}" if path else key
+        value = parent.get(key, _MISSING)
+        if value is _MISSING and required:
+            self.error_missing(full, unit, what)
+        return full, value
+
     def table(
         self, parent: dict[str, Any], key: str, path: str, *, required: bool = True
     ) -> dict[str, Any] | None:
-        full = f"{path}.{key}" if path else key
-        value = parent.get(key, _MISSING)
+        full, value = self._given(parent, key, path, "", "a table", required)
         if value is _MISSING:
-            if required:
-                self.error_missing(full, "", "a table")
             return None
         if not isinstance(value, dict):
             self.error(full, value, "", "must be a table")
@@ -93,11 +110,8 @@ class TableReader:
         required: bool = True,
         default: str | None = None,
     ) -> str | None:
-        full = f"{path}.{key}" if path else key
-        value = parent.get(key, _MISSING)
+        full, value = self._given(parent, key, path, "", "a string", required)
         if value is _MISSING:
-            if required:
-                self.error_missing(full, "", "a string")
             return default
         if not isinstance(value, str) or not value.strip():
             self.error(full, value, "", "must be a non-empty string")
@@ -118,11 +132,9 @@ class TableReader:
         maximum: float | None = None,
         integer: bool = False,
     ) -> float | None:
-        full = f"{path}.{key}" if path else key
-        value = parent.get(key, _MISSING)
+        what = "an integer" if integer else "a number"
+        full, value = self._given(parent, key, path, unit, what, required)
         if value is _MISSING:
-            if required:
-                self.error_missing(full, unit, "an integer" if integer else "a number")
             return default
         if not _is_number(value):
             self.error(full, value, unit, "must be a number" + (f" in {unit}" if unit else ""))
@@ -156,11 +168,8 @@ class TableReader:
         required: bool = True,
         default: FloatArray | None = None,
     ) -> FloatArray | None:
-        full = f"{path}.{key}" if path else key
-        value = parent.get(key, _MISSING)
+        full, value = self._given(parent, key, path, unit, f"a list of {length} numbers", required)
         if value is _MISSING:
-            if required:
-                self.error_missing(full, unit, f"a list of {length} numbers")
             return default
         if not isinstance(value, list) or len(value) != length:
             self.error(full, value, unit, f"must be a list of {length} numbers ({unit})")
@@ -176,10 +185,9 @@ class TableReader:
 
     def matrix3(self, parent: dict[str, Any], key: str, path: str, unit: str) -> FloatArray | None:
         """A 3×3 matrix given as 3 rows, or its diagonal as 3 numbers."""
-        full = f"{path}.{key}" if path else key
-        value = parent.get(key, _MISSING)
+        what = "3 numbers (diagonal) or 3 rows of 3 numbers"
+        full, value = self._given(parent, key, path, unit, what, True)
         if value is _MISSING:
-            self.error_missing(full, unit, "3 numbers (diagonal) or 3 rows of 3 numbers")
             return None
         if isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value):
             arr = np.diag(np.array(value, dtype=np.float64))
@@ -306,3 +314,23 @@ def read_fields(rd: TableReader, t: dict[str, Any], path: str, specs: Iterable[F
         v = _field_read(rd, t, path, spec, getattr(defaults, name, None))
         if v is not None:
             into[name] = v
+
+
+C = TypeVar("C")
+
+
+def read_section(rd: TableReader, data: dict[str, Any], key: str, allowed: Iterable[str],
+                 config: Callable[..., C], read: Callable[[dict[str, Any], dict[str, Any]], None],
+                 ) -> C | None:  # fmt: skip
+    """The optional top-level section ``key`` as a ``config``: absent, ``config()``; else its
+    keys checked against ``allowed``, ``read(table, fields)`` fills the config's fields (its
+    refusals recorded in ``rd``), and the config of them — None where anything was refused."""
+    n0 = len(rd.errors)
+    t = rd.section(data, key, allowed)
+    if t is None:
+        return config()
+    vals: dict[str, Any] = {}
+    read(t, vals)
+    if len(rd.errors) > n0:
+        return None
+    return config(**vals)
