@@ -70,11 +70,11 @@ class TableReader:
                 )
 
     def section(
-        self, data: dict[str, Any], key: str, allowed: Iterable[str]
+        self, data: dict[str, Any], key: str, allowed: Iterable[str], required: bool = False
     ) -> dict[str, Any] | None:
-        """The optional top-level table ``key`` with its keys checked against ``allowed``;
-        None where it is absent (or no table: reported)."""
-        t = self.table(data, key, "", required=False)
+        """The top-level table ``key`` with its keys checked against ``allowed``; None where
+        it is absent (reported when ``required``) or no table (reported)."""
+        t = self.table(data, key, "", required=required)
         if t is not None:
             self.check_keys(t, allowed, key)
         return t
