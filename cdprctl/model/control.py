@@ -12,6 +12,7 @@ from cdprctl.model.reader import (
     Number,
     TableReader,
     Vector,
+    positive,
     read_fields,
     read_section,
 )
@@ -134,12 +135,9 @@ CONTROL_FIELDS = (
     Number("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0),
     Number("force_feedback", "× the lowest mode", minimum=0.0, maximum=10.0),
     Number("jog_deadman", "s", positive=True, maximum=5.0),
-    Number("max_velocity", "m/s", positive=True),
-    Number("max_acceleration", "m/s²", positive=True),
-    Number("max_jerk", "m/s³", positive=True),
-    Number("max_angular_velocity", "rad/s", positive=True),
-    Number("max_angular_acceleration", "rad/s²", positive=True),
-    Number("max_angular_jerk", "rad/s³", positive=True),
+    *positive(("max_velocity", "m/s"), ("max_acceleration", "m/s²"), ("max_jerk", "m/s³")),
+    *positive(("max_angular_velocity", "rad/s"), ("max_angular_acceleration", "rad/s²"),
+              ("max_angular_jerk", "rad/s³")),
     Flag("friction_compensation"),
     Vector("external_wrench", "N, N·m", length=6),
 )
@@ -150,12 +148,8 @@ TDA_FIELDS = (
     Number("max_tension_rate", "N/s", positive=True),
 )
 SAFETY_FIELDS = (
-    Number("max_position_error", "m", positive=True),
-    Number("max_angle_error", "rad", positive=True),
-    Number("max_speed", "m/s", positive=True),
-    Number("max_feedback_age", "s", positive=True),
-    Number("stop_duration", "s", positive=True),
-    Number("max_saturation_time", "s", positive=True),
+    *positive(("max_position_error", "m"), ("max_angle_error", "rad"), ("max_speed", "m/s"),
+              ("max_feedback_age", "s"), ("stop_duration", "s"), ("max_saturation_time", "s")),
     Number("tension_margin", "N", minimum=0.0),
     Number("max_fk_residual", "m", positive=True),
     Number("max_tension_disagreement", "of the tension range", positive=True, maximum=1.0),

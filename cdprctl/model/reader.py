@@ -270,6 +270,11 @@ class Text:
 Field = Number | Vector | Choice | Flag | Text
 
 
+def positive(*keys: tuple[str, str]) -> tuple[Number, ...]:
+    """Numbers that must be > 0, each given as (key, unit)."""
+    return tuple(Number(key, unit, positive=True) for key, unit in keys)
+
+
 def _field_read(rd: TableReader, t: dict[str, Any], path: str, spec: Field,
                 default: Any) -> Any:  # fmt: skip
     """What ``spec`` reads from table ``t`` (None: absent without a default, or refused)."""
