@@ -8,6 +8,7 @@ from typing import Any
 
 from cdprctl.model.reader import (
     Choice,
+    Field,
     Flag,
     Number,
     TableReader,
@@ -125,7 +126,7 @@ class ControlConfig:
 
 
 #: the plain keys of ``[control]`` and its tables, in the order they are read
-CONTROL_FIELDS = (
+CONTROL_FIELDS: tuple[Field, ...] = (
     Number("rate", "Hz", positive=True, maximum=10000.0),
     Number("bandwidth", "Hz", positive=True),
     Vector("axis_bandwidth", "Hz", length=6, positive=True),
@@ -147,7 +148,7 @@ TDA_FIELDS = (
     Vector("direction", "", field="tda_direction"),
     Number("max_tension_rate", "N/s", positive=True),
 )
-SAFETY_FIELDS = (
+SAFETY_FIELDS: tuple[Field, ...] = (
     *positive(("max_position_error", "m"), ("max_angle_error", "rad"), ("max_speed", "m/s"),
               ("max_feedback_age", "s"), ("stop_duration", "s"), ("max_saturation_time", "s")),
     Number("tension_margin", "N", minimum=0.0),
