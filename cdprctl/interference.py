@@ -54,7 +54,6 @@ from cdprctl.rotation import FloatArray
 
 #: a check's kind (``Interference.checks[:, 0]``)
 CABLE, BODY, OBSTACLE = 0, 1, 2
-KIND_NAMES = ("cable", "body", "obstacle")
 #: the shape a check measures the cable against (``checks[:, 3]``)
 SEGMENT, BOX, PLANE = 0, 1, 2
 #: m: anchors or attachments this close are one point by design (the pair is not checked)

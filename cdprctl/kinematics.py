@@ -128,11 +128,6 @@ class KinematicsData:
         return self.exitT.T
 
     @property
-    def cable_vectors(self) -> FloatArray:
-        """(m, 3) m, base frame: ``B_i`` → exit point (view)."""
-        return self.cable_vectorsT.T
-
-    @property
     def attach_points(self) -> FloatArray:
         """(m, 3) m, base frame: the attachment points ``B_i = p + R b_i`` (allocates)."""
         return self.rb + self.position

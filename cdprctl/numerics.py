@@ -61,13 +61,12 @@ clamp = njit(cache=True)(_clamp)
 plausible_step = njit(cache=True)(_plausible_step)
 cable_compliance = njit(cache=True)(_cable_compliance)
 #: the same rules for Python callers outside the loop (no compilation at import)
-clamp_py = _clamp
 plausible_step_py = _plausible_step
 cable_compliance_py = _cable_compliance
 
 
 def compliance_terms(cable: object) -> tuple[float, float, float, float]:
-    """``(1/k_fixed, 1/(E S), l_w, 1/k_s)`` of a ``CableConfig`` for ``cable_compliance``."""
+    """``(1/k_fixed, 1/(E S), l_w, 1/k_s)`` of a ``Cable`` for ``cable_compliance``."""
     stiffness = getattr(cable, "stiffness", None)
     spring = getattr(cable, "spring_stiffness", None)
     if stiffness is not None:
@@ -112,7 +111,7 @@ class Compliance(NamedTuple):
 
 
 def compliance_of(cables: Sequence[object]) -> Compliance:
-    """The ``Compliance`` of a robot's ``CableConfig`` sequence (``compliance_terms``)."""
+    """The ``Compliance`` of a robot's ``Cable`` sequence (``compliance_terms``)."""
     terms = np.array([compliance_terms(c) for c in cables], dtype=float).reshape(len(cables), 4)
     return Compliance(*(np.ascontiguousarray(terms[:, j]) for j in range(4)))
 

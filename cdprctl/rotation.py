@@ -114,12 +114,6 @@ def exp_so3(phi: FloatArray) -> FloatArray:
     return out
 
 
-def orthonormalize(R: FloatArray) -> FloatArray:
-    """The nearest rotation to an almost-orthonormal ``R`` (one Newton step of the polar
-    decomposition, ``R (3 I − RᵀR)/2``): removes the drift of repeated products."""
-    return 0.5 * R @ (3.0 * np.eye(3) - R.T @ R)
-
-
 def log_so3_into(R: FloatArray, out: FloatArray) -> None:
     """``out[0:3]`` ← the rotation vector (rad) of the rotation matrix ``R`` (inverse of
     :func:`rodrigues_into`). The one rotation logarithm: plain Python here, compiled as

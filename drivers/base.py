@@ -172,10 +172,6 @@ class WinchDriver(ABC):
         self._recover_until = self.clock() + settle
         self.lifecycle = INACTIVE
 
-    @property
-    def activating(self) -> bool:
-        return self._activating
-
     def command_brake(self, c: int, closed: bool, timeout: float) -> None:
         """Cable index ``c``'s holding brake closed whatever its power stage does
         (``closed``), or given back to the drive's own logic: a brake test pushes an enabled

@@ -132,7 +132,11 @@ class CdprPlant:
         # outputs of the last step
         self.tension = np.zeros(m)
         self._step_kin = KinematicsData(model)  # the physics steps' inverse kinematics
-        # the kernel's bundles: the same arrays as the attributes above (written in place)
+        self._bundle()
+        self.set_pose(model.home.position, model.home.rotation, None)
+
+    def _bundle(self) -> None:
+        """The kernels' bundles: the same arrays as the attributes (written in place)."""
         o = self.opt
         body = Body(self.com, float(self.mass), self.inertia, self.gravity)
         winches = Winches(
@@ -177,7 +181,6 @@ class CdprPlant:
         jaw_state = JawState(self.jaw_travel, self.jaw_speed, self.jb_tension, self.contact_force)
         self._args = tuple(kernel_args(b) for b in (body, winches, state, inputs, self.servo))
         self._jaw_args = (kernel_args(jaws), kernel_args(jaw_state))
-        self.set_pose(model.home.position, model.home.rotation, None)
 
     def _init_grippers(self) -> None:
         """Jaw bodies of the reconfigurable end-effector (``[[grippers]]``): each a point mass

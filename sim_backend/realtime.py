@@ -62,6 +62,37 @@ class LateSteps:
                 f"the latest {self.worst * 1e3:.1f} ms (the simulator starved, not the drives)")
 
 
+class SimClock:
+    """Simulated time = monotonic − ``t0`` − ``lag``: a stall of this process up to the
+    network's MAX_CATCH_UP is simulated afterwards, frame by frame at their arrival instants
+    (with 10 ms, the frames of a longer stall were bunched at one instant: SYNC intervals of
+    0, following-error faults); a longer one is lag."""
+
+    def __init__(self, t0: float):
+        self.t0, self.lag = t0, 0.0
+        self.wall_minus_mono = time.time() - time.monotonic()
+
+    def arrival(self, msg: can.Message) -> float:
+        """s of simulated time a frame arrived at: its kernel receive stamp (wall clock)."""
+        if msg.timestamp <= 0.0:
+            return math.inf  # no stamp: handled now
+        return msg.timestamp - self.wall_minus_mono - self.t0 - self.lag
+
+
+def status_line(sim_t: float, plant: CdprPlant, net: SimNetwork) -> str:
+    """``cdprctl sim``'s status: the platform, the tensions, the frames, the brakes."""
+    p = plant.position
+    return (
+        f"sim t={sim_t:7.2f} s  P=[{p[0]:.4f} {p[1]:.4f} {p[2]:.4f}] m  "
+        f"tensions {plant.tension.min():.1f}..{plant.tension.max():.1f} N  "
+        f"frames in/out {net.frames_in}/{net.frames_out}  "
+        f"brakes {int(plant.brake.sum())}/{len(plant.brake)}"
+        + ("  safety chain OPEN" if any(
+            getattr(getattr(d, "axis", None), "sto_open", False)
+            for d in net.drives) else "")
+    )  # fmt: skip
+
+
 def run_realtime(
     model: RobotModel,
     bus_overrides: dict[str, Any] | None = None,
@@ -103,19 +134,7 @@ def run_realtime(
     t0 = time.monotonic()
     next_status = status_every
     woke_on: Any = None
-    # simulated time = monotonic − t0 − lag: a stall of this process up to the network's
-    # MAX_CATCH_UP is simulated afterwards, frame by frame at their arrival instants (with
-    # 10 ms, the frames of a longer stall were bunched at one instant: SYNC intervals of 0,
-    # following-error faults); a longer one is lag
-    lag = 0.0
-    wall_minus_mono = time.time() - time.monotonic()
-
-    def arrival(msg: can.Message) -> float:
-        """s of simulated time a frame arrived at: its kernel receive stamp (wall clock)."""
-        if msg.timestamp <= 0.0:
-            return math.inf  # no stamp: handled now
-        return msg.timestamp - wall_minus_mono - t0 - lag
-
+    clock = SimClock(t0)
     try:
         last = t0
         while not stop["flag"]:
@@ -123,9 +142,9 @@ def run_realtime(
             elapsed = now - last
             if elapsed > 0 or woke_on is not None:
                 late.step(now - t0, elapsed)
-                lag += max(0.0, elapsed - net.MAX_CATCH_UP)
-                wall_minus_mono = time.time() - time.monotonic()
-                net.advance_until(now - t0 - lag, arrival, first=woke_on)
+                clock.lag += max(0.0, elapsed - net.MAX_CATCH_UP)
+                clock.wall_minus_mono = time.time() - time.monotonic()
+                net.advance_until(now - t0 - clock.lag, clock.arrival, first=woke_on)
                 woke_on = None
                 last = now
                 if between is not None and not between(net):
@@ -134,17 +153,7 @@ def run_realtime(
             if duration is not None and sim_t >= duration:
                 break
             if status_every and sim_t >= next_status:
-                p = plant.position
-                print_fn(
-                    f"sim t={sim_t:7.2f} s  P=[{p[0]:.4f} {p[1]:.4f} {p[2]:.4f}] m  "
-                    f"tensions {plant.tension.min():.1f}..{plant.tension.max():.1f} N  "
-                    f"frames in/out {net.frames_in}/{net.frames_out}  "
-                    f"brakes {int(plant.brake.sum())}/{len(plant.brake)}"
-                    + ("  safety chain OPEN" if any(
-                        getattr(getattr(d, "axis", None), "sto_open", False)
-                        for d in net.drives) else ""),
-                    flush=True,
-                )
+                print_fn(status_line(sim_t, plant, net), flush=True)
                 next_status += status_every
             # sleep until the next step, or until a frame comes (one bus is enough to wake)
             wait = step - (time.monotonic() - now)

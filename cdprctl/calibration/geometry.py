@@ -18,9 +18,10 @@ encoders' offsets follow from sample 0 (as in :mod:`identify`). Residuals, for p
 
 Solved with ``scipy.optimize.least_squares`` (trust-region reflective, the Jacobian's sparsity
 given: a pose touches its own sample's rows and, through ``l0_0``, the length rows of the
-others). The residuals' variance factor against the weights is the model test (``chi2_test``):
-a model error the unknowns cannot absorb leaves residuals larger than the drives' resolution
-explains, and the record is refused rather than trusted.
+others). The residuals' variance factor against the weights is the model test
+(``identify.model_test``, in ``geometry_procedure``): a model error the unknowns cannot absorb
+leaves residuals larger than the drives' resolution explains, and the record is refused rather
+than trusted.
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
-from scipy.stats import chi2 as chi2_dist
 
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cable_compliance_py, compliance_of, unstretched_lengths
@@ -78,12 +78,6 @@ class GeometryResult:
     std_pose: list[float]  # m, rad: sample 0's predicted σ
     success: bool
     message: str
-
-
-def chi2_limit(dof: int, confidence: float = 0.999) -> float:
-    """The variance factor a correct model exceeds with probability ``1 − confidence``:
-    χ²(dof) quantile / dof."""
-    return float(chi2_dist.ppf(confidence, max(dof, 1)) / max(dof, 1))
 
 
 class GeometryIdentification:

@@ -44,7 +44,7 @@ from cdprctl.calibration.procedure import (
     where_around_start,
 )
 from cdprctl.calibration.progress import Progress, stopped
-from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
+from cdprctl.calibration.record import CalibrationRecord, stamped
 from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
 from cdprctl.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
@@ -244,12 +244,9 @@ def geometry_record(built: RobotModel, cal: GeometryCalibration,
     """The calibration record of ``built`` (the robot file as identified): its encoders'
     zeros, its drums as they are (scale 1), the start pose."""
     r = cal.result
-    return CalibrationRecord(
-        robot=built.name,
-        method="geometry",
-        time=now_iso(),
-        geometry_hash=geometry_hash(built),
-        encoders=built.drives.encoders,
+    return stamped(
+        built,
+        "geometry",
         theta_zero=[float(x) for x in r.theta_zero],
         drum_scale=[1.0] * built.n_cables,
         pose=r.pose,

@@ -35,7 +35,7 @@ from cdprctl.calibration.identify import (
     model_test,
 )
 from cdprctl.calibration.progress import Progress, stopped
-from cdprctl.calibration.record import CalibrationRecord, geometry_hash, now_iso
+from cdprctl.calibration.record import CalibrationRecord, identities_of, stamped
 from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
@@ -89,16 +89,13 @@ def known_pose(
     l0 = unstretched_lengths(law, lengths, tension)
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     theta_zero = theta - (kin.length - l0) / ses.ratio
-    return CalibrationRecord(
-        robot=model.name,
-        method="known-pose",
-        time=now_iso(),
-        geometry_hash=geometry_hash(model),
-        encoders=model.drives.encoders,
+    return stamped(
+        model,
+        "known-pose",
         theta_zero=[float(x) for x in theta_zero],
         drum_scale=[1.0] * model.n_cables,
         pose=[float(x) for x in pose],
-        identities=list(getattr(driver, "identities", [None] * model.n_cables)),
+        identities=identities_of(driver, model.n_cables),
         notes={"tensions": [round(float(x), 2) for x in tension],
                "max_motor_speed_while_sampled": speed},
     )  # fmt: skip
@@ -274,16 +271,13 @@ def self_calibrate(
     force = list(np.flatnonzero(ses.force))
     ident = Identification(model, opt.fit_drum_scales, opt.weights).solve(samples)
     worst = max(max(ident.std[:3]) / opt.max_std[0], max(ident.std[3:]) / opt.max_std[1])
-    record = CalibrationRecord(
-        robot=model.name,
-        method="self",
-        time=now_iso(),
-        geometry_hash=geometry_hash(model),
-        encoders=model.drives.encoders,
+    record = stamped(
+        model,
+        "self",
         theta_zero=[float(x) for x in ident.theta_zero],
         drum_scale=[float(x) for x in ident.drum_scale],
         pose=ident.pose,
-        identities=list(getattr(driver, "identities", [None] * model.n_cables)),
+        identities=identities_of(driver, model.n_cables),
         residual_rms=ident.residual_rms,
         condition=ident.condition,
         std=ident.std,

@@ -86,6 +86,20 @@ class CalibrationRecord:
             )
 
 
+def stamped(model: RobotModel, method: str, **fields: Any) -> CalibrationRecord:
+    """A record of ``model`` by ``method``, stamped now with what it holds for (the robot's
+    name, its geometry's hash, its encoders' kind as the config declares them); ``fields``
+    the rest (``CalibrationRecord``)."""
+    return CalibrationRecord(robot=model.name, method=method, time=now_iso(),
+                             geometry_hash=geometry_hash(model),
+                             encoders=model.drives.encoders, **fields)  # fmt: skip
+
+
+def identities_of(driver: Any, n_cables: int) -> list[dict[str, int] | None]:
+    """Each drive's identity (0x1018) as the driver read it, None where it has none."""
+    return list(getattr(driver, "identities", [None] * n_cables))
+
+
 def record_path(state_dir: Path) -> Path:
     return Path(state_dir) / FILE_NAME
 

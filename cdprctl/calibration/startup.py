@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprctl.calibration.record import CalibrationError, CalibrationRecord, load
+from cdprctl.calibration.record import CalibrationError, CalibrationRecord, identities_of, load
 from cdprctl.model.robot import RobotModel
 from drivers.base import WinchDriver
 
@@ -42,7 +42,7 @@ def check_drives(model: RobotModel, record: CalibrationRecord, driver: WinchDriv
     """With the drives configured: the same drives as at calibration (0x1018, where both
     have it) and, with incremental encoders, none reset since cdprctl last set it up."""
     names = [c.name for c in model.cables]
-    now = list(getattr(driver, "identities", [None] * model.n_cables))
+    now = identities_of(driver, model.n_cables)
     for i, (then, ident) in enumerate(zip(record.identities, now, strict=False)):
         if then and ident and then != ident:
             raise CalibrationError(

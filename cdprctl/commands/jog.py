@@ -186,6 +186,55 @@ def _view(j: Jogger, state: dict[str, Any] | None, prefix: str) -> str:
     return "\x1b[H\x1b[2J" + "\r\n".join(x.replace("\n", "\r\n") for x in lines)
 
 
+class Inbox:
+    """What the daemon said since the screen was last drawn, from Zenoh's threads: its last
+    state, the note to show (a reply, or its word on a jog or a fault), whether one of our
+    jogs was answered."""
+
+    def __init__(self) -> None:
+        self.latest: dict[str, Any] = {}
+        self.lock = threading.Lock()
+
+    def take(self) -> tuple[str | None, dict[str, Any] | None, bool]:
+        """(the note, or None: none new; the last state; whether a jog of ours was answered
+        since the last take)."""
+        with self.lock:
+            return (self.latest.pop("note", None), self.latest.get("state"),
+                    bool(self.latest.pop("replied", False)))  # fmt: skip
+
+    def on_state(self, sample: Any) -> None:
+        try:
+            with self.lock:
+                self.latest["state"] = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            pass
+
+    def on_reply(self, sample: Any) -> None:
+        try:
+            body = json.loads(sample.payload.to_bytes())
+        except ValueError:
+            return
+        kind = str(sample.key_expr).rsplit("/", 1)[-1]
+        ours = str(body.get("id") or "").startswith("jog-tool-")
+        if not ours and body.get("ok"):
+            return  # another client's
+        with self.lock:
+            self.latest["replied"] = self.latest.get("replied", False) or ours
+            if not (kind == "jog" and body.get("ok")):  # not 20 "accepted" a second
+                self.latest["note"] = (f"{kind}: accepted" if body.get("ok")
+                                       else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
+
+    def on_event(self, sample: Any) -> None:
+        """The daemon's word on a jog (where the soft limits stop it, and why) or a fault."""
+        try:
+            text = str(json.loads(sample.payload.to_bytes()).get("text", ""))
+        except ValueError:
+            return
+        if text.startswith(("jog", "FAULT")):
+            with self.lock:
+                self.latest["note"] = text
+
+
 def jog(args: argparse.Namespace) -> int:
     """Move the robot with the keyboard: each held key is a velocity (a fraction of the
     configured limits) sent as cmd/jog every 50 ms; the daemon stops at the soft limits and
@@ -197,47 +246,13 @@ def jog(args: argparse.Namespace) -> int:
     if not os.isatty(sys.stdin.fileno()):
         print("cdprctl jog: error: needs a terminal (stdin is not a tty)", file=sys.stderr)
         return 2
-    latest: dict[str, Any] = {}
-    lock = threading.Lock()
     session = tool_session(args)
     if session is None:
         return 2
-
-    def on_state(sample: Any) -> None:
-        try:
-            with lock:
-                latest["state"] = json.loads(sample.payload.to_bytes())
-        except ValueError:
-            pass
-
-    def on_reply(sample: Any) -> None:
-        try:
-            body = json.loads(sample.payload.to_bytes())
-        except ValueError:
-            return
-        kind = str(sample.key_expr).rsplit("/", 1)[-1]
-        ours = str(body.get("id") or "").startswith("jog-tool-")
-        if not ours and body.get("ok"):
-            return  # another client's
-        with lock:
-            latest["replied"] = latest.get("replied", False) or ours
-            if not (kind == "jog" and body.get("ok")):  # not 20 "accepted" a second
-                latest["note"] = (f"{kind}: accepted" if body.get("ok")
-                                  else f"{kind}: rejected: {body.get('reason')}")  # fmt: skip
-
-    def on_event(sample: Any) -> None:
-        """The daemon's word on a jog (where the soft limits stop it, and why) or a fault."""
-        try:
-            text = str(json.loads(sample.payload.to_bytes()).get("text", ""))
-        except ValueError:
-            return
-        if text.startswith(("jog", "FAULT")):
-            with lock:
-                latest["note"] = text
-
-    subs = [session.declare_subscriber(f"{prefix}/state", on_state),
-            session.declare_subscriber(f"{prefix}/reply/*", on_reply),
-            session.declare_subscriber(f"{prefix}/events", on_event)]  # fmt: skip
+    inbox = Inbox()
+    subs = [session.declare_subscriber(f"{prefix}/state", inbox.on_state),
+            session.declare_subscriber(f"{prefix}/reply/*", inbox.on_reply),
+            session.declare_subscriber(f"{prefix}/events", inbox.on_event)]  # fmt: skip
     status = robot_status(session, prefix)
     if not status:  # nothing to jog: say why before the screen takes the terminal
         why = why_no_answer(session, args, prefix, command=False)
@@ -263,11 +278,9 @@ def jog(args: argparse.Namespace) -> int:
                     j.key(ch, now)
             j.tick(now)
             if now >= next_draw:
-                with lock:
-                    if "note" in latest:
-                        j.note = latest.pop("note")
-                    state = latest.get("state")
-                    replied = bool(latest.pop("replied", False))
+                note, state, replied = inbox.take()
+                if note is not None:
+                    j.note = note
                 lost = j.unanswered(now, replied)
                 if lost:  # a command the gateway dropped: say why
                     why = why_no_answer(session, args, prefix)

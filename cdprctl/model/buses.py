@@ -87,56 +87,8 @@ def read_buses(
             integer=True,
         )
         cables = bt.get("cables")
-        nodes = bt.get("node_ids")
-        idx: list[int] = []
-        if not isinstance(cables, list) or not all(isinstance(c, str) for c in cables):
-            rd.error(f"{path}.cables", cables, "", "must be a list of cable names")
-        else:
-            for c in cables:
-                if c not in cable_names:
-                    rd.error(f"{path}.cables", c, "", f"is not a cable ({', '.join(cable_names)})")
-                elif cable_names.index(c) in seen_cable:
-                    rd.error(
-                        f"{path}.cables",
-                        c,
-                        "",
-                        f"is already on {seen_cable[cable_names.index(c)]}: one bus per cable",
-                    )
-                else:
-                    seen_cable[cable_names.index(c)] = path
-                    idx.append(cable_names.index(c))
-        if (
-            not isinstance(nodes, list)
-            or not all(isinstance(n, int) and not isinstance(n, bool) for n in nodes)
-            or (isinstance(cables, list) and len(nodes) != len(cables))
-        ):
-            rd.error(
-                f"{path}.node_ids",
-                nodes,
-                "",
-                "must be a list of integers, one per cable of the bus",
-            )
-            nodes = []
-        else:
-            lo, hi, what = NODE_IDS.get(driver, NODE_IDS["cia402"])
-            for n in nodes:
-                if not lo <= n <= hi:
-                    rd.error(f"{path}.node_ids", n, "", f"must be {what} in [{lo}, {hi}]")
-            dups = sorted({n for n in nodes if nodes.count(n) > 1})
-            if dups:
-                rd.error(
-                    f"{path}.node_ids",
-                    nodes,
-                    "",
-                    f"repeats node id {dups[0]}: node ids on a bus must be unique",
-                )
-            if ctrl_id is not None and int(ctrl_id) in nodes:
-                rd.error(
-                    f"{path}.node_ids",
-                    nodes,
-                    "",
-                    f"contains the controller's node id {int(ctrl_id)}",
-                )
+        idx = _bus_cables(rd, path, cables, cable_names, seen_cable)
+        nodes = _bus_nodes(rd, path, bt.get("node_ids"), cables, driver, ctrl_id)
         options = bt.get("options", {})
         if not isinstance(options, dict):
             rd.error(f"{path}.options", options, "", "must be a table of python-can arguments")
@@ -161,6 +113,68 @@ def read_buses(
             "needs a drive"
         )
     return buses
+
+
+def _bus_cables(rd: TableReader, path: str, cables: Any, cable_names: list[str],
+                seen_cable: dict[int, str]) -> list[int]:  # fmt: skip
+    """The indices of a bus's ``cables`` (names), each on no other bus (``seen_cable``: where
+    each cable is so far, updated)."""
+    idx: list[int] = []
+    if not isinstance(cables, list) or not all(isinstance(c, str) for c in cables):
+        rd.error(f"{path}.cables", cables, "", "must be a list of cable names")
+        return idx
+    for c in cables:
+        if c not in cable_names:
+            rd.error(f"{path}.cables", c, "", f"is not a cable ({', '.join(cable_names)})")
+        elif cable_names.index(c) in seen_cable:
+            rd.error(
+                f"{path}.cables",
+                c,
+                "",
+                f"is already on {seen_cable[cable_names.index(c)]}: one bus per cable",
+            )
+        else:
+            seen_cable[cable_names.index(c)] = path
+            idx.append(cable_names.index(c))
+    return idx
+
+
+def _bus_nodes(rd: TableReader, path: str, nodes: Any, cables: Any, driver: str,
+               ctrl_id: float | None) -> list[int]:  # fmt: skip
+    """A bus's ``node_ids``, one per cable, in the ``driver``'s range, unique, not the
+    controller's (``ctrl_id``); [] where they are no list of integers."""
+    if (
+        not isinstance(nodes, list)
+        or not all(isinstance(n, int) and not isinstance(n, bool) for n in nodes)
+        or (isinstance(cables, list) and len(nodes) != len(cables))
+    ):
+        rd.error(
+            f"{path}.node_ids",
+            nodes,
+            "",
+            "must be a list of integers, one per cable of the bus",
+        )
+        return []
+    lo, hi, what = NODE_IDS.get(driver, NODE_IDS["cia402"])
+    for n in nodes:
+        if not lo <= n <= hi:
+            rd.error(f"{path}.node_ids", n, "", f"must be {what} in [{lo}, {hi}]")
+    dups = sorted({n for n in nodes if nodes.count(n) > 1})
+    if dups:
+        rd.error(
+            f"{path}.node_ids",
+            nodes,
+            "",
+            f"repeats node id {dups[0]}: node ids on a bus must be unique",
+        )
+    if ctrl_id is not None and int(ctrl_id) in nodes:
+        rd.error(
+            f"{path}.node_ids",
+            nodes,
+            "",
+            f"contains the controller's node id {int(ctrl_id)}",
+        )
+    return nodes
 
 
 def _read_dcf(rd: TableReader, value: Any, path: str, n: int) -> tuple[str, ...]:

@@ -130,18 +130,7 @@ def read_cable(
     stiffness = rd.number(t, "stiffness", path, "N/m", required=False, positive=True)
     modulus = rd.number(t, "youngs_modulus", path, "Pa", required=False, positive=True)
     section = rd.number(t, "cross_section", path, "m²", required=False, positive=True)
-    has_k, has_e, has_s = "stiffness" in t, "youngs_modulus" in t, "cross_section" in t
-    if has_k and (has_e or has_s):
-        rd.errors.append(
-            f"{rd.file}: {path} gives both stiffness and youngs_modulus/cross_section: "
-            "give either a fixed stiffness (N/m) or both youngs_modulus (Pa) and cross_section (m²)"
-        )
-    elif not has_k and not (has_e and has_s):
-        missing = "cross_section" if has_e else "youngs_modulus" if has_s else "stiffness"
-        rd.errors.append(
-            f"{rd.file}: {path}.{missing} is missing: elasticity needs stiffness (N/m), "
-            "or both youngs_modulus (Pa) and cross_section (m²)"
-        )
+    _elasticity_given_once(rd, t, path)
     spring = rd.number(t, "spring_stiffness", path, "N/m", required=False, positive=True)
     damping = rd.number(t, "damping", path, "N·s/m", required=False, default=0.0, minimum=0.0)
     to_winch = rd.number(t, "length_to_winch", path, "m", required=False, default=0.0, minimum=0.0)
@@ -149,14 +138,7 @@ def read_cable(
     pt = rd.table(t, "pulley", path, required=False)
     if pt is not None:
         pulley = read_pulley(rd, pt, f"{path}.pulley")
-    winch_table = rd.table(t, "winch", path, required=False)
-    winch: Winch | None = None
-    if winch_table is None and not has_winch_table:
-        rd.error_missing(f"{path}.winch", "", "a [winch] table (global or per cable)")
-    elif winch_table is None:
-        winch = default_winch  # None when [winch] itself was invalid (reported there)
-    elif default_winch is not None or not has_winch_table:
-        winch = read_winch(rd, winch_table, f"{path}.winch", default_winch)
+    winch = _cable_winch(rd, t, path, has_winch_table, default_winch)
     if winch is not None and t_max is not None and t_max > winch.max_cable_force * (1 + 1e-12):
         rd.error(
             f"{path}.tension_max",
@@ -192,6 +174,37 @@ def read_cable(
         pulley=pulley,
         winch=winch,
     )
+
+
+def _elasticity_given_once(rd: TableReader, t: dict[str, Any], path: str) -> None:
+    """A cable's elasticity: a fixed stiffness, or both a Young's modulus and a section."""
+    has_k, has_e, has_s = "stiffness" in t, "youngs_modulus" in t, "cross_section" in t
+    if has_k and (has_e or has_s):
+        rd.errors.append(
+            f"{rd.file}: {path} gives both stiffness and youngs_modulus/cross_section: "
+            "give either a fixed stiffness (N/m) or both youngs_modulus (Pa) and cross_section (m²)"
+        )
+    elif not has_k and not (has_e and has_s):
+        missing = "cross_section" if has_e else "youngs_modulus" if has_s else "stiffness"
+        rd.errors.append(
+            f"{rd.file}: {path}.{missing} is missing: elasticity needs stiffness (N/m), "
+            "or both youngs_modulus (Pa) and cross_section (m²)"
+        )
+
+
+def _cable_winch(rd: TableReader, t: dict[str, Any], path: str, has_winch_table: bool,
+                 default_winch: Winch | None) -> Winch | None:  # fmt: skip
+    """The cable's own ``[cables.winch]`` over the global ``[winch]`` (``default_winch``),
+    or the global one; None where neither is usable (reported)."""
+    winch_table = rd.table(t, "winch", path, required=False)
+    winch: Winch | None = None
+    if winch_table is None and not has_winch_table:
+        rd.error_missing(f"{path}.winch", "", "a [winch] table (global or per cable)")
+    elif winch_table is None:
+        winch = default_winch  # None when [winch] itself was invalid (reported there)
+    elif default_winch is not None or not has_winch_table:
+        winch = read_winch(rd, winch_table, f"{path}.winch", default_winch)
+    return winch
 
 
 def read_pulley(rd: TableReader, t: dict[str, Any], path: str) -> Pulley | None:

@@ -55,10 +55,9 @@ def read_calibration(rd: TableReader, data: dict[str, Any], n_cables: int,
     """``reference_anchors = [i, j, k]``: cable numbers as in the file (1-based: the first
     [[cables]] is 1), three distinct, their anchors not on one line; ``geometry_fill`` (a
     fraction in ``FILL_RANGE``) and ``geometry_speed`` (m/s in ``SPEED_RANGE``)."""
-    t = rd.table(data, "calibration", "", required=False)
+    t = rd.section(data, "calibration", CALIBRATION_KEYS)
     if t is None:
         return CalibrationConfig()
-    rd.check_keys(t, CALIBRATION_KEYS, "calibration")
     fill = rd.number(t, "geometry_fill", "calibration", "", required=False,
                      minimum=FILL_RANGE[0], maximum=FILL_RANGE[1])  # fmt: skip
     speed = rd.number(t, "geometry_speed", "calibration", "m/s", required=False,

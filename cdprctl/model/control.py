@@ -6,9 +6,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
-from cdprctl.model.reader import TableReader
+from cdprctl.model.reader import (
+    Choice,
+    Field,
+    Flag,
+    Number,
+    TableReader,
+    Vector,
+    positive,
+    read_fields,
+    read_section,
+)
 
 CONTROL_KEYS = (
     "rate",
@@ -117,162 +125,86 @@ class ControlConfig:
         return 1.0 / self.rate
 
 
+#: the plain keys of ``[control]`` and its tables, in the order they are read
+CONTROL_FIELDS: tuple[Field, ...] = (
+    Number("rate", "Hz", positive=True, maximum=10000.0),
+    Number("bandwidth", "Hz", positive=True),
+    Vector("axis_bandwidth", "Hz", length=6, positive=True),
+    Number("damping_ratio", "", positive=True),
+    Number("velocity_filter", "Hz", positive=True),
+    Number("observer_bandwidth", "Hz", minimum=0.0),
+    Number("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0),
+    Number("force_feedback", "× the lowest mode", minimum=0.0, maximum=10.0),
+    Number("jog_deadman", "s", positive=True, maximum=5.0),
+    *positive(("max_velocity", "m/s"), ("max_acceleration", "m/s²"), ("max_jerk", "m/s³")),
+    *positive(("max_angular_velocity", "rad/s"), ("max_angular_acceleration", "rad/s²"),
+              ("max_angular_jerk", "rad/s³")),
+    Flag("friction_compensation"),
+    Vector("external_wrench", "N, N·m", length=6),
+)
+TDA_FIELDS = (
+    Choice("method", METHODS, field="tda_method"),
+    Number("nu", "", field="tda_nu", minimum=0.0, maximum=1.0),
+    Vector("direction", "", field="tda_direction"),
+    Number("max_tension_rate", "N/s", positive=True),
+)
+SAFETY_FIELDS: tuple[Field, ...] = (
+    *positive(("max_position_error", "m"), ("max_angle_error", "rad"), ("max_speed", "m/s"),
+              ("max_feedback_age", "s"), ("stop_duration", "s"), ("max_saturation_time", "s")),
+    Number("tension_margin", "N", minimum=0.0),
+    Number("max_fk_residual", "m", positive=True),
+    Number("max_tension_disagreement", "of the tension range", positive=True, maximum=1.0),
+)
+REALTIME_FIELDS = (
+    Number("sleep_margin", "s", minimum=0.0, maximum=0.01),
+    Number("sched_priority", "", minimum=1, maximum=99, integer=True),
+    Number("cpu", "", minimum=-1, integer=True),
+    Flag("lock_memory"),
+    Flag("freeze_gc"),
+)
+
+
 def read_control(
     rd: TableReader, data: dict[str, Any], cable_names: list[str]
 ) -> ControlConfig | None:
-    t = rd.table(data, "control", "", required=False)
-    if t is None:
-        return ControlConfig()
-    n0 = len(rd.errors)
-    path = "control"
-    rd.check_keys(t, CONTROL_KEYS, path)
-    d = ControlConfig()
-    vals: dict[str, Any] = {}
+    def read(t: dict[str, Any], vals: dict[str, Any]) -> None:
+        d = ControlConfig()
+        read_fields(rd, t, "control", CONTROL_FIELDS, d, vals)
+        tda = rd.table(t, "tda", "control", required=False)
+        if tda is not None:
+            rd.check_keys(tda, TDA_KEYS, "control.tda")
+            read_fields(rd, tda, "control.tda", TDA_FIELDS, d, vals)
+            vals["impositions"] = read_impositions(rd, tda, cable_names)
+        for key, keys, fields in (("safety", SAFETY_KEYS, SAFETY_FIELDS),
+                                  ("realtime", REALTIME_KEYS, REALTIME_FIELDS)):  # fmt: skip
+            sub = rd.table(t, key, "control", required=False)
+            if sub is not None:
+                rd.check_keys(sub, keys, f"control.{key}")
+                read_fields(rd, sub, f"control.{key}", fields, d, vals)
 
-    def num(key: str, unit: str, **rules: Any) -> None:
-        v = rd.number(t, key, path, unit, required=False, default=getattr(d, key), **rules)
-        if v is not None:
-            vals[key] = v
+    return read_section(rd, data, "control", CONTROL_KEYS, ControlConfig, read)
 
-    num("rate", "Hz", positive=True, maximum=10000.0)
-    num("bandwidth", "Hz", positive=True)
-    ab = rd.vector(t, "axis_bandwidth", path, "Hz", length=6, required=False, default=None)
-    if ab is not None:
-        if np.any(ab <= 0.0):
-            rd.error(f"{path}.axis_bandwidth", ab.tolist(), "Hz", "must contain only values > 0")
-        else:
-            vals["axis_bandwidth"] = tuple(float(x) for x in ab)
-    num("damping_ratio", "", positive=True)
-    num("velocity_filter", "Hz", positive=True)
-    num("observer_bandwidth", "Hz", minimum=0.0)
-    num("disturbance_bandwidth", "Hz", minimum=0.0, maximum=5.0)
-    num("force_feedback", "× the lowest mode", minimum=0.0, maximum=10.0)
-    num("jog_deadman", "s", positive=True, maximum=5.0)
-    for key, unit in (
-        ("max_velocity", "m/s"),
-        ("max_acceleration", "m/s²"),
-        ("max_jerk", "m/s³"),
-        ("max_angular_velocity", "rad/s"),
-        ("max_angular_acceleration", "rad/s²"),
-        ("max_angular_jerk", "rad/s³"),
-    ):
-        num(key, unit, positive=True)
-    if "friction_compensation" in t:
-        if not isinstance(t["friction_compensation"], bool):
-            rd.error(
-                f"{path}.friction_compensation",
-                t["friction_compensation"],
-                "",
-                "must be true or false",
-            )
-        else:
-            vals["friction_compensation"] = t["friction_compensation"]
-    ext = rd.vector(t, "external_wrench", path, "N, N·m", length=6, required=False, default=None)
-    if ext is not None:
-        vals["external_wrench"] = tuple(float(x) for x in ext)
-    tda = rd.table(t, "tda", path, required=False)
-    if tda is not None:
-        tp = f"{path}.tda"
-        rd.check_keys(tda, TDA_KEYS, tp)
-        method = rd.string(tda, "method", tp, required=False, default=d.tda_method)
-        if method not in METHODS:
-            rd.error(f"{tp}.method", method, "", f"must be one of {', '.join(METHODS)}")
-        else:
-            vals["tda_method"] = method
-        nu = rd.number(
-            tda, "nu", tp, "", required=False, default=d.tda_nu, minimum=0.0, maximum=1.0
-        )
-        if nu is not None:
-            vals["tda_nu"] = nu
-        direction = rd.vector(tda, "direction", tp, "", required=False, default=None)
-        if direction is not None:
-            vals["tda_direction"] = tuple(float(x) for x in direction)
-        rate = rd.number(
-            tda,
-            "max_tension_rate",
-            tp,
-            "N/s",
-            required=False,
-            default=d.max_tension_rate,
-            positive=True,
-        )
-        if rate is not None:
-            vals["max_tension_rate"] = rate
-        imps = tda.get("impose", [])
-        if not isinstance(imps, list) or not all(isinstance(x, dict) for x in imps):
-            rd.error(f"{tp}.impose", imps, "", "must be an array of tables")
-            imps = []
-        out = []
-        for k, imp in enumerate(imps):
-            ip = f"{tp}.impose[{k}]"
-            rd.check_keys(imp, ("cable", "quantity", "value"), ip)
-            cable = imp.get("cable")
-            q = imp.get("quantity")
-            v = rd.number(imp, "value", ip, {"energy": "J", "tension": "N"}.get(q, "m"))
-            if cable not in cable_names:
-                rd.error(f"{ip}.cable", cable, "", f"is not a cable ({', '.join(cable_names)})")
-            elif q not in ("energy", "tension", "deformation"):
-                rd.error(f"{ip}.quantity", q, "", "must be energy, tension or deformation")
-            elif v is not None:
-                out.append(ImposeConfig(cable_names.index(cable), q, v))
-        vals["impositions"] = tuple(out)
-    safety = rd.table(t, "safety", path, required=False)
-    if safety is not None:
-        sp = f"{path}.safety"
-        rd.check_keys(safety, SAFETY_KEYS, sp)
-        for key, unit, rules in (
-            ("max_position_error", "m", {"positive": True}),
-            ("max_angle_error", "rad", {"positive": True}),
-            ("max_speed", "m/s", {"positive": True}),
-            ("max_feedback_age", "s", {"positive": True}),
-            ("stop_duration", "s", {"positive": True}),
-            ("max_saturation_time", "s", {"positive": True}),
-            ("tension_margin", "N", {"minimum": 0.0}),
-            ("max_fk_residual", "m", {"positive": True}),
-            ("max_tension_disagreement", "of the tension range", {"positive": True,
-                                                                  "maximum": 1.0}),
-        ):
-            v = rd.number(safety, key, sp, unit, required=False, default=getattr(d, key), **rules)
-            if v is not None:
-                vals[key] = v
-    rt = rd.table(t, "realtime", path, required=False)
-    if rt is not None:
-        rp = f"{path}.realtime"
-        rd.check_keys(rt, REALTIME_KEYS, rp)
-        v = rd.number(
-            rt,
-            "sleep_margin",
-            rp,
-            "s",
-            required=False,
-            default=d.sleep_margin,
-            minimum=0.0,
-            maximum=0.01,
-        )
-        if v is not None:
-            vals["sleep_margin"] = v
-        v = rd.number(
-            rt,
-            "sched_priority",
-            rp,
-            "",
-            required=False,
-            default=d.sched_priority,
-            minimum=1,
-            maximum=99,
-            integer=True,
-        )
-        if v is not None:
-            vals["sched_priority"] = int(v)
-        v = rd.number(rt, "cpu", rp, "", required=False, default=d.cpu, minimum=-1, integer=True)
-        if v is not None:
-            vals["cpu"] = int(v)
-        for key in ("lock_memory", "freeze_gc"):
-            if key in rt:
-                if not isinstance(rt[key], bool):
-                    rd.error(f"{rp}.{key}", rt[key], "", "must be true or false")
-                else:
-                    vals[key] = rt[key]
-    if len(rd.errors) > n0:
-        return None
-    return ControlConfig(**vals)
+
+def read_impositions(
+    rd: TableReader, tda: dict[str, Any], cable_names: list[str]
+) -> tuple[ImposeConfig, ...]:
+    """``[[control.tda.impose]]``: the energy TDA's impositions, each on a cable by name."""
+    tp = "control.tda"
+    imps = tda.get("impose", [])
+    if not isinstance(imps, list) or not all(isinstance(x, dict) for x in imps):
+        rd.error(f"{tp}.impose", imps, "", "must be an array of tables")
+        imps = []
+    out = []
+    for k, imp in enumerate(imps):
+        ip = f"{tp}.impose[{k}]"
+        rd.check_keys(imp, ("cable", "quantity", "value"), ip)
+        cable = imp.get("cable")
+        q = imp.get("quantity")
+        v = rd.number(imp, "value", ip, {"energy": "J", "tension": "N"}.get(q, "m"))
+        if cable not in cable_names:
+            rd.error(f"{ip}.cable", cable, "", f"is not a cable ({', '.join(cable_names)})")
+        elif q not in ("energy", "tension", "deformation"):
+            rd.error(f"{ip}.quantity", q, "", "must be energy, tension or deformation")
+        elif v is not None:
+            out.append(ImposeConfig(cable_names.index(cable), q, v))
+    return tuple(out)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from cdprctl.model.buses import BusConfig, default_buses, read_buses
-from cdprctl.model.reader import TableReader
+from cdprctl.model.reader import Choice, Flag, Number, TableReader, Text, read_fields
 
 DRIVES_KEYS = (
     "driver",
@@ -167,6 +167,41 @@ def default_drives(name: str, n_cables: int, rated_torque: float) -> DrivesConfi
     )
 
 
+#: the plain keys of ``[drives]``, in the order they are read: what decides the others
+#: first (``_odrive_limits`` relates them), then the timing and scaling, then the set-up's
+DRIVES_FIRST = (
+    Choice("driver", DRIVERS, lenient=True),
+    Choice("mode", MODES, lenient=True),
+    Number("torque_constant", "N·m/A", positive=True),
+)
+DRIVES_TIMING = (
+    Number("position_loop_bandwidth", "Hz", positive=True),
+    Number("following_error_window", "m", positive=True),
+    Number("following_error_timeout", "s", positive=True, maximum=65.535),
+    Number("target_extrapolation", "s", positive=True),
+    Number("brake_release_time", "s", minimum=0.0, maximum=1.0),
+    Number("rated_torque", "N·m", positive=True),
+    Number("feedback_timeout", "s", positive=True),
+)
+DRIVES_SETUP = (
+    # a CiA 402 drive beats five times a timeout (drivers/cia402/drive_setup.py) and 0x1017
+    # is whole ms in 16 bits: 2 ms to 65.535 s between beats
+    Number("heartbeat_timeout", "s", minimum=0.01, maximum=327.675),
+    Number("heartbeat_period", "s", positive=True),
+    Number("controller_node_id", "", minimum=1, maximum=127, integer=True),
+    Number("comm_timeout", "s", positive=True),
+    Choice("velocity_source", ("derived", "pdo"), rule="must be 'derived' or 'pdo'"),
+    Choice("pdo_mapping", ("configure", "static"),
+           rule="must be 'configure' (the driver writes the PDO mapping by SDO) or 'static' "
+           "(it only checks it)"),
+    Choice("encoders", ENCODERS,
+           rule="must be 'incremental' (the counter restarts at power-up) or 'absolute' "
+           "(multi-turn, kept across power-ups)"),
+    Flag("assume_home_at_start"),
+    Text("log_file"),
+)  # fmt: skip
+
+
 def read_drives(
     rd: TableReader,
     data: dict[str, Any],
@@ -176,20 +211,39 @@ def read_drives(
     max_torque_limit: float = 0.0,
 ) -> DrivesConfig | None:
     """``max_torque_limit`` (N·m): the largest of the winches' ``torque_limit``."""
-    t = rd.table(data, "drives", "", required=False)
+    n0 = len(rd.errors)
+    t = rd.section(data, "drives", DRIVES_KEYS)
     if t is None:
         return default_drives(name, len(cable_names), rated_default)
-    n0 = len(rd.errors)
-    rd.check_keys(t, DRIVES_KEYS, "drives")
-    driver = rd.string(t, "driver", "drives", required=False, default="cia402") or "cia402"
-    if driver not in DRIVERS:
-        rd.error("drives.driver", driver, "", f"must be one of {', '.join(DRIVERS)}")
-    mode = rd.string(t, "mode", "drives", required=False, default=None) or DEFAULT_MODE
-    if mode not in MODES:
-        rd.error("drives.mode", mode, "", f"must be one of {', '.join(MODES)}")
-    torque_constant = rd.number(
-        t, "torque_constant", "drives", "N·m/A", required=False, default=None, positive=True
-    )
+    defaults = DrivesConfig(mode=DEFAULT_MODE, rated_torque=rated_default)
+    vals: dict[str, Any] = {}
+    read_fields(rd, t, "drives", DRIVES_FIRST, defaults, vals)
+    _odrive_limits(rd, t, vals, max_torque_limit)
+    read_fields(rd, t, "drives", DRIVES_TIMING, defaults, vals)
+    if "missed_feedback_limit" in t:
+        rd.error(
+            "drives.missed_feedback_limit",
+            t["missed_feedback_limit"],
+            "cycles",
+            "is replaced by feedback_timeout, a time in s (e.g. feedback_timeout = 0.03): a "
+            "count of cycles meant a different time at every rate",
+        )
+    read_fields(rd, t, "drives", DRIVES_SETUP, defaults, vals)
+    buses = read_buses(rd, t, cable_names, name, vals.get("controller_node_id"), vals["driver"])
+    if len(rd.errors) > n0:
+        return None
+    vals["rated_torque"] = float(vals["rated_torque"])
+    return DrivesConfig(**vals, buses=tuple(buses))
+
+
+def _odrive_limits(
+    rd: TableReader, t: dict[str, Any], vals: dict[str, Any], max_torque_limit: float
+) -> None:
+    """What an ODrive asks of the other keys: its torque constant in position mode (its
+    current limit goes by CAN), a current limit it can drive, and a torque feed-forward its
+    int16 carries."""
+    driver, mode = vals["driver"], vals["mode"]
+    torque_constant = vals.get("torque_constant")
     if mode == "csp" and driver == "odrive" and "torque_constant" not in t:
         rd.error_missing(
             "drives.torque_constant", "N·m/A",
@@ -213,101 +267,3 @@ def read_drives(
             f"must be <= {ODRIVE_MAX_TORQUE_FF} with ODrive axes in position mode: "
             "Set_Input_Pos carries the torque feed-forward as int16 × 0.001 N·m",
         )  # fmt: skip
-    pos_bw = rd.number(
-        t, "position_loop_bandwidth", "drives", "Hz", required=False, default=50.0, positive=True
-    )
-    fe_window = rd.number(
-        t, "following_error_window", "drives", "m", required=False, default=None, positive=True
-    )
-    fe_timeout = rd.number(
-        t, "following_error_timeout", "drives", "s", required=False, default=0.003,
-        positive=True, maximum=65.535,
-    )  # fmt: skip
-    extrapolation = rd.number(
-        t, "target_extrapolation", "drives", "s", required=False, default=0.05, positive=True
-    )
-    release = rd.number(
-        t, "brake_release_time", "drives", "s", required=False, default=0.05, minimum=0.0,
-        maximum=1.0,
-    )  # fmt: skip
-    rated = rd.number(
-        t, "rated_torque", "drives", "N·m", required=False, default=rated_default, positive=True
-    )
-    fb_to = rd.number(
-        t, "feedback_timeout", "drives", "s", required=False, default=0.03, positive=True
-    )
-    if "missed_feedback_limit" in t:
-        rd.error(
-            "drives.missed_feedback_limit",
-            t["missed_feedback_limit"],
-            "cycles",
-            "is replaced by feedback_timeout, a time in s (e.g. feedback_timeout = 0.03): a "
-            "count of cycles meant a different time at every rate",
-        )
-    # a CiA 402 drive beats five times a timeout (drivers/cia402/drive_setup.py) and 0x1017 is
-    # whole ms in 16 bits: 2 ms to 65.535 s between beats
-    hb_to = rd.number(
-        t, "heartbeat_timeout", "drives", "s", required=False, default=0.5, minimum=0.01,
-        maximum=327.675,
-    )  # fmt: skip
-    hb_p = rd.number(
-        t, "heartbeat_period", "drives", "s", required=False, default=0.1, positive=True
-    )
-    ctrl_id = rd.number(
-        t,
-        "controller_node_id",
-        "drives",
-        "",
-        required=False,
-        default=127,
-        minimum=1,
-        maximum=127,
-        integer=True,
-    )
-    comm = rd.number(t, "comm_timeout", "drives", "s", required=False, default=0.1, positive=True)
-    vsrc = rd.string(t, "velocity_source", "drives", required=False, default="derived")
-    if vsrc not in ("derived", "pdo"):
-        rd.error("drives.velocity_source", vsrc, "", "must be 'derived' or 'pdo'")
-    pdo_mapping = rd.string(t, "pdo_mapping", "drives", required=False, default="configure")
-    if pdo_mapping not in ("configure", "static"):
-        rd.error(
-            "drives.pdo_mapping", pdo_mapping, "",
-            "must be 'configure' (the driver writes the PDO mapping by SDO) or 'static' (it "
-            "only checks it)",
-        )  # fmt: skip
-    encoders = rd.string(t, "encoders", "drives", required=False, default="incremental")
-    if encoders not in ENCODERS:
-        rd.error(
-            "drives.encoders", encoders, "",
-            "must be 'incremental' (the counter restarts at power-up) or 'absolute' (multi-turn, "
-            "kept across power-ups)",
-        )  # fmt: skip
-    assume_home = t.get("assume_home_at_start", False)
-    if not isinstance(assume_home, bool):
-        rd.error("drives.assume_home_at_start", assume_home, "", "must be true or false")
-    log_file = rd.string(t, "log_file", "drives", required=False, default=None)
-    buses = read_buses(rd, t, cable_names, name, ctrl_id, driver)
-    if len(rd.errors) > n0:
-        return None
-    return DrivesConfig(
-        driver=driver,
-        mode=mode,
-        position_loop_bandwidth=float(pos_bw or 50.0),
-        following_error_window=None if fe_window is None else float(fe_window),
-        following_error_timeout=float(fe_timeout or 0.003),
-        target_extrapolation=float(extrapolation or 0.05),
-        brake_release_time=float(0.05 if release is None else release),
-        rated_torque=float(rated if rated is not None else rated_default),
-        torque_constant=None if torque_constant is None else float(torque_constant),
-        feedback_timeout=float(fb_to or 0.03),
-        heartbeat_timeout=float(hb_to or 0.5),
-        heartbeat_period=float(hb_p or 0.1),
-        controller_node_id=int(ctrl_id or 127),
-        comm_timeout=float(comm or 0.1),
-        velocity_source=vsrc or "derived",
-        pdo_mapping=pdo_mapping or "configure",
-        encoders=encoders or "incremental",
-        assume_home_at_start=bool(assume_home),
-        log_file=log_file,
-        buses=tuple(buses),
-    )

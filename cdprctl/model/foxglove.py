@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from cdprctl.model.reader import TableReader
+from cdprctl.model.reader import Number, TableReader, read_fields, read_section
 
 FOXGLOVE_KEYS = ("listen", "rate")
 
@@ -36,23 +36,15 @@ def parse_listen(text: str) -> tuple[str, int]:
 
 
 def read_foxglove(rd: TableReader, data: dict[str, Any]) -> FoxgloveConfig | None:
-    t = rd.table(data, "foxglove", "", required=False)
-    if t is None:
-        return FoxgloveConfig()
-    n0 = len(rd.errors)
-    rd.check_keys(t, FOXGLOVE_KEYS, "foxglove")
-    vals: dict[str, Any] = {}
-    listen = rd.string(t, "listen", "foxglove", required=False, default="")
-    if listen:
-        try:
-            parse_listen(listen)
-            vals["listen"] = listen
-        except ValueError as exc:
-            rd.error("foxglove.listen", listen, "", str(exc).split(" ", 1)[1])
-    rate = rd.number(t, "rate", "foxglove", "Hz", required=False, default=30.0, positive=True,
-                     maximum=200.0)  # fmt: skip
-    if rate is not None:
-        vals["rate"] = rate
-    if len(rd.errors) > n0:
-        return None
-    return FoxgloveConfig(**vals)
+    def read(t: dict[str, Any], vals: dict[str, Any]) -> None:
+        listen = rd.string(t, "listen", "foxglove", required=False, default="")
+        if listen:
+            try:
+                parse_listen(listen)
+                vals["listen"] = listen
+            except ValueError as exc:
+                rd.error("foxglove.listen", listen, "", str(exc).split(" ", 1)[1])
+        rate = Number("rate", "Hz", positive=True, maximum=200.0)
+        read_fields(rd, t, "foxglove", (rate,), FoxgloveConfig(), vals)
+
+    return read_section(rd, data, "foxglove", FOXGLOVE_KEYS, FoxgloveConfig, read)

@@ -46,11 +46,6 @@ class Gripper:
     guide_friction: float  # N, Coulomb friction of the jaw on its guide (the paper's F_jBA)
     travel_max: float  # m, the guide's upper end stop (the lower one is at zero travel)
 
-    @property
-    def contact_stiffness(self) -> float:
-        """N/m, K_B in series with the object."""
-        return in_series(self.k_b, self.object_stiffness)
-
 
 def in_series(k1: float, k2: float) -> float:
     """Stiffness (N/m) of two springs in series; an infinite one is rigid."""
@@ -72,7 +67,6 @@ def read_grippers(
         return None
     if cables is None:
         return None
-    names = [c.name for c in cables]
     out: list[Gripper] = []
     n_errors = len(rd.errors)
     if len(raw) > len(cables) - 6:
@@ -85,22 +79,7 @@ def read_grippers(
     for i, g in enumerate(raw):
         path = f"grippers[{i}]"
         rd.check_keys(g, GRIPPER_KEYS, path)
-        name = rd.string(g, "cable", path)
-        idx = None
-        if name is not None and name not in names:
-            rd.error(f"{path}.cable", name, "", f"is not a cable ({', '.join(names)})")
-        elif name is not None and name in used:
-            rd.error(f"{path}.cable", name, "", f"already carries grippers[{used[name]}]")
-        elif name is not None:
-            used[name] = i
-            idx = names.index(name)
-            c = cables[idx]
-            if c.stiffness is None or c.spring_stiffness is not None:
-                rd.errors.append(
-                    f"{rd.file}: cables[{idx}] (name {name!r}) carries {path}: it must give a "
-                    "fixed stiffness (N/m), the spring K_A, and no spring_stiffness or "
-                    "youngs_modulus (the paper's model: an inextensible cable and K_A)"
-                )
+        name, idx = _gripper_cable(rd, g, i, cables, used)
         mass = rd.number(g, "jaw_mass", path, "kg", positive=True)
         offset = rd.vector(g, "jaw_offset", path, "m")
         axis = rd.vector(g, "guide_axis", path, "")
@@ -143,3 +122,28 @@ def read_grippers(
             )
         )
     return tuple(out) if len(rd.errors) == n_errors else None
+
+
+def _gripper_cable(rd: TableReader, g: dict[str, Any], i: int, cables: list[Any],
+                   used: dict[str, int]) -> tuple[str | None, int | None]:  # fmt: skip
+    """The cable (name, index) gripper ``i`` hangs on: a cable that carries no other
+    (``used``: the grippers' indices by cable, updated) and has the paper's model, a fixed
+    stiffness K_A."""
+    names, path = [c.name for c in cables], f"grippers[{i}]"
+    name = rd.string(g, "cable", path)
+    idx = None
+    if name is not None and name not in names:
+        rd.error(f"{path}.cable", name, "", f"is not a cable ({', '.join(names)})")
+    elif name is not None and name in used:
+        rd.error(f"{path}.cable", name, "", f"already carries grippers[{used[name]}]")
+    elif name is not None:
+        used[name] = i
+        idx = names.index(name)
+        c = cables[idx]
+        if c.stiffness is None or c.spring_stiffness is not None:
+            rd.errors.append(
+                f"{rd.file}: cables[{idx}] (name {name!r}) carries {path}: it must give a "
+                "fixed stiffness (N/m), the spring K_A, and no spring_stiffness or "
+                "youngs_modulus (the paper's model: an inextensible cable and K_A)"
+            )
+    return name, idx

@@ -221,10 +221,9 @@ def _read_platform(rd: TableReader, data: dict[str, Any]) -> Platform | None:
 
 
 def _read_home(rd: TableReader, data: dict[str, Any]) -> Pose | None:
-    t = rd.table(data, "home", "")
+    t = rd.section(data, "home", HOME_KEYS, required=True)
     if t is None:
         return None
-    rd.check_keys(t, HOME_KEYS, "home")
     position = rd.vector(t, "position", "home", "m")
     rpy = rd.vector(t, "rpy", "home", "rad", required=False, default=np.zeros(3))
     if position is None or rpy is None:
@@ -233,10 +232,9 @@ def _read_home(rd: TableReader, data: dict[str, Any]) -> Pose | None:
 
 
 def _read_workspace(rd: TableReader, data: dict[str, Any]) -> Workspace | None:
-    t = rd.table(data, "workspace", "")
+    t = rd.section(data, "workspace", WORKSPACE_KEYS, required=True)
     if t is None:
         return None
-    rd.check_keys(t, WORKSPACE_KEYS, "workspace")
     lo = rd.vector(t, "position_min", "workspace", "m")
     hi = rd.vector(t, "position_max", "workspace", "m")
     max_angle = rd.number(t, "max_angle", "workspace", "rad", positive=True, maximum=math.pi)

@@ -23,10 +23,9 @@ class PathsConfig:
 
 def read_paths(rd: TableReader, data: dict[str, Any]) -> PathsConfig:
     """``[paths]`` (optional; every key has a default). Errors go to ``rd``."""
-    t = rd.table(data, "paths", "", required=False)
+    t = rd.section(data, "paths", PATHS_KEYS)
     if t is None:
         return PathsConfig()
-    rd.check_keys(t, PATHS_KEYS, "paths")
     tol = rd.number(t, "arc_tolerance", "paths", "m", required=False,
                     default=PathsConfig.arc_tolerance)  # fmt: skip
     if tol is None:

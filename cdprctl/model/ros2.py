@@ -9,7 +9,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from cdprctl.model.reader import TableReader
+from cdprctl.model.reader import Number, TableReader, read_fields, read_section
 
 ROS2_KEYS = ("enabled", "domain_id", "namespace", "rate")
 
@@ -86,32 +86,25 @@ def ros_token(name: str) -> str:
 
 
 def read_ros2(rd: TableReader, data: dict[str, Any]) -> Ros2Config | None:
-    t = rd.table(data, "ros2", "", required=False)
-    if t is None:
-        return Ros2Config()
-    n0 = len(rd.errors)
-    rd.check_keys(t, ROS2_KEYS, "ros2")
-    vals: dict[str, Any] = {}
-    enabled = t.get("enabled", False)
-    if not isinstance(enabled, bool):
-        rd.error("ros2.enabled", enabled, "", "must be true or false")
-    vals["enabled"] = enabled is True
-    domain = rd.number(t, "domain_id", "ros2", "", required=False, minimum=0,
-                       maximum=DOMAIN_MAX, integer=True)  # fmt: skip
-    if domain is not None:
-        vals["domain_id"] = int(domain)
-    ns = rd.string(t, "namespace", "ros2", required=False, default="")
-    if ns:
-        ns = ns.strip("/")
-        if _NAMESPACE.fullmatch(ns):
-            vals["namespace"] = ns
-        else:
-            rd.error("ros2.namespace", ns, "", "must be a ROS 2 name: tokens of letters, digits "
-                     "and underscores separated by /, none starting with a digit")  # fmt: skip
-    rate = rd.number(t, "rate", "ros2", "Hz", required=False, default=50.0, positive=True,
-                     maximum=500.0)  # fmt: skip
-    if rate is not None:
-        vals["rate"] = rate
-    if len(rd.errors) > n0:
-        return None
-    return Ros2Config(**vals)
+    def read(t: dict[str, Any], vals: dict[str, Any]) -> None:
+        enabled = t.get("enabled", False)
+        if not isinstance(enabled, bool):
+            rd.error("ros2.enabled", enabled, "", "must be true or false")
+        vals["enabled"] = enabled is True
+        domain = rd.number(t, "domain_id", "ros2", "", required=False, minimum=0,
+                           maximum=DOMAIN_MAX, integer=True)  # fmt: skip
+        if domain is not None:
+            vals["domain_id"] = int(domain)
+        ns = rd.string(t, "namespace", "ros2", required=False, default="")
+        if ns:
+            ns = ns.strip("/")
+            if _NAMESPACE.fullmatch(ns):
+                vals["namespace"] = ns
+            else:
+                rd.error("ros2.namespace", ns, "", "must be a ROS 2 name: tokens of "
+                         "letters, digits and underscores separated by /, none starting with a "
+                         "digit")  # fmt: skip
+        rate = Number("rate", "Hz", positive=True, maximum=500.0)
+        read_fields(rd, t, "ros2", (rate,), Ros2Config(), vals)
+
+    return read_section(rd, data, "ros2", ROS2_KEYS, Ros2Config, read)

@@ -18,12 +18,6 @@ SAFETY_KEYS = (
 )
 
 WRONG_MODEL = "a slipped or broken cable: holding powered on a wrong model is no state to stay in"
-#: IEC 60204-1's stop categories, as a cable robot takes them (docs/safety.md)
-STOP_NAMES = {
-    0: "category 0: the drives disabled at once, the brakes stop and hold the platform",
-    1: "category 1: the pose held with feasible tensions, then the drives disabled (SS1)",
-    2: "category 2: the pose held, the power kept, until a reset or disable (SS2)",
-}
 #: per fault kind (``control.states.FaultKind``'s values): the stop categories it may take
 #: (``[safety.stop_category]``), the first its default, and why the others are not offered
 STOP_CATEGORIES: dict[str, tuple[tuple[int, ...], str]] = {

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cdprctl.model.reader import TableReader
+from cdprctl.model.reader import Flag, Number, TableReader, read_fields, read_section
 
 ZENOH_KEYS = (
     "enabled",
@@ -45,73 +45,58 @@ class ZenohConfig:
         return self.prefix or f"cdpr/{robot}"
 
 
+ENDPOINT_PROTOCOLS = ("tcp", "udp", "tls", "quic")
+ZENOH_FLAGS = tuple(Flag(key) for key in ("enabled", "multicast_scouting", "commands",
+                                          "allow_unauthenticated_commands"))  # fmt: skip
+ZENOH_RATES = (Number("state_rate", "Hz", positive=True, maximum=1000.0),
+               Number("timing_rate", "Hz", positive=True, maximum=100.0))  # fmt: skip
+
+
 def read_zenoh(rd: TableReader, data: dict[str, Any], robot: str) -> ZenohConfig | None:
-    t = rd.table(data, "zenoh", "", required=False)
-    if t is None:
-        return ZenohConfig()
-    n0 = len(rd.errors)
-    rd.check_keys(t, ZENOH_KEYS, "zenoh")
-    d = ZenohConfig()
-    vals: dict[str, Any] = {}
-    for key in ("enabled", "multicast_scouting", "commands", "allow_unauthenticated_commands"):
-        if key in t:
-            if isinstance(t[key], bool):
-                vals[key] = t[key]
+    def read(t: dict[str, Any], vals: dict[str, Any]) -> None:
+        d = ZenohConfig()
+        read_fields(rd, t, "zenoh", ZENOH_FLAGS, d, vals)
+        prefix = rd.string(t, "prefix", "zenoh", required=False, default="")
+        if prefix:
+            if not all(_KEY_CHUNK.match(c) for c in prefix.split("/")):
+                rd.error(
+                    "zenoh.prefix",
+                    prefix,
+                    "",
+                    "must be a Zenoh key of non-empty chunks of letters, digits, _ . - (no "
+                    "wildcards)",
+                )
             else:
-                rd.error(f"zenoh.{key}", t[key], "", "must be true or false")
-    prefix = rd.string(t, "prefix", "zenoh", required=False, default="")
-    if prefix:
-        if not all(_KEY_CHUNK.match(c) for c in prefix.split("/")):
-            rd.error(
-                "zenoh.prefix",
-                prefix,
-                "",
-                "must be a Zenoh key of non-empty chunks of letters, digits, _ . - (no wildcards)",
-            )
-        else:
-            vals["prefix"] = prefix
-    elif not all(_KEY_CHUNK.match(c) for c in robot.split("/")):
-        rd.error("name", robot, "", "cannot be a Zenoh key chunk: set zenoh.prefix")
-    mode = rd.string(t, "mode", "zenoh", required=False, default="peer")
-    if mode is not None and mode not in ("peer", "client", "router"):
-        rd.error("zenoh.mode", mode, "", "must be peer, client or router")
-    elif mode:
-        vals["mode"] = mode
-    for key in ("listen", "connect"):
-        eps = t.get(key, [])
-        if not isinstance(eps, list) or not all(
-            isinstance(e, str) and "/" in e and e.split("/", 1)[0] in ("tcp", "udp", "tls", "quic")
-            for e in eps
-        ):
-            rd.error(
-                f"zenoh.{key}",
-                eps,
-                "",
-                'must be a list of Zenoh endpoints such as "tcp/192.168.1.10:7447" '
-                "(tcp, udp, tls or quic)",
-            )
-        else:
-            vals[key] = tuple(eps)
-    for key, limit in (("state_rate", 1000.0), ("timing_rate", 100.0)):
-        v = rd.number(
-            t,
-            key,
-            "zenoh",
-            "Hz",
-            required=False,
-            default=getattr(d, key),
-            positive=True,
-            maximum=limit,
-        )
-        if v is not None:
-            vals[key] = v
-    cf = rd.string(t, "config_file", "zenoh", required=False, default="")
-    if cf:
-        path = Path(cf) if Path(cf).is_absolute() else Path(rd.file).parent / cf
-        if not path.is_file():
-            rd.error("zenoh.config_file", cf, "", f"must name an existing file ({path} is not)")
-        else:
-            vals["config_file"] = str(path)
-    if len(rd.errors) > n0:
-        return None
-    return ZenohConfig(**vals)
+                vals["prefix"] = prefix
+        elif not all(_KEY_CHUNK.match(c) for c in robot.split("/")):
+            rd.error("name", robot, "", "cannot be a Zenoh key chunk: set zenoh.prefix")
+        mode = rd.string(t, "mode", "zenoh", required=False, default="peer")
+        if mode is not None and mode not in ("peer", "client", "router"):
+            rd.error("zenoh.mode", mode, "", "must be peer, client or router")
+        elif mode:
+            vals["mode"] = mode
+        for key in ("listen", "connect"):
+            eps = t.get(key, [])
+            if not isinstance(eps, list) or not all(
+                isinstance(e, str) and "/" in e and e.split("/", 1)[0] in ENDPOINT_PROTOCOLS
+                for e in eps
+            ):
+                rd.error(
+                    f"zenoh.{key}",
+                    eps,
+                    "",
+                    'must be a list of Zenoh endpoints such as "tcp/192.168.1.10:7447" '
+                    "(tcp, udp, tls or quic)",
+                )
+            else:
+                vals[key] = tuple(eps)
+        read_fields(rd, t, "zenoh", ZENOH_RATES, d, vals)
+        cf = rd.string(t, "config_file", "zenoh", required=False, default="")
+        if cf:
+            path = Path(cf) if Path(cf).is_absolute() else Path(rd.file).parent / cf
+            if not path.is_file():
+                rd.error("zenoh.config_file", cf, "", f"must name an existing file ({path} is not)")
+            else:
+                vals["config_file"] = str(path)
+
+    return read_section(rd, data, "zenoh", ZENOH_KEYS, ZenohConfig, read)

@@ -63,11 +63,6 @@ def contains(poly: Sequence[Point] | FloatArray, x: float, y: float, tol: float 
     return bool(contains_kernel(P, len(P), x, y, tol))
 
 
-def closest_point(poly: Sequence[Point] | FloatArray, x: float, y: float) -> Point:
-    """Point of the convex polygon closest to ``(x, y)`` (Euclidean)."""
-    return min_quadratic(poly, 1.0, 0.0, 1.0, -x, -y)
-
-
 def min_quadratic(
     poly: Sequence[Point] | FloatArray, h11: float, h12: float, h22: float, g1: float, g2: float
 ) -> Point:
@@ -77,13 +72,6 @@ def min_quadratic(
     P = _as_array(poly)
     x, y = min_quadratic_kernel(P, len(P), h11, h12, h22, g1, g2)
     return float(x), float(y)
-
-
-def min_linear(poly: Sequence[Point] | FloatArray, c1: float, c2: float) -> Point:
-    """Vertex minimising ``c1 x + c2 y`` (a linear objective's optimum is at a vertex)."""
-    P = _as_array(poly)
-    k = int(np.argmin(P @ np.array([c1, c2])))
-    return float(P[k, 0]), float(P[k, 1])
 
 
 # -- compiled kernels (arrays in, arrays out; ``nv`` = the number of valid vertices) ------------

@@ -9,12 +9,11 @@ import contextlib
 import json
 import multiprocessing as mp
 import queue
-import sys
 import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import Decimator, HelperProcess, close_queue
+from cdprctl.telemetry.helper import Decimator, HelperProcess, NewStates, close_queue, paced
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -66,13 +65,20 @@ def foxglove_main(
     builder, messages = SceneBuilder(layout), SceneMessages(layout)
     names = list(layout.names)
     grippers = [g.name for g in model.grippers]
-    period = 1.0 / model.foxglove.rate
+
+    def publish(s: Any) -> None:
+        now_ns = time.time_ns()
+        state = state_payload(s, names, "", grippers)
+        sc = builder.build(state)
+        if sc is not None:
+            tf.log(transforms(sc, now_ns), log_time=now_ns)
+            scene_ch.log(messages.update(sc, now_ns), log_time=now_ns)
+        sig_ch.log(signals(state), log_time=now_ns)
+
+    new_states = NewStates(snap, "cdprctl-foxglove", publish)
     ready.set()
-    next_t = time.monotonic()
-    last_seq = -1.0
-    failed = False  # said once
     try:
-        while not stop.is_set():
+        for _ in paced(stop, 1.0 / model.foxglove.rate):
             now_ns = time.time_ns()
             while True:
                 try:
@@ -80,23 +86,7 @@ def foxglove_main(
                 except queue.Empty:
                     break
                 log_ch.log(log_message(now_ns, kind, text), log_time=now_ns)
-            s = snap.read()
-            if s is not None and s["seq"][0] != last_seq:
-                last_seq = s["seq"][0]
-                try:
-                    state = state_payload(s, names, "", grippers)
-                    sc = builder.build(state)
-                    if sc is not None:
-                        tf.log(transforms(sc, now_ns), log_time=now_ns)
-                        scene_ch.log(messages.update(sc, now_ns), log_time=now_ns)
-                    sig_ch.log(signals(state), log_time=now_ns)
-                except Exception as exc:  # a bad frame must not end the view
-                    if not failed:
-                        print(f"cdprctl-foxglove: a frame failed: {type(exc).__name__}: {exc}",
-                              file=sys.stderr, flush=True)  # fmt: skip
-                    failed = True
-            next_t = max(next_t + period, time.monotonic())
-            time.sleep(max(0.0, next_t - time.monotonic()))
+            new_states()
     finally:
         server.stop()
         snap.close()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 
@@ -72,6 +72,59 @@ class HelperProcess:
         if self.process.is_alive():
             self.process.terminate()
             self.process.join(timeout=2.0)
+
+
+def paced(stop: Any, period: float, alive: Callable[[], bool] | None = None) -> Iterator[float]:
+    """A helper process's loop (the gateway, the Foxglove view, the ROS 2 view): a turn once a
+    ``period`` s, each given its time (``time.monotonic``), until ``stop`` is set or
+    ``alive()`` is false (the daemon is gone); a late turn is not caught up (a stall makes no
+    burst)."""
+    next_t = time.monotonic()
+    while not stop.is_set() and (alive is None or alive()):
+        yield time.monotonic()
+        next_t = max(next_t + period, time.monotonic())
+        time.sleep(max(0.0, next_t - time.monotonic()))
+
+
+class Deadlines:
+    """One rate among a helper's turns (``paced``): ``due(now)`` once a ``period`` s, on the
+    grid that starts at its creation; after a stall the next is a period on (no burst)."""
+
+    def __init__(self, period: float):
+        self.period = period
+        self.next = time.monotonic()
+
+    def due(self, now: float) -> bool:
+        if now < self.next:
+            return False
+        self.next += self.period
+        if self.next < now:  # a stall
+            self.next = now + self.period
+        return True
+
+
+class NewStates:
+    """A view's publication of the loop's states: ``publish(s)`` for each state of the
+    snapshot ``snap`` not published yet (its ``seq`` changed); one that fails is said once on
+    stderr, by the process's ``name``, and does not end the view."""
+
+    def __init__(self, snap: Any, name: str, publish: Callable[[Any], None]):
+        self.snap, self.name, self.publish = snap, name, publish
+        self.last_seq = -1.0
+        self.failed = False  # said once
+
+    def __call__(self) -> None:
+        s = self.snap.read()
+        if s is None or s["seq"][0] == self.last_seq:
+            return
+        self.last_seq = s["seq"][0]
+        try:
+            self.publish(s)
+        except Exception as exc:  # a bad frame must not end the view
+            if not self.failed:
+                print(f"{self.name}: a frame failed: {type(exc).__name__}: {exc}",
+                      file=sys.stderr, flush=True)  # fmt: skip
+            self.failed = True
 
 
 class Decimator:

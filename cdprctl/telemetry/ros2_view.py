@@ -7,12 +7,11 @@ follows ROS 2's naming is a ROS 2 publisher to every node on the domain. It take
 from __future__ import annotations
 
 import multiprocessing as mp
-import sys
 import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import Decimator, HelperProcess
+from cdprctl.telemetry.helper import Decimator, HelperProcess, NewStates, paced
 from cdprctl.telemetry.ros2_frames import Ros2Frames, topics, types
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
@@ -49,26 +48,16 @@ def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> N
     frames_of = Ros2Frames(model, [c.name for c in model.cables], model.home.rotation,
                            model.name)  # fmt: skip
     writers["tf_static"].write(frames_of.static(rm.ros_time(time.time())))
-    period = 1.0 / model.ros2.rate
+
+    def publish(s: Any) -> None:
+        for key, msg in frames_of.build(s, rm.ros_time(time.time())).items():
+            writers[key].write(msg)
+
+    new_states = NewStates(snap, "cdprctl-ros2", publish)
     ready.set()
-    next_t = time.monotonic()
-    last_seq = -1.0
-    failed = False
     try:
-        while not stop.is_set():
-            s = snap.read()
-            if s is not None and s["seq"][0] != last_seq:
-                last_seq = s["seq"][0]
-                try:
-                    for key, msg in frames_of.build(s, rm.ros_time(time.time())).items():
-                        writers[key].write(msg)
-                except Exception as exc:  # a bad frame must not end the link; said once
-                    if not failed:
-                        print(f"cdprctl-ros2: a frame failed: {type(exc).__name__}: {exc}",
-                              file=sys.stderr, flush=True)  # fmt: skip
-                    failed = True
-            next_t = max(next_t + period, time.monotonic())
-            time.sleep(max(0.0, next_t - time.monotonic()))
+        for _ in paced(stop, 1.0 / model.ros2.rate):
+            new_states()
     finally:
         snap.close()
         del dp, domain  # the participant before its domain

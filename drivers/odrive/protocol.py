@@ -9,7 +9,6 @@ import struct
 
 HEARTBEAT = 0x01  # axis_error u32, axis_state u8, procedure_result u8, trajectory_done u8
 ESTOP = 0x02
-GET_ERROR = 0x03
 SET_AXIS_STATE = 0x07  # u32
 GET_ENCODER_ESTIMATES = 0x09  # pos f32 (turns), vel f32 (turns/s)
 SET_CONTROLLER_MODE = 0x0B  # control_mode u32, input_mode u32

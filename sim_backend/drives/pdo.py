@@ -27,8 +27,8 @@ from drivers.cia402.objects import variable
 _FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x0007: "I"}
 
 PDO_NOT_VALID = 0x80000000
-RPDO_COMM, RPDO_MAP = 0x1400, 0x1600
-TPDO_COMM, TPDO_MAP = 0x1800, 0x1A00
+RPDO_COMM = 0x1400  # its mapping parameter: + 0x200
+TPDO_COMM = 0x1800
 TPDO_COMMS = (TPDO_COMM, TPDO_COMM + 1)  # the drive's TPDOs: 1 (status), 2 (velocity)
 
 
