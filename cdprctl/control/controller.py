@@ -7,8 +7,9 @@
 write after — is the manager's (``manager.py``); the controller only asks the drives to change
 their lifecycle (``DrivePort``). Every output lands in ``data`` (``ControlData``), which is
 what outside readers read. Commands arrive at the desk (``desk.py``: checked on the way in,
-acted on at the start of a cycle); the start-up's fixed point is ``startup.py``; the states
-and faults are the supervisor's (``supervisor.py``).
+acted on at the start of a cycle); the start-up's fixed point is ``startup.py``; the faults
+are the supervisor's (``supervisor.py``); the state is the state machine's alone
+(``state_machine.py``), which the three ask.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.path_follower import PathFollower
 from cdprctl.control.reference_pose import ReferencePose, WorkingPose
+from cdprctl.control.state_machine import StateMachine
 from cdprctl.control.states import (
     ACTIVE_STATES,
     DISABLING,
@@ -88,9 +90,10 @@ class Controller:
         )
         # position mode: a drive sitting at its torque limit is a load beyond the cables
         torque_limits = self.winches.limit if model.drives.holds_lengths else None
+        # the one owner of data.state: the desk, the supervisor and the start-up ask it
+        self.machine = StateMachine(d)
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits,
-                                     model.safety)  # fmt: skip
-        self.supervisor.position = e.position  # the estimate, updated in place
+                                     model.safety, self.machine)  # fmt: skip
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
         self.jog = Jog(model, d, tr, self.limits)
@@ -176,6 +179,7 @@ class Controller:
             last.residual if last is not None else 0.0,
             math.hypot(e.velocity.item(0), e.velocity.item(1), e.velocity.item(2)),
             self.trajectory.finished and not self.path.holds_motion,
+            e.position,
         )
         if d.motion and self.trajectory.finished and not self.path.holds_motion:
             d.motion = "" if self.path.plan is None else d.motion

@@ -48,6 +48,7 @@ class CommandDesk:
     def __init__(self, ctl: Controller):
         self.ctl = ctl
         self.data = ctl.data
+        self.machine = ctl.machine  # the state changes the commands ask for
         self.mailbox: collections.deque[Command] = collections.deque(maxlen=MAILBOX)
         self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
             CommandKind.ENABLE: self._enable,
@@ -169,7 +170,7 @@ class CommandDesk:
         c.grippers.hold()
         d.stop_category = -1
         c.drives.begin_activate()
-        c.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
+        self.machine.request(State.ENABLING, t, "enabling the drives with holding torques")
 
     def _still_stopping(self, t: float, cmd: Command) -> bool:
         """A fault's stop under way: a reset or disable waits until a category 2 stop holds."""
@@ -189,8 +190,8 @@ class CommandDesk:
         self._take_motion(t, "stop")
         self.ctl.trajectory.stop_here()
         self.data.stop_category = 1
-        self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested: decelerating, "
-                                      "then the drives disabled")  # fmt: skip
+        self.machine.request(State.DISABLING, t, "disable requested: decelerating, "
+                             "then the drives disabled")  # fmt: skip
 
     def _stop(self, t: float, cmd: Command) -> None:
         """IEC 60204-1's categories: 0 the drives off at once (the brakes stop the platform),
@@ -207,7 +208,7 @@ class CommandDesk:
             self._take_motion(t, "stop")
             self.ctl.trajectory.stop_here()
             d.stop_category = 2
-            sup.set_state(State.ENABLED, t, "stop: decelerating, then holding")
+            self.machine.request(State.ENABLED, t, "stop: decelerating, then holding")
         else:
             d.events.append((t, f"stop category 2 ignored in {d.state.value}"))
 
@@ -219,7 +220,7 @@ class CommandDesk:
         if d.state is State.STOPPING:  # a category 2 stop holding: back to holding, enabled
             c.supervisor.clear_fault()
             c.trajectory.reset(c.pose6())
-            c.supervisor.set_state(State.ENABLED, t, "fault reset: holding the pose")
+            self.machine.request(State.ENABLED, t, "fault reset: holding the pose")
             return
         # from the e-stop the drives take the reset only once the chain is closed; else they
         # report it again and the e-stop says so
@@ -228,7 +229,7 @@ class CommandDesk:
         c.drives.begin_recover()
         c.supervisor.clear_fault()
         c.trajectory.reset(c.pose6())
-        c.supervisor.set_state(State.READY, t, "fault reset")
+        self.machine.request(State.READY, t, "fault reset")
 
     def _move(self, t: float, cmd: Command) -> None:
         if cmd.target is None or cmd.pose is None:  # not through submit(): nothing to act on
@@ -237,7 +238,7 @@ class CommandDesk:
         self._take_motion(t, "move")
         c.trajectory.set_target(cmd.target, cmd.speed, cmd.accel)
         self.data.motion = "move"
-        c.supervisor.set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
+        self.machine.request(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
 
     def _jog(self, t: float, cmd: Command) -> None:
         c, d = self.ctl, self.data
@@ -247,7 +248,7 @@ class CommandDesk:
             return
         c.jog.command(t, cmd)
         if c.jog.active and d.state is not State.MOVING:
-            c.supervisor.set_state(State.MOVING, t, "jog")
+            self.machine.request(State.MOVING, t, "jog")
 
     def _path(self, t: float, cmd: Command) -> None:
         c, d = self.ctl, self.data
@@ -257,7 +258,7 @@ class CommandDesk:
                              "checked"))  # fmt: skip
             return
         c.path.start(t, plan, offset)
-        c.supervisor.set_state(State.MOVING, t, f"path {plan.name}: {plan.summary()}")
+        self.machine.request(State.MOVING, t, f"path {plan.name}: {plan.summary()}")
 
     def _pause(self, t: float, cmd: Command) -> None:
         path = self.ctl.path
@@ -273,8 +274,8 @@ class CommandDesk:
             return
         plan, offset = cmd.plan
         c.path.start(t, plan, offset)
-        c.supervisor.set_state(State.MOVING, t, f"path {plan.name} resumed at segment "
-                               f"{offset + 1}")  # fmt: skip
+        self.machine.request(State.MOVING, t, f"path {plan.name} resumed at segment "
+                             f"{offset + 1}")  # fmt: skip
 
     def _abort(self, t: float, cmd: Command) -> None:
         self.ctl.path.abort(t)

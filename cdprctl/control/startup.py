@@ -70,4 +70,4 @@ def initialise(ctl: Controller, now: float, st: WinchStates) -> None:
     e.omega[:] = 0.0
     ctl.trajectory.reset(ctl.pose6())
     ctl.reference.update(e)
-    ctl.supervisor.set_state(State.READY, now, "drives inactive, feedback live, pose estimated")
+    ctl.machine.request(State.READY, now, "drives inactive, feedback live, pose estimated")
