@@ -163,7 +163,7 @@ class CommandDesk:
         c.reference.restart()
         d.tensions[:] = d.hold_tensions
         c.pose.reset()
-        c.observer.reset()
+        c.observer.reset(c.io.estimate)
         c.cable_space.start_measuring()
         # a fresh start: the saturation of before the fault is not this run's
         d.saturation, d.saturated_for = 1.0, 0.0
