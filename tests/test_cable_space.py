@@ -17,6 +17,7 @@ from cdprctl.control.cable_space import (
     measured_tension_kernel,
     motor_target_kernel,
 )
+from cdprctl.control.cycle_io import reference_args
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.reference_pose import ReferencePose
 from cdprctl.control.states import State
@@ -256,7 +257,7 @@ def test_motor_targets_match_the_plants_cable_law():
     rng = np.random.default_rng(7)
     est = Estimator(model)
     tr = Trajectory(model, model.control.period)
-    reference = ReferencePose(model, tr, est._law)
+    reference = ReferencePose(model)
     kin = KinematicsData(model)
     for _ in range(5):
         pos = model.home.position + rng.uniform(-0.2, 0.2, 3) * [1, 0.1, 1]
@@ -265,7 +266,8 @@ def test_motor_targets_match_the_plants_cable_law():
         R = rpy_to_matrix(*rpy)
         plant.set_pose(pos, R, tensions)
         tr.reset(np.concatenate([pos, rpy_to_rotvec(rpy, model.home.rotation)]))
-        reference.update(SimpleNamespace(position=pos, rotation=R))  # no deviation
+        reference.update(reference_args(tr.position, tr.velocity, tr.acceleration),
+                         SimpleNamespace(position=pos, rotation=R))  # no deviation
         out = np.zeros(model.n_cables)
         motor_target_kernel(
             reference.reference_kin.length, tensions, est._law, est.l_home, est.drum_ratio,
@@ -802,13 +804,13 @@ def test_the_working_pose_follows_the_estimate_through_its_low_pass():
     from scipy.spatial.transform import Rotation
 
     model = load_robot(CONFIG / "seed000_grippers.toml")
-    est = Estimator(model)
     tr = Trajectory(model, model.control.period)
-    ref = ReferencePose(model, tr, est._law)
+    ref = ReferencePose(model)
     f = model.drives.position_loop_bandwidth / 10.0
     assert ref.bandwidth == pytest.approx(f)  # 5 Hz as shipped
     x = np.array([7.1, 4.05, 1.45, 0.02, -0.01, 0.03])  # m, rad from the home rotation
     tr.reset(x)
+    at_reference = reference_args(tr.position, tr.velocity, tr.acceleration)
     R_ref = Rotation.from_rotvec(x[3:]).as_matrix() @ model.home.rotation
     dp, dphi = np.array([3e-3, -2e-3, 1e-3]), np.array([2e-3, 1e-3, -3e-3])  # m, rad
     estimate = SimpleNamespace(
@@ -817,7 +819,7 @@ def test_the_working_pose_follows_the_estimate_through_its_low_pass():
     kin = KinematicsData(model)
     dt = model.control.period  # s: one step a cycle
     for n in range(1, 41):
-        ref.update(estimate)
+        ref.update(at_reference, estimate)
         share = 1.0 - math.exp(-2.0 * math.pi * f * n * dt)
         np.testing.assert_allclose(ref.position, x[:3] + share * dp, rtol=0.0, atol=1e-12)
         R = Rotation.from_rotvec(share * dphi).as_matrix() @ R_ref
@@ -832,7 +834,7 @@ def test_the_working_pose_follows_the_estimate_through_its_low_pass():
     for k in range(400):
         sign = 1.0 if k % 2 == 0 else -1.0
         estimate.position = x[:3] + sign * dp
-        ref.update(estimate)
+        ref.update(at_reference, estimate)
     np.testing.assert_allclose(
         np.abs(ref.position - x[:3]), alpha / (2.0 - alpha) * np.abs(dp), rtol=1e-9
     )

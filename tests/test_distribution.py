@@ -28,7 +28,7 @@ def at_home():
     c = Controller(ROWC, FakeDrives(ROWC.n_cables, Lifecycle.INACTIVE))
     m = ROWC.n_cables
     c.estimator.update(0.0, np.zeros(m), ROWC.tension_min.copy())
-    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation)
+    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation, c.data.ext_total)
     return c
 
 
@@ -63,14 +63,14 @@ def test_switching_builds_nothing_and_blends(at_home):
         dist.switch(energy, 10.0, blend=True)
         for s in (0.0, 0.25, 0.5, 0.75, 0.999):
             d.time = 10.0 + s * Distribution.BLEND_TIME
-            dist.distribute()
+            dist.distribute(c.at)
             expect = (1.0 - s) * t_old + s * t_new
             np.testing.assert_allclose(d.tensions, expect, atol=1e-6)
             np.testing.assert_allclose(W @ d.tensions, d.wrench, atol=1e-6)
             assert np.all(d.tensions >= dist.t_min - 1e-9)
             assert np.all(d.tensions <= dist.t_max + 1e-9)
         d.time = 10.0 + Distribution.BLEND_TIME
-        dist.distribute()
+        dist.distribute(c.at)
         assert dist.old is None
         dist.impose((Imposition(7, ImposedQuantity.TENSION, 100.0),))
     assert dist.options.method is TDAMethod.ENERGY and d.tda_method == "energy"
@@ -91,7 +91,7 @@ def test_a_switch_while_blending_blends_from_the_current_one(at_home):
     assert dist.current.options.method is TDAMethod.ENERGY
     assert dist.current is not dist.old
     d.time = 1.5
-    dist.distribute()
+    dist.distribute(c.at)
     np.testing.assert_allclose(d.tensions, reference(b, c), atol=1e-6)
 
 
@@ -102,7 +102,7 @@ def test_the_stretch_distribution_switches_with_the_loops(at_home):
     sotda = TDAOptions(method=TDAMethod.SOTDA, nu=0.9, period=p)
     dist.switch(sotda, 0.0, blend=False)
     assert dist.static.options == sotda and dist.static is not dist.current
-    assert dist.stretch(c.data.wrench)
+    assert dist.stretch(c.data.wrench, c.at)
     np.testing.assert_allclose(c.data.stretch_tensions, reference(sotda, c), atol=1e-6)
 
 
@@ -121,13 +121,13 @@ def test_an_infeasible_wrench_is_saturated_not_dropped(at_home, push):
     the feed-forward kept whole, the tensions inside their limits."""
     c = at_home
     d, dist, W = c.data, c.distribution, c.at.kin.W
-    ff = c.pose.gravity_hold(c.at.rotation)
+    ff = c.pose.gravity_hold(c.at.rotation, c.data.ext_total)
     fb = np.array([*push, 0.0, 0.0, 0.0])
     assert not feasible_lp(W, ff + fb, dist.t_min, dist.t_max)
     d.wrench[:] = ff + fb
     d.feedback_wrench[:] = fb
     d.tensions[:] = d.hold_tensions[:] = dist.t_min
-    out = dist.distribute()
+    out = dist.distribute(c.at)
     s = d.saturation
     assert out.ok and 0.0 < s < 1.0 and dist.bad_cycles == 0
     np.testing.assert_allclose(d.wrench, ff + s * fb, atol=1e-9)
@@ -143,6 +143,6 @@ def test_an_infeasible_feed_forward_holds_the_last_tensions(at_home):
     d.hold_tensions[:] = np.linspace(20.0, 30.0, ROWC.n_cables)
     d.wrench[:] = [0.0, 0.0, 1e5, 0.0, 0.0, 0.0]  # 100 kN up: no tensions hold that
     d.feedback_wrench[:] = 0.0
-    out = dist.distribute()
+    out = dist.distribute(c.at)
     assert not out.ok and d.saturation == 1.0 and dist.bad_cycles == 1
     np.testing.assert_allclose(d.tensions, d.hold_tensions)

@@ -57,7 +57,7 @@ def test_gcode_square_with_dwell_is_traced(rowc):
     with enabled(rowc) as cl:
         c = cl.controller
         cl.command("path", text=SQUARE, name="square")
-        plan = c.desk.mailbox[-1].plan[0]
+        plan = c.desk.mailbox[-1][1].path[0]  # what submit planned for it
         seen = []
         cl.run(30.0, each=lambda cl: seen.append((cl.net.time, c.data.path_segment,
                                                    c.data.path_state, c.data.path_fraction,

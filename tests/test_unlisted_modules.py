@@ -102,6 +102,7 @@ def test_the_wrench_observer_is_a_first_order_lag_of_its_bandwidth():
 
     from conftest import in_torque_mode
 
+    from cdprctl.control.cycle_io import pose_args
     from cdprctl.control.estimator import Estimator
     from cdprctl.control.observer import WrenchObserver
     from cdprctl.control.torques import WinchTorques
@@ -124,14 +125,14 @@ def test_the_wrench_observer_is_a_first_order_lag_of_its_bandwidth():
                           rcond=None)[0]  # fmt: skip
     torque = wt.r * t_a  # at rest: no friction, no rotor term
     d = ControlData(model.n_cables, 0)
-    obs = WrenchObserver(model, d, est, wt)
+    obs = WrenchObserver(model, d)
     assert obs.enabled
-    obs.reset()
+    obs.reset(pose_args(est))
     dt, zeros = model.control.period, np.zeros(model.n_cables)
     tau = 1.0 / (2.0 * np.pi * f_hz)
     seen = {}
     for k in range(round(5 * tau / dt) + 2):
-        obs.update(k * dt, torque, zeros, np.zeros(6))
+        obs.update(k * dt, torque, zeros, np.zeros(6), pose_args(est), est.kin)
         seen[k] = d.ext_estimate.copy()
     k1 = round(tau / dt) + 1  # the first update only starts the integral
     # the discrete steps at 500 Hz (L dt = 0.025) land within 5 % of the continuous lag: a
@@ -176,7 +177,7 @@ def _controller_at_home(model):
 
     c = Controller(model, FakeDrives(model.n_cables, Lifecycle.INACTIVE))
     c.estimator.update(0.0, np.zeros(model.n_cables), model.tension_min.copy())
-    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation)
+    c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation, c.data.ext_total)
     return c
 
 
@@ -192,16 +193,17 @@ def test_the_distribution_keeps_its_tension_margin_from_both_limits():
     )
     c = _controller_at_home(model)
     lo, hi = model.tension_min + margin, model.tension_max - margin
-    c.distribution.distribute()  # the holding tensions, feasible: held when a wrench is not
+    c.distribution.distribute(c.at)  # the holding tensions, feasible: held when a wrench is not
     rng = np.random.default_rng(48)
     inside = 0
     for _ in range(40):
         # a feedback wrench beyond what the cables give: saturated onto the feasible set's
         # edge, where a tension sits at its bound
         c.data.feedback_wrench[:] = rng.normal(scale=400.0, size=6)
-        c.data.wrench[:] = c.pose.gravity_hold(c.at.rotation) + c.data.feedback_wrench
+        hold = c.pose.gravity_hold(c.at.rotation, c.data.ext_total)
+        c.data.wrench[:] = hold + c.data.feedback_wrench
         c.data.tensions[:] = c.data.hold_tensions  # no rate limit in the way of the bounds
-        out = c.distribution.distribute()
+        out = c.distribution.distribute(c.at)
         t = c.data.tensions
         assert np.all(t >= lo - 1e-6) and np.all(t <= hi + 1e-6), (out.status, t)
         inside += bool(np.any(t <= lo + 0.5) or np.any(t >= hi - 0.5))
@@ -236,8 +238,9 @@ def test_a_platform_frame_jog_goes_along_the_platforms_axes():
     tr.reset(np.r_[model.home.position, 0.0, 0.0, 0.15])
     jog = Jog(model, ControlData(model.n_cables, 0), tr, SoftLimits(model))
     cmd = Command(CommandKind("jog"), velocity=np.array([0.1, 0, 0, 0, 0, 0]), frame="platform")
-    assert jog.plan(cmd)
-    d = cmd.target[:3] - tr.position[:3]
+    plan = jog.plan(cmd)
+    assert plan is not None and plan.target is not None
+    d = plan.target[:3] - tr.position[:3]
     np.testing.assert_allclose(d / np.linalg.norm(d), [np.cos(0.15), np.sin(0.15), 0.0], atol=1e-9)
 
 

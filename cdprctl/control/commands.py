@@ -49,10 +49,7 @@ class Command:
     category: int = 2  # stop: IEC 60204-1's stop category (0, 1, 2; docs/safety.md)
     text: str = ""  # path: the file's content (CSV or G-code, motion/path_file.py)
     name: str = ""  # path: where it came from, for the messages
-    # move, jog: x, y, z (m) and the rotation vector from home (rad), set by Controller.submit
-    target: FloatArray | None = None
-    # jog: the segment's per-coordinate limits; path, resume: the checked plan (submit)
-    limits: tuple[list[float], list[float]] | None = None
+    # path: (plan, offset) checked already from where the robot rests (the gateway, --path)
     plan: Any = None
 
     def __post_init__(self) -> None:
@@ -61,6 +58,22 @@ class Command:
         self.kind = CommandKind(self.kind)
         self.grip = GripKind(self.grip)
 
+
+@dataclass(frozen=True)
+class Plan:
+    """What the desk's ``submit`` planned for a command (outside the loop), queued with it and
+    handed to its handler in the cycle; the command itself is never written. ``target``: a
+    move's or a jog's end, trajectory coordinates (x, y, z m, the rotation vector from home
+    rad; a jog's None: a stop); ``limits``: a jog's segment limits per coordinate (velocity,
+    acceleration); ``path``: a path's or a resume's checked plan and its segment offset."""
+
+    target: FloatArray | None = None
+    limits: tuple[list[float], list[float]] | None = None
+    path: tuple[Any, int] | None = None
+
+
+#: a command with nothing to plan (enable, stop, a TDA switch, ...)
+NOTHING = Plan()
 
 _MOTION = frozenset({State.ENABLED, State.MOVING})
 

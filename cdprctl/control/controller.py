@@ -7,8 +7,10 @@
 write after — is the manager's (``manager.py``); the controller only asks the drives to change
 their lifecycle (``DrivePort``). Every output lands in ``data`` (``ControlData``), which is
 what outside readers read. Commands arrive at the desk (``desk.py``: checked on the way in,
-acted on at the start of a cycle); the start-up's fixed point is ``startup.py``; the states
-and faults are the supervisor's (``supervisor.py``).
+acted on at the start of a cycle); the start-up's fixed point is ``startup.py``; the faults
+are the supervisor's (``supervisor.py``); the state is the state machine's alone
+(``state_machine.py``), which the three ask. Each stage gets its inputs and outputs in its
+call, as the bundles of ``cycle_io.py``, built here once.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import numpy as np
 
 from cdprctl.control.cable_space import CableSpace
 from cdprctl.control.commands import Command
+from cdprctl.control.cycle_io import CycleIO, reference_args
 from cdprctl.control.data import ControlData
 from cdprctl.control.desk import CommandDesk, Verdict
 from cdprctl.control.distribution import Distribution
@@ -29,6 +32,7 @@ from cdprctl.control.jog import Jog
 from cdprctl.control.observer import WrenchObserver
 from cdprctl.control.path_follower import PathFollower
 from cdprctl.control.reference_pose import ReferencePose, WorkingPose
+from cdprctl.control.state_machine import StateMachine
 from cdprctl.control.states import (
     ACTIVE_STATES,
     DISABLING,
@@ -69,14 +73,18 @@ class Controller:
         self.trajectory = tr = Trajectory(model, self.period)
         # the pose the feed-forward, the distribution and the jaws' loads are computed at:
         # the estimate, or in position mode the reference (reference_pose.py says why)
-        self.reference = ReferencePose(model, tr, e._law)
+        self.reference = ReferencePose(model)
         self.at: WorkingPose = self.reference if model.drives.holds_lengths else e
-        self.pose = PoseController(model, d, tr, self.at)
+        # the bundles the stages read and write, named in each call (cycle_io.py)
+        self.io = CycleIO.build(
+            reference_args(tr.position, tr.velocity, tr.acceleration), e, self.at, d
+        )
+        self.pose = PoseController(model)
         self.winches = WinchTorques(model)
-        self.distribution = Distribution(model, d, self.at, gs, tda or tda_options_of(model))
+        self.distribution = Distribution(model, d, GripperSet(model), tda or tda_options_of(model))
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
-        self.observer = WrenchObserver(model, d, e, self.winches)
+        self.observer = WrenchObserver(model, d)
         self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
                                        self.distribution, self.ext_wrench, tr)  # fmt: skip
@@ -87,10 +95,11 @@ class Controller:
             else None
         )
         # position mode: a drive sitting at its torque limit is a load beyond the cables
-        torque_limits = self.winches.limit if model.drives.holds_lengths else None
+        torque_limits = self.winches.limit.copy() if model.drives.holds_lengths else None
+        # the one owner of data.state: the desk, the supervisor and the start-up ask it
+        self.machine = StateMachine(d)
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits,
-                                     model.safety)  # fmt: skip
-        self.supervisor.position = e.position  # the estimate, updated in place
+                                     model.safety, self.machine)  # fmt: skip
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
         self.jog = Jog(model, d, tr, self.limits)
@@ -127,26 +136,86 @@ class Controller:
 
     # -- the cycle ---------------------------------------------------------------------------------
     def update(self, t: float, st: WinchStates) -> None:
-        """One cycle at time ``t`` (s) from the drives' feedback ``st``: every output into
-        ``data`` (phases 1-5 of ``PHASES`` timed)."""
-        clock, d = self._clock, self.data
+        """One cycle at time ``t`` (s) from the drives' feedback ``st``, stage by stage, each
+        stage's inputs and outputs named in its call (the bundles of ``cycle_io.py``); every
+        output into ``data`` (phases 1-5 of ``PHASES`` timed)."""
+        clock, d, io, e, tr = self._clock, self.data, self.io, self.estimator, self.trajectory
         ph = d.phase_us
         t1 = clock()
-        # the real elapsed time: after a late or missed period the integral, the trajectory,
-        # the tension rate limit, the ramps and the saturation time step by what passed
+        gap = self._step_time(t)
+        if not self.grippers.n:  # the known external wrench, whoever set it, from now on
+            np.copyto(d.ext_total, self.ext_wrench)  # copyto: a slice would build a view
+        np.copyto(d.motor_position, st.position)
+        self.desk.handle(t)  # the commands: state requests, targets (desk.py)
+        # 1. estimate ← feedback, the cables stretched by the tensions this mode assumes
+        self._stretch_tensions(st)
+        fk = e.update(st.stamp, st.position, d.stretch_tensions, st.velocity, st.feedback_age)
+        if d.state in OBSERVED_STATES:  # estimate, feedback → data.ext_estimate
+            self.observer.update(t, st.torque, st.velocity, tr.acceleration, io.estimate, e.kin)
+        if self.grippers.n:
+            self.grippers.update(st, sense=True)  # ext_total: + the jaws' weight
+        t2 = clock()
+        ph[1] = (t2 - t1) * 1e6
+        # 2. reference ← the trajectory and its sources, after the supervisor's checks
+        last = e.last_fk
+        self.jog.update(t)
+        self.path.update(t)
+        self.supervisor.supervise(
+            t,
+            fk.status,
+            last.residual if last is not None else 0.0,
+            math.hypot(e.velocity.item(0), e.velocity.item(1), e.velocity.item(2)),
+            tr.finished and not self.path.holds_motion,
+            e.position,
+        )
+        if d.motion and tr.finished and not self.path.holds_motion:
+            d.motion = "" if self.path.plan is None else d.motion
+        tr.update(self._reference_step(gap))  # → io.reference
+        if self.cable_space.enabled:  # position mode: the working pose, at the reference
+            self.reference.update(io.reference, e)  # → io.working
+        t3 = clock()
+        ph[2] = (t3 - t2) * 1e6
+        # 3. wrench ← reference, working pose, the known external wrench
+        active = d.state in ACTIVE_STATES
+        if active:  # anti-windup: the integral holds while the feedback is saturated
+            integrate = d.state in HEALTHY_STATES and d.saturation >= 1.0
+            self.pose.update(io.reference, io.working, d.ext_total, integrate, d.dt, io.wrench)
+        t4 = clock()
+        ph[3] = (t4 - t3) * 1e6
+        # 4. tensions ← wrench at the working pose (data.wrench → data.tensions)
+        if active:
+            out = self.distribution.distribute(self.at)
+            self.supervisor.distribution(t, self.distribution.bad_cycles, out)
+        t5 = clock()
+        ph[4] = (t5 - t4) * 1e6
+        # 5. torques, targets ← tensions
+        self.winches.update(d.tensions, self.at.kin.WT, tr.acceleration, st.velocity, active,
+                            d.torques)  # fmt: skip
+        if self.cable_space.enabled:
+            self.cable_space.targets(active, st.position)  # → data.motor_target
+        ph[5] = (clock() - t5) * 1e6
+
+    def _step_time(self, t: float) -> float:
+        """``data.dt``, ``time``, ``cycle`` for a cycle at ``t`` (s); the gap (s) since the
+        last. The real elapsed time: after a late or missed period the integral, the
+        trajectory, the tension rate limit, the ramps and the saturation time step by what
+        passed."""
+        d = self.data
         gap = t - self._last_t
         d.dt = gap if 0.0 < gap < self.MAX_STEP else self.period
         self._last_t = t
         d.time = t
         d.cycle += 1
-        if not self.grippers.n:  # the known external wrench, whoever set it, from now on
-            np.copyto(d.ext_total, self.ext_wrench)  # copyto: a slice would build a view
-        np.copyto(d.motor_position, st.position)
-        self.desk.handle(t)
-        cs = self.cable_space
+        return gap
+
+    def _stretch_tensions(self, st: WinchStates) -> None:
+        """``data.stretch_tensions`` for the estimate. Position mode, the drives on: the
+        commanded ones (the drives hold the lengths they stretch; no pose feedback there, so no
+        algebraic loop), and the cables measured (``CableSpace``: measured tensions, tension
+        error, the external wrench fed forward, the force feedback's give). Else every
+        ``stretch_every`` cycles the feed-forward ones (``refresh_stretch_tensions``)."""
+        d, cs = self.data, self.cable_space
         if cs.enabled and d.state in OBSERVED_STATES:
-            # the drives hold the lengths stretched by the commanded tensions (no pose feedback
-            # in position mode, so no algebraic loop): the same tensions for the estimate
             np.copyto(d.stretch_tensions, d.tensions)
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
             cs.estimate_disturbance(
@@ -159,49 +228,6 @@ class Controller:
             cs.force_feedback(stopping=d.state is STOPPING)
         elif d.cycle % self.stretch_every == 0:
             self.refresh_stretch_tensions()
-        e = self.estimator
-        fk = e.update(st.stamp, st.position, d.stretch_tensions, st.velocity, st.feedback_age)
-        if d.state in OBSERVED_STATES:
-            self.observer.update(t, st.torque, st.velocity, self.trajectory.acceleration)
-        if self.grippers.n:
-            self.grippers.update(st, sense=True)  # ext_total: + the jaws' weight
-        t2 = clock()
-        ph[1] = (t2 - t1) * 1e6
-        last = e.last_fk
-        self.jog.update(t)
-        self.path.update(t)
-        self.supervisor.supervise(
-            t,
-            fk.status,
-            last.residual if last is not None else 0.0,
-            math.hypot(e.velocity.item(0), e.velocity.item(1), e.velocity.item(2)),
-            self.trajectory.finished and not self.path.holds_motion,
-        )
-        if d.motion and self.trajectory.finished and not self.path.holds_motion:
-            d.motion = "" if self.path.plan is None else d.motion
-        self.trajectory.update(self._reference_step(gap))
-        if cs.enabled:
-            self.reference.update(e)
-        t3 = clock()
-        ph[2] = (t3 - t2) * 1e6
-        active = d.state in ACTIVE_STATES
-        if active:
-            # anti-windup: the integral holds while the feedback is saturated
-            self.pose.update(d.state in HEALTHY_STATES and d.saturation >= 1.0)
-        t4 = clock()
-        ph[3] = (t4 - t3) * 1e6
-        if active:
-            out = self.distribution.distribute()
-            self.supervisor.distribution(t, self.distribution.bad_cycles, out)
-        t5 = clock()
-        ph[4] = (t5 - t4) * 1e6
-        self.winches.update(
-            d.tensions, self.at.kin.WT, self.trajectory.acceleration, st.velocity, active,
-            d.torques,
-        )  # fmt: skip
-        if cs.enabled:
-            cs.targets(active, st.position)
-        ph[5] = (clock() - t5) * 1e6
 
     def _reference_step(self, gap: float) -> float:
         """s the reference moves on this cycle, ``gap`` s after the last. Position mode: as
@@ -227,11 +253,11 @@ class Controller:
     def refresh_stretch_tensions(self) -> None:
         """The feed-forward tensions for the estimator's stretch (``Distribution.stretch``)."""
         e, tr, pf, ff = self.estimator, self.trajectory, self.model.platform, self._ff_wrench
-        ff[:] = self.pose.gravity_hold(e.rotation)
+        ff[:] = self.pose.gravity_hold(e.rotation, self.data.ext_total)
         if self.data.state in OBSERVED_STATES:  # the trajectory's acceleration is applied
             ff[:3] += pf.mass * tr.acceleration[:3]
             ff[3:] += e.rotation @ pf.inertia @ e.rotation.T @ tr.acceleration[3:]
-        self.distribution.stretch(ff)
+        self.distribution.stretch(ff, self.at)
 
     def pose6(self) -> FloatArray:
         """The estimated pose as trajectory coordinates."""

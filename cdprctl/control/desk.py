@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdprctl.control.commands import Command, CommandKind, accepted
+from cdprctl.control.commands import NOTHING, Command, CommandKind, Plan, accepted
 from cdprctl.control.states import HEALTHY_STATES, State
 from cdprctl.realtime import sharing_the_interpreter
 from cdprctl.rotation import FloatArray, rpy_to_matrix
@@ -48,15 +48,17 @@ class CommandDesk:
     def __init__(self, ctl: Controller):
         self.ctl = ctl
         self.data = ctl.data
-        self.mailbox: collections.deque[Command] = collections.deque(maxlen=MAILBOX)
-        self._handlers: dict[CommandKind, Callable[[float, Command], None]] = {
+        self.machine = ctl.machine  # the state changes the commands ask for
+        # each command queued with what submit planned for it
+        self.mailbox: collections.deque[tuple[Command, Plan]] = collections.deque(maxlen=MAILBOX)
+        self._handlers: dict[CommandKind, Callable[[float, Command, Plan], None]] = {
             CommandKind.ENABLE: self._enable,
             CommandKind.DISABLE: self._disable,
             CommandKind.STOP: self._stop,
             CommandKind.RESET: self._reset,
             CommandKind.MOVE: self._move,
             CommandKind.SET_TDA: self._set_tda,
-            CommandKind.GRIPPER: ctl.grippers.command,
+            CommandKind.GRIPPER: self._gripper,
             CommandKind.JOG: self._jog,
             CommandKind.PATH: self._path,
             CommandKind.PAUSE: self._pause,
@@ -72,18 +74,18 @@ class CommandDesk:
         daemon's I/O thread): a path's or a resume's plan checks thousands of samples, so the
         interpreter's lock is shared in short turns meanwhile."""
         with sharing_the_interpreter():
-            why = self._refusal(cmd)
-        if why:
-            return Verdict(False, why)
+            plan = self._plan(cmd)
+        if plan is None:
+            return Verdict(False, self.data.events[-1][1])
         if len(self.mailbox) >= MAILBOX:
             return FULL
-        self.mailbox.append(cmd)
+        self.mailbox.append((cmd, plan))
         return ACCEPTED
 
-    def _refusal(self, cmd: Command) -> str:
-        """Why ``cmd`` cannot be acted on (also written as an event), or ""."""
+    def _plan(self, cmd: Command) -> Plan | None:
+        """What ``cmd`` needs planned (``NOTHING`` for most kinds), or None when it cannot be
+        acted on (why: written as an event)."""
         c, d = self.ctl, self.data
-        ok = True
         if cmd.kind is CommandKind.MOVE:
             pose = None if cmd.pose is None else np.asarray(cmd.pose, dtype=float)
             if (
@@ -93,30 +95,29 @@ class CommandDesk:
                 or not (0.0 < cmd.speed <= 1.0 and 0.0 < cmd.accel <= 1.0)
             ):  # the gateway validates; this is the last guard before the trajectory
                 d.events.append((d.time, "move ignored: pose or speed not finite/in range"))
-                ok = False
-            else:
-                cmd.target = c.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
-                why = self._line_leaves_limits(cmd.target)
-                if why:
-                    d.events.append((d.time, f"move ignored: {why}"))
-                    ok = False
-        elif cmd.kind is CommandKind.JOG:
+                return None
+            target = c.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
+            why = self._line_leaves_limits(target)
+            if why:
+                d.events.append((d.time, f"move ignored: {why}"))
+                return None
+            return Plan(target=target)
+        if cmd.kind is CommandKind.JOG:
             why = self._take_motion(d.time, "jog", ask_only=True)  # again in the cycle: a
             if why:  # path may end meanwhile
                 d.events.append((d.time, f"jog ignored: {why}"))
-                ok = False
-            else:
-                ok = c.jog.plan(cmd)
-        elif cmd.kind is CommandKind.PATH:
-            ok = c.path.plan_path(cmd)
-        elif cmd.kind is CommandKind.RESUME:
-            ok = c.path.plan_resume(cmd)
-        elif cmd.kind is CommandKind.SET_TDA:
+                return None
+            return c.jog.plan(cmd)
+        if cmd.kind is CommandKind.PATH:
+            return c.path.plan_path(cmd)
+        if cmd.kind is CommandKind.RESUME:
+            return c.path.plan_resume(cmd)
+        if cmd.kind is CommandKind.SET_TDA:
             errors = ["no options"] if cmd.tda is None else cmd.tda.validate(c.model)
             if errors:
                 d.events.append((d.time, f"TDA options rejected: {'; '.join(errors)}"))
-                ok = False
-        return "" if ok else d.events[-1][1]
+                return None
+        return NOTHING
 
     def _line_leaves_limits(self, target: FloatArray) -> str:
         """Where the straight line from the reference to ``target`` (coordinates) leaves the
@@ -133,9 +134,9 @@ class CommandDesk:
     def handle(self, t: float) -> None:
         d = self.data
         while self.mailbox:
-            cmd = self.mailbox.popleft()
+            cmd, plan = self.mailbox.popleft()
             if accepted(cmd.kind, d.state):
-                self._handlers[cmd.kind](t, cmd)
+                self._handlers[cmd.kind](t, cmd, plan)
             else:
                 d.events.append((t, f"command {cmd.kind.value} ignored in state {d.state.value}"))
 
@@ -151,7 +152,7 @@ class CommandDesk:
             c.jog.active = False
         return ""
 
-    def _enable(self, t: float, cmd: Command) -> None:
+    def _enable(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d = self.ctl, self.data
         if c.drives.lifecycle is not Lifecycle.INACTIVE:
             # a drive fault came back after the reset: the supervisor faults next
@@ -162,14 +163,14 @@ class CommandDesk:
         c.reference.restart()
         d.tensions[:] = d.hold_tensions
         c.pose.reset()
-        c.observer.reset()
+        c.observer.reset(c.io.estimate)
         c.cable_space.start_measuring()
         # a fresh start: the saturation of before the fault is not this run's
         d.saturation, d.saturated_for = 1.0, 0.0
         c.grippers.hold()
         d.stop_category = -1
         c.drives.begin_activate()
-        c.supervisor.set_state(State.ENABLING, t, "enabling the drives with holding torques")
+        self.machine.request(State.ENABLING, t, "enabling the drives with holding torques")
 
     def _still_stopping(self, t: float, cmd: Command) -> bool:
         """A fault's stop under way: a reset or disable waits until a category 2 stop holds."""
@@ -179,7 +180,7 @@ class CommandDesk:
                                  f"{self.data.stop_category}) is under way"))  # fmt: skip
         return True
 
-    def _disable(self, t: float, cmd: Command) -> None:
+    def _disable(self, t: float, cmd: Command, plan: Plan) -> None:
         """Decelerate to rest, then disable (the supervisor, once the trajectory stands):
         the holding brakes are not for stopping a moving platform (a category 1 stop)."""
         if self._still_stopping(t, cmd):
@@ -189,10 +190,10 @@ class CommandDesk:
         self._take_motion(t, "stop")
         self.ctl.trajectory.stop_here()
         self.data.stop_category = 1
-        self.ctl.supervisor.set_state(State.DISABLING, t, "disable requested: decelerating, "
-                                      "then the drives disabled")  # fmt: skip
+        self.machine.request(State.DISABLING, t, "disable requested: decelerating, "
+                             "then the drives disabled")  # fmt: skip
 
-    def _stop(self, t: float, cmd: Command) -> None:
+    def _stop(self, t: float, cmd: Command, plan: Plan) -> None:
         """IEC 60204-1's categories: 0 the drives off at once (the brakes stop the platform),
         1 decelerate then disable (``disable``), 2 decelerate and hold, powered."""
         d, sup = self.data, self.ctl.supervisor
@@ -202,16 +203,16 @@ class CommandDesk:
                      "stop the platform")  # fmt: skip
         elif cmd.category == 1:
             if d.state is not State.DISABLING:
-                self._disable(t, cmd)
+                self._disable(t, cmd, plan)
         elif d.state in (State.ENABLED, State.MOVING):
             self._take_motion(t, "stop")
             self.ctl.trajectory.stop_here()
             d.stop_category = 2
-            sup.set_state(State.ENABLED, t, "stop: decelerating, then holding")
+            self.machine.request(State.ENABLED, t, "stop: decelerating, then holding")
         else:
             d.events.append((t, f"stop category 2 ignored in {d.state.value}"))
 
-    def _reset(self, t: float, cmd: Command) -> None:
+    def _reset(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d = self.ctl, self.data
         if self._still_stopping(t, cmd):
             return
@@ -219,7 +220,7 @@ class CommandDesk:
         if d.state is State.STOPPING:  # a category 2 stop holding: back to holding, enabled
             c.supervisor.clear_fault()
             c.trajectory.reset(c.pose6())
-            c.supervisor.set_state(State.ENABLED, t, "fault reset: holding the pose")
+            self.machine.request(State.ENABLED, t, "fault reset: holding the pose")
             return
         # from the e-stop the drives take the reset only once the chain is closed; else they
         # report it again and the e-stop says so
@@ -228,59 +229,63 @@ class CommandDesk:
         c.drives.begin_recover()
         c.supervisor.clear_fault()
         c.trajectory.reset(c.pose6())
-        c.supervisor.set_state(State.READY, t, "fault reset")
+        self.machine.request(State.READY, t, "fault reset")
 
-    def _move(self, t: float, cmd: Command) -> None:
-        if cmd.target is None or cmd.pose is None:  # not through submit(): nothing to act on
+    def _move(self, t: float, cmd: Command, plan: Plan) -> None:
+        if plan.target is None or cmd.pose is None:  # not through submit(): nothing to act on
             return
         c = self.ctl
         self._take_motion(t, "move")
-        c.trajectory.set_target(cmd.target, cmd.speed, cmd.accel)
+        c.trajectory.set_target(plan.target, cmd.speed, cmd.accel)
         self.data.motion = "move"
-        c.supervisor.set_state(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
+        self.machine.request(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
 
-    def _jog(self, t: float, cmd: Command) -> None:
+    def _jog(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d = self.ctl, self.data
         why = self._take_motion(t, "jog")
         if why:
             d.events.append((t, f"jog ignored: {why}"))
             return
-        c.jog.command(t, cmd)
+        c.jog.command(t, plan)
         if c.jog.active and d.state is not State.MOVING:
-            c.supervisor.set_state(State.MOVING, t, "jog")
+            self.machine.request(State.MOVING, t, "jog")
 
-    def _path(self, t: float, cmd: Command) -> None:
+    def _path(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d = self.ctl, self.data
-        plan, offset = cmd.plan
-        if not c.trajectory.finished or not plan.starts_at(c.trajectory.position):
-            d.events.append((t, f"path {plan.name} not started: the robot moved since it was "
+        assert plan.path is not None  # submit planned it
+        path, offset = plan.path
+        if not c.trajectory.finished or not path.starts_at(c.trajectory.position):
+            d.events.append((t, f"path {path.name} not started: the robot moved since it was "
                              "checked"))  # fmt: skip
             return
-        c.path.start(t, plan, offset)
-        c.supervisor.set_state(State.MOVING, t, f"path {plan.name}: {plan.summary()}")
+        c.path.start(t, path, offset)
+        self.machine.request(State.MOVING, t, f"path {path.name}: {path.summary()}")
 
-    def _pause(self, t: float, cmd: Command) -> None:
+    def _pause(self, t: float, cmd: Command, plan: Plan) -> None:
         path = self.ctl.path
         if path.plan is None or path.paused:
             self.data.events.append((t, "pause ignored: no running path"))
             return
         path.pause(t)
 
-    def _resume(self, t: float, cmd: Command) -> None:
+    def _resume(self, t: float, cmd: Command, plan: Plan) -> None:
         c = self.ctl
-        if not c.path.paused or cmd.plan is None:
+        if not c.path.paused or plan.path is None:
             self.data.events.append((t, "resume ignored: no paused path"))
             return
-        plan, offset = cmd.plan
-        c.path.start(t, plan, offset)
-        c.supervisor.set_state(State.MOVING, t, f"path {plan.name} resumed at segment "
-                               f"{offset + 1}")  # fmt: skip
+        path, offset = plan.path
+        c.path.start(t, path, offset)
+        self.machine.request(State.MOVING, t, f"path {path.name} resumed at segment "
+                             f"{offset + 1}")  # fmt: skip
 
-    def _abort(self, t: float, cmd: Command) -> None:
+    def _abort(self, t: float, cmd: Command, plan: Plan) -> None:
         self.ctl.path.abort(t)
         self.ctl.jog.stop()
 
-    def _set_tda(self, t: float, cmd: Command) -> None:
+    def _gripper(self, t: float, cmd: Command, plan: Plan) -> None:
+        self.ctl.grippers.command(t, cmd)
+
+    def _set_tda(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d, opts = self.ctl, self.data, cmd.tda
         if opts is None:
             return

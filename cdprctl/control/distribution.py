@@ -50,7 +50,6 @@ class Distribution:
         self,
         model: RobotModel,
         data: ControlData,
-        at: WorkingPose,
         grippers: GripperSet,
         options: TDAOptions,
     ):
@@ -58,7 +57,6 @@ class Distribution:
         m = model.n_cables
         self.model = model
         self.data = data
-        self.at = at  # the pose the TDA works at: the estimate, or the reference (csp)
         self.grippers = grippers
         self.t_min = model.tension_min + c.tension_margin  # N
         self.t_max = model.tension_max - c.tension_margin  # N
@@ -135,11 +133,12 @@ class Distribution:
 
     # -- solving -------------------------------------------------------------------------------
     def solve(
-        self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None
-    ) -> TDAOutput:
-        """The TDA at the working pose (``reference_pose.py``), on the springs' tensions when
-        there are grippers."""
-        e, gs = self.at, self.grippers
+        self, tda: TensionDistributor, wrench: FloatArray, t_prev: FloatArray | None,
+        at: WorkingPose,
+    ) -> TDAOutput:  # fmt: skip
+        """The TDA at the working pose ``at`` (the estimate, or the reference in position mode:
+        ``reference_pose.py``), on the springs' tensions when there are grippers."""
+        e, gs = at, self.grippers
         if gs.n:
             jb = self.data.jb_load
             wrench = gs.spring_wrench(e.kin.W, wrench, jb)
@@ -165,6 +164,7 @@ class Distribution:
         wrench: FloatArray,
         t_prev: FloatArray | None,
         tensions: FloatArray,
+        at: WorkingPose,
     ) -> None:
         """``tensions`` (the new distribution's, N) ← a blend with the old distribution's
         while a switch is under way; unchanged when the old one has nothing feasible."""
@@ -174,35 +174,35 @@ class Distribution:
         if s >= 1.0:
             self.old = self.old_static = None
             return
-        out = self.solve(old, wrench, t_prev)
+        out = self.solve(old, wrench, t_prev, at)
         if usable(out.status):
             old_total = self._blend_old
             self.total(out.tensions, old_total)
             tensions *= s
             tensions += (1.0 - s) * old_total
 
-    def distribute(self) -> TDAOutput:
-        """``data.tensions`` for ``data.wrench``. A wrench the cables cannot produce is
-        saturated: its feedback part (``data.feedback_wrench``) scaled down until it can
-        (``data.saturation`` < 1, ``data.wrench`` the saturated one); when even the
-        feed-forward cannot be held, the last feasible tensions are held (never outside the
-        limits) and ``bad_cycles`` counts."""
+    def distribute(self, at: WorkingPose) -> TDAOutput:
+        """``data.tensions`` for ``data.wrench`` at the working pose ``at``. A wrench the
+        cables cannot produce is saturated: its feedback part (``data.feedback_wrench``)
+        scaled down until it can (``data.saturation`` < 1, ``data.wrench`` the saturated one);
+        when even the feed-forward cannot be held, the last feasible tensions are held (never
+        outside the limits) and ``bad_cycles`` counts."""
         d = self.data
         # while a switch blends, the blend limits the tension rate: a rate limit on either
         # side would hold the commanded tensions back from the stretch estimate's (which has
         # none) and the pose estimate would see the difference as an encoder fault
         blending = self.old is not None
         t_prev = None if blending else d.tensions
-        out = self.solve(self.current, d.wrench, t_prev)
+        out = self.solve(self.current, d.wrench, t_prev, at)
         d.saturation = 1.0
         if out.status is INFEASIBLE:
-            saturated = self._saturate(t_prev)
+            saturated = self._saturate(t_prev, at)
             if saturated is not None:
                 out = saturated
         d.tda_status = out.status
         if usable(out.status):
             self.total(out.tensions, d.tensions)
-            self.blend(self.old, d.wrench, None, d.tensions)
+            self.blend(self.old, d.wrench, None, d.tensions, at)
             np.copyto(d.hold_tensions, d.tensions)
             self.bad_cycles = 0
         else:
@@ -210,14 +210,14 @@ class Distribution:
             self.bad_cycles += 1
         return out
 
-    def _saturate(self, t_prev: FloatArray | None) -> TDAOutput | None:
+    def _saturate(self, t_prev: FloatArray | None, at: WorkingPose) -> TDAOutput | None:
         """The solution for ``w_ff + s w_fb`` with the largest ``s`` in [0, 1] the cables can
         produce (``w_fb``: the PID's feedback wrench, ``w_ff`` the rest: weight, inertia, the
         known external wrench — never scaled); None when even ``s = 0`` is infeasible. For
         r = 2 exactly, by bisection on the feasible polygon's emptiness (``planar.
         feasible_scale_kernel``, ~20 polygons of a few µs); for other r by bisection on the
         distributor's own solve (8 solves)."""
-        d, e, gs, dist = self.data, self.at, self.grippers, self.current
+        d, e, gs, dist = self.data, at, self.grippers, self.current
         ff = self._w_ff
         np.subtract(d.wrench, d.feedback_wrench, out=ff)
         if self.r == 2:
@@ -232,42 +232,43 @@ class Distribution:
                 self._verts_tmp, self._t_s,
             )  # fmt: skip
         else:
-            s = self._scale_by_solving(ff, d.feedback_wrench, t_prev)
+            s = self._scale_by_solving(ff, d.feedback_wrench, t_prev, at)
         if s < 0.0:
             return None
         w = self._w_sat
         np.multiply(d.feedback_wrench, s, out=w)
         w += ff
-        out = self.solve(dist, w, t_prev)
+        out = self.solve(dist, w, t_prev, at)
         if not usable(out.status):
             return None
         d.saturation = s
         d.wrench[:] = w
         return out
 
-    def _scale_by_solving(self, ff: FloatArray, fb: FloatArray, t_prev: FloatArray | None) -> float:
+    def _scale_by_solving(self, ff: FloatArray, fb: FloatArray, t_prev: FloatArray | None,
+                          at: WorkingPose) -> float:  # fmt: skip
         """``_saturate``'s scale for r != 2: bisection on the distributor's own solve."""
         w = self._w_sat
         w[:] = ff
-        if not usable(self.solve(self.current, w, t_prev).status):
+        if not usable(self.solve(self.current, w, t_prev, at).status):
             return -1.0
         a, b = 0.0, 1.0  # feasible at a, not at b
         for _ in range(8):
             s = 0.5 * (a + b)
             np.multiply(fb, s, out=w)
             w += ff
-            if usable(self.solve(self.current, w, t_prev).status):
+            if usable(self.solve(self.current, w, t_prev, at).status):
                 a = s
             else:
                 b = s
         return a
 
-    def stretch(self, ff_wrench: FloatArray) -> bool:
+    def stretch(self, ff_wrench: FloatArray, at: WorkingPose) -> bool:
         """``data.stretch_tensions`` ← the static distribution of the feed-forward wrench
-        ``ff_wrench``; False (unchanged) when it has none."""
-        out = self.solve(self.static, ff_wrench, None)
+        ``ff_wrench`` at the working pose ``at``; False (unchanged) when it has none."""
+        out = self.solve(self.static, ff_wrench, None, at)
         if not out.ok:
             return False
         self.total(out.tensions, self.data.stretch_tensions)
-        self.blend(self.old_static, ff_wrench, None, self.data.stretch_tensions)
+        self.blend(self.old_static, ff_wrench, None, self.data.stretch_tensions, at)
         return True

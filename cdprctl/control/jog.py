@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.control.commands import Command
+from cdprctl.control.commands import NOTHING, Command, Plan
 from cdprctl.control.data import ControlData
 from cdprctl.control.motion_source import MotionSource
 from cdprctl.model.robot import RobotModel
@@ -31,10 +31,10 @@ class Jog(MotionSource):
         self.last = 0.0  # s, loop time of the last jog command
         self._rest = [0.0] * 6  # the segment ends at rest (ruckig's target velocity)
 
-    def plan(self, cmd: Command) -> bool:
-        """Outside the loop (``Controller.submit``): the jog's segment, along its velocity to
-        where the soft limits end it (ruckig brakes to stop there). False (with an event)
-        when the command is unusable."""
+    def plan(self, cmd: Command) -> Plan | None:
+        """Outside the loop (``CommandDesk.submit``): the jog's segment, along its velocity to
+        where the soft limits end it (ruckig brakes to stop there; a zero velocity: a stop,
+        no target). None (with an event) when the command is unusable."""
         d = self.data
         v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
         if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
@@ -42,10 +42,9 @@ class Jog(MotionSource):
         ) or cmd.frame not in ("base", "platform"):  # fmt: skip
             d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
                              "configured limits, or frame not base/platform"))  # fmt: skip
-            return False
+            return None
         if not np.any(v):
-            cmd.target = None  # a stop
-            return True
+            return NOTHING  # a stop
         start = self.trajectory.position.copy()
         if cmd.frame == "platform":
             R = coordinates_rotation(self.model.home.rotation, start[3:])
@@ -55,9 +54,8 @@ class Jog(MotionSource):
         reach = float(np.linalg.norm(ws.position_max - ws.position_min))
         horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
         end, why = self.limits.ray_end(start, v, horizon, step=0.02)
-        cmd.target = end
         vmax = np.maximum(np.abs(v), FLOOR * self.trajectory.limits)
-        cmd.limits = (vmax.tolist(), self.trajectory.full_acceleration)
+        segment = Plan(target=end, limits=(vmax.tolist(), self.trajectory.full_acceleration))
         # one event per bound met, not one per repeated command (the end moves by a bisection
         # step as the reference approaches it)
         bound = end if why else None
@@ -66,18 +64,18 @@ class Jog(MotionSource):
         ):
             d.events.append((d.time, f"jog: stops at {np.round(end[:3], 4).tolist()} m: {why}"))
         self._bound = bound
-        return True
+        return segment
 
-    def command(self, t: float, cmd: Command) -> None:
-        """Follow ``cmd`` (checked and planned by ``Controller.submit``)."""
-        if cmd.target is None or cmd.limits is None:  # a zero velocity: stop
+    def command(self, t: float, plan: Plan) -> None:
+        """Follow a jog's ``plan`` (its segment, from ``plan`` by ``CommandDesk.submit``)."""
+        if plan.target is None or plan.limits is None:  # a zero velocity: stop
             self.stop()
             return
         tr = self.trajectory
-        if tr.finished and float(np.max(np.abs(cmd.target - tr.position))) < 1e-9:
+        if tr.finished and float(np.max(np.abs(plan.target - tr.position))) < 1e-9:
             return  # already at the bound: nothing to move, no state to change
-        vmax, amax = cmd.limits
-        self.trajectory.set_segment(cmd.target, self._rest, vmax, amax)
+        vmax, amax = plan.limits
+        self.trajectory.set_segment(plan.target, self._rest, vmax, amax)
         self.active = True
         self.last = t
         self.data.motion = "jog"

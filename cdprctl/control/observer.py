@@ -29,10 +29,11 @@ from typing import NamedTuple
 
 import numpy as np
 
+from cdprctl.control.cycle_io import PoseArgs
 from cdprctl.control.data import ControlData
-from cdprctl.control.estimator import Estimator
-from cdprctl.control.pd_kernel import Platform, PoseEstimate
+from cdprctl.control.pd_kernel import Platform
 from cdprctl.control.torques import WinchTorques, applied_tension
+from cdprctl.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cycle_kernel, kernel_args
 
@@ -101,14 +102,13 @@ def observer_kernel(
 
 
 class WrenchObserver:
-    """``[control] observer_bandwidth`` Hz (0: off): the estimate is ``data.ext_estimate``."""
+    """``[control] observer_bandwidth`` Hz (0: off): the estimate is ``data.ext_estimate``,
+    from the estimate (a ``PoseEstimate`` bundle and its ``KinematicsData``) given each call."""
 
-    def __init__(self, model: RobotModel, data: ControlData, estimator: Estimator,
-                 winches: WinchTorques):  # fmt: skip
+    def __init__(self, model: RobotModel, data: ControlData):
         c = model.control
         self.model = model
         self.data = data
-        self.estimator = estimator
         self.gain = 2.0 * math.pi * c.observer_bandwidth  # rad/s
         # in position mode the measured tensions give the external wrench (cable_space.py)
         self.enabled = self.gain > 0.0 and not model.drives.holds_lengths
@@ -118,13 +118,13 @@ class WrenchObserver:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
+        # the winches' torque law (its own terms, from the model as the torques' are)
+        winches = WinchTorques(model)
         self._winches = winches.terms
-        e = estimator
         self._platform = kernel_args(Platform(
             np.ascontiguousarray(model.home.rotation, dtype=float), self._mass, self._inertia,
             self._com, self._gravity,
         ))  # fmt: skip
-        self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
         self._rotor_term = winches.rotor_term
         self._accel_term = np.zeros(m)  # N·m: J θ̈_d of the torques' feedforward
         self._state = kernel_args(
@@ -132,43 +132,45 @@ class WrenchObserver:
         )
         self._last_t = math.nan
 
-    def warm_up(self) -> None:
+    def warm_up(self, estimate: PoseArgs, kin: KinematicsData) -> None:
         """Compile the kernels (``warm_up.py``), leaving the estimate at zero."""
         enabled, self.enabled, self._last_t = self.enabled, True, 0.0
         m = self.model.n_cables
-        self.reset()
+        self.reset(estimate)
         self._last_t = 0.0
-        self.update(self.model.control.period, np.zeros(m), np.zeros(m), np.zeros(6))
+        self.update(self.model.control.period, np.zeros(m), np.zeros(m), np.zeros(6), estimate,
+                    kin)  # fmt: skip
         self.enabled = enabled
-        self.reset()
+        self.reset(estimate)
         self._state[0][:] = 0.0
 
-    def reset(self) -> None:
-        """Start from zero at the current momentum (enable: the platform at rest on its
-        holding tensions)."""
-        e = self.estimator
+    def reset(self, estimate: PoseArgs) -> None:
+        """Start from zero at the ``estimate``'s momentum (enable: the platform at rest on
+        its holding tensions)."""
+        _, R, v, w = estimate
         w_hat, p0, integral, _ = self._state
         w_hat[:] = 0.0
         integral[:] = 0.0
         self.data.ext_estimate[:] = 0.0
-        momentum_kernel(self._mass, self._inertia, e.rotation, e.velocity, e.omega, p0)
+        momentum_kernel(self._mass, self._inertia, R, v, w, p0)
         self._last_t = math.nan
 
     def update(self, t: float, torque: np.ndarray, velocity: np.ndarray,
-               acceleration: np.ndarray) -> None:  # fmt: skip
+               acceleration: np.ndarray, estimate: PoseArgs,
+               kin: KinematicsData) -> None:  # fmt: skip
         """One step at time ``t`` (s) from the drives' measured ``torque`` (N·m) and
-        ``velocity`` (rad/s); ``acceleration``: the trajectory's (the torques' rotor-inertia
-        feedforward, subtracted as applied)."""
+        ``velocity`` (rad/s) at the ``estimate`` (its wrench matrix in ``kin``);
+        ``acceleration``: the trajectory's (the torques' rotor-inertia feedforward,
+        subtracted as applied)."""
         if not self.enabled:
             return
         dt = t - self._last_t
         self._last_t = t
         if not 0.0 < dt < 0.1:
             return  # the first step after reset, or a gap: the integral starts here
-        e = self.estimator
-        self._rotor_term(e.kin.WT, acceleration, self._accel_term)
+        self._rotor_term(kin.WT, acceleration, self._accel_term)
         observer_kernel(
-            dt, self.gain, self._platform, self._est, e.kin.W, torque, velocity,
+            dt, self.gain, self._platform, estimate, kin.W, torque, velocity,
             self._accel_term, self._winches, self._state,
         )  # fmt: skip
         np.copyto(self.data.ext_estimate, self._state[0])  # no view built

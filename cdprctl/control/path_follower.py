@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from cdprctl.control.commands import Command
+from cdprctl.control.commands import Command, Plan
 from cdprctl.control.data import ControlData
 from cdprctl.control.motion_source import MotionSource
 from cdprctl.control.states import State
@@ -39,38 +39,37 @@ class PathFollower(MotionSource):
         self._started = 0.0  # s: when the plan under way started
 
     # -- outside the loop (Controller.submit) ----------------------------------------------------
-    def plan_path(self, cmd: Command) -> bool:
+    def plan_path(self, cmd: Command) -> Plan | None:
         """Parse and check the whole path from where the reference is (motion/path_plan.py);
-        False (an event naming the line and the rule) when it is refused. The loop starts it
+        None (an event naming the line and the rule) when it is refused. The loop starts it
         only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
         d, tr = self.data, self.trajectory
         name = cmd.name or "(payload)"
         if cmd.plan is not None and cmd.plan[0].starts_at(tr.position):
-            return True  # checked already (the gateway, --path) from where it rests
+            return Plan(path=cmd.plan)  # checked already (the gateway, --path) from there
         try:
             plan = plan_text(self.model, cmd.text, tr.position.copy(), self.model.control.period,
                              self.limits, name)  # fmt: skip
-            cmd.plan = (plan, 0)
         except (PathFileError, PathRejectedError) as exc:
             d.events.append((d.time, f"path {name} rejected: {exc}"))
-            return False
-        return True
+            return None
+        return Plan(path=(plan, 0))
 
-    def plan_resume(self, cmd: Command) -> bool:
+    def plan_resume(self, cmd: Command) -> Plan | None:
         """The rest of a paused path from where it stands, checked again."""
         if self.plan is None or not self.paused:
-            return True  # the loop says so (Controller._resume)
+            return Plan(path=cmd.plan)  # the loop says so (CommandDesk._resume)
         k, offset = self.remaining()
         plan = self.plan
         durations = [None, *plan.durations[k + 1 :]]
         try:
             here = self.trajectory.position.copy()
-            cmd.plan = (plan_path(self.model, plan.waypoints[k:], here, self.model.control.period,
-                                  self.limits, plan.name, durations), offset)  # fmt: skip
+            rest = plan_path(self.model, plan.waypoints[k:], here, self.model.control.period,
+                             self.limits, plan.name, durations)  # fmt: skip
         except PathRejectedError as exc:
             self.data.events.append((self.data.time, f"resume refused: {exc}"))
-            return False
-        return True
+            return None
+        return Plan(path=(rest, offset))
 
     # -- in the loop -------------------------------------------------------------------------------
     @property

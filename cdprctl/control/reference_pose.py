@@ -33,11 +33,10 @@ from typing import Protocol
 import numpy as np
 from numba import njit
 
-from cdprctl.control.pd_kernel import PoseEstimate, Reference
+from cdprctl.control.cycle_io import ReferenceArgs, pose_args
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
-from cdprctl.motion.trajectory import Trajectory
-from cdprctl.numerics import cycle_kernel, kernel_args, stiffness_kernel
+from cdprctl.numerics import compliance_of, cycle_kernel, kernel_args, stiffness_kernel
 from cdprctl.rotation import FloatArray, log_relative_kernel, rotated_kernel
 
 # the working pose's low-pass, below the drives' position loops by this factor (a decade)
@@ -104,8 +103,7 @@ class ReferencePose:
     and the inverse kinematics at the reference itself, ``reference_kin``: the targets'
     lengths (``CableSpace``), which the encoders do not reach at all."""
 
-    def __init__(self, model: RobotModel, trajectory: Trajectory, law: tuple):
-        self.trajectory = trajectory
+    def __init__(self, model: RobotModel):
         self.position = np.array(model.home.position, dtype=float)
         self.rotation = np.array(model.home.rotation, dtype=float)
         self.velocity = np.zeros(3)
@@ -119,20 +117,18 @@ class ReferencePose:
         self._alpha = 1.0 - math.exp(-2.0 * math.pi * self.bandwidth * model.control.period)
         self.offset = np.zeros(6)  # m, rad (base frame): the deviation low-passed
         self._R_home = np.ascontiguousarray(model.home.rotation, dtype=float)
-        self._law = law  # the cable law's kernel arguments (Estimator's)
-        # the kernel's bundles: the trajectory's reference, this working pose, a scratch
-        tr = trajectory
-        self._ref = kernel_args(Reference(tr.position, tr.velocity, tr.acceleration))
-        self._pose = kernel_args(PoseEstimate(self.position, self.rotation, self.velocity,
-                                              self.omega))  # fmt: skip
+        # the cable law, as the kernels take it (its own: the estimator's terms, computed alike)
+        self._law = kernel_args(compliance_of(model.cables))
+        # the kernel's bundles: this working pose, a scratch
+        self._pose = pose_args(self)
         self._work = (np.zeros((3, 3)), np.zeros((3, 3)), np.zeros(6))  # R_ref, E, dev
         self.hold(self.position, self.rotation)
 
-    def update(self, estimate: WorkingPose) -> None:
-        """At the trajectory's reference now, moved by the ``estimate``'s deviation from it
-        through the low-pass, one period's step (each cycle, after the trajectory's)."""
+    def update(self, reference: ReferenceArgs, estimate: WorkingPose) -> None:
+        """At the trajectory's ``reference`` now, moved by the ``estimate``'s deviation from
+        it through the low-pass, one period's step (each cycle, after the trajectory's)."""
         reference_pose_kernel(
-            self._ref, self._R_home, estimate.position, estimate.rotation, self._alpha,
+            reference, self._R_home, estimate.position, estimate.rotation, self._alpha,
             self.offset, self._law, self.reference_kin.arrays, self.kin.arrays, self._pose,
             self.k, self._work,
         )  # fmt: skip

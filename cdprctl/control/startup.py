@@ -38,7 +38,7 @@ def initialise(ctl: Controller, now: float, st: WinchStates) -> None:
             ctl.reference.hold(e.position, e.rotation)
         if ctl.grippers.n:
             ctl.grippers.update(st, sense=False)
-        out = dist.solve(dist.current, ctl.pose.gravity_hold(e.rotation), None)
+        out = dist.solve(dist.current, ctl.pose.gravity_hold(e.rotation, d.ext_total), None, ctl.at)
         # on the way, a pose that cannot be held gives its least-violating tensions: the
         # fixed point goes on from them (from the minimum tensions, with the pose from six
         # cables, the first poses of the springy Sensors 2019 robot are far off)
@@ -69,5 +69,5 @@ def initialise(ctl: Controller, now: float, st: WinchStates) -> None:
     e.velocity[:] = 0.0
     e.omega[:] = 0.0
     ctl.trajectory.reset(ctl.pose6())
-    ctl.reference.update(e)
-    ctl.supervisor.set_state(State.READY, now, "drives inactive, feedback live, pose estimated")
+    ctl.reference.update(ctl.io.reference, e)
+    ctl.machine.request(State.READY, now, "drives inactive, feedback live, pose estimated")

@@ -1,4 +1,5 @@
-"""The supervisor: the state machine, its transition table, and the checks that stop the robot.
+"""The supervisor: the checks that stop the robot, and the transitions they ask of the state
+machine (``state_machine.py``: the table, the one owner of the state).
 
 ::
 
@@ -32,6 +33,8 @@ from cdprctl.control.cable_checks import TensionDisagreement
 from cdprctl.control.data import ControlData
 from cdprctl.control.estop import EmergencyStop
 from cdprctl.control.persistence import Persistence
+from cdprctl.control.state_machine import TRANSITIONS as TRANSITIONS
+from cdprctl.control.state_machine import StateMachine
 from cdprctl.control.states import (
     DISABLING,
     ENABLED,
@@ -48,11 +51,15 @@ from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.safety import SafetyConfig
 from cdprctl.numerics import largest, worst_ratio
+from cdprctl.rotation import FloatArray
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
 from drivers.vocabulary import ACTIVE, ERROR, Lifecycle, WinchStates
 
 # bound once (on 3.11 reading an enum member builds a method wrapper: states.py)
 _FK_FAILED = (FKStatus.DEGENERATE, FKStatus.BAD_INPUT)
+# m: the estimated position where a caller gives none (a test of the checks alone)
+_NOWHERE = np.zeros(3)
+_NOWHERE.flags.writeable = False
 
 
 class DrivePort(Protocol):
@@ -69,24 +76,6 @@ class DrivePort(Protocol):
     def begin_activate(self) -> None: ...
     def begin_deactivate(self) -> None: ...
     def begin_recover(self, settle: float = 0.5) -> None: ...
-
-
-S = State
-#: every transition the supervisor makes; a transition missing here is refused (an event)
-TRANSITIONS: dict[State, frozenset[State]] = {
-    S.INIT: frozenset({S.READY, S.FAULT}),
-    S.READY: frozenset({S.ENABLING, S.STOPPING, S.FAULT}),
-    S.ENABLING: frozenset({S.ENABLED, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
-    S.ENABLED: frozenset({S.ENABLED, S.MOVING, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
-    S.MOVING: frozenset({S.MOVING, S.ENABLED, S.DISABLING, S.READY, S.STOPPING, S.FAULT}),
-    S.DISABLING: frozenset({S.READY, S.STOPPING, S.FAULT}),
-    S.STOPPING: frozenset({S.FAULT, S.ENABLED, S.DISABLING}),
-    S.FAULT: frozenset({S.READY}),
-    S.ESTOP: frozenset({S.READY}),
-}
-# the safety chain can open in any state but the start-up's (the drives not yet configured)
-for _s in (S.READY, S.ENABLING, S.ENABLED, S.MOVING, S.DISABLING, S.STOPPING, S.FAULT):
-    TRANSITIONS[_s] = TRANSITIONS[_s] | {S.ESTOP}
 
 
 def driver_fault_kind(err: DriverError | None) -> FaultKind:
@@ -114,10 +103,12 @@ class Supervisor:
     def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
                  tension_limits: np.ndarray | None = None,
                  torque_limits: np.ndarray | None = None,
-                 safety: SafetyConfig | None = None):  # fmt: skip
+                 safety: SafetyConfig | None = None,
+                 machine: StateMachine | None = None):  # fmt: skip
         """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
         ``tension_limits`` (N, per cable): the internal tension error that faults (position
-        mode), None: not checked; ``safety``: each fault kind's stop category."""
+        mode), None: not checked; ``safety``: each fault kind's stop category; ``machine``:
+        the state machine its transitions are asked of (the controller's; None: its own)."""
         self.config = config
         safety = safety or SafetyConfig()
         self.stop_of = {k: safety.category_of(k.value) for k in FaultKind}
@@ -131,7 +122,6 @@ class Supervisor:
         self.data = data
         self.drives = drives
         self._stop_here = stop_here
-        self.t_state = 0.0  # s, when the state was entered
         # s: the longest a disable decelerates before the brakes close anyway (a trajectory
         # that never stands must not keep the drives on): twice the limits' own stop time
         # (a jerk-limited stop from the top speed takes v/a + a/j), at least 3 s
@@ -148,30 +138,28 @@ class Supervisor:
         # really fall silent are the driver's (feedback_timeout, over running cycles)
         self._feedback_old = Persistence(config.period)
         self.estop = EmergencyStop()
-        # m, base frame: the estimated position (the controller gives the estimator's array)
-        self.position = np.zeros(3)
-        self._persistences = (
-            self._tension.over, self._torque_at_limit, self._speed_over, self._feedback_old
+        self.machine = machine if machine is not None else StateMachine(data)
+        self.machine.forget_when_unsupervised(
+            (self._tension.over, self._torque_at_limit, self._speed_over, self._feedback_old)
         )
 
     @property
     def state(self) -> State:
         return self.data.state
 
+    @property
+    def t_state(self) -> float:
+        """s, when the state was entered (the state machine's)."""
+        return self.machine.entered
+
+    @t_state.setter
+    def t_state(self, t: float) -> None:  # a test's start of the enable time-out
+        self.machine.entered = t
+
     def set_state(self, s: State, t: float, why: str) -> None:
-        d = self.data
-        if s not in TRANSITIONS[d.state]:
-            d.events.append((t, f"internal: transition {d.state.value} -> {s.value} refused"))
-            return
-        if s is not d.state:
-            d.events.append((t, f"state {d.state.value} -> {s.value}: {why}"))
-        if s not in (ENABLED, MOVING, DISABLING, STOPPING):
-            # unsupervised from here on: what held before must persist anew once enabled (a
-            # drive at its limit before a fault tripped the check at the next enable at once)
-            for p in self._persistences:
-                p.held(t, False)
-        d.state = s
-        self.t_state = t
+        """A transition asked of the state machine (``StateMachine.request``), as the checks
+        here ask it; for a test that drives the supervisor by hand."""
+        self.machine.request(s, t, why)
 
     def fault(self, t: float, kind: FaultKind, reason: str) -> None:
         """Stop the robot for ``reason`` by the category ``kind`` takes: hold the pose with
@@ -189,7 +177,7 @@ class Supervisor:
             d.stop_category = category
             self._stop_here()
             self._stop_until = t + self.config.stop_duration
-            self.set_state(STOPPING, t, f"controlled stop, holding the pose (category "
+            self.machine.request(STOPPING, t, f"controlled stop, holding the pose (category "
                            f"{category})")  # fmt: skip
         else:
             self.off(t, FAULT, "drives disabled, brakes closed")
@@ -198,7 +186,7 @@ class Supervisor:
         """Category 0: the drives disabled at once, the brakes stop and hold the platform."""
         self.data.stop_category = 0
         self.drives.begin_deactivate()
-        self.set_state(s, t, why)
+        self.machine.request(s, t, why)
 
     def holding_after_stop(self, t: float) -> bool:
         """A category 2 stop done: holding the pose powered until a reset or disable."""
@@ -216,11 +204,13 @@ class Supervisor:
         fk_residual: float,
         speed: float,
         trajectory_finished: bool,
+        position: FloatArray = _NOWHERE,
     ) -> None:
-        """One cycle's checks, in order of precedence (``speed``: m/s, estimated)."""
+        """One cycle's checks, in order of precedence (``speed``: m/s, ``position``: m, base
+        frame, both estimated)."""
         d, drv = self.data, self.drives
         if d.state is ESTOP:
-            said = self.estop.watch(t, self.position, speed)
+            said = self.estop.watch(t, position, speed)
             if said is not None:
                 d.events.append((t, said))
             return
@@ -228,7 +218,7 @@ class Supervisor:
         if drv.lifecycle is ERROR and isinstance(err, DriveFaultError) and (
             isinstance(err, SafeTorqueOffError) or self.estop.refused(t, err)
         ):
-            d.events.append((t, self.estop.enter(t, self.position, err)))
+            d.events.append((t, self.estop.enter(t, position, err)))
             # the drives do not say when the chain closes (they stay in fault until a reset)
             d.fault_reason = "emergency stop: the safety chain opened; reset once it is closed"
             d.fault_kind = None
@@ -244,7 +234,7 @@ class Supervisor:
             return
         if d.state is ENABLING:
             if drv.lifecycle is ACTIVE:
-                self.set_state(ENABLED, t, "drives enabled, holding the pose")
+                self.machine.request(ENABLED, t, "drives enabled, holding the pose")
             elif t - self.t_state > self.ENABLE_TIMEOUT:
                 why = f"drives not enabled within {self.ENABLE_TIMEOUT:g} s"
                 self.fault(t, FaultKind.ENABLE_TIMEOUT, why)
@@ -254,7 +244,7 @@ class Supervisor:
             if at_rest or t - self.t_state > self.disable_within:  # else: decelerating
                 drv.begin_deactivate()
                 why = "" if at_rest else f" (not at rest after {self.disable_within:g} s)"
-                self.set_state(READY, t, f"drives disabled, brakes closed{why}")
+                self.machine.request(READY, t, f"drives disabled, brakes closed{why}")
                 return
         if self.torque_limits is not None and d.state in (
             ENABLED, MOVING, STOPPING, DISABLING
@@ -268,7 +258,7 @@ class Supervisor:
                 return
             if d.stop_category != 2:
                 drv.begin_deactivate()
-                self.set_state(FAULT, t, "stopped; drives disabled, brakes closed")
+                self.machine.request(FAULT, t, "stopped; drives disabled, brakes closed")
                 return
             failure = self._motion_failure(t, fk_status, fk_residual, speed)  # SS2: watched
             if failure is not None:
@@ -280,7 +270,7 @@ class Supervisor:
             return
         if d.state is MOVING and trajectory_finished:
             paused = d.path_state == "paused"  # braked onto the path: not its target
-            self.set_state(ENABLED, t, "path paused, holding" if paused else "target reached")
+            self.machine.request(ENABLED, t, "path paused, holding" if paused else "target reached")
         failure = self._motion_failure(t, fk_status, fk_residual, speed)
         if failure is not None:
             self.fault(t, failure[0], failure[1])

@@ -63,7 +63,7 @@ def warm_up(controller: Controller) -> None:
     est.update(0.0, zeros, t_min.copy(), zeros, zeros)
     if c.grippers.n:
         c.grippers.warm_up()  # the jaws' loads: the weight wrench's kernel too
-    hold = c.pose.gravity_hold(est.rotation)  # any wrench: a kernel compiles whole
+    hold = c.pose.gravity_hold(est.rotation, d.ext_total)  # any wrench: a kernel compiles whole
     prev = 0.5 * (t_min + t_max)
     for opts in _tda_variants(c.distribution.options, model.redundancy, prev):
         if opts.validate(model):
@@ -85,8 +85,8 @@ def warm_up(controller: Controller) -> None:
     # not the cycle's but beside it: a jog's or a path's soft limits, checked by submit() in
     # the daemon's I/O thread while the loop runs (a compile there would hold the GIL)
     c.limits.check(np.tile(c.trajectory.position, (2, 1)))
-    c.observer.warm_up()
-    c.pose.update(True)
+    c.observer.warm_up(c.io.estimate, c.estimator.kin)
+    c.pose.update(c.io.reference, c.io.working, d.ext_total, True, d.dt, c.io.wrench)
     c.pose.reset()
     c.winches.update(d.tensions, c.at.kin.WT, c.trajectory.acceleration, zeros, True,
                      d.torques)  # fmt: skip
@@ -96,7 +96,7 @@ def warm_up(controller: Controller) -> None:
               d.internal_leverage)  # fmt: skip
     saved = [a.copy() for a in arrays]
     offset = c.reference.offset.copy()
-    c.reference.update(c.estimator)  # the next cycle computes it afresh
+    c.reference.update(c.io.reference, c.estimator)  # the next cycle computes it afresh
     c.reference.offset[:] = offset
     c.cable_space.targets(True, zeros)
     c.cable_space.warm_up(ns.N)

@@ -8,22 +8,19 @@ import math
 
 import numpy as np
 
-from cdprctl.control.data import ControlData
-from cdprctl.control.pd_kernel import Pid, Platform, PoseEstimate, Reference, pd_wrench_kernel
-from cdprctl.control.reference_pose import WorkingPose
+from cdprctl.control.cycle_io import PoseArgs, ReferenceArgs, WrenchArgs
+from cdprctl.control.pd_kernel import Pid, Platform, pd_wrench_kernel
 from cdprctl.model.robot import RobotModel
-from cdprctl.motion.trajectory import Trajectory
 from cdprctl.numerics import kernel_args
 from cdprctl.rotation import FloatArray
 
 
 class PoseController:
-    def __init__(
-        self, model: RobotModel, data: ControlData, trajectory: Trajectory, at: WorkingPose
-    ):
+    """The stage ``reference`` and working pose → ``wrench`` (``cycle_io.py``)."""
+
+    def __init__(self, model: RobotModel):
         c = model.control
         self.model = model
-        self.data = data
         self.period = c.period
         bw = c.axis_bandwidth if c.axis_bandwidth is not None else (c.bandwidth,) * 6
         self.bandwidth = np.array(bw, dtype=float)  # Hz per axis (torque mode: set by hand)
@@ -56,11 +53,6 @@ class PoseController:
         self._Rd = np.zeros((3, 3))
         self._E = np.zeros((3, 3))
         self._S = np.zeros(15)  # the kernel's vectors
-        # the pose the feed-forward is computed at and the feedback closed on (position mode:
-        # the reference, reference_pose.py says why; the feedback is off there)
-        tr, e = trajectory, at
-        self._ref = kernel_args(Reference(tr.position, tr.velocity, tr.acceleration))
-        self._est = kernel_args(PoseEstimate(e.position, e.rotation, e.velocity, e.omega))
         self._pid = kernel_args(Pid(self.kp, self.kd, self.ki, self.integral, self.integral_limit))
         platform = Platform(self._R_home, float(model.platform.mass), self._inertia, self._com,
                             self._gravity)  # fmt: skip
@@ -69,27 +61,31 @@ class PoseController:
     def reset(self) -> None:
         self.integral[:] = 0.0
 
-    def gravity_hold(self, R: FloatArray) -> FloatArray:
+    def gravity_hold(self, R: FloatArray, ext_total: FloatArray) -> FloatArray:
         """The wrench (N, N·m at P, base frame) that holds the platform at rest at orientation
-        ``R`` against gravity and the known external wrench."""
-        return -(self.model.gravity_wrench(R) + self.data.ext_total)
+        ``R`` against gravity and the known external wrench ``ext_total``."""
+        return -(self.model.gravity_wrench(R) + ext_total)
 
-    def update(self, integrate: bool) -> None:
-        """``data.wrench`` and ``data.pose_error`` for this cycle; the integral grows only
-        when ``integrate`` (holding or moving, not while enabling or stopping)."""
-        d = self.data
+    def update(self, reference: ReferenceArgs, at: PoseArgs, ext_total: FloatArray,
+               integrate: bool, dt: float, out: WrenchArgs) -> None:  # fmt: skip
+        """``out`` (pose error, wrench, feedback part) for the trajectory's ``reference`` at
+        the working pose ``at`` (the feedback closed on it; position mode: the reference,
+        reference_pose.py says why; the feedback is off there), the known external wrench
+        ``ext_total`` fed forward; the integral grows by ``dt`` (s) only when ``integrate``
+        (holding or moving, not while enabling or stopping)."""
+        pose_error, wrench, feedback = out
         pd_wrench_kernel(
-            self._ref,
-            self._est,
+            reference,
+            at,
             self._pid,
             integrate,
-            d.dt if d.dt > 0.0 else self.period,
+            dt if dt > 0.0 else self.period,
             self._platform,
-            d.ext_total,
+            ext_total,
             self._Rd,
             self._E,
             self._S,
-            d.pose_error,
-            d.wrench,
-            d.feedback_wrench,
+            pose_error,
+            wrench,
+            feedback,
         )
