@@ -190,3 +190,25 @@ class LineProbe:
 
 def _short(filename: str) -> str:
     return str(Path(filename).relative_to(ROOT)) if filename.startswith(str(ROOT)) else filename
+
+
+def peak_bytes(call: Any, calls: int = 1) -> int:
+    """Bytes taken from the allocator at the peak of ``calls`` (1-3) calls of ``call``, after one
+    call outside the window (compiled, or loaded from numba's cache) and the float free list
+    primed as the loop primes it; the window itself builds no object."""
+    call()
+    floats = [i * 0.5 for i in range(100)]  # given back to their free list, as in the loop
+    del floats
+    mark = np.zeros(1, dtype=np.int64)
+    tracemalloc.start()
+    try:
+        mark[0] = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        call()  # unrolled: a loop's iterator would be a block in the window
+        if calls > 1:
+            call()
+        if calls > 2:
+            call()
+        return int(tracemalloc.get_traced_memory()[1] - mark[0])
+    finally:
+        tracemalloc.stop()

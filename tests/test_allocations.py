@@ -18,7 +18,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from alloc_probe import OURS, LineProbe, Window
+from alloc_probe import OURS, LineProbe, Window, peak_bytes
 from conftest import CONFIG
 
 from cdprctl.control.states import State
@@ -203,21 +203,6 @@ def test_a_planted_temporary_is_caught():
             tracemalloc.stop()
 
 
-def _peak_of(call) -> int:
-    call()  # compiled, or loaded from numba's cache
-    floats = [i * 0.5 for i in range(100)]  # given back to their free list, as in the loop
-    del floats
-    mark = np.zeros(1, dtype=np.int64)
-    tracemalloc.start()
-    try:
-        mark[0] = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
-        call()
-        return int(tracemalloc.get_traced_memory()[1] - mark[0])
-    finally:
-        tracemalloc.stop()
-
-
 def test_the_cycle_kernels_take_no_block():
     """A ``cycle_kernel`` passes its arrays as they are: a call from Python takes no block
     (with numba's reference counting each array argument took one)."""
@@ -242,5 +227,5 @@ def test_the_cycle_kernels_take_no_block():
         "pack_rpdo1_kernel": lambda: pack_rpdo1_kernel(fields, counts, position, frames),
         "decode_tpdo1_kernel": lambda: decode_tpdo1_kernel(8, raw, counts, rows),
     }
-    taken = {name: _peak_of(call) for name, call in calls.items()}
+    taken = {name: peak_bytes(call) for name, call in calls.items()}
     assert not any(taken.values()), taken

@@ -15,11 +15,11 @@ import importlib.util
 import math
 import os
 import sys
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
 import pytest
+from alloc_probe import peak_bytes
 from scipy.optimize import lsq_linear
 
 from cdprctl.interference import BODY, CABLE, Interference, check_pose
@@ -384,25 +384,6 @@ def test_a_planted_bug_fails_the_comparison(robots, bug, tmp_path):
 
 
 # -- no allocation -----------------------------------------------------------------------------
-def _peak(call) -> int:
-    """Bytes taken from the allocator within three calls of ``call`` (tests/test_allocations'
-    window: no loop, no tuple built inside it; the float free list primed)."""
-    call()  # compiled, or loaded from numba's cache
-    floats = [i * 0.5 for i in range(100)]  # given back to their free list, as in the loop
-    del floats
-    mark = np.zeros(1, dtype=np.int64)
-    tracemalloc.start()
-    try:
-        mark[0] = tracemalloc.get_traced_memory()[0]
-        tracemalloc.reset_peak()
-        call()
-        call()
-        call()
-        return int(tracemalloc.get_traced_memory()[1] - mark[0])
-    finally:
-        tracemalloc.stop()
-
-
 def test_a_check_takes_no_block():
     """``Interference.update`` on rowc with its body and a cell of three obstacles takes no
     block: its arrays are the kernel's outputs, the kernel runs without reference counting."""
@@ -411,7 +392,7 @@ def test_a_check_takes_no_block():
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     r = Interference(model, cfg)
-    assert _peak(lambda: r.update(kin)) == 0
+    assert peak_bytes(lambda: r.update(kin), calls=3) == 0
 
 
 def test_the_probe_sees_an_allocating_check():
@@ -425,7 +406,7 @@ def test_the_probe_sees_an_allocating_check():
         r.update(kin)
         return np.array(r.distance)
 
-    assert _peak(careless) > 0
+    assert peak_bytes(careless, calls=3) > 0
 
 
 # -- the robot file ------------------------------------------------------------------------------
