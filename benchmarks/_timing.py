@@ -7,13 +7,14 @@ median and p99 over all calls, and the lowest round median (the quiet-machine fi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gc
 import os
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -156,3 +157,16 @@ def ab_arguments(**more: tuple[type, object]) -> argparse.Namespace:
     for name, (kind, default) in more.items():
         ap.add_argument(f"--{name}", type=kind, default=default)
     return ap.parse_args()
+
+
+@contextlib.contextmanager
+def busy_processes(n: int) -> Iterator[None]:
+    """``n`` busy Python processes at normal priority for the duration (the machine's other
+    work: a camera node, a build), killed at the end."""
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import machine_line
+from _timing import busy_processes, machine_line
 from bench_floor import PRIORITY
 
 SOURCE = r"""
@@ -97,14 +97,8 @@ def main() -> None:
         exe = build(Path(tmp))
         probe = run(exe, period_ns, 200, 100_000, cpu, args.priority)
         n = int(100_000 * args.work / float(np.median(probe[50:])))
-        hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
-                for _ in range(args.hog)]  # fmt: skip
-        try:
+        with busy_processes(args.hog):
             d = run(exe, period_ns, int(args.seconds * args.rate), n, cpu, args.priority)
-        finally:
-            for h in hogs:
-                h.kill()
-                h.wait()
     p50, p99 = float(np.median(d)), float(np.percentile(d, 99))
     print(f"CPU {cpu}, SCHED_FIFO {args.priority}, {args.rate:g} Hz, {args.hog} hogs, "
           f"{len(d)} cycles of fixed C work: p50 {p50:.0f} us, p99 {p99:.0f} us, max "

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import machine_line
+from _timing import busy_processes, machine_line
 
 from cdprctl.control.loop import periods_missed
 
@@ -201,16 +201,11 @@ def main() -> None:
         os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
     except PermissionError:
         print("note: SCHED_FIFO not permitted here: both sides run at the normal scheduler")
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.hog)]
-    if hogs:
-        print(f"{len(hogs)} CPU hogs (busy Python processes, normal priority) run throughout")
-    try:
+    if args.hog:
+        print(f"{args.hog} CPU hogs (busy Python processes, normal priority) run throughout")
+    with busy_processes(args.hog):
         for rate in (float(r) for r in args.rates.split(",")):
             measure(exe, rate, args.seconds, cpu, args.across, args.during, args.config)
-    finally:
-        for h in hogs:
-            h.kill()
-            h.wait()
 
 
 def measure(

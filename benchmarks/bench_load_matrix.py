@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import machine_line
+from _timing import busy_processes, machine_line
 from bench_floor import PRIORITY, daemon, ensure_cyclictest, floor
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -81,8 +80,7 @@ def main() -> None:
     print(f"loop's CPU {cpu}, SCHED_FIFO {PRIORITY}; {args.seconds:g} s a run", flush=True)
     rows = []
     for load in (int(x) for x in args.loads.split(",")):
-        hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(load)]
-        try:
+        with busy_processes(load):
             for way in args.ways.split(","):
                 for rate in (float(r) for r in args.rates.split(",")):
                     r = row(exe, load, way, rate, args.seconds, cpu)
@@ -90,10 +88,6 @@ def main() -> None:
                     print(f"{load} hogs, {way}, {rate:g} Hz: C floor missed {r['floor']:.3f} "
                           f"%, missed {r['missed']:.3f} %, faults {r['faults']}",
                           flush=True)  # fmt: skip
-        finally:
-            for h in hogs:
-                h.kill()
-                h.wait()
     print("\n| hogs | run | Hz | C floor's missed periods: before/after, during | its wake-ups "
           "> 1 ms | missed | missed / floor | overruns | compute p50/p99 us | FAULT | goal |\n"
           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")  # fmt: skip

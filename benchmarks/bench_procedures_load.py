@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import machine_line
+from _timing import busy_processes, machine_line
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "cdprctl.cli"]
@@ -98,9 +98,7 @@ def main() -> None:
                     help="times a stopped calibration is resumed (--resume)")
     args = ap.parse_args()
     print(machine_line())
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
-            for _ in range(args.hog)]  # fmt: skip
-    try:
+    with busy_processes(args.hog):
         for robot in args.robots.split(","):
             config = str(ROOT / "config" / f"{robot}.toml")
             port = random.randint(20000, 60000)
@@ -121,10 +119,6 @@ def main() -> None:
                     print(f"{robot}: record written: {Path(out).is_file()}", flush=True)
                 finally:
                     stop(sim_box[0])
-    finally:
-        for h in hogs:
-            h.kill()
-            h.wait()
 
 
 if __name__ == "__main__":
