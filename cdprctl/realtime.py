@@ -93,8 +93,31 @@ def helper_thread(loop_cpu_index: int | None, loop_priority: int) -> None:
     other work while it holds it (a command flood in the gateway, on the other CPU) stalls
     the loop, so it keeps a real-time priority. Best effort, silent: the loop's own settings
     were reported already."""
+    _beside_the_loop(loop_cpu_index, max(1, loop_priority - 1))
+
+
+#: SCHED_FIFO priority of a long computation in the loop's process: the lowest real-time one
+WORKER_PRIORITY = 1
+
+
+def worker_thread(loop_cpu_index: int | None) -> None:
+    """For a thread of the loop's process that computes for seconds while the loop holds the
+    drives (the geometric calibration's identification): the CPUs but the loop's, and
+    ``SCHED_FIFO`` at ``WORKER_PRIORITY`` — below the loop, its helpers and a simulated robot
+    on the machine, above all of the machine's normal work. At the normal scheduler, other
+    work preempted it while it held the interpreter's lock, and the loop waiting for that lock
+    sent no SYNC for over 100 ms (CAROCA beside two busy processes: the drives' comm_timeout,
+    EMCY 0x8130); a copy of the loop's priority on its CPU starved the loop, and one below the
+    loop on the other CPU would starve a simulated robot there (a FIFO task runs until it
+    blocks). Best effort, silent."""
+    _beside_the_loop(loop_cpu_index, WORKER_PRIORITY)
+
+
+def _beside_the_loop(loop_cpu_index: int | None, priority: int) -> None:
+    """The calling thread at ``SCHED_FIFO`` ``priority`` (the normal scheduler where refused),
+    on the CPUs but the loop's."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, loop_priority - 1)))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError):
         with contextlib.suppress(OSError, AttributeError):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))

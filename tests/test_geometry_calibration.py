@@ -390,3 +390,57 @@ def test_a_known_pose_outside_the_workspace_is_refused_before_any_drive_is_touch
         main(["calibrate", "--config", rowc, "known-pose", "--pose", "-1.52,0.36,0.61,0,0,0"])
     assert str(e.value) == ("--pose: x = -1.52 m is outside the workspace box [0.5, 2.5] m "
                             f"([workspace] of {rowc})")  # fmt: skip
+
+
+def _identify_beside(holder_fifo: bool) -> tuple[int, int, set[int]]:
+    """``held_while``'s computation as seen from inside it (scheduler, priority, CPUs), the
+    holder's thread at SCHED_FIFO on the last CPU (``calibrate geometry``) or not."""
+    import os
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from cdprctl.calibration.geometry_moves import held_while
+
+    ses = SimpleNamespace(driver=SimpleNamespace(clock=time.monotonic),
+                          model=SimpleNamespace(control=SimpleNamespace(cpu=-1)),
+                          run=lambda seconds: time.sleep(0.001))  # fmt: skip
+    seen: list = []
+
+    def holder() -> None:
+        if holder_fifo:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            os.sched_setaffinity(0, {max(os.sched_getaffinity(0))})
+        seen.append(held_while(ses, lambda: np.array([  # type: ignore[arg-type]
+            os.sched_getscheduler(0), os.sched_getparam(0).sched_priority,
+            *sorted(os.sched_getaffinity(0))])))  # fmt: skip
+
+    t = threading.Thread(target=holder)
+    t.start()
+    t.join(10)
+    got = seen[0]
+    return int(got[0]), int(got[1]), {int(c) for c in got[2:]}
+
+
+def test_the_identification_beside_a_real_time_hold_is_never_preempted_by_normal_work():
+    """At the normal scheduler the identifying thread, preempted by other work while it held
+    the interpreter's lock, left the holder without SYNC for over 100 ms (CAROCA beside two
+    busy processes: the drives' comm_timeout); it runs at the lowest real-time priority on
+    the CPUs but the holder's, and at the normal scheduler when the hold is not real-time."""
+    import os
+
+    from cdprctl.realtime import WORKER_PRIORITY
+
+    cpus = set(os.sched_getaffinity(0))
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except PermissionError:
+        pytest.skip("SCHED_FIFO not permitted here")
+    if len(cpus) < 2:
+        pytest.skip("one CPU: nothing beside the holder's")
+    policy, priority, where = _identify_beside(holder_fifo=True)
+    assert (policy, priority) == (os.SCHED_FIFO, WORKER_PRIORITY)
+    assert where == cpus - {max(cpus)}
+    policy, _, where = _identify_beside(holder_fifo=False)
+    assert policy == os.SCHED_OTHER and where == cpus

@@ -55,16 +55,16 @@ def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
         return out
     import threading
 
+    from cdprctl import realtime as rt
+
     results: list[np.ndarray] = []
     failed: list[BaseException] = []
+    held_in_real_time = _fifo()
+    loop_cpu = rt.loop_cpu(ses.model.control.cpu)
 
     def work() -> None:
-        import contextlib
-        import os
-
-        # at the normal scheduler: a SCHED_FIFO copy of the holder starved it (0x8130)
-        with contextlib.suppress(OSError, AttributeError):
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        if held_in_real_time:  # never preempted while it holds the interpreter's lock
+            rt.worker_thread(loop_cpu)
         try:
             results.append(compute())
         except BaseException as exc:  # re-raised in the caller's thread
@@ -72,11 +72,23 @@ def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
 
     worker = threading.Thread(target=work, name="cdprctl-identify", daemon=True)
     worker.start()
-    while worker.is_alive():
-        ses.run(0.05)
+    with rt.sharing_the_interpreter():  # the lock back to the holder's cycle within 0.1 ms
+        while worker.is_alive():
+            ses.run(0.05)
     if failed:
         raise failed[0]
     return results[0]
+
+
+def _fifo() -> bool:
+    """Whether the calling thread runs at ``SCHED_FIFO`` (``calibrate geometry``'s cycles,
+    unless ``--no-realtime``)."""
+    import os
+
+    try:
+        return os.sched_getscheduler(0) == os.SCHED_FIFO
+    except (OSError, AttributeError):
+        return False
 
 
 GoalOf = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # pose -> (rad, N) per cable
