@@ -197,9 +197,10 @@ def serve(start: Start) -> int:
 
     if os.getppid() != parent:
         return 0  # the daemon is gone already
-    if start.realtime:
+    def realtime() -> None:
         for w in rt.simulator_realtime(start.loop_cpu, start.loop_priority):
             say(f"cdprctl run: warning: the simulated robot: {w}")
+
     plant = plant_of(start)
     injector = FaultInjector([])
 
@@ -229,7 +230,8 @@ def serve(start: Start) -> int:
     overrides = {"interface": "socketpair", "channels": [str(fd) for fd in start.bus_fds]}
     late = LateSteps(say)
     net = run_realtime(start.model, overrides, faults=injector, plant=plant, late=late,
-                       print_fn=say, between=between, signals=False)  # fmt: skip
+                       print_fn=say, between=between, signals=False,
+                       realtime=realtime if start.realtime else None)  # fmt: skip
     net.close()
     if late.count:
         say(late.summary().replace("cdprctl sim:", "cdprctl run: the simulated robot:"))

@@ -106,11 +106,15 @@ def run_realtime(
     late: LateSteps | None = None,
     between: Callable[[SimNetwork], bool] | None = None,
     signals: bool = True,
+    realtime: Callable[[], None] | None = None,
 ) -> SimNetwork:
     """``plant``: the physics (default: the model's, at rest at home); ``encoders``:
     ``SimNetwork``'s; ``late``: where its late steps are counted and said; ``between(net)``:
     called after each step (``run --sim``'s requests and true pose), False to stop;
-    ``signals``: SIGINT and SIGTERM stop it (else only ``duration`` or ``between``)."""
+    ``signals``: SIGINT and SIGTERM stop it (else only ``duration`` or ``between``);
+    ``realtime()``: the process's real-time settings, applied once the kernels are loaded (a
+    start-up of seconds at SCHED_FIFO held everything below it on its CPU meanwhile: another
+    simulated robot, a daemon's helper threads)."""
     late = late if late is not None else LateSteps(print_fn)
     plant = plant if plant is not None else CdprPlant(model)
     net = SimNetwork(model, plant, bus_overrides, encoders=encoders)
@@ -119,6 +123,8 @@ def run_realtime(
     # one step before "ready": the physics kernels compile at their first call (seconds on a
     # cold cache, when the drives stood deaf for ~15 s after "ready")
     net.advance(step)
+    if realtime is not None:
+        realtime()
     print_fn("cdprctl sim: ready", flush=True)  # the buses are open: peers may start
     stop = {"flag": False}
 

@@ -103,11 +103,13 @@ def test_a_starved_simulated_robot_says_so_and_ignores_ctrl_c():
         os.kill(child, signal.SIGINT)
 
     out = run_sim(["--duration", "2", "--no-demo", "--status", "0"], stall, code=3)
-    said = re.search(r"stepped (\d+\.\d) ms late", out)
-    assert said is not None and 40.0 <= float(said.group(1)) <= 2000.0, out
+    assert re.search(r"stepped \d+\.\d ms late", out), out
     assert "the simulator's lateness, not a drive's fault" in out
-    # the stall at least (a loaded machine holds it up more often: each counted)
-    assert re.search(r"the simulated robot: [1-9]\d* steps later than 10 ms", out), out
+    # the stall at least (a loaded machine holds it up more often: each counted, and said at
+    # most once a second, so the stall's own line may be one of the "more since")
+    latest = re.search(r"the simulated robot: [1-9]\d* steps later than 10 ms, the latest "
+                       r"(\d+\.\d) ms", out)  # fmt: skip
+    assert latest is not None and 40.0 <= float(latest.group(1)) <= 2000.0, out
     # the daemon's own word (the drives were silent), and its exit: it ended in that fault
     assert "final state fault (drives: drive of cable index" in out and "no feedback for" in out
 

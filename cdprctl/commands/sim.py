@@ -242,12 +242,14 @@ def run(args: argparse.Namespace) -> int:
                  if math.isfinite(estop.duration) else ""), flush=True)  # fmt: skip
     plant, encoders = start_state(model, args)
     plant.opt.brake_close_time = args.brake_close_time
-    if not args.no_realtime:
+
+    def realtime() -> None:
         from cdprctl import realtime as rt
 
         ctl = model.control
         for w in rt.simulator_realtime(rt.loop_cpu(ctl.cpu), ctl.sched_priority):
             print(f"cdprctl sim: warning: {w}", file=sys.stderr, flush=True)
+
     late = LateSteps()
     try:
         net = run_realtime(
@@ -259,6 +261,7 @@ def run(args: argparse.Namespace) -> int:
             plant=plant,
             encoders=encoders,
             late=late,
+            realtime=None if args.no_realtime else realtime,
         )
     except DriverError as exc:
         print(f"cdprctl sim: error: {exc}", file=sys.stderr)
