@@ -95,41 +95,10 @@ def jaw_dynamics(
             Q[3 + a] += rf[a]
         Q[6 + j] += f[0] * k[0] + f[1] * k[1] + f[2] * k[2]
         # along the guide, between jaw and platform: object, end stops, friction
-        s = 0.0
-        fc = 0.0
-        if q[j] > g_L21[j]:
-            fc = g_kc[j] * (q[j] - g_L21[j]) + g_cc[j] * qd[j]
-            if fc < 0.0:
-                fc = 0.0
-        s -= fc
-        g_fc[j] = fc
-        if q[j] < 0.0:
-            st = -g_kstop[j] * q[j] - g_cstop[j] * qd[j]
-            s += st if st > 0.0 else 0.0
-        elif q[j] > g_qmax[j]:
-            st = g_kstop[j] * (q[j] - g_qmax[j]) + g_cstop[j] * qd[j]
-            s -= st if st > 0.0 else 0.0
-        s -= g_fric[j] * math.tanh(qd[j] / g_fric_v)
+        s, g_fc[j] = _guide_force(q[j], qd[j], g_L21[j], g_kc[j], g_cc[j], g_kstop[j],
+                                  g_cstop[j], g_qmax[j], g_fric[j], g_fric_v)  # fmt: skip
         Q[6 + j] += s
-        # mass matrix: m J_jᵀ J_j with J_j = [I, −[r]×, k e_j]
-        rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-        rk = np.cross(r, k)
-        for a in range(3):
-            A[a, a] += mj
-            A[a, 6 + j] += mj * k[a]
-            A[6 + j, a] += mj * k[a]
-            A[3 + a, 6 + j] += mj * rk[a]
-            A[6 + j, 3 + a] += mj * rk[a]
-            for b in range(3):
-                A[3 + a, 3 + b] += mj * ((rr if a == b else 0.0) - r[a] * r[b])
-        # the −[r]× block and its transpose: (−[r]×)[a, b] = ε_abc r_c
-        for a in range(3):
-            b, c = (a + 1) % 3, (a + 2) % 3
-            A[a, 3 + b] += mj * r[c]
-            A[a, 3 + c] -= mj * r[b]
-            A[3 + b, a] += mj * r[c]
-            A[3 + c, a] -= mj * r[b]
-        A[6 + j, 6 + j] += mj
+        _add_jaw_mass(A, 6 + j, mj, r, k)
     udot = np.linalg.solve(A, Q)
     for a in range(3):
         v[a] += udot[a] * dt
@@ -137,3 +106,52 @@ def jaw_dynamics(
     for j in range(ng):
         qd[j] += udot[6 + j] * dt
         q[j] += qd[j] * dt
+
+
+@njit(cache=True)
+def _guide_force(
+    q, qd, free, kc, cc, kstop, cstop, qmax, fric, fric_v
+):  # pragma: no cover - compiled
+    """(N along the guide on the jaw, N of the object's contact): the object beyond the free
+    travel ``free`` (m; a spring-damper ``kc``, ``cc`` that only pushes), the end stops at 0
+    and ``qmax`` (``kstop``, ``cstop``), the Coulomb friction ``fric`` (smoothed over
+    ``fric_v`` m/s); ``q`` (m), ``qd`` (m/s) the jaw's travel and speed."""
+    s = 0.0
+    fc = 0.0
+    if q > free:
+        fc = kc * (q - free) + cc * qd
+        if fc < 0.0:
+            fc = 0.0
+    s -= fc
+    if q < 0.0:
+        st = -kstop * q - cstop * qd
+        s += st if st > 0.0 else 0.0
+    elif q > qmax:
+        st = kstop * (q - qmax) + cstop * qd
+        s -= st if st > 0.0 else 0.0
+    s -= fric * math.tanh(qd / fric_v)
+    return s, fc
+
+
+@njit(cache=True)
+def _add_jaw_mass(A, j, mj, r, k):  # pragma: no cover - compiled
+    """``A`` += a jaw's ``m J_jᵀ J_j`` with ``J_j = [I, −[r]×, k e_j]`` (``j``: its
+    generalised speed's index; ``mj`` kg, ``r`` m from the COM, ``k`` the guide)."""
+    rr = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    rk = np.cross(r, k)
+    for a in range(3):
+        A[a, a] += mj
+        A[a, j] += mj * k[a]
+        A[j, a] += mj * k[a]
+        A[3 + a, j] += mj * rk[a]
+        A[j, 3 + a] += mj * rk[a]
+        for b in range(3):
+            A[3 + a, 3 + b] += mj * ((rr if a == b else 0.0) - r[a] * r[b])
+    # the −[r]× block and its transpose: (−[r]×)[a, b] = ε_abc r_c
+    for a in range(3):
+        b, c = (a + 1) % 3, (a + 2) % 3
+        A[a, 3 + b] += mj * r[c]
+        A[a, 3 + c] -= mj * r[b]
+        A[3 + b, a] += mj * r[c]
+        A[3 + c, a] -= mj * r[b]
+    A[j, j] += mj
