@@ -73,12 +73,12 @@ CASES = [
     ),
     (
         "anchor wrong shape",
-        sub(r"^anchor = \[0.000, 0.250, 0.000\]", "anchor = [0.0, 0.25]"),
-        ["cables[0].anchor = [0, 0.25] must be a list of 3 numbers (m)"],
+        sub(r"^anchor = \[0.050, 0.250, 0.000\]", "anchor = [0.05, 0.25]"),
+        ["cables[0].anchor = [0.05, 0.25] must be a list of 3 numbers (m)"],
     ),
     (
         "anchor missing",
-        sub(r"^anchor = \[0.000, 0.250, 0.000\].*\n", ""),
+        sub(r"^anchor = \[0.050, 0.250, 0.000\].*\n", ""),
         ["cables[0].anchor is missing"],
     ),
     (
