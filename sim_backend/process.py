@@ -231,6 +231,7 @@ def serve(start: Start) -> int:
     net = run_realtime(start.model, overrides, faults=injector, plant=plant, late=late,
                        print_fn=say, between=between, signals=False)  # fmt: skip
     net.close()
+    say(f"cdprctl run: the simulated robot: {plant.contact.report()}")
     if late.count:
         say(late.summary().replace("cdprctl sim:", "cdprctl run: the simulated robot:"))
     return 0
