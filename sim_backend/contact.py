@@ -30,6 +30,9 @@ class ContactRecorder:
         self.least_what = ""  # which pair, and when (s of simulated time)
         self.contacts: list[tuple[float, str]] = []  # (s, what): each contact's start
         self._touching = False
+        if self.active:  # the kernels loaded here, not in the first real-time step
+            inverse_kinematics(model, self._kin, model.home.position, model.home.rotation)
+            self.interference.update(self._kin)
 
     def update(self, t: float, position: FloatArray, rotation: FloatArray) -> None:
         """The distances at the true pose ``position`` (m, P in the base frame), ``rotation``

@@ -81,7 +81,7 @@ def test_pushed_toward_an_obstacle_the_robot_stops_before_any_contact(rowc):
         cl.run(2.0, each=push, until=lambda c: d.state is State.FAULT)
     assert d.fault_kind is FaultKind.CLEARANCE, d.fault_reason
     assert "cable 1 and the bracket" in d.fault_reason and "clearance 5.00 mm" in d.fault_reason
-    t, least, contacts = faulted[0]
+    _, least, contacts = faulted[0]
     assert contacts == [] and 0.0 < least < held
     assert cl.plant.contact.contacts == []  # nor after, the push removed at the stop
 
