@@ -18,6 +18,10 @@ from cdprctl.interference import Interference, check_pose
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import load_robot
 from cdprctl.model.interference import Box, InterferenceConfig
+from cdprctl.telemetry.foxglove_messages import SceneMessages
+from cdprctl.telemetry.scene import SceneBuilder, SceneLayout
+from cdprctl.telemetry.schema import clearance_parts, state_payload
+from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values
 from sim_backend.contact import ContactRecorder
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,6 +75,7 @@ def test_pushed_toward_an_obstacle_the_robot_stops_before_any_contact(rowc):
         assert d.state is State.ENABLED, d.fault_reason  # holding: the noise rode through
         assert d.interference.minimum == pytest.approx(0.0051, abs=5e-5)
         held = cl.plant.contact.least
+        _telemetry_names_the_pair(model, d)
         faulted = []
 
         def push(c):
@@ -84,6 +89,29 @@ def test_pushed_toward_an_obstacle_the_robot_stops_before_any_contact(rowc):
     _, least, contacts = faulted[0]
     assert contacts == [] and 0.0 < least < held
     assert cl.plant.contact.contacts == []  # nor after, the push removed at the stop
+
+
+def _telemetry_names_the_pair(model, d):
+    """The snapshot, the state payload and the Foxglove scene carry the least distance, its
+    pair and its points (read back through the shared memory)."""
+    snap = SharedSnapshot(model.n_cables)
+    try:
+        snap.write(controller_values(d))
+        state = state_payload(snap.read(), [c.name for c in model.cables], "",
+                              parts=clearance_parts(model))  # fmt: skip
+    finally:
+        snap.close()
+    c = state["clearance"]
+    g = d.interference
+    assert c["distance"] == pytest.approx(g.minimum, abs=1e-6) and c["limit"] == 0.005
+    assert c["kind"] == "obstacle" and c["between"] == ["1", "the bracket"]
+    assert np.allclose(c["points"], g.closest[g.best[0]].reshape(2, 3), atol=1e-6)
+    layout = SceneLayout.from_model(model)
+    scene = SceneBuilder(layout).build(state)
+    assert scene.closest[1] == f"cable 1 and the bracket: {g.minimum * 1e3:.1f} mm"
+    assert scene.closest[2] is False  # not under the clearance: drawn amber
+    wire = SceneMessages(layout).update(scene, 0).encode()  # protobuf: the entity and its label
+    assert b"clearance" in wire and scene.closest[1].encode() in wire
 
 
 def test_the_recorder_records_a_contact_and_says_it(rowc):
