@@ -160,7 +160,8 @@ def clearance_summary(res: Any) -> str:
     text = (f"  interference-free (cables, body, cell ≥ {res.limit * 1e3:.2f} mm apart): "
             f"{int(clear.sum())} of {n} points, in {res.clearance_seconds:.2f} s; both: "
             f"{int(usable.sum())} ({res.usable_volume:.4g} m³); failing: {tension_only} on "
-            f"the tension only, {clearance_only} on the clearance only, {both} on both")  # fmt: skip
+            f"the tension only, {clearance_only} on the clearance only, {both} on both"
+            )  # fmt: skip
     blocked = res.pair[~clear & np.isfinite(res.clearance)]
     if len(blocked):
         ids, counts = np.unique(blocked, return_counts=True)
