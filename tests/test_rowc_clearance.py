@@ -3,7 +3,7 @@
 by the brute force of ``tools/clearance_check.py`` (numpy only, each cable sampled every
 0.1 mm, apart from ``cdprctl/interference.py``). The grid here: the ``[workspace]`` box's
 corners and the paper's X0, at the home orientation and turned ``max_angle`` about the 26 axes
-of a cube (the full grid, every 0.1 m x 10 mm x 0.1 m and 83 orientations: docs/interference.md).
+of a cube (the full grid, every 0.1 m x 10 mm x 0.1 m and 83 orientations: docs/clearance.md).
 The same poses against the kernel (the two agree within the sampling's 0.05 mm), and the
 geometry before the offsets, which the brute force finds crossing (the check can fail)."""
 

@@ -1,18 +1,20 @@
-"""rowc's crossed pairs (1-2, 3-4, 5-6, 7-8): their clearance at home and over the documented
-workspace, and offsets in x of one cable of each pair that open it (issue 67), each checked
-against the property rowc.toml documents: the 50 N lateral force (+y) held over the workspace.
+"""rowc's crossed pairs (1-2, 3-4, 5-6, 7-8): the search that chose the offsets rowc.toml ships
+with (issue 67). From the geometry before them (each pair's anchors at the frame's corner, its
+attachments at the body's corner: the two cables in one plane, through each other), offsets of
+one cable of each pair, each checked against the property rowc.toml documents: the 50 N
+lateral force (+y) held over the workspace.
 
 * The workspace as rowc.toml documents it: the ``[workspace]`` box at the home orientation
   (the file scanned the 50 N force "every 0.2 m x 0.1 m"); here every 25 mm in x and z and
   10 mm in y. Then the same box with the platform tilted up to ``max_angle`` (0.2 rad) about
   26 axes (the cube's faces, edges and corners) plus 200 random rotations, every 0.1 m.
 * Clearance: ``cdprctl/interference.py`` on every pose; the least pose of each variant checked
-  again by scipy's bounded least squares (BVLS) on the segments, apart from the kernel.
+  again by scipy's bounded least squares (BVLS) on the segments, apart from the kernel (the
+  shipped geometry's full grid by brute force: ``tools/clearance_check.py``, docs/clearance.md).
 * Feasible: ``cdprctl.tda.workspace.Margins`` (the tension margin of ``cdprctl workspace``)
   holding the weight and w_e = [0, 50, 0, 0, 0, 0] at the home orientation, on the file's
-  scan (x every 0.2 m, z every 0.1 m, in the platform's plane y = 0.35 m: as shipped, the
-  force is not held at y < 0.35 m, down to −9.0 N of margin at y = 0.33 m) and on the fine
-  grid of the whole box.
+  scan (x every 0.2 m, z every 0.1 m, in the platform's plane y = 0.35 m: the force is not
+  held at y < 0.35 m) and on the fine grid of the whole box.
 
 The variants move the even cable of each pair (2, 4, 6, 8: the back anchor, the front
 attachment) by ``d`` in x towards the frame's middle (+x for the pairs at x = 0, −x at x = 3):
@@ -26,6 +28,7 @@ from __future__ import annotations
 import argparse
 import copy
 import itertools
+import math
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +50,7 @@ def variant(where: str, d: float, axis: int = 0) -> tuple[RobotModel, dict]:
     """rowc with the even cable of each pair moved ``d`` (m) along ``axis`` (0: x, 2: z)
     towards the middle (of the frame for an anchor, of the body for an attachment) at
     ``where`` ("attachment", "anchor", "both"); the TOML as edited."""
-    data = copy.deepcopy(read_merged(ROOT / "config" / "rowc.toml"))
+    data = before_offsets(copy.deepcopy(read_merged(ROOT / "config" / "rowc.toml")))
     middle = 1.5 if axis == 0 else 0.7  # m: the frame's middle in x, in z
     for _, j in PAIRS:
         cable = data["cables"][j]
@@ -60,6 +63,16 @@ def variant(where: str, d: float, axis: int = 0) -> tuple[RobotModel, dict]:
             inward = d if cable["anchor"][axis] < middle else -d
             cable["anchor"][axis] = round(cable["anchor"][axis] + inward, 6)
     return parse_robot(data, f"rowc ({where} {d * 1e3:g} mm)"), data
+
+
+def before_offsets(data: dict) -> dict:
+    """rowc's cables as they were before issue 67: every anchor at the frame's corner (x 0 or
+    3 m, z 0 or 1.4 m), every attachment at the body's corner (x and z ±0.1 m)."""
+    for cable in data["cables"]:
+        a, b = cable["anchor"], cable["attachment"]
+        a[0], a[2] = (0.0 if a[0] < 1.5 else 3.0), (0.0 if a[2] < 0.7 else 1.4)
+        b[0], b[2] = math.copysign(0.1, b[0]), math.copysign(0.1, b[2])
+    return data
 
 
 def box_grid(model: RobotModel, dx: float, dy: float, dz: float) -> np.ndarray:
@@ -129,10 +142,12 @@ def report(model: RobotModel, label: str, fine, tilted, scan) -> str:
     tilt = least(model, tilted)
     m_scan, m_fine = margins(model, scan), margins(model, fine)
     check = bvls_pair(model, flat["crossed"][1]) if flat["crossed"][1] else np.nan
-    return (f"| {label} | {home['crossed'][0] * 1e3:.2f} | {flat['crossed'][0] * 1e3:.2f} "
-            f"(BVLS {check * 1e3:.2f}) | {tilt['crossed'][0] * 1e3:.2f} | "
-            f"{flat['body'][0] * 1e3:.1f} ({flat['body'][2].split(':')[0]}) | "
-            f"{m_scan.min():.1f} | {m_fine.min():.1f} ({int((m_fine >= 0).sum())}/{len(m_fine)}) |")
+    return (
+        f"| {label} | {home['crossed'][0] * 1e3:.2f} | {flat['crossed'][0] * 1e3:.2f} "
+        f"(BVLS {check * 1e3:.2f}) | {tilt['crossed'][0] * 1e3:.2f} | "
+        f"{flat['body'][0] * 1e3:.1f} ({flat['body'][2].split(':')[0]}) | "
+        f"{m_scan.min():.1f} | {m_fine.min():.1f} ({int((m_fine >= 0).sum())}/{len(m_fine)}) |"
+    )
 
 
 def main() -> None:
@@ -148,13 +163,19 @@ def main() -> None:
                      if abs(p[1] - base.home.position[1]) < 1e-9])  # fmt: skip
     rotations = tilts(base.workspace.max_angle, 200)
     tilted = [(p, R @ base.home.rotation) for p in coarse for R in rotations]
-    print(f"{len(fine)} poses at home orientation, {len(tilted)} tilted (<= "
-          f"{base.workspace.max_angle} rad), feasibility scan {len(scan)} points")
-    print("| variant | crossed pairs at home (mm) | over the workspace, home orientation (mm) "
-          "| tilted <= max_angle (mm) | cables-body, home orientation (mm) | 50 N margin, "
-          "file's scan (N) | 50 N margin, fine grid (N) (feasible/points) |")
+    print(
+        f"{len(fine)} poses at home orientation, {len(tilted)} tilted (<= "
+        f"{base.workspace.max_angle} rad), feasibility scan {len(scan)} points"
+    )
+    print(
+        "| variant | crossed pairs at home (mm) | over the workspace, home orientation (mm) "
+        "| tilted <= max_angle (mm) | cables-body, home orientation (mm) | 50 N margin, "
+        "file's scan (N) | 50 N margin, fine grid (N) (feasible/points) |"
+    )
     print("| --- | --- | --- | --- | --- | --- | --- |")
-    print(report(base, "rowc as shipped", fine, tilted, scan), flush=True)
+    print(report(base, "rowc before the offsets", fine, tilted, scan), flush=True)
+    shipped = parse_robot(read_merged(ROOT / "config" / "rowc.toml"), "rowc")
+    print(report(shipped, "rowc as shipped (x, z, z: 50, 50, 20 mm)", fine, tilted, scan))
     for where in args.where:
         for d in args.offsets:
             model, _ = variant(where, d, "xyz".index(args.axis))
