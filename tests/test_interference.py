@@ -219,19 +219,27 @@ def test_every_distance_and_the_least_pair_agree_with_brute_force(robots, name):
 
 
 def test_the_issue_figures_at_home(robots):
-    """rowc's crossed pairs cross (the issue's 0.05 mm, here 0); CAROCA 112 mm, CoGiRo
-    398 mm and seed000 142 mm between their cables at home (seed000's shared anchors out)."""
+    """rowc's crossed pairs, offset since the issue, 33.4 mm apart (tools/clearance_check.py's
+    brute force: 33.43 mm); CAROCA 112 mm, CoGiRo 398 mm and seed000 142 mm between their
+    cables at home (seed000's shared anchors out). rowc's layout before the offsets (each
+    pair's anchors and attachments sharing x and z): its crossed pairs cross (the issue's
+    0.05 mm, here 0)."""
     least = {}
     for name in ("rowc", "caroca", "cogiro", "seed000"):
         model = robots[name][0]
         r = check_pose(model, model.home.position, model.home.rotation)
         cables = r.checks[:, 0] == CABLE
         least[name] = float(r.distance[cables].min())
-    assert least["rowc"] < 1e-9
+    assert least["rowc"] == pytest.approx(0.03343, abs=5e-5)
     assert least["caroca"] == pytest.approx(0.112, abs=5e-4)
     assert least["cogiro"] == pytest.approx(0.398, abs=5e-4)
     assert least["seed000"] == pytest.approx(0.142, abs=5e-4)
-    model = robots["rowc"][0]
+    data = read_merged(ROOT / "config" / "rowc.toml")
+    for i, j in ((0, 1), (2, 3), (4, 5), (6, 7)):
+        a, b = data["cables"][i], data["cables"][j]
+        for key in ("anchor", "attachment"):
+            b[key] = [a[key][0], b[key][1], a[key][2]]
+    model = parse_robot(data, "rowc before the offsets")
     r = check_pose(model, model.home.position, model.home.rotation)
     crossed = {(int(i), int(j)) for kind, i, j, *_ in r.checks[r.distance < 1e-6] if kind == CABLE}
     assert crossed == {(0, 1), (2, 3), (4, 5), (6, 7)}
@@ -336,10 +344,12 @@ def test_the_attachments_neighbourhood_is_left_out():
         inverse_kinematics(model, kin, model.home.position, model.home.rotation)
         r.update(kin)
         body = r.distance[r.checks[:, 0] == BODY]
-        # every rowc cable leaves its corner outwards in x and z: the exclusion point is the
-        # closest, at e·sqrt(u_x² + u_z²) from the box
-        u = kin.u
-        assert body == pytest.approx(exclusion * np.hypot(u[:, 0], u[:, 2]), abs=1e-12)
+        # every rowc cable leaves the box outwards from its attachment on the box's edge (a
+        # corner for cables 1, 3, 5, 7): the exclusion point is the closest, its distance the
+        # clamp of that point against the box (home: platform frame = base axes)
+        point = model.attachments + exclusion * kin.u
+        excess = np.maximum(np.abs(point) - np.array([0.1, 0.05, 0.1]), 0.0)
+        assert body == pytest.approx(np.linalg.norm(excess, axis=1), abs=1e-12)
     inside = InterferenceConfig(0.005, 0.01, (_box("big", [0, 0, 0], [2.0, 0.05, 2.0]),), ())
     r = Interference(model, inside)
     r.update(kin)

@@ -197,14 +197,16 @@ def main() -> None:
         span = model.workspace.position_max - model.workspace.position_min
         steps = tuple(args.step) if args.step else tuple(float(s) / 10 for s in span)
         check = Clearance(model)
-        by_turn: dict[str, list[float]] = {}
+        by_turn: dict[str, list[float]] = {}  # least cables, body (m); poses below, poses
         t0, n = time.perf_counter(), 0
         for group, label, dR in turns(model.workspace.max_angle, args.angles, args.random):
             R = dR @ model.home.rotation
-            row = by_turn.setdefault(group, [math.inf, math.inf])
+            row = by_turn.setdefault(group, [math.inf, math.inf, 0, 0])
             for p in positions(model, steps):  # type: ignore[arg-type]
                 d = check.at(p, R, label)
                 row[0], row[1] = min(row[0], d["cables"][0]), min(row[1], d["body"][0])
+                row[2] += min(v[0] for v in d.values()) < model.interference.clearance
+                row[3] += 1
                 n += 1
         c, b = check.least["cables"], check.least["body"]
         below = sum(x.below for x in check.least.values())
@@ -217,9 +219,11 @@ def main() -> None:
         for x in (c, b):
             if x.what:
                 print(f"    {x.what}: {x.where}", file=sys.stderr)
-        for label, (cab, body) in by_turn.items():
+        for label, (cab, body, below_n, poses) in by_turn.items():
             print(
-                f"    {label}: cables {cab * 1e3:.2f} mm, body {body * 1e3:.2f} mm", file=sys.stderr
+                f"    {label}: cables {cab * 1e3:.2f} mm, body {body * 1e3:.2f} mm, "
+                f"{below_n}/{poses} poses below the clearance",
+                file=sys.stderr,
             )
 
 
