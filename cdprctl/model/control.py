@@ -80,7 +80,7 @@ class ControlConfig:
     # the platform's lowest mode over 6 (cable_space.disturbance_bandwidth says why)
     disturbance_bandwidth: float | None = None
     # position mode: the integral force feedback's gain and leak, as a multiple of the
-    # platform's lowest mode on its cables (stiffness.lowest_mode; rowc 19.4 rad/s); 0: off
+    # platform's lowest mode on its cables (stiffness.lowest_mode; rowc 19.9 rad/s); 0: off
     force_feedback: float = 1.0
     max_velocity: float = 0.3  # m/s
     max_acceleration: float = 1.0  # m/s²
