@@ -141,7 +141,7 @@ def test_daemon_sim_notify_and_sigterm(tmp_path):
     assert "ready: pose" in out and "summary:" in out
     # where the gains come from, said at start: rowc's from its model
     assert "gains from the model: drives hold the lengths" in out
-    assert "force feedback 19.4 rad/s" in out and "external-wrench estimate 0.514 Hz" in out
+    assert "force feedback 19.9 rad/s" in out and "external-wrench estimate 0.529 Hz" in out
     # --timing-file: every cycle of the summary, on the period's grid, in order
     timing = np.load(tmp_path / "timing.npz")
     cycles = int(re.search(r"cycles (\d+)", out).group(1))
