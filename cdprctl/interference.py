@@ -164,8 +164,9 @@ class Interference:
         """Check ``c`` in words: what against what."""
         kind, i, k = (int(x) for x in self.checks[c, :3])
         cable = self.cable_names
-        if kind == CABLE:
-            return f"cables {cable[i]} and {cable[k]}"
+        if kind == CABLE:  # names that say "cable" already ("cable 6") are not repeated
+            said = cable[i].startswith("cable") and cable[k].startswith("cable")
+            return f"{cable[i]} and {cable[k]}" if said else f"cables {cable[i]} and {cable[k]}"
         if kind == BODY:
             return f"cable {cable[i]} and the platform's {self.body_names[k]}"
         return f"cable {cable[i]} and {self.obstacle_names[k]}"
