@@ -146,7 +146,10 @@ class SoftLimits:
                 if gap < self._clearance(near):
                     where = "" if x is coord else (
                         f"on the way to it, at {np.round(x[:3], 4).tolist()} m, ")  # fmt: skip
-                    return f"{where}{self.clearance.describe(x)} ([interference] clearance)"
+                    since = "" if near is None else (
+                        f"; closer than the {(near + 1e-6) * 1e3:.2f} mm the motion started at")
+                    return (f"{where}{self.clearance.describe(x)} ([interference] clearance"
+                            f"{since})")  # fmt: skip
         need = self.required if floor is None else min(self.required, floor)
         if not math.isfinite(margin):
             return "the cables' geometry is degenerate there (a cable of zero length)"
