@@ -22,7 +22,8 @@ from cdprctl.cli import main
 from cdprctl.control.estimator import Estimator
 from cdprctl.control.manager import ControllerManager
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import load_robot
+from cdprctl.model import load_robot, parse_robot
+from cdprctl.model.loader import read_merged
 from cdprctl.numerics import compliance_of, unstretched_lengths
 from cdprctl.rotation import exp_so3, log_so3, matrix_to_rpy
 from cdprctl.tda.hold import equilibrium_tensions
@@ -498,6 +499,14 @@ def test_a_record_is_saved_into_a_new_state_directory_and_a_failed_write_leaves_
 def test_the_geometry_hash_of_a_shipped_robot_is_what_records_in_the_field_hold():
     """The hash every record on a robot PC was written with: a change of how it is computed
     (the fields, their order, their rounding) refuses every one of them after an upgrade
-    ("geometry changed": recalibrate). Change these values only on purpose, and say so."""
-    assert geometry_hash(load_robot(CONFIG / "rowc.toml")) == "501d6d292634f352"
+    ("geometry changed": recalibrate). Change these values only on purpose, and say so.
+    rowc's changed on purpose with its geometry (issue 67: its crossed pairs offset): a record
+    of the layout before is refused, as it must be; that layout still hashes as it did."""
+    assert geometry_hash(load_robot(CONFIG / "rowc.toml")) == "f2d538e9beddfa41"
+    data = read_merged(CONFIG / "rowc.toml")
+    for cable in data["cables"]:  # the layout before: anchors at the frame's corners, ...
+        a, b = cable["anchor"], cable["attachment"]
+        a[0], a[2] = (0.0 if a[0] < 1.5 else 3.0), (0.0 if a[2] < 0.7 else 1.4)
+        b[2] = 0.1 if b[2] > 0.0 else -0.1  # ... attachments at the body's corners
+    assert geometry_hash(parse_robot(data, "rowc before")) == "501d6d292634f352"
     assert geometry_hash(load_robot(CONFIG / "caroca.toml")) == "65afdc6cefd6ee88"
