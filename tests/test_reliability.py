@@ -55,7 +55,9 @@ def test_fault(rowc, scenario):
     if name == "winch slips 0.05 m/s":  # the stop reels the slipping cable in to its tension
         assert r.excursion_mm < 10.3, r.excursion_mm  # torque mode's; 25.4 held, 8.5 reeled in
     if name == "cable snaps":
-        assert r.excursion_mm < 40.0, r.excursion_mm  # 34.0 measured (torque mode 163)
+        # 40.1 measured on rowc's offset geometry (issue 67), 34.0 on the layout before (torque
+        # mode 163): the remaining cables take the load as the new layout shares it
+        assert r.excursion_mm < 45.0, r.excursion_mm
     if name in ESTOPS | SLOW_BRAKES:  # its own state, never a fault
         assert r.detection_s is not None and r.detection_s < 0.01, r.reaction
         assert r.reaction.startswith("estop: emergency stop") and r.fault_kind == "", r.reaction
