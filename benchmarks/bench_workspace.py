@@ -1,5 +1,6 @@
 """Benchmark: the wrench-feasible workspace of a 40×40×40 grid (``cdprctl workspace``), the
-compiled polygon LP (r = 2) against ``scipy.optimize.linprog`` (HiGHS) on the same points.
+compiled polygon LP (r = 2) against ``scipy.optimize.linprog`` (HiGHS) on the same points; and
+the interference check of the same grid (issue 67) the command adds, as a fraction of it.
 
 Run: ``.venv/bin/python benchmarks/bench_workspace.py [--all]``. linprog runs on a seeded
 sample of 2000 of the grid's points (``--all``: every point, minutes) and its grid time is
@@ -35,6 +36,7 @@ def main() -> None:
         runs = [wrench_feasible_workspace(model, grid, R, np.zeros(6)) for _ in range(3)]
         res = runs[0]
         poly_s = float(np.median([r.seconds for r in runs]))
+        clear_s = float(np.median([r.clearance_seconds for r in runs]))
         rng = np.random.default_rng(0)
         idx = np.arange(len(res.points)) if everything else rng.choice(len(res.points), 2000,
                                                                         replace=False)  # fmt: skip
@@ -57,7 +59,10 @@ def main() -> None:
             f"{lp_point * 1e6:.0f} µs/point median → {lp_grid:.0f} s "
             f"{'measured' if everything else 'for the grid (from 2000 points)'}; "
             f"ratio {lp_grid / poly_s:.0f}x; verdicts agree on {agree}/{finite}; "
-            f"{int(res.feasible.sum())} feasible, {res.volume:.3g} m³"
+            f"{int(res.feasible.sum())} feasible, {res.volume:.3g} m³; interference "
+            f"{clear_s:.2f} s ({clear_s / len(res.points) * 1e6:.1f} µs/point, "
+            f"{(poly_s + clear_s) / poly_s:.2f}x the wrench-feasible alone), "
+            f"{int(res.usable.sum())} both"
         )
 
 

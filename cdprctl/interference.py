@@ -158,15 +158,18 @@ class Interference:
         if not len(self.distance):
             return "nothing to check"
         c = int(self.best[0]) if c is None else c
+        return f"{self.name(c)}: {self.distance[c] * 1e3:.2f} mm"
+
+    def name(self, c: int) -> str:
+        """Check ``c`` in words: what against what."""
         kind, i, k = (int(x) for x in self.checks[c, :3])
         cable = self.cable_names
-        if kind == CABLE:
-            what = f"cables {cable[i]} and {cable[k]}"
-        elif kind == BODY:
-            what = f"cable {cable[i]} and the platform's {self.body_names[k]}"
-        else:
-            what = f"cable {cable[i]} and {self.obstacle_names[k]}"
-        return f"{what}: {self.distance[c] * 1e3:.2f} mm"
+        if kind == CABLE:  # names that say "cable" already ("cable 6") are not repeated
+            said = cable[i].startswith("cable") and cable[k].startswith("cable")
+            return f"{cable[i]} and {cable[k]}" if said else f"cables {cable[i]} and {cable[k]}"
+        if kind == BODY:
+            return f"cable {cable[i]} and the platform's {self.body_names[k]}"
+        return f"cable {cable[i]} and {self.obstacle_names[k]}"
 
 
 def check_pose(model: CableLayout, position: FloatArray, rotation: FloatArray) -> Interference:

@@ -38,6 +38,7 @@ from cdprctl.model.robot import RobotModel
 from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args, unstretched_lengths
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.hold import equilibrium_tensions
+from sim_backend.contact import ContactRecorder
 from sim_backend.jaw_dynamics import Jaws, JawState
 from sim_backend.physics import Body, BodyState, Inputs, Winches, physics_kernel
 from sim_backend.servo import Servo
@@ -134,6 +135,8 @@ class CdprPlant:
         self._step_kin = KinematicsData(model)  # the physics steps' inverse kinematics
         self._bundle()
         self.set_pose(model.home.position, model.home.rotation, None)
+        # the cables' contacts at the true pose, each step (contact.py)
+        self.contact = ContactRecorder(model)
 
     def _bundle(self) -> None:
         """The kernels' bundles: the same arrays as the attributes (written in place)."""
@@ -327,6 +330,7 @@ class CdprPlant:
             jaw_state,
         )
         self.time += duration
+        self.contact.update(self.time, self.position, self.R)
 
     def energy(self) -> float:
         """Kinetic + cable elastic + gravity potential energy (J), winches included; for the

@@ -233,6 +233,7 @@ def serve(start: Start) -> int:
                        print_fn=say, between=between, signals=False,
                        realtime=realtime if start.realtime else None)  # fmt: skip
     net.close()
+    say(f"cdprctl run: the simulated robot: {plant.contact.report()}")
     if late.count:
         say(late.summary().replace("cdprctl sim:", "cdprctl run: the simulated robot:"))
     return 0

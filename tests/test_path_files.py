@@ -197,8 +197,8 @@ class LimitsWithABand(SoftLimits):
         super().__init__(model)
         self.x0, self.width = x0, width
 
-    def check(self, coords, acceleration=None, floor=None):
-        margin, ok = super().check(coords, acceleration, floor)
+    def check(self, coords, acceleration=None, floor=None, **clearance):
+        margin, ok = super().check(coords, acceleration, floor, **clearance)
         x = np.asarray(coords, dtype=float).reshape(-1, 6)[:, 0]
         inside = (x >= self.x0) & (x <= self.x0 + self.width)
         return np.where(inside, -1.0, margin), ok & ~inside

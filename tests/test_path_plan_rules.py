@@ -167,7 +167,7 @@ class MarginGrowingWithX(SoftLimits):
     """Every sample holds; the margin grows with x (N): the start of a move in +x is the
     tightest point of the plan."""
 
-    def check(self, coords, acceleration=None, floor=None):
+    def check(self, coords, acceleration=None, floor=None, **clearance):
         x = np.asarray(coords, dtype=float).reshape(-1, 6)[:, 0]
         return 100.0 + 1000.0 * (x - 1.5), np.ones(len(x), dtype=bool)
 
@@ -201,7 +201,7 @@ def test_the_summary_says_segments_duration_samples_spacing_in_mm_and_margin(row
 def test_a_rejected_sample_is_named_by_its_three_coordinates(rowc):
     """To 0.1 mm: the first refused sample's x, rounded to four decimals."""
     class Refuse(SoftLimits):
-        def check(self, coords, acceleration=None, floor=None):
+        def check(self, coords, acceleration=None, floor=None, **clearance):
             x = np.asarray(coords, dtype=float).reshape(-1, 6)[:, 0]
             band = (x > 1.55) & (x < 1.57)
             self.refused = x[band].tolist()

@@ -1,4 +1,5 @@
-"""``cdprctl workspace``: the wrench-feasible workspace on a grid (``cdprctl.tda.workspace``)."""
+"""``cdprctl workspace``: the wrench-feasible and the interference-free workspace on a grid
+(``cdprctl.tda.workspace``, ``cdprctl.interference``)."""
 
 from __future__ import annotations
 
@@ -16,9 +17,14 @@ For every point of a grid, whether the cables can hold the platform there, at th
 orientation, against its weight plus the given external wrench, within their tension limits —
 and the tension margin: how far (N) the best tension distribution stays from the nearest limit
 (negative: by how much the least-violating one exceeds a limit). Redundancy 2: an exact 2-D
-linear programme per point (compiled); otherwise scipy's linprog (HiGHS) per point.
+linear programme per point (compiled); otherwise scipy's linprog (HiGHS) per point. And
+whether it is interference-free: every pair of cables, each cable and the platform's body,
+each cable and the cell's obstacles at least [interference] clearance apart (the least
+distance and its pair per point). Each point that fails says why: the tension, the clearance
+or both.
 --json prints {"points": [[x, y, z], ...], "feasible": [...], "margin": [N, ...],
-"volume": m³, ...} with x varying fastest, then y, then z."""
+"clearance": [m, ...], "clear": [...], "usable": [...], "why": [...], "pair": [index into
+"pairs"], "volume": m³, "volume_usable": m³, ...} with x varying fastest, then y, then z."""
 
 EPILOG = """\
 examples:
@@ -27,8 +33,9 @@ examples:
 
 
 def add_parser(sub: Any) -> None:
-    p = command_parser(sub, "workspace", "the wrench-feasible workspace on a grid (JSON, slice "
-                       "plots)", run, description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
+    p = command_parser(sub, "workspace", "the wrench-feasible and interference-free workspace "
+                       "on a grid (JSON, slice plots)", run, description=DESCRIPTION,
+                       epilog=EPILOG)  # fmt: skip
     p.add_argument("--rpy", metavar="ROLL,PITCH,YAW",
                    help="orientation (rad; default: the home one)")  # fmt: skip
     p.add_argument(
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
     if args.json:
         margin = [round(float(x), 4) if np.isfinite(x) else None for x in res.margin]
+        clearance = [round(float(x), 6) if np.isfinite(x) else None for x in res.clearance]
         json.dump(
             {
                 "robot": model.name,
@@ -101,9 +109,18 @@ def run(args: argparse.Namespace) -> int:
                 "points": np.round(res.points, 6).tolist(),
                 "feasible": feasible.tolist(),
                 "margin": margin,
+                "clearance": clearance,
+                "clearance_limit": res.limit,
+                "clear": res.clear.tolist(),
+                "usable": res.usable.tolist(),
+                "why": why_each(res),
+                "pair": res.pair.tolist(),
+                "pairs": res.pairs,
                 "volume": res.volume,
+                "volume_usable": res.usable_volume,
                 "method": res.method,
                 "seconds": res.seconds,
+                "clearance_seconds": res.clearance_seconds,
             },
             sys.stdout,
         )
@@ -120,4 +137,35 @@ def run(args: argparse.Namespace) -> int:
               f"y {p[:, 1].min():.3f}..{p[:, 1].max():.3f} m, "
               f"z {p[:, 2].min():.3f}..{p[:, 2].max():.3f} m; "
               f"largest margin {res.margin.max():.1f} N")  # fmt: skip
+    print(clearance_summary(res))
     return 0
+
+
+def why_each(res: Any) -> list[str]:
+    """Why each point fails: "", "tension", "clearance" or "tension, clearance"."""
+    words = ("", "tension", "clearance", "tension, clearance")
+    code = (~res.feasible).astype(int) + 2 * (~res.clear).astype(int)
+    return [words[c] for c in code]
+
+
+def clearance_summary(res: Any) -> str:
+    """The interference-free points, both, and why the others fail (the pairs that bound the
+    clearance most often)."""
+    n, clear, usable = len(res.margin), res.clear, res.usable
+    if not len(res.clearance):
+        return "  interference: nothing to check (one cable, no body, no obstacle)"
+    tension_only = int(np.count_nonzero(~res.feasible & clear))
+    clearance_only = int(np.count_nonzero(res.feasible & ~clear))
+    both = int(np.count_nonzero(~res.feasible & ~clear))
+    text = (f"  interference-free (cables, body, cell ≥ {res.limit * 1e3:.2f} mm apart): "
+            f"{int(clear.sum())} of {n} points, in {res.clearance_seconds:.2f} s; both: "
+            f"{int(usable.sum())} ({res.usable_volume:.4g} m³); failing: {tension_only} on "
+            f"the tension only, {clearance_only} on the clearance only, {both} on both"
+            )  # fmt: skip
+    blocked = res.pair[~clear & np.isfinite(res.clearance)]
+    if len(blocked):
+        ids, counts = np.unique(blocked, return_counts=True)
+        top = np.argsort(-counts, kind="stable")[:3]
+        text += "\n  closest under the clearance: " + ", ".join(
+            f"{res.pairs[int(ids[j])]} ({int(counts[j])} points)" for j in top)
+    return text

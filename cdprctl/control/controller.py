@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from cdprctl.control.cable_space import CableSpace
+from cdprctl.control.clearance_watch import ClearanceWatch
 from cdprctl.control.commands import Command
 from cdprctl.control.cycle_io import CycleIO, reference_args
 from cdprctl.control.data import ControlData
@@ -46,6 +47,7 @@ from cdprctl.control.supervisor import DrivePort, Supervisor
 from cdprctl.control.torques import WinchTorques
 from cdprctl.control.wrench import PoseController
 from cdprctl.gripper import GripperSet
+from cdprctl.interference import Interference, interference_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.trajectory import Trajectory
@@ -98,8 +100,12 @@ class Controller:
         torque_limits = self.winches.limit.copy() if model.drives.holds_lengths else None
         # the one owner of data.state: the desk, the supervisor and the start-up ask it
         self.machine = StateMachine(d)
+        # the cables' clearance at the estimated pose (data.interference), watched
+        self.interference = d.interference = Interference(model)
+        watch = ClearanceWatch(self.interference)
+        self._clearance = self.interference.arrays if watch.active else None
         self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits,
-                                     model.safety, self.machine)  # fmt: skip
+                                     model.safety, self.machine, watch)  # fmt: skip
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
         self.jog = Jog(model, d, tr, self.limits)
@@ -150,6 +156,8 @@ class Controller:
         # 1. estimate ← feedback, the cables stretched by the tensions this mode assumes
         self._stretch_tensions(st)
         fk = e.update(st.stamp, st.position, d.stretch_tensions, st.velocity, st.feedback_age)
+        if self._clearance is not None:  # → data.interference, at the estimate's cables
+            interference_kernel(e.kin.arrays, e.position, e.rotation, self._clearance)
         if d.state in OBSERVED_STATES:  # estimate, feedback → data.ext_estimate
             self.observer.update(t, st.torque, st.velocity, tr.acceleration, io.estimate, e.kin)
         if self.grippers.n:

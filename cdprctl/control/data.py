@@ -88,6 +88,9 @@ class ControlData:
         self.target: np.ndarray = np.zeros(6)  # where the trajectory ends
         self.motor_position: np.ndarray = np.zeros(m)  # rad
         self.grasp: Any = None  # GraspSensor, with grippers
+        # the cables' clearance at the estimated pose: ``Interference`` (its ``distance`` m,
+        # ``best``, ``closest`` m, base frame), written every cycle (controller.py)
+        self.interference: Any = None
         self.tda_method = ""
         # where the loop's gains come from, set once (controller.py): force_feedback rad/s,
         # disturbance_bandwidth Hz, pose_bandwidth Hz per axis (torque mode's, set by hand)

@@ -52,6 +52,7 @@ class FaultKind(enum.StrEnum):
     TENSION_DISTRIBUTION = "tension distribution"
     CABLE_TENSION = "cable tension"
     BEYOND_CAPACITY = "beyond capacity"
+    CLEARANCE = "clearance"
     DURING_STOP = "during the stop"
     INTERNAL = "internal error"
 
@@ -84,6 +85,9 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.BEYOND_CAPACITY: "persistent: 30 ms of a drive at its torque limit while the "
     "drives hold the lengths (position mode): the cables cannot hold the platform, a stop on "
     "the motors would be dragged; the brakes, which hold more than the motors, close at once",
+    FaultKind.CLEARANCE: "persistent: 10 ms under the clearance, or at once 0.5 mm under it "
+    "(the estimate's noise is µm; clearance_watch.py): two cables, a cable and the platform's "
+    "body or the cell closer than [interference] clearance",
     FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
     FaultKind.INTERNAL: "immediate: the cycle itself failed",
 }

@@ -30,6 +30,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from cdprctl.control.cable_checks import TensionDisagreement
+from cdprctl.control.clearance_watch import ClearanceWatch
 from cdprctl.control.data import ControlData
 from cdprctl.control.estop import EmergencyStop
 from cdprctl.control.persistence import Persistence
@@ -104,11 +105,13 @@ class Supervisor:
                  tension_limits: np.ndarray | None = None,
                  torque_limits: np.ndarray | None = None,
                  safety: SafetyConfig | None = None,
-                 machine: StateMachine | None = None):  # fmt: skip
+                 machine: StateMachine | None = None,
+                 clearance: ClearanceWatch | None = None):  # fmt: skip
         """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
         ``tension_limits`` (N, per cable): the internal tension error that faults (position
         mode), None: not checked; ``safety``: each fault kind's stop category; ``machine``:
-        the state machine its transitions are asked of (the controller's; None: its own)."""
+        the state machine its transitions are asked of (the controller's; None: its own);
+        ``clearance``: the cables' clearance check (None: not checked)."""
         self.config = config
         safety = safety or SafetyConfig()
         self.stop_of = {k: safety.category_of(k.value) for k in FaultKind}
@@ -139,8 +142,10 @@ class Supervisor:
         self._feedback_old = Persistence(config.period)
         self.estop = EmergencyStop()
         self.machine = machine if machine is not None else StateMachine(data)
+        self.clearance = clearance
         self.machine.forget_when_unsupervised(
             (self._tension.over, self._torque_at_limit, self._speed_over, self._feedback_old)
+            + (() if clearance is None else (clearance,))
         )
 
     @property
@@ -293,6 +298,9 @@ class Supervisor:
                 f"{fk_residual * 1e3:.2f} mm > {c.max_fk_residual * 1e3:.0f} mm "
                 "(an encoder jump, a slipped or broken cable)"
             )
+        why = None if self.clearance is None else self.clearance.check(t)
+        if why is not None:
+            return FaultKind.CLEARANCE, why
         if position_error > c.max_position_error:
             return FaultKind.TRACKING, (
                 f"tracking error {position_error * 1e3:.1f} mm "

@@ -1,8 +1,10 @@
 """Soft limits, one rule for every target (a path's samples, a jog's ray): the reference point
 inside the workspace box, the tilt within ``max_angle``, and the wrench the cables must
 exert there — the weight, the known external wrench and the motion's inertial load — held
-with a tension margin of at least ``RobotModel.soft_margin`` (``cdprctl.tda.workspace``).
-A motion that starts below that margin may go on while it does not lose more of it."""
+with a tension margin of at least ``RobotModel.soft_margin`` (``cdprctl.tda.workspace``), and
+the cables at least ``[interference] clearance`` from each other, the platform's body and the
+cell (``clearance.py``: at each sample, and between the samples of a motion). A motion that
+starts below that margin, or under that clearance, may go on while it loses no more of it."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import numpy as np
 
 from cdprctl.gripper import GripperSet
 from cdprctl.model.robot import RobotModel
+from cdprctl.motion.clearance import Clearance
 from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.rotation import FloatArray
 from cdprctl.tda.workspace import Margins, hold_wrench
@@ -26,6 +29,12 @@ class SoftLimits:
             model.control.external_wrench if external is None else external, dtype=float
         )
         self.required = model.soft_margin  # N
+        self.clearance = Clearance(model)
+        # m: the least distance of the last check's samples (with ``continuous``, of the way to
+        # each), and (n, 6) the coordinates where it is
+        self.nearest = np.full(1, math.inf)
+        self.nearest_at = np.zeros((1, 6))
+        self.near: float | None = None  # m: the last ``along``'s clearance floor
 
     def rotations(self, coords: FloatArray) -> FloatArray:
         """(n, 3, 3): the orientations of trajectory coordinates ``[p, φ]`` (φ: rotation
@@ -46,11 +55,17 @@ class SoftLimits:
         return out
 
     def check(
-        self, coords: FloatArray, acceleration: FloatArray | None = None, floor: float | None = None
+        self,
+        coords: FloatArray,
+        acceleration: FloatArray | None = None,
+        floor: float | None = None,
+        continuous: bool = False,
+        near: float | None = None,
     ) -> tuple[FloatArray, FloatArray]:
         """For samples ``coords`` (n, 6): (margin N, ok bool) per sample; ``floor`` (N) lowers
-        the required margin (a motion that starts below it). The box and the tilt are checked
-        to 1 µm / 1 µrad."""
+        the required margin (a motion that starts below it), ``near`` (m) the clearance (one
+        that starts under it); ``continuous``: the samples are one motion, checked between
+        them too (``Clearance.least``). The box and the tilt are checked to 1 µm / 1 µrad."""
         c = np.asarray(coords, dtype=float).reshape(-1, 6)
         ws = self.model.workspace
         if acceleration is None and len(c) > 1 and not np.ptp(c[:, 3:], axis=0).any():
@@ -69,22 +84,52 @@ class SoftLimits:
             & (np.linalg.norm(c[:, 3:], axis=1) <= ws.max_angle + 1e-6)
             & (margin >= need)
         )
+        if self.clearance.active:
+            self.nearest, self.nearest_at = self.clearance.least(c, continuous)
+            ok &= self.nearest >= self._clearance(near)
+        else:
+            self.nearest, self.nearest_at = np.full(len(c), math.inf), c
         return margin, ok
+
+    def near_of(self, start: FloatArray) -> float | None:
+        """m: the clearance a motion from the coordinates ``start`` keeps: None (the
+        configured one) when it starts clear, else no closer than it starts."""
+        if not self.clearance.active:
+            return None
+        d = float(self.clearance.least(start)[0][0])
+        return None if d >= self.clearance.limit else d - 1e-6
+
+    def _clearance(self, near: float | None) -> float:
+        """m: the clearance required (``near``: a motion's start under it)."""
+        return self.clearance.limit if near is None else min(self.clearance.limit, near)
 
     def along(
         self, coords: FloatArray, acceleration: FloatArray | None = None
     ) -> tuple[FloatArray, FloatArray, float | None]:
-        """``check`` of a motion's samples, from its first: a motion that starts below the
-        required margin may go on while it loses none of it. Returns (margin, ok, the floor
-        used or None)."""
+        """``check`` of a motion's samples, from its first, between the samples too: a motion
+        that starts below the required margin, or under the clearance, may go on while it
+        loses none of it. Returns (margin, ok, the floor used or None); the clearance's floor
+        is kept in ``near``, ``nearest`` and ``nearest_at`` say where each sample's way came
+        closest."""
         first = np.asarray(coords, dtype=float)[:1]
         margin, ok = self.check(first, None if acceleration is None else acceleration[:1])
-        floor = None if ok[0] or not math.isfinite(margin[0]) else float(margin[0]) - 1e-6
-        margin, ok = self.check(coords, acceleration, floor)
+        floor = None if margin[0] >= self.required or not math.isfinite(margin[0]) else (
+            float(margin[0]) - 1e-6)  # fmt: skip
+        self.near = self.near_of(first[0])
+        self.nearest_at = np.array(coords, dtype=float)  # (a check without the clearance)
+        margin, ok = self.check(coords, acceleration, floor, continuous=True, near=self.near)
         return margin, ok, floor
 
-    def why(self, coord: FloatArray, margin: float, floor: float | None = None) -> str:
-        """Which rule the sample ``coord`` breaks, with the values and units."""
+    def why(
+        self,
+        coord: FloatArray,
+        margin: float,
+        floor: float | None = None,
+        at: FloatArray | None = None,
+        near: float | None = None,
+    ) -> str:
+        """Which rule the sample ``coord`` breaks, with the values and units; ``at``: where the
+        way to it came closest (``nearest_at``), ``near`` the clearance's floor used."""
         ws = self.model.workspace
         p = coord[:3]
         for k, axis in enumerate("xyz"):
@@ -95,6 +140,16 @@ class SoftLimits:
         if angle > ws.max_angle + 1e-6:
             return (f"the tilt {angle:.4f} rad from the home orientation exceeds "
                     f"workspace.max_angle = {ws.max_angle:g} rad")  # fmt: skip
+        if self.clearance.active:
+            for x in (coord,) if at is None else (coord, at):
+                gap = self.clearance.least(x)[0][0]
+                if gap < self._clearance(near):
+                    where = "" if x is coord else (
+                        f"on the way to it, at {np.round(x[:3], 4).tolist()} m, ")  # fmt: skip
+                    since = "" if near is None else (
+                        f"; closer than the {(near + 1e-6) * 1e3:.2f} mm the motion started at")
+                    return (f"{where}{self.clearance.describe(x)} ([interference] clearance"
+                            f"{since})")  # fmt: skip
         need = self.required if floor is None else min(self.required, floor)
         if not math.isfinite(margin):
             return "the cables' geometry is degenerate there (a cable of zero length)"
@@ -118,16 +173,19 @@ class SoftLimits:
         s = np.linspace(0.0, horizon, n)
         coords = start[None, :] + s[:, None] * d[None, :]
         margin, ok, floor = self.along(coords)
+        near = self.near
         if ok.all():
             return coords[-1], ""
         bad = int(np.argmin(ok))
+        why = self.why(coords[bad], float(margin[bad]), floor, self.nearest_at[bad], near)
         if bad == 0:
-            return np.array(start, dtype=float), self.why(coords[0], float(margin[0]), floor)
+            return np.array(start, dtype=float), why
         lo, hi = s[bad - 1], s[bad]
         for _ in range(6):
             mid = 0.5 * (lo + hi)
-            if self.check((start + mid * d)[None], floor=floor)[1][0]:
+            way = np.array([start + lo * d, start + mid * d])
+            if self.check(way, floor=floor, continuous=True, near=near)[1].all():
                 lo = mid
             else:
                 hi = mid
-        return start + lo * d, self.why(coords[bad], float(margin[bad]), floor)
+        return start + lo * d, why

@@ -12,7 +12,9 @@ corner is rounded, within the limits. A timed row sets the segment's minimum dur
 
 The check plays the plan offline through the same ``Trajectory`` at the loop's period and
 tests every sample (``SoftLimits``, the inertial load included) at most ``CHECK_SPACING``
-apart; the first failing sample rejects the path, naming its waypoint, time, pose and rule.
+apart, and the cables' clearance between the samples too (``clearance.py``); the first
+failing sample rejects the path, naming its waypoint, time, pose and rule (for the clearance:
+the pair and the distance).
 """
 
 from __future__ import annotations
@@ -140,11 +142,12 @@ def plan_path(
     lim = limits or SoftLimits(model)
     start = np.asarray(start, dtype=float)
     targets = [coordinates_of(model, w.pose) for w in waypoints]
+    near = lim.near_of(start)  # a path from under the clearance gets no closer
     for w, x in zip(waypoints, targets, strict=True):  # the waypoints themselves first
-        margin, ok = lim.check(x[None])
+        margin, ok = lim.check(x[None], near=near)
         if not ok[0]:
             raise PathRejectedError(f"{w.where}: waypoint {(np.round(w.pose, 4) + 0.0).tolist()}: "
-                               f"{lim.why(x, float(margin[0]))}")  # fmt: skip
+                               f"{lim.why(x, float(margin[0]), near=near)}")  # fmt: skip
         if w.speed is not None and w.speed > c.max_velocity * (1 + 1e-9):
             raise PathRejectedError(f"{w.where}: speed {w.speed:g} m/s exceeds the configured "
                                f"[control] max_velocity = {c.max_velocity:g} m/s")  # fmt: skip
@@ -272,7 +275,7 @@ def _play_and_check(
         i = int(np.argmin(ok))
         k = seg_of[i]
         pose = np.round(P[i, :3], 4).tolist()
-        why = lim.why(P[i], float(margin[i]), floor)
+        why = lim.why(P[i], float(margin[i]), floor, lim.nearest_at[i], lim.near)
         raise PathRejectedError(
             f"{segments[k].where} (segment {k + 1}): at t = {times[i]:.2f} s, position {pose} m: "
             f"{why}"

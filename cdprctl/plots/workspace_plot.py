@@ -1,7 +1,9 @@
 """Pictures of the wrench-feasible workspace (``cdprctl workspace --plot DIR``), after CASPR's
 workspace plots: slices through the feasible part of the grid coloured by the tension margin
-(N), the boundary drawn on the cells' edges, infeasible cells grey, the configured workspace
-box, the anchors' projections and the home pose marked; and the feasible points in 3-D."""
+(N), the boundary drawn on the cells' edges, infeasible cells grey, the points where the
+cables come closer than the clearance crossed (issue 67: not interference-free), the
+configured workspace box, the anchors' projections and the home pose marked; and the
+feasible points in 3-D, those under the clearance in red."""
 
 from __future__ import annotations
 
@@ -87,8 +89,11 @@ def slices_figure(model: RobotModel, res: WorkspaceResult, margin: np.ndarray, k
     fig, axs = plt.subplots(rows, cols, figsize=(4.2 * cols + 1.2, 3.6 * rows + 0.6), squeeze=False,
                             layout="constrained")  # fmt: skip
     im = None
+    n = res.grid.n
+    clear = res.clear.reshape(n[2], n[1], n[0])
     for ax, idx in zip(axs.ravel(), picks, strict=False):
         im = _draw_slice(ax, model, res, np.take(margin, idx, axis=2 - k), k, idx, top or 1.0)
+        _cross_blocked(ax, res, np.take(clear, idx, axis=2 - k), k)
     for ax in axs.ravel()[len(picks):]:
         ax.axis("off")
     if im is not None:
@@ -96,6 +101,7 @@ def slices_figure(model: RobotModel, res: WorkspaceResult, margin: np.ndarray, k
     home_k = model.home.position[k]
     fig.suptitle(
         f"{title}\nfeasible: coloured by margin, red: boundary, grey: infeasible, "
+        f"×: cables under the {res.limit * 1e3:.3g} mm clearance, "
         f"dashed: configured workspace (where the slice cuts it), ▲ anchors (projected), "
         f"☆ home (on its slice only, {AXES[k]} = {home_k:.3g} m)",
         fontsize=9,
@@ -147,6 +153,16 @@ def _draw_slice(ax: Any, model: RobotModel, res: WorkspaceResult, sl: np.ndarray
     return im
 
 
+def _cross_blocked(ax: Any, res: WorkspaceResult, clear: np.ndarray, k: int) -> None:
+    """A cross on each point of the slice that is not interference-free (``clear``: the
+    slice's verdicts, rows the higher of the two remaining axes)."""
+    axes = res.grid.axes()
+    a, b = [i for i in range(3) if i != k]
+    rows, cols = np.nonzero(~clear.reshape(len(axes[b]), len(axes[a])))
+    if len(rows):
+        ax.scatter(axes[a][cols], axes[b][rows], marker="x", s=8, c="red", linewidths=0.6)
+
+
 def _half_step(x: np.ndarray) -> float:
     return float(x[1] - x[0]) / 2.0 if len(x) > 1 else 0.5
 
@@ -154,7 +170,7 @@ def _half_step(x: np.ndarray) -> float:
 def _scatter(d: Path, model: RobotModel, res: WorkspaceResult, title: str) -> Path:
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
-    ok = res.feasible
+    ok = res.usable
     p = res.points[ok]
     # a cloud of thousands of opaque points hides itself: small, translucent
     sc = ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=res.margin[ok], s=2, alpha=0.35,
@@ -163,6 +179,10 @@ def _scatter(d: Path, model: RobotModel, res: WorkspaceResult, title: str) -> Pa
     ax.scatter(a[:, 0], a[:, 1], a[:, 2], marker="^", c="k", s=30)
     h = model.home.position
     ax.scatter([h[0]], [h[1]], [h[2]], marker="*", c="red", s=120, label="home")
+    near = res.points[res.feasible & ~res.clear]
+    if len(near):
+        ax.scatter(near[:, 0], near[:, 1], near[:, 2], marker="x", c="red", s=4, alpha=0.5,
+                   label=f"feasible, cables < {res.limit * 1e3:.3g} mm apart")  # fmt: skip
     ws = model.workspace
     lo, hi = np.asarray(ws.position_min), np.asarray(ws.position_max)
     for i in range(3):  # the configured box's 12 edges
@@ -178,7 +198,8 @@ def _scatter(d: Path, model: RobotModel, res: WorkspaceResult, title: str) -> Pa
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
     fig.colorbar(sc, ax=ax, shrink=0.6, label="tension margin (N)")
-    ax.set_title(f"{title}\n{ok.sum()} of {len(ok)} points feasible, {res.volume:.3g} m³",
+    ax.set_title(f"{title}\n{res.feasible.sum()} of {len(ok)} points wrench-feasible, "
+                 f"{ok.sum()} of them interference-free ({res.usable_volume:.3g} m³)",
                  fontsize=9)  # fmt: skip
     path = d / "feasible_3d.png"
     fig.savefig(path, dpi=110)

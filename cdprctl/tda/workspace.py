@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
 
 from cdprctl.gripper import GripperSet
+from cdprctl.interference import Interference, interference_kernel
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.rotation import FloatArray
@@ -198,15 +199,41 @@ class WorkspaceResult:
     margin: FloatArray  # (n,) N; -inf where the geometry is degenerate
     seconds: float  # wall time of the margins
     method: str  # "polygon" (r = 2) or "lp"
+    # the cables' least distance (m) at each point (``cdprctl/interference.py``), the check
+    # that has it (an index of ``pairs``: what against what), the clearance (m), the time (s)
+    clearance: FloatArray = field(default_factory=lambda: np.zeros(0))
+    pair: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    pairs: list[str] = field(default_factory=list)
+    limit: float = 0.0
+    clearance_seconds: float = 0.0
 
     @property
     def feasible(self) -> np.ndarray:
+        """Wrench-feasible: the tension margin ≥ 0."""
         return self.margin >= 0.0
+
+    @property
+    def clear(self) -> np.ndarray:
+        """Interference-free: the cables at least the clearance apart (every point, with
+        nothing to check)."""
+        if not len(self.clearance):
+            return np.ones(len(self.margin), dtype=bool)
+        return self.clearance >= self.limit
+
+    @property
+    def usable(self) -> np.ndarray:
+        """Both wrench-feasible and interference-free."""
+        return self.feasible & self.clear
 
     @property
     def volume(self) -> float:
         """m³: feasible points × the grid's cell volume."""
         return float(np.count_nonzero(self.feasible)) * self.grid.cell_volume()
+
+    @property
+    def usable_volume(self) -> float:
+        """m³: the points both wrench-feasible and interference-free × the cell volume."""
+        return float(np.count_nonzero(self.usable)) * self.grid.cell_volume()
 
 
 def wrench_feasible_workspace(
@@ -220,4 +247,39 @@ def wrench_feasible_workspace(
     calc = Margins(model)
     t0 = time.perf_counter()
     margin = calc.of(pts, np.broadcast_to(R, (n, 3, 3)), np.broadcast_to(w, (n, 6)))
-    return WorkspaceResult(grid, pts, margin, time.perf_counter() - t0, calc.method)
+    seconds = time.perf_counter() - t0
+    g = Interference(model)
+    res = WorkspaceResult(grid, pts, margin, seconds, calc.method, limit=g.clearance,
+                          pairs=[g.name(c) for c in range(len(g.distance))])  # fmt: skip
+    if len(g.distance):
+        t0 = time.perf_counter()
+        res.clearance, res.pair = np.empty(n), np.empty(n, dtype=np.int64)
+        _clearances(calc.kin.arrays, pts, np.ascontiguousarray(R, dtype=float), g.arrays,
+                    res.clearance, res.pair)  # fmt: skip
+        res.clearance_seconds = time.perf_counter() - t0
+    return res
+
+
+@njit(cache=True, nogil=True)
+def _clearances(k, P, R, g, out, which):  # pragma: no cover - compiled
+    """The least distance (m) of every point ``P`` (n, 3) at the orientation ``R``, and its
+    check (``interference_kernel``); NaN where the geometry is degenerate."""
+    anchors, attach = k[0], k[1]
+    distance, best = g[4], g[6]
+    for n in range(P.shape[0]):
+        ok = True
+        for i in range(anchors.shape[0]):  # an attachment on its anchor: no cable
+            d2 = 0.0
+            for a in range(3):
+                b = P[n, a] - anchors[i, a]
+                for c in range(3):
+                    b += R[a, c] * attach[i, c]
+                d2 += b * b
+            if not d2 > 1e-18:
+                ok = False
+        if not ok:
+            out[n], which[n] = math.nan, 0
+            continue
+        ik_kernel(k, P[n], R)
+        interference_kernel(k, P[n], R, g)
+        out[n], which[n] = distance[best[0]], best[0]

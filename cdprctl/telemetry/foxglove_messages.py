@@ -153,6 +153,21 @@ class SceneMessages:
                                 size=Vector3(x=1.5 * s, y=1.5 * s, z=1.5 * s),
                                 color=Color(r=0.9, g=0.2, b=0.2, a=1.0))
                 for j in scene.jaws]  # fmt: skip
+        near = []  # the closest pair: a line between its points, named; red under the clearance
+        if scene.closest is not None:
+            points, label, under = scene.closest
+            red, amber = Color(r=0.9, g=0.1, b=0.1, a=1.0), Color(r=0.95, g=0.75, b=0.1, a=1.0)
+            colour = red if under else amber
+            m = 0.5 * (points[0] + points[1])
+            near = [SceneEntity(timestamp=stamp, frame_id=BASE, id="clearance",
+                                lines=[LinePrimitive(type=LinePrimitiveLineType.LineList,
+                                                     points=[_pt(points[0]), _pt(points[1])],
+                                                     thickness=0.5 * s, color=colour)],
+                                texts=[TextPrimitive(
+                                    pose=Pose(position=Vector3(x=float(m[0]), y=float(m[1]),
+                                                               z=float(m[2]))),
+                                    billboard=True, font_size=2.0 * s, scale_invariant=False,
+                                    color=colour, text=label)])]  # fmt: skip
         return SceneUpdate(entities=[
             SceneEntity(timestamp=stamp, frame_id=BASE, id="frame", spheres=self.anchors,
                         lines=[self.frame_box, *pulleys]),
@@ -161,6 +176,7 @@ class SceneMessages:
             SceneEntity(timestamp=stamp, frame_id=PLATFORM, id="platform", frame_locked=True,
                         cubes=[platform]),
             SceneEntity(timestamp=stamp, frame_id=BASE, id="jaws", spheres=jaws),
+            *near,
         ])  # fmt: skip
 
 
@@ -173,6 +189,7 @@ def signals(state: dict[str, Any]) -> dict[str, Any]:
         "torques": state.get("torques"),
         "tracking_error": state.get("tracking_error"),
         "path": state.get("path"),
+        "clearance": (state.get("clearance") or {}).get("distance"),
     }
 
 
@@ -184,6 +201,7 @@ SIGNALS_SCHEMA = {
         "tensions": {"type": "array", "items": {"type": ["number", "null"]}},
         "torques": {"type": "array", "items": {"type": ["number", "null"]}},
         "tracking_error": {"type": "array", "items": {"type": ["number", "null"]}},
+        "clearance": {"type": ["number", "null"]},  # m, the cables' least distance
     },
 }
 

@@ -39,7 +39,7 @@ def foxglove_main(
         transforms,
     )
     from cdprctl.telemetry.scene import SceneBuilder, SceneLayout
-    from cdprctl.telemetry.schema import state_payload
+    from cdprctl.telemetry.schema import clearance_parts, state_payload
 
     yield_to_the_loop(loop_cpu(model.control.cpu))  # best effort, as the gateway's
     snap = SharedSnapshot(model.n_cables, snapshot_name, g=len(model.grippers))
@@ -65,10 +65,11 @@ def foxglove_main(
     builder, messages = SceneBuilder(layout), SceneMessages(layout)
     names = list(layout.names)
     grippers = [g.name for g in model.grippers]
+    parts = clearance_parts(model)
 
     def publish(s: Any) -> None:
         now_ns = time.time_ns()
-        state = state_payload(s, names, "", grippers)
+        state = state_payload(s, names, "", grippers, parts=parts)
         sc = builder.build(state)
         if sc is not None:
             tf.log(transforms(sc, now_ns), log_time=now_ns)

@@ -20,6 +20,7 @@ from cdprctl.telemetry.helper import Deadlines, paced
 from cdprctl.telemetry.refusals import log_refusals, refuses_anybody
 from cdprctl.telemetry.schema import (
     SCHEMA,
+    clearance_parts,
     encode,
     event_payload,
     pose_payload,
@@ -124,6 +125,7 @@ class Gateway:
         )
         self.names = [c.name for c in model.cables]
         self.grip_names = [g.name for g in model.grippers]
+        self.parts = clearance_parts(model)
         self.brake_test = summary.get("safety", {}).get("brake_test")
         self.validator = CommandValidator(model, zc.commands)
         self.warning = (UNAUTHENTICATED_WARNING
@@ -215,7 +217,8 @@ class Gateway:
         s = self.read_snapshot()
         if s is not None and s["seq"][0] != self.last_seq:
             self.last_seq = float(s["seq"][0])
-            body = state_payload(s, self.names, self.fault, self.grip_names, self.brake_test)
+            body = state_payload(s, self.names, self.fault, self.grip_names, self.brake_test,
+                                 self.parts)  # fmt: skip
             if self.warning:
                 body["warning"] = self.warning
             self.pub_state.put(encode(body))

@@ -136,6 +136,9 @@ class Scene:
     pulleys: list[FloatArray]  # (k, 3) circles of the pulleys' wheels
     box: tuple[FloatArray, FloatArray]  # platform frame: the attachments' box (centre, size)
     jaws: FloatArray  # (g, 3) base frame
+    # the cables' least distance (``schema.clearance_payload``): the closest points (2, 3),
+    # the label ("cables 1 and 2: 25.7 mm") and whether it is under the clearance; None: none
+    closest: tuple[FloatArray, str, bool] | None = None
 
 
 class SceneBuilder:
@@ -187,5 +190,18 @@ class SceneBuilder:
             exits=exits, attach=attach, tensions=t,
             colours=[tension_rgba(float(t[i]), float(lo[i]), float(hi[i])) for i in range(len(t))],
             status=[cable_status(float(t[i]), float(lo[i]), float(hi[i])) for i in range(len(t))],
-            pulleys=pulleys, box=self.box, jaws=jaws,
+            pulleys=pulleys, box=self.box, jaws=jaws, closest=closest_pair(state),
         )  # fmt: skip
+
+
+def closest_pair(state: dict[str, Any]) -> tuple[FloatArray, str, bool] | None:
+    """The closest pair of a state payload's ``clearance``: its points, label, and whether
+    it is under the clearance."""
+    c = state.get("clearance")
+    if not c or c["distance"] is None or None in c["points"][0] + c["points"][1]:
+        return None
+    points = np.array(c["points"], dtype=float)
+    a, b = c["between"]
+    what = f"cables {a} and {b}" if c["kind"] == "cable" else f"cable {a} and {b}"
+    under = c["limit"] is not None and c["distance"] < c["limit"]
+    return points, f"{what}: {c['distance'] * 1e3:.1f} mm", under

@@ -72,7 +72,10 @@ def state_payload(
     fault: str,
     gripper_names: list[str] | tuple[str, ...] = (),
     brake_test: Any = None,
+    parts: tuple[list[str], list[str]] = ([], []),
 ) -> dict[str, Any]:
+    """``parts``: the names of the platform's body parts and of the cell's obstacles (the
+    clearance's pair)."""
     true = snap["true_position"]
     grip = [
         {
@@ -118,6 +121,39 @@ def state_payload(
         },
         **({"true_position": _floats(true)} if np.all(np.isfinite(true)) else {}),
         **({"grippers": grip} if grip else {}),
+        "clearance": clearance_payload(snap["clearance"], cable_names, parts),
+    }
+
+
+CHECK_KINDS = ("cable", "body", "obstacle")
+
+
+def clearance_parts(model: Any) -> tuple[list[str], list[str]]:
+    """The names of ``model``'s body parts and obstacles, for ``state_payload``'s ``parts``."""
+    cfg = model.interference
+    return [b.name for b in cfg.body], [o.name for o in cfg.obstacles]
+
+
+def clearance_payload(
+    c: np.ndarray, cables: list[str], parts: tuple[list[str], list[str]]
+) -> dict[str, Any] | None:
+    """The least distance at the estimate (m), what it is between (the cable, then the other
+    cable, body part or obstacle), the closest points on each (m, base frame) and the
+    clearance (m); None with nothing to check."""
+    if not np.all(np.isfinite(c[1:4])):
+        return None
+    kind, i, k = int(c[1]), int(c[2]), int(c[3])
+    if kind == 0:
+        other = cables[k]
+    else:
+        names = parts[kind - 1]
+        other = names[k] if k < len(names) else f"{CHECK_KINDS[kind]} {k + 1}"
+    return {
+        "distance": _float(c[0]),
+        "kind": CHECK_KINDS[kind],
+        "between": [cables[i], other],
+        "points": [_floats(c[4:7]), _floats(c[7:10])],
+        "limit": _float(c[10]),
     }
 
 

@@ -64,6 +64,11 @@ class Layout:
             ("motor_target", m),  # rad, position mode's targets (the motors' own otherwise)
             ("measured_tensions", m),  # N, from the drives' torques (position mode)
             ("true_position", 3),  # m, the simulated plant's (NaN on a real robot)
+            # the cables' least distance at the estimate (cdprctl/interference.py): m, the
+            # check's kind (0 cable, 1 body, 2 obstacle), cable (0-based), the other (cable,
+            # body part, obstacle; 0-based), the closest points on each (m, base frame), and
+            # the clearance (m); NaN: nothing to check
+            ("clearance", 11),
             ("timing", len(TIMING)),
             # the reconfigurable end-effector, per gripper (docs/gripper.md)
             ("grip_state", g),  # index in GRASP_STATES
@@ -160,6 +165,10 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
     }
     if true_position is not None:
         out["true_position"] = true_position
+    g = d.interference
+    if g is not None and len(g.distance):
+        c = int(g.best[0])
+        out["clearance"] = (g.distance[c], *g.checks[c, :3], *g.closest[c], g.clearance)
     if d.grasp is not None and len(d.grip_target):
         from cdprctl.gripper import GraspState
 

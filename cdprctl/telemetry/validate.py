@@ -250,11 +250,13 @@ class CommandValidator:
                 f"cannot be held within the tension limits ({out.status.name}: {out.message})"
             )
         target = pose_coordinates(m, p, R)
-        margin, ok = self.limits.check(target[None])
+        # the clearance a target must keep depends on where the motion starts (no closer than
+        # there, when that is under it), which the daemon knows: here only no contact (0 m)
+        margin, ok = self.limits.check(target[None], near=0.0)
         if not ok[0]:
             raise CommandError(
                 f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad: "
-                f"{self.limits.why(target, float(margin[0]))}"
+                f"{self.limits.why(target, float(margin[0]), near=0.0)}"
             )
         return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
 
