@@ -74,15 +74,16 @@ def observer_kernel(
     ``w_hat`` from the momentum now. ``platform``: a ``Platform``; ``est``: the estimate, a
     ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``."""
     w_hat, p0, integral, scratch = state
-    r, viscous, coulomb = winches[0], winches[1], winches[2]
+    r, viscous, coulomb, stribeck, capstan = winches[:5]
     _, mass, inertia, com, gravity = platform
     R, v, w = est[1], est[2], est[3]
     m = torque.shape[0]
     t_a, rc, f, p = scratch[:m], scratch[m : m + 3], scratch[m + 3 : m + 9], scratch[m + 9 :]
     for i in range(m):
         t_a[i] = applied_tension(
-            torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
-        )
+            torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i], velocity[i],
+            accel_term[i], r[i],
+        )  # fmt: skip
     # known forces on the platform: cables and gravity (moment about P: (R c) × m g)
     for i in range(3):
         rc[i] = R[i, 0] * com[0] + R[i, 1] * com[1] + R[i, 2] * com[2]
