@@ -2,12 +2,14 @@
 drive's torque while the platform goes out and back along the same line at several speeds.
 
 Per winch, every cycle ``k`` of the moves: ``τ_k = g(s_k) + f(θ̇_k) + J θ̈_k [+ μ β g(s_k)
-tanh(θ̇_k/ω_ε)] + (r N λ_k)`` — ``s`` the fraction of the line where the platform is, ``g`` the statics
+tanh(θ̇_k/ω_ε)] + r N λ_k`` — ``s`` the fraction of the line where the platform is, ``g`` the
+statics
 (the cable's tension times r, and whatever else depends on the pose alone: a Legendre series
 in ``s`` the fit takes as it comes, so that the statics cancel between the ways out and back),
 ``f`` the friction law (``numerics.friction_regressors``: viscous, Coulomb, Stribeck), ``J``
 the inertia the drive accelerates, and the pulley's capstan loss to first order
-(``exp(±μβ) ≈ 1 ± μβ``, the winch-side tension ``g/r`` times it); ``λ_k`` the internal
+(``exp(±μβ) ≈ 1 ± μβ``, the winch-side tension times it, read from the torque); ``λ_k`` the
+internal
 tensions (the null space ``N`` of the wrench matrix), whatever the drives' loops make them:
 every winch's equation is taken together, projected off them (``null_projectors``). Linear
 least squares; each parameter's standard deviation from the residuals' variance,
@@ -35,7 +37,7 @@ from cdprctl.numerics import FRICTION_SMOOTHING, friction_regressors
 #: of rowc's and CoGiRo's lines to within the torque's resolution)
 STATICS_DEGREE = 12
 #: a fit whose residual RMS is beyond this times the torque's noise is refused
-RESIDUAL_FACTOR = 4.0
+RESIDUAL_FACTOR = 2.0
 #: μ kept only when its σ is within this fraction of max(μ, ``PULLEY_FLOOR``)
 PULLEY_DECIDED = 0.2
 PULLEY_FLOOR = 0.02
@@ -104,15 +106,15 @@ def _solve(Q: np.ndarray, Y: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray
         q, y, t = Q[k0 : k0 + 2000], Y[k0 : k0 + 2000], torque[k0 : k0 + 2000]
         A += np.einsum("kij,kia,kjb->iajb", q, y, y, optimize=True)
         b += np.einsum("kij,kia,kj->ia", q, y, t, optimize=True)
-    A, b = A.reshape(m * p, m * p), b.ravel()
-    scale = np.sqrt(np.maximum(np.diag(A), 1e-300))
-    As = A / np.outer(scale, scale)
+    A2, b1 = A.reshape(m * p, m * p), b.ravel()
+    scale = np.sqrt(np.maximum(np.diag(A2), 1e-300))
+    As = A2 / np.outer(scale, scale)
     inv = np.linalg.pinv(As, rcond=1e-12, hermitian=True)
-    coef = inv @ (b / scale) / scale
+    coef = inv @ (b1 / scale) / scale
     c = coef.reshape(m, p)
     res = np.einsum("kij,kj->ki", Q, torque - np.einsum("kia,ia->ki", Y, c))
     rank = np.linalg.matrix_rank(As, tol=1e-12 * np.max(np.linalg.eigvalsh(As)), hermitian=True)
-    dof = max(1, int(round(np.trace(Q[0]))) * n - rank)
+    dof = max(1, round(float(np.trace(Q[0]))) * n - int(rank))
     cov = (float(np.sum(res**2)) / dof) * inv / np.outer(scale, scale)
     return c, cov, res
 
@@ -122,16 +124,15 @@ def null_projectors(W: np.ndarray, r: np.ndarray) -> np.ndarray:
     vector of motor torques the directions the cables' internal tensions move it in
     (``diag(r) N``, ``N`` the null space of W, ``r`` m/rad): the torques with every internal
     tension the drives' lags leave taken out (a robot with more than six cables all held by
-    position: rowc's stiff cables pulled against each other by a few newtons, odd in the
-    direction of the motion, a third of its Coulomb friction)."""
-    n, _, m = W.shape
-    out = np.empty((n, m, m))
-    for k in range(n):
-        _, sv, vt = np.linalg.svd(W[k])
-        N = vt[int(np.sum(sv > 1e-9 * sv[0])) :].T  # (m, m - rank)
-        B = r[:, None] * N
-        out[k] = np.eye(m) - B @ np.linalg.pinv(B)
-    return out
+    position: rowc's stiff cables pulled against each other by up to 300 N along a line,
+    their odd part a third of its Coulomb friction)."""
+    m = W.shape[2]
+    _, sv, vt = np.linalg.svd(W)  # batched: (n, 6), (n, m, m)
+    rank = int(np.min(np.sum(sv > 1e-9 * sv[:, :1], axis=1)))
+    B = r[None, :, None] * np.swapaxes(vt[:, rank:, :], 1, 2)  # (n, m, m - rank)
+    # B's columns orthonormalised: Q = I − U Uᵀ
+    U, _ = np.linalg.qr(B)
+    return np.eye(m)[None] - U @ np.swapaxes(U, 1, 2)
 
 
 def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarray,
@@ -141,23 +142,26 @@ def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarra
     fraction ``s`` of it (n), the
     projectors ``Q`` (n, m, m; ``null_projectors``), the motor ``speed`` (rad/s),
     ``acceleration`` (rad/s²) and ``torque`` (N·m), each (n, m); ``noise`` (N·m, per winch)
-    the torque's σ at rest with one count (the residual's limit); ``wrap`` (rad) each cable's
-    wrap on its pulley (0: none, no μ fitted)."""
+    the torque's σ at rest with one count (the residual's limit); ``wrap`` (rad, (n, m)) each
+    cable's wrap on its pulley at each sample (0: none, no μ fitted)."""
     statics = line_statics(s, line)
     Y = _design(statics, speed, acceleration)
     c, cov, res = _solve(Q, Y, torque)
-    n, m, p = Y.shape
+    n, m, p = (int(x) for x in Y.shape)
     d = statics.shape[1]
     pulley: list[float | None] = [None] * m
     pulley_std: list[float | None] = [None] * m
-    notes = ["no pulley" if wrap[i] <= 0.0 else "" for i in range(m)]
-    if np.any(wrap > 0.0):
-        g = np.einsum("ka,ia->ki", statics, c[:, :d])  # N·m: r t, the statics
-        col = wrap[None, :] * g * np.tanh(speed / FRICTION_SMOOTHING)
+    pulleys = np.max(wrap, axis=0) > 0.0
+    notes = ["" if pulleys[i] else "no pulley" for i in range(m)]
+    if np.any(pulleys):
+        # r t on the winch's side: the measured torque itself (the friction in it changes the
+        # term by μβ of itself: second order). Not the fitted statics: projected, they are
+        # known only up to the internal tensions' directions
+        col = wrap * torque * np.tanh(speed / FRICTION_SMOOTHING)
         Yp = np.concatenate([Y, col[:, :, None]], axis=2)  # μ's column last
         cp, covp, resp = _solve(Q, Yp, torque)
         decided = []
-        for i in np.flatnonzero(wrap > 0.0):
+        for i in (int(x) for x in np.flatnonzero(pulleys)):
             mu, sd = float(cp[i, -1]), float(np.sqrt(covp[i * (p + 1) + p, i * (p + 1) + p]))
             if sd <= PULLEY_DECIDED * max(abs(mu), PULLEY_FLOOR):
                 decided.append(i)
@@ -169,8 +173,8 @@ def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarra
         if decided:
             c, res, p = cp, resp, p + 1
             cov = covp
-            for i in set(range(m)) - set(decided):
-                c[i, -1] = 0.0
+            for other in set(range(m)) - set(decided):
+                c[other, -1] = 0.0
     fits = []
     for i in range(m):
         k = [i * p + d + j for j in range(4)]
@@ -187,9 +191,12 @@ def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarra
 
 
 def refusal(names: list[str], fits: list[WinchFriction]) -> str:
-    """Why the fits are refused ("" when every winch's is accepted): the first winch whose
-    residual the law does not explain, or whose terms come out negative (beyond 3 σ)."""
-    for name, f in zip(names, fits, strict=True):
+    """Why the fits are refused ("" when every winch's is accepted): the winch whose residual
+    the law explains least, beyond its limit (the winches' equations are solved together:
+    a bearing's residual spreads a little to the others), or whose terms come out negative
+    (beyond 3 σ)."""
+    worst = max(range(len(fits)), key=lambda i: fits[i].residual_rms / fits[i].residual_limit)
+    for name, f in ((names[worst], fits[worst]), *zip(names, fits, strict=True)):
         if not f.explained:
             return (f"winch {name}: the residual RMS {f.residual_rms:.4f} N·m exceeds its "
                     f"limit {f.residual_limit:.4f} N·m ({RESIDUAL_FACTOR:g}x the torque's "

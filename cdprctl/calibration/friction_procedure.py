@@ -26,7 +26,6 @@ from cdprctl.calibration.friction import WinchFriction, fit_winches, null_projec
 from cdprctl.calibration.geometry_moves import RETREAT_SPEED, GoalOf, motor_goals, move
 from cdprctl.calibration.geometry_plan import GeometryOptions, tension_noise
 from cdprctl.calibration.session import CalibrationFailedError, Session
-from cdprctl.control.torques import home_wrap
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
@@ -94,17 +93,18 @@ def choose_lines(model: RobotModel, start: np.ndarray, travel: float,
 
 
 def _grid(model: RobotModel, goal_of: GoalOf, start: np.ndarray,
-          end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """The planned motor angles (101, m; rad) and wrench matrices (101, 6, m) along the line
-    from ``start`` to ``end``, evenly spaced."""
+          end: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """The planned motor angles (101, m; rad), wrench matrices (101, 6, m) and pulley wraps
+    (101, m; rad) along the line from ``start`` to ``end``, evenly spaced."""
     kin = KinematicsData(model)
-    grid, W = [], []
+    grid, W, wrap = [], [], []
     for f in np.linspace(0.0, 1.0, 101):
         x = start + f * (end - start)
         grid.append(goal_of(x)[0])
         inverse_kinematics(model, kin, x[:3], model.home.rotation)
         W.append(np.array(kin.W))
-    return np.array(grid), np.array(W)
+        wrap.append(kin.wrap_angle.copy())
+    return np.array(grid), np.array(W), np.array(wrap)
 
 
 #: s: the span of the motion's polynomial fit (Savitzky-Golay, cubic) around each sample
@@ -114,13 +114,12 @@ MOTION_WINDOW = 0.04
 def motion_of(theta: np.ndarray, t: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
     """Each sample's motor speeds (rad/s) and accelerations (rad/s²) from the motor angles
     ``theta`` (rows sampled every ``period`` s at times ``t``, in runs without a gap): a cubic
-    fit over ``MOTION_WINDOW`` s centred on the sample. The drives' own speed, derived from
-    the last two positions, is half a period late and one encoder count over a period noisy:
-    differenced again for the acceleration, the noise's variance was the rotor inertia's
-    signal's and the fit took 72 % of J off (and a fifth of four of rowc's viscous terms)."""
+    fit over ``MOTION_WINDOW`` s centred on the sample, at the torque's instant. The drives'
+    own speed (``velocity_source = "derived"``) is the mean over the last period, half a
+    period before the torque it is paired with, and one encoder count per period noisy."""
     from scipy.signal import savgol_filter
 
-    n = max(5, int(round(MOTION_WINDOW / period)) | 1)
+    n = max(5, round(MOTION_WINDOW / period) | 1)
     w, a = np.zeros_like(theta), np.zeros_like(theta)
     cuts = np.flatnonzero(np.diff(t) > 1.5 * period) + 1
     for k in np.split(np.arange(len(t)), cuts):
@@ -195,15 +194,16 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
     line, t, theta = data[:, 0].astype(int), data[:, 1], data[:, 2 : 2 + m]
     tau = data[:, 2 + 2 * m :]
     s = np.zeros(len(t))
-    Q = np.empty((len(t), m, m))
-    for j, (grid, W) in enumerate(grids):
+    Q, wrap = np.empty((len(t), m, m)), np.empty((len(t), m))
+    for j, (grid, W, wraps) in enumerate(grids):
         k = line == j
         s[k] = _where(theta[k], grid)
-        Q[k] = null_projectors(W, ses.ratio)[np.rint(s[k] * (len(grid) - 1)).astype(int)]
+        at = np.rint(s[k] * (len(grid) - 1)).astype(int)
+        Q[k], wrap[k] = null_projectors(W, ses.ratio)[at], wraps[at]
     w, acc = motion_of(theta, t, driver.period)
     # the residual's limit: the noise at rest and one torque count (tension_noise: N, √12)
     count = tension_noise(model) * np.sqrt(12.0) * ses.ratio
-    fits = fit_winches(s, line, Q, w, acc, tau, np.hypot(noise, count), home_wrap(model))
+    fits = fit_winches(s, line, Q, w, acc, tau, np.hypot(noise, count), wrap)
     why = refusal([c.name for c in model.cables], fits)
     return FrictionCalibration(fits, start.tolist(), [e.tolist() for e in ends], moved,
                                not why, why or "accepted")  # fmt: skip

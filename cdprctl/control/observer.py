@@ -106,7 +106,11 @@ class WrenchObserver:
     """``[control] observer_bandwidth`` Hz (0: off): the estimate is ``data.ext_estimate``,
     from the estimate (a ``PoseEstimate`` bundle and its ``KinematicsData``) given each call."""
 
-    def __init__(self, model: RobotModel, data: ControlData):
+    def __init__(self, model: RobotModel, data: ControlData,
+                 winches: WinchTorques | None = None):  # fmt: skip
+        """``winches``: the torque law's terms it takes back out of the measured torques —
+        the controller's, so that a friction calibration applied to them reaches it too
+        (None: the model's own)."""
         c = model.control
         self.model = model
         self.data = data
@@ -119,8 +123,7 @@ class WrenchObserver:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
-        # the winches' torque law (its own terms, from the model as the torques' are)
-        winches = WinchTorques(model)
+        winches = winches if winches is not None else WinchTorques(model)
         self._winches = winches.terms
         self._platform = kernel_args(Platform(
             np.ascontiguousarray(model.home.rotation, dtype=float), self._mass, self._inertia,
