@@ -148,7 +148,7 @@ def test_applied_friction_reaches_the_torques_and_the_observer():
     wt.update(np.zeros(m), np.zeros((m, 6)), np.zeros(6), w, True, out)
     np.testing.assert_allclose(out, law(w, 1e-3, 0.05, 0.01), rtol=1e-12)
     # the observer takes the same arrays back out of the measured torques
-    assert obs._winches[2] is wt.coulomb and obs._winches[3] is wt.stribeck
+    assert obs.winches.terms[2] is wt.coulomb and obs.winches.terms[3] is wt.stribeck
 
 
 def test_the_robot_file_takes_each_winchs_stribeck_and_pulley_terms(tmp_path):

@@ -4,7 +4,8 @@ friction fitted (:mod:`friction`; docs/friction.md).
 
 The line: from where the platform stands, the direction (of a few, in the workspace) along
 which the cable that moves least still moves most, as far as ``travel`` or the soft limits
-(``motion/limits.py``: the workspace box and the tension margin) allow. The moves are the
+(``motion/limits.py``: the workspace box and the tension margin) and the geometric
+calibration's tension bounds along a move (``geometry_plan.PATH_MARGIN``) allow. The moves are the
 geometric calibration's (:func:`geometry_moves.move`, every cable by position, the torques'
 feed-forward from the planned tensions): a tension nearing its limit stops a move where it is,
 and the platform goes back the way it came, slower (:data:`geometry_moves.RETREAT_SPEED`).
@@ -24,7 +25,14 @@ import numpy as np
 
 from cdprctl.calibration.friction import WinchFriction, fit_winches, null_projectors, refusal
 from cdprctl.calibration.geometry_moves import RETREAT_SPEED, GoalOf, motor_goals, move
-from cdprctl.calibration.geometry_plan import GeometryOptions, tension_noise
+from cdprctl.calibration.geometry_plan import (
+    PATH_MARGIN,
+    STOP_MARGIN,
+    GeometryOptions,
+    line_is_held,
+    tension_bounds,
+    tension_noise,
+)
 from cdprctl.calibration.session import CalibrationFailedError, Session
 from cdprctl.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
@@ -72,11 +80,14 @@ def choose_lines(model: RobotModel, start: np.ndarray, travel: float,
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, start[:3], model.home.rotation)
     l0 = kin.length.copy()
+    bounds = tension_bounds(model, PATH_MARGIN)
     scored = []
     for d in _DIRECTIONS:
         for sign in (1.0, -1.0):
             u = sign * d / np.linalg.norm(d)
             far, _ = limits.ray_end(start, np.r_[u, 0.0, 0.0, 0.0], travel)
+            if not line_is_held(model, kin, start, far, bounds):
+                continue  # a cable would near its limit (the geometric calibration's rule)
             inverse_kinematics(model, kin, far[:3], model.home.rotation)
             scored.append((float(np.min(np.abs(kin.length - l0))), u, far))
     scored.sort(key=lambda x: -x[0])
@@ -151,6 +162,7 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
     opt = opt or FrictionOptions()
     ends = choose_lines(model, start, opt.travel, opt.lines)
     ses = Session(model, driver, log)
+    ses.t_stop_low, ses.t_stop_high = tension_bounds(model, STOP_MARGIN)
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     goal_of = motor_goals(model, theta_zero, kin.length.copy(), ses.ratio)

@@ -124,7 +124,7 @@ class WrenchObserver:
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
         winches = winches if winches is not None else WinchTorques(model)
-        self._winches = winches.terms
+        self.winches = winches  # its terms read each call: a friction calibration replaces them
         self._platform = kernel_args(Platform(
             np.ascontiguousarray(model.home.rotation, dtype=float), self._mass, self._inertia,
             self._com, self._gravity,
@@ -175,6 +175,6 @@ class WrenchObserver:
         self._rotor_term(kin.WT, acceleration, self._accel_term)
         observer_kernel(
             dt, self.gain, self._platform, estimate, kin.W, torque, velocity,
-            self._accel_term, self._winches, self._state,
+            self._accel_term, self.winches.terms, self._state,
         )  # fmt: skip
         np.copyto(self.data.ext_estimate, self._state[0])  # no view built
