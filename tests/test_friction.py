@@ -194,3 +194,36 @@ def test_rowc_in_lockstep_with_each_winch_off_the_file():
         assert f.coulomb == pytest.approx(w.coulomb_friction, rel=0.12)
         assert f.viscous == pytest.approx(w.viscous_friction, rel=0.15)
         assert f.stribeck == pytest.approx(w.stribeck_friction, rel=0.25)
+
+
+def test_the_status_and_the_start_up_say_which_friction_is_in_use(tmp_path):
+    from cdprctl.calibration.friction import WinchFriction
+    from cdprctl.calibration.friction_record import (
+        friction_entry,
+        friction_line,
+        friction_summary,
+        friction_terms,
+    )
+    from cdprctl.calibration.record import load, save, stamped
+
+    model = load_robot(CONFIG / "rowc.toml")
+    m = model.n_cables
+    rec = stamped(model, "known-pose", theta_zero=[0.0] * m, drum_scale=[1.0] * m,
+                  pose=[0.0] * 6, identities=[None] * m)  # fmt: skip
+    save(rec, tmp_path)
+    assert friction_summary(model, tmp_path)["source"] == "file"
+    assert friction_terms(rec) is None and "the robot file's" in friction_line(rec)
+    fits = [WinchFriction(4e-4 + 1e-5 * i, 0.02 + 0.001 * i, 0.01, 1.5e-4, (0.0,) * 4, None,
+                          None, 1e-3, 2e-3, 100) for i in range(m)]  # fmt: skip
+    fits[0].coulomb = -1e-4  # within its noise below zero: kept as 0
+    rec.friction = friction_entry(model, fits, 120.0, True)
+    save(rec, tmp_path)
+    back = load(tmp_path)
+    back.check(model)
+    viscous, coulomb, stribeck, pulley = friction_terms(back)
+    assert stribeck == [0.01] * m
+    assert coulomb[0] == 0.0 and coulomb[3] == pytest.approx(0.023)
+    assert pulley == [0.0] * m  # no pulley: the file's μ
+    s = friction_summary(model, tmp_path)
+    assert s["source"] == "calibrated" and s["viscous"] == viscous
+    assert "Coulomb 0..0.027 N·m" in friction_line(back)
