@@ -42,11 +42,11 @@ def run(robot: str, seed: int) -> dict:
                                      log=lambda s: None)  # fmt: skip
         except CalibrationFailedError as exc:
             return {**row, "stopped": str(exc), "wall": time.monotonic() - t0}
-    w = [c.winch for c in truth.cables]
+    pairs = list(zip(cal.fits, [c.winch for c in truth.cables], strict=True))
     err = {
-        "viscous": [f.viscous / x.viscous_friction - 1 for f, x in zip(cal.fits, w)],
-        "coulomb": [f.coulomb / x.coulomb_friction - 1 for f, x in zip(cal.fits, w)],
-        "stribeck": [f.stribeck / x.stribeck_friction - 1 for f, x in zip(cal.fits, w)],
+        "viscous": [f.viscous / x.viscous_friction - 1 for f, x in pairs],
+        "coulomb": [f.coulomb / x.coulomb_friction - 1 for f, x in pairs],
+        "stribeck": [f.stribeck / x.stribeck_friction - 1 for f, x in pairs],
     }
     row.update({k: float(np.max(np.abs(v)) * 100) for k, v in err.items()})
     row.update(accepted=cal.accepted, reason=cal.reason, motion=cal.motion_time,
