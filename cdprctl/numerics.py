@@ -9,10 +9,14 @@ text. Rotations are in ``rotation.py``.
 * ``forward_substitution``: a lower-triangular solve (forward kinematics, the null space).
 * ``cable_compliance``: 1/k (m/N) of a cable and its series spring at a length (the model's
   stiffness, the estimator's stretch, the simulated plant's cable force).
+* ``friction_law``, ``friction_regressors``, ``capstan_factor``: a winch's friction torque at a
+  motor speed and a cable's loss over its pulley (the torque law and the tension estimate,
+  the simulated plant's winches, ``cdprctl calibrate friction``'s fit).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -57,7 +61,44 @@ def forward_substitution(L, b, y):  # pragma: no cover - compiled
         y[i] = s / L[i, i]
 
 
+#: rad/s: the smoothing of the Coulomb term's sign, ``tanh(θ̇/ω_ε)``, of the controller's law
+FRICTION_SMOOTHING = 0.05
+#: rad/s at the motor: the speed below which the Stribeck term (the breakaway friction beyond
+#: the Coulomb level) acts, ``exp(−(θ̇/ω_s)²)``; a constant of the law, so that the law is
+#: linear in its three coefficients (``friction_regressors``)
+STRIBECK_SPEED = 2.0
+
+
+def _friction_law(viscous: float, coulomb: float, stribeck: float, w: float,
+                  smoothing: float) -> float:  # fmt: skip
+    """N·m a winch's friction takes at motor speed ``w`` (rad/s): ``b θ̇ + (τ_c + τ_s
+    exp(−(θ̇/ω_s)²)) tanh(θ̇/ω_ε)`` — viscous ``b`` (N·m·s/rad), Coulomb ``τ_c`` and Stribeck
+    ``τ_s`` (N·m), ``ω_ε`` = ``smoothing`` (rad/s; Olsson et al., "Friction models and friction
+    compensation", Eur. J. Control 1998, eq. (10) with a smooth sign)."""
+    sign = math.tanh(w / smoothing)
+    return viscous * w + (coulomb + stribeck * math.exp(-((w / STRIBECK_SPEED) ** 2))) * sign
+
+
+def _capstan_factor(exponent: float, w: float, smoothing: float) -> float:
+    """The winch-side tension over the platform-side one of a cable over its pulley: the
+    capstan (Euler-Eytelwein) ``exp(±μ β)``, ``exponent`` = μ β (μ the coefficient, β rad the
+    wrap), ``+`` winding in (θ̇ > 0: the winch pulls the cable over the pulley), ``−`` paying
+    out, smoothed by ``tanh(θ̇/ω_ε)`` as the Coulomb term (``smoothing`` = ω_ε, rad/s)."""
+    return math.exp(exponent * math.tanh(w / smoothing))
+
+
+def friction_regressors(w: np.ndarray) -> np.ndarray:
+    """(n, 3): the law's terms at motor speeds ``w`` (rad/s), per unit coefficient — viscous,
+    Coulomb, Stribeck — so that ``friction_regressors(w) @ [b, τ_c, τ_s]`` is ``friction_law``
+    at the controller's smoothing (the fit of ``cdprctl calibrate friction``)."""
+    w = np.asarray(w, float)
+    sign = np.tanh(w / FRICTION_SMOOTHING)
+    return np.stack([w, sign, np.exp(-((w / STRIBECK_SPEED) ** 2)) * sign], axis=-1)
+
+
 clamp = njit(cache=True)(_clamp)
+friction_law = njit(cache=True)(_friction_law)
+capstan_factor = njit(cache=True)(_capstan_factor)
 plausible_step = njit(cache=True)(_plausible_step)
 cable_compliance = njit(cache=True)(_cable_compliance)
 #: the same rules for Python callers outside the loop (no compilation at import)

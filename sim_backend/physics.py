@@ -4,14 +4,13 @@ takes named bundles of the plant's own arrays, written in place."""
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from cdprctl.kinematics import ik_kernel
-from cdprctl.numerics import Compliance, compliance_at
+from cdprctl.numerics import Compliance, capstan_factor, compliance_at, friction_law
 from cdprctl.rotation import exp_so3_kernel
 from sim_backend.jaw_dynamics import jaw_dynamics
 from sim_backend.servo import following_error, servo_torque
@@ -29,18 +28,19 @@ class Body(NamedTuple):
 
 class Winches(NamedTuple):
     """Per cable: home length (m), drum radius over gear ratio (m/rad), rotor inertia
-    (kg·m²), viscous (N·m·s/rad) and Coulomb (N·m) friction, the Coulomb smoothing (rad/s),
-    the cable law, the cable damping (N·s/m); the pulleys' capstan μ."""
+    (kg·m²), viscous (N·m·s/rad), Coulomb and Stribeck (N·m) friction, the Coulomb smoothing
+    (rad/s), the cable law, the cable damping (N·s/m), its pulley's capstan μ."""
 
     l_home: np.ndarray
     drum_ratio: np.ndarray
     rotor_inertia: np.ndarray
     viscous: np.ndarray
     coulomb: np.ndarray
+    stribeck: np.ndarray
     coulomb_velocity: float
     law: Compliance
     damping: np.ndarray
-    pulley_friction: float
+    pulley_friction: np.ndarray
 
 
 class BodyState(NamedTuple):
@@ -80,7 +80,7 @@ def physics_kernel(
     ``tension`` (N) out; the bundles are the plant's (``Body``, ``Winches``, ``BodyState``,
     ``Inputs``, ``Servo``, ``Jaws``, ``JawState``, as plain tuples: ``numerics.kernel_args``)."""
     com, mass, inertia, g = body
-    l_home, drum_ratio, J, visc, coul, coul_v, law, damping, mu_p = winches
+    l_home, drum_ratio, J, visc, coul, strib, coul_v, law, damping, mu_p = winches
     com_pos, R, v, w, theta, theta_dot = state
     tau_m, brake, slip, hold, cut, drum_slip, f_ext, m_ext = inputs
     g_of_cable, _, g_mass, _, _, _, _, _, g_kjb, g_cjb, _, _, _, _, _ = jaws
@@ -133,7 +133,7 @@ def physics_kernel(
                 M[0] += ry * fz - rz * fy
                 M[1] += rz * fx - rx * fz
                 M[2] += rx * fy - ry * fx
-            # winch: J θ̈ = τ_m − (r/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)
+            # winch: J θ̈ = τ_m − (r/G) t_w − f(θ̇) (numerics.friction_law)
             if brake[i] and slip[i] != 0.0:
                 theta_dot[i] = -slip[i]  # a slipping brake (a fault) pays cable out
                 theta[i] += theta_dot[i] * dt
@@ -157,14 +157,10 @@ def physics_kernel(
                 tau = servo_torque(servo, i, theta[i], theta_dot[i], tau_m[i], dt)
                 closes = following_error(servo, i)  # the drive's firmware brakes
                 cap = 1.0
-                if mu_p > 0.0 and wrap[i] > 0.0:
-                    cap = math.exp(mu_p * wrap[i] * math.tanh(theta_dot[i] / coul_v))
-                acc = (
-                    tau
-                    - drum_ratio[i] * t * cap
-                    - visc[i] * theta_dot[i]
-                    - coul[i] * math.tanh(theta_dot[i] / coul_v)
-                ) / J[i]
+                if mu_p[i] > 0.0 and wrap[i] > 0.0:
+                    cap = capstan_factor(mu_p[i] * wrap[i], theta_dot[i], coul_v)
+                friction = friction_law(visc[i], coul[i], strib[i], theta_dot[i], coul_v)
+                acc = (tau - drum_ratio[i] * t * cap - friction) / J[i]
                 theta_dot[i] += acc * dt
                 theta[i] += theta_dot[i] * dt
                 if closes:  # it holds the drum from the next step on (as ``close_brake``)

@@ -10,7 +10,9 @@ Conventions (docs/simulator.md):
   ``k = E·S/(l0 + l_w)`` (or a fixed stiffness) in series with the optional spring; ``l`` the
   geometric length (free part + arc on the pulley). Pulley friction as a capstan factor
   ``exp(±μ β)`` on the winch side, by the direction the cable moves.
-* Winch: ``J θ̈ = τ_m − (r_d/G) t_w − b θ̇ − τ_c tanh(θ̇/ω_ε)``; a closed brake holds ``θ``
+* Winch: ``J θ̈ = τ_m − (r_d/G) t_w − f(θ̇)``, ``f`` each winch's own friction (viscous,
+  Coulomb, Stribeck: ``numerics.friction_law``, its terms the robot's as built: the as-built
+  file or ``PlantErrors``, hidden from the controller); a closed brake holds ``θ``
   (a slipping brake, a fault, lets the drum pay out at a set rate). ``τ_m`` is the drive's
   torque: its target (torque mode), or its own position loop at every physics step around the
   target interpolated between SYNCs, plus a torque offset (position mode, CiA 402 CSP).
@@ -47,7 +49,8 @@ from sim_backend.servo import Servo
 @dataclass
 class PlantOptions:
     physics_dt: float = 0.0002  # s
-    pulley_friction: float = 0.0  # μ of the capstan factor
+    # μ of every pulley's capstan factor; None: each winch's own (``[winch] pulley_friction``)
+    pulley_friction: float | None = None
     damping_ratio: float = (
         0.02  # cable damping as a fraction of critical (when the config has none)
     )
@@ -86,6 +89,11 @@ class CdprPlant:
         self.rotor_inertia = np.array([w.winch.rotor_inertia for w in c])
         self.viscous = np.array([w.winch.viscous_friction for w in c])
         self.coulomb = np.array([w.winch.coulomb_friction for w in c])
+        self.stribeck = np.array([w.winch.stribeck_friction for w in c])
+        mu = self.opt.pulley_friction
+        self.pulley_friction = np.array(
+            [w.winch.pulley_friction if mu is None else mu for w in c], dtype=float
+        )
         self.law = compliance_of(c)  # the cable law's terms (cdprctl.numerics)
         self.kin = KinematicsData(model)
         inverse_kinematics(model, self.kin, model.home.position, model.home.rotation)
@@ -148,10 +156,11 @@ class CdprPlant:
             self.rotor_inertia,
             self.viscous,
             self.coulomb,
+            self.stribeck,
             o.coulomb_velocity,
             self.law,
             self.damping,
-            o.pulley_friction,
+            self.pulley_friction,
         )
         state = BodyState(self.com_pos, self.R, self.v, self.w, self.theta, self.theta_dot)
         inputs = Inputs(

@@ -40,6 +40,9 @@ LEFT_HELD = {
     ("grippers", "distribution"),
     ("supervisor", "trajectory"),
     ("jog", "trajectory"), ("jog", "limits"), ("path", "trajectory"), ("path", "limits"),
+    # the winch law's terms a friction calibration replaces at start-up: one set, read by the
+    # torques, the cable space, the grasp sensing and the observer alike (docs/friction.md)
+    ("observer", "winches"),
 }  # fmt: skip
 POSITION_MODE_HELD = {("grippers", "reference")}
 # arrays two components share: the known external wrench (the controller's, which the

@@ -14,25 +14,55 @@ from conftest import CONFIG
 from cdprctl.control.torques import WinchTorques, applied_tension, friction_kernel
 from cdprctl.model import load_robot
 
-SMOOTHING = 0.05  # rad/s: the Coulomb model's tanh(θ̇/ω_ε), as control/torques.py documents it
+SMOOTHING = 0.05  # rad/s: the Coulomb model's tanh(θ̇/ω_ε), as numerics.py documents it
+STRIBECK = 2.0  # rad/s: the Stribeck term's exp(−(θ̇/ω_s)²)
+
+
+def with_pulleys_and_stribeck(model):
+    """``model`` whose winches each have their own Stribeck term and pulley μ (seeded)."""
+    rng = np.random.default_rng(46)
+    cables = tuple(
+        dataclasses.replace(c, winch=dataclasses.replace(
+            c.winch, stribeck_friction=float(rng.uniform(0.01, 0.05)),
+            pulley_friction=float(rng.uniform(0.02, 0.1))))
+        for c in model.cables
+    )  # fmt: skip
+    return dataclasses.replace(model, cables=cables)
+
+
+def wrap_angles(model):
+    """rad each cable wraps its pulley at home, from the pulley's geometry written out: the
+    cable leaves the wheel tangentially towards the attachment (β = π − φ)."""
+    from cdprctl.kinematics import KinematicsData, inverse_kinematics
+
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    return kin.wrap_angle.copy()
 
 
 def reference_torques(model, tensions, WT, acceleration, velocity, friction):
-    """``τ = (r/G) t + b θ̇ + τ_c tanh(θ̇/ω_ε) + J Wᵀ a / (r/G)`` within ±limit, per cable."""
+    """``τ = (r/G) t e^{μβ tanh(θ̇/ω_ε)} + b θ̇ + (τ_c + τ_s e^{−(θ̇/ω_s)²}) tanh(θ̇/ω_ε)
+    + J Wᵀ a / (r/G)`` within ±limit, per cable."""
     w = [c.winch for c in model.cables]
     r = np.array([x.drum_radius / x.gear_ratio for x in w])
-    tau = r * tensions + np.array([x.rotor_inertia for x in w]) * (WT @ acceleration) / r
+    tau = r * tensions
+    sign = np.tanh(velocity / SMOOTHING)
     if friction:
+        mu = np.array([x.pulley_friction for x in w])
+        tau = tau * np.exp(mu * wrap_angles(model) * sign)
         tau += np.array([x.viscous_friction for x in w]) * velocity
-        tau += np.array([x.coulomb_friction for x in w]) * np.tanh(velocity / SMOOTHING)
+        tau += np.array([x.coulomb_friction for x in w]) * sign
+        stribeck = np.array([x.stribeck_friction for x in w])
+        tau += stribeck * np.exp(-((velocity / STRIBECK) ** 2)) * sign
+    tau += np.array([x.rotor_inertia for x in w]) * (WT @ acceleration) / r
     limit = np.array([x.torque_limit for x in w])
     return np.minimum(limit, np.maximum(-limit, tau)), tau, limit
 
 
-@pytest.mark.parametrize("robot_file", ["rowc.toml", "seed000.toml"])
+@pytest.mark.parametrize("robot_file", ["rowc.toml", "seed000.toml", "caroca_pulleys.toml"])
 @pytest.mark.parametrize("friction", [False, True])
 def test_torques_follow_the_law_and_never_leave_their_limit(robot_file, friction):
-    model = load_robot(CONFIG / robot_file)
+    model = with_pulleys_and_stribeck(load_robot(CONFIG / robot_file))
     model = dataclasses.replace(
         model, control=dataclasses.replace(model.control, friction_compensation=friction)
     )
@@ -85,8 +115,10 @@ def test_the_rotor_term_is_the_laws_inertia_part():
 def test_applied_tension_takes_the_law_back():
     """The grasp sensing's and the cable space's ``applied_tension`` inverts the torque law:
     from the torque the law gives for a tension (friction and the rotor's term included),
-    it returns that tension, per cable, at speeds of both signs."""
-    model = load_robot(CONFIG / "seed000.toml")
+    it returns that tension, per cable, at speeds of both signs, pulleys' losses included."""
+    model = with_pulleys_and_stribeck(load_robot(CONFIG / "caroca_pulleys.toml"))
+    wrap = wrap_angles(model)
+    assert np.all(wrap > 0.1)
     rng = np.random.default_rng(45)
     m = model.n_cables
     for _ in range(50):
@@ -97,17 +129,19 @@ def test_applied_tension_takes_the_law_back():
         for i, c in enumerate(model.cables):
             x = c.winch
             r = x.drum_radius / x.gear_ratio
-            got = applied_tension(tau[i], x.viscous_friction, x.coulomb_friction, w[i], rotor[i], r)
+            got = applied_tension(tau[i], x.viscous_friction, x.coulomb_friction,
+                                  x.stribeck_friction, x.pulley_friction * wrap[i], w[i],
+                                  rotor[i], r)  # fmt: skip
             assert got == pytest.approx(t[i], rel=1e-12, abs=1e-9)
 
 
 def test_friction_kernel_takes_the_cables_it_is_given():
-    model = load_robot(CONFIG / "seed000.toml")
+    model = with_pulleys_and_stribeck(load_robot(CONFIG / "seed000.toml"))
     wt = WinchTorques(model)
     velocity = np.linspace(-2.0, 2.0, model.n_cables)
     cables = np.array([7, 0, 3], dtype=np.int64)
     out = np.empty(3)
-    friction_kernel(wt.viscous, wt.coulomb, velocity, cables, out)
+    friction_kernel(wt.terms, velocity, cables, out)
     full = reference_torques(model, np.zeros(model.n_cables), np.zeros((model.n_cables, 6)),
                              np.zeros(6), velocity, True)[1]  # fmt: skip
     np.testing.assert_allclose(out, full[cables], rtol=1e-12)

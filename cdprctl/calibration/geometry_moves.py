@@ -112,14 +112,17 @@ def motor_goals(model: RobotModel, theta_ref: np.ndarray, l0_ref: np.ndarray,
 
 
 def move(ses: Session, a: np.ndarray, b: np.ndarray, goal_of: GoalOf, opt: GeometryOptions,
-         stop: bool = True, track: np.ndarray | None = None) -> tuple[float, float]:  # fmt: skip
+         stop: bool = True, track: np.ndarray | None = None,
+         each: Callable[[float], None] | None = None) -> tuple[float, float]:  # fmt: skip
     """From pose ``a`` to ``b`` in a straight line (a cosine time law at ``opt.speed``): the
     planned motor angles and tensions every 1 cm (or 0.01 rad), interpolated per cycle.
     Returns the fraction done (a tension near its limit stops it, unless ``stop`` is False:
     a retreat along a way it came, where only the session's hard limits stop it) and the
     seconds taken (a stopped move ends where it stopped: holding the rest of its time would
     only add to the motion's). ``track`` (6): where the plan has the platform, every cycle
-    (a stopped calibration resumes from there)."""
+    (a stopped calibration resumes from there). ``each(s)``: called every cycle with the
+    fraction ``s`` of the way the plan has the platform at (the friction calibration's
+    samples)."""
     a, b = a.copy(), b.copy()  # ``track`` may be either
     dist = float(np.linalg.norm(b - a))
     n = max(2, math.ceil(dist / 0.01) + 1)
@@ -164,6 +167,8 @@ def move(ses: Session, a: np.ndarray, b: np.ndarray, goal_of: GoalOf, opt: Geome
         waypoint(i + 1)
         ses.base[:] = G[i] + u * (G[i + 1] - G[i])
         ses.tension_goal[:] = T[i] + u * (T[i + 1] - T[i])
+        if each is not None:
+            each(s)
         return False
 
     took = ses.run(duration, step)

@@ -66,6 +66,9 @@ class CalibrationRecord:
     sample_residuals: list[float] = dataclasses.field(default_factory=list)  # m, RMS each
     notes: dict[str, Any] = dataclasses.field(default_factory=dict)
     simulated: bool = False  # taken on a simulated robot: never a real robot's calibration
+    # ``cdprctl calibrate friction``'s result (calibration/friction_record.py): each winch's
+    # terms, applied by the next ``run`` in place of the robot file's
+    friction: dict[str, Any] | None = None
 
     def check(self, model: RobotModel) -> None:
         """Raise :class:`CalibrationError` when the record does not fit ``model``."""
@@ -78,6 +81,13 @@ class CalibrationRecord:
                 raise CalibrationError(f"{name}: {values} is not {m} finite numbers")
         if not all(0.9 < s < 1.1 for s in self.drum_scale):
             raise CalibrationError(f"drum_scale: {self.drum_scale} outside (0.9, 1.1)")
+        for name in ("viscous", "coulomb", "stribeck", "pulley") if self.friction else ():
+            values = self.friction.get(name) if self.friction else None
+            if (not isinstance(values, list) or len(values) != m
+                    or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0
+                               for v in values)):  # fmt: skip
+                raise CalibrationError(f"friction.{name}: {values} is not {m} finite numbers "
+                                       ">= 0 (N·m·s/rad, N·m, N·m, μ)")  # fmt: skip
         if self.geometry_hash != geometry_hash(model):
             raise CalibrationError(
                 f"the robot's geometry changed since the calibration of {self.time} (hash "

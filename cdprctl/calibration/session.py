@@ -144,7 +144,7 @@ class Session:
         read it as tension, the identified anchors were off by 1.6-6.9 mm; at rest, speed 0,
         it is 0). The rotor's inertia is neglected: the moves are slow."""
         w = self.winches
-        friction_kernel(w.viscous, w.coulomb, self.states.velocity, self._all, self._friction)
+        friction_kernel(w.terms, self.states.velocity, self._all, self._friction)
         return (self.states.torque - self._friction) / self.ratio
 
     def run(self, duration: float, each: Callable[[float], bool | None] | None = None) -> float:

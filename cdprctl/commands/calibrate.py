@@ -83,6 +83,7 @@ def add_parser(sub: Any) -> None:
         "--can-channel 239.74.163.9 self --json\n"
         "  cdprctl calibrate --config config/rowc.toml --can-interface udp_multicast "
         "--can-channel 239.74.163.9 geometry --out built.toml\n"
+        "  cdprctl calibrate --config config/rowc.toml friction --sim --plant-errors 1\n"
         "\nexit codes: 0 calibrated (the record written), 1 refused or stopped (the reason in "
         "one line),\n2 a bad option, 4 the state directory cannot take the record. A simulated "
         "robot's record\n(drives on udp_multicast) goes to "
@@ -123,7 +124,21 @@ def add_parser(sub: Any) -> None:
         "and the encoders' zeros; refused when the residuals are more than the drives' "
         "resolution explains or the data do not decide them (docs/homing.md).",
     )
-    for method in (kp, sp, gp):
+    fp = methods.add_parser(
+        "friction",
+        help="each winch's friction (viscous, Coulomb, Stribeck) and pulley loss, from its "
+        "drive's torque while the platform goes out and back at three speeds (about two "
+        "minutes of motion)",
+        description="Move the platform out and back along three lines from where it stands, "
+        "every cable by position, at three speeds; fit each winch's friction with the statics "
+        "and the internal tensions taken out; refused when the residuals are more than the "
+        "torque's noise explains; written into the calibration record, which the next "
+        "cdprctl run applies (docs/friction.md).",
+    )
+    from cdprctl.commands.calibrate_friction import add_arguments
+
+    add_arguments(fp)
+    for method in (kp, sp, gp, fp):
         _robot_and_bus(method, default=argparse.SUPPRESS)
     for method in (sp, gp):
         method.add_argument(
@@ -169,6 +184,10 @@ def run(args: argparse.Namespace) -> int:
         from cdprctl.commands.calibrate_geometry import run_geometry
 
         return run_geometry(args, model)
+    if args.method == "friction":
+        from cdprctl.commands.calibrate_friction import run_friction
+
+        return run_friction(args, model)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     pose = _pose_or_checked(args, model)
     overrides = bus_overrides(args)

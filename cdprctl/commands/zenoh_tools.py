@@ -156,6 +156,13 @@ def safety_line(safety: dict[str, Any]) -> str:
             + f"; {tested}")  # fmt: skip
 
 
+def friction_status(f: dict[str, Any]) -> str:
+    """The winches' friction in use in one line: the calibration's or the robot file's."""
+    c = f.get("coulomb") or [0.0]
+    where = f"calibrated {f['time']}" if f.get("source") == "calibrated" else "the robot file's"
+    return f"friction {where}: Coulomb {min(c):.3g}..{max(c):.3g} N·m per winch"
+
+
 def path_line(path: dict[str, Any]) -> str:
     """A path's progress in one line: segment k of n, the share of its planned time played
     (of its segments, from a daemon that does not say the times) and the time left."""
@@ -193,6 +200,7 @@ def render(state: dict[str, Any], timing: dict[str, Any] | None, meta: dict[str,
         ),
         *([f"WARNING  {state['warning']}"] if state.get("warning") else []),
         *([safety_line(state["safety"])] if state.get("safety") else []),
+        *([friction_status(meta["friction"])] if meta.get("friction") else []),
         *([path_line(state["path"])] if state.get("path") else []),
         "tensions",
     ]

@@ -97,13 +97,14 @@ def measured_tension_kernel(
     sample only starts its count; a cable without a new one keeps its values.
     ``winches``: the ``WinchTerms`` (``r``, the friction, ``J``, the ``limit``); ``state``:
     ``(last_sampled, last_velocity, commanded_f, fast_error)``, updated in place."""
-    r, viscous, coulomb, J, limit = winches
+    r, viscous, coulomb, stribeck, capstan, J, limit = winches
     last_sampled, last_velocity, commanded_f, fast_error = state
     for i in range(out.shape[0]):
         h = sampled[i] - last_sampled[i]
         if h > 0.0 and math.isfinite(h):
             rotor = J[i] * (velocity[i] - last_velocity[i]) / h
-            t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], rotor, r[i])
+            t = applied_tension(torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i],
+                                velocity[i], rotor, r[i])  # fmt: skip
             plausible = abs(torque[i]) <= 1.05 * limit[i] and abs(rotor) <= 2.0 * limit[i]
             if plausible and math.isfinite(t):
                 alpha = 1.0 - math.exp(-2.0 * math.pi * f_slow * h)

@@ -86,7 +86,7 @@ class Controller:
         self.distribution = Distribution(model, d, GripperSet(model), tda or tda_options_of(model))
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
-        self.observer = WrenchObserver(model, d)
+        self.observer = WrenchObserver(model, d, self.winches)
         self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
                                        self.distribution, self.ext_wrench, tr)  # fmt: skip

@@ -88,7 +88,7 @@ class GripperControl:
         np.add(self.ext_wrench, self._jaw_wrench, out=d.ext_total)
         if sense and st is not None:
             c, w = self._cables, self.winches
-            friction_kernel(w.viscous, w.coulomb, st.velocity, c, self._friction)
+            friction_kernel(w.terms, st.velocity, c, self._friction)
             r = w.r[c]
             l0 = e.l_zero[c] - r * st.position[c]
             self._torque[:] = st.torque[c] - self._friction
@@ -102,7 +102,7 @@ class GripperControl:
     def warm_up(self) -> None:
         """Compile the sensing's and the jaws' kernels on scratch arrays (``warm_up.py``)."""
         w = self.winches
-        friction_kernel(w.viscous, w.coulomb, np.zeros(len(w.r)), self._cables, self._friction)
+        friction_kernel(w.terms, np.zeros(len(w.r)), self._cables, self._friction)
         tr = self.trajectory
         self.set.jaw_loads(
             self.at.rotation, tr.acceleration, tr.velocity, self._jaw_wrench,

@@ -74,15 +74,16 @@ def observer_kernel(
     ``w_hat`` from the momentum now. ``platform``: a ``Platform``; ``est``: the estimate, a
     ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``."""
     w_hat, p0, integral, scratch = state
-    r, viscous, coulomb = winches[0], winches[1], winches[2]
+    r, viscous, coulomb, stribeck, capstan = winches[:5]
     _, mass, inertia, com, gravity = platform
     R, v, w = est[1], est[2], est[3]
     m = torque.shape[0]
     t_a, rc, f, p = scratch[:m], scratch[m : m + 3], scratch[m + 3 : m + 9], scratch[m + 9 :]
     for i in range(m):
         t_a[i] = applied_tension(
-            torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i]
-        )
+            torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i], velocity[i],
+            accel_term[i], r[i],
+        )  # fmt: skip
     # known forces on the platform: cables and gravity (moment about P: (R c) × m g)
     for i in range(3):
         rc[i] = R[i, 0] * com[0] + R[i, 1] * com[1] + R[i, 2] * com[2]
@@ -105,7 +106,11 @@ class WrenchObserver:
     """``[control] observer_bandwidth`` Hz (0: off): the estimate is ``data.ext_estimate``,
     from the estimate (a ``PoseEstimate`` bundle and its ``KinematicsData``) given each call."""
 
-    def __init__(self, model: RobotModel, data: ControlData):
+    def __init__(self, model: RobotModel, data: ControlData,
+                 winches: WinchTorques | None = None):  # fmt: skip
+        """``winches``: the torque law's terms it takes back out of the measured torques —
+        the controller's, so that a friction calibration applied to them reaches it too
+        (None: the model's own)."""
         c = model.control
         self.model = model
         self.data = data
@@ -118,9 +123,8 @@ class WrenchObserver:
         self._gravity = np.ascontiguousarray(model.gravity, dtype=float)
         self._com = np.ascontiguousarray(pf.com, dtype=float)
         m = model.n_cables
-        # the winches' torque law (its own terms, from the model as the torques' are)
-        winches = WinchTorques(model)
-        self._winches = winches.terms
+        winches = winches if winches is not None else WinchTorques(model)
+        self.winches = winches  # its terms read each call: a friction calibration replaces them
         self._platform = kernel_args(Platform(
             np.ascontiguousarray(model.home.rotation, dtype=float), self._mass, self._inertia,
             self._com, self._gravity,
@@ -171,6 +175,6 @@ class WrenchObserver:
         self._rotor_term(kin.WT, acceleration, self._accel_term)
         observer_kernel(
             dt, self.gain, self._platform, estimate, kin.W, torque, velocity,
-            self._accel_term, self._winches, self._state,
+            self._accel_term, self.winches.terms, self._state,
         )  # fmt: skip
         np.copyto(self.data.ext_estimate, self._state[0])  # no view built

@@ -224,6 +224,7 @@ def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = 
                    brake_test_required: bool = False) -> dict[str, Any]:  # fmt: skip
     """What the gateway's status serves of the configuration."""
     import cdprctl
+    from cdprctl.calibration.friction_record import friction_summary
     from cdprctl.telemetry.scene import SceneLayout
 
     m, c = model, model.control
@@ -252,7 +253,8 @@ def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = 
         "ros2": {"enabled": m.ros2.enabled, "namespace": m.ros2.topic_namespace(m.name),
                  "domain_id": None if m.ros2.environment_problem() else m.ros2.domain()},
         "simulated": simulated,
-        **({"safety": safety_summary(m, state_dir, brake_test_required)}
+        **({"safety": safety_summary(m, state_dir, brake_test_required),
+            "friction": friction_summary(m, state_dir)}
            if state_dir is not None else {}),
         "versions": {"cdprctl": getattr(cdprctl, "__version__", "?"), **_versions()},
     }

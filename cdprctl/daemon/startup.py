@@ -112,6 +112,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         except CalibrationError as exc:
             raise refused(str(exc)) from None
         dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
+        _friction(dm)
         _brakes_tested(dm)
     dm._print("start-up: loading the compiled kernels (the first run on a machine compiles "
               "them: about a minute), configuring the drives, estimating the pose")  # fmt: skip
@@ -150,6 +151,17 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     if drives:
         dm.links.event(dm.data.time, drives, "drives")
     return None if path is None else _plan_path(dm, *path)
+
+
+def _friction(dm: Daemon) -> None:
+    """The record's friction calibration, if any, in place of the robot file's winch terms
+    (the torque law, the tension estimate, the observer: the controller's ``WinchTorques``)."""
+    from cdprctl.calibration.friction_record import friction_line, friction_terms
+
+    terms = friction_terms(dm.record)
+    if terms is not None:
+        dm.manager.controller.winches.apply_friction(*terms)
+    dm._print(friction_line(dm.record))
 
 
 def _brakes_tested(dm: Daemon) -> None:

@@ -17,6 +17,8 @@ WINCH_KEYS = (
     "rotor_inertia",
     "viscous_friction",
     "coulomb_friction",
+    "stribeck_friction",
+    "pulley_friction",
     "torque_limit",
     "encoder_counts_per_rev",
 )
@@ -44,6 +46,10 @@ _WINCH_FIELDS: tuple[tuple[str, str, dict[str, Any]], ...] = (
     ("rotor_inertia", "kg·m²", {"minimum": 0.0}),
     ("viscous_friction", "N·m·s/rad", {"minimum": 0.0}),
     ("coulomb_friction", "N·m", {"minimum": 0.0}),
+    # the breakaway friction beyond the Coulomb level near zero speed (numerics.friction_law)
+    ("stribeck_friction", "N·m", {"minimum": 0.0, "required": False, "default": 0.0}),
+    # μ of the capstan loss of the cable over its swivel pulley (a robot without pulleys: none)
+    ("pulley_friction", "", {"minimum": 0.0, "maximum": 1.0, "required": False, "default": 0.0}),
     ("torque_limit", "N·m", {"positive": True}),
     ("encoder_counts_per_rev", "counts", {"positive": True, "integer": True}),
 )
@@ -67,6 +73,8 @@ def read_winch(rd: TableReader, t: dict[str, Any], path: str, base: Winch | None
         rotor_inertia=numbers["rotor_inertia"],
         viscous_friction=numbers["viscous_friction"],
         coulomb_friction=numbers["coulomb_friction"],
+        stribeck_friction=numbers["stribeck_friction"],
+        pulley_friction=numbers["pulley_friction"],
         torque_limit=numbers["torque_limit"],
         encoder_counts_per_rev=int(numbers["encoder_counts_per_rev"]),
     )

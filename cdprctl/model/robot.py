@@ -56,6 +56,10 @@ class Winch:
     coulomb_friction: float  # N·m at the motor shaft
     torque_limit: float  # N·m, motor
     encoder_counts_per_rev: int  # counts per motor revolution
+    # N·m at the motor: the breakaway friction beyond the Coulomb level near zero speed
+    # (``numerics.friction_law``)
+    stribeck_friction: float = 0.0
+    pulley_friction: float = 0.0  # μ of the capstan loss over the cable's swivel pulley
 
     @property
     def max_cable_force(self) -> float:

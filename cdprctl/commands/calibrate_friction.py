@@ -1,0 +1,196 @@
+"""``cdprctl calibrate friction``: each winch's friction identified from its drive's torque
+while the platform goes out and back along three lines at three speeds, written into the
+calibration record, which the next ``cdprctl run`` applies (docs/friction.md). ``--sim``: on the
+simulated robot in this process (lock-step), each winch's friction drawn off the file's
+(``--plant-errors SEED``), the result printed, no record written."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+import numpy as np
+
+from cdprctl.commands.calibrate import WHO, moves_held
+from cdprctl.commands.records import EXIT_STATE_DIR, records_dir
+from cdprctl.commands.sim import bus_overrides, refuse_in_process_bus
+from drivers.simulated import simulated_robot
+
+
+def add_arguments(fp: Any) -> None:
+    """The options of ``calibrate friction``."""
+    fp.add_argument("--sim", action="store_true",
+                    help="on the simulated robot, in this process (lock-step): the result "
+                    "printed, no record written")  # fmt: skip
+    fp.add_argument("--plant-errors", type=int, metavar="SEED", default=None,
+                    help="with --sim: each winch's viscous and Coulomb friction 30-50 %% off "
+                    "the file's, up or down (seeded), a Stribeck term half the Coulomb "
+                    "one")  # fmt: skip
+    fp.add_argument("--pulley-friction", type=float, default=None, metavar="MU",
+                    help="with --sim: every pulley's μ in the simulated robot")  # fmt: skip
+    fp.add_argument("--travel", type=float, default=0.4, help="m of each line at most (0.4)")
+    fp.add_argument("--json", action="store_true", help="print the result as JSON")
+    fp.add_argument("--no-realtime", action="store_true",
+                    help="do not ask for SCHED_FIFO and CPU pinning while it moves")
+
+
+def run_friction(args: argparse.Namespace, model: Any) -> int:
+    """Exit 0 accepted (the record updated, unless --sim), 1 refused or stopped (the reason in
+    one line), 2 bad options, 4 the state directory cannot take the record."""
+    from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
+    from cdprctl.calibration.session import CalibrationFailedError
+    from drivers.errors import DriverError
+
+    if not 0.05 <= args.travel <= 2.0:
+        print(f"{WHO}: error: --travel = {args.travel} m: must be in [0.05, 2]", file=sys.stderr)
+        return 2
+    if not args.sim and (args.plant_errors is not None or args.pulley_friction is not None):
+        print(f"{WHO}: error: --plant-errors and --pulley-friction are the simulated robot's: "
+              "give --sim", file=sys.stderr)  # fmt: skip
+        return 2
+    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
+    opt = FrictionOptions(travel=args.travel)
+    sim, driver, record, state_dir = None, None, None, None
+    try:
+        if args.sim:
+            sim = _lockstep(args, model)
+            driver = sim.driver
+            driver.configure()
+            theta_zero = np.zeros(model.n_cables)
+            start = np.r_[model.home.position, 0.0, 0.0, 0.0]
+        else:
+            got = _on_the_robot(args, model, log)
+            if isinstance(got, int):
+                return got
+            driver, record, state_dir, theta_zero, start = got
+        with moves_held(model, not (args.no_realtime or args.sim), log):
+            cal = friction_calibrate(model, driver, theta_zero, start, opt, log)
+    except (DriverError, CalibrationFailedError) as exc:
+        print(f"{WHO}: failed: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if sim is not None:
+            sim.close()
+        elif driver is not None:
+            driver.shutdown()
+    return _report(args, model, cal, record, state_dir, sim, log)
+
+
+def _lockstep(args: argparse.Namespace, model: Any) -> Any:
+    """The simulated robot at home, its winches' friction as ``--plant-errors`` draws it."""
+    from sim_backend.network import LockStep
+    from sim_backend.plant import CdprPlant
+    from sim_backend.plant_errors import PlantErrors
+
+    truth = model
+    if args.plant_errors is not None or args.pulley_friction is not None:
+        drawn = (0.3, 0.5) if args.plant_errors is not None else (0.0, 0.0)
+        truth = PlantErrors(args.plant_errors or 0, 0.0, 0.0, friction=drawn,
+                            stribeck=0.5 if args.plant_errors is not None else 0.0,
+                            pulley=args.pulley_friction).apply(model)[0]  # fmt: skip
+    plant = CdprPlant(truth)
+    plant.set_pose(model.home.position, model.home.rotation, None)
+    ls = LockStep(model, plant=plant)
+    ls.truth = truth  # type: ignore[attr-defined]  # the report compares with it
+    return ls
+
+
+def _on_the_robot(args: argparse.Namespace, model: Any, log: Any) -> Any:
+    """(driver, record, state directory, the encoders' zeros, the start pose) on the robot
+    over its buses, the drives configured and checked against the record; an exit code after
+    one line when it cannot go on."""
+    from cdprctl.calibration.record import CalibrationError
+    from cdprctl.calibration.startup import check_drives, how_to_calibrate, load_record, offsets
+    from drivers import create_driver
+
+    overrides = bus_overrides(args)
+    if refuse_in_process_bus(WHO, model, overrides, False):
+        return 2
+    simulated = simulated_robot(model, overrides)
+    state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
+    if state_dir is None:
+        return EXIT_STATE_DIR
+    try:
+        record = load_record(model, state_dir, simulated)
+    except CalibrationError as exc:
+        print(f"{WHO}: error: {exc}: the encoders' zeros are needed to move the platform; "
+              f"{how_to_calibrate(model, state_dir)}", file=sys.stderr)  # fmt: skip
+        return 1
+    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
+    log(f"{WHO}: {model.name}, friction: configuring the drives")
+    driver.configure()
+    try:
+        check_drives(model, record, driver)
+    except CalibrationError as exc:
+        driver.shutdown()
+        print(f"{WHO}: error: {exc}", file=sys.stderr)
+        return 1
+    theta_zero, scale = offsets(record)
+    return driver, record, state_dir, theta_zero, _start_pose(model, driver, theta_zero, scale)
+
+
+def _start_pose(model: Any, driver: Any, theta_zero: np.ndarray,
+                scale: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Where the platform stands (6: m, the home orientation taken): the estimator's forward
+    kinematics on the encoders and the tensions at rest."""
+    from cdprctl.control.estimator import Estimator
+
+    states = driver.read(driver.clock())
+    e = Estimator(model)
+    e.apply_calibration(theta_zero, scale)
+    r = np.array([c.winch.drum_radius / c.winch.gear_ratio for c in model.cables])
+    for k in range(60):
+        e.update(0.01 * k, states.position.copy(), states.torque / r)
+    return np.r_[e.position, 0.0, 0.0, 0.0]
+
+
+def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_dir: Any,
+            sim: Any, log: Any) -> int:  # fmt: skip
+    """Each winch's terms and σ (with --sim, the simulated robot's beside them); the record
+    updated when accepted on a robot."""
+    from cdprctl.calibration.friction_record import friction_entry
+    from cdprctl.calibration.record import save
+
+    truth = getattr(sim, "truth", None)
+    rows = []
+    for i, (c, f) in enumerate(zip(model.cables, cal.fits, strict=True)):
+        row = {"cable": c.name, "viscous": f.viscous, "coulomb": f.coulomb,
+               "stribeck": f.stribeck, "inertia": f.inertia, "std": list(f.std),
+               "pulley": f.pulley, "pulley_std": f.pulley_std, "pulley_note": f.pulley_note,
+               "residual_rms": f.residual_rms, "residual_limit": f.residual_limit}  # fmt: skip
+        if truth is not None:
+            w = truth.cables[i].winch
+            row["plant"] = {"viscous": w.viscous_friction, "coulomb": w.coulomb_friction,
+                            "stribeck": w.stribeck_friction,
+                            "pulley": w.pulley_friction}  # fmt: skip
+        rows.append(row)
+    written = None
+    if cal.accepted and record is not None and state_dir is not None:
+        record.friction = friction_entry(model, cal.fits, cal.motion_time, record.simulated)
+        written = str(save(record, state_dir))
+    if args.json:
+        print(json.dumps({"accepted": cal.accepted, "reason": cal.reason, "winches": rows,
+                          "motion_time": cal.motion_time, "record": written},
+                         indent=1))  # fmt: skip
+    else:
+        for r in rows:
+            sd = r["std"]
+            line = (f"  winch {r['cable']}: viscous {r['viscous']:.4g} ± {sd[0]:.2g} "
+                    "N·m·s/rad, "
+                    f"Coulomb {r['coulomb']:.4g} ± {sd[1]:.2g} N·m, Stribeck "
+                    f"{r['stribeck']:.3g} ± {sd[2]:.2g} N·m, inertia {r['inertia']:.3g} kg·m²"
+                    f", residual {r['residual_rms']:.2g} N·m (limit "
+                    f"{r['residual_limit']:.2g})")  # fmt: skip
+            if "plant" in r:
+                p = r["plant"]
+                line += (f" [simulated robot: {p['viscous']:.4g}, {p['coulomb']:.4g}, "
+                         f"{p['stribeck']:.3g}]")  # fmt: skip
+            mu = (f"; pulley μ {r['pulley']:.3g} ± {r['pulley_std']:.2g}"
+                  if r["pulley"] is not None else f"; pulley: {r['pulley_note']}")  # fmt: skip
+            log(line + mu)
+        tail = (f"; the record updated: {written} (the next cdprctl run applies it)" if written
+                else " (--sim: no record written)" if sim is not None else "")  # fmt: skip
+        log(f"{WHO}: friction {'accepted' if cal.accepted else 'refused: ' + cal.reason}{tail}")
+    return 0 if cal.accepted else 1

@@ -1,0 +1,78 @@
+"""``cdprctl calibrate friction`` over seeded simulated robots, in lock-step: each winch's
+viscous and Coulomb friction 30-50 % off the robot file's (up or down, seeded), a Stribeck term
+half the Coulomb one. Per seed the worst error of each identified term against the simulated
+robot's, over the winches; the markdown table docs/friction.md quotes.
+
+    .venv/bin/python tools/friction_table.py [--seeds 10] [--robots rowc cogiro]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+from cdprctl.calibration.friction_procedure import friction_calibrate  # noqa: E402
+from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
+from cdprctl.model import load_robot  # noqa: E402
+from sim_backend.network import LockStep  # noqa: E402
+from sim_backend.plant import CdprPlant  # noqa: E402
+from sim_backend.plant_errors import PlantErrors  # noqa: E402
+
+
+def run(robot: str, seed: int) -> dict:
+    """One calibration on ``robot`` whose winches are drawn from ``seed``: the worst errors
+    (% of the simulated robot's term) and whether it was accepted."""
+    model = load_robot(ROOT / "config" / f"{robot}.toml")
+    truth = PlantErrors(seed, 0.0, 0.0, friction=(0.3, 0.5), stribeck=0.5).apply(model)[0]
+    plant = CdprPlant(truth)
+    plant.set_pose(model.home.position, model.home.rotation, None)
+    t0 = time.monotonic()
+    row: dict = {"robot": robot, "seed": seed}
+    with LockStep(model, plant=plant) as ls:
+        ls.driver.configure()
+        start = np.r_[model.home.position, 0.0, 0.0, 0.0]
+        try:
+            cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables), start,
+                                     log=lambda s: None)  # fmt: skip
+        except CalibrationFailedError as exc:
+            return {**row, "stopped": str(exc), "wall": time.monotonic() - t0}
+    pairs = list(zip(cal.fits, [c.winch for c in truth.cables], strict=True))
+    err = {
+        "viscous": [f.viscous / x.viscous_friction - 1 for f, x in pairs],
+        "coulomb": [f.coulomb / x.coulomb_friction - 1 for f, x in pairs],
+        "stribeck": [f.stribeck / x.stribeck_friction - 1 for f, x in pairs],
+    }
+    row.update({k: float(np.max(np.abs(v)) * 100) for k, v in err.items()})
+    row.update(accepted=cal.accepted, reason=cal.reason, motion=cal.motion_time,
+               wall=time.monotonic() - t0)  # fmt: skip
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--first", type=int, default=1)
+    ap.add_argument("--robots", nargs="+", default=["rowc", "cogiro"])
+    args = ap.parse_args()
+    print("| robot | seed | accepted | viscous, worst error % | Coulomb, worst % | "
+          "Stribeck, worst % | motion s |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for robot in args.robots:
+        for seed in range(args.first, args.first + args.seeds):
+            r = run(robot, seed)
+            if "stopped" in r:
+                print(f"| {robot} | {seed} | stopped: {r['stopped']} | | | | |", flush=True)
+                continue
+            print(f"| {robot} | {seed} | {'yes' if r['accepted'] else 'no: ' + r['reason']} "
+                  f"| {r['viscous']:.1f} | {r['coulomb']:.1f} | {r['stribeck']:.1f} | "
+                  f"{r['motion']:.0f} |", flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    sys.exit(main())
