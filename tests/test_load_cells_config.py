@@ -90,3 +90,12 @@ def test_section_keys(tmp_path):
     errs = errors(tmp_path, "[sensors]\nestimate_error = 0\ndisagreement_time = 0.2\n")
     assert any("sensors.estimate_error = 0 N must be > 0" in e for e in errs), errs
     assert any("sensors.disagreement_time = 0.2 s must be <= 0.1" in e for e in errs), errs
+
+
+def test_refused_on_odrive_buses(tmp_path):
+    p = tmp_path / "odrive_cells.toml"
+    p.write_text(f'base = "{CONFIG / "rowc_odrive.toml"}"\n' + CELL)
+    with pytest.raises(ConfigError) as exc:
+        load_robot(p)
+    assert any("sensors.load_cells = '1 cells' need CANopen buses" in e
+               for e in exc.value.errors), exc.value.errors  # fmt: skip

@@ -139,8 +139,9 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     paths = read_paths(rd, data)
     interference = read_interference(rd, data)
     sensors = read_sensors(rd, data, [c.name for c in cables or ()],
-                           drives.buses if drives else (), drives.controller_node_id
-                           if drives else 127)  # fmt: skip
+                           drives.buses if drives else (),
+                           drives.controller_node_id if drives else 127,
+                           drives.driver if drives else "cia402")  # fmt: skip
 
     if (
         rd.errors

@@ -67,7 +67,8 @@ class SensorsConfig:
 
 
 def read_sensors(rd: TableReader, data: dict[str, Any], cable_names: list[str],
-                 buses: tuple[BusConfig, ...], controller_id: int) -> SensorsConfig:  # fmt: skip
+                 buses: tuple[BusConfig, ...], controller_id: int,
+                 driver: str = "cia402") -> SensorsConfig:  # fmt: skip
     """``[sensors]`` (optional) with its ``[[sensors.load_cells]]``; errors go to ``rd``.
     ``buses``: the drives' (a cell is on one of them, its node id none of theirs)."""
     n0 = len(rd.errors)
@@ -83,6 +84,11 @@ def read_sensors(rd: TableReader, data: dict[str, Any], cable_names: list[str],
     if not isinstance(raw, list) or not all(isinstance(c, dict) for c in raw):
         rd.errors.append(f"{rd.file}: sensors.load_cells must be an array of tables "
                          "[[sensors.load_cells]]")  # fmt: skip
+        raw = []
+    if raw and driver != "cia402":
+        rd.error("sensors.load_cells", f"{len(raw)} cells", "", f"need CANopen buses: the "
+                 f"drives' (drives.driver = {driver!r}) speak CAN Simple, whose frame ids are "
+                 "CANopen's too")  # fmt: skip
         raw = []
     cells: list[LoadCell] = []
     used: dict[tuple[int, int], str] = {}

@@ -31,9 +31,9 @@ Hook = Callable[[int, int, int], None]  # (index, sub, value)
 
 
 @lru_cache(maxsize=128)
-def _parsed(node_id: int) -> ObjectDictionary:
+def _parsed(node_id: int, eds: Path = EDS) -> ObjectDictionary:
     """The EDS parsed for ``node_id`` ($NODEID resolved); definitions only, never mutated."""
-    return canopen.import_od(str(EDS), node_id)
+    return canopen.import_od(str(eds), node_id)
 
 
 class Dictionary:
@@ -44,11 +44,13 @@ class Dictionary:
         read: Callable[[int, int], int | None],
         check: Hook,
         written: Hook,
+        eds: Path = EDS,
     ):
-        """``stored``: the drive's own values over the EDS defaults (its non-volatile
-        memory: what a reset restores); ``read(index, sub)``: a live value or None;
-        ``check`` before a download is stored, ``written`` after."""
-        self.od = _parsed(node_id)
+        """``eds``: the node's (default: the winch drive's); ``stored``: the drive's own values
+        over the EDS defaults (its non-volatile memory: what a reset restores);
+        ``read(index, sub)``: a live value or None; ``check`` before a download is stored,
+        ``written`` after."""
+        self.od = _parsed(node_id, eds)
         self.node = canopen.LocalNode(node_id, self.od)
         # canopen's NMT slave would start its own heartbeat timer when 0x1017 is written: the
         # drive produces its heartbeat itself, on the simulator's clock
