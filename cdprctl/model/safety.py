@@ -36,6 +36,7 @@ STOP_CATEGORIES: dict[str, tuple[tuple[int, ...], str]] = {
     "orientation": ((1, 0, 2), ""),
     "platform speed": ((1, 0, 2), ""),
     "tension distribution": ((1, 0, 2), ""),
+    "load cell": ((1, 0, 2), ""),
 }
 
 
