@@ -41,6 +41,7 @@ class LoadCells:
         self.cable = np.array([c.cable for c in cells], dtype=np.int64)
         self.bus = np.array([c.bus for c in cells], dtype=np.int64)
         self.node = np.array([c.node_id for c in cells], dtype=np.int64)
+        self.sdo_index = [0] * n  # each cell's index for the set-up's SDO client
         self.type_code = np.array([DATA_TYPES.index(c.data_type) for c in cells], dtype=np.int64)
         self.place = np.zeros(n, dtype=np.int64)  # byte of the value in its TPDO (set-up)
         self.scale = np.array([c.scale for c in cells])  # N per unit
@@ -62,7 +63,11 @@ class LoadCells:
         index ``m + k``: the set-up's SDO port numbers the cells after the ``m`` drives)."""
         for k, c in enumerate(self.cells):
             dispatch[(c.bus, c.cob_id)] = (LOAD_CELL, k)
-            dispatch[(c.bus, p.SDO_TX + c.node_id)] = (sdo_kind, m + k)
+            drive = dispatch.get((c.bus, p.SDO_TX + c.node_id))
+            # a drive's own analog input: its SDO answers are the drive's
+            self.sdo_index[k] = drive[1] if drive is not None else m + k
+            if drive is None:
+                dispatch[(c.bus, p.SDO_TX + c.node_id)] = (sdo_kind, m + k)
 
     def receive(self, k: int, data: Any) -> None:
         """Cell ``k``'s TPDO (bytes): kept for the cycle's decoding."""
@@ -96,15 +101,17 @@ class LoadCells:
                      self.states.tension.copy(), self.states.tension_age.copy())  # fmt: skip
 
     # -- set-up ---------------------------------------------------------------------------------
-    def configure(self, sdo: Any, m: int, configure: bool, timeout: float) -> None:
+    def configure(self, sdo: Any, configure: bool, timeout: float) -> None:
         """Each cell checked by SDO in PRE-OPERATIONAL (``sdo``: the client whose port numbers
-        cell ``k`` ``m + k``): a CiA 404 device where its object is one of CiA 404's; its TPDO
+        cell ``k`` ``sdo_index[k]``: after the drives, or a drive's own): a CiA 404 device
+        where its object is one of CiA 404's; its TPDO
         at every SYNC carrying the value — mapped so when ``configure`` ([drives] pdo_mapping),
         else refused. DriverInitializationError names the cell and the fix."""
         for k, cell in enumerate(self.cells):
             where = f"load cell of cable index {cell.cable} (node {cell.node_id}, bus {cell.bus})"
             try:
-                self.place[k] = _setup_cell(sdo, m + k, cell, configure, timeout, where)
+                self.place[k] = _setup_cell(sdo, self.sdo_index[k], cell, configure, timeout,
+                                            where)  # fmt: skip
             except DriverInitializationError:
                 raise
             except Exception as exc:  # a timeout, an abort: said with the cell

@@ -56,6 +56,8 @@ def test_defaults_and_types(tmp_path):
         (('cable = "1"', 'cable = "9"'), 'sensors.load_cells[0].cable = \'9\' is not a cable'),
         (("node_id = 21", "node_id = 3"),
          "sensors.load_cells[0].node_id = 3 is already the drive of 3 on bus 0"),
+        (("node_id = 21", "node_id = 3\ntpdo = 2"),
+         "sensors.load_cells[0].node_id = 3 is already the drive of 3 on bus 0"),
         (("node_id = 21", "node_id = 127"),
          "node_id = 127 is already the controller (drives.controller_node_id) on bus 0"),
         (("scale = 0.01", "scale = -0.01"), "sensors.load_cells[0].scale = -0.01 N must be > 0"),
@@ -75,6 +77,16 @@ def test_defaults_and_types(tmp_path):
 def test_bad_cell_is_named(tmp_path, change, expected):
     errs = errors(tmp_path, CELL.replace(*change))
     assert any(expected in e for e in errs), errs
+
+
+def test_a_drives_analog_input_in_its_tpdo3(tmp_path):
+    """A drive's own analog input: its node, a TPDO cdprctl does not map (3 or 4), its
+    object and data type."""
+    cell = CELL.replace(
+        "node_id = 21", 'node_id = 1\ntpdo = 3\nobject = 0x2205\ndata_type = "int16"'
+    )
+    c = load(tmp_path, cell).sensors.load_cells[0]
+    assert (c.node_id, c.cob_id, c.object, c.data_type) == (1, 0x381, 0x2205, "int16")
 
 
 def test_two_cells_on_one_cable_or_node(tmp_path):

@@ -89,7 +89,7 @@ def test_a_cell_mapped_otherwise_is_mapped_or_refused(rig):
         match=r"load cell of cable index 0 \(node "
         r"21, bus 0\): TPDO1 does not carry 0x9130:01 at every SYNC",
     ):
-        ls.driver.cells.configure(ls.driver.cells_sdo, MODEL.n_cables, False, 0.5)
+        ls.driver.cells.configure(ls.driver.cells_sdo, False, 0.5)
     assert cell.od[(0x1A00, 1)] == 0x61500108
 
 

@@ -120,8 +120,13 @@ def _read_cell(rd: TableReader, ct: dict[str, Any], path: str, names: list[str],
             rd.error(f"{path}.cable", name, "", "already has a load cell (one per cable)")
     bus = _cell_bus(rd, ct, path, cable, buses)
     node = rd.number(ct, "node_id", path, "", minimum=1, maximum=127, integer=True)
+    tpdo = rd.number(ct, "tpdo", path, "", required=False, default=1, minimum=1, maximum=4,
+                     integer=True)  # fmt: skip
     if node is not None and bus is not None:
-        other = used.get((bus, int(node))) or next(
+        other = used.get((bus, int(node)))
+        if other and other.startswith("the drive") and tpdo is not None and tpdo > 2:
+            other = None  # a drive's analog input in its TPDO3/4 (cdprctl maps TPDO1-2)
+        other = other or next(
             (f"the load cell of {names[c.cable]}" for c in cells
              if (c.bus, c.node_id) == (bus, int(node))), None)  # fmt: skip
         if other:
@@ -131,8 +136,6 @@ def _read_cell(rd: TableReader, ct: dict[str, Any], path: str, names: list[str],
     sub = rd.number(ct, "subindex", path, "", required=False, default=1, minimum=0,
                     maximum=254, integer=True)  # fmt: skip
     dtype = _cell_type(rd, ct, path, obj)
-    tpdo = rd.number(ct, "tpdo", path, "", required=False, default=1, minimum=1, maximum=4,
-                     integer=True)  # fmt: skip
     scale = rd.number(ct, "scale", path, "N", positive=True)
     offset = rd.number(ct, "offset", path, "N", required=False, default=0.0)
     accuracy = rd.number(ct, "accuracy", path, "N", positive=True)

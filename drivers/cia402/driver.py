@@ -160,8 +160,7 @@ class Cia402Driver(WinchDriver):
                 counter[self._medium_of(c)] = False
         for c in range(self.m):
             self._configure_drive(c, timeout, caps[c], counter[self._medium_of(c)])
-        self.cells.configure(self.cells_sdo, self.m, self.config.pdo_mapping == "configure",
-                             timeout)  # fmt: skip
+        self.cells.configure(self.cells_sdo, self.config.pdo_mapping == "configure", timeout)
         self.sdo.nmt_all(p.NMT_START)
         self.liveness.started = True
 
