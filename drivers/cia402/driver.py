@@ -86,8 +86,10 @@ class Cia402Driver(WinchDriver):
         self.cells = LoadCells(model.sensors.load_cells, m, self.states)
         self.cells.dispatch_into(t.dispatch, m, SDO)
         self.feedback.on_cell = self.cells.receive
+        port = self.sdo.port
+        assert isinstance(port, DriverSdoPort)
         self.cells_sdo = SdoClient(dataclasses.replace(
-            self.sdo.port, bus_of=np.concatenate([self.bus_of, self.cells.bus]),
+            port, bus_of=np.concatenate([self.bus_of, self.cells.bus]),
             node=np.concatenate([self.node, self.cells.node]),
         ))  # fmt: skip
         # what the set-up found: each drive's 0x1018; the optional objects its set-up skipped

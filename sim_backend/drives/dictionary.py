@@ -41,7 +41,7 @@ class Dictionary:
         self,
         node_id: int,
         stored: dict[Key, int],
-        read: Callable[[int, int], int | None],
+        read: Callable[[int, int], int | float | None],
         check: Hook,
         written: Hook,
         eds: Path = EDS,
@@ -75,7 +75,7 @@ class Dictionary:
                 key = (var.index, var.subindex)
                 self.values[key] = int(self._stored.get(key, var.default))
 
-    def value(self, index: int, sub: int) -> int | None:
+    def value(self, index: int, sub: int) -> int | float | None:
         """An object's value now: live from the drive, else the stored number (None: not a
         number, e.g. the device name, which canopen answers from the EDS)."""
         live = self._read(index, sub)
@@ -90,7 +90,7 @@ class Dictionary:
     def send_message(self, can_id: int, data: Any, remote: bool = False) -> None:
         self._answer = can.Message(arbitration_id=can_id, data=bytes(data), is_extended_id=False)
 
-    def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
+    def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | float | None:
         return self.value(index, subindex)
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:
