@@ -29,7 +29,7 @@ def main() -> None:
     print("| robot | winches' friction | cells | at rest, max N | moving, max N | state |")
     print("| --- | --- | --- | --- | --- | --- |")
     for pair in args.pairs.split(","):
-        for i, name in enumerate(pair.split(":")):
+        for name in pair.split(":"):
             model = load_robot(ROOT / "config" / name)
             runs = [(None, jet_run(model, None))]
             runs += [(s, jet_run(model, s)) for s in range(args.seeds)]
@@ -37,7 +37,7 @@ def main() -> None:
             worst_move = max(r.moving for _, r in runs[1:]) if args.seeds else 0.0
             states = {r.state for _, r in runs}
             nominal = runs[0][1]
-            cells = "yes" if i else "no"
+            cells = "yes" if model.sensors.load_cells else "no"
             print(f"| {model.name} | as the file | {cells} | {nominal.at_rest:.2f} | "
                   f"{nominal.moving:.2f} | {nominal.state} |")  # fmt: skip
             if args.seeds:

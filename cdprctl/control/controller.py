@@ -89,6 +89,7 @@ class Controller:
         self.observer = WrenchObserver(model, d)
         self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
         self.load_cells = LoadCellCheck(model, self.winches)  # tension_source.py
+        self._rotor_term = np.zeros(model.n_cables)  # N·m, for its check
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
                                        self.distribution, self.ext_wrench, tr)  # fmt: skip
         # position mode: the cables' internal tension error is supervised, per cable (N)
@@ -238,7 +239,9 @@ class Controller:
     def _check_cells(self, t: float, st: WinchStates) -> None:
         """The load cells' supervision (``LoadCellCheck``): a fault that names the cell."""
         if self.load_cells.cells:
-            why = self.load_cells.check(t, st.torque, st.velocity, st.tension)
+            accel = self._rotor_term  # N·m: the torques' rotor-inertia feed-forward
+            self.winches.rotor_term(self.at.kin.WT, self.trajectory.acceleration, accel)
+            why = self.load_cells.check(t, st.torque, st.velocity, accel, st.tension)
             if why:
                 self.supervisor.fault(t, LOAD_CELL, why)
 

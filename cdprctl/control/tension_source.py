@@ -41,21 +41,21 @@ def cable_tension(from_torque, cell):  # pragma: no cover - compiled
 
 
 @cycle_kernel
-def disagreement_kernel(cells, torque, velocity, winches, measured, alpha, estimate_f,
-                        measured_f, bound):  # pragma: no cover - compiled  # fmt: skip
+def disagreement_kernel(cells, torque, velocity, accel_term, winches, measured, alpha,
+                        estimate_f, measured_f, bound):  # pragma: no cover - compiled  # fmt: skip
     """For each cell ``k`` on cable ``cells[k]``: the tension its drive's ``torque`` (N·m)
-    applies at ``velocity`` (rad/s) (``torques.applied_tension``; ``winches``: the
-    ``WinchTerms``) and the cell's ``measured`` (N), each low-passed by ``alpha`` into
-    ``estimate_f`` and ``measured_f`` (N). Returns the cell furthest beyond its ``bound`` (N)
-    apart (-1: none), or ``-2 - k`` for the first dead one (NaN: not heard within its
-    timeout)."""
+    applies at ``velocity`` (rad/s), less the rotor's inertia ``accel_term`` (N·m)
+    (``torques.applied_tension``; ``winches``: the ``WinchTerms``) and the cell's
+    ``measured`` (N), each low-passed by ``alpha`` into ``estimate_f`` and ``measured_f``
+    (N). Returns the cell furthest beyond its ``bound`` (N) apart (-1: none), or ``-2 - k``
+    for the first dead one (NaN: not heard within its timeout)."""
     r, viscous, coulomb = winches[0], winches[1], winches[2]
     worst, excess = -1, 0.0
     for k in range(cells.shape[0]):
         i = cells[k]
         if not math.isfinite(measured[i]):
             return -2 - k
-        t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], 0.0, r[i])
+        t = applied_tension(torque[i], viscous[i], coulomb[i], velocity[i], accel_term[i], r[i])
         if math.isfinite(estimate_f[k]) and math.isfinite(measured_f[k]):
             estimate_f[k] += alpha * (t - estimate_f[k])
             measured_f[k] += alpha * (measured[i] - measured_f[k])
@@ -99,19 +99,20 @@ class LoadCellCheck:
         self._since = 0.0
         self._last_t = math.nan
 
-    def check(self, t: float, torque: np.ndarray, velocity: np.ndarray,
+    def check(self, t: float, torque: np.ndarray, velocity: np.ndarray, accel_term: np.ndarray,
               measured: np.ndarray) -> str:  # fmt: skip
-        """At ``t`` (s) from the drives' ``torque`` (N·m), ``velocity`` (rad/s) and the
-        cells' ``measured`` tensions (N per cable, NaN: none or dead): why a cell is a fault
-        now ("" while none is)."""
+        """At ``t`` (s) from the drives' ``torque`` (N·m), ``velocity`` (rad/s), the rotor's
+        inertia ``accel_term`` (N·m per winch, ``WinchTorques.rotor_term``: on CoGiRo 40 N of
+        tension per m/s² of cable) and the cells' ``measured`` tensions (N per cable, NaN:
+        none or dead): why a cell is a fault now ("" while none is)."""
         if not self.cells:
             return ""
         dt = t - self._last_t if math.isfinite(self._last_t) else 0.0
         self._last_t = t
         self._since += dt
         alpha = 1.0 - math.exp(-2.0 * math.pi * self.FILTER * max(dt, 0.0))
-        k = disagreement_kernel(self.index, torque, velocity, self.terms, measured, alpha,
-                                self.estimate_f, self.measured_f, self.bound)  # fmt: skip
+        k = disagreement_kernel(self.index, torque, velocity, accel_term, self.terms, measured,
+                                alpha, self.estimate_f, self.measured_f, self.bound)  # fmt: skip
         if k >= 0 and self._since <= self.release:
             k = -1  # the brakes may still hold part of the load: not the torque's yet
         if k <= -2:
@@ -132,5 +133,5 @@ class LoadCellCheck:
     def warm_up(self) -> None:
         """The kernel once on throwaway state (compiled before the drives start)."""
         z = np.zeros(self.terms[0].shape[0])
-        disagreement_kernel(self.index, z, z, self.terms, z, 0.5, self.estimate_f.copy(),
+        disagreement_kernel(self.index, z, z, z, self.terms, z, 0.5, self.estimate_f.copy(),
                             self.measured_f.copy(), self.bound)  # fmt: skip
