@@ -111,3 +111,17 @@ def test_refused_on_odrive_buses(tmp_path):
         load_robot(p)
     assert any("sensors.load_cells = '1 cells' need CANopen buses" in e
                for e in exc.value.errors), exc.value.errors  # fmt: skip
+
+
+def test_the_cells_count_in_the_bus_load():
+    """Each cell's TPDO (4 bytes for 0x9130) in its bus's budget: rowc's four cells a bus at
+    250 Hz add 4 × frame_bits(4) × 250 bit/s, against the drives' frames alone."""
+    from drivers.busload import bus_loads, frame_bits
+
+    m = load_robot(CONFIG / "rowc_load_cells.toml")
+    without = bus_loads(m.drives, 250.0)
+    with_cells = bus_loads(m.drives, 250.0, cells=m.sensors.load_cells)
+    for a, b in zip(without, with_cells, strict=True):
+        assert b.bits_per_cycle - a.bits_per_cycle == 4 * frame_bits(4)
+        assert "4 x load cell TPDO (4 B)" in b.frames
+        assert b.load == pytest.approx(a.load + 4 * frame_bits(4) * 250.0 / b.bitrate)
