@@ -366,7 +366,7 @@ def test_state_at_its_rate_a_command_moves_a_bad_one_changes_nothing(robot_and_c
     assert s["safety"]["brake_test"]["required"] is False
     assert {k: status[0]["safety"][k] for k in safety} == safety
     stops = status[0]["config"]["safety"]["stop_category"]
-    assert stops["drive fault"] == 0 and stops["tracking"] == 1 and len(stops) == 15
+    assert stops["drive fault"] == 0 and stops["tracking"] == 1 and len(stops) == 16
 
     client.put("enable", {"id": "e1"})
     assert client.wait(lambda: client.last()["state"] == "enabled"), client.replies
