@@ -66,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
     from cdprctl.commands import brake_test
 
     brake_test.add_parser(sub)
+    from cdprctl.commands import load_cells
+
+    load_cells.add_parser(sub)
     tda_cmd.add_parser(sub)
     bus_load.add_parser(sub)
     from cdprctl.commands import drives

@@ -15,7 +15,7 @@ from pathlib import Path
 REAL_ROOT = Path("/var/lib/cdprctl")
 # what the procedures keep: their records and the samples of a stop midway (partial_session)
 RECORD_FILES = ("calibration.json", "brake_test.json", "calibration-geometry.partial.json",
-                "calibration-self.partial.json", "brake_test.partial.json")
+                "calibration-self.partial.json", "brake_test.partial.json", "load_cells.json")
 
 
 class StateDirError(Exception):

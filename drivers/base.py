@@ -114,7 +114,8 @@ class WinchDriver(ABC):
 
         self.require(UNCONFIGURED)
         self._warm_up()
-        self.warnings, errors = check_bus_load(self.config, 1.0 / self.period)
+        self.warnings, errors = check_bus_load(self.config, 1.0 / self.period,
+                                               self.model.sensors.load_cells)  # fmt: skip
         for w in self.warnings:
             _LOG.warning(w)
         if errors:

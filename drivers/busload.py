@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cdprctl.model.drives import DrivesConfig
+from cdprctl.model.sensors import DATA_SIZES, LoadCell
 
 WARN_LOAD = 0.70
 MAX_LOAD = 1.00
@@ -74,14 +75,19 @@ def cycle_frames(
     return frames
 
 
-def bus_loads(drives: DrivesConfig, rate: float, heartbeat_rate: float = 10.0) -> list[BusLoad]:
+def bus_loads(drives: DrivesConfig, rate: float, heartbeat_rate: float = 10.0,
+              cells: tuple[LoadCell, ...] = ()) -> list[BusLoad]:  # fmt: skip
     """The load of each bus at the control ``rate`` (Hz), heartbeats (1 byte, every drive and
-    the controller, ``heartbeat_rate`` Hz) included."""
+    the controller, ``heartbeat_rate`` Hz) included, and the TPDO of each load cell on it
+    (``cells``: ``[[sensors.load_cells]]``, its value alone as the set-up maps it)."""
     out = []
     for b, bus in enumerate(drives.buses):
         n = len(bus.cables)
         n_position = sum(drives.mode_of(c) == "csp" for c in bus.cables)
         frames = cycle_frames(drives.driver, n, drives.velocity_source == "pdo", n_position)
+        for size in sorted({DATA_SIZES[c.data_type] for c in cells if c.bus == b}):
+            count = sum(c.bus == b and DATA_SIZES[c.data_type] == size for c in cells)
+            frames.append(("load cell TPDO", count, size))
         bits = sum(count * frame_bits(nb) for _, count, nb in frames)
         hb_bits_per_s = (n + 1) * frame_bits(1 if drives.driver == "cia402" else 8) * heartbeat_rate
         load = (bits * rate + hb_bits_per_s) / bus.bitrate
@@ -90,10 +96,11 @@ def bus_loads(drives: DrivesConfig, rate: float, heartbeat_rate: float = 10.0) -
     return out
 
 
-def check_bus_load(drives: DrivesConfig, rate: float) -> tuple[list[str], list[str]]:
+def check_bus_load(drives: DrivesConfig, rate: float,
+                   cells: tuple[LoadCell, ...] = ()) -> tuple[list[str], list[str]]:  # fmt: skip
     """(warnings, errors): a bus above 70 % warns, above 100 % refuses to start."""
     warnings, errors = [], []
-    for bl in bus_loads(drives, rate):
+    for bl in bus_loads(drives, rate, cells=cells):
         msg = (
             f"CAN bus {bl.bus} ({bl.interface} {bl.channel}, {bl.bitrate} bit/s): "
             f"{bl.load * 100:.1f} % load at {rate:g} Hz ({bl.bits_per_cycle} bits per cycle, "

@@ -48,6 +48,10 @@ class WinchStates:
         self.feedback_age = np.full(m, math.inf)  # s since the last feedback
         self.sampled_at = np.full(m, -math.inf)  # s: when the last feedback was taken (its SYNC)
         self.fault_code = np.zeros(m, dtype=np.int64)  # drive error code, 0 when none
+        # N: each cable's load cell's tension (NaN: no cell, or none heard within its
+        # timeout) and s since its last value (drivers/load_cells.py)
+        self.tension = np.full(m, math.nan)
+        self.tension_age = np.full(m, math.inf)
         self.stamp = 0.0  # s, the time given to read()
 
 

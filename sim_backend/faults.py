@@ -15,6 +15,11 @@ Kinds (``FaultEvent.kind``) and their ``value``:
 * ``estop`` — the safety chain opens at every drive's STO input (an e-stop; ``value``: the
   error code the drives report, 0 for the simulated drives' own, ``EMCY_STO``), closed again
   when the event ends (CiA 402 drives; the drives keep their error until a fault reset);
+* ``load_cell_dead`` — the load cell of ``cable`` stops sending (``[[sensors.load_cells]]``);
+* ``load_cell_drift`` — the load cell of ``cable`` drifts at ``value`` N/s (its offset kept
+  when the event ends, as a drifted cell's is);
+* ``load_cell_offset`` — the load cell of ``cable`` reads ``value`` N more (a knock, a loose
+  connector), taken off again when the event ends;
 * ``external_wrench`` — ``value`` = (fx, fy, fz, mx, my, mz) N, N·m at P, base frame,
   ramped over ``ramp`` s (0: a step) from the wrench acting when the event starts: an event
   of zeros with a ramp takes a force off as gradually as one put it on.
@@ -44,6 +49,9 @@ KINDS = (
     "winch_slip",
     "external_wrench",
     "estop",
+    "load_cell_dead",
+    "load_cell_drift",
+    "load_cell_offset",
 )
 
 
@@ -205,11 +213,23 @@ class FaultInjector:
                 d.encoder_offset += float(ev.value)
         elif ev.kind == "cable_snap":
             net.plant.cable_cut[c] = True
+        elif ev.kind.startswith("load_cell_"):
+            self._load_cell(net.load_cells[c], ev.kind, float(ev.value), 1.0)
         elif ev.kind == "estop":
             for i, d in enumerate(net.drives):
                 if d is not None:
                     frames = d.open_sto(int(ev.value) or EMCY_STO, net.time)
                     net._send(net.bus_index_of(i), frames)
+
+    @staticmethod
+    def _load_cell(cell: Any, kind: str, value: float, sign: float) -> None:
+        """A load cell's fault begins (``sign`` 1) or ends (-1)."""
+        if kind == "load_cell_dead":
+            cell.silent = sign > 0
+        elif kind == "load_cell_drift":
+            cell.drift_rate += sign * value
+        else:
+            cell.offset += sign * value
 
     def _end(self, net: Any, ev: FaultEvent) -> None:
         c = ev.cable
@@ -221,6 +241,8 @@ class FaultInjector:
             self.corruption = 0.0
         elif ev.kind == "silent_drive":
             net.drives[c].silent = False
+        elif ev.kind.startswith("load_cell_"):
+            self._load_cell(net.load_cells[c], ev.kind, float(ev.value), -1.0)
         elif ev.kind == "estop":
             for d in net.drives:
                 if d is not None:

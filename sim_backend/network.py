@@ -19,6 +19,7 @@ from cdprctl.model.robot import RobotModel
 from drivers.buses import media_key, open_bus
 from drivers.cia402 import protocol as p402
 from sim_backend.drives.cia402 import Cia402Drive
+from sim_backend.drives.load_cell import load_cell_nodes
 from sim_backend.plant import CdprPlant
 
 
@@ -97,6 +98,9 @@ class SimNetwork:
         self.rx_filter: Any = None  # (msg, t) -> False: the frame is lost
         self.faults: Any = None
         self._bus_of = {c: b for b, bc in enumerate(self.cfg.buses) for c in bc.cables}
+        self.load_cells = {}  # cable → its load cell's node ([[sensors.load_cells]])
+        for cell, node in load_cell_nodes(model, plant):
+            self.nodes[cell.bus][cell.node_id] = self.load_cells[cell.cable] = node
         # powered on: each CiA 402 drive's boot-up message (CiA 301 §7.2.8.2, INITIALISATION
         # → PRE-OPERATIONAL), heard by whoever already listens (candump, a master)
         if self.protocol != "odrive":

@@ -735,7 +735,7 @@ def test_measured_tensions_take_the_rotor_out_at_the_samples_own_times():
         measured_tension_kernel(
             torque, shown, sampled, (r, b, np.zeros(m), np.zeros(m), np.zeros(m), J, limit),
             t_true, f, 20.0,
-            (last_s, last_v, cmd_f, fast), out, error,
+            (last_s, last_v, cmd_f, fast), out, error, np.full(m, math.nan),
         )  # fmt: skip
         if first_s is None:
             first_s = s

@@ -21,7 +21,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             f"cdprctl.model.{m}"
             for m in ("robot", "control", "drives", "buses", "grippers", "zenoh", "foxglove",
                       "ros2", "calibration", "safety", "errors", "reader", "paths",
-                      "interference")
+                      "interference", "sensors")
         ),
     ),
     (

@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     refused = False
     print(f"{model.name}: driver {model.drives.driver}, control rate {rate:g} Hz")
-    for bl in bus_loads(model.drives, rate):
+    for bl in bus_loads(model.drives, rate, cells=model.sensors.load_cells):
         print(f"bus {bl.bus}: {bl.interface} {bl.channel}, {bl.bitrate} bit/s, {bl.drives} drives")
         print(f"  per cycle: {bl.frames}")
         print(f"  {bl.bits_per_cycle} bits per cycle, load {bl.load * 100:.1f} %  {bl.verdict}")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+from cdprctl.control.tension_source import cable_tension
 from cdprctl.control.torques import applied_tension
 from cdprctl.numerics import compliance_at, cycle_kernel
 
@@ -81,7 +82,7 @@ def tension_hold_kernel(
 
 @cycle_kernel
 def measured_tension_kernel(
-    torque, velocity, sampled, winches, commanded, f_slow, f_fast, state, out, error
+    torque, velocity, sampled, winches, commanded, f_slow, f_fast, state, out, error, cells
 ):  # pragma: no cover - compiled  # fmt: skip
     """Per cable with a new sample (taken at ``sampled`` s, after ``last_sampled``): the
     tension its drive's measured ``torque`` (N·m) applies (``torques.applied_tension``), less
@@ -96,15 +97,20 @@ def measured_tension_kernel(
     sample is skipped, the next one measured against the last good one. A cable's first
     sample only starts its count; a cable without a new one keeps its values.
     ``winches``: the ``WinchTerms`` (``r``, the friction, ``J``, the ``limit``); ``state``:
-    ``(last_sampled, last_velocity, commanded_f, fast_error)``, updated in place."""
+    ``(last_sampled, last_velocity, commanded_f, fast_error)``, updated in place. ``cells``
+    (N per cable): the load cells' tensions, which replace the torque's where finite
+    (``tension_source.cable_tension``)."""
     r, viscous, coulomb, stribeck, capstan, J, limit = winches
     last_sampled, last_velocity, commanded_f, fast_error = state
     for i in range(out.shape[0]):
         h = sampled[i] - last_sampled[i]
         if h > 0.0 and math.isfinite(h):
             rotor = J[i] * (velocity[i] - last_velocity[i]) / h
-            t = applied_tension(torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i],
-                                velocity[i], rotor, r[i])  # fmt: skip
+            t = cable_tension(
+                applied_tension(torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i],
+                                velocity[i], rotor, r[i]),
+                cells[i],
+            )  # fmt: skip
             plausible = abs(torque[i]) <= 1.05 * limit[i] and abs(rotor) <= 2.0 * limit[i]
             if plausible and math.isfinite(t):
                 alpha = 1.0 - math.exp(-2.0 * math.pi * f_slow * h)

@@ -166,6 +166,7 @@ class CableSpace:
         self._drive_rate = np.zeros(m)
         self._deviation = np.zeros(m)
         self._deviation_rate = np.zeros(m)
+        self._no_cells = np.full(m, math.nan)  # N: no load cell on any cable
 
     def targets(self, active: bool, motor_position: FloatArray) -> None:
         """``data.motor_target`` (rad): from the reference pose and the commanded tensions
@@ -284,8 +285,9 @@ class CableSpace:
             disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
 
     def measure(
-        self, torque: FloatArray, velocity: FloatArray, sampled_at: FloatArray, N: FloatArray
-    ) -> None:
+        self, torque: FloatArray, velocity: FloatArray, sampled_at: FloatArray, N: FloatArray,
+        cells: FloatArray | None = None,
+    ) -> None:  # fmt: skip
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
         (rad/s), sampled at ``sampled_at`` (s, each drive's SYNC), the rotor's inertia taken out at
         the acceleration the samples show (``measured_tension_kernel``); ``data.tension_error``
@@ -298,7 +300,8 @@ class CableSpace:
         acceleration has no stretch in it); one cycle held up 6 ms there weighted that sample
         by the cycle's 8 ms instead of the 2 ms it covered: 136 N, the force feedback paid
         out 0.52 rad, the drive reversed and faulted on its following error (seed000, 500 Hz,
-        lock-step; docs/control.md "Measured tensions")."""
+        lock-step; docs/control.md "Measured tensions"). ``cells`` (N per cable, NaN: none):
+        the load cells' tensions, measured where a cable has one (``tension_source.py``)."""
         d, w = self.data, self.winches
         self._measured_for += d.dt
         if self._measured_for <= self._release:
@@ -306,5 +309,6 @@ class CableSpace:
         measured_tension_kernel(
             torque, velocity, sampled_at, w.terms, self.expected, self.MEASURED_TENSION_FILTER,
             self.SUPERVISION_FILTER, self._measuring, d.measured_tensions, d.tension_error,
+            self._no_cells if cells is None else cells,
         )  # fmt: skip
         internal_part_kernel(N, self._fast_error, d.internal_tension_error, d.internal_leverage)

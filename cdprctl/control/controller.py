@@ -44,6 +44,7 @@ from cdprctl.control.states import (
     FaultKind,
 )
 from cdprctl.control.supervisor import DrivePort, Supervisor
+from cdprctl.control.tension_source import LoadCellCheck
 from cdprctl.control.torques import WinchTorques
 from cdprctl.control.wrench import PoseController
 from cdprctl.gripper import GripperSet
@@ -56,6 +57,7 @@ from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.vocabulary import WinchStates
 
 # the states in which the external wrench is observed (the drives apply what is computed)
+LOAD_CELL = FaultKind.LOAD_CELL  # bound once: states.py says why
 OBSERVED_STATES = (ENABLED, MOVING, DISABLING, STOPPING)  # a tuple: states.py says why
 
 
@@ -88,6 +90,8 @@ class Controller:
         d.ext_total[:] = self.ext_wrench
         self.observer = WrenchObserver(model, d, self.winches)
         self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
+        self.load_cells = LoadCellCheck(model, self.winches)  # tension_source.py
+        self._rotor_term = np.zeros(model.n_cables)  # N·m, for its check
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
                                        self.distribution, self.ext_wrench, tr)  # fmt: skip
         # position mode: the cables' internal tension error is supervised, per cable (N)
@@ -159,7 +163,9 @@ class Controller:
         if self._clearance is not None:  # → data.interference, at the estimate's cables
             interference_kernel(e.kin.arrays, e.position, e.rotation, self._clearance)
         if d.state in OBSERVED_STATES:  # estimate, feedback → data.ext_estimate
-            self.observer.update(t, st.torque, st.velocity, tr.acceleration, io.estimate, e.kin)
+            self.observer.update(t, st.torque, st.velocity, tr.acceleration, io.estimate, e.kin,
+                                 st.tension)  # fmt: skip
+            self._check_cells(t, st)
         if self.grippers.n:
             self.grippers.update(st, sense=True)  # ext_total: + the jaws' weight
         t2 = clock()
@@ -225,7 +231,8 @@ class Controller:
         d, cs = self.data, self.cable_space
         if cs.enabled and d.state in OBSERVED_STATES:
             np.copyto(d.stretch_tensions, d.tensions)
-            cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N)
+            cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N,
+                       st.tension)  # fmt: skip
             cs.estimate_disturbance(
                 self.at.kin.W,
                 d.state is not STOPPING
@@ -236,6 +243,15 @@ class Controller:
             cs.force_feedback(stopping=d.state is STOPPING)
         elif d.cycle % self.stretch_every == 0:
             self.refresh_stretch_tensions()
+
+    def _check_cells(self, t: float, st: WinchStates) -> None:
+        """The load cells' supervision (``LoadCellCheck``): a fault that names the cell."""
+        if self.load_cells.cells:
+            accel = self._rotor_term  # N·m: the torques' rotor-inertia feed-forward
+            self.winches.rotor_term(self.at.kin.WT, self.trajectory.acceleration, accel)
+            why = self.load_cells.check(t, st.torque, st.velocity, accel, st.tension)
+            if why:
+                self.supervisor.fault(t, LOAD_CELL, why)
 
     def _reference_step(self, gap: float) -> float:
         """s the reference moves on this cycle, ``gap`` s after the last. Position mode: as

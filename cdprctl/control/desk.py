@@ -165,6 +165,7 @@ class CommandDesk:
         c.pose.reset()
         c.observer.reset(c.io.estimate)
         c.cable_space.start_measuring()
+        c.load_cells.reset()
         # a fresh start: the saturation of before the fault is not this run's
         d.saturation, d.saturated_for = 1.0, 0.0
         c.grippers.hold()

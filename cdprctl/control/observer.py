@@ -32,6 +32,7 @@ import numpy as np
 from cdprctl.control.cycle_io import PoseArgs
 from cdprctl.control.data import ControlData
 from cdprctl.control.pd_kernel import Platform
+from cdprctl.control.tension_source import cable_tension
 from cdprctl.control.torques import WinchTorques, applied_tension
 from cdprctl.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
@@ -66,13 +67,15 @@ def momentum_kernel(mass, inertia, R, v, w, out):  # pragma: no cover - compiled
 
 @cycle_kernel
 def observer_kernel(
-    dt, gain, platform, est, W, torque, velocity, accel_term, winches, state
+    dt, gain, platform, est, W, torque, velocity, accel_term, winches, state, cells
 ):  # pragma: no cover - compiled  # fmt: skip
     """One step of the observer (module docstring): the applied tensions from the measured
     ``torque`` (N·m) less friction at ``velocity`` (rad/s) and the rotor-inertia term
     ``accel_term`` (N·m, per winch), the wrench they exert with gravity, the integral, and
     ``w_hat`` from the momentum now. ``platform``: a ``Platform``; ``est``: the estimate, a
-    ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``."""
+    ``PoseEstimate``; ``winches``: the ``WinchTerms``; ``state``: the ``ObserverState``;
+    ``cells`` (N per cable): the load cells' tensions, taken where finite
+    (``tension_source.cable_tension``)."""
     w_hat, p0, integral, scratch = state
     r, viscous, coulomb, stribeck, capstan = winches[:5]
     _, mass, inertia, com, gravity = platform
@@ -80,9 +83,10 @@ def observer_kernel(
     m = torque.shape[0]
     t_a, rc, f, p = scratch[:m], scratch[m : m + 3], scratch[m + 3 : m + 9], scratch[m + 9 :]
     for i in range(m):
-        t_a[i] = applied_tension(
-            torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i], velocity[i],
-            accel_term[i], r[i],
+        t_a[i] = cable_tension(
+            applied_tension(torque[i], viscous[i], coulomb[i], stribeck[i], capstan[i],
+                            velocity[i], accel_term[i], r[i]),
+            cells[i],
         )  # fmt: skip
     # known forces on the platform: cables and gravity (moment about P: (R c) × m g)
     for i in range(3):
@@ -135,6 +139,7 @@ class WrenchObserver:
             ObserverState(np.zeros(6), np.zeros(6), np.zeros(6), np.zeros(m + 15))
         )
         self._last_t = math.nan
+        self._no_cells = np.full(m, math.nan)  # N: no load cell on any cable
 
     def warm_up(self, estimate: PoseArgs, kin: KinematicsData) -> None:
         """Compile the kernels (``warm_up.py``), leaving the estimate at zero."""
@@ -160,12 +165,12 @@ class WrenchObserver:
         self._last_t = math.nan
 
     def update(self, t: float, torque: np.ndarray, velocity: np.ndarray,
-               acceleration: np.ndarray, estimate: PoseArgs,
-               kin: KinematicsData) -> None:  # fmt: skip
+               acceleration: np.ndarray, estimate: PoseArgs, kin: KinematicsData,
+               cells: np.ndarray | None = None) -> None:  # fmt: skip
         """One step at time ``t`` (s) from the drives' measured ``torque`` (N·m) and
         ``velocity`` (rad/s) at the ``estimate`` (its wrench matrix in ``kin``);
         ``acceleration``: the trajectory's (the torques' rotor-inertia feedforward,
-        subtracted as applied)."""
+        subtracted as applied); ``cells`` (N per cable, NaN: none): the load cells'."""
         if not self.enabled:
             return
         dt = t - self._last_t
@@ -176,5 +181,6 @@ class WrenchObserver:
         observer_kernel(
             dt, self.gain, self._platform, estimate, kin.W, torque, velocity,
             self._accel_term, self.winches.terms, self._state,
+            self._no_cells if cells is None else cells,
         )  # fmt: skip
         np.copyto(self.data.ext_estimate, self._state[0])  # no view built

@@ -55,6 +55,7 @@ class FaultKind(enum.StrEnum):
     CLEARANCE = "clearance"
     DURING_STOP = "during the stop"
     INTERNAL = "internal error"
+    LOAD_CELL = "load cell"
 
 
 PERSISTENCE: dict[FaultKind, str] = {
@@ -90,4 +91,8 @@ PERSISTENCE: dict[FaultKind, str] = {
     "body or the cell closer than [interference] clearance",
     FaultKind.DURING_STOP: "immediate: the drives failed while the controlled stop held the pose",
     FaultKind.INTERNAL: "immediate: the cycle itself failed",
+    FaultKind.LOAD_CELL: "persistent: a cell silent beyond its own timeout ([[sensors."
+    "load_cells]] timeout, 30 ms), or the cell and its drive's torque apart beyond both their "
+    "errors for [sensors] disagreement_time (50 ms), both low-passed at 20 Hz: a cell's noise "
+    "and a lost frame ride through (control/tension_source.py)",
 }

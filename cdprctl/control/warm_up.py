@@ -86,6 +86,7 @@ def warm_up(controller: Controller) -> None:
     # the daemon's I/O thread while the loop runs (a compile there would hold the GIL)
     c.limits.check(np.tile(c.trajectory.position, (2, 1)))
     c.observer.warm_up(c.io.estimate, c.estimator.kin)
+    c.load_cells.warm_up()
     c.pose.update(c.io.reference, c.io.working, d.ext_total, True, d.dt, c.io.wrench)
     c.pose.reset()
     c.winches.update(d.tensions, c.at.kin.WT, c.trajectory.acceleration, zeros, True,

@@ -143,6 +143,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
             raise StartupRefusedError(
                 f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
             ) from None
+    _load_cells_zeroed(dm)
     for w in dm.driver.warnings:
         dm._print(f"warning: {w}", err=True)
     lines, drives = identity_lines(m, dm.driver)
@@ -162,6 +163,25 @@ def _friction(dm: Daemon) -> None:
     if terms is not None:
         dm.manager.controller.winches.apply_friction(*terms)
     dm._print(friction_line(dm.record))
+
+
+def _load_cells_zeroed(dm: Daemon) -> None:
+    """The load cells' tare (`cdprctl load-cells zero`) applied where there is one; without
+    it the file's offsets, said (cdprctl/calibration/load_cells.py)."""
+    from cdprctl.calibration.load_cells import LoadCellError, apply, load
+
+    if not dm.model.sensors.load_cells:
+        return
+    try:
+        record = load(dm.state_dir)
+        if record.simulated and not dm.simulated_robot:
+            raise LoadCellError(f"{record.time}'s tare was a simulated robot's")
+        apply(record, dm.model, dm.driver)
+    except LoadCellError as exc:
+        dm._print(f"warning: load cells: {exc}: the robot file's offsets (`cdprctl load-cells "
+                  "zero` tares them)", err=True)  # fmt: skip
+        return
+    dm._print(f"load cells: zeroed {record.time} ({dm.state_dir})")
 
 
 def _brakes_tested(dm: Daemon) -> None:

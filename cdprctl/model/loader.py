@@ -27,6 +27,7 @@ from cdprctl.model.reader import TableReader
 from cdprctl.model.robot import Platform, Pose, RobotModel, Workspace
 from cdprctl.model.ros2 import read_ros2
 from cdprctl.model.safety import read_safety
+from cdprctl.model.sensors import read_sensors
 from cdprctl.model.zenoh import read_zenoh
 
 TOP_KEYS = (
@@ -49,6 +50,7 @@ TOP_KEYS = (
     "paths",
     "cell",
     "interference",
+    "sensors",
 )
 PLATFORM_KEYS = ("mass", "com", "inertia", "body")  # body: model/interference.py
 HOME_KEYS = ("position", "rpy")
@@ -136,6 +138,10 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     safety = read_safety(rd, data)
     paths = read_paths(rd, data)
     interference = read_interference(rd, data)
+    sensors = read_sensors(rd, data, [c.name for c in cables or ()],
+                           drives.buses if drives else (),
+                           drives.controller_node_id if drives else 127,
+                           drives.driver if drives else "cia402")  # fmt: skip
 
     if (
         rd.errors
@@ -177,6 +183,7 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
         safety=safety,
         paths=paths,
         interference=interference,
+        sensors=sensors,
     )
     # Checks that need the assembled geometry.
     from cdprctl.model.checks import check_model  # late import: checks use the kinematics

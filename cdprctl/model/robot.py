@@ -20,6 +20,7 @@ from cdprctl.model.interference import InterferenceConfig
 from cdprctl.model.paths import PathsConfig
 from cdprctl.model.ros2 import Ros2Config
 from cdprctl.model.safety import SafetyConfig
+from cdprctl.model.sensors import SensorsConfig
 from cdprctl.model.zenoh import ZenohConfig
 from cdprctl.numerics import cable_compliance_py, compliance_terms
 from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
@@ -146,6 +147,8 @@ class RobotModel:
     paths: PathsConfig = field(default_factory=PathsConfig)  # how path files are read
     # the platform's body, the cell's obstacles, the clearance (cdprctl/interference.py)
     interference: InterferenceConfig = field(default_factory=InterferenceConfig)
+    # load cells on cables (docs/config.md, "Load cells")
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)
     # Stacked per-cable arrays (derived in __post_init__; read-only).
     anchors: FloatArray = field(init=False, repr=False)  # (m, 3) base frame
     attachments: FloatArray = field(init=False, repr=False)  # (m, 3) platform frame

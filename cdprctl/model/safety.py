@@ -37,6 +37,7 @@ STOP_CATEGORIES: dict[str, tuple[tuple[int, ...], str]] = {
     "platform speed": ((1, 0, 2), ""),
     "tension distribution": ((1, 0, 2), ""),
     "clearance": ((1, 0, 2), ""),
+    "load cell": ((1, 0, 2), ""),
 }
 
 

@@ -17,6 +17,7 @@ SYNC clock and the SDO client, each its own object; this class is the one hook l
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -30,7 +31,7 @@ from drivers.cia402 import protocol as p
 from drivers.cia402.brake import command_brake
 from drivers.cia402.capabilities import Capabilities, read_capabilities
 from drivers.cia402.drive_setup import OPTIONAL, DriveRecord, configure_drive
-from drivers.cia402.feedback import Cia402Feedback
+from drivers.cia402.feedback import SDO, Cia402Feedback
 from drivers.cia402.sdo_client import DriverSdoPort, SdoClient
 from drivers.cia402.sync_clock import SyncClock
 from drivers.errors import (
@@ -41,6 +42,7 @@ from drivers.errors import (
     SafeTorqueOffError,
     following_error_text,
 )
+from drivers.load_cells import LoadCells
 from drivers.registry import register_driver
 from drivers.transport import CanTransport
 from drivers.vocabulary import ACTIVE, ERROR, INACTIVE
@@ -78,6 +80,17 @@ class Cia402Driver(WinchDriver):
         self.sdo = SdoClient(DriverSdoPort(
             self.bus_of, self.node, t.media, self.feedback.sdo_reply, self.period, t.send,
             self.feedback.drain, self.clock, self.wait,
+        ))  # fmt: skip
+        # the load cells on these buses: their TPDOs, and an SDO port numbering them after
+        # the drives (drivers/load_cells.py)
+        self.cells = LoadCells(model.sensors.load_cells, m, self.states)
+        self.cells.dispatch_into(t.dispatch, m, SDO)
+        self.feedback.on_cell = self.cells.receive
+        port = self.sdo.port
+        assert isinstance(port, DriverSdoPort)
+        self.cells_sdo = SdoClient(dataclasses.replace(
+            port, bus_of=np.concatenate([self.bus_of, self.cells.bus]),
+            node=np.concatenate([self.node, self.cells.node]),
         ))  # fmt: skip
         # what the set-up found: each drive's 0x1018; the optional objects its set-up skipped
         # and why (drive_setup.OPTIONAL); the PDOs it had to write (0: all were as needed);
@@ -149,6 +162,7 @@ class Cia402Driver(WinchDriver):
                 counter[self._medium_of(c)] = False
         for c in range(self.m):
             self._configure_drive(c, timeout, caps[c], counter[self._medium_of(c)])
+        self.cells.configure(self.cells_sdo, self.config.pdo_mapping == "configure", timeout)
         self.sdo.nmt_all(p.NMT_START)
         self.liveness.started = True
 
@@ -160,8 +174,8 @@ class Cia402Driver(WinchDriver):
         blocking.await_first_feedback(
             self,
             timeout,
-            lambda: bool(np.all(np.isfinite(self.liveness.fb_stamp))),
-            "feedback (TPDO1)",
+            lambda: bool(np.all(np.isfinite(self.liveness.fb_stamp))) and self.cells.all_heard(),
+            "feedback (TPDO1, and the load cells' TPDOs)",
             resend_start,
         )
 
@@ -201,6 +215,8 @@ class Cia402Driver(WinchDriver):
         super()._warm_up()
         m = self.m
         self.feedback.warm_up()
+        if self.cells.cells:
+            self.cells.warm_up()
         cyclic.controlword_kernel(
             np.zeros(m),
             self.feedback.ps,
@@ -252,6 +268,8 @@ class Cia402Driver(WinchDriver):
 
     def _drain(self, t: float) -> None:
         self.feedback.drain(t)
+        if self.cells.cells:
+            self.cells.update(t)
 
     def _update_states(self) -> bool:
         return self.feedback.update_states()

@@ -59,6 +59,8 @@ class Cia402Feedback:
         self.feedback = (states.position, states.velocity, states.state, states.fault_code)
         self.nmt_state = np.full(m, -1, dtype=np.int64)  # from each drive's heartbeat
         self.sdo_reply: dict[int, bytes] = {}  # cable → its drive's last SDO answer
+        # a load cell's TPDO (kind 6, drivers/load_cells.py): (cell, data) → kept
+        self.on_cell: Any = None
 
     def dispatch_into(self, dispatch: dict[tuple[int, int], tuple[int, int]],
                       node: np.ndarray, bus_of: np.ndarray) -> None:  # fmt: skip
@@ -76,7 +78,7 @@ class Cia402Feedback:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
         applied together, in their order of arrival (``cyclic.tpdo1_synced_kernel``)."""
         tp2, raw, cables, n = p.TPDO2_STRUCT.unpack, self.tpdo1_bytes, self.tpdo1_cable, 0
-        pdo_velocity = self.pdo_velocity
+        pdo_velocity, on_cell = self.pdo_velocity, self.on_cell
         for kind, c, data in self.transport.frames():  # the kinds as literals (no lookup)
             if kind == 1 and len(data) == 8:
                 if n == len(cables):  # more than 4 per drive since the last read: apply them
@@ -95,6 +97,8 @@ class Cia402Feedback:
                 self.nmt_state[c] = data[0]
             elif kind == 5 and len(data) == 8:
                 self.sdo_reply[c] = bytes(data)
+            elif kind == 6 and on_cell is not None:
+                on_cell(c, data)
             else:
                 self.stats.frames_ignored += 1
         if n:

@@ -31,9 +31,9 @@ Hook = Callable[[int, int, int], None]  # (index, sub, value)
 
 
 @lru_cache(maxsize=128)
-def _parsed(node_id: int) -> ObjectDictionary:
+def _parsed(node_id: int, eds: Path = EDS) -> ObjectDictionary:
     """The EDS parsed for ``node_id`` ($NODEID resolved); definitions only, never mutated."""
-    return canopen.import_od(str(EDS), node_id)
+    return canopen.import_od(str(eds), node_id)
 
 
 class Dictionary:
@@ -41,14 +41,16 @@ class Dictionary:
         self,
         node_id: int,
         stored: dict[Key, int],
-        read: Callable[[int, int], int | None],
+        read: Callable[[int, int], int | float | None],
         check: Hook,
         written: Hook,
+        eds: Path = EDS,
     ):
-        """``stored``: the drive's own values over the EDS defaults (its non-volatile
-        memory: what a reset restores); ``read(index, sub)``: a live value or None;
-        ``check`` before a download is stored, ``written`` after."""
-        self.od = _parsed(node_id)
+        """``eds``: the node's (default: the winch drive's); ``stored``: the drive's own values
+        over the EDS defaults (its non-volatile memory: what a reset restores);
+        ``read(index, sub)``: a live value or None; ``check`` before a download is stored,
+        ``written`` after."""
+        self.od = _parsed(node_id, eds)
         self.node = canopen.LocalNode(node_id, self.od)
         # canopen's NMT slave would start its own heartbeat timer when 0x1017 is written: the
         # drive produces its heartbeat itself, on the simulator's clock
@@ -73,7 +75,7 @@ class Dictionary:
                 key = (var.index, var.subindex)
                 self.values[key] = int(self._stored.get(key, var.default))
 
-    def value(self, index: int, sub: int) -> int | None:
+    def value(self, index: int, sub: int) -> int | float | None:
         """An object's value now: live from the drive, else the stored number (None: not a
         number, e.g. the device name, which canopen answers from the EDS)."""
         live = self._read(index, sub)
@@ -88,7 +90,7 @@ class Dictionary:
     def send_message(self, can_id: int, data: Any, remote: bool = False) -> None:
         self._answer = can.Message(arbitration_id=can_id, data=bytes(data), is_extended_id=False)
 
-    def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | None:
+    def _on_read(self, index: int, subindex: int, od: ODVariable) -> int | float | None:
         return self.value(index, subindex)
 
     def _on_write(self, index: int, subindex: int, od: ODVariable, data: bytes) -> None:

@@ -24,7 +24,8 @@ from canopen.objectdictionary import ObjectDictionary
 from drivers.cia402.objects import variable
 
 # CiA 301 data types → struct formats (little endian)
-_FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x0007: "I"}
+_FORMAT = {0x0002: "b", 0x0003: "h", 0x0004: "i", 0x0005: "B", 0x0006: "H", 0x0007: "I",
+           0x0008: "f"}  # fmt: skip
 
 PDO_NOT_VALID = 0x80000000
 RPDO_COMM = 0x1400  # its mapping parameter: + 0x200
