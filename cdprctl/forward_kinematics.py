@@ -15,14 +15,15 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-from numba import njit
 
 from cdprctl.kinematics import KinematicsData, ik_kernel
 from cdprctl.numerics import (
     cable_compliance_py,
     compliance_terms,
+    cycle_kernel,
     forward_substitution,
     kernel_args,
+    matmul_into,
 )
 from cdprctl.rotation import FloatArray, exp_so3_kernel
 
@@ -47,6 +48,33 @@ class FKLimits(NamedTuple):
     step_tolerance: float
     max_iterations: int
     max_residual: float
+
+
+class FKWork(NamedTuple):
+    """The iteration's working arrays, taken once (the solve takes no block per call): the
+    normal equations ``lhs`` (6×6) and ``rhs`` (6), their Cholesky factor ``L`` (6×6), the
+    forward solve's ``y`` and the ``step`` δX (m, rad), the trial pose ``p_new`` (m),
+    ``R_new``, the step's rotation ``E`` and two 3×3 products ``A``, ``B``."""
+
+    lhs: np.ndarray
+    rhs: np.ndarray
+    L: np.ndarray
+    y: np.ndarray
+    step: np.ndarray
+    p_new: np.ndarray
+    R_new: np.ndarray
+    E: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+
+
+def fk_work() -> tuple:
+    """A new ``FKWork`` as the kernels take it (``kernel_args``)."""
+    six, three = np.zeros((6, 6)), np.zeros((3, 3))
+    return kernel_args(
+        FKWork(six, np.zeros(6), six.copy(), np.zeros(6), np.zeros(6), np.zeros(3),
+               three, three.copy(), three.copy(), three.copy())
+    )  # fmt: skip
 
 
 @dataclass
@@ -93,7 +121,7 @@ class ForwardKinematics:
         self._R = np.eye(3)
         self._info = np.zeros(3)  # residual, iterations, status
         self._res = np.zeros(m)
-        self._work = np.zeros((3, 3, 3))
+        self.work = fk_work()
 
     def solve(
         self,
@@ -109,55 +137,87 @@ class ForwardKinematics:
         p, R, info = self._p, self._R, self._info
         p[:] = position0
         R[:] = rotation0
-        fk_kernel(d.arrays, lengths, p, R, self.limits, self._res, info)
+        fk_kernel(d.arrays, lengths, p, R, self.limits, self._res, info, self.work)
         d.position[:] = p
         d.rotation[:] = R
         status = FKStatus(int(info[2]))
         return FKResult(p.copy(), R.copy(), float(info[0]), int(info[1]), status)
 
 
-@njit(cache=True)
-def _exp_left(phi0, phi1, phi2, R):  # pragma: no cover - compiled
-    """``exp([φ]×) @ R``, as a new array."""
-    E = np.empty((3, 3))
+@cycle_kernel
+def _exp_left(phi0, phi1, phi2, R, E, out):  # pragma: no cover - compiled
+    """``out`` ← ``exp([φ]×) @ R`` (``E`` the exponential's scratch)."""
     exp_so3_kernel(phi0, phi1, phi2, E)
-    return E @ R
+    matmul_into(E, R, out)
 
 
-@njit(cache=True)
-def _cholesky_solve6(A, b):  # pragma: no cover - compiled
-    """Solve the SPD 6×6 system ``A x = b`` by Cholesky; returns (x, ok)."""
+@cycle_kernel
+def copy_pose(p_from, R_from, p, R):  # pragma: no cover - compiled
+    """``p``, ``R`` ← ``p_from``, ``R_from`` element by element (a slice assignment may copy
+    through a temporary when the arrays could overlap: a block, and not without reference
+    counting)."""
+    for i in range(3):
+        p[i] = p_from[i]
+        for j in range(3):
+            R[i, j] = R_from[i, j]
+
+
+@cycle_kernel
+def rotation_since(R, R_before, out):  # pragma: no cover - compiled
+    """``out`` ← ``R R_beforeᵀ``, the rotation from ``R_before`` to ``R`` (base frame)."""
+    matmul_into(R, R_before.T, out)
+
+
+@cycle_kernel
+def _cholesky_solve6(A, b, L, y, x):  # pragma: no cover - compiled
+    """``x`` ← the solution of the SPD 6×6 system ``A x = b`` by Cholesky (``L``, ``y`` its
+    scratch); False when ``A`` is not positive definite."""
     n = 6
-    L = np.zeros((n, n))
+    L[:, :] = 0.0
     for j in range(n):
         s = A[j, j]
         for k in range(j):
             s -= L[j, k] * L[j, k]
         if not s > 0.0:
-            return np.zeros(n), False
+            x[:] = 0.0
+            return False
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
             s = A[i, j]
             for k in range(j):
                 s -= L[i, k] * L[j, k]
             L[i, j] = s / L[j, j]
-    y = np.zeros(n)
+    y[:] = 0.0
     forward_substitution(L, b, y)
-    x = np.zeros(n)
+    x[:] = 0.0
     for i in range(n - 1, -1, -1):
         s = y[i]
         for k in range(i + 1, n):
             s -= L[k, i] * x[k]
         x[i] = s / L[i, i]
-    return x, True
+    return True
 
 
-@njit(cache=True)
-def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compiled
+@cycle_kernel
+def _polar_step(R, A, B):  # pragma: no cover - compiled
+    """``R`` ← ``0.5 R (3 I − RᵀR)``, one Newton step of the polar decomposition (``A``, ``B``
+    scratch; the products BLAS's, as ``@`` took them: the same bits)."""
+    matmul_into(R.T, R, A)
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = (3.0 if i == j else 0.0) - A[i, j]
+    matmul_into(R, A, B)
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = 0.5 * B[i, j]
+
+
+@cycle_kernel
+def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - compiled
     """Levenberg-Marquardt FK; ``p``/``R`` hold the warm start in and the pose out;
     ``info`` receives [RMS residual (m), iterations, FKStatus]: a converged least-squares pose
     whose RMS residual is above ``max_residual`` (m) is INCONSISTENT. ``k``: the
-    :class:`KinArrays` the iteration's IK writes into."""
+    :class:`KinArrays` the iteration's IK writes into; ``work``: an ``FKWork`` (``fk_work``)."""
     m = lengths.shape[0]
     free_len, length, W = k[7], k[9], k[10]  # KinArrays: free_len, length, W
     tol, step_tol, max_iter, max_residual = limits
@@ -171,9 +231,8 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
     if not math.isfinite(s):
         info[0], info[1], info[2] = math.inf, 0.0, 3.0  # BAD_INPUT
         return
-    # one Newton step of the polar decomposition: warm starts chain products off SO(3)
-    Rn = 0.5 * (R @ (3.0 * np.eye(3) - R.T @ R))
-    R[:, :] = Rn
+    lhs, rhs, L, y, step, p_new, R_new, E, A, B = work
+    _polar_step(R, A, B)  # warm starts chain products off SO(3)
     ik_kernel(k, p, R)
     if not _lengths_ok(free_len):
         info[0], info[1], info[2] = math.inf, 0.0, 2.0  # DEGENERATE
@@ -184,9 +243,6 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
         cost += res[i] * res[i]
     mu = 1e-9  # Levenberg damping (m²); raised when a step does not reduce the residual
     it = 0
-    lhs = np.empty((6, 6))
-    rhs = np.empty(6)
-    p_new = np.empty(3)
     while it < max_iter:
         if cost < tol * tol * m:
             _converged(info, math.sqrt(cost / m), it, max_residual)
@@ -204,12 +260,11 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
                 lhs[a, b] = acc
                 lhs[b, a] = acc
             lhs[a, a] += mu
-        step, ok = _cholesky_solve6(lhs, rhs)
-        if not ok:
+        if not _cholesky_solve6(lhs, rhs, L, y, step):
             info[0], info[1], info[2] = math.sqrt(cost / m), it, 2.0
             return
         p_new[0], p_new[1], p_new[2] = p[0] + step[0], p[1] + step[1], p[2] + step[2]
-        R_new = _exp_left(step[3], step[4], step[5], R)
+        _exp_left(step[3], step[4], step[5], R, E, R_new)
         big = 0.0
         for a in range(6):
             big = max(big, abs(step[a]))
@@ -221,8 +276,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
                 for a in range(6):
                     r_i -= W[a, i] * step[a]
                 lin += r_i * r_i
-            p[:] = p_new
-            R[:, :] = R_new
+            copy_pose(p_new, R_new, p, R)
             _converged(info, math.sqrt(lin / m), it, max_residual)
             return
         ik_kernel(k, p_new, R_new)
@@ -235,8 +289,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
             e = length[i] - lengths[i]
             cost_new += e * e
         if cost_new < cost:
-            p[:] = p_new
-            R[:, :] = R_new
+            copy_pose(p_new, R_new, p, R)
             cost = cost_new
             for i in range(m):
                 res[i] = length[i] - lengths[i]
@@ -253,7 +306,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info):  # pragma: no cover - compil
         info[0], info[1], info[2] = rms, it, 1.0  # MAX_ITERATIONS
 
 
-@njit(cache=True)
+@cycle_kernel
 def _converged(info, rms, iterations, max_residual):  # pragma: no cover - compiled
     """``info`` of a converged solve: CONVERGED, or INCONSISTENT when the least-squares pose
     leaves an RMS residual above ``max_residual`` (m)."""
@@ -261,7 +314,7 @@ def _converged(info, rms, iterations, max_residual):  # pragma: no cover - compi
     info[2] = 0.0 if rms <= max_residual else 4.0
 
 
-@njit(cache=True)
+@cycle_kernel
 def _lengths_ok(free_len):  # pragma: no cover - compiled
     for x in free_len:  # noqa: SIM110 - numba compiles loops, not generators
         if not x > 1e-6:  # also False for NaN

@@ -18,16 +18,70 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core.errors import TypingError
+from numba.core.typing import signature
+from numba.extending import intrinsic
+from numba.np.linalg import dot_3_mm, ensure_blas
 
 #: A kernel the control loop calls from Python, which allocates nothing itself: compiled
 #: without numba's reference counting, so that its array arguments are passed as they are —
 #: with it, each one took a block from the allocator at every call (issue 64). A kernel that
 #: builds an array (``np.eye``, ``@``) cannot be one: it does not compile so.
 cycle_kernel = njit(cache=True, _nrt=False)  # type: ignore[call-overload]  # not in the stubs
+
+
+def _matmul_into(typingctx, a, b, out):
+    """``matmul_into(a, b, out)``: ``out`` ← ``a @ b`` in a kernel, the same BLAS call as
+    numba's ``@`` (the same bits) into an existing array. ``np.dot(a, b, out)`` does the
+    same but compiles only with reference counting, which a ``cycle_kernel`` is without.
+    2-D float64; ``a``, ``b`` C- or F-contiguous (a transpose ``R.T`` is), ``out``
+    C-contiguous. It uses numba's own lowering of that product (``numba.np.linalg``)."""
+    arrays = (a, b, out)
+    if not all(isinstance(x, types.Array) and x.ndim == 2 and x.dtype == types.float64
+               for x in arrays):  # fmt: skip
+        raise TypingError("matmul_into takes 2-D float64 arrays")
+    if a.layout not in "CF" or b.layout not in "CF" or out.layout != "C":
+        raise TypingError("matmul_into: a and b contiguous, out C-contiguous")
+
+    def codegen(context, builder, sig, args):
+        ensure_blas()
+        dot_3_mm(context, builder, signature(sig.args[2], *sig.args), args)
+        return context.get_dummy_value()
+
+    return types.none(a, b, out), codegen
+
+
+#: compiled calls only (``matmul_into(a, b, out)`` in a kernel; numba types it)
+matmul_into: Any = intrinsic(_matmul_into)
+
+
+@cycle_kernel
+def count_kernel(counter, every):  # pragma: no cover - compiled
+    """``counter[0]`` += 1; True when it is then a multiple of ``every``. A count kept in an
+    int64 array: a Python int past 256 took a block at each increment."""
+    counter[0] += 1
+    return counter[0] % every == 0
+
+
+@cycle_kernel
+def add_count(counts, slot, n):  # pragma: no cover - compiled
+    """``counts[slot]`` += ``n`` in place (an int64 array of counters: no int built)."""
+    counts[slot] += n
+
+
+def max2(a: float, b: float) -> float:
+    """``max(a, b)`` exactly (ties and NaN alike: ``a`` unless ``b > a``), without the
+    builtin's argument tuple (a block per call: the loop's Python code calls this)."""
+    return b if b > a else a
+
+
+def min2(a: float, b: float) -> float:
+    """``min(a, b)`` exactly (``a`` unless ``b < a``), without the builtin's block."""
+    return b if b < a else a
 
 
 def _clamp(v: float, lo: float, hi: float) -> float:
@@ -38,7 +92,8 @@ def _plausible_step(step: float, max_speed: float, elapsed: float, slack: float)
     """A motor turning at most ``max_speed`` (rad/s) can move by ``step`` (rad) in the
     ``elapsed`` s since its last accepted sample plus ``slack`` s (a period, for timing
     jitter). A non-finite step is never plausible."""
-    return abs(step) <= max_speed * (max(elapsed, 0.0) + slack)
+    since = 0.0 if elapsed < 0.0 else elapsed  # max(elapsed, 0.0), without its block
+    return abs(step) <= max_speed * (since + slack)
 
 
 def _cable_compliance(

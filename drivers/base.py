@@ -243,8 +243,8 @@ class WinchDriver(ABC):
         if torques.shape != cmd.shape:  # not one torque per winch: none is trusted
             torques = np.full(self.m, math.nan)
         rejected, clamped = clamp_kernel(torques, self._last_command, self.torque_limit, cmd)
-        self.stats.rejected_commands += rejected
-        self.stats.clamped_commands += clamped
+        if rejected or clamped:
+            self.stats.commands(rejected, clamped)
         if self.lifecycle is not ACTIVE and not force and not self._activating:
             cmd[:] = 0.0
         np.copyto(self._last_command, cmd)  # no view built, as a slice would
@@ -259,7 +259,7 @@ class WinchDriver(ABC):
         except Exception as exc:
             err = DriverOperationError(f"write failed: {type(exc).__name__}: {exc}")
         self.sent_at = self._sent_instant()
-        self.stats.cycles += 1
+        self.stats.cycle()
         if err is not None:
             self._fail(err)
 

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel, plausible_step_py
+from cdprctl.numerics import add_count, cycle_kernel, max2, min2, plausible_step_py
 from drivers.errors import DriverError, DriverTimeoutError
-from drivers.vocabulary import DriverStats, WinchStates
+from drivers.vocabulary import MISSED_FEEDBACK, DriverStats, WinchStates
 
 #: m/s of cable: a position step faster than this between two samples is a corrupted frame
 #: (or a failing encoder): five times the supervisor's speed limit
@@ -64,11 +64,12 @@ class Liveness:
     def plausible(self, c: int, step: float, stamp: float) -> bool:
         """Whether motor ``c`` can have turned by ``step`` (rad) since its last accepted
         sample, at ``stamp`` (s); counts the implausible ones."""
-        prev = self.fb_stamp[c]
+        prev = self.fb_stamp.item(c)  # item: a float, not a numpy scalar (a block)
         if not math.isfinite(prev):
             return True
         # a period of slack for timing jitter (the one rule: cdprctl.numerics.plausible_step)
-        if plausible_step_py(step, float(self.max_motor_speed[c]), stamp - prev, self.period):
+        speed = self.max_motor_speed.item(c)
+        if plausible_step_py(step, speed, stamp - prev, self.period):
             self.implausible[c] = 0
             return True
         self.implausible[c] += 1
@@ -80,7 +81,7 @@ class Liveness:
         nothing; the first read: one period)."""
         gap = t - self.last_read if math.isfinite(self.last_read) else self.period
         self.last_read = t
-        return min(max(gap, 0.0), 2.0 * self.period)
+        return min2(max2(gap, 0.0), 2.0 * self.period)
 
     def update(self, t: float, gap: float, states: WinchStates) -> bool:
         """The cycle's bookkeeping (``liveness_kernel``) after the feedback was decoded, the
@@ -90,7 +91,8 @@ class Liveness:
             self.started, self.feedback_timeout, self.heartbeat_timeout,
             states.feedback_age, states.sampled_at,
         )  # fmt: skip
-        self.stats.missed_feedback += missed
+        if missed:
+            add_count(self.stats.counts, MISSED_FEEDBACK, missed)
         return late
 
     def warm_up(self, states: WinchStates) -> None:

@@ -3,21 +3,22 @@ socket per medium), the node of each cable, sending (staged and sent together wh
 can, with the traffic log and a failure streak) and receiving (the frames of our drives, by a
 dispatch table the protocol fills). It knows nothing of a protocol; the driver
 (``drivers/base.py``) opens and closes it and brackets each cycle's frames with
-``begin_frames``/``end_frames``; the protocol sends by ``send`` and reads by ``frames``."""
+``begin_frames``/``end_frames``; the protocol sends by ``send`` and reads by ``receive``."""
 
 from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
 import can
 import numpy as np
 
+from cdprctl.numerics import add_count
 from drivers.buses import TrafficLog, media_key, media_of, open_bus
 from drivers.errors import DriverError, DriverOperationError
-from drivers.vocabulary import DriverStats
+from drivers.vocabulary import FRAMES_IGNORED, FRAMES_RECEIVED, FRAMES_SENT, DriverStats
 
 if TYPE_CHECKING:
     from cdprctl.model.drives import DrivesConfig
@@ -202,42 +203,50 @@ class CanTransport:
             self._refused(1)
             return False
         self._send_fail_streak = 0
-        self.stats.frames_sent += 1
+        add_count(self.stats.counts, FRAMES_SENT, 1)
         if self.log is not None:
             self.log(msg)
         return True
 
-    def frames(self) -> Iterator[tuple[int, int, bytearray]]:
+    def receive(self, handler: Callable[[int, int, Any], None]) -> None:
         """Every frame waiting on every bus (``recv(0)``: never blocks) that belongs to one of
-        our drives: ``(kind, cable, data)`` by ``dispatch``; foreign, extended and remote
-        frames are counted as ignored."""
-        dispatch = self.dispatch
-        stats = self.stats
-        for b in self.media:
-            bus = self.buses[b]
+        our drives, handed to ``handler(kind, cable, data)`` by ``dispatch``; foreign,
+        extended and remote frames are counted as ignored. By index, counted in place: no
+        block of ours per cycle (a python-can bus's ``recv`` builds a Message per frame: the
+        medium's; ``drain_frames``, a medium's own path, builds its tuples)."""
+        dispatch, media, buses, counts = self.dispatch, self.media, self.buses, self.stats.counts
+        received = ignored = 0
+        i, n = 0, len(media)
+        while i < n:
+            b = media[i]
+            i += 1
             drain = self._drain_of[b]
             if drain is not None and self.log is None:  # no Message per frame (udp_bus.py)
                 for arb, plain, data in drain():
-                    stats.frames_received += 1
+                    received += 1
                     key = dispatch.get((b, arb))
                     if key is None or not plain:
-                        stats.frames_ignored += 1
+                        ignored += 1
                         continue
-                    yield key[0], key[1], data
+                    handler(key[0], key[1], data)
                 continue
+            bus = buses[b]
             while True:
                 try:
                     msg = bus.recv(0)
                 except can.CanError:  # the link down (ENETDOWN): nothing from this bus now;
-                    stats.receive_errors += 1  # the feedback timeout judges how long
+                    self.stats.receive_errors += 1  # the feedback timeout judges how long
                     break
                 if msg is None:
                     break
-                stats.frames_received += 1
+                received += 1
                 if self.log is not None:
                     self.log(msg)
                 key = dispatch.get((b, msg.arbitration_id))
                 if key is None or msg.is_extended_id or msg.is_remote_frame:
-                    stats.frames_ignored += 1
+                    ignored += 1
                     continue
-                yield key[0], key[1], msg.data
+                handler(key[0], key[1], msg.data)
+        add_count(counts, FRAMES_RECEIVED, received)
+        if ignored:
+            add_count(counts, FRAMES_IGNORED, ignored)

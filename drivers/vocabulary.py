@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from cdprctl.numerics import add_count
+
 
 class Lifecycle(enum.Enum):
     UNCONFIGURED = "unconfigured"
@@ -55,18 +57,63 @@ class WinchStates:
         self.stamp = 0.0  # s, the time given to read()
 
 
+#: The driver's counters, in the order of ``DriverStats.counts``
+STAT_NAMES = (
+    "cycles",
+    "frames_sent",
+    "frames_received",
+    "frames_ignored",  # foreign ids, wrong lengths
+    "missed_feedback",  # cable-cycles without feedback
+    "implausible_frames",  # position steps no motor can make: dropped
+    "clamped_commands",  # torques beyond the limit, clamped
+    "rejected_commands",  # non-finite torques, replaced by the last valid one
+    "send_errors",  # frames the bus would not take (link down, bus-off, TX full)
+    "receive_errors",  # reads the bus refused (link down)
+)
+CYCLES, FRAMES_SENT, FRAMES_RECEIVED, FRAMES_IGNORED = 0, 1, 2, 3
+MISSED_FEEDBACK, IMPLAUSIBLE_FRAMES, CLAMPED_COMMANDS, REJECTED_COMMANDS = 4, 5, 6, 7
+
+
+class _Count:
+    """One of ``DriverStats.counts`` as an int attribute (a read builds the int: readers are
+    outside the loop; the loop adds in place, ``numerics.add_count``)."""
+
+    def __init__(self, slot: int):
+        self.slot = slot
+
+    def __get__(self, stats: DriverStats, owner: object = None) -> int:
+        return int(stats.counts[self.slot])
+
+    def __set__(self, stats: DriverStats, value: int) -> None:
+        stats.counts[self.slot] = value
+
+
 class DriverStats:
+    """The driver's counters (``STAT_NAMES``), kept in an int64 array: a Python int past 256
+    took a block at every increment of the loop's."""
+
+    cycles = _Count(0)
+    frames_sent = _Count(1)
+    frames_received = _Count(2)
+    frames_ignored = _Count(3)
+    missed_feedback = _Count(4)
+    implausible_frames = _Count(5)
+    clamped_commands = _Count(6)
+    rejected_commands = _Count(7)
+    send_errors = _Count(8)
+    receive_errors = _Count(9)
+
     def __init__(self) -> None:
-        self.cycles = 0
-        self.frames_sent = 0
-        self.frames_received = 0
-        self.frames_ignored = 0  # foreign ids, wrong lengths
-        self.missed_feedback = 0  # cable-cycles without feedback
-        self.implausible_frames = 0  # position steps no motor can make: dropped
-        self.clamped_commands = 0  # torques beyond the limit, clamped
-        self.rejected_commands = 0  # non-finite torques, replaced by the last valid one
-        self.send_errors = 0  # frames the bus would not take (link down, bus-off, TX full)
-        self.receive_errors = 0  # reads the bus refused (link down)
+        self.counts = np.zeros(len(STAT_NAMES), dtype=np.int64)
+
+    def cycle(self) -> None:
+        """One write more (in place)."""
+        add_count(self.counts, CYCLES, 1)
+
+    def commands(self, rejected: int, clamped: int) -> None:
+        """A write's torques replaced (non-finite) and clamped, counted in place."""
+        add_count(self.counts, REJECTED_COMMANDS, rejected)
+        add_count(self.counts, CLAMPED_COMMANDS, clamped)
 
     def as_dict(self) -> dict[str, int]:
-        return dict(vars(self))
+        return {name: int(self.counts[i]) for i, name in enumerate(STAT_NAMES)}

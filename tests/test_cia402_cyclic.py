@@ -46,7 +46,8 @@ class Codec:
         self.fresh[:] = False
         # no SYNC sent (sequence 0): every frame stamped at ``stamp``
         return int(cyclic.tpdo1_synced_kernel(
-            len(f), f, np.zeros(8), 0, np.zeros(self.m, dtype=np.int64), 2, stamp, PERIOD,
+            len(f), f, np.zeros(8), np.zeros(1, dtype=np.int64), np.zeros(self.m, dtype=np.int64),
+            2, stamp, PERIOD,
             np.full(self.m, MAX_SPEED), np.full(self.m, RAD), RATED, cyclic.POWER_STATE_OF_SW7,
             self.decoded, self.torque, self.fresh, self.fb_stamp, np.zeros(self.m),
         ))  # fmt: skip

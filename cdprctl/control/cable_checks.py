@@ -36,8 +36,8 @@ class TensionDisagreement:
         lim = self.limits
         assert lim is not None
         i = worst_ratio(err, lim)
-        e = float(err[i])
-        ratio = abs(e) / lim[i]
+        e = err.item(i)  # item: plain floats (a numpy scalar was a block each cycle)
+        ratio = abs(e) / lim.item(i)
         if not self.over.held(t, ratio > 1.0 and not at_limit, ratio):
             return None
         limit = self.config.max_tension_disagreement

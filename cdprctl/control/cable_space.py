@@ -59,6 +59,7 @@ from cdprctl.control.estimator import Estimator
 from cdprctl.control.reference_pose import ReferencePose
 from cdprctl.control.torques import WinchTorques
 from cdprctl.model.robot import RobotModel
+from cdprctl.numerics import min2
 from cdprctl.rotation import FloatArray
 from cdprctl.stiffness import lowest_mode
 
@@ -134,6 +135,9 @@ class CableSpace:
         # ENABLE_SETTLE (smoothstep: no velocity step at either end)
         self.settle = np.zeros(m)
         self._settle0 = np.zeros(m)  # m: at enable
+        # of it left, per cable (a float operand built an array a call, a broadcast one a
+        # buffer)
+        self._share = np.zeros(m)
         self._settle_time = math.inf  # s since enable (nan: the first active cycle takes it)
         self._settle_rad = np.zeros(m)  # rad: the settle at the motor
         # N: the tensions the cables should carry, the commanded ones less what the settle
@@ -195,7 +199,7 @@ class CableSpace:
         dt = d.dt
         after_stall_kernel(
             d.motor_target, self._sent, self._drive_rate, self._deviation, self._deviation_rate,
-            dt, self._period, min(dt, self._extrapolation), dt > self.LATE * self._period,
+            dt, self._period, min2(dt, self._extrapolation), dt > self.LATE * self._period,
             self.CATCH_UP,
         )  # fmt: skip
 
@@ -221,7 +225,8 @@ class CableSpace:
             self.settle.fill(0.0)  # fill, copyto: no view built, as a slice would
             np.copyto(self.expected, d.tensions)
             return
-        np.multiply(self._settle0, 1.0 - x * x * (3.0 - 2.0 * x), out=self.settle)
+        self._share.fill(1.0 - x * x * (3.0 - 2.0 * x))
+        np.multiply(self._settle0, self._share, out=self.settle)
         # paid out like the force feedback's give: the motor angle less settle / (r/G)
         np.divide(self.settle, e.drum_ratio, out=self._settle_rad)
         np.subtract(d.motor_target, self._settle_rad, out=d.motor_target)
@@ -229,7 +234,8 @@ class CableSpace:
         np.subtract(d.tensions, self.expected, out=self.expected)
         # within the cables' range: a length the model has wrong by millimetres would make
         # hundreds of newtons of a stiff cable
-        np.clip(self.expected, self._t_lo, self._t_hi, out=self.expected)
+        np.maximum(self.expected, self._t_lo, out=self.expected)  # np.clip's rule, in two
+        np.minimum(self.expected, self._t_hi, out=self.expected)  # ufuncs: no block
 
     def start_measuring(self) -> None:
         """The measured and commanded tensions start from the holding ones (enable)."""

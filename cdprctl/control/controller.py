@@ -52,6 +52,7 @@ from cdprctl.interference import Interference, interference_kernel
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.trajectory import Trajectory
+from cdprctl.numerics import count_kernel, min2
 from cdprctl.rotation import FloatArray
 from cdprctl.tda import TDAOptions, tda_options_of
 from drivers.vocabulary import WinchStates
@@ -123,6 +124,7 @@ class Controller:
         # y direction turned its 0.2 mm of stretch into 6 mm of estimate (lock-step, measured).
         self._ff_wrench = np.zeros(6)
         self.stretch_every = max(1, round(self.STRETCH_PERIOD / self.period))
+        self._stretch_due = True  # this cycle refreshes the stretch tensions (torque mode)
         # s as a float: the ns counter's ints are past the small ones Python keeps, a block
         # each (the cycle allocates nothing: tests/test_allocations.py)
         self._clock = time.perf_counter
@@ -219,7 +221,7 @@ class Controller:
         d.dt = gap if 0.0 < gap < self.MAX_STEP else self.period
         self._last_t = t
         d.time = t
-        d.cycle += 1
+        self._stretch_due = count_kernel(d.cycles, self.stretch_every)  # a bool: no int
         return gap
 
     def _stretch_tensions(self, st: WinchStates) -> None:
@@ -241,7 +243,7 @@ class Controller:
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
             cs.force_feedback(stopping=d.state is STOPPING)
-        elif d.cycle % self.stretch_every == 0:
+        elif self._stretch_due:
             self.refresh_stretch_tensions()
 
     def _check_cells(self, t: float, st: WinchStates) -> None:
@@ -259,7 +261,7 @@ class Controller:
         a longer stall (by all of it, the next targets stepped ahead of the held drives: a
         following-error fault, 78 ms at 0.2 m/s on rowc). Torque mode: ``data.dt``."""
         if self.cable_space.enabled and 0.0 < gap < math.inf:
-            return min(gap, self._extrapolation)
+            return min2(gap, self._extrapolation)
         return self.data.dt
 
     # s: a longer gap between cycles (the first one, or after the loop stood still) steps by a

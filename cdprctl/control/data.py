@@ -32,7 +32,8 @@ class ControlData:
         # the stop under way or the last one's (IEC 60204-1 category 0, 1, 2; -1: none since
         # the last enable or reset): docs/safety.md
         self.stop_category = -1
-        self.cycle = 0
+        # cycles run (``cycle``), counted in place by the controller (numerics.count_kernel)
+        self.cycles = np.zeros(1, dtype=np.int64)
         self.time = 0.0  # s, the loop's clock at the last cycle
         # s, the real time since the cycle before (a period, or more after a late or missed
         # one): every time-dependent part steps by it (controller.py)
@@ -103,3 +104,8 @@ class ControlData:
         self.path_fraction = 0.0  # of the segment's distance covered
         self.path_elapsed = 0.0  # s the path has moved (or dwelt), pauses not counted
         self.path_time_left = 0.0  # s of the plan still to play (as planned)
+
+    @property
+    def cycle(self) -> int:
+        """Cycles run (an int built per read: readers are outside the loop)."""
+        return int(self.cycles[0])

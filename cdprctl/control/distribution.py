@@ -97,6 +97,7 @@ class Distribution:
         self._t_s = np.zeros(m)
         self._verts = np.zeros((2 * m + 8, 2))
         self._verts_tmp = np.zeros((2 * m + 8, 2))
+        self._bounds = np.zeros((3, m))  # the polygon's strips (feasible_scale_kernel)
         data.tda_method = options.method.value
 
     @property
@@ -229,7 +230,7 @@ class Distribution:
             np.subtract(ns.t0, self._t_ff, out=self._t_fb)
             s = feasible_scale_kernel(
                 ns.N, self._t_ff, self._t_fb, self.t_min, self.t_max, self._verts,
-                self._verts_tmp, self._t_s,
+                self._verts_tmp, self._t_s, self._bounds,
             )  # fmt: skip
         else:
             s = self._scale_by_solving(ff, d.feedback_wrench, t_prev, at)

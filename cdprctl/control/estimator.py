@@ -26,12 +26,24 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
-from cdprctl.forward_kinematics import FKResult, FKStatus, ForwardKinematics, fk_kernel
+from cdprctl.forward_kinematics import (
+    FKResult,
+    FKStatus,
+    ForwardKinematics,
+    copy_pose,
+    fk_kernel,
+    rotation_since,
+)
 from cdprctl.kinematics import KinematicsData, ik_kernel, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import compliance_at, compliance_of, kernel_args, stiffness_kernel
+from cdprctl.numerics import (
+    compliance_at,
+    compliance_of,
+    cycle_kernel,
+    kernel_args,
+    stiffness_kernel,
+)
 from cdprctl.rotation import FloatArray, log_so3_kernel
 
 
@@ -76,7 +88,7 @@ class Estimator:
         stiffness_kernel(self.l_home, self._law, self.k)
         nf = len(self.fk_cables)
         scratch = FKScratch(self._theta, self.lengths, np.zeros(nf), np.zeros(nf), self._fk_p,
-                            self._fk_R, self._info)  # fmt: skip
+                            self._fk_R, self._info, np.zeros((3, 3)), np.zeros(3))  # fmt: skip
         self._scratch = kernel_args(scratch)
         state = EstimateState(self.position, self.rotation, self.velocity, self.omega,
                               self._clock, self.k)  # fmt: skip
@@ -126,6 +138,7 @@ class Estimator:
             self.fk_cables,
             self.fk.data.arrays,
             self.fk.limits,
+            self.fk.work,
             self._scratch,
             self.kin.arrays,
             self._state,
@@ -151,7 +164,8 @@ CONVERGED, MAX_ITERATIONS, INCONSISTENT = (
 
 class FKScratch(NamedTuple):
     """The estimator's working arrays: angles brought to one instant (rad), all cables'
-    lengths (m), the FK cables' lengths and residuals (m), FK's pose and ``info``."""
+    lengths (m), the FK cables' lengths and residuals (m), FK's pose and ``info``, the
+    rotation since the last pose ``dR`` and its rotation vector ``w`` (rad)."""
 
     th: np.ndarray
     lengths: np.ndarray
@@ -160,6 +174,8 @@ class FKScratch(NamedTuple):
     p: np.ndarray
     R: np.ndarray
     info: np.ndarray
+    dR: np.ndarray
+    w: np.ndarray
 
 
 class EstimateState(NamedTuple):
@@ -175,17 +191,17 @@ class EstimateState(NamedTuple):
     k: np.ndarray
 
 
-@njit(cache=True)
+@cycle_kernel
 def estimate_kernel(
     t, theta, tensions, rate, age, lag, l_zero, drum_ratio, law, fk_cables, fk_kin, limits,
-    scratch, kin, state,
+    fk_work, scratch, kin, state,
 ):  # pragma: no cover - compiled  # fmt: skip
     """``Estimator.update`` (see the module docstring for the steps): angles brought to the
     newest sample's instant when ``lag``, lengths under ``tensions`` (the cable law ``law``),
     the forward kinematics of the ``fk_cables`` (``fk_kin``, ``limits``) warm-started from the
     state's pose, the filtered twist, and the inverse kinematics (``kin``) and each cable's
     stiffness at the new pose, into ``state``."""
-    th, lengths, fk_lengths, res, p, R, info = scratch
+    th, lengths, fk_lengths, res, p, R, info, dR, w = scratch
     position, rotation, velocity, omega, clock, k = state
     m = theta.shape[0]
     shift = 0.0
@@ -208,9 +224,8 @@ def estimate_kernel(
         lengths[i] = l0 + tensions[i] * compliance_at(law, i, l0)
     for j in range(fk_cables.shape[0]):
         fk_lengths[j] = lengths[fk_cables[j]]
-    p[:] = position
-    R[:, :] = rotation
-    fk_kernel(fk_kin, fk_lengths, p, R, limits, res, info)
+    copy_pose(position, rotation, p, R)
+    fk_kernel(fk_kin, fk_lengths, p, R, limits, res, info, fk_work)
     status = int(info[2])
     if status != CONVERGED and status != MAX_ITERATIONS and status != INCONSISTENT:
         return
@@ -219,14 +234,12 @@ def estimate_kernel(
         a = 1.0 - math.exp(-clock[1] * dt)
         for j in range(3):
             velocity[j] += a * ((p[j] - position[j]) / dt - velocity[j])
-        dR = R @ rotation.T
-        w = np.empty(3)
+        rotation_since(R, rotation, dR)
         log_so3_kernel(dR, w)
         for j in range(3):
             omega[j] += a * (w[j] / dt - omega[j])
     if dt > 0.0:
         clock[0] = t
-    position[:] = p
-    rotation[:, :] = R
+    copy_pose(p, R, position, rotation)
     ik_kernel(kin, position, rotation)
     stiffness_kernel(kin[9], law, k)  # KinArrays.length

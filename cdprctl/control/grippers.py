@@ -61,6 +61,9 @@ class GripperControl:
         self._delta = np.zeros(n)
         self._cables = np.asarray(c, dtype=np.int64)
         self._jaw_wrench = np.zeros(6)  # N, N·m: the jaws' weight and inertia
+        # the options this set last imposed, and the impositions of other cables they kept
+        self._imposed: TDAOptions | None = None
+        self._keep: tuple[Imposition, ...] = ()
         # the range check's scratch distributor (grip_range replaces its options)
         self._range_tda = (
             TensionDistributor(
@@ -198,7 +201,9 @@ class GripperControl:
     def _apply(self) -> None:
         gs, d = self.set, self.data
         base = self.distribution.options
-        keep = tuple(i for i in base.impositions if i.cable not in gs.cables)
+        if base is not self._imposed:  # options from elsewhere: their other impositions
+            self._keep = tuple(i for i in base.impositions if i.cable not in gs.cables)
+        keep = self._keep
         # the moving ones last: at the end of its range the TDA saturates the last imposition
         # (the one being driven there), not a gripper that holds
         holding = [j for j in range(gs.n) if d.grip_imposed[j] == d.grip_target[j]]
@@ -209,6 +214,7 @@ class GripperControl:
             if not math.isnan(d.grip_imposed[j])
         )
         self.distribution.impose(keep + grip)
+        self._imposed = self.distribution.options
 
     def status(self) -> list[dict[str, Any]]:
         g, d = self.grasp, self.data

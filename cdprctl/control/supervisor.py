@@ -51,7 +51,7 @@ from cdprctl.control.states import (
 from cdprctl.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.safety import SafetyConfig
-from cdprctl.numerics import largest, worst_ratio
+from cdprctl.numerics import largest, max2, worst_ratio
 from cdprctl.rotation import FloatArray
 from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
 from drivers.vocabulary import ACTIVE, ERROR, Lifecycle, WinchStates
@@ -331,7 +331,8 @@ class Supervisor:
         tau, lim = self.drives.states.torque, self.torque_limits
         assert lim is not None
         i = worst_ratio(tau, lim)
-        self._at_limit = abs(float(tau[i])) >= self.AT_LIMIT * lim[i]
+        # item: plain floats (an element as a numpy scalar was a block each cycle)
+        self._at_limit = abs(tau.item(i)) >= self.AT_LIMIT * lim.item(i)
         if not self._torque_at_limit.held(t, self._at_limit):
             return None
         return (
@@ -370,7 +371,7 @@ class Supervisor:
             d.saturated_for += d.dt
             d.saturated_cycles += 1
         else:
-            d.saturated_for = max(0.0, d.saturated_for - self.SATURATION_LEAK * d.dt)
+            d.saturated_for = max2(0.0, d.saturated_for - self.SATURATION_LEAK * d.dt)
         if d.state is STOPPING:
             return
         if bad_cycles >= self.BAD_CYCLES:

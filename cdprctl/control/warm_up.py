@@ -22,7 +22,7 @@ from cdprctl.control.cable_kernels import (
     tension_hold_kernel,
 )
 from cdprctl.control.estimator import Estimator
-from cdprctl.numerics import largest, worst_ratio
+from cdprctl.numerics import count_kernel, largest, worst_ratio
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.planar import feasible_scale_kernel
@@ -78,10 +78,10 @@ def warm_up(controller: Controller) -> None:
     ns.particular(hold, t_ff)
     if model.redundancy == 2:
         verts = np.zeros((2 * m + 8, 2))
-        feasible_scale_kernel(
-            ns.N, t_ff, t_ff.copy(), t_min, t_max, verts, verts.copy(), zeros.copy()
-        )
+        feasible_scale_kernel(ns.N, t_ff, t_ff.copy(), t_min, t_max, verts, verts.copy(),
+                              zeros.copy(), np.zeros((3, m)))  # fmt: skip
         least_violating(ns.N, ns.t0, t_min, t_max)  # a wrench no tensions can produce
+    count_kernel(np.zeros(1, dtype=np.int64), 1)  # the cycle's count (controller._step_time)
     # not the cycle's but beside it: a jog's or a path's soft limits, checked by submit() in
     # the daemon's I/O thread while the loop runs (a compile there would hold the GIL)
     c.limits.check(np.tile(c.trajectory.position, (2, 1)))

@@ -36,6 +36,14 @@ from cdprctl.rotation import FloatArray, exp_so3, log_so3, matrix_to_rpy
 # a CDPR should be; ruckig (0.19) raises RuckigError on some inputs ("error in step 1"), then
 # time synchronisation, then none, are tried.
 _SYNC_ORDER = (Synchronization.Phase, Synchronization.Time, Synchronization.No)
+# the binding's enum members, looked up once: each lookup and each assignment of an enum to an
+# input parameter took a block (the parameters are set only when they change)
+_PHASE, _POSITION, _VELOCITY = (
+    Synchronization.Phase,
+    ControlInterface.Position,
+    ControlInterface.Velocity,
+)
+_WORKING, _FINISHED, _ERROR = Result.Working, Result.Finished, Result.Error
 
 
 def pose_coordinates(model: RobotModel, position: FloatArray, rotation: FloatArray) -> FloatArray:
@@ -90,6 +98,12 @@ class Trajectory:
         # the configured accelerations as ruckig takes them (a stop brakes with all there is)
         self.full_acceleration = self.acc_limits.tolist()
         self._target_velocity = self._zero6  # ruckig's target velocity (a list: the binding's)
+        # ruckig's input holds the last step's output as the current state (pass_to_input, in
+        # C++: no list per cycle); False when the state was set from here (reset, an error)
+        self._fed = False
+        self.inp.synchronization = _PHASE
+        self._interface = _POSITION  # the control interface the input is set to
+        self.inp.control_interface = _POSITION
 
     def coordinates(self, position: FloatArray, rotation: FloatArray) -> FloatArray:
         return pose_coordinates(self.model, position, rotation)
@@ -104,6 +118,7 @@ class Trajectory:
         self.target[:] = x
         self.finished = True
         self._velocity_mode = False
+        self._fed = False
 
     def clamp(self, x: FloatArray) -> tuple[FloatArray, bool]:
         """``x`` inside the workspace box and the largest angle; True when it was changed."""
@@ -124,9 +139,19 @@ class Trajectory:
         self.inp.max_acceleration = (self.acc_limits * min(1.0, max(1e-3, accel_scale))).tolist()
         self._target_velocity = self._zero6
         self.inp.minimum_duration = None
+        self._aim()
         self.finished = False
         self._velocity_mode = False
         return True
+
+    def _aim(self) -> None:
+        """ruckig's input towards ``target`` at ``_target_velocity``, by its position
+        interface (set when a target or segment is given: not a list per cycle)."""
+        inp = self.inp
+        self._interface = inp.control_interface = _POSITION
+        inp.target_position = self.target.tolist()
+        inp.target_velocity = self._target_velocity
+        inp.target_acceleration = self._zero6
 
     def set_segment(
         self,
@@ -145,6 +170,7 @@ class Trajectory:
         self.inp.max_velocity = max_velocity
         self.inp.max_acceleration = max_acceleration
         self.inp.minimum_duration = minimum_duration
+        self._aim()
         self.finished = False
         self._velocity_mode = False
 
@@ -153,7 +179,8 @@ class Trajectory:
         self.inp.current_position = self.position.tolist()
         self.inp.current_velocity = self.velocity.tolist()
         self.inp.current_acceleration = self.acceleration.tolist()
-        self.inp.control_interface = ControlInterface.Velocity
+        self._fed = False  # the next step starts from these arrays, not the last output
+        self._interface = self.inp.control_interface = _VELOCITY
         self.inp.max_acceleration = self.full_acceleration
         self.inp.target_velocity = self._zero6
         self.inp.target_acceleration = self._zero6
@@ -169,30 +196,25 @@ class Trajectory:
             return
         if dt > 0.0 and abs(dt - self._dt) > 1e-9:
             self.otg.delta_time = self._dt = dt
-        inp = self.inp
-        inp.current_position = self.position.tolist()
-        inp.current_velocity = self.velocity.tolist()
-        inp.current_acceleration = self.acceleration.tolist()
-        if not self._velocity_mode:
-            inp.control_interface = ControlInterface.Position
-            inp.target_position = self.target.tolist()
-            inp.target_velocity = self._target_velocity
-            inp.target_acceleration = self._zero6
-        res = Result.Error
-        for sync in _SYNC_ORDER:
-            inp.synchronization = sync
-            try:
-                res = self.otg.update(inp, self.out)
-            except RuckigError:
-                res = Result.Error
-            if res in (Result.Working, Result.Finished):
-                break
+        inp, out = self.inp, self.out
+        if self._fed:  # the last step's output, in C++
+            out.pass_to_input(inp)
+        else:
+            inp.current_position = self.position.tolist()
+            inp.current_velocity = self.velocity.tolist()
+            inp.current_acceleration = self.acceleration.tolist()
+        if not self._velocity_mode and self._interface is not _POSITION:
+            self._aim()
+        res = self._step()
         self.result = res
-        if res in (Result.Working, Result.Finished):
-            self.position[:] = self.out.new_position
-            self.velocity[:] = self.out.new_velocity
-            self.acceleration[:] = self.out.new_acceleration
-            if res == Result.Finished:
+        if res is _WORKING or res is _FINISHED:
+            # one list per read (the binding's, given back at once), copied by index: a
+            # slice assignment built an array from it
+            _store(self.position, out.new_position)
+            _store(self.velocity, out.new_velocity)
+            _store(self.acceleration, out.new_acceleration)
+            self._fed = True
+            if res is _FINISHED:
                 self.finished = True
                 self._velocity_mode = False
         else:  # an error of ruckig's input: hold where we are
@@ -200,3 +222,34 @@ class Trajectory:
             self.acceleration[:] = 0.0
             self.finished = True
             self._velocity_mode = False
+            self._fed = False
+
+    def _step(self) -> Result:
+        """One ruckig step: phase synchronisation, else the fallbacks of ``_SYNC_ORDER``."""
+        inp, otg, out = self.inp, self.otg, self.out
+        try:
+            res = otg.update(inp, out)
+        except RuckigError:
+            res = _ERROR
+        if res is _WORKING or res is _FINISHED:
+            return res
+        for sync in _SYNC_ORDER[1:]:
+            inp.synchronization = sync
+            try:
+                res = otg.update(inp, out)
+            except RuckigError:
+                res = _ERROR
+            if res is _WORKING or res is _FINISHED:
+                break
+        inp.synchronization = _PHASE
+        return res
+
+
+def _store(a: FloatArray, v: list[float]) -> None:
+    """``a[:6]`` ← ``v`` element by element (no array built from the list)."""
+    a[0] = v[0]
+    a[1] = v[1]
+    a[2] = v[2]
+    a[3] = v[3]
+    a[4] = v[4]
+    a[5] = v[5]

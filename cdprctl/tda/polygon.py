@@ -17,6 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import FloatArray
 
 Point = tuple[float, float]
@@ -80,11 +81,15 @@ def min_quadratic(
 @njit(cache=True)
 def polygon_kernel(N, t0, t_lo, t_hi, eps, verts, tmp):  # pragma: no cover - compiled
     """Clip the parallelogram of two strips with the other strips; vertices into ``verts``
-    (counter-clockwise); returns their number (0: empty)."""
+    (counter-clockwise); returns their number (0: empty). ``polygon_into`` on a new scratch."""
+    return polygon_into(N, t0, t_lo, t_hi, eps, verts, tmp, np.empty((3, N.shape[0])))
+
+
+@cycle_kernel
+def polygon_into(N, t0, t_lo, t_hi, eps, verts, tmp, bounds):  # pragma: no cover - compiled
+    """``polygon_kernel`` with its scratch given: ``bounds`` (3, m) (no block taken)."""
     m = N.shape[0]
-    lo = np.empty(m)
-    hi = np.empty(m)
-    norms = np.empty(m)
+    lo, hi, norms = bounds[0], bounds[1], bounds[2]
     for i in range(m):
         lo[i] = t_lo[i] - t0[i] - eps
         hi[i] = t_hi[i] - t0[i] + eps
@@ -129,7 +134,7 @@ def polygon_kernel(N, t0, t_lo, t_hi, eps, verts, tmp):  # pragma: no cover - co
     return _dedupe(verts, nv)
 
 
-@njit(cache=True)
+@cycle_kernel
 def _clip_strip(verts, nv, ax, ay, lo, hi, out):  # pragma: no cover - compiled
     """Sutherland-Hodgman with both sides of ``lo <= ax·x + ay·y <= hi`` in one pass; the
     result goes to ``out`` (always, even when nothing is cut); returns its vertex count."""
@@ -176,7 +181,7 @@ def _clip_strip(verts, nv, ax, ay, lo, hi, out):  # pragma: no cover - compiled
     return n_out
 
 
-@njit(cache=True)
+@cycle_kernel
 def _dedupe(verts, nv):  # pragma: no cover - compiled
     """Drop vertices repeating the previous one (clipping through a vertex makes them)."""
     if nv < 2:
@@ -199,7 +204,7 @@ def _dedupe(verts, nv):  # pragma: no cover - compiled
     return n
 
 
-@njit(cache=True)
+@cycle_kernel
 def area_centroid_kernel(verts, nv):  # pragma: no cover - compiled
     """(area, cx, cy): shoelace formula, closing edge included, shifted to the first vertex
     for less cancellation; the vertex mean for a degenerate polygon."""
@@ -225,7 +230,7 @@ def area_centroid_kernel(verts, nv):  # pragma: no cover - compiled
     return 0.5 * abs(a2), x0 + cx / (3.0 * a2), y0 + cy / (3.0 * a2)
 
 
-@njit(cache=True)
+@cycle_kernel
 def contains_kernel(verts, nv, x, y, tol):  # pragma: no cover - compiled
     if nv == 0:
         return False
@@ -242,7 +247,7 @@ def contains_kernel(verts, nv, x, y, tol):  # pragma: no cover - compiled
     return True
 
 
-@njit(cache=True)
+@cycle_kernel
 def min_quadratic_kernel(verts, nv, h11, h12, h22, g1, g2):  # pragma: no cover - compiled
     det = h11 * h22 - h12 * h12
     ux = -(h22 * g1 - h12 * g2) / det

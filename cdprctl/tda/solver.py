@@ -97,6 +97,7 @@ class TensionDistributor(EnergyMethod):
         self._code_of: TDAOptions | None = None  # the options _planar_code is for
         self._planar_code = planar.BARYCENTER
         self._ones = np.ones(self.m)
+        self._halves = np.full(self.m, 0.5)
         self._dt = self.options.period  # s, the rate limit's step of this solve
         self._no_kin = KinematicsData(model)  # placeholder geometry when no kinematics given
         self._direction = np.zeros(3)
@@ -106,9 +107,16 @@ class TensionDistributor(EnergyMethod):
 
     def set_options(self, options: TDAOptions) -> None:
         """Use ``options`` from the next solve: the loop switches a distributor built at
-        start-up this way, allocating nothing. The options must have been validated for
-        this robot (``TDAOptions.validate``)."""
+        start-up this way, allocating nothing (but for SOTDA's grid finer than any before:
+        its candidates' room, once). The options must have been validated for this robot
+        (``TDAOptions.validate``)."""
         self.options = options
+        grid = options.grid_points if options.sotda_variant == "grid" else 0
+        work = self._planar_work
+        if grid * grid + work.verts.shape[0] > work.cand.shape[0] - 1:  # a finer grid: once
+            bigger = planar.PlanarWork.of(self.m, grid)
+            self._planar_work = work._replace(cand=bigger.cand, dX=bigger.dX)
+            self._planar = kernel_args(self._planar_work)
         d = options.direction
         n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         for i in range(3):
@@ -320,7 +328,9 @@ class TensionDistributor(EnergyMethod):
         if k is not None:
             np.multiply(t, t, out=out.energies)
             out.energies /= k
-            out.energies *= 0.5  # U_i = t_i²/(2 k_i), Sensors 2019 eq. (4)
+            # U_i = t_i²/(2 k_i), Sensors 2019 eq. (4); by an array of halves: a scalar
+            # operand built an array each call
+            np.multiply(out.energies, self._halves, out=out.energies)
             out.energy_total = total(out.energies)
         out.status = status
         return out

@@ -12,20 +12,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 
 from cdprctl.kinematics import KinematicsData
+from cdprctl.numerics import cycle_kernel
 from cdprctl.rotation import FloatArray
 from cdprctl.stiffness import _ka_weighted
 from cdprctl.tda.polygon import Point
 
 
-@njit(cache=True)
-def sotda_stiffness_kernel(N, t0, k, uT, W, rbT, free_len, S):  # pragma: no cover - compiled
+@cycle_kernel
+def sotda_stiffness_kernel(N, t0, k, uT, W, rbT, free_len, T, S):  # pragma: no cover - compiled
     """``S`` (3, 6, 6) ← ``K0 = Kp + Ka(t0)``, ``A1 = Ka(N_1)``, ``A2 = Ka(N_2)`` (Picard et
-    al. 2020, eq. (3)-(4): ``K(λ) = K0 + λ1 A1 + λ2 A2``), ``Kp = W diag(k) Wᵀ``."""
+    al. 2020, eq. (3)-(4): ``K(λ) = K0 + λ1 A1 + λ2 A2``), ``Kp = W diag(k) Wᵀ``; ``T``
+    (3, m) scratch."""
     m = N.shape[0]
-    T = np.empty((3, m))
     for i in range(m):
         T[0, i] = t0[i]
         T[1, i] = N[i, 0]
@@ -52,6 +52,7 @@ class SotdaModel:
             data.W,
             data.rbT,
             data.free_length,
+            np.empty((3, len(t0))),
             S,
         )
         self.K0, self.A1, self.A2 = S[0], S[1], S[2]
@@ -61,16 +62,22 @@ class SotdaModel:
         NaN rows where ``K(λ)`` is singular."""
         out = np.empty((len(lam), 6))
         displacements_kernel(
-            self.K0, self.A1, self.A2, np.ascontiguousarray(lam), len(lam), delta_wrench, out
+            self.K0,
+            self.A1,
+            self.A2,
+            np.ascontiguousarray(lam),
+            len(lam),
+            delta_wrench,
+            out,
+            np.empty((6, 7)),
         )
         return out
 
 
-@njit(cache=True)
-def displacements_kernel(K0, A1, A2, lam, n, dw, out):  # pragma: no cover - compiled
+@cycle_kernel
+def displacements_kernel(K0, A1, A2, lam, n, dw, out, K):  # pragma: no cover - compiled
     """``out[j] = (K0 + λ_j1 A1 + λ_j2 A2)⁻¹ dw`` by Gaussian elimination with partial
-    pivoting; NaN where singular."""
-    K = np.empty((6, 7))
+    pivoting; NaN where singular. ``K`` (6, 7) scratch."""
     for j in range(n):
         l1, l2 = lam[j, 0], lam[j, 1]
         for r in range(6):
@@ -94,7 +101,8 @@ def displacements_kernel(K0, A1, A2, lam, n, dw, out):  # pragma: no cover - com
                 for k in range(c, 7):
                     K[r, k] -= f * K[c, k]
         if singular:
-            out[j, :] = np.nan
+            for r in range(6):
+                out[j, r] = np.nan
             continue
         for r in range(5, -1, -1):
             s = K[r, 6]
@@ -111,7 +119,7 @@ def grid_candidates(poly: Sequence[Point] | FloatArray, n: int) -> FloatArray:
     return out[: grid_candidates_kernel(P, len(P), n, out)]
 
 
-@njit(cache=True)
+@cycle_kernel
 def grid_candidates_kernel(verts, nv, n, out):  # pragma: no cover - compiled
     """:func:`grid_candidates` of the counter-clockwise polygon ``verts[:nv]`` into ``out``
     (room for ``n² + nv`` rows); returns the number of rows written. The grid is numpy's

@@ -94,14 +94,16 @@ def tpdo1_frame(
 
 @cycle_kernel
 def tpdo1_synced_kernel(
-    n, frames, syncs, seq, answered, lag_max, fallback, period, max_speed, rad_per_count,
+    n, frames, syncs, seqs, answered, lag_max, fallback, period, max_speed, rad_per_count,
     rated_torque, ps_table, decoded, torque, fresh, fb_stamp, rate,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Apply ``n`` TPDO1 frames in their order of arrival (``tpdo1_frame``), ``frames[i]`` =
     (cable, statusword, torque per-mille, 32-bit position), each stamped at the instant of
     the SYNC it answers (``sync_clock.sync_instant``); ``decoded``: the :class:`Decoded`
-    state. Returns the number of frames dropped."""
+    state; ``seqs[0]`` the newest SYNC's sequence number. Returns the number of frames
+    dropped."""
     raw = decoded[0]
+    seq = seqs[0]
     dropped = 0
     for i in range(n):
         c, pos = frames[i, 0], frames[i, 3]

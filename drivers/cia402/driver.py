@@ -24,6 +24,7 @@ from typing import Any
 import can
 import numpy as np
 
+from cdprctl.numerics import max2, min2
 from drivers import blocking
 from drivers.base import WinchDriver
 from drivers.cia402 import cyclic, drive_setup
@@ -263,8 +264,10 @@ class Cia402Driver(WinchDriver):
         cyclic.pack_rpdo1_kernel(fields, self._target_counts, self._position_flags,
                                  self._rpdo_bytes)  # fmt: skip
         send, bus_of, rpdo = self._send, self._bus_of_list, self._rpdo
-        for c in range(self.m):
+        c, m = 0, self.m
+        while c < m:  # by index: a for loop's iterator was a block
             send(bus_of[c], rpdo[c])
+            c += 1
 
     def _drain(self, t: float) -> None:
         self.feedback.drain(t)
@@ -313,7 +316,7 @@ class Cia402Driver(WinchDriver):
             # a SYNC of now: the drives, which had gone on at the targets' rate, reversed and
             # faulted on their following error. The targets go out for the SYNC's instant.
             # Only between two cycles of running drives: the step at an enable is no rate.
-            late = min(max(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
+            late = min2(max2(self.clock() - t, 0.0), self.max_carry) if not setup else 0.0
             running = self.lifecycle is ACTIVE
             since = self._last_targets_t if running else -math.inf
             cyclic.target_rates_kernel(
@@ -328,8 +331,10 @@ class Cia402Driver(WinchDriver):
         if self.sync.due(now, setup):  # else its RPDOs wait for the next SYNC
             self._send_sync(t, now, late, fields, setup)
         if t - self._last_hb_sent >= self.config.heartbeat_period:
-            for b in self.media:
-                self._send(b, self._hb)
+            media, i = self.media, 0
+            while i < len(media):
+                self._send(media[i], self._hb)
+                i += 1
             self._last_hb_sent = t
         return self.transport.sends_failing()
 
@@ -345,15 +350,20 @@ class Cia402Driver(WinchDriver):
             # next late SYNCs overshot into a following-error fault. Sent again for now,
             # and checked again: held up once more while they went out again, they were
             # that much behind (rowc, two 10 ms holds: 0.37 rad, a fault; lock-step)
-            for _ in range(self.RESEND_TRIES):
-                again = min(max(now - t, 0.0), self.max_carry)
+            tries = 0
+            while tries < self.RESEND_TRIES:
+                tries += 1
+                again = min2(max2(now - t, 0.0), self.max_carry)
                 if not sync.behind(late, again, self.RESEND_AFTER):
                     break
                 self._send_targets(again, fields)
                 self.resent_targets += 1
                 late, now = again, self.clock()
         sync.advance()
-        frame, plain, counted = sync.frame, sync.plain, sync.counted
-        for b in self.media:
+        frame, plain, counted, media = sync.frame, sync.plain, sync.counted, self.media
+        i, n = 0, len(media)
+        while i < n:
+            b = media[i]
             self._send(b, frame if counted[b] else plain)
+            i += 1
         sync.sent(now, setup)

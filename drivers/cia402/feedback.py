@@ -10,13 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.numerics import kernel_args
+from cdprctl.numerics import add_count, kernel_args
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
 from drivers.cia402.cyclic import GENERIC_STATE
 from drivers.cia402.sync_clock import SyncClock
 from drivers.liveness import Liveness
-from drivers.vocabulary import DriverStats, WinchStates
+from drivers.vocabulary import IMPLAUSIBLE_FRAMES, DriverStats, WinchStates
 
 # frame kinds of the dispatch table (``Cia402Feedback.dispatch_into``)
 TPDO1, TPDO2, EMCY, HEARTBEAT, SDO = 1, 2, 3, 4, 5
@@ -30,7 +30,7 @@ class Cia402Feedback:
                  liveness: Liveness, stats: DriverStats):  # fmt: skip
         """``rad_per_count`` per drive, ``rated_torque`` (N·m per 1000 per-mille),
         ``velocity_source`` ([drives]: "pdo" or "derived"); the frames come from
-        ``transport.frames()``, the SYNCs' instants from ``sync``; the decoded feedback goes
+        ``transport.receive``, the SYNCs' instants from ``sync``; the decoded feedback goes
         into ``states`` and ``liveness`` (and the dropped frames into ``stats``)."""
         self.m, self.period = m, period
         self.rad_per_count, self.rated_torque = rad_per_count, rated_torque
@@ -50,6 +50,10 @@ class Cia402Feedback:
         self.tpdo1_bytes = bytearray(8 * 4 * m)
         self.tpdo1_raw = np.frombuffer(self.tpdo1_bytes, dtype=np.uint8).reshape(4 * m, 8)
         self.tpdo1_cable = np.zeros(4 * m, dtype=np.int64)
+        self._slots = 4 * m  # TPDO1s the arrays hold
+        self._n = 0  # TPDO1s received in this read
+        self._t = 0.0  # s, this read's time
+        self._on_frame = self._frame  # bound once: a bound method per read was a block
         self.generic = np.array([int(GENERIC_STATE[s]) for s in sorted(p.PowerState)])
         self.decoded = kernel_args(
             cyclic.Decoded(self.raw, self.counts, self.ps, np.zeros(m, dtype=np.int64),
@@ -77,44 +81,48 @@ class Cia402Feedback:
     def drain(self, t: float) -> None:
         """Decode every frame waiting on every bus (``recv(0)``: never blocks); the TPDO1s are
         applied together, in their order of arrival (``cyclic.tpdo1_synced_kernel``)."""
-        tp2, raw, cables, n = p.TPDO2_STRUCT.unpack, self.tpdo1_bytes, self.tpdo1_cable, 0
-        pdo_velocity, on_cell = self.pdo_velocity, self.on_cell
-        for kind, c, data in self.transport.frames():  # the kinds as literals (no lookup)
-            if kind == 1 and len(data) == 8:
-                if n == len(cables):  # more than 4 per drive since the last read: apply them
-                    self.apply_tpdo1(n, t)
-                    n = 0
-                cables[n] = c
-                raw[8 * n : 8 * n + 8] = data  # unpacked, its fields were an int each
-                n += 1
-            elif kind == 2 and len(data) == 4:
-                if pdo_velocity:
-                    self.states.velocity[c] = tp2(data)[0] * self.rad_per_count[c]
-            elif kind == 3 and len(data) == 8:
-                self.emcy[c] = p.EMCY_STRUCT.unpack(data)[0]
-            elif kind == 4 and len(data) >= 1:
-                self.liveness.last_hb[c] = t
-                self.nmt_state[c] = data[0]
-            elif kind == 5 and len(data) == 8:
-                self.sdo_reply[c] = bytes(data)
-            elif kind == 6 and on_cell is not None:
-                on_cell(c, data)
-            else:
-                self.stats.frames_ignored += 1
-        if n:
-            self.apply_tpdo1(n, t)
+        self._t, self._n = t, 0
+        self.transport.receive(self._on_frame)
+        if self._n:
+            self.apply_tpdo1(self._n, t)
+
+    def _frame(self, kind: int, c: int, data: Any) -> None:
+        """One frame of drive ``c`` (the kinds as literals: no lookup)."""
+        if kind == 1 and len(data) == 8:
+            n = self._n
+            if n == self._slots:  # more than 4 per drive since the last read: apply them
+                self.apply_tpdo1(n, self._t)
+                n = 0
+            self.tpdo1_cable[n] = c
+            self.tpdo1_bytes[8 * n : 8 * n + 8] = data  # unpacked, its fields were an int each
+            self._n = n + 1
+        elif kind == 2 and len(data) == 4:
+            if self.pdo_velocity:
+                self.states.velocity[c] = p.TPDO2_STRUCT.unpack(data)[0] * self.rad_per_count[c]
+        elif kind == 3 and len(data) == 8:
+            self.emcy[c] = p.EMCY_STRUCT.unpack(data)[0]
+        elif kind == 4 and len(data) >= 1:
+            self.liveness.last_hb[c] = self._t
+            self.nmt_state[c] = data[0]
+        elif kind == 5 and len(data) == 8:
+            self.sdo_reply[c] = bytes(data)
+        elif kind == 6 and self.on_cell is not None:  # a load cell's TPDO (drivers/load_cells.py)
+            self.on_cell(c, data)
+        else:
+            self.stats.frames_ignored += 1
 
     def apply_tpdo1(self, n: int, t: float) -> None:
         """The ``n`` TPDO1s received, decoded and applied (``t``: s, before the first SYNC)."""
         cyclic.decode_tpdo1_kernel(n, self.tpdo1_raw, self.tpdo1_cable, self.tpdo1)
         sync, lv = self.sync, self.liveness
         dropped = cyclic.tpdo1_synced_kernel(
-            n, self.tpdo1, sync.instants, sync.seq, sync.answered, sync.LAG_MAX, t,
+            n, self.tpdo1, sync.instants, sync.seqs, sync.answered, sync.LAG_MAX, t,
             self.period, lv.max_motor_speed, self.rad_per_count, self.rated_torque,
             cyclic.POWER_STATE_OF_SW7, self.decoded, self.states.torque, lv.fresh,
             lv.fb_stamp, sync.rate,
         )  # fmt: skip
-        self.stats.implausible_frames += dropped
+        if dropped:
+            add_count(self.stats.counts, IMPLAUSIBLE_FRAMES, dropped)
 
     def update_states(self) -> bool:
         """The winches' states from the decoded feedback; True if a drive is in fault."""

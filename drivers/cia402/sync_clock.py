@@ -38,7 +38,7 @@ class SyncClock:
         # the SYNCs' instants by sequence number (a ring), the newest's number, and the one
         # each drive's last TPDO1 answered: each frame is stamped at its own SYNC's instant
         self.instants = np.full(self.RING, math.nan)
-        self.seq = 0
+        self.seqs = np.zeros(1, dtype=np.int64)  # [the newest's number] (in place: no int)
         self.answered = np.zeros(m, dtype=np.int64)
         self.rate = np.zeros(m)  # counts/s: each drive's last step over its time
         self.last = math.nan  # s (clock): the last SYNC sent (nan: none yet)
@@ -78,16 +78,27 @@ class SyncClock:
     def sent(self, now: float, setup: bool) -> None:
         """A SYNC went out at ``now`` (s, clock), of the set-up's cycling if ``setup``."""
         self.last = self.of_write = now
-        self.seq += 1
-        self.instants[self.seq % self.RING] = now
+        sync_sent_kernel(self.seqs, self.instants, now)
         if not setup:
             self.last_cycle = now
+
+    @property
+    def seq(self) -> int:
+        """The newest SYNC's sequence number (0: none yet)."""
+        return int(self.seqs[0])
 
     def sent_instant(self, now: float) -> float:
         """When the drives take the last write's frames: its SYNC, when it sent one, else
         ``now``."""
         s = self.of_write
         return s if math.isfinite(s) else now
+
+
+@cycle_kernel
+def sync_sent_kernel(seqs, instants, now):  # pragma: no cover - compiled
+    """The next sequence number into ``seqs[0]``, its instant ``now`` (s) into the ring."""
+    seqs[0] += 1
+    instants[seqs[0] % instants.shape[0]] = now
 
 
 @cycle_kernel

@@ -9,9 +9,9 @@ Clear_Errors. The axes stream their heartbeat and encoder estimates cyclically (
 the ODrive), and their torques in torque mode. The cyclic ``write`` sends each axis
 Set_Input_Pos (the target, its rate as velocity feed-forward, the torque as torque
 feed-forward) in position mode, its Get_Torques asked for by RTR just before (the torque at the
-end of the setpoint it held: ``_pack_position``), or Set_Input_Torque (a gripper's cable, or
-torque mode). An ODrive does not supervise its
-following error: the driver does, as a CiA 402 drive would (0x8611, ``_following``).
+end of the setpoint it held: ``cyclic.pack_frames_kernel``), or Set_Input_Torque (a gripper's
+cable, or torque mode). An ODrive does not supervise its following error: the driver does, as
+a CiA 402 drive would (0x8611, ``_following``).
 """
 
 from __future__ import annotations
@@ -22,18 +22,28 @@ from typing import Any
 import can
 import numpy as np
 
+from cdprctl.numerics import add_count
 from drivers import blocking
 from drivers.base import WinchDriver
 from drivers.errors import DriveFaultError, DriverError, following_error_text
 from drivers.odrive import protocol as p
+from drivers.odrive.cyclic import following_kernel, pack_frames_kernel
 from drivers.odrive.gains import AxisGains, axis_gains
 from drivers.registry import register_driver
 from drivers.transport import CanTransport
-from drivers.vocabulary import DriveState
+from drivers.vocabulary import CLAMPED_COMMANDS, DriveState
 
 TWO_PI = 2.0 * math.pi
 FE = 0x8611  # CiA 402's code for a following error, the same fault for the same rule
 FE_BY = "checked by cdprctl: the ODrive does not"
+# enum members looked up once: each lookup of a member took a block (Python 3.11)
+_CLOSED_LOOP, _IDLE = p.AxisState.CLOSED_LOOP_CONTROL, p.AxisState.IDLE
+_ENABLED, _DISABLED = DriveState.ENABLED, DriveState.DISABLED
+_FAULT, _UNKNOWN = DriveState.FAULT, DriveState.UNKNOWN
+# a heartbeat's axis state byte → AxisState (UNDEFINED for a value the enum lacks)
+_AXIS_STATE_OF = [p.AxisState.UNDEFINED] * 256
+for _s in p.AxisState:
+    _AXIS_STATE_OF[_s.value] = _s
 
 
 @register_driver
@@ -81,7 +91,7 @@ class ODriveDriver(WinchDriver):
         self._sent_target = np.zeros(m)  # rad: the last position target each axis was given
         # rad: the targets before the last one and before that: the path of the last two
         # holds, from where the following error is measured; the hold before the last one
-        # (the one the last torque asked for ended) held their middle, ``_pack_position``
+        # (the one the last torque asked for ended) held their middle, ``cyclic.pack_frames_kernel``
         self._hold_from = np.zeros(m)
         self._path_from = np.zeros(m)
         # N·m/rad: the share of the loop's stiffness that hold's pull adds to that torque
@@ -104,6 +114,17 @@ class ODriveDriver(WinchDriver):
         self._enable_sent: bool | None = None
         self._enable_sent_at = -math.inf
         self._clear = False
+        self._t = 0.0  # s, the read under way (its frames, _frame)
+        self._on_frame = self._frame  # bound once: a bound method per read was a block
+        # the cyclic path's arrays (cyclic.py): the modes and closed-loop states as flags,
+        # each cyclic frame's bytes, a float32 and its bytes to pack through
+        self._csp = np.array(self.csp, dtype=np.bool_)
+        self._closed = np.zeros(m, dtype=np.bool_)
+        self._bus_of_list = [int(b) for b in self.bus_of]
+        self._frame_bytes = tuple(np.frombuffer(msg.data, dtype=np.uint8)
+                                  for msg in self._cyclic_msg)  # fmt: skip
+        self._f32 = np.zeros(1, dtype=np.float32)
+        self._f32_bytes = self._f32.view(np.uint8)
 
     def _send_cmd(self, c: int, cmd: int, data: bytes) -> None:
         self._send(
@@ -148,45 +169,55 @@ class ODriveDriver(WinchDriver):
         self._beyond[:] = 0.0
 
     def _drain(self, t: float) -> None:
-        for cmd, c, data in self.transport.frames():
-            if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
-                pos, vel = p.ENCODER_STRUCT.unpack(data)
-                step = pos * TWO_PI - self.states.position[c]
-                if not (math.isfinite(pos) and math.isfinite(vel)) or not self.liveness.plausible(
-                    c, step, t
-                ):
-                    continue  # a corrupted frame: dropped whole, like a lost one
-                self.states.position[c] = pos * TWO_PI
-                self.states.velocity[c] = vel * TWO_PI
-                self.liveness.fresh[c] = True
-                self.liveness.fb_stamp[c] = t
-            elif cmd == p.GET_TORQUES and len(data) == 8:
-                tau = p.TORQUES_STRUCT.unpack(data)[1]
-                if self.csp[c]:
-                    # asked for as the next setpoint went out: the estimate closes the period
-                    # the axis held the middle of the last two targets (``_pack_position``),
-                    # where a drive interpolating between them stands at the last target;
-                    # the part of the loop's pull kp (setpoint − target) that accelerates the
-                    # rotor within the staircase, not the cable, taken out (``hold_ripple``):
-                    # rowc's demo 0.47 → 0.011 mm RMS (lock-step, 250 Hz)
-                    pull = 0.5 * (self._path_from[c] - self._hold_from[c])  # setpoint − target
-                    tau -= self._pull_gain[c] * pull
-                self.states.torque[c] = tau
-            elif cmd == p.HEARTBEAT and len(data) >= 7:
-                err, state = p.HEARTBEAT_STRUCT.unpack(bytes(data).ljust(8, b"\0"))[:2]
-                self.axis_error[c] = err
-                try:
-                    self.axis_state[c] = p.AxisState(state)
-                except ValueError:
-                    self.axis_state[c] = p.AxisState.UNDEFINED
-                self.liveness.last_hb[c] = t
-            else:
-                self.stats.frames_ignored += 1
+        self._t = t
+        self.transport.receive(self._on_frame)
+
+    def _frame(self, cmd: int, c: int, data: Any) -> None:
+        """One frame of axis ``c``."""
+        t = self._t
+        if cmd == p.GET_ENCODER_ESTIMATES and len(data) == 8:
+            pos, vel = p.ENCODER_STRUCT.unpack(data)
+            step = pos * TWO_PI - self.states.position.item(c)  # item: a float, not a scalar
+            if not (math.isfinite(pos) and math.isfinite(vel)) or not self.liveness.plausible(
+                c, step, t
+            ):
+                return  # a corrupted frame: dropped whole, like a lost one
+            self.states.position[c] = pos * TWO_PI
+            self.states.velocity[c] = vel * TWO_PI
+            self.liveness.fresh[c] = True
+            self.liveness.fb_stamp[c] = t
+        elif cmd == p.GET_TORQUES and len(data) == 8:
+            tau = p.TORQUES_STRUCT.unpack(data)[1]
+            if self.csp[c]:
+                # asked for as the next setpoint went out: the estimate closes the period
+                # the axis held the middle of the last two targets (``cyclic.pack_frames_kernel``),
+                # where a drive interpolating between them stands at the last target;
+                # the part of the loop's pull kp (setpoint − target) that accelerates the
+                # rotor within the staircase, not the cable, taken out (``hold_ripple``):
+                # rowc's demo 0.47 → 0.011 mm RMS (lock-step, 250 Hz)
+                # setpoint − target
+                pull = 0.5 * (self._path_from.item(c) - self._hold_from.item(c))
+                tau -= self._pull_gain.item(c) * pull
+            self.states.torque[c] = tau
+        elif cmd == p.HEARTBEAT and len(data) >= 7:
+            # HEARTBEAT_STRUCT's first two fields, read in place (no padded copy, no tuple)
+            self.axis_error[c] = p.U32_STRUCT.unpack_from(data, 0)[0]
+            state = _AXIS_STATE_OF[data[4]]  # a table: the enum's call took blocks
+            self.axis_state[c] = state
+            self._closed[c] = state is _CLOSED_LOOP
+            self.liveness.last_hb[c] = t
+        else:
+            self.stats.frames_ignored += 1
 
     def _update_states(self) -> bool:
         """Each axis's state from its heartbeat (``_cable_fault``, cable by cable)."""
         self._following(self.states.stamp)
-        return any([self._cable_fault(c) is not None for c in range(self.m)])
+        fault, c = False, 0
+        while c < self.m:  # every cable's state set: no early exit
+            if self._cable_fault(c) is not None:
+                fault = True
+            c += 1
+        return fault
 
     def _following(self, t: float) -> None:
         """Each enabled axis in position mode off its path by more than the window: for
@@ -195,27 +226,19 @@ class ODriveDriver(WinchDriver):
         is the control period (two reads beyond the window at 250 Hz). The path is the one an
         interpolating drive would have followed over the last two holds: the encoder estimate
         comes on the ODrive's own timer, from either hold and anywhere in it, and the setpoint
-        held is half a period ahead of the path by design (``_pack_position``); measured
+        held is half a period ahead of the path by design (``cyclic.pack_frames_kernel``); measured
         against the setpoint, rowc's 1.6 mm window at 0.3 m/s tripped in real time."""
         dt = t - self._checked_at if math.isfinite(self._checked_at) else 0.0
         self._checked_at = t
-        timeout = self.config.following_error_timeout
-        for c in range(self.m):
-            on = self.csp[c] and self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL
-            a, b, e = self._path_from[c], self._hold_from[c], self._sent_target[c]
-            x = self.states.position[c]
-            off = max(min(a, b, e) - x, x - max(a, b, e))
-            if on and off > self.following_window[c]:
-                self._beyond[c] += dt
-                if self._beyond[c] > timeout and not self.following[c]:
-                    self.following[c] = True
-                    self._following_off[c] = off  # rad: what the fault line reports
-            else:
-                self._beyond[c] = 0.0
+        following_kernel(
+            self._csp, self._closed, self._path_from, self._hold_from, self._sent_target,
+            self.states.position, self.following_window, self._beyond, self.following,
+            self._following_off, dt, self.config.following_error_timeout,
+        )  # fmt: skip
 
     def _cable_fault(self, c: int) -> DriverError | None:
         st = self.states
-        code = int(self.axis_error[c])
+        code = self.axis_error.item(c)  # item: an int, not a numpy scalar
         st.fault_code[c] = code
         if self.following[c]:
             st.state[c] = DriveState.FAULT
@@ -224,13 +247,13 @@ class ODriveDriver(WinchDriver):
                 float(self._following_off[c]), float(self.following_window[c]),
                 float(self._m_per_rad[c]), self.config.following_error_timeout, FE_BY))
         if code:
-            st.state[c] = DriveState.FAULT
-        elif self.axis_state[c] is p.AxisState.CLOSED_LOOP_CONTROL:
-            st.state[c] = DriveState.ENABLED
-        elif self.axis_state[c] is p.AxisState.IDLE:
-            st.state[c] = DriveState.DISABLED
+            st.state[c] = _FAULT
+        elif self.axis_state[c] is _CLOSED_LOOP:
+            st.state[c] = _ENABLED
+        elif self.axis_state[c] is _IDLE:
+            st.state[c] = _DISABLED
         else:
-            st.state[c] = DriveState.UNKNOWN
+            st.state[c] = _UNKNOWN
         if code:
             return DriveFaultError(c, int(self.node[c]), code, p.describe_axis_error(code))
         return None
@@ -242,42 +265,35 @@ class ODriveDriver(WinchDriver):
                 self.axis_error[c] = 0
             self._clear = False
         if self._enable is not None:
-            want = p.AxisState.CLOSED_LOOP_CONTROL if self._enable else p.AxisState.IDLE
+            want = _CLOSED_LOOP if self._enable else _IDLE
             resend = t - self._enable_sent_at > 0.5  # lost on a lossy bus: sent again
             if self._enable != self._enable_sent or resend:
-                for c in range(self.m):
+                c = 0
+                while c < self.m:  # by index: checked every 0.5 s, mostly sending nothing
                     if self._enable != self._enable_sent or self.axis_state[c] is not want:
                         self._send_cmd(c, p.SET_AXIS_STATE, p.U32_STRUCT.pack(want))
+                    c += 1
                 self._enable_sent = self._enable
                 self._enable_sent_at = t
-        for c in range(self.m):
-            msg = self._cyclic_msg[c]
-            if self.csp[c]:
-                self._send(int(self.bus_of[c]), self._torque_request[c])
-                self._pack_position(c, msg.data, float(torques[c]))
-            else:
-                p.TORQUE_STRUCT.pack_into(msg.data, 0, float(torques[c]))
-            self._send(int(self.bus_of[c]), msg)
+        clamped = pack_frames_kernel(
+            self.targets, torques, self._csp, self.period, self._sent_target, self._hold_from,
+            self._path_from, self._frame_bytes, self._f32, self._f32_bytes,
+        )  # fmt: skip
+        if clamped:
+            add_count(self.stats.counts, CLAMPED_COMMANDS, clamped)
+        send, bus_of, csp, c = self._send, self._bus_of_list, self.csp, 0
+        while c < self.m:  # by index: a for loop's iterator was a block
+            if csp[c]:  # Get_Torques asked for as the setpoint goes out (_frame)
+                send(bus_of[c], self._torque_request[c])
+            send(bus_of[c], self._cyclic_msg[c])
+            c += 1
         return self.transport.sends_failing()
 
-    def _pack_position(self, c: int, data: bytearray, torque: float) -> None:
-        """Set_Input_Pos for the period to come: the target's rate over the last period as
-        the velocity feed-forward, the torque as the torque feed-forward (each int16 field
-        saturated; a saturated rate counts as a clamped command) and as the position the
-        middle of the last target and this one. A CiA 402 drive interpolates from the one to
-        the other over the period; an ODrive in passthrough holds what it was sent, its
-        position loop pulling against the feed-forward: held at the new target the motor led
-        the interpolated path by half a period on average (rowc's demo: 1 mm RMS of tracking,
-        lock-step), held at the middle the pull averages out."""
-        target = float(self.targets[c])
-        last = self._sent_target[c]
-        rate = (target - last) / (TWO_PI * self.period * p.VEL_FF_SCALE)
-        vel = max(-p.INT16_MAX, min(p.INT16_MAX, round(rate)))
-        if vel != round(rate):
-            self.stats.clamped_commands += 1
-        tau = max(-p.INT16_MAX, min(p.INT16_MAX, round(torque / p.TORQUE_FF_SCALE)))
-        setpoint = 0.5 * (last + target)
-        p.INPUT_POS_STRUCT.pack_into(data, 0, setpoint / TWO_PI, vel, tau)
-        self._path_from[c] = self._hold_from[c]
-        self._hold_from[c] = last
-        self._sent_target[c] = target
+    # Set_Input_Pos (cyclic.pack_frames_kernel) for the period to come: the target's rate over
+    # the last period as the velocity feed-forward, the torque as the torque feed-forward
+    # (each int16 field saturated; a saturated rate counts as a clamped command) and as the
+    # position the middle of the last target and this one. A CiA 402 drive interpolates from
+    # the one to the other over the period; an ODrive in passthrough holds what it was sent,
+    # its position loop pulling against the feed-forward: held at the new target the motor
+    # led the interpolated path by half a period on average (rowc's demo: 1 mm RMS of
+    # tracking, lock-step), held at the middle the pull averages out.

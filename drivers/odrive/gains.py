@@ -81,7 +81,7 @@ def hold_ripple(inertia: float, kp: float, kd: float, period: float) -> float:
     the loop's ``kp`` N·m/rad and ``kd`` N·m·s/rad, the hold ``period`` s).
 
     Along a target moving at ``v``, the setpoint held over a period is the middle of the path
-    (``_pack_position``), so the loop pulls ``kp v (T/2 − τ)`` more than an interpolating drive
+    (its Set_Input_Pos), so the loop pulls ``kp v (T/2 − τ)`` more than an interpolating drive
     at τ into the hold: a sawtooth. In its periodic steady state the rotor answers it as
     ``J ẍ + kd ẋ + kp x = kp v (T/2 − τ)``; at τ = T the axis applies
     ``−kp v T/2 − kp x(T) − kd ẋ(T) = J ẍ(T)`` more than the interpolating drive, returned
