@@ -60,7 +60,7 @@ def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
     results: list[np.ndarray] = []
     failed: list[BaseException] = []
     held_in_real_time = _fifo()
-    loop_cpu = rt.loop_cpu(ses.model.control.cpu)
+    loop_cpu = rt.loop_cpu(ses.model.control.cpu) if held_in_real_time else None
 
     def work() -> None:
         if held_in_real_time:  # never preempted while it holds the interpreter's lock
