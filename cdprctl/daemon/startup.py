@@ -6,6 +6,7 @@ opened."""
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import time
@@ -18,6 +19,7 @@ from cdprctl.daemon.report import identity_lines
 from cdprctl.daemon.scripts import PathScript
 
 if TYPE_CHECKING:
+    from cdprctl.calibration.record import CalibrationRecord
     from cdprctl.daemon.service import Daemon
 
 NOT_CALIBRATED = 4  # exit code: no valid calibration record or brake test (systemd: no restart)
@@ -106,13 +108,16 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         dm._print("encoders: taken as zero at the home pose ("
                   + ("the simulated robot starts there" if dm.sim else
                      "[drives] assume_home_at_start = true") + ")")  # fmt: skip
+        if not dm.sim:  # no zeros needed, but a friction calibration on record still applies
+            with contextlib.suppress(CalibrationError):
+                _friction(dm, load_record(m, dm.state_dir, dm.simulated_robot))
     else:
         try:
             dm.record = load_record(m, dm.state_dir, dm.simulated_robot)
         except CalibrationError as exc:
             raise refused(str(exc)) from None
         dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
-        _friction(dm)
+        _friction(dm, dm.record)
         _brakes_tested(dm)
     dm._print("start-up: loading the compiled kernels (the first run on a machine compiles "
               "them: about a minute), configuring the drives, estimating the pose")  # fmt: skip
@@ -154,15 +159,15 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     return None if path is None else _plan_path(dm, *path)
 
 
-def _friction(dm: Daemon) -> None:
-    """The record's friction calibration, if any, in place of the robot file's winch terms
+def _friction(dm: Daemon, record: CalibrationRecord) -> None:
+    """``record``'s friction calibration, if any, in place of the robot file's winch terms
     (the torque law, the tension estimate, the observer: the controller's ``WinchTorques``)."""
     from cdprctl.calibration.friction_record import friction_line, friction_terms
 
-    terms = friction_terms(dm.record)
+    terms = friction_terms(record)
     if terms is not None:
         dm.manager.controller.winches.apply_friction(*terms)
-    dm._print(friction_line(dm.record))
+    dm._print(friction_line(record))
 
 
 def _load_cells_zeroed(dm: Daemon) -> None:
