@@ -93,3 +93,10 @@ def test_the_command_on_the_simulated_robot(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     fix = f"add [[sensors.load_cells]] to {CONFIG / 'rowc.toml'} (docs/config.md)"
     assert err == [f"cdprctl load-cells zero: error: rowc has no load cells: {fix}"]
+    # a reading too short to average (or not a number) refused before a record is touched
+    for seconds in ("0", "nan", "100"):
+        assert main([*args[:-3], "--state-dir", str(tmp_path / "short"), "--seconds",
+                     seconds]) == 2  # fmt: skip
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--seconds" in err[0] and "must be in [0.2, 60] s" in err[0]
+    assert not (tmp_path / "short").exists()

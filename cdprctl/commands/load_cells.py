@@ -46,6 +46,10 @@ def add_parser(sub: Any) -> None:
     z.add_argument("--json", action="store_true", help="print the result as JSON")
 
 
+#: s: the shortest and longest reading of the cells for a tare
+TARE_SECONDS = (0.2, 60.0)
+
+
 def on_stand(model: Any) -> Any:
     """The lock-step simulated robot with its platform resting on its stand: the stand takes
     its weight (no gravity on it), its cables hang unloaded (zero tension), brakes closed."""
@@ -69,6 +73,11 @@ def zero(args: argparse.Namespace) -> int:
     from cdprctl.calibration.load_cells import LoadCellError, save, tare
     from drivers.errors import DriverError
 
+    if not (TARE_SECONDS[0] <= args.seconds <= TARE_SECONDS[1]):  # NaN too
+        print(f"{WHO}: error: --seconds = {args.seconds:g} s must be in [{TARE_SECONDS[0]:g}, "
+              f"{TARE_SECONDS[1]:g}] s (the cells' readings averaged over it: a few hundred "
+              "samples at least)", file=sys.stderr)  # fmt: skip
+        return 2
     model = load_or_report(args.config, WHO)
     if model is None:
         return 1
