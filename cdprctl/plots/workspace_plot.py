@@ -101,9 +101,9 @@ def slices_figure(model: RobotModel, res: WorkspaceResult, margin: np.ndarray, k
     home_k = model.home.position[k]
     fig.suptitle(
         f"{title}\nfeasible: coloured by margin, red: boundary, grey: infeasible, "
-        f"×: cables under the {res.limit * 1e3:.3g} mm clearance, "
-        f"dashed: configured workspace (where the slice cuts it), ▲ anchors (projected), "
-        f"☆ home (on its slice only, {AXES[k]} = {home_k:.3g} m)",
+        f"×: cables under the {res.limit * 1e3:.3g} mm clearance,\n"  # one line was wider
+        f"dashed: configured workspace (where the slice cuts it), ▲ anchors (projected), "  # than
+        f"☆ home (on its slice only, {AXES[k]} = {home_k:.3g} m)",  # the figure: cut off
         fontsize=9,
     )
     return fig
