@@ -68,11 +68,22 @@ def row(exe: str, load: int, way: str, rate: float, seconds: float, cpu: int) ->
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--loads", default="0,2,4", help="busy processes beside it, per row")
-    ap.add_argument("--rates", default="250,500,1000")
-    ap.add_argument("--ways", default="sim,across")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0],
+        epilog="Each row runs cyclictest (the C floor) before, during and after the daemon: about "
+        "3 x --seconds + 20 s a row, 18 rows by default (~20 min at 20 s). Needs cyclictest "
+        "(rt-tests; installed here when missing, as root).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    ap.add_argument("--seconds", type=float, default=20.0, help="s of each run (the goal: 60)")
+    ap.add_argument("--loads", default="0,2,4",
+                    help="busy Python processes beside it at normal priority, one value a row")
+    ap.add_argument("--rates", default="250,500,1000",
+                    help="Hz; 1000 runs config/rowc_1khz.toml, the others config/rowc.toml")
+    ap.add_argument("--ways", default="sim,across",
+                    help="sim: run --sim under the 30 N water jet (the simulated robot a child "
+                    "process); across: against cdprctl sim over udp_multicast, a bus listener "
+                    "beside them")  # fmt: skip
     args = ap.parse_args()
     exe = ensure_cyclictest()
     print(machine_line())
