@@ -7,11 +7,12 @@ import argparse
 import dataclasses
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
-from cdprctl.commands.records import EXIT_STATE_DIR, records_dir, save_or_keep
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
+from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, records_dir, save_or_keep
+from cdprctl.commands.sim import add_bus_arguments
 from drivers.simulated import simulated_robot
 
 WHO = "cdprctl brake-test"
@@ -154,13 +155,12 @@ def run(args: argparse.Namespace) -> int:
     weak = _weak_brake_index(who, args.weak_brake, args.sim, model)
     if weak == -1:
         return 2
-    overrides = bus_overrides(args)
-    if refuse_in_process_bus(who, model, overrides, args.sim):
-        return 2
-    simulated = args.sim or simulated_robot(model, overrides)
-    state_dir = records_dir(who, model.name, args.state_dir, simulated)
-    if state_dir is None:
-        return EXIT_STATE_DIR
+    where = bus_and_records(who, model, args, args.sim)
+    if isinstance(where, int):
+        return where
+    overrides, simulated, found = where
+    state_dir: Path | None  # found again once the drives say they are simulated
+    state_dir = found
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     resumed = _kept(args, model, state_dir, log)
     if resumed is None:

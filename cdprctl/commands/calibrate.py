@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
-from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
+from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, keep_record, records_dir
+from cdprctl.commands.sim import add_bus_arguments
 from drivers.simulated import simulated_robot
 
 
@@ -190,13 +190,12 @@ def run(args: argparse.Namespace) -> int:
         return run_friction(args, model)
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     pose = _pose_or_checked(args, model)
-    overrides = bus_overrides(args)
-    if refuse_in_process_bus(WHO, model, overrides, False):
-        return 2
-    simulated = simulated_robot(model, overrides)
-    state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-    if state_dir is None:
-        return EXIT_STATE_DIR
+    where = bus_and_records(WHO, model, args, False)
+    if isinstance(where, int):
+        return where
+    overrides, simulated, found = where
+    state_dir: Path | None  # found again once the drives say they are simulated
+    state_dir = found
     opt = None if pose is not None else SelfOptions(
         travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales)  # fmt: skip
     resumed = _self_progress(args, model, opt, state_dir, log)

@@ -14,9 +14,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.calibrate import WHO, moves_held
-from cdprctl.commands.records import EXIT_STATE_DIR, records_dir
-from cdprctl.commands.sim import bus_overrides, refuse_in_process_bus
-from drivers.simulated import simulated_robot
+from cdprctl.commands.records import bus_and_records
 
 
 def add_arguments(fp: Any) -> None:
@@ -105,13 +103,10 @@ def _on_the_robot(args: argparse.Namespace, model: Any, log: Any) -> Any:
     from cdprctl.calibration.startup import check_drives, how_to_calibrate, load_record, offsets
     from drivers import create_driver
 
-    overrides = bus_overrides(args)
-    if refuse_in_process_bus(WHO, model, overrides, False):
-        return 2
-    simulated = simulated_robot(model, overrides)
-    state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-    if state_dir is None:
-        return EXIT_STATE_DIR
+    where = bus_and_records(WHO, model, args, False)
+    if isinstance(where, int):
+        return where
+    overrides, simulated, state_dir = where
     try:
         record = load_record(model, state_dir, simulated)
     except CalibrationError as exc:

@@ -8,12 +8,13 @@ import dataclasses
 import inspect
 import json
 import sys
+from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import load_or_report
 from cdprctl.commands.parsing import command_parser
-from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
-from cdprctl.commands.sim import add_bus_arguments, bus_overrides, refuse_in_process_bus
+from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, keep_record, records_dir
+from cdprctl.commands.sim import add_bus_arguments
 from drivers.simulated import simulated_robot
 
 WHO = "cdprctl load-cells zero"
@@ -85,13 +86,12 @@ def zero(args: argparse.Namespace) -> int:
         print(f"{WHO}: error: {model.name} has no load cells: add [[sensors.load_cells]] to "
               f"{args.config} (docs/config.md)", file=sys.stderr)  # fmt: skip
         return 2
-    overrides = bus_overrides(args)
-    if refuse_in_process_bus(WHO, model, overrides, args.sim):
-        return 2
-    simulated = args.sim or simulated_robot(model, overrides)
-    state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-    if state_dir is None:
-        return EXIT_STATE_DIR
+    where = bus_and_records(WHO, model, args, args.sim)
+    if isinstance(where, int):
+        return where
+    overrides, simulated, found = where
+    state_dir: Path | None  # found again once the drives say they are simulated
+    state_dir = found
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     sim = on_stand(model) if args.sim else None
     if sim is not None:

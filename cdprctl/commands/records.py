@@ -55,3 +55,22 @@ def save_or_keep(who: str, save: Callable[[Any, Path], Path], record: Any, state
               "give --state-dir) and run again", file=sys.stderr)  # fmt: skip
         print(json.dumps(result))
         return None
+
+
+def bus_and_records(who: str, model: Any, args: Any,
+                    in_process: bool) -> tuple[dict[str, Any], bool, Path] | int:  # fmt: skip
+    """The bus overrides of ``args``, whether the robot on them is simulated (``in_process``:
+    this process's own, lock-step) and the directory its records go to; an exit code after
+    one line when the bus (an in-process bus without ``--sim``) or the directory is refused.
+    A simulated robot's records never go where a real robot's are."""
+    from cdprctl.commands.sim import bus_overrides, refuse_in_process_bus
+    from drivers.simulated import simulated_robot
+
+    overrides = bus_overrides(args)
+    if refuse_in_process_bus(who, model, overrides, in_process):
+        return 2
+    simulated = in_process or simulated_robot(model, overrides)
+    state_dir = records_dir(who, model.name, args.state_dir, simulated)
+    if state_dir is None:
+        return EXIT_STATE_DIR
+    return overrides, simulated, state_dir
