@@ -96,17 +96,9 @@ class LoadCellNode:
         if self.nmt != p.HB_OPERATIONAL:
             return []
         self.sample = self.reading()
-        out = []
-        for k, tx in enumerate(self.tx):
-            if not tx.valid or not 0 <= tx.transmission <= 240:
-                continue
-            self.tx_count[k] += 1
-            if self.tx_count[k] < max(1, tx.transmission):
-                continue
-            self.tx_count[k] = 0
-            values = [self.dictionary.value(index, sub) for index, sub in tx.entries]
-            out.append(can.Message(arbitration_id=tx.cob_id, data=tx.codec.pack(*values),
-                                   is_extended_id=False))  # fmt: skip
+        value = self.dictionary.value
+        out = pdo.due_tpdos(self.tx, self.tx_count,
+                            lambda _, tx: [value(index, sub) for index, sub in tx.entries])
         return [] if self.silent else out
 
     def tick(self, t: float) -> list[can.Message]:

@@ -177,18 +177,22 @@ class PdoEngine:
 
     def tpdos(self) -> list[can.Message]:
         """The TPDOs due at this SYNC (transmission type n: every n-th SYNC), as mapped."""
-        out = []
-        for k, tx in enumerate(self.tx):
-            if not tx.valid or not 0 <= tx.transmission <= 240:
-                continue
-            self.tx_count[k] += 1
-            if self.tx_count[k] < max(1, tx.transmission):
-                continue
-            self.tx_count[k] = 0
-            values = [value() for value in self.tx_values[k]]
-            out.append(
-                can.Message(
-                    arbitration_id=tx.cob_id, data=tx.codec.pack(*values), is_extended_id=False
-                )
-            )
-        return out
+        return due_tpdos(self.tx, self.tx_count,
+                         lambda k, _: [value() for value in self.tx_values[k]])  # fmt: skip
+
+
+def due_tpdos(tx: list[Layout], tx_count: list[int],
+              values: Callable[[int, Layout], list[Any]]) -> list[can.Message]:  # fmt: skip
+    """The TPDOs of ``tx`` due at this SYNC (transmission type n: every n-th SYNC; ``tx_count``
+    the SYNCs since each was sent, counted here), each with ``values(k, tx[k])``."""
+    out = []
+    for k, pdo in enumerate(tx):
+        if not pdo.valid or not 0 <= pdo.transmission <= 240:
+            continue
+        tx_count[k] += 1
+        if tx_count[k] < max(1, pdo.transmission):
+            continue
+        tx_count[k] = 0
+        out.append(can.Message(arbitration_id=pdo.cob_id, data=pdo.codec.pack(*values(k, pdo)),
+                               is_extended_id=False))  # fmt: skip
+    return out
