@@ -32,7 +32,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check cdprctl drivers sim_backend tests benchmarks tools
 	$(BIN)/mypy
 
-# the hardware-in-the-loop tests (tests/test_hil.py) run on a kernel SocketCAN vcan0: this
+# the hardware-in-the-loop tests (tests/tools/test_hil.py) run on a kernel SocketCAN vcan0: this
 # machine's, or inside User-Mode Linux (tools/hil.py; docs/hil.md); `test` runs them where it
 # can, and says why where it cannot
 test: $(STAMP) lint

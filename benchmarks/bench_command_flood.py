@@ -40,7 +40,7 @@ def main() -> None:
     ap.add_argument("--commands", type=int, default=20000)
     args = ap.parse_args()
     print(machine_line())
-    from cdprctl.telemetry.session import open_session
+    from cdprctl.telemetry.zenoh.session import open_session
 
     tmp = Path(tempfile.mkdtemp())
     (tmp / "users.txt").write_text("operator:op-secret\n")

@@ -20,7 +20,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line, row
 
-from cdprctl.model import load_robot
+from cdprctl.robot_file import load_robot
 from sim_backend.network import LockStep
 from sim_backend.plant import CdprPlant
 

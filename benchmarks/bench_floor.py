@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import busy_processes, machine_line
 
-from cdprctl.control.loop import periods_missed
+from cdprctl.control.lifecycle.loop import periods_missed
 
 ROOT = Path(__file__).resolve().parents[1]
 PRIORITY = 80  # [control.realtime] sched_priority's default: the loop's

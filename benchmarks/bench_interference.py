@@ -1,4 +1,4 @@
-"""Benchmark: the interference check of one pose (``cdprctl/interference.py``), after the
+"""Benchmark: the interference check of one pose (``cdprctl/geometry/interference.py``), after the
 inverse kinematics that it reads: µs per pose, median and p99, for rowc (its body), CAROCA and
 CoGiRo (their cables only: their files give no body), and each with a cell of three obstacles
 (a floor, a tilted wall, a box) to show what obstacles cost.
@@ -16,11 +16,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line, row, time_calls
 
-from cdprctl.interference import Interference
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import RobotModel, load_robot
+from cdprctl.core.rotation import exp_so3, rpy_to_matrix
+from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import RobotModel
 from cdprctl.model.interference import Box, InterferenceConfig, Plane
-from cdprctl.rotation import exp_so3, rpy_to_matrix
+from cdprctl.robot_file import load_robot
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 

@@ -13,10 +13,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line, row, time_calls
 
-from cdprctl.forward_kinematics import ForwardKinematics
-from cdprctl.kinematics import KinematicsData, cable_lengths, inverse_kinematics
-from cdprctl.model import load_robot
-from cdprctl.rotation import exp_so3
+from cdprctl.core.rotation import exp_so3
+from cdprctl.geometry.forward_kinematics import ForwardKinematics
+from cdprctl.geometry.kinematics import KinematicsData, cable_lengths, inverse_kinematics
+from cdprctl.robot_file import load_robot
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 

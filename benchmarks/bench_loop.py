@@ -20,8 +20,8 @@ from _timing import machine_line
 
 from cdprctl.control.data import PHASES
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.model import load_robot
 from cdprctl.model.robot import RobotModel
+from cdprctl.robot_file import load_robot
 from cdprctl.tda import TDAMethod, TDAOptions
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"

@@ -41,7 +41,7 @@ def main() -> int:
     a = ap.parse_args()
     import tempfile
 
-    from cdprctl.telemetry.session import open_session
+    from cdprctl.telemetry.zenoh.session import open_session
 
     # the timing at 20 Hz: windows of 50 ms, so a missed period is placed to 50 ms
     cfg = Path(tempfile.mkdtemp()) / "robot.toml"

@@ -18,9 +18,9 @@ import quadprog
 from _timing import machine_line, row, stats, time_calls
 from scipy.optimize import linprog
 
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import load_robot
-from cdprctl.rotation import exp_so3
+from cdprctl.core.rotation import exp_so3
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.robot_file import load_robot
 from cdprctl.tda import (
     ImposedQuantity,
     Imposition,

@@ -42,7 +42,7 @@ def flood(
     sys.path.insert(0, str(ROOT))
     import os
 
-    from cdprctl.telemetry.session import open_session
+    from cdprctl.telemetry.zenoh.session import open_session
 
     # this thread (and the Zenoh threads its session starts) off the loop's CPU (the last):
     # the flood stands for operators on other machines, not for load on the robot PC

@@ -18,8 +18,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _timing import machine_line
 
-from cdprctl.kinematics import KinematicsData, ik_kernel
-from cdprctl.model import load_robot
+from cdprctl.geometry.kinematics import KinematicsData, ik_kernel
+from cdprctl.robot_file import load_robot
 from cdprctl.tda.workspace import Grid, hold_wrench, margin_lp, wrench_feasible_workspace
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"

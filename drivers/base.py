@@ -338,7 +338,7 @@ class WinchDriver(ABC):
     @property
     def _batching(self) -> bool:
         """Whether the transport stages the frames now (``begin_frames``); set by hand, a
-        test stages frames outside a cycle (tests/test_udp_bus.py)."""
+        test stages frames outside a cycle (tests/drivers/test_udp_bus.py)."""
         return self.transport.batching
 
     @_batching.setter
@@ -352,7 +352,8 @@ class WinchDriver(ABC):
     def _warm_up(self) -> None:
         """Call the cyclic path's compiled kernels once, on copies, before the drives start:
         a first call compiles (seconds) or loads from numba's cache (ms), neither of which
-        belongs in the loop (cdprctl/control/warm_up.py). Extend it with the driver's own."""
+        belongs in the loop (cdprctl/control/lifecycle/warm_up.py). Extend it with the driver's
+        own."""
         clamp_kernel(self._command, self._last_command.copy(), self.torque_limit, np.zeros(self.m))
         finite_into(self.targets, self.targets.copy())
         self.liveness.warm_up(self.states)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.numerics import clamp, cycle_kernel
+from cdprctl.core.numerics import clamp, cycle_kernel
 
 
 @cycle_kernel

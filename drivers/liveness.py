@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.numerics import add_count, cycle_kernel, max2, min2, plausible_step_py
+from cdprctl.core.numerics import add_count, cycle_kernel, max2, min2, plausible_step_py
 from drivers.errors import DriverError, DriverTimeoutError
 from drivers.vocabulary import MISSED_FEEDBACK, DriverStats, WinchStates
 
@@ -67,7 +67,7 @@ class Liveness:
         prev = self.fb_stamp.item(c)  # item: a float, not a numpy scalar (a block)
         if not math.isfinite(prev):
             return True
-        # a period of slack for timing jitter (the one rule: cdprctl.numerics.plausible_step)
+        # a period of slack for timing jitter (the one rule: cdprctl.core.numerics.plausible_step)
         speed = self.max_motor_speed.item(c)
         if plausible_step_py(step, speed, stamp - prev, self.period):
             self.implausible[c] = 0

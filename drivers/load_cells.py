@@ -7,7 +7,7 @@ A cell's TPDO is taken whole into a slot of preallocated bytes as it is drained;
 ``cells_kernel`` decodes the fresh ones (INTEGER16, INTEGER32 or REAL32 at the value's place
 in the PDO), scales them (``tension = scale · value + offset``) and ages them: a cell silent
 for longer than its ``timeout`` reads NaN, which the control side takes as no cell
-(``cdprctl/control/tension_source.py``, where a dead cell is a fault). The driver itself never
+(``cdprctl/control/cycle/tension_source.py``, where a dead cell is a fault). The driver itself never
 fails on a cell: a cell is a better tension, not a condition for driving.
 """
 
@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.core.numerics import cycle_kernel
 from cdprctl.model.sensors import CIA404_PV_TYPES, DATA_SIZES, DATA_TYPES, LoadCell
-from cdprctl.numerics import cycle_kernel
 from drivers.cia402 import protocol as p
 from drivers.errors import DriverInitializationError
 from drivers.vocabulary import WinchStates

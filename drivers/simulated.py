@@ -1,6 +1,6 @@
 """Whether the drives a command reaches are a simulated robot's: a simulation never writes
 where a real robot's records live, and a real robot never takes a simulated robot's record
-(cdprctl/state_dir.py)."""
+(cdprctl/core/state_dir.py)."""
 
 from __future__ import annotations
 

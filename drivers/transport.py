@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import can
 import numpy as np
 
-from cdprctl.numerics import add_count
+from cdprctl.core.numerics import add_count
 from drivers.buses import TrafficLog, media_key, media_of, open_bus
 from drivers.errors import DriverError, DriverOperationError
 from drivers.vocabulary import FRAMES_IGNORED, FRAMES_RECEIVED, FRAMES_SENT, DriverStats

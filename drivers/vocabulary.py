@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from cdprctl.numerics import add_count
+from cdprctl.core.numerics import add_count
 
 
 class Lifecycle(enum.Enum):
@@ -23,7 +23,7 @@ class Lifecycle(enum.Enum):
 
 # Each lifecycle state bound to a name once: on Python 3.11 reading ``Lifecycle.X`` goes
 # through ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped
-# it): the control cycle reads these (tests/test_allocations.py).
+# it): the control cycle reads these (tests/control/cycle/test_allocations.py).
 UNCONFIGURED, INACTIVE, ACTIVE = Lifecycle.UNCONFIGURED, Lifecycle.INACTIVE, Lifecycle.ACTIVE
 ERROR, FINALIZED = Lifecycle.ERROR, Lifecycle.FINALIZED
 

@@ -1,5 +1,5 @@
 """Contacts in the simulated robot (issue 67): the same least distances the controller
-measures (``cdprctl/interference.py``: cable against cable, the platform's body, the cell),
+measures (``cdprctl/geometry/interference.py``: cable against cable, the platform's body, the cell),
 here at the plant's true pose after each step, and every contact recorded — so that a test
 or a run shows whether the controller stopped the robot before one happened.
 
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import math
 
-from cdprctl.interference import Interference
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
 
 
 class ContactRecorder:

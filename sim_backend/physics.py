@@ -9,9 +9,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from cdprctl.kinematics import ik_kernel
-from cdprctl.numerics import Compliance, capstan_factor, compliance_at, friction_law
-from cdprctl.rotation import exp_so3_kernel
+from cdprctl.core.numerics import Compliance, capstan_factor, compliance_at, friction_law
+from cdprctl.core.rotation import exp_so3_kernel
+from cdprctl.geometry.kinematics import ik_kernel
 from sim_backend.jaw_dynamics import jaw_dynamics
 from sim_backend.servo import following_error, servo_torque
 

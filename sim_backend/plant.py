@@ -33,12 +33,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprctl.gripper import GripperSet
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.core.numerics import (
+    cable_compliance_py,
+    compliance_of,
+    kernel_args,
+    unstretched_lengths,
+)
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.gripper_mechanics import GripperSet
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.grippers import in_series
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import cable_compliance_py, compliance_of, kernel_args, unstretched_lengths
-from cdprctl.rotation import FloatArray
 from cdprctl.tda.hold import equilibrium_tensions
 from sim_backend.contact import ContactRecorder
 from sim_backend.jaw_dynamics import Jaws, JawState
@@ -94,7 +99,7 @@ class CdprPlant:
         self.pulley_friction = np.array(
             [w.winch.pulley_friction if mu is None else mu for w in c], dtype=float
         )
-        self.law = compliance_of(c)  # the cable law's terms (cdprctl.numerics)
+        self.law = compliance_of(c)  # the cable law's terms (cdprctl.core.numerics)
         self.kin = KinematicsData(model)
         inverse_kinematics(model, self.kin, model.home.position, model.home.rotation)
         self.l_home = self.kin.length.copy()

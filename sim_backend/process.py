@@ -63,7 +63,7 @@ class SimulatedRobotProcess:
 
     def __init__(self, model: RobotModel, as_built: RobotModel | None, realtime: bool,
                  print_fn: Any = print) -> None:  # fmt: skip
-        from cdprctl import realtime as rt
+        from cdprctl.core import realtime as rt
 
         self.print = print_fn
         ours, theirs = zip(*(socket_pair() for _ in model.drives.buses), strict=True)
@@ -169,7 +169,7 @@ def serve(start: Start) -> int:
     Signals do not stop it (and it is in a session of its own): a Ctrl-C to the terminal's
     process group, or systemd's SIGTERM to the unit's processes, would silence the drives while
     the daemon stops them."""
-    from cdprctl import realtime as rt
+    from cdprctl.core import realtime as rt
     from sim_backend.faults import FaultEvent, FaultInjector
     from sim_backend.realtime import LateSteps, run_realtime
 

@@ -1,5 +1,5 @@
 """Counting what the controller's cycle takes from the allocator, apart from the simulated
-robot's (tests/test_allocations.py).
+robot's (tests/control/cycle/test_allocations.py).
 
 tracemalloc sees every block taken from Python's allocators and every numpy data buffer; the
 free lists of floats and small tuples hand out no block and are not counted. A window around

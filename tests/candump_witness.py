@@ -1,4 +1,4 @@
-"""The candump witness of the hardware-in-the-loop demo (tests/test_hil.py): a `candump -L`
+"""The candump witness of the hardware-in-the-loop demo (tests/tools/test_hil.py): a `candump -L`
 log checked against CiA 301/402 from the frames alone, independent of cdprctl's code."""
 
 from __future__ import annotations

@@ -5,12 +5,19 @@ from __future__ import annotations
 import dataclasses
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from cdprctl.model import RobotModel, load_robot
+from cdprctl.model import RobotModel
+from cdprctl.robot_file import load_robot
+
+# The tests mirror the package tree (tests/<package>/test_<module>.py); a test may use another
+# test module's helpers by its name (names are unique across the tree: pytest's default import
+# mode needs that too), so every test directory is importable.
+sys.path[1:1] = sorted({str(f.parent) for f in Path(__file__).parent.rglob("test_*.py")})
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "config"
@@ -51,7 +58,7 @@ def seed000_expected() -> dict:
 
 def random_poses(model: RobotModel, n: int, rng: np.random.Generator, tilt: float = 0.15):
     """Seeded random poses inside the model's workspace box, tilted up to ``tilt`` rad."""
-    from cdprctl.rotation import exp_so3
+    from cdprctl.core.rotation import exp_so3
 
     ws = model.workspace
     R0 = model.home.rotation

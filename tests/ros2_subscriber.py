@@ -1,8 +1,8 @@
-"""An independent ROS 2 subscriber for tests/test_ros2.py: its own DDS types, written from ROS
-2's message definitions (common_interfaces: sensor_msgs/JointState.msg, tf2_msgs/TFMessage.msg,
-geometry_msgs/{PoseStamped,TransformStamped,...}.msg), not from cdprctl's code, on its own
-participant in its own process. Counts what arrives on each topic for ``seconds`` and prints
-one JSON line: counts, the last pose and transforms, the joint names and efforts.
+"""An independent ROS 2 subscriber for tests/telemetry/ros2/test_ros2.py: its own DDS types, written
+from ROS 2's message definitions (common_interfaces: sensor_msgs/JointState.msg,
+tf2_msgs/TFMessage.msg, geometry_msgs/{PoseStamped,TransformStamped,...}.msg), not from cdprctl's
+code, on its own participant in its own process. Counts what arrives on each topic for ``seconds``
+and prints one JSON line: counts, the last pose and transforms, the joint names and efforts.
 
     python tests/ros2_subscriber.py DOMAIN NAMESPACE SECONDS
 """

@@ -14,12 +14,12 @@ from conftest import CONFIG
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from cdprctl.control.commands import Command
-from cdprctl.control.desk import FULL
+from cdprctl.control.command_types import Command
+from cdprctl.control.intake.desk import FULL
 from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.model import load_robot
-from cdprctl.telemetry.validate import KINDS, CommandError, CommandValidator
+from cdprctl.robot_file import load_robot
+from cdprctl.telemetry.zenoh.validate import KINDS, CommandError, CommandValidator
 
 ROWC = load_robot(CONFIG / "rowc.toml")
 VALIDATOR = CommandValidator(ROWC, commands_enabled=True)

@@ -15,12 +15,12 @@ from conftest import CONFIG
 
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import FaultKind
-from cdprctl.model import load_robot
+from cdprctl.core.rotation import exp_so3
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.rotation import exp_so3
+from cdprctl.robot_file import load_robot
 from cdprctl.tda.workspace import hold_wrench
-from cdprctl.telemetry.schema import state_payload
 from cdprctl.telemetry.snapshot import SharedSnapshot, controller_values
+from cdprctl.telemetry.zenoh.schema import state_payload
 
 
 def weight_wrench_by_hand(model, R):
@@ -102,11 +102,11 @@ def test_the_wrench_observer_is_a_first_order_lag_of_its_bandwidth():
 
     from conftest import in_torque_mode
 
-    from cdprctl.control.cycle_io import pose_args
-    from cdprctl.control.estimator import Estimator
-    from cdprctl.control.observer import WrenchObserver
-    from cdprctl.control.torques import WinchTorques
-    from cdprctl.kinematics import KinematicsData, inverse_kinematics
+    from cdprctl.control.cycle.cycle_io import pose_args
+    from cdprctl.control.cycle.estimator import Estimator
+    from cdprctl.control.cycle.observer import WrenchObserver
+    from cdprctl.control.cycle.torques import WinchTorques
+    from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 
     base = in_torque_mode(load_robot(CONFIG / "rowc.toml"))
     f_hz = 2.0
@@ -146,8 +146,8 @@ def test_the_estimators_velocity_takes_each_sample_at_its_own_instant():
     turn (the drives' samples are their SYNC's, not the read's): each sample is placed at its
     own instant (read time less its age), so the filtered velocity is the motion's, without
     the beat an instant off by the age would add."""
-    from cdprctl.control.estimator import Estimator
-    from cdprctl.kinematics import KinematicsData, inverse_kinematics
+    from cdprctl.control.cycle.estimator import Estimator
+    from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 
     model = load_robot(CONFIG / "rowc.toml")
     est = Estimator(model)
@@ -172,7 +172,7 @@ def test_the_estimators_velocity_takes_each_sample_at_its_own_instant():
 def _controller_at_home(model):
     from conftest import FakeDrives
 
-    from cdprctl.control.controller import Controller
+    from cdprctl.control.cycle.controller import Controller
     from drivers.vocabulary import Lifecycle
 
     c = Controller(model, FakeDrives(model.n_cables, Lifecycle.INACTIVE))
@@ -229,8 +229,8 @@ def test_a_batch_of_samples_is_checked_as_each_sample_alone(change):
 def test_a_platform_frame_jog_goes_along_the_platforms_axes():
     """A jog in the platform frame from a pose turned 0.15 rad about z: +x of the platform is
     (cos 0.15, sin 0.15, 0) in the base frame."""
-    from cdprctl.control.commands import Command, CommandKind
-    from cdprctl.control.jog import Jog
+    from cdprctl.control.command_types import Command, CommandKind
+    from cdprctl.control.intake.jog import Jog
     from cdprctl.motion.trajectory import Trajectory
 
     model = load_robot(CONFIG / "rowc.toml")

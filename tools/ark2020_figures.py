@@ -19,7 +19,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cdprctl.control.cable_space import disturbance_bandwidth  # noqa: E402
+from cdprctl.control.cycle.cable_space import disturbance_bandwidth  # noqa: E402
 from cdprctl.experiments.ark2020 import (  # noqa: E402
     PATH,
     path_under_force,
@@ -27,9 +27,9 @@ from cdprctl.experiments.ark2020 import (  # noqa: E402
     uncompensated,
     with_tension_max,
 )
-from cdprctl.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
-from cdprctl.model.checks import feasible_tensions_lp  # noqa: E402
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
+from cdprctl.robot_file.checks import feasible_tensions_lp  # noqa: E402
 
 NUS = [round(0.1 * i, 1) for i in range(10)]
 # what these figures were before issue 67's offsets (measured by this script on the layout before)

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdprctl.experiments.bandwidth import AXES, bandwidth, response  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 
 
 def main() -> None:

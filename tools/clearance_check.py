@@ -1,9 +1,9 @@
 """The cables' clearance over a robot's documented workspace by brute force, apart from the
-project's kernel (``cdprctl/interference.py``; issue 67): numpy only, every cable sampled every
-0.1 mm.
+project's kernel (``cdprctl/geometry/interference.py``; issue 67): numpy only, every cable sampled
+every 0.1 mm.
 
 * **A cable** is the segment from its attachment ``p + R b_i`` to its exit point (the anchor;
-  with a swivel pulley, the tangent point as ``cdprctl/kinematics.py`` computes it: the one
+  with a swivel pulley, the tangent point as ``cdprctl/geometry/kinematics.py`` computes it: the one
   value read from the project).
 * **Cable against cable**: the points of cable ``i``, every ``step`` (0.1 mm), each projected
   onto cable ``j``'s segment (clamped): the least such distance is the pair's, at most
@@ -35,9 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import RobotModel, load_robot
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import RobotModel
 from cdprctl.model.interference import Box
+from cdprctl.robot_file import load_robot
 
 STEP = 1e-4  # m: the cables' sampling
 COARSE = 0.01  # m: the first pass that brackets each least
@@ -45,7 +46,7 @@ SHARED = 1e-6  # m: anchors or attachments this close are one point by design
 
 
 def rotation(axis_angle: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula, written here (not ``cdprctl.rotation``)."""
+    """Rodrigues' formula, written here (not ``cdprctl.core.rotation``)."""
     theta = float(np.linalg.norm(axis_angle))
     if theta == 0.0:
         return np.eye(3)

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.control.commands import Command
+from cdprctl.control.command_types import Command
 from cdprctl.control.states import State
+from cdprctl.core.rotation import log_so3
 from cdprctl.experiments.ark2020 import deflection_reference
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.model import RobotModel, load_robot
-from cdprctl.rotation import log_so3
+from cdprctl.model import RobotModel
+from cdprctl.robot_file import load_robot
 from cdprctl.tda import TDAMethod, TDAOptions
 from sim_backend.faults import FaultEvent, FaultInjector
 

@@ -18,9 +18,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from cdprctl.core.rotation import log_so3  # noqa: E402
 from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
-from cdprctl.model import RobotModel, load_robot  # noqa: E402
-from cdprctl.rotation import log_so3  # noqa: E402
+from cdprctl.model import RobotModel  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 
 AMPLITUDE = (0.002, 0.002, 0.002, 0.01, 0.01, 0.01)  # m, rad
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 from cdprctl.calibration.friction_procedure import friction_calibrate  # noqa: E402
 from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 from sim_backend.network import LockStep  # noqa: E402
 from sim_backend.plant import CdprPlant  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402

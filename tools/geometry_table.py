@@ -33,12 +33,12 @@ from cdprctl.calibration.geometry_procedure import (  # noqa: E402
 )
 from cdprctl.calibration.procedure import force_cables  # noqa: E402
 from cdprctl.calibration.session import CalibrationFailedError, Session  # noqa: E402
-from cdprctl.calibration.startup import offsets  # noqa: E402
-from cdprctl.control.estimator import Estimator  # noqa: E402
-from cdprctl.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.calibration.startup_checks import offsets  # noqa: E402
+from cdprctl.control.cycle.estimator import Estimator  # noqa: E402
+from cdprctl.core.rotation import exp_so3, log_so3  # noqa: E402
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
 from cdprctl.model.calibration import reference_anchors  # noqa: E402
-from cdprctl.rotation import exp_so3, log_so3  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 from cdprctl.tda.hold import equilibrium_tensions  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
 

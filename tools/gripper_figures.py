@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprctl.experiments import grippers as ge
-from cdprctl.gripper import GripperSet, gripper_travel
-from cdprctl.model import load_robot
+from cdprctl.experiments import gripper_experiments as ge
+from cdprctl.geometry.gripper_mechanics import GripperSet, gripper_travel
+from cdprctl.robot_file import load_robot
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "gripper"

@@ -1,5 +1,5 @@
-"""``make hil``: the hardware-in-the-loop tests (``pytest -m hil``, tests/test_hil.py) on a real
-kernel SocketCAN: natively where this machine has vcan0 or can make one, otherwise inside
+"""``make hil``: the hardware-in-the-loop tests (``pytest -m hil``, tests/tools/test_hil.py) on a
+real kernel SocketCAN: natively where this machine has vcan0 or can make one, otherwise inside
 User-Mode Linux — Debian's ``user-mode-linux`` kernel (vcan built as modules) run as an ordinary
 process with this machine's filesystem as its root, so the project, its venv and Python are
 there as they are. The tests' output and exit status come back through the shared filesystem;

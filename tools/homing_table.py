@@ -21,7 +21,7 @@ from test_homing import pose_error, robot_at, start_pose  # noqa: E402
 
 from cdprctl.calibration.procedure import self_calibrate  # noqa: E402
 from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
 
 

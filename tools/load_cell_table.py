@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdprctl.experiments.load_cells import jet_run  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 
 PAIRS = "rowc.toml:rowc_load_cells.toml,cogiro.toml:cogiro_load_cells.toml"
 

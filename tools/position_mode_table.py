@@ -23,8 +23,8 @@ sys.path.insert(0, str(ROOT))
 
 from cdprctl.daemon.scripts import demo_targets  # noqa: E402
 from cdprctl.experiments.closed_loop import ClosedLoop, ramped_force  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
 from cdprctl.model.robot import RobotModel  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 
 
 def measure(model: RobotModel, force: float) -> dict[str, object]:

@@ -8,7 +8,8 @@ lateral force (+y) held over the workspace.
   (the file scanned the 50 N force "every 0.2 m x 0.1 m"); here every 25 mm in x and z and
   10 mm in y. Then the same box with the platform tilted up to ``max_angle`` (0.2 rad) about
   26 axes (the cube's faces, edges and corners) plus 200 random rotations, every 0.1 m.
-* Clearance: ``cdprctl/interference.py`` on every pose; the least pose of each variant checked
+* Clearance: ``cdprctl/geometry/interference.py`` on every pose; the least pose of each variant
+checked
   again by scipy's bounded least squares (BVLS) on the segments, apart from the kernel (the
   shipped geometry's full grid by brute force: ``tools/clearance_check.py``, docs/clearance.md).
 * Feasible: ``cdprctl.tda.workspace.Margins`` (the tension margin of ``cdprctl workspace``)
@@ -34,11 +35,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from cdprctl.interference import CABLE, Interference
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import RobotModel, parse_robot
-from cdprctl.model.loader import read_merged
-from cdprctl.rotation import exp_so3
+from cdprctl.core.rotation import exp_so3
+from cdprctl.geometry.interference import CABLE, Interference
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import RobotModel
+from cdprctl.robot_file import parse_robot
+from cdprctl.robot_file.loader import read_merged
 from cdprctl.tda.workspace import Margins, hold_wrench
 
 ROOT = Path(__file__).resolve().parents[1]

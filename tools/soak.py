@@ -21,11 +21,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cdprctl.control.commands import Command  # noqa: E402
+from cdprctl.control.command_types import Command  # noqa: E402
 from cdprctl.control.states import FaultKind, State  # noqa: E402
 from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
 from cdprctl.experiments.scenarios import Result, Scenario, Watch  # noqa: E402
-from cdprctl.model import load_robot  # noqa: E402
+from cdprctl.robot_file import load_robot  # noqa: E402
 from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
 
 

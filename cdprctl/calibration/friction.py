@@ -31,7 +31,7 @@ import dataclasses
 
 import numpy as np
 
-from cdprctl.numerics import FRICTION_SMOOTHING, friction_regressors
+from cdprctl.core.numerics import FRICTION_SMOOTHING, friction_regressors
 
 #: the statics' Legendre series in the line's fraction: degree (12: the tension along 0.3-0.6 m
 #: of rowc's and CoGiRo's lines to within the torque's resolution)

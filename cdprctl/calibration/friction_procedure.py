@@ -34,7 +34,7 @@ from cdprctl.calibration.geometry_plan import (
     tension_noise,
 )
 from cdprctl.calibration.session import CalibrationFailedError, Session
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from drivers.base import WinchDriver

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from cdprctl.calibration.calibration_record import CalibrationRecord, now_iso
 from cdprctl.calibration.friction import WinchFriction
-from cdprctl.calibration.record import CalibrationRecord, now_iso
 from cdprctl.model.robot import RobotModel
 
 
@@ -55,7 +55,7 @@ def friction_line(record: CalibrationRecord) -> str:
 def friction_summary(model: RobotModel, state_dir: Any) -> dict[str, Any]:
     """What the gateway's status says of the friction in use: the calibration's (its time,
     per winch its terms) where the record in ``state_dir`` has one, else the robot file's."""
-    from cdprctl.calibration.record import CalibrationError, load
+    from cdprctl.calibration.calibration_record import CalibrationError, load
 
     try:
         rec = load(state_dir)

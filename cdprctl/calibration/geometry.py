@@ -33,9 +33,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
+from cdprctl.core.numerics import cable_compliance_py, compliance_of, unstretched_lengths
+from cdprctl.core.rotation import exp_so3, matrix_to_rpy, skew
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import cable_compliance_py, compliance_of, unstretched_lengths
-from cdprctl.rotation import exp_so3, matrix_to_rpy, skew
 
 
 def left_jacobian(phi: np.ndarray) -> np.ndarray:
@@ -143,8 +143,8 @@ class GeometryIdentification:
         return np.concatenate(out)
 
     def jacobian(self, z: np.ndarray, s: GeometrySamples) -> np.ndarray:
-        """∂residuals/∂z, analytic (``tests/test_geometry_calibration.py`` checks it against
-        finite differences): the derivatives of ``L``, ``u`` and the moment arms by the
+        """∂residuals/∂z, analytic (``tests/calibration/test_geometry_calibration.py`` checks it
+        against finite differences): the derivatives of ``L``, ``u`` and the moment arms by the
         anchors, the position and the rotation (through ``left_jacobian``), and of the tensions
         and the unstretched lengths by the drum scales."""
         K = s.theta.shape[0]

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.model.loader import read_merged
 from cdprctl.model.robot import RobotModel
+from cdprctl.robot_file.loader import read_merged
 
 
 def _value(v: Any) -> str:

@@ -12,9 +12,9 @@ import numpy as np
 
 from cdprctl.calibration.geometry_plan import GeometryOptions, move_duration
 from cdprctl.calibration.session import Session, hold_tensions
-from cdprctl.kinematics import KinematicsData
+from cdprctl.core.numerics import compliance_of, unstretched_lengths
+from cdprctl.geometry.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import compliance_of, unstretched_lengths
 
 # of the moves' speed, a retreat's: it starts where a cable is near its lower stop, and at full
 # speed the way back let one go slack (CoGiRo at 0.2 m/s: 4 of 10 seeds stopped so, every one
@@ -55,7 +55,7 @@ def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
         return out
     import threading
 
-    from cdprctl import realtime as rt
+    from cdprctl.core import realtime as rt
 
     results: list[np.ndarray] = []
     failed: list[BaseException] = []

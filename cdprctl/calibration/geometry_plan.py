@@ -19,10 +19,10 @@ import numpy as np
 from cdprctl.calibration.geometry import GeometryIdentification, GeometrySamples
 from cdprctl.calibration.identify import Weights, length_noise, quantization_std
 from cdprctl.calibration.session import CalibrationFailedError, hold_tensions
-from cdprctl.kinematics import KinematicsData
+from cdprctl.core.numerics import compliance_of, unstretched_lengths
+from cdprctl.geometry.kinematics import KinematicsData
 from cdprctl.model.calibration import reference_anchors
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import compliance_of, unstretched_lengths
 
 
 @dataclasses.dataclass(frozen=True)

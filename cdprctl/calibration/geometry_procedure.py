@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cdprctl.calibration.calibration_record import CalibrationRecord, stamped
 from cdprctl.calibration.geometry import GeometryIdentification, GeometryResult, GeometrySamples
 from cdprctl.calibration.geometry_moves import (
     RETREAT_SPEED,
@@ -44,11 +45,10 @@ from cdprctl.calibration.procedure import (
     where_around_start,
 )
 from cdprctl.calibration.progress import Progress, stopped
-from cdprctl.calibration.record import CalibrationRecord, stamped
 from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
-from cdprctl.kinematics import KinematicsData
+from cdprctl.core.numerics import compliance_of, unstretched_lengths
+from cdprctl.geometry.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import compliance_of, unstretched_lengths
 from drivers.base import WinchDriver
 from drivers.errors import DriverError
 from drivers.vocabulary import Lifecycle

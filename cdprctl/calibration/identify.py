@@ -29,10 +29,10 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.core.numerics import cable_compliance_py, compliance_of, unstretched_lengths
+from cdprctl.core.rotation import exp_so3, matrix_to_rpy
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import cable_compliance_py, compliance_of, unstretched_lengths
-from cdprctl.rotation import exp_so3, matrix_to_rpy
 
 
 @dataclasses.dataclass

@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.core.state_file import iso_utc, read_json, write_atomically
 from cdprctl.model.robot import RobotModel
-from cdprctl.state_file import iso_utc, read_json, write_atomically
 
 FILE_NAME = "load_cells.json"
 FORMAT = 1

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.calibration.calibration_record import CalibrationRecord, identities_of, stamped
 from cdprctl.calibration.identify import (
     Identification,
     Identified,
@@ -35,12 +36,11 @@ from cdprctl.calibration.identify import (
     model_test,
 )
 from cdprctl.calibration.progress import Progress, stopped
-from cdprctl.calibration.record import CalibrationRecord, identities_of, stamped
 from cdprctl.calibration.session import CalibrationFailedError, Session, hold_tensions
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.core.numerics import compliance_of, unstretched_lengths
+from cdprctl.core.rotation import rpy_to_matrix
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.numerics import compliance_of, unstretched_lengths
-from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
 from drivers.errors import DriverError

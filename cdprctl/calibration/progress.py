@@ -1,8 +1,8 @@
 """What a calibration measured so far (:class:`Progress`): the samples at rest, in order, and
 where the plan had the platform, so that a calibration stopped midway (a drive fault, a
 feedback timeout) keeps them (:class:`CalibrationStoppedError`, a partial session in the state
-directory: ``cdprctl/partial_session.py``) and ``--resume`` goes on from the first pose not yet
-sampled, the identification taking every sample (docs/homing.md)."""
+directory: ``cdprctl/calibration/partial_session.py``) and ``--resume`` goes on from the first pose
+not yet sampled, the identification taking every sample (docs/homing.md)."""
 
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ class CalibrationStoppedError(CalibrationFailedError):
 def stopped(exc: Exception, progress: Progress, ses: Any, at: str) -> CalibrationStoppedError:
     """``exc`` (a :class:`CalibrationFailedError` or a driver's error) as a stop that keeps
     ``progress``; ``ses`` the session (its missed periods, its driver's error)."""
-    from cdprctl.partial_session import timing_cause
+    from cdprctl.calibration.partial_session import timing_cause
 
     cause = timing_cause(ses.driver.error, ses.missed_periods, ses.cycles)
     progress.stopped_theta = np.array(ses.states.position, float)
@@ -103,7 +103,7 @@ def check_reference(model: Any, driver: Any, progress: Progress, identities: lis
     were taken on (``path``: its file), else why not, in one line: a drive exchanged
     (0x1018), reset since the stop (``reset_since_setup``: an incremental counter restarted),
     or a motor reading more than ``MOVED_SINCE_STOP`` of cable from where the stop left it."""
-    from cdprctl.partial_session import PartialSessionError, check_identities
+    from cdprctl.calibration.partial_session import PartialSessionError, check_identities
 
     names = [c.name for c in model.cables]
     fix = "start over without --resume"

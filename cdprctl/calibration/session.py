@@ -10,15 +10,15 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cdprctl.calibration.calibration_record import CalibrationRecord
 from cdprctl.calibration.identify import Identified
-from cdprctl.calibration.record import CalibrationRecord
-from cdprctl.control.cable_kernels import force_feedback_kernel
-from cdprctl.control.loop import periods_missed
-from cdprctl.control.torques import WinchTorques, friction_kernel
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.control.cycle.cable_kernels import force_feedback_kernel
+from cdprctl.control.cycle.torques import WinchTorques, friction_kernel
+from cdprctl.control.lifecycle.loop import periods_missed
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.geometry.stiffness import lowest_mode
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.trajectory import coordinates_rotation
-from cdprctl.stiffness import lowest_mode
 from cdprctl.tda.hold import equilibrium_tensions
 from drivers.base import WinchDriver
 from drivers.vocabulary import Lifecycle, WinchStates

@@ -35,9 +35,9 @@ def _kept(args: argparse.Namespace, model: Any, state_dir: Any,
           log: Any) -> tuple[list[Any], float | None, list[Any]] | None:  # fmt: skip
     """(the cables kept, when the first was tested, the drives' identities then) with
     ``--resume``, ([], None, []) without; None after one line when it cannot resume."""
-    from cdprctl.calibration.record import geometry_hash
+    from cdprctl.calibration.calibration_record import geometry_hash
     from cdprctl.commands.resume import load_to_resume, replaced_warning
-    from cdprctl.safety.record import CableResult
+    from cdprctl.safety.brake_record import CableResult
 
     if not args.resume:
         replaced_warning(state_dir, KIND, log, WHO)
@@ -137,15 +137,15 @@ def run(args: argparse.Namespace) -> int:
     brake that lets it turn more than [safety] brake_test_max_counts fails. `cdprctl run`
     refuses to enable a real robot whose last passed test is older than [safety]
     brake_test_interval (8 h)."""
-    from cdprctl.partial_session import (
+    from cdprctl.calibration.partial_session import (
         PartialSessionError,
         check_identities,
         clear_latched_fault,
         path_of,
         remove,
     )
+    from cdprctl.safety.brake_record import save
     from cdprctl.safety.brake_test import BrakeTest, BrakeTestFailedError, BrakeTestStoppedError
-    from cdprctl.safety.record import save
     from drivers.errors import DriverError
 
     who = WHO

@@ -39,7 +39,7 @@ def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterat
     extrapolated, then a step in their targets) and, with ``realtime``, SCHED_FIFO on the
     loop's CPU (a late cycle is a tension spike on stiff cables: rowc's moves stopped short,
     a following error). Given back after."""
-    from cdprctl import realtime as rt
+    from cdprctl.core import realtime as rt
 
     try:
         for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
@@ -166,10 +166,10 @@ def run(args: argparse.Namespace) -> int:
     """Calibrate the robot's encoders: the drives are configured, enabled, the platform held
     (known-pose) or moved near its start (self), the drives disabled (brakes on), and the
     record written atomically to the state directory, where ``cdprctl run`` reads it."""
+    from cdprctl.calibration.partial_session import clear_latched_fault, path_of, remove
     from cdprctl.calibration.procedure import SelfOptions, known_pose, self_calibrate
     from cdprctl.calibration.progress import CalibrationStoppedError, check_reference
     from cdprctl.calibration.session import CalibrationFailedError
-    from cdprctl.partial_session import clear_latched_fault, path_of, remove
     from drivers import create_driver
     from drivers.errors import DriverError
 
@@ -256,7 +256,7 @@ def _pose_or_checked(args: argparse.Namespace, model: Any) -> np.ndarray | None:
 def _report_homing(args: argparse.Namespace, record: Any, ident: Any, state_dir: Path,
                    log: Callable[[str], None]) -> int:  # fmt: skip
     """``known-pose``'s or ``self``'s record written, the result said (JSON or lines)."""
-    from cdprctl.calibration.record import save
+    from cdprctl.calibration.calibration_record import save
 
     result = {
         "pose": record.pose,
@@ -289,9 +289,9 @@ def _self_progress(args: argparse.Namespace, model: Any, opt: Any, state_dir: Pa
                    log: Callable[[str], None]) -> Any:  # fmt: skip
     """(progress, the drives' identities then) of a stopped ``self`` with ``--resume``,
     (None, []) otherwise; the exit code after one line when it cannot resume."""
+    from cdprctl.calibration.calibration_record import geometry_hash
     from cdprctl.calibration.procedure import self_options
     from cdprctl.calibration.progress import Progress
-    from cdprctl.calibration.record import geometry_hash
     from cdprctl.commands.resume import load_to_resume, replaced_warning
 
     if opt is None:

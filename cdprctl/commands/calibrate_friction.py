@@ -99,8 +99,13 @@ def _on_the_robot(args: argparse.Namespace, model: Any, log: Any) -> Any:
     """(driver, record, state directory, the encoders' zeros, the start pose) on the robot
     over its buses, the drives configured and checked against the record; an exit code after
     one line when it cannot go on."""
-    from cdprctl.calibration.record import CalibrationError
-    from cdprctl.calibration.startup import check_drives, how_to_calibrate, load_record, offsets
+    from cdprctl.calibration.calibration_record import CalibrationError
+    from cdprctl.calibration.startup_checks import (
+        check_drives,
+        how_to_calibrate,
+        load_record,
+        offsets,
+    )
     from drivers import create_driver
 
     where = bus_and_records(WHO, model, args, False)
@@ -130,7 +135,7 @@ def _start_pose(model: Any, driver: Any, theta_zero: np.ndarray,
                 scale: np.ndarray) -> np.ndarray:  # fmt: skip
     """Where the platform stands (6: m, the home orientation taken): the estimator's forward
     kinematics on the encoders and the tensions at rest."""
-    from cdprctl.control.estimator import Estimator
+    from cdprctl.control.cycle.estimator import Estimator
 
     states = driver.read(driver.clock())
     e = Estimator(model)
@@ -145,8 +150,8 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_d
             sim: Any, log: Any) -> int:  # fmt: skip
     """Each winch's terms and σ (with --sim, the simulated robot's beside them); the record
     updated when accepted on a robot."""
+    from cdprctl.calibration.calibration_record import save
     from cdprctl.calibration.friction_record import friction_entry
-    from cdprctl.calibration.record import save
 
     truth = getattr(sim, "truth", None)
     rows = []

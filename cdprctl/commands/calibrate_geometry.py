@@ -73,9 +73,9 @@ def _plan_or_resume(args: argparse.Namespace, model: Any, opt: Any, state_dir: P
                     log: Callable[[str], None]) -> Any:  # fmt: skip
     """(poses, progress, the drives' identities then) — planned, or a stopped run's read
     back with ``--resume``; else the exit code after one line."""
+    from cdprctl.calibration.calibration_record import geometry_hash
     from cdprctl.calibration.geometry_plan import plan
     from cdprctl.calibration.progress import Progress
-    from cdprctl.calibration.record import geometry_hash
     from cdprctl.calibration.session import CalibrationFailedError
 
     if args.resume:
@@ -110,9 +110,9 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     1 refused or stopped (the reason in one line), 2 bad options."""
     from cdprctl.calibration.geometry_plan import GeometryOptions
     from cdprctl.calibration.geometry_procedure import geometry_calibrate
+    from cdprctl.calibration.partial_session import clear_latched_fault, path_of, remove
     from cdprctl.calibration.progress import CalibrationStoppedError, check_reference
     from cdprctl.calibration.session import CalibrationFailedError
-    from cdprctl.partial_session import clear_latched_fault, path_of, remove
     from drivers import create_driver
     from drivers.errors import DriverError
 
@@ -187,9 +187,9 @@ def _stopped(args: argparse.Namespace, model: Any, exc: Any, opt: Any, poses: np
 def _report(args: argparse.Namespace, model: Any, cal: Any, state_dir: Path | None,
             simulated: bool, driver: Any, log: Callable[[str], None]) -> int:  # fmt: skip
     """The result: with --out (accepted) the robot file and its record; JSON or lines."""
+    from cdprctl.calibration.calibration_record import now_iso, save
     from cdprctl.calibration.geometry_file import calibrated_robot_text
     from cdprctl.calibration.geometry_procedure import geometry_record
-    from cdprctl.calibration.record import now_iso, save
 
     out = Path(args.out) if args.out else None
     r = cal.result

@@ -7,8 +7,9 @@ import sys
 
 import numpy as np
 
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model import ConfigError, RobotModel, load_robot
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model import ConfigError, RobotModel
+from cdprctl.robot_file import load_robot
 
 
 def safety_summary(model: RobotModel) -> str:
@@ -82,8 +83,8 @@ def run(file: str) -> int:
             print(f"  {e}", file=sys.stderr)
         return 1
     print(summary(model))
-    from cdprctl.telemetry.security import command_security_problems
-    from cdprctl.telemetry.zenoh_files import missing_files
+    from cdprctl.telemetry.zenoh.security import command_security_problems
+    from cdprctl.telemetry.zenoh.zenoh_files import missing_files
 
     problems = missing_files(model.zenoh.config_file) + command_security_problems(model.zenoh)
     for p in problems:  # cdprctl run would refuse to start with these

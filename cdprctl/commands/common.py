@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.parsing import command_parser as command_parser  # re-exported
-from cdprctl.model import ConfigError, RobotModel, load_robot
+from cdprctl.model import ConfigError, RobotModel
+from cdprctl.robot_file import load_robot
 
 
 def os_error_text(exc: Exception) -> str:

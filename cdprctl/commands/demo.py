@@ -12,7 +12,7 @@ from typing import Any
 from cdprctl.commands import tda as tda_cmd
 from cdprctl.commands.check_config import summary
 from cdprctl.commands.common import command_parser
-from cdprctl.model import load_robot
+from cdprctl.robot_file import load_robot
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 

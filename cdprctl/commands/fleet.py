@@ -141,9 +141,9 @@ def zenoh_router(args: argparse.Namespace) -> int:
     """A Zenoh router in this process (eclipse-zenoh's own, mode "router"): robots and tools
     connect to it instead of to each other (docs/fleet.md). Says who connects and leaves,
     one line each; Ctrl-C ends it."""
-    from cdprctl.telemetry.security import zenoh_error
-    from cdprctl.telemetry.session import open_session
-    from cdprctl.telemetry.zenoh_files import missing_files
+    from cdprctl.telemetry.zenoh.security import zenoh_error
+    from cdprctl.telemetry.zenoh.session import open_session
+    from cdprctl.telemetry.zenoh.zenoh_files import missing_files
 
     problems = missing_files(args.zenoh_config)
     for p in problems:

@@ -101,13 +101,13 @@ def record(args: argparse.Namespace) -> int:
     with lock:
         n = _write_csvs(out, rows)
         if args.mcap:
-            from cdprctl.telemetry.mcap_log import write_mcap
+            from cdprctl.telemetry.mcap.mcap_log import write_mcap
 
             layout = status.get("config", {}).get("layout")
             write_mcap(out / "telemetry.mcap", prefix, raw, layout)
             mcaps.append("telemetry.mcap")
             if layout:  # the ROS 2 messages need the robot's cables
-                from cdprctl.telemetry.ros2_mcap import write_ros2_mcap
+                from cdprctl.telemetry.mcap.ros2_mcap import write_ros2_mcap
 
                 write_ros2_mcap(out / "ros2.mcap", raw, status)
                 mcaps.append("ros2.mcap")

@@ -12,7 +12,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from cdprctl.state_dir import StateDirError, check_writable, state_dir_for
+from cdprctl.core.state_dir import StateDirError, check_writable, state_dir_for
 
 EXIT_STATE_DIR = 4  # docs/operating.md, "Exit codes"
 

@@ -26,8 +26,8 @@ def report(args: argparse.Namespace) -> int:
     the run farthest apart, as the live Foxglove view draws it."""
     import matplotlib.pyplot as plt
 
-    from cdprctl.telemetry import report_plots as rp
-    from cdprctl.telemetry.recording import load_recording
+    from cdprctl.telemetry.report import report_plots as rp
+    from cdprctl.telemetry.report.recording import load_recording
 
     run = Path(args.run)
     rec = load_recording(run)

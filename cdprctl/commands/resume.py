@@ -11,9 +11,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from cdprctl import partial_session as ps
-from cdprctl.state_dir import StateDirError, check_writable, state_dir_for
-from cdprctl.state_file import iso_utc
+from cdprctl.calibration import partial_session as ps
+from cdprctl.core.state_dir import StateDirError, check_writable, state_dir_for
+from cdprctl.core.state_file import iso_utc
 
 
 def state_dir_or_warn(who: str, robot: str, given: str | None, simulated: bool,
@@ -83,7 +83,7 @@ def stopped_line(who: str, at: str, fault: str, kept: str, cause: str, resume: s
 def new_partial(kind: str, model: Any, options: dict[str, Any], fault: str, at: str,
                 kept: int, data: dict[str, Any], started: float, simulated: bool,
                 identities: list[Any]) -> ps.PartialSession:  # fmt: skip
-    from cdprctl.calibration.record import geometry_hash
+    from cdprctl.calibration.calibration_record import geometry_hash
 
     return ps.PartialSession(kind=kind, robot=model.name, geometry_hash=geometry_hash(model),
                              options=options, fault=fault, stopped_at=at, kept=kept,

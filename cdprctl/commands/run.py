@@ -174,8 +174,8 @@ def checked_model(args: argparse.Namespace) -> tuple[Any, Any, bool]:
     if zo:
         model = dataclasses.replace(model, zenoh=dataclasses.replace(model.zenoh, **zo))
     if args.zenoh or bool(zo) or model.zenoh.enabled:
-        from cdprctl.telemetry.security import command_security_problems
-        from cdprctl.telemetry.zenoh_files import missing_files
+        from cdprctl.telemetry.zenoh.security import command_security_problems
+        from cdprctl.telemetry.zenoh.zenoh_files import missing_files
 
         problems = missing_files(model.zenoh.config_file) or command_security_problems(
             model.zenoh

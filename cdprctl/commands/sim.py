@@ -244,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
     plant.opt.brake_close_time = args.brake_close_time
 
     def realtime() -> None:
-        from cdprctl import realtime as rt
+        from cdprctl.core import realtime as rt
 
         ctl = model.control
         for w in rt.simulator_realtime(rt.loop_cpu(ctl.cpu), ctl.sched_priority):
@@ -305,7 +305,7 @@ def start_state(model: Any, args: argparse.Namespace) -> tuple[Any, str]:
     import numpy as np
 
     from cdprctl.commands.common import parse_pose
-    from cdprctl.rotation import rpy_to_matrix
+    from cdprctl.core.rotation import rpy_to_matrix
     from sim_backend.plant import CdprPlant
     from sim_backend.plant_errors import PlantErrors
 

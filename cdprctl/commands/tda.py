@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report
-from cdprctl.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
+from cdprctl.core.rotation import rpy_to_matrix
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model import RobotModel
-from cdprctl.rotation import rpy_to_matrix
 from cdprctl.tda import (
     ImposedQuantity,
     Imposition,
@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(format_text(model, result))
     if args.plot:
-        from cdprctl.plots.tda_plot import plot_tda
+        from cdprctl.tda.plots.tda_plot import plot_tda
 
         plot_tda(args.plot, model, ctx)
         if not args.json:

@@ -1,5 +1,5 @@
 """``cdprctl workspace``: the wrench-feasible and the interference-free workspace on a grid
-(``cdprctl.tda.workspace``, ``cdprctl.interference``)."""
+(``cdprctl.tda.workspace``, ``cdprctl.geometry.interference``)."""
 
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cdprctl.rotation import rpy_to_matrix
+    from cdprctl.core.rotation import rpy_to_matrix
     from cdprctl.tda.workspace import Grid, wrench_feasible_workspace
 
     model = load_or_report(args.config)
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     feasible = res.feasible
     n_ok = int(feasible.sum())
     if args.plot:
-        from cdprctl.plots.workspace_plot import plot_workspace
+        from cdprctl.tda.plots.workspace_plot import plot_workspace
 
         title = (f"{model.name}: rpy {np.round(rpy, 3).tolist()} rad, external wrench "
                  f"{np.round(wrench, 2).tolist()} N, N·m")  # fmt: skip

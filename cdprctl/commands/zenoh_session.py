@@ -35,9 +35,9 @@ def key_prefix(args: argparse.Namespace) -> str | None:
 def tool_session(args: argparse.Namespace) -> Any:
     """The tool's Zenoh session; None, with what is wrong said in a line or a few, when the
     configuration names files that are missing or Zenoh cannot open a session."""
-    from cdprctl.telemetry.security import zenoh_error
-    from cdprctl.telemetry.session import open_session
-    from cdprctl.telemetry.zenoh_files import missing_files
+    from cdprctl.telemetry.zenoh.security import zenoh_error
+    from cdprctl.telemetry.zenoh.session import open_session
+    from cdprctl.telemetry.zenoh.zenoh_files import missing_files
 
     problems = missing_files(args.zenoh_config)
     for p in problems:

@@ -72,7 +72,7 @@ class ControlData:
         # winch torques (torques.py)
         self.torques = np.zeros(m)  # N·m, motor, commanded (the feed-forward in position mode)
         self.motor_target = np.zeros(m)  # rad: each winch's position target (cable_space.py)
-        # grippers (grippers.py)
+        # grippers (gripper_control.py)
         self.jb_load = np.zeros(g)  # N, what each jB carries
         self.grip_target = np.full(g, math.nan)  # m, commanded travel
         self.grip_imposed = np.full(g, math.nan)  # m, ramping towards it

@@ -20,7 +20,7 @@ class State(enum.Enum):
 
 # Each state bound to a name once: on Python 3.11 reading ``State.X`` goes
 # through ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped
-# it): the control cycle reads these (tests/test_allocations.py).
+# it): the control cycle reads these (tests/control/cycle/test_allocations.py).
 INIT, READY, ENABLING, ENABLED, MOVING = (
     State.INIT, State.READY, State.ENABLING, State.ENABLED, State.MOVING
 )  # fmt: skip
@@ -94,5 +94,5 @@ PERSISTENCE: dict[FaultKind, str] = {
     FaultKind.LOAD_CELL: "persistent: a cell silent beyond its own timeout ([[sensors."
     "load_cells]] timeout, 30 ms), or the cell and its drive's torque apart beyond both their "
     "errors for [sensors] disagreement_time (50 ms), both low-passed at 20 Hz: a cell's noise "
-    "and a lost frame ride through (control/tension_source.py)",
+    "and a lost frame ride through (control/cycle/tension_source.py)",
 }

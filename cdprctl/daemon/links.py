@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from cdprctl.control.commands import Command
+from cdprctl.control.command_types import Command
 from cdprctl.control.data import ControlData
 from cdprctl.model.robot import RobotModel
 from cdprctl.telemetry.helper import HelperProcess
@@ -35,17 +35,17 @@ def links_of(model: RobotModel, zenoh: bool, foxglove: str | None, summary: Any,
     configuration summary the gateway serves."""
     out: list[Link] = []
     if zenoh or model.zenoh.enabled:
-        from cdprctl.telemetry.link import TelemetryLink
+        from cdprctl.telemetry.zenoh.link import TelemetryLink
 
         out.append(TelemetryLink(model, summary()))
     listen = foxglove or model.foxglove.listen
     if listen:
         from cdprctl.model.foxglove import parse_listen
-        from cdprctl.telemetry.foxglove_view import FoxgloveLink
+        from cdprctl.telemetry.foxglove.foxglove_view import FoxgloveLink
 
         out.append(FoxgloveLink(model, *parse_listen(listen)))
     if ros2 or model.ros2.enabled:
-        from cdprctl.telemetry.ros2_view import Ros2Link
+        from cdprctl.telemetry.ros2.ros2_view import Ros2Link
 
         out.append(Ros2Link(model))
     return out

@@ -206,7 +206,7 @@ def safety_summary(model: RobotModel, state_dir: Path, required: bool) -> dict[s
     """The brake test on record (``required``: a real robot, which ``run`` enables only with
     a passed one younger than the interval) and each fault kind's stop category."""
     from cdprctl.model.safety import STOP_CATEGORIES
-    from cdprctl.safety.record import BrakeTestError, due_time, load
+    from cdprctl.safety.brake_record import BrakeTestError, due_time, load
 
     test: dict[str, Any] = {"required": required, "time": None, "passed": None,
                             "next_due": None}  # fmt: skip
@@ -225,7 +225,7 @@ def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = 
     """What the gateway's status serves of the configuration."""
     import cdprctl
     from cdprctl.calibration.friction_record import friction_summary
-    from cdprctl.telemetry.scene import SceneLayout
+    from cdprctl.telemetry.foxglove.scene import SceneLayout
 
     m, c = model, model.control
     return {
@@ -237,7 +237,7 @@ def config_summary(model: RobotModel, simulated: bool, state_dir: Path | None = 
         "torque_limit": [w.winch.torque_limit for w in m.cables],
         "rate_hz": c.rate,
         "tda": c.tda_method,
-        "limits": {  # what a jog may ask (control/jog.py)
+        "limits": {  # what a jog may ask (control/intake/jog.py)
             "max_velocity": c.max_velocity,
             "max_angular_velocity": c.max_angular_velocity,
             "jog_deadman": c.jog_deadman,

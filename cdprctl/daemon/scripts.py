@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.commands import Command, CommandKind
+from cdprctl.control.command_types import Command, CommandKind
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import State
+from cdprctl.core.realtime import sharing_the_interpreter
 from cdprctl.model.robot import RobotModel
-from cdprctl.realtime import sharing_the_interpreter
 
 
 @dataclass(frozen=True)

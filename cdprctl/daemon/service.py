@@ -22,13 +22,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cdprctl import realtime as rt
-from cdprctl.control.commands import Command, CommandKind
+from cdprctl.control.command_types import Command, CommandKind
 from cdprctl.control.data import PHASES
-from cdprctl.control.desk import FULL
-from cdprctl.control.loop import LoopStats
-from cdprctl.control.manager import ControllerManager
+from cdprctl.control.intake.desk import FULL
+from cdprctl.control.lifecycle.loop import LoopStats
+from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.control.states import State
+from cdprctl.core import realtime as rt
 from cdprctl.daemon.links import Links, links_of
 from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script
@@ -70,13 +70,13 @@ class Daemon:
         config). ``ros2``: publish to ROS 2 (or ``[ros2] enabled``).
         ``as_built``: with ``sim``, the robot the simulated plant is (its geometry; the drives
         from ``model``), in a process of its own (``sim_backend/process.py``)."""
-        from cdprctl.state_dir import default_state_dir, simulated_state_dir
+        from cdprctl.core.state_dir import default_state_dir, simulated_state_dir
         from drivers import create_driver
         from drivers.simulated import simulated_robot
 
         self.model = model
         self.bus_hint = ""  # the bus options given, as options: the refusals' commands repeat them
-        # a simulated robot's records are apart from a real robot's (cdprctl/state_dir.py)
+        # a simulated robot's records are apart from a real robot's (cdprctl/core/state_dir.py)
         self.simulated_robot = sim or simulated_robot(model, overrides)
         self.state_dir = Path(state_dir) if state_dir else (
             simulated_state_dir if self.simulated_robot else default_state_dir)(model.name)

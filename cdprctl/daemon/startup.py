@@ -14,12 +14,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cdprctl import realtime as rt
+from cdprctl.core import realtime as rt
 from cdprctl.daemon.report import identity_lines
 from cdprctl.daemon.scripts import PathScript
 
 if TYPE_CHECKING:
-    from cdprctl.calibration.record import CalibrationRecord
+    from cdprctl.calibration.calibration_record import CalibrationRecord
     from cdprctl.daemon.service import Daemon
 
 NOT_CALIBRATED = 4  # exit code: no valid calibration record or brake test (systemd: no restart)
@@ -88,8 +88,8 @@ def forget_stop_signals() -> None:
 
 def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None:
     """Everything before ``ready``; returns the ``--path`` script (planned), if any."""
-    from cdprctl.calibration.record import CalibrationError
-    from cdprctl.calibration.startup import how_to_calibrate, load_record
+    from cdprctl.calibration.calibration_record import CalibrationError
+    from cdprctl.calibration.startup_checks import how_to_calibrate, load_record
 
     m = dm.model
     failure = dm.links.start()
@@ -138,7 +138,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         hint = "" if dm.assume_home else f" ({how_to_calibrate(m, dm.state_dir, dm.bus_hint)})"
         raise StartupRefusedError(f"cdprctl run: start-up failed: {exc}{hint}", 1) from None
     if dm.brake_record is not None:  # the brakes tested are these drives'
-        from cdprctl.safety.record import BrakeTestError, check_drives, how_to_test
+        from cdprctl.safety.brake_record import BrakeTestError, check_drives, how_to_test
 
         try:
             check_drives(dm.brake_record, list(getattr(dm.driver, "identities", [])),
@@ -193,7 +193,7 @@ def _brakes_tested(dm: Daemon) -> None:
     """A real robot is enabled only with a passed brake test younger than ``[safety]
     brake_test_interval`` on record (not with ``--sim`` or ``assume_home_at_start``: the
     simulated robot)."""
-    from cdprctl.safety.record import BrakeTestError, check_due, due_time, how_to_test
+    from cdprctl.safety.brake_record import BrakeTestError, check_due, due_time, how_to_test
 
     try:
         last = check_due(dm.model, dm.state_dir, time.time(), dm.simulated_robot)
@@ -210,7 +210,7 @@ def _calibration(dm: Daemon) -> Any:
     """The record's offsets, once the configured drives match it (``Manager.startup``)."""
 
     def offsets_of(driver: Any) -> tuple[np.ndarray, np.ndarray]:
-        from cdprctl.calibration.startup import check_drives, offsets
+        from cdprctl.calibration.startup_checks import check_drives, offsets
 
         check_drives(dm.model, dm.record, driver)
         return offsets(dm.record)

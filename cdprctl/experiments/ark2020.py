@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.geometry.stiffness import cable_stiffnesses, stiffness_matrix
 from cdprctl.model import RobotModel
-from cdprctl.stiffness import cable_stiffnesses, stiffness_matrix
 from cdprctl.tda import TDAMethod, TDAOptions
 from sim_backend.faults import FaultEvent, FaultInjector
 

@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.commands import Command, CommandKind
-from cdprctl.control.manager import ControllerManager
+from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.model.robot import RobotModel
 from sim_backend.network import LockStep
 

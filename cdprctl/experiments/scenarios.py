@@ -1,6 +1,7 @@
 """The reliability matrix (issue 8): each fault injected mid-motion into the closed loop in
-lock-step (deterministic, seeded), with what the loop did measured. tests/test_reliability.py
-asserts on these runs; tools/reliability_table.py writes docs/reliability.md from them.
+lock-step (deterministic, seeded), with what the loop did measured.
+tests/experiments/test_reliability.py asserts on these runs; tools/reliability_table.py writes
+docs/reliability.md from them.
 
 Per run: the time from the fault to the supervisor leaving the healthy states (detection),
 the state and reason it ended in (reaction), the platform's largest distance from its
@@ -19,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.commands import Command, CommandKind
-from cdprctl.control.controller import Controller
-from cdprctl.control.manager import ControllerManager
+from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.cycle.controller import Controller
+from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.model.robot import RobotModel

@@ -1,7 +1,7 @@
-"""Robot description: frozen dataclasses and the validating TOML loader."""
+"""Robot description: the frozen dataclasses and the readers of their sections (the
+loader, which checks a robot with the geometry, is cdprctl.robot_file)."""
 
 from cdprctl.model.errors import ConfigError
-from cdprctl.model.loader import load_robot, parse_robot
 from cdprctl.model.robot import Cable, Platform, Pose, Pulley, RobotModel, Winch, Workspace
 
 __all__ = [
@@ -13,6 +13,4 @@ __all__ = [
     "RobotModel",
     "Winch",
     "Workspace",
-    "load_robot",
-    "parse_robot",
 ]

@@ -73,10 +73,10 @@ class ControlConfig:
     damping_ratio: float = 1.0
     # Hz, first-order low-pass on the finite-difference twist (docs/control.md: rate and filter)
     velocity_filter: float = 40.0
-    # Hz, the external-wrench observer's bandwidth (control/observer.py); 0: off
+    # Hz, the external-wrench observer's bandwidth (control/cycle/observer.py); 0: off
     observer_bandwidth: float = 0.0
     # Hz, position mode: the external wrench estimated from the measured tensions, fed
-    # forward to the TDA (control/cable_space.py); 0: off; None (default): from the model,
+    # forward to the TDA (control/cycle/cable_space.py); 0: off; None (default): from the model,
     # the platform's lowest mode over 6 (cable_space.disturbance_bandwidth says why)
     disturbance_bandwidth: float | None = None
     # position mode: the integral force feedback's gain and leak, as a multiple of the
@@ -88,7 +88,7 @@ class ControlConfig:
     max_angular_velocity: float = 0.3  # rad/s
     max_angular_acceleration: float = 1.0  # rad/s²
     max_angular_jerk: float = 10.0  # rad/s³
-    jog_deadman: float = 0.2  # s without a jog command before the jog stops (control/jog.py)
+    jog_deadman: float = 0.2  # s without a jog command before the jog stops (control/intake/jog.py)
     friction_compensation: bool = True  # winch viscous + Coulomb friction feedforward
     external_wrench: tuple[float, ...] = (0.0,) * 6  # N, N·m at P, base frame: known, fed forward
     tda_method: str = "barycenter"
@@ -110,7 +110,7 @@ class ControlConfig:
     max_fk_residual: float = 0.005
     # of each cable's tension range (t_max − t_min): in position mode, the measured tensions'
     # internal part (what no external wrench explains) beyond this is a cable whose length is
-    # not what its encoder says (control/cable_space.py). rowc: ≤ 3.3 N under a 50 N jet,
+    # not what its encoder says (control/cycle/cable_space.py). rowc: ≤ 3.3 N under a 50 N jet,
     # 48-110 N after an encoder jump, a slip or a snapped cable (lock-step, measured)
     max_tension_disagreement: float = 0.1
     sleep_margin: float = 0.0002  # s, spin (instead of sleep) this long before each deadline

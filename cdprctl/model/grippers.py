@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.core.rotation import FloatArray
 from cdprctl.model.reader import TableReader
-from cdprctl.rotation import FloatArray
 
 GRIPPER_KEYS = (
     "cable",

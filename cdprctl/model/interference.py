@@ -1,4 +1,4 @@
-"""The interference sections of a robot description (issue 67; ``cdprctl/interference.py``
+"""The interference sections of a robot description (issue 67; ``cdprctl/geometry/interference.py``
 measures them): the platform's body (``[[platform.body.boxes]]``, platform frame), the cell's
 obstacles (``[[cell.obstacles]]``, base frame: boxes and planes) and ``[interference]``
 (``clearance``, ``attachment_exclusion``). Every key is optional: a robot without them has no
@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.core.rotation import FloatArray, rpy_to_matrix
 from cdprctl.model.reader import TableReader
-from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 INTERFERENCE_KEYS = ("clearance", "attachment_exclusion")
 BODY_KEYS = ("boxes",)

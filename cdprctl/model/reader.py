@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from cdprctl.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray
 
 _MISSING = object()
 

@@ -1,4 +1,4 @@
-"""The robot description: frozen dataclasses built once by :mod:`cdprctl.model.loader`.
+"""The robot description: frozen dataclasses built once by :mod:`cdprctl.robot_file.loader`.
 
 All quantities are SI. Frames: ``base`` is the fixed world frame of the robot (z up);
 ``platform`` is the moving-platform frame, whose origin ``P`` is the platform's reference point
@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.core.numerics import cable_compliance_py, compliance_terms
+from cdprctl.core.rotation import FloatArray, cross3, rpy_to_matrix
 from cdprctl.model.calibration import CalibrationConfig
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.drives import DrivesConfig
@@ -22,8 +24,6 @@ from cdprctl.model.ros2 import Ros2Config
 from cdprctl.model.safety import SafetyConfig
 from cdprctl.model.sensors import SensorsConfig
 from cdprctl.model.zenoh import ZenohConfig
-from cdprctl.numerics import cable_compliance_py, compliance_terms
-from cdprctl.rotation import FloatArray, cross3, rpy_to_matrix
 
 
 def _frozen(a: FloatArray) -> FloatArray:
@@ -88,7 +88,7 @@ class Cable:
 
     def axial_stiffness(self, length: float) -> float:
         """Axial stiffness (N/m) of cable + series spring at geometric length ``length`` (m)
-        (``cdprctl.numerics.cable_compliance``; the loader guarantees E and S are set whenever
+        (``cdprctl.core.numerics.cable_compliance``; the loader guarantees E and S are set whenever
         ``stiffness`` is not)."""
         return 1.0 / cable_compliance_py(*compliance_terms(self), length)
 
@@ -141,11 +141,12 @@ class RobotModel:
     zenoh: ZenohConfig = field(default_factory=ZenohConfig)
     foxglove: FoxgloveConfig = field(default_factory=FoxgloveConfig)
     ros2: Ros2Config = field(default_factory=Ros2Config)
-    grippers: tuple[Gripper, ...] = ()  # Sensors 2019 §2.4 end-effector (cdprctl.gripper)
+    # Sensors 2019 §2.4 end-effector (cdprctl.geometry.gripper_mechanics)
+    grippers: tuple[Gripper, ...] = ()
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     paths: PathsConfig = field(default_factory=PathsConfig)  # how path files are read
-    # the platform's body, the cell's obstacles, the clearance (cdprctl/interference.py)
+    # the platform's body, the cell's obstacles, the clearance (cdprctl/geometry/interference.py)
     interference: InterferenceConfig = field(default_factory=InterferenceConfig)
     # load cells on cables (docs/config.md, "Load cells")
     sensors: SensorsConfig = field(default_factory=SensorsConfig)

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from cdprctl.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray
 
 #: plane G code → (first, second) pose index: first × second is the axis the arc turns about
 PLANES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}

@@ -1,5 +1,5 @@
 """The cables' clearance as a soft limit (issue 67): the least distance between two cables, a
-cable and the platform's body, a cable and the cell (``cdprctl/interference.py``) at each
+cable and the platform's body, a cable and the cell (``cdprctl/geometry/interference.py``) at each
 sample of a motion, and between two samples.
 
 Between samples the check does not trust the sampling step; it bounds what can happen there.
@@ -24,10 +24,10 @@ import math
 
 import numpy as np
 
-from cdprctl.interference import Interference
-from cdprctl.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.core.rotation import FloatArray, exp_so3
+from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, exp_so3
 
 #: m: the displacement bound of one refined sub-interval (what a dip there may hide: half)
 REFINE_STEP = 1e-4

@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.core.rotation import FloatArray
 from cdprctl.motion import arcs
 from cdprctl.motion.path_file import PathFileError, Waypoint
-from cdprctl.rotation import FloatArray
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(\d+\.?\d*|\.\d+))")
 AXES = {"X": 0, "Y": 1, "Z": 2, "A": 3, "B": 4, "C": 5}

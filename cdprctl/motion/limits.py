@@ -12,11 +12,11 @@ import math
 
 import numpy as np
 
-from cdprctl.gripper import GripperSet
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.gripper_mechanics import GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.clearance import Clearance
 from cdprctl.motion.trajectory import coordinates_rotation
-from cdprctl.rotation import FloatArray
 from cdprctl.tda.workspace import Margins, hold_wrench
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprctl.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray
 
 
 @dataclass(frozen=True)

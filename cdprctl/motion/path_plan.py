@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cdprctl.core.rotation import FloatArray, rpy_to_matrix
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.gcode import looks_like_metres
 from cdprctl.motion.limits import SoftLimits
@@ -34,7 +35,6 @@ from cdprctl.motion.trajectory import (
     pose_coordinates,
     velocity_limits,
 )
-from cdprctl.rotation import FloatArray, rpy_to_matrix
 
 CHECK_SPACING = 0.002  # m (or rad) between checked samples at most
 # m (or rad): a plan made where the reference rested still holds from a reference this close

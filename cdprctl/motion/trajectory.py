@@ -28,9 +28,9 @@ from ruckig import (
     Synchronization,
 )
 
+from cdprctl.core.rotation import FloatArray, exp_so3, log_so3, matrix_to_rpy
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray, exp_so3, log_so3, matrix_to_rpy
 
 # Phase synchronisation: a straight line in the 6-D pose space, what a point-to-point move of
 # a CDPR should be; ruckig (0.19) raises RuckigError on some inputs ("error in step 1"), then

@@ -15,9 +15,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cdprctl.core.state_file import iso_utc
 from cdprctl.model.robot import RobotModel
-from cdprctl.safety.record import BrakeTestRecord, CableResult
-from cdprctl.state_file import iso_utc
+from cdprctl.safety.brake_record import BrakeTestRecord, CableResult
 from drivers.base import WinchDriver
 from drivers.errors import DriverError
 from drivers.vocabulary import Lifecycle, WinchStates
@@ -104,7 +104,7 @@ class BrakeTest:
         except (BrakeTestFailedError, DriverError) as exc:
             if not results:
                 raise
-            from cdprctl.partial_session import timing_cause
+            from cdprctl.calibration.partial_session import timing_cause
 
             raise BrakeTestStoppedError(str(exc), results, len(results),
                                         timing_cause(d.error, 0, 0), started) from None

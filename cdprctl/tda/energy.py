@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import quadprog  # at import: an import statement in a solve looked the module up each time
 
-from cdprctl.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray
 from cdprctl.tda.polygon import feasible_polygon, min_quadratic
 
 

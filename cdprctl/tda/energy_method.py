@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel
-from cdprctl.rotation import FloatArray
+from cdprctl.core.numerics import cycle_kernel
+from cdprctl.core.rotation import FloatArray
 from cdprctl.tda.energy import cable_energies, impose, minimum_energy
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.types import (

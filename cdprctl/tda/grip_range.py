@@ -9,9 +9,9 @@ import math
 
 import numpy as np
 
-from cdprctl.gripper import GripperSet
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.gripper_mechanics import GripperSet
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
 from cdprctl.tda.solver import TensionDistributor
 from cdprctl.tda.types import ImposedQuantity, Imposition, TDAMethod
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from cdprctl.gripper import GripperSet
-from cdprctl.kinematics import KinematicsData
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.gripper_mechanics import GripperSet
+from cdprctl.geometry.kinematics import KinematicsData
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
 from cdprctl.tda.solver import TensionDistributor
 from cdprctl.tda.types import TDAMethod, TDAOptions, tda_options_of
 
@@ -28,7 +28,7 @@ def equilibrium_tensions(model: RobotModel, kin: KinematicsData) -> FloatArray:
     wrench = gs.spring_wrench(kin.W, hold, load)
     k = model.cable_stiffness(kin.length)
     own = dataclasses.replace(tda_options_of(model), max_tension_rate=None)  # no history
-    margin = model.control.tension_margin  # the controller's bounds (control/distribution.py)
+    margin = model.control.tension_margin  # the controller's bounds (control/cycle/distribution.py)
     lo, hi = model.tension_min + margin, model.tension_max - margin
     out = TensionDistributor(model, own).solve(kin.W, wrench, lo, hi, k=k, kin=kin)
     if not out.ok:

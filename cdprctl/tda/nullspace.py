@@ -17,8 +17,8 @@ import math
 
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel, forward_substitution
-from cdprctl.rotation import FloatArray
+from cdprctl.core.numerics import cycle_kernel, forward_substitution
+from cdprctl.core.rotation import FloatArray
 
 
 class NullSpace:

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel
+from cdprctl.core.numerics import cycle_kernel
 from cdprctl.tda import polygon as pg
 from cdprctl.tda.sotda import (
     displacements_kernel,

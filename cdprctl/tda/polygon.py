@@ -17,8 +17,8 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
-from cdprctl.numerics import cycle_kernel
-from cdprctl.rotation import FloatArray
+from cdprctl.core.numerics import cycle_kernel
+from cdprctl.core.rotation import FloatArray
 
 Point = tuple[float, float]
 

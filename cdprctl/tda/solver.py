@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import quadprog  # at import: an import statement in a solve looked the module up each time
 
-from cdprctl.kinematics import KinematicsData
-from cdprctl.numerics import cycle_kernel, kernel_args, total
-from cdprctl.rotation import FloatArray
+from cdprctl.core.numerics import cycle_kernel, kernel_args, total
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.kinematics import KinematicsData
 from cdprctl.tda import planar
 from cdprctl.tda import polygon as pg
 from cdprctl.tda.energy_method import EnergyMethod

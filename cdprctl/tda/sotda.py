@@ -13,10 +13,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cdprctl.kinematics import KinematicsData
-from cdprctl.numerics import cycle_kernel
-from cdprctl.rotation import FloatArray
-from cdprctl.stiffness import _ka_weighted
+from cdprctl.core.numerics import cycle_kernel
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.kinematics import KinematicsData
+from cdprctl.geometry.stiffness import _ka_weighted
 from cdprctl.tda.polygon import Point
 
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from cdprctl.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray
 
 if TYPE_CHECKING:
     from cdprctl.model.robot import RobotModel
@@ -45,7 +45,7 @@ class TDAStatus(enum.IntEnum):
 
 # Each member bound to a name once: on Python 3.11 reading ``TDAStatus.X`` goes through
 # ``EnumType.__getattr__``, which builds a method wrapper per read (3.12 dropped it): the
-# control cycle's solve reads these (tests/test_allocations.py).
+# control cycle's solve reads these (tests/control/cycle/test_allocations.py).
 OK, OUT_OF_LIMITS, INFEASIBLE = TDAStatus.OK, TDAStatus.OUT_OF_LIMITS, TDAStatus.INFEASIBLE
 IMPOSITION_INFEASIBLE, DEGENERATE, INTERNAL_ERROR = (
     TDAStatus.IMPOSITION_INFEASIBLE, TDAStatus.DEGENERATE, TDAStatus.INTERNAL_ERROR

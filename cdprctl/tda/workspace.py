@@ -19,11 +19,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from cdprctl.gripper import GripperSet
-from cdprctl.interference import Interference, interference_kernel
-from cdprctl.kinematics import KinematicsData, ik_kernel
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.gripper_mechanics import GripperSet
+from cdprctl.geometry.interference import Interference, interference_kernel
+from cdprctl.geometry.kinematics import KinematicsData, ik_kernel
 from cdprctl.model.robot import RobotModel
-from cdprctl.rotation import FloatArray
 from cdprctl.tda.polygon import least_violating_kernel
 
 
@@ -199,7 +199,7 @@ class WorkspaceResult:
     margin: FloatArray  # (n,) N; -inf where the geometry is degenerate
     seconds: float  # wall time of the margins
     method: str  # "polygon" (r = 2) or "lp"
-    # the cables' least distance (m) at each point (``cdprctl/interference.py``), the check
+    # the cables' least distance (m) at each point (``cdprctl/geometry/interference.py``), the check
     # that has it (an index of ``pairs``: what against what), the clearance (m), the time (s)
     clearance: FloatArray = field(default_factory=lambda: np.zeros(0))
     pair: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))

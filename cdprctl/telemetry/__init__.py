@@ -1,1 +1,2 @@
-"""Zenoh telemetry, status and commands: a gateway process beside the loop's process."""
+"""The processes beside the loop's (Zenoh, Foxglove, ROS 2), fed by its shared-memory snapshot; a
+run recorded (MCAP) and reported."""

@@ -64,7 +64,7 @@ class Layout:
             ("motor_target", m),  # rad, position mode's targets (the motors' own otherwise)
             ("measured_tensions", m),  # N, from the drives' torques (position mode)
             ("true_position", 3),  # m, the simulated plant's (NaN on a real robot)
-            # the cables' least distance at the estimate (cdprctl/interference.py): m, the
+            # the cables' least distance at the estimate (cdprctl/geometry/interference.py): m, the
             # check's kind (0 cable, 1 body, 2 obstacle), cable (0-based), the other (cable,
             # body part, obstacle; 0-based), the closest points on each (m, base frame), and
             # the clearance (m); NaN: nothing to check
@@ -134,7 +134,7 @@ class SharedSnapshot:
 
 def controller_values(d: ControlData, true_position: Any = None) -> dict[str, Any]:
     """The snapshot fields from the loop's ``ControlData`` (called by the I/O thread)."""
-    from cdprctl.rotation import matrix_to_rpy
+    from cdprctl.core.rotation import matrix_to_rpy
 
     out: dict[str, Any] = {
         "time": d.time,
@@ -170,7 +170,7 @@ def controller_values(d: ControlData, true_position: Any = None) -> dict[str, An
         c = int(g.best[0])
         out["clearance"] = (g.distance[c], *g.checks[c, :3], *g.closest[c], g.clearance)
     if d.grasp is not None and len(d.grip_target):
-        from cdprctl.gripper import GraspState
+        from cdprctl.geometry.gripper_mechanics import GraspState
 
         states = list(GraspState)
         g = d.grasp

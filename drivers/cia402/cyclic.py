@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from cdprctl.numerics import clamp, cycle_kernel, plausible_step
+from cdprctl.core.numerics import clamp, cycle_kernel, plausible_step
 from drivers.cia402 import protocol as p
 from drivers.cia402.sync_clock import sync_instant
 from drivers.vocabulary import DriveState

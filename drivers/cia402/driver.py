@@ -24,7 +24,7 @@ from typing import Any
 import can
 import numpy as np
 
-from cdprctl.numerics import max2, min2
+from cdprctl.core.numerics import max2, min2
 from drivers import blocking
 from drivers.base import WinchDriver
 from drivers.cia402 import cyclic, drive_setup

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.numerics import add_count, kernel_args
+from cdprctl.core.numerics import add_count, kernel_args
 from drivers.cia402 import cyclic
 from drivers.cia402 import protocol as p
 from drivers.cia402.cyclic import GENERIC_STATE

@@ -14,7 +14,7 @@ import math
 import can
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel
+from cdprctl.core.numerics import cycle_kernel
 from drivers.cia402 import protocol as p
 
 # counts: a SYNC fits a late TPDO1 better than the sequence's only by more than this (the

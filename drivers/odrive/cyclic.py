@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from cdprctl.numerics import cycle_kernel
+from cdprctl.core.numerics import cycle_kernel
 from drivers.odrive import protocol as p
 
 TWO_PI = 2.0 * math.pi

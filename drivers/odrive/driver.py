@@ -22,7 +22,7 @@ from typing import Any
 import can
 import numpy as np
 
-from cdprctl.numerics import add_count
+from cdprctl.core.numerics import add_count
 from drivers import blocking
 from drivers.base import WinchDriver
 from drivers.errors import DriveFaultError, DriverError, following_error_text

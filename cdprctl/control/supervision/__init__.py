@@ -1,0 +1,1 @@
+"""The checks, the faults, the stop, and the one owner of the state."""

@@ -1,0 +1,1 @@
+"""The live Foxglove view process and the scene it draws."""

@@ -1,0 +1,1 @@
+"""`cdprctl record --mcap`: a recording as MCAP, with its ROS 2 channels."""

@@ -1,0 +1,1 @@
+"""A recording read back and `cdprctl report`'s figures."""

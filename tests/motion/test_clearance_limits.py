@@ -1,0 +1,167 @@
+"""The cables' clearance as a soft limit and a supervised check (issue 67): a move, a jog and
+a path that would bring a cable within ``[interference] clearance`` of an obstacle are
+refused or stopped short, also where the closest approach falls between two samples, and the
+supervisor stops under the clearance (``ClearanceWatch``). The reference is brute force: the
+motion sampled every 0.05 mm, each pose measured on its own (the per-pose distances are
+checked against scipy and dense sampling in tests/geometry/test_interference.py). The robot is
+CAROCA (112 mm clear at home) with a planted obstacle, a small box, placed next to one cable's
+sweep."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdprctl.control.supervision.clearance_watch import ClearanceWatch
+from cdprctl.core.rotation import exp_so3
+from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model.interference import Box, InterferenceConfig
+from cdprctl.motion.clearance import REFINE_STEP
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.path_plan import PathRejectedError, plan_text
+from cdprctl.motion.trajectory import pose_coordinates
+from cdprctl.robot_file import load_robot
+
+ROOT = Path(__file__).resolve().parents[2]
+CABLE = 2  # 0-based: the cable whose sweep the lamp stands in
+AT = 0.31  # m of +x travel where it passes the lamp
+HALF = 0.002  # m: the lamp's half side
+
+
+@pytest.fixture(scope="module")
+def caroca():
+    return load_robot(ROOT / "config" / "caroca.toml")
+
+
+def _home(model):
+    return pose_coordinates(model, np.asarray(model.home.position), model.home.rotation)
+
+
+def _with_lamp(model, offset: float):
+    """CAROCA with a lamp, a cube of side 4 mm, ``offset`` m beside cable ``CABLE`` 0.2 m from
+    its attachment as it stands after ``AT`` m of +x travel, across both the cable and the
+    motion."""
+    kin = KinematicsData(model)
+    x = _home(model) + np.array([AT, 0, 0, 0, 0, 0])
+    inverse_kinematics(model, kin, x[:3], model.home.rotation)
+    b = x[:3] + kin.rbT[:, CABLE]
+    e = kin.exitT[:, CABLE]
+    n = np.cross(e - b, [1.0, 0.0, 0.0])
+    centre = b + 0.2 * (e - b) / np.linalg.norm(e - b) + offset * n / np.linalg.norm(n)
+    lamp = Box("the lamp", centre, np.full(3, HALF), np.eye(3))
+    cfg = model.interference
+    return dataclasses.replace(
+        model, interference=InterferenceConfig(cfg.clearance, cfg.attachment_exclusion, (), (lamp,))
+    )
+
+
+def _dense(model, start, direction, horizon, step=5e-5):
+    """(s, least distance m) every ``step`` of the straight motion: the brute force."""
+    s = np.arange(0.0, horizon + step, step)
+    g, kin = Interference(model), KinematicsData(model)
+    out = np.empty(len(s))
+    for k, sk in enumerate(s):
+        x = start + sk * direction
+        inverse_kinematics(model, kin, x[:3], exp_so3(x[3:]) @ model.home.rotation)
+        g.update(kin)
+        out[k] = g.minimum
+    return s, out
+
+
+X = np.array([1.0, 0, 0, 0, 0, 0])
+
+
+@pytest.mark.parametrize("step", [0.005, 0.02])  # a jog's and a move's sampling
+def test_a_straight_motion_stops_short_where_brute_force_finds_the_clearance(caroca, step):
+    model = _with_lamp(caroca, 0.0)  # straight in the cable's way
+    lim = SoftLimits(model)
+    start = _home(model)
+    end, why = lim.ray_end(start, X, 0.5, step=step)
+    s, d = _dense(model, start, X, 0.5)
+    first = s[np.argmax(d < lim.clearance.limit)]  # where it first comes too close
+    assert d[0] > 0.05 and d.min() == 0.0
+    travelled = end[0] - start[0]
+    assert first - step / 64 - 1e-4 <= travelled <= first + 1e-4
+    assert f"cable {CABLE + 1} and the lamp" in why and "mm apart, under the clearance 5.00" in why
+
+
+@pytest.mark.parametrize("offset, refused", [(0.0055, True), (0.0080, False)])
+def test_a_pass_between_two_samples_is_found_by_the_bound(caroca, offset, refused):
+    """The cable passes the lamp at ~``offset − HALF`` between two samples 6 cm apart, each
+    of which is centimetres clear: the Lipschitz bound sends the check between them."""
+    model = _with_lamp(caroca, offset)
+    lim = SoftLimits(model)
+    start = _home(model)
+    coords = start + np.array([0.0, AT - 0.03, AT + 0.03])[:, None] * X  # samples either side of AT
+    d_samples, _ = lim.clearance.at(coords)
+    assert np.all(d_samples > 2 * lim.clearance.limit)  # the samples alone see nothing
+    _, d = _dense(model, coords[1], X, 0.06)
+    assert bool(d.min() < lim.clearance.limit) == refused
+    margin, ok, _ = lim.along(coords)
+    assert bool(not ok.all()) == refused
+    if refused:
+        assert lim.nearest[2] == pytest.approx(d.min(), abs=REFINE_STEP)
+        why = lim.why(coords[2], float(margin[2]), None, lim.nearest_at[2], lim.near)
+        assert why.startswith("on the way to it, at [") and "the lamp" in why
+
+
+def test_a_path_into_the_lamp_is_refused_naming_segment_pair_and_distance(caroca):
+    model = _with_lamp(caroca, 0.0)
+    lim = SoftLimits(model)
+    start = _home(model)
+    z = model.home.position[2]
+    text = f"x, y, z\n0.1, 0, {z}\n0.5, 0, {z}\n"
+    with pytest.raises(PathRejectedError, match=rf"line 3 \(segment 2\): at t = .* s, position "
+                       rf".*: cable {CABLE + 1} and the lamp: [0-9.]+ mm apart, under the "
+                       r"clearance 5\.00 mm"):  # fmt: skip
+        plan_text(model, text, start, model.control.period, lim)
+    plan = plan_text(model, f"x, y, z\n0.1, 0, {z}\n0.2, 0, {z}\n", start, model.control.period,
+                     lim)  # fmt: skip
+    assert plan.samples > 2
+
+
+def test_a_motion_from_under_the_clearance_may_leave_it_but_get_no_closer(caroca):
+    model = _with_lamp(caroca, 0.0)
+    lim = SoftLimits(model)
+    s, d = _dense(model, _home(model), X, 0.35, step=1e-4)
+    inside = _home(model) + s[np.argmax(d < 0.003)] * X  # 3 mm from the lamp
+    back, why = lim.ray_end(inside, -X, 0.2)
+    assert why == "" and back[0] == pytest.approx(inside[0] - 0.2)
+    on, why = lim.ray_end(inside, X, 0.2)
+    assert on[0] - inside[0] < 0.005 and "the lamp" in why
+
+
+def test_the_supervisor_rides_through_a_shallow_dip_and_stops_on_a_deep_or_lasting_one(caroca):
+    model = _with_lamp(caroca, 0.0)
+    g, kin = Interference(model), KinematicsData(model)
+    s, d = _dense(model, _home(model), X, 0.35, step=1e-5)
+    limit = g.clearance
+
+    def at(distance):  # the pose where the cable is ``distance`` from the lamp
+        x = _home(model) + s[np.argmax(d < distance)] * X
+        inverse_kinematics(model, kin, x[:3], model.home.rotation)
+        g.update(kin)
+
+    watch = ClearanceWatch(g)
+    at(0.02)
+    assert watch.check(0.0) is None and watch.limit == limit
+    at(limit - 0.0003)  # shallow: ridden through for HOLD
+    assert watch.check(0.001) is None
+    assert watch.check(0.001 + 0.5 * watch.HOLD) is None
+    why = watch.check(0.001 + watch.HOLD)
+    assert why is not None and "for 10 ms" in why and f"cable {CABLE + 1} and the lamp" in why
+    watch.held(0.1, False)  # the state left the supervised ones
+    at(0.02)
+    assert watch.check(0.2) is None
+    at(limit - 0.0006)  # deep: at once
+    why = watch.check(0.201)
+    assert why is not None and "by more than 0.5 mm" in why and "4.4" in why
+    watch.held(0.3, False)
+    at(0.003)  # enabled under the clearance: the limit is where it started, less NOISE
+    assert watch.check(0.4) is None and watch.limit == pytest.approx(0.003 - watch.NOISE, abs=2e-5)
+    at(0.0028)
+    assert watch.check(0.41) is None and watch.check(0.5) is None

@@ -1,0 +1,169 @@
+"""The wrench-feasible workspace (cdprctl.tda.workspace, ``cdprctl workspace``) against an
+independent linear programme on every shipped robot, and brute force for r = 1."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from cdprctl.cli import main
+from cdprctl.core.rotation import rpy_to_matrix
+from cdprctl.geometry.kinematics import wrench_matrix
+from cdprctl.robot_file import load_robot
+from cdprctl.tda.workspace import Grid, Margins, hold_wrench, wrench_feasible_workspace
+
+ROOT = Path(__file__).resolve().parents[2]
+ROBOTS = sorted(p.name for p in (ROOT / "config").glob("*.toml"))
+
+
+def lp_feasible(W, w, lo, hi) -> bool:
+    """Independent verdict: is there t in [lo, hi] with W t = w (HiGHS, no objective)?"""
+    res = linprog(np.zeros(W.shape[1]), A_eq=W, b_eq=w, bounds=list(zip(lo, hi, strict=True)),
+                  method="highs")  # fmt: skip
+    return res.status == 0
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_verdicts_agree_with_an_independent_lp(name):
+    model = load_robot(ROOT / "config" / name)
+    rng = np.random.default_rng(20)
+    grid = Grid.around(model, 12)
+    rpy = np.array(model.home.rpy) + rng.uniform(-0.05, 0.05, 3)
+    R = rpy_to_matrix(*rpy)
+    ext = rng.uniform(-20, 20, 6) * np.array([1, 1, 1, 0.1, 0.1, 0.1])
+    res = wrench_feasible_workspace(model, grid, R, ext)
+    w = hold_wrench(model, R, ext)
+    span = float(np.min(model.tension_max - model.tension_min))
+    near, checked, feasible = 0, 0, 0
+    for i in rng.choice(len(res.points), 250, replace=False):
+        margin = res.margin[i]
+        if not np.isfinite(margin):
+            continue
+        W = wrench_matrix(model, res.points[i], R)
+        verdict = lp_feasible(W, w, model.tension_min, model.tension_max)
+        if abs(margin) < 1e-6 * span:  # on the boundary: either verdict is right
+            near += 1
+            continue
+        checked += 1
+        feasible += verdict
+        assert verdict == (margin >= 0.0), (name, res.points[i], margin)
+        # the margin itself: shrinking every bound by it is just feasible, by a bit more not
+        if margin > 1e-3 and margin < span / 2:
+            assert lp_feasible(W, w, model.tension_min + margin - 1e-3,
+                               model.tension_max - margin + 1e-3)  # fmt: skip
+            assert not lp_feasible(W, w, model.tension_min + margin + 1e-3,
+                                   model.tension_max - margin - 1e-3)  # fmt: skip
+    print(f"{name}: {checked} verdicts agree ({feasible} feasible), {near} on the boundary")
+    assert checked > 150 and near <= 5
+
+
+def test_redundancy_one_uses_the_lp_and_agrees_with_brute_force():
+    """7 cables (CAROCA without its last): t = t0 + n λ, the margin is the best λ of
+    min_k(c_k − a_k λ), a 1-D problem solved exactly at every pairwise crossing."""
+    base = load_robot(ROOT / "config" / "caroca.toml")
+    model = dataclasses.replace(base, cables=base.cables[:7])
+    calc = Margins(model)
+    assert calc.method == "lp"
+    rng = np.random.default_rng(7)
+    R = model.home.rotation
+    w = hold_wrench(model, R, np.zeros(6))
+    lo, hi = model.tension_min, model.tension_max
+    for _ in range(30):
+        p = model.home.position + rng.uniform(-0.6, 0.6, 3)
+        W = wrench_matrix(model, p, R)
+        t0 = np.linalg.lstsq(W, w, rcond=None)[0]
+        n = np.linalg.svd(W)[2][-1]
+        # lines: t_i − lo_i = (t0_i − lo_i) + n_i λ and hi_i − t_i = (hi_i − t0_i) − n_i λ
+        c = np.concatenate([t0 - lo, hi - t0])
+        a = np.concatenate([n, -n])
+        cands = [(c[j] - c[k]) / (a[k] - a[j]) for j, k in itertools.combinations(range(14), 2)
+                 if abs(a[k] - a[j]) > 1e-12]  # fmt: skip
+        best = max(min(c + a * lam) for lam in cands)
+        assert calc.at(p, R, w) == pytest.approx(best, abs=1e-6), p
+
+
+def test_grid_order_volume_and_degenerate_points():
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    g = Grid((0.0, 0.3, 0.2), (2.0, 0.4, 0.6), (3, 2, 2))
+    pts = g.points()
+    assert pts[:3, 0].tolist() == [0.0, 1.0, 2.0] and np.all(pts[:3, 1] == 0.3)  # x fastest
+    assert pts[3, 1] == 0.4 and pts[6, 2] == 0.6
+    assert g.cell_volume() == pytest.approx(1.0 * 0.1 * 0.4)
+    res = wrench_feasible_workspace(model, g, model.home.rotation, np.zeros(6))
+    assert res.volume == pytest.approx(res.feasible.sum() * 0.04)
+    # an attachment on its anchor: a cable of zero length, no verdict but "not feasible"
+    calc = Margins(model)
+    R = model.home.rotation
+    at = model.anchors[0] - R @ model.attachments[0]
+    assert calc.at(at, R, hold_wrench(model, R, np.zeros(6))) == -math.inf
+
+
+def test_grid_parse_names_the_part():
+    assert Grid.parse("0:1:3,0:0:1,1:2:5").n == (3, 1, 5)
+    for bad, words in [("0:1:3,0:1", "x0:x1:nx"), ("0:1:3,a:1:2,0:1:2", "--grid y"),
+                       ("0:1:3,0:1:2,1:0:2", "start <= stop"), ("0:1:0,0:1:2,0:1:2", "count")]:
+        with pytest.raises(ValueError, match=words):
+            Grid.parse(bad)
+
+
+def test_cli_json_and_plot(tmp_path, capsys):
+    rc = main(["workspace", "--config", str(ROOT / "config" / "rowc.toml"), "--wrench",
+               "0,30,0,0,0,0", "--grid", "0.5:2.5:5,0.35:0.35:1,0.3:0.7:3", "--json",
+               "--plot", str(tmp_path)])  # fmt: skip
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["points"]) == len(out["feasible"]) == len(out["margin"]) == 15
+    assert out["points"][1] == [1.0, 0.35, 0.3]
+    assert out["volume"] == pytest.approx(sum(out["feasible"]) * 0.5 * 0.2)
+    assert all(f == (m >= 0) for f, m in zip(out["feasible"], out["margin"], strict=True))
+    assert (tmp_path / "slices_xy.png").stat().st_size > 10_000
+    rc = main(["workspace", "--config", str(ROOT / "config" / "rowc.toml"), "--wrench", "1,2"])
+    assert rc == 2
+    assert "--wrench = '1,2' must be 6 finite numbers (N, N·m)" in capsys.readouterr().err
+
+
+def _homes(fig) -> list[str]:
+    """The titles of the slices that draw the home star."""
+    return [ax.get_title() for ax in fig.axes
+            if any(line.get_marker() == "*" for line in ax.get_lines())]  # fmt: skip
+
+
+def test_the_home_star_only_on_the_slice_through_home(rowc):
+    """A slice 1 m above home draws no home star (it was drawn on every slice, as if home lay
+    on each); the slice through home (within half a spacing) draws it; and the slice through
+    home is among those drawn even when the spread of picks would step over it."""
+    import matplotlib.pyplot as plt
+
+    from cdprctl.tda.plots.workspace_plot import slices_figure
+
+    hx, _, hz = rowc.home.position
+    # x slices 0.5 m apart, through home and 1 m either side of it
+    grid = Grid((hx - 1.0, 0.3, 0.3), (hx + 1.0, 0.4, 0.7), (5, 3, 3))
+    res = wrench_feasible_workspace(rowc, grid, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(3, 3, 5), 0, "t")
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title().startswith("x =")]
+    assert f"x = {hx - 1.0:.3g} m" in titles and f"x = {hx + 1.0:.3g} m" in titles
+    assert _homes(fig) == [f"x = {hx:.3g} m (home)"]  # not on the slices 1 m away
+    plt.close(fig)
+    # the grid starts 0.3 m past home (spacing 0.5 m): home is on none of its slices
+    off = Grid((hx + 0.3, 0.3, 0.3), (hx + 1.3, 0.4, 0.7), (3, 3, 3))
+    res = wrench_feasible_workspace(rowc, off, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(3, 3, 3), 0, "t")
+    assert [ax for ax in fig.axes if ax.get_title().startswith("x =")]
+    assert _homes(fig) == []
+    plt.close(fig)
+    # 40 z slices of which 9 are drawn: the one through home is one of them
+    fine = Grid((1.0, 0.3, 0.0), (2.0, 0.4, 1.4), (3, 3, 40))
+    res = wrench_feasible_workspace(rowc, fine, rowc.home.rotation, np.zeros(6))
+    fig = slices_figure(rowc, res, res.margin.reshape(40, 3, 3), 2, "t")
+    step = 1.4 / 39
+    near = fine.axes()[2][round(hz / step)]
+    assert _homes(fig) == [f"z = {near:.3g} m (home)"]
+    plt.close(fig)
