@@ -132,3 +132,21 @@ def test_the_controller_sees_a_view_of_the_drives_not_the_driver():
             assert not hasattr(view, name), name
     finally:
         rig.close()
+
+
+def test_the_architecture_doc_holds_the_same_layers():
+    """docs/architecture.md's "Layers" table names, row by row, the packages of ``LAYERS``."""
+    doc = (ROOT / "docs" / "architecture.md").read_text()
+    table = doc.split("## Layers", 1)[1].split("\n\n")[2]
+    rows = [r.split("|")[1:3] for r in table.splitlines()[2:]]
+    in_doc = [(name.strip(), tuple(sorted(
+        p.strip(" `/").removesuffix(".py").replace("/", ".") for p in cell.split(", ")
+    ))) for name, cell in rows]  # fmt: skip
+    assert in_doc == [(name, tuple(sorted(prefixes))) for name, prefixes in LAYERS]
+
+
+def test_no_module_stands_loose_beside_the_layers_packages():
+    """A module of cdprctl/ belongs to a layer's package; only the entry point (``cli.py``)
+    and the package's face stand at its top."""
+    loose = sorted(f.name for f in (ROOT / "cdprctl").glob("*.py"))
+    assert loose == ["__init__.py", "cli.py"]
