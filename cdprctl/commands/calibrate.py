@@ -4,15 +4,15 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
 from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, keep_record, records_dir
 from cdprctl.commands.sim import add_bus_arguments
@@ -32,29 +32,6 @@ def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
     add_bus_arguments(p, **default)
 
 
-@contextlib.contextmanager
-def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterator[None]:
-    """A procedure's cycles as the daemon's loop runs its own: the garbage collector frozen
-    (a full collection of what the start-up built held a cycle ~80 ms on this VM: the drives
-    extrapolated, then a step in their targets) and, with ``realtime``, SCHED_FIFO on the
-    loop's CPU (a late cycle is a tension spike on stiff cables: rowc's moves stopped short,
-    a following error). Given back after."""
-    from cdprctl.core import realtime as rt
-
-    try:
-        for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
-            log(f"cdprctl calibrate: warning: {w}")
-        if realtime:
-            for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
-                log(f"cdprctl calibrate: warning: {w}")
-        yield
-    finally:
-        if realtime:
-            rt.leave_realtime()
-        rt.restore_gc()
-
-
-WHO = "cdprctl calibrate"
 
 
 def _simulated_after_configure(model: Any, overrides: dict[str, Any], driver: Any,

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.calibrate import WHO, moves_held
+from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.records import bus_and_records
 
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.calibrate import WHO, moves_held
+from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.common import load_or_report
 from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
 from cdprctl.commands.resume import (

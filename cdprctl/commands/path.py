@@ -32,13 +32,13 @@ def check(args: argparse.Namespace) -> int:
     the closest approach to the limits); exit 0 when it holds, 2 when it is refused (why, on
     one line)."""
     from cdprctl.motion.limits import SoftLimits
-    from cdprctl.motion.path_file import PathFileError
     from cdprctl.motion.path_plan import (
         PathRejectedError,
         coordinates_of,
         plan_text,
         units_hint,
     )
+    from cdprctl.motion.waypoints import PathFileError
 
     model = load_or_report(args.config)
     if model is None:

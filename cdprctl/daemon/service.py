@@ -85,11 +85,11 @@ class Daemon:
         self.brake_record: Any = None  # the brake test a real robot's start-up took
         self.out = out if out is not None else sys.stdout
         # first, before the simulated robot is built (its first build compiles for ~10 s)
-        self._print(f"cdprctl run: {model.name}, {model.n_cables} {model.drives.driver} drives, "
+        self.say(f"cdprctl run: {model.name}, {model.n_cables} {model.drives.driver} drives, "
                     f"{model.control.rate:g} Hz, TDA {tda_options_of(model).method.value}"
                     + (", simulated robot" if sim else ""))  # fmt: skip
         if sim:
-            self._print("building the simulated robot (the first run on a machine compiles its "
+            self.say("building the simulated robot (the first run on a machine compiles its "
                         "kernels too: about 15 s more)")  # fmt: skip
         self.status_every, self.timing_file, self.realtime = status_every, timing_file, realtime
         self._cycle_done = threading.Event()  # set by the loop after each cycle
@@ -100,7 +100,7 @@ class Daemon:
             if sim:
                 from sim_backend.process import SimulatedRobotProcess
 
-                self.sim = SimulatedRobotProcess(model, as_built, realtime, self._print)
+                self.sim = SimulatedRobotProcess(model, as_built, realtime, self.say)
                 self.driver = create_driver(model, period=period, bus_overrides=self.sim.overrides)
             else:
                 self.driver = create_driver(model, period=period, bus_overrides=overrides)
@@ -146,26 +146,26 @@ class Daemon:
     def _run(self, duration: float | None, demo: bool, force: float,
              path: tuple[str, str, str] | None) -> int:  # fmt: skip
         m, d = self.model, self.data
-        self._print(gains_line(m, d, self.driver))
+        self.say(gains_line(m, d, self.driver))
         try:
             script = start_up(self, path)
             # from here a signal is the loop's controlled stop (until now: the start-up's end)
             old = {s: signal.signal(s, self._on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
             stop_if_interrupted()  # a signal whose exception a library swallowed ends it here
         except (StartupRefusedError, StartupInterrupted) as exc:
-            self._print(exc.message, err=True)
+            self.say(exc.message, err=True)
             self._close_buses()
             self.links.close()
             return exc.code
         finally:
             forget_stop_signals()
         p = d.position
-        self._print(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
+        self.say(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
         notify("READY=1")
         if self.realtime:  # the helper threads started below leave the loop's CPU and priority
             for w in rt.schedule_realtime(m.control.sched_priority, m.control.cpu):
-                self._print(f"warning: {w}", err=True)
+                self.say(f"warning: {w}", err=True)
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip
         interval = watchdog_interval()
@@ -190,14 +190,14 @@ class Daemon:
         self._drain_events()
         self.links.close()
         for line in self.report.finish(self.driver.stats.as_dict()):
-            self._print(line)
+            self.say(line)
         if script is not None and script.rejected:  # checked whole: the drives never enabled
-            self._print(f"cdprctl run: path {script.name} rejected: {script.rejected}", err=True)
+            self.say(f"cdprctl run: path {script.name} rejected: {script.rejected}", err=True)
             code = 2
         elif path is not None and not self.stop_requested.is_set():
             why = (f" (stopped at the {d.state.value}: {d.fault_reason})"
                    if d.state in SCRIPT_STOPS else "")  # fmt: skip
-            self._print(f"path {path[0]}: {d.path_state or 'not run'}{why}")
+            self.say(f"path {path[0]}: {d.path_state or 'not run'}{why}")
             code = 0 if d.path_state == "done" else 3
         else:
             code = 0 if d.state is not State.FAULT or self.stop_requested.is_set() else 3
@@ -212,7 +212,7 @@ class Daemon:
         d = self.data
         left = sum(not isinstance(step, Disturbance) for _, step in script)
         why = f" ({d.fault_reason})" if d.fault_reason else ""
-        self._print(f"[t={d.time:9.3f}] demo: stopped at the {d.state.value}{why}; its "
+        self.say(f"[t={d.time:9.3f}] demo: stopped at the {d.state.value}{why}; its "
                     f"remaining {left} commands not sent")  # fmt: skip
         if self.sim is not None and any(isinstance(step, Disturbance) for _, step in script):
             self.sim.disturb(0.0)  # the demo's own lateral force, due off later, off now
@@ -241,7 +241,7 @@ class Daemon:
         try:
             self._io_loop(duration, demo, force, path)
         except Exception as exc:  # the I/O thread must not die silently: stop the run
-            self._print(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
+            self.say(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
             self.manager.submit(Command(CommandKind.DISABLE))
             self._await_disabled(time.monotonic())
             self.finished.set()
@@ -288,7 +288,7 @@ class Daemon:
                     submit(step)
             self.report.track(true)
             if self.status_every and now >= next_status:
-                self._print(self.report.status_line(now, self.status_every, true))
+                self.say(self.report.status_line(now, self.status_every, true))
                 next_status += self.status_every
             if demo and not script and duration is not None and d.state is State.FAULT:
                 submit(Command(CommandKind.RESET))  # a long demo run carries on after a fault
@@ -308,7 +308,7 @@ class Daemon:
                 drives_on = d.state in (State.ENABLED, State.MOVING, State.ENABLING)
                 if self.stop_requested.is_set():
                     how = ": decelerating, then the drives disabled" if drives_on else ""
-                    self._print(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}{how}")
+                    self.say(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}{how}")
                 if drives_on:
                     submit(Command(CommandKind.STOP))
                     submit(Command(CommandKind.DISABLE))
@@ -329,7 +329,7 @@ class Daemon:
         d = self.data
         while d.events:
             t, text = d.events.popleft()
-            self._print(f"[t={t:9.3f}] {text}")
+            self.say(f"[t={t:9.3f}] {text}")
             self.links.event(t, text)
         while d.faults:
             self.report.faults[d.faults.popleft()[1].value] += 1
@@ -337,6 +337,7 @@ class Daemon:
             self._last_fault = d.fault_reason
             self.links.event(d.time, d.fault_reason, "fault")
 
-    def _print(self, text: str, err: bool = False) -> None:
+    def say(self, text: str, err: bool = False) -> None:
+        """A line to the operator: stdout (or ``err``: stderr), flushed (journald reads it)."""
         print(text, file=sys.stderr if err else self.out, flush=True)
 

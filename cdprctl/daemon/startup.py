@@ -10,7 +10,7 @@ import contextlib
 import signal
 import sys
 import time
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -19,8 +19,14 @@ from cdprctl.daemon.report import identity_lines
 from cdprctl.daemon.scripts import PathScript
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from cdprctl.calibration.calibration_record import CalibrationRecord
-    from cdprctl.daemon.service import Daemon
+    from cdprctl.control.data import ControlData
+    from cdprctl.control.lifecycle.manager import ControllerManager
+    from cdprctl.daemon.links import Links
+    from cdprctl.model import RobotModel
+    from sim_backend.process import SimulatedRobotProcess
 
 NOT_CALIBRATED = 4  # exit code: no valid calibration record or brake test (systemd: no restart)
 
@@ -86,7 +92,28 @@ def forget_stop_signals() -> None:
     _received.clear()
 
 
-def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None:
+class StartingDaemon(Protocol):
+    """What the start-up reads and sets of the daemon (``service.Daemon``), given to it
+    rather than the daemon's class imported (the daemon calls the start-up)."""
+
+    model: RobotModel
+    bus_hint: str  # the bus options given, as options: the refusals' commands repeat them
+    simulated_robot: bool
+    state_dir: Path
+    assume_home: bool
+    realtime: bool
+    record: Any  # the calibration record the start-up loads
+    brake_record: Any  # the brake test a real robot's start-up took
+    sim: SimulatedRobotProcess | None
+    driver: Any
+    manager: ControllerManager
+    data: ControlData
+    links: Links
+
+    def say(self, text: str, err: bool = False) -> None: ...
+
+
+def start_up(dm: StartingDaemon, path: tuple[str, str, str] | None) -> PathScript | None:
     """Everything before ``ready``; returns the ``--path`` script (planned), if any."""
     from cdprctl.calibration.calibration_record import CalibrationError
     from cdprctl.calibration.startup_checks import how_to_calibrate, load_record
@@ -97,7 +124,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
         raise StartupRefusedError(f"cdprctl run: {failure}", 1)
     for link in dm.links.links:  # what each link is, once it runs
         for text, err in link.announcement():
-            dm._print(text, err=err)
+            dm.say(text, err=err)
 
     def refused(why: str) -> StartupRefusedError:  # no enable without a valid calibration
         how = how_to_calibrate(m, dm.state_dir, dm.bus_hint)
@@ -105,7 +132,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
                                    NOT_CALIBRATED)  # fmt: skip
 
     if dm.assume_home:
-        dm._print("encoders: taken as zero at the home pose ("
+        dm.say("encoders: taken as zero at the home pose ("
                   + ("the simulated robot starts there" if dm.sim else
                      "[drives] assume_home_at_start = true") + ")")  # fmt: skip
         if not dm.sim:  # no zeros needed, but a friction calibration on record still applies
@@ -116,10 +143,10 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
             dm.record = load_record(m, dm.state_dir, dm.simulated_robot)
         except CalibrationError as exc:
             raise refused(str(exc)) from None
-        dm._print(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
+        dm.say(f"calibration: {dm.record.method} of {dm.record.time} ({dm.state_dir})")
         _friction(dm, dm.record)
         _brakes_tested(dm)
-    dm._print("start-up: loading the compiled kernels (the first run on a machine compiles "
+    dm.say("start-up: loading the compiled kernels (the first run on a machine compiles "
               "them: about a minute), configuring the drives, estimating the pose")  # fmt: skip
     stop_if_interrupted()
     dm.manager.warm_up()
@@ -129,7 +156,7 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
     # on a slow CPU held the loop 0.6 s (the HIL demo under User-Mode Linux: feedback fault)
     for w in rt.lock_memory_and_freeze_gc(dm.realtime and m.control.lock_memory,
                                           m.control.freeze_gc):  # fmt: skip
-        dm._print(f"warning: {w}", err=True)
+        dm.say(f"warning: {w}", err=True)
     try:
         dm.manager.startup(calibration=None if dm.assume_home else _calibration(dm))
     except CalibrationError as exc:
@@ -150,16 +177,16 @@ def start_up(dm: Daemon, path: tuple[str, str, str] | None) -> PathScript | None
             ) from None
     _load_cells_zeroed(dm)
     for w in dm.driver.warnings:
-        dm._print(f"warning: {w}", err=True)
+        dm.say(f"warning: {w}", err=True)
     lines, drives = identity_lines(m, dm.driver)
     for line in lines:
-        dm._print(line)
+        dm.say(line)
     if drives:
         dm.links.event(dm.data.time, drives, "drives")
     return None if path is None else _plan_path(dm, *path)
 
 
-def _friction(dm: Daemon, record: CalibrationRecord) -> None:
+def _friction(dm: StartingDaemon, record: CalibrationRecord) -> None:
     """``record``'s friction calibration, if any, in place of the robot file's winch terms
     (the torque law, the tension estimate, the observer: the controller's ``WinchTorques``)."""
     from cdprctl.calibration.friction_record import friction_line, friction_terms
@@ -167,10 +194,10 @@ def _friction(dm: Daemon, record: CalibrationRecord) -> None:
     terms = friction_terms(record)
     if terms is not None:
         dm.manager.controller.winches.apply_friction(*terms)
-    dm._print(friction_line(record))
+    dm.say(friction_line(record))
 
 
-def _load_cells_zeroed(dm: Daemon) -> None:
+def _load_cells_zeroed(dm: StartingDaemon) -> None:
     """The load cells' tare (`cdprctl load-cells zero`) applied where there is one; without
     it the file's offsets, said (cdprctl/calibration/load_cells.py)."""
     from cdprctl.calibration.load_cells import LoadCellError, apply, load
@@ -183,13 +210,13 @@ def _load_cells_zeroed(dm: Daemon) -> None:
             raise LoadCellError(f"{record.time}'s tare was a simulated robot's")
         apply(record, dm.model, dm.driver)
     except LoadCellError as exc:
-        dm._print(f"warning: load cells: {exc}: the robot file's offsets (`cdprctl load-cells "
+        dm.say(f"warning: load cells: {exc}: the robot file's offsets (`cdprctl load-cells "
                   "zero` tares them)", err=True)  # fmt: skip
         return
-    dm._print(f"load cells: zeroed {record.time} ({dm.state_dir})")
+    dm.say(f"load cells: zeroed {record.time} ({dm.state_dir})")
 
 
-def _brakes_tested(dm: Daemon) -> None:
+def _brakes_tested(dm: StartingDaemon) -> None:
     """A real robot is enabled only with a passed brake test younger than ``[safety]
     brake_test_interval`` on record (not with ``--sim`` or ``assume_home_at_start``: the
     simulated robot)."""
@@ -203,10 +230,10 @@ def _brakes_tested(dm: Daemon) -> None:
             f"cdprctl run: refusing to enable the drives: {why}", NOT_CALIBRATED
         ) from None
     dm.brake_record = last
-    dm._print(f"brakes: tested {last.time}, the next test due {due_time(last, dm.model)}")
+    dm.say(f"brakes: tested {last.time}, the next test due {due_time(last, dm.model)}")
 
 
-def _calibration(dm: Daemon) -> Any:
+def _calibration(dm: StartingDaemon) -> Any:
     """The record's offsets, once the configured drives match it (``Manager.startup``)."""
 
     def offsets_of(driver: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -218,14 +245,14 @@ def _calibration(dm: Daemon) -> Any:
     return offsets_of
 
 
-def _plan_path(dm: Daemon, name: str, text: str, units: str) -> PathScript:
+def _plan_path(dm: StartingDaemon, name: str, text: str, units: str) -> PathScript:
     """The script of the path: planned whole from the pose start-up found and checked before
     the drives are enabled (``units``: a CSV's lengths without a row of units) — by the I/O
     thread once the loop runs: planned here, a long path (100 segments: 3 s) left the started
     drives unserved and they were lost ("no heartbeat for 0.510 s")."""
     from cdprctl.motion.limits import SoftLimits
-    from cdprctl.motion.path_file import PathFileError
     from cdprctl.motion.path_plan import PathRejectedError, plan_text, units_hint
+    from cdprctl.motion.waypoints import PathFileError
 
     def planner(start: np.ndarray) -> tuple[Any, str]:
         """(the plan, "") or (None, why it was rejected)."""
@@ -234,7 +261,7 @@ def _plan_path(dm: Daemon, name: str, text: str, units: str) -> PathScript:
                              SoftLimits(dm.model), name, units)  # fmt: skip
         except (PathFileError, PathRejectedError) as exc:
             return None, f"{exc}{units_hint(text, units, str(exc))}"
-        dm._print(f"path {name}: {plan.summary()}")
+        dm.say(f"path {name}: {plan.summary()}")
         return plan, ""
 
     return PathScript(name, text, planner)

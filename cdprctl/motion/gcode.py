@@ -23,7 +23,7 @@ import numpy as np
 
 from cdprctl.core.rotation import FloatArray
 from cdprctl.motion import arcs
-from cdprctl.motion.path_file import PathFileError, Waypoint
+from cdprctl.motion.waypoints import PathFileError, Waypoint
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(\d+\.?\d*|\.\d+))")
 AXES = {"X": 0, "Y": 1, "Z": 2, "A": 3, "B": 4, "C": 5}

@@ -16,26 +16,12 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
 
 import numpy as np
 
 from cdprctl.core.rotation import FloatArray
-
-
-@dataclass(frozen=True)
-class Waypoint:
-    pose: tuple[float, float, float, float, float, float]  # x, y, z (m), roll, pitch, yaw (rad)
-    speed: float | None  # m/s along the segment ending here; None: the configured maximum
-    time: float | None  # s after the path's start at which it is reached
-    blend: bool  # pass through without stopping
-    dwell: float  # s held here
-    where: str  # "line 7" (the file's line, 1-based)
-
-
-class PathFileError(ValueError):
-    """A path file that cannot be read: the message names the line, the column, the value,
-    the unit and the rule."""
+from cdprctl.motion.gcode import read_gcode
+from cdprctl.motion.waypoints import PathFileError, Waypoint
 
 
 def parse_path(
@@ -54,8 +40,6 @@ def parse_path(
         raise PathFileError("the path file is empty")
     if _CSV_HEADER.match(lines[0]):
         return _csv(text, start, LENGTH_UNITS[units])
-    from cdprctl.motion.gcode import read_gcode  # late: gcode reads into this module's types
-
     return read_gcode(text, start, arc_tolerance)
 
 

@@ -27,7 +27,7 @@ from cdprctl.core.rotation import FloatArray, rpy_to_matrix
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.gcode import looks_like_metres
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import Waypoint, csv_without_units, parse_path
+from cdprctl.motion.path_file import csv_without_units, parse_path
 from cdprctl.motion.trajectory import (
     Trajectory,
     acceleration_limits,
@@ -35,6 +35,7 @@ from cdprctl.motion.trajectory import (
     pose_coordinates,
     velocity_limits,
 )
+from cdprctl.motion.waypoints import Waypoint
 
 CHECK_SPACING = 0.002  # m (or rad) between checked samples at most
 # m (or rad): a plan made where the reference rested still holds from a reference this close

@@ -9,6 +9,8 @@ import ast
 import re
 from pathlib import Path
 
+from import_graph import circles, imports_within
+
 ROOT = Path(__file__).resolve().parent.parent.parent
 DRIVERS = ROOT / "drivers"
 PRIVATE = re.compile(r"^_[a-z]")  # _field, not __dunder__ (nor a _Class)
@@ -38,57 +40,6 @@ def modules() -> dict[str, Path]:
         parts = f.relative_to(ROOT).with_suffix("").parts
         out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = f
     return out
-
-
-def imports_within(name: str, path: Path, known: set[str]) -> set[str]:
-    """The modules of ``known`` that module ``name`` imports — anywhere in it, under
-    ``TYPE_CHECKING`` too; ``from package import module`` is an import of the module."""
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    out = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*parts, base] if base else parts)
-            for a in node.names:
-                sub = f"{base}.{a.name}"
-                out.add(sub if sub in known else base)
-    return {m for m in out if m in known and m != name}
-
-
-def circles(graph: dict[str, set[str]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (Tarjan)."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    found: list[list[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        for w in sorted(graph[v]):
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                component.append(w)
-                if w == v:
-                    break
-            if len(component) > 1:
-                found.append(sorted(component))
-
-    for v in sorted(graph):
-        if v not in index:
-            visit(v)
-    return found
 
 
 def test_no_module_reaches_into_another_objects_private_fields():

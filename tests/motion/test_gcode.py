@@ -12,9 +12,10 @@ import pytest
 
 from cdprctl.cli import main
 from cdprctl.model import ConfigError
-from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_file import parse_path
 from cdprctl.motion.path_plan import plan_text, units_hint
 from cdprctl.motion.trajectory import pose_coordinates
+from cdprctl.motion.waypoints import PathFileError
 from cdprctl.robot_file import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]

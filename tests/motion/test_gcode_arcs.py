@@ -11,7 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_file import parse_path
+from cdprctl.motion.waypoints import PathFileError
 
 START = np.array([1.5, 0.35, 0.59, 0.0, 0.0, 0.0])
 #: the plane's G code → the axis it turns about (index, as in the pose) — the right-hand rule

@@ -11,9 +11,10 @@ import pytest
 
 from cdprctl.cli import main
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import PathFileError, parse_path
+from cdprctl.motion.path_file import parse_path
 from cdprctl.motion.path_plan import CHECK_SPACING, PathRejectedError, plan_path
 from cdprctl.motion.trajectory import Trajectory, pose_coordinates
+from cdprctl.motion.waypoints import PathFileError
 from cdprctl.robot_file import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]

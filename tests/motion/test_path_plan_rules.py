@@ -13,8 +13,9 @@ import pytest
 
 from cdprctl.motion import path_plan as pp
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import Waypoint, parse_path
+from cdprctl.motion.path_file import parse_path
 from cdprctl.motion.trajectory import acceleration_limits, pose_coordinates, velocity_limits
+from cdprctl.motion.waypoints import Waypoint
 from cdprctl.robot_file import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,9 +17,9 @@ from cdprctl.control.intake.motion_source import MotionSource
 from cdprctl.control.states import State
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
-from cdprctl.motion.path_file import PathFileError
 from cdprctl.motion.path_plan import PathPlan, PathRejectedError, plan_path, plan_text
 from cdprctl.motion.trajectory import Trajectory
+from cdprctl.motion.waypoints import PathFileError
 
 
 class PathFollower(MotionSource):

@@ -193,8 +193,8 @@ class CommandValidator:
         """``{"text": the CSV or G-code file, "name": where it came from}``: parsed and the
         whole path checked from where the robot rests now (the controller checks again from
         the reference it holds when the command arrives; a refusal there is an event)."""
-        from cdprctl.motion.path_file import PathFileError
         from cdprctl.motion.path_plan import PathRejectedError, plan_text
+        from cdprctl.motion.waypoints import PathFileError
 
         text, name = d.get("text"), d.get("name", "")
         if not isinstance(text, str) or not text.strip():
