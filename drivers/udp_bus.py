@@ -12,6 +12,14 @@ none is left, decoded to ``(arbitration id, plain, data)`` — and ``stage``/``f
 packed as python-can packs them, sent together by ``sendmmsg`` (Linux; elsewhere one
 ``sendto`` each) from a send socket connected to the group. The set-up (SDO, NMT, the
 ``canopen`` package) keeps python-can's path through ``recv``/``send``.
+
+Two differences from python-can's defaults, both for a medium that stands in for vcan on one
+machine (``docs/drivers.md``): the hop limit is 0 unless given (``--can-option hop_limit=1``
+for peers on other machines), so a frame never leaves the machine — with python-can's 1 each
+one also went out on the NIC, on this VM a transmit to the host per frame, half of a cycle's
+write across processes; and the receive socket drops what our own ``flush`` sent (python-can's
+bus has no ``receive_own_messages`` either, but the loopback gave it them: half the frames a
+cycle read across processes were our own).
 """
 
 from __future__ import annotations
@@ -30,7 +38,9 @@ from can.interfaces.udp_multicast import UdpMulticastBus
 from can.interfaces.udp_multicast.utils import pack_message
 
 from drivers.cyclic_path import StagedFrames
+from drivers.udp_frames import FramePacker
 
+HOST_LOCAL_HOPS = 0  # hop limit unless given: the frames stay on this machine
 MAX_DATAGRAM = 4096  # bytes: python-can's own receive buffer
 MAX_STANDARD_ID = 0x7FF
 MAX_STAGED = 64  # frames a flush sends at most in one call (a cycle of rowc: 9-17)
@@ -87,11 +97,46 @@ def _own_group_only(sock: socket.socket) -> None:
                         IPV6_MULTICAST_ALL if v6 else IP_MULTICAST_ALL, 0)  # fmt: skip
 
 
+# Linux's socket filter (<linux/filter.h>): classic BPF over the datagram, offset 0 its UDP
+# header, SKF_NET_OFF + k the IP header's byte k
+SO_ATTACH_FILTER = 26
+SKF_NET_OFF = -0x100000
+_LD_H_ABS, _LD_W_ABS, _JEQ_K, _RET_K = 0x28, 0x20, 0x15, 0x06
+
+
+def _own_datagrams_dropped(rx: socket.socket, tx: socket.socket) -> bool:
+    """Make ``rx`` drop the datagrams ``tx`` sends (their source: ``tx``'s address and port,
+    which no other socket of this machine has), in the kernel, before they are queued; every
+    other sender's datagrams pass. False where the kernel has no socket filter (then our own
+    frames keep arriving: ``drain_frames`` reads and ignores them as before)."""
+    host, port = tx.getsockname()[:2]
+    v6 = tx.family == socket.AF_INET6
+    address = socket.inet_pton(tx.family, host.split("%")[0])
+    words = struct.unpack(f"!{len(address) // 4}I", address)
+    source_at = (8 if v6 else 12) + SKF_NET_OFF  # the IP header's source address
+    n = len(words)
+    # ldh [0] (UDP source port); jeq port; then each word of the source address; a mismatch
+    # jumps to "keep" (the last instruction), all matching falls through to "drop"
+    prog = [(_LD_H_ABS, 0, 0, 0), (_JEQ_K, 0, 2 * n + 1, port)]
+    for i, w in enumerate(words):
+        prog += [(_LD_W_ABS, 0, 0, (source_at + 4 * i) & 0xFFFFFFFF),
+                 (_JEQ_K, 0, 2 * (n - i) - 1, w)]  # fmt: skip
+    prog += [(_RET_K, 0, 0, 0), (_RET_K, 0, 0, 0xFFFFFFFF)]
+    code = ctypes.create_string_buffer(b"".join(struct.pack("HBBI", *op) for op in prog))
+    fprog = struct.pack("HL", len(prog), ctypes.addressof(code))  # struct sock_fprog
+    try:
+        rx.setsockopt(socket.SOL_SOCKET, SO_ATTACH_FILTER, fprog)
+    except OSError:
+        return False
+    return True
+
+
 class CyclicUdpMulticastBus(StagedFrames, UdpMulticastBus):
     """``UdpMulticastBus`` (same arguments) with the control cycle's path: ``drain_frames``
     to read, ``stage`` and ``flush`` to send."""
 
     def __init__(self, channel: str = UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs: Any):
+        kwargs.setdefault("hop_limit", HOST_LOCAL_HOPS)
         super().__init__(channel, **kwargs)
         # A second handle on the same socket (its receive queue, its options): reading it by
         # MSG_DONTWAIT never changes the blocking mode python-can's send relies on.
@@ -102,7 +147,9 @@ class CyclicUdpMulticastBus(StagedFrames, UdpMulticastBus):
         #: datagrams that were no python-can frame (not msgpack, a field missing or of the wrong
         #: type): dropped like a frame with a bad CRC on a wire, never raised in the cycle
         self.malformed = 0
-        self._open_sender(channel, int(kwargs.get("port", 43113)), int(kwargs.get("hop_limit", 1)))
+        self._open_sender(channel, int(kwargs.get("port", 43113)), int(kwargs["hop_limit"]))
+        #: our own flushed frames are dropped by the kernel, not read back (a socket filter)
+        self.own_frames_dropped = _own_datagrams_dropped(self._raw, self._tx)
 
     def _open_sender(self, group: str, port: int, hop_limit: int) -> None:
         """A socket connected to the group for ``flush`` (no address per datagram; the group's
@@ -117,11 +164,11 @@ class CyclicUdpMulticastBus(StagedFrames, UdpMulticastBus):
             self._tx.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_MULTICAST_HOPS, hops)
         self._tx.connect((group, port))
         self._sendmmsg = _libc_sendmmsg()
-        self._slots = [ctypes.create_string_buffer(SLOT_BYTES) for _ in range(MAX_STAGED)]
+        self._packer = FramePacker(MAX_STAGED, SLOT_BYTES)
         self._iov = (_Iovec * MAX_STAGED)()
         self._hdrs = (_Mmsghdr * MAX_STAGED)()
-        for i, buf in enumerate(self._slots):
-            self._iov[i].base = ctypes.addressof(buf)
+        for i in range(MAX_STAGED):
+            self._iov[i].base = self._packer.address + i * SLOT_BYTES
             self._hdrs[i].hdr.iov = ctypes.pointer(self._iov[i])
             self._hdrs[i].hdr.iovlen = 1
         self._iov_of = [self._iov[i] for i in range(MAX_STAGED)]  # views, made once
@@ -129,20 +176,22 @@ class CyclicUdpMulticastBus(StagedFrames, UdpMulticastBus):
         self._datagrams: list[bytes] = []  # without sendmmsg: sent one by one
 
     def stage(self, msg: can.Message) -> bool:
-        """Pack ``msg`` now (as python-can's ``send`` does) for the next
-        ``flush``; False if the batch is full or the frame does not fit a slot (then nothing
-        is staged)."""
+        """Pack ``msg`` now (the bytes python-can's ``send`` sends: ``udp_frames.py``) for the
+        next ``flush``; False if the batch is full or the frame does not fit a slot (then
+        nothing is staged)."""
         k = self._staged
         if k >= MAX_STAGED:
             return False
-        data = pack_message(msg)
-        if len(data) > SLOT_BYTES:
-            return False
         if self._sendmmsg is None:
+            data = pack_message(msg)
+            if len(data) > SLOT_BYTES:
+                return False
             self._datagrams.append(data)
         else:
-            ctypes.memmove(self._slots[k], data, len(data))
-            self._iov_of[k].len = len(data)
+            size = self._packer.pack(k, msg)
+            if size == 0:
+                return False
+            self._iov_of[k].len = size
         self._staged = k + 1
         return True
 
