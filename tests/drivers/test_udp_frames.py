@@ -6,10 +6,12 @@ from __future__ import annotations
 import random
 
 import can
+import msgpack
+import numpy as np
 import pytest
 from can.interfaces.udp_multicast.utils import pack_message, unpack_message
 
-from drivers.udp_frames import FramePacker, template
+from drivers.udp_frames import ERROR, EXTENDED, FD, REMOTE, FramePacker, template
 
 SLOT = 512
 
@@ -87,3 +89,111 @@ def test_a_frame_of_no_template_is_packed_whole(channel):
     msg.channel = channel
     size = packer.pack(0, msg)
     assert slot_bytes(packer, 0, size) == pack_message(msg)
+
+
+def expected(raw: bytes) -> tuple[int, int, bytes] | None:
+    """What a datagram says, by msgpack's own unpacker (the reference): (id, flags, data), or
+    None for what is no frame."""
+    try:
+        d = msgpack.unpackb(raw)
+        arb, data = d["arbitration_id"], d["data"]
+        flags = sum(bit for key, bit in (("is_extended_id", EXTENDED), ("is_remote_frame", REMOTE),
+                                         ("is_error_frame", ERROR), ("is_fd", FD))
+                    if d.get(key, False))  # fmt: skip
+        # the flags as the cycle has always read them: a later one only if the earlier are off
+        d["is_extended_id"] or d["is_remote_frame"] or d["is_error_frame"]
+    except Exception:
+        return None
+    if type(arb) is not int or type(data) is not bytes or arb < 0:
+        return None
+    return arb, flags, data
+
+
+def variants(rng: random.Random) -> list[bytes]:
+    """python-can's datagrams and their neighbours: fields shuffled, unknown ones added, one
+    missing, of another type, a map16, truncated, trailing bytes, no map at all."""
+    out = []
+    for _ in range(400):
+        msg = random_message(rng)
+        d = msgpack.unpackb(pack_message(msg))
+        out.append(pack_message(msg))
+        items = list(d.items())
+        rng.shuffle(items)
+        kind = rng.randrange(8)
+        if kind == 0:
+            items.append(("extra", rng.choice([None, 1.5, "x", -3, 2**40, b"zz"])))
+        elif kind == 1:
+            del items[rng.randrange(len(items))]
+        elif kind == 2:
+            k = rng.randrange(len(items))
+            items[k] = (items[k][0], rng.choice(["0x181", -1, 2**64 - 1, [1], {"a": 1}, 1.0]))
+        elif kind == 3:
+            items += [(f"pad{j}", j) for j in range(10)]  # 16 and more: a map16
+        raw = msgpack.packb(dict(items), use_bin_type=True)
+        if kind == 4:
+            raw = raw[: rng.randrange(len(raw))]
+        elif kind == 5:
+            raw += b"\x00"
+        elif kind == 6:
+            raw = msgpack.packb([1, 2, 3])
+        out.append(raw)
+    return out
+
+
+def test_the_kernel_reads_what_msgpack_reads_or_leaves_it_to_msgpack():
+    from drivers.udp_frames import FRAME, KEY_BYTES, decode_frames_kernel
+
+    rng = random.Random(65)
+    datagrams = variants(rng)
+    stride = 512
+    buf = np.zeros(len(datagrams) * stride, dtype=np.uint8)
+    sizes = np.zeros(len(datagrams), dtype=np.uint32)
+    for i, raw in enumerate(datagrams):
+        buf[i * stride : i * stride + len(raw)] = np.frombuffer(raw, dtype=np.uint8)
+        sizes[i] = len(raw)
+    out = np.zeros((len(datagrams), 5), dtype=np.int64)
+    decode_frames_kernel(buf, stride, sizes, len(datagrams), KEY_BYTES, out)
+    read = 0
+    for i, raw in enumerate(datagrams):
+        want = expected(raw)
+        if out[i, 0] != FRAME:
+            continue  # msgpack's own unpacker reads it (the bus's fallback)
+        read += 1
+        arb, flags, off, n = (int(x) for x in out[i, 1:])
+        assert want == (arb, flags, bytes(buf[off : off + n])), raw
+    # every frame python-can packs is read by the kernel, not left to msgpack
+    assert all(out[i, 0] == FRAME for i in range(0, 800, 2))
+    assert read > 450
+
+
+def test_the_bus_drains_every_datagram_as_msgpack_reads_it():
+    """The same datagrams sent on a group: what ``drain_frames`` gives, kernel and fallback
+    together, is what msgpack's unpacker says (FD frames dropped on a classic bus)."""
+    import os
+    import socket
+    import time
+
+    from drivers.udp_bus import CyclicUdpMulticastBus
+
+    group, port = "239.74.163.2", random.Random(os.getpid() * 41).randrange(40000, 50000)
+    datagrams = variants(random.Random(66))[:200]
+    bus = CyclicUdpMulticastBus(group, port=port, fd=False)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
+    try:
+        got: list = []
+        for k in range(0, len(datagrams), 20):  # within the socket's buffer
+            for raw in datagrams[k : k + 20]:
+                tx.sendto(raw, (group, port))
+            time.sleep(0.02)
+            got.extend(bus.drain_frames())
+    finally:
+        tx.close()
+        bus.shutdown()
+    want = []
+    for raw in datagrams:
+        e = expected(raw)
+        if e is not None and not e[1] & FD:
+            want.append((e[0], not e[1] & (EXTENDED | REMOTE | ERROR) and e[0] <= 0x7FF, e[2]))
+    assert got == want
+    assert bus.malformed == sum(expected(raw) is None for raw in datagrams)
