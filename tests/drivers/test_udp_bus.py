@@ -176,9 +176,58 @@ def test_staged_frames_reach_python_can_in_order(pair, batched):
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
         (0x201 + k, bytes([k] * 8)) for k in range(8)
     ] + [(0x80, b"\x05")]
-    # our own socket receives them too, as python-can's send would have it
-    assert [f[0] for f in drained(ours, len(frames))] == [m.arbitration_id for m in frames]
+    # never read back by our own socket (a CAN controller does not receive its own frames)
+    assert ours.own_frames_dropped
+    assert drained(ours, 1, timeout=0.3) == []
     assert ours.flush() == 0  # nothing staged
+
+
+def test_only_our_own_flushed_frames_are_dropped():
+    """Two cyclic buses on one group (the daemon's and the simulated robot's): each hears every
+    frame the other flushes and none of its own; python-can's ``send`` (the set-up's path)
+    still reaches both."""
+    port = random.Random(os.getpid() * 31).randrange(40000, 50000)
+    a = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
+    b = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
+    try:
+        assert a.own_frames_dropped and b.own_frames_dropped
+        for k in range(4):
+            a.stage(can.Message(arbitration_id=0x201 + k, data=[k], is_extended_id=False))
+            b.stage(can.Message(arbitration_id=0x181 + k, data=[k], is_extended_id=False))
+        assert a.flush() == 4 and b.flush() == 4
+        assert [f[0] for f in drained(b, 4)] == [0x201, 0x202, 0x203, 0x204]
+        assert [f[0] for f in drained(a, 4)] == [0x181, 0x182, 0x183, 0x184]
+        a.send(can.Message(arbitration_id=0x601, data=[1], is_extended_id=False), timeout=0)
+        assert [f[0] for f in drained(b, 1)] == [0x601]
+        time.sleep(0.05)  # loopback is delivered within the send: this is only margin
+        assert list(a.drain_frames()) in ([], [(0x601, True, b"\x01")])  # python-can's echo
+        assert list(b.drain_frames()) == []
+    finally:
+        a.shutdown()
+        b.shutdown()
+
+
+def test_the_medium_stays_on_this_machine_unless_told():
+    """Hop limit 0 by default (a frame never goes out on the network card), python-can's
+    ``hop_limit`` option still obeyed; both of the bus's sockets alike."""
+    port = random.Random(os.getpid() * 37).randrange(40000, 50000)
+
+    def ttls(bus: CyclicUdpMulticastBus) -> tuple[int, int]:
+        def ttl(s: socket.socket) -> int:
+            return s.getsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL)
+
+        return ttl(bus._raw), ttl(bus._tx)
+
+    local = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
+    lan = CyclicUdpMulticastBus(GROUP, port=port, fd=False, hop_limit=1)
+    try:
+        assert ttls(local) == (0, 0) and ttls(lan) == (1, 1)
+        local.stage(can.Message(arbitration_id=0x181, data=[7], is_extended_id=False))
+        local.flush()
+        assert drained(lan, 1) == [(0x181, True, b"\x07")]  # still heard on this machine
+    finally:
+        local.shutdown()
+        lan.shutdown()
 
 
 def test_a_full_batch_refuses_more_and_stays_whole(pair):
