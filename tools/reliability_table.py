@@ -110,7 +110,9 @@ def main() -> None:
             f"{max(r.excursion_mm for r in results):.1f} | "
             f"{max(r.max_tension_n for r in results):.0f} | "
             f"{max(r.max_torque_nm for r in results):.2f} / {results[0].torque_limit_nm:g} | "
-            f"{'yes' if ok else 'NO'} | {cell(results, 'recovered')} |"
+            f"{'yes' if ok else 'NO'} | {cell(results, 'recovered')} | "
+            f"{sum(r.contacts for r in results)} "
+            f"({min(r.least_clearance_mm for r in results):.1f}) |"
         )
         print(rows[-1], flush=True)
     lines = [
@@ -127,7 +129,9 @@ def main() -> None:
         "enable and a move back. Excursion: the platform's largest distance from its reference",
         "after the fault, while the controller still drives it (for SIGKILL: its drift until the",
         "brakes hold). Invariants: every torque finite and within its limit, every commanded",
-        "tension within [t_min, t_max] while the state is healthy.",
+        "tension within [t_min, t_max] while the state is healthy. Cable contacts: the",
+        "simulated robot's, at its true pose every step (sim_backend/contact.py), over every",
+        "seed, and the closest the cables came (docs/clearance.md).",
         "",
         *GEOMETRY_CHANGE.strip().splitlines(),
         "",
@@ -144,8 +148,8 @@ def main() -> None:
         "re-enabling is refused (an e-stop on a suspended robot wants SS1, docs/safety.md).**",
         "",
         "| fault | expected | detection | fault kind | reaction | excursion mm | max tension N | "
-        "max torque N·m / limit | invariants | recovered |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "max torque N·m / limit | invariants | recovered | cable contacts (closest mm) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         *SIGKILL_ACROSS_PROCESSES.strip().splitlines(),

@@ -105,6 +105,7 @@ def main() -> None:
                 c.submit(Command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]])))
                 counts["moves"] += 1
                 next_move = t + 4.0
+        contact = cl.plant.contact  # the cables at the plant's true pose, every step
     comp = np.array(compute)
     violations = {
         what: n
@@ -130,6 +131,8 @@ def main() -> None:
         "faults_detected_by_reason": dict(faults),
         "state_changes": dict(counts),
         "invariant_violations": violations,
+        "cable_contacts": len(contact.contacts),
+        "closest_cables": contact.least_what,
         "final_state": c.data.state.value,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

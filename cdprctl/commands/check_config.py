@@ -36,6 +36,35 @@ def ros2_summary(model: RobotModel) -> str:
             f"{r.rate:g} Hz (docs/ros2.md)")
 
 
+#: points per axis of the workspace box the clearance is measured over (at home orientation)
+CLEARANCE_GRID = 11
+
+
+def clearance_summary(model: RobotModel) -> str:
+    """The cables' least distance (``[interference]``, docs/clearance.md) at the home pose and
+    over the workspace box at the home orientation (``CLEARANCE_GRID`` points per axis), each
+    with its pair, against the limit."""
+    from cdprctl.motion.clearance import Clearance
+
+    c = Clearance(model)
+    if not c.active:
+        return "clearance   nothing to check (one cable, no body, no obstacle)"
+    ws = model.workspace
+    axes = [np.linspace(ws.position_min[k], ws.position_max[k], CLEARANCE_GRID) for k in range(3)]
+    box = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    coords = np.vstack([np.r_[model.home.position, 0.0, 0.0, 0.0],
+                        np.c_[box, np.zeros((len(box), 3))]])  # fmt: skip
+    dist, _ = c.at(coords)
+    j = 1 + int(np.argmin(dist[1:]))
+    words = []
+    for name, k in (("at home", 0), ("over the workspace box at the home orientation", j)):
+        under = " UNDER the limit" if dist[k] < c.limit else ""
+        at = "" if k == 0 else f" at {np.round(coords[k, :3], 4).tolist()} m"
+        words.append(f"{name} {dist[k] * 1e3:.2f} mm ({c.pair_at(coords[k])}{at}){under}")
+    return (f"clearance   limit {c.limit * 1e3:.2f} mm ([interference] clearance); "
+            + "; ".join(words) + f" ({CLEARANCE_GRID} points per axis; docs/clearance.md)")
+
+
 def summary(model: RobotModel) -> str:
     home = model.home
     data = KinematicsData(model)
@@ -52,6 +81,7 @@ def summary(model: RobotModel) -> str:
         f"inertia diag {np.round(np.diag(pf.inertia), 4).tolist()} kg·m²",
         f"gravity     {model.gravity.tolist()} m/s²",
         f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
+        clearance_summary(model),
         safety_summary(model),
         ros2_summary(model),
         "",

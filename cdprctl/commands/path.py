@@ -73,6 +73,7 @@ def check(args: argparse.Namespace) -> int:
         extra = f", dwell {s.dwell:g} s" if s.dwell else ""
         timed = f", in {s.minimum_duration:.2f} s" if s.minimum_duration is not None else ""
         print(f"  {k:3d}  {s.where:>9}  to [{to}] m{timed}{extra}")
+    print(f"  {plan.clearance_text()}")
     n = len(plan.segments)
     print(f"ok: the path holds ({n} segment{'s' if n != 1 else ''}, {plan.duration:.2f} s)")
     return 0

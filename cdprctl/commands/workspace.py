@@ -66,6 +66,19 @@ def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:
     return v
 
 
+def _beyond_max_angle(model: Any, rpy: np.ndarray) -> str:
+    """Why the orientation ``rpy`` (rad) is beyond the robot's ``[workspace] max_angle`` from
+    its home orientation (the limit every target keeps), or ""."""
+    from cdprctl.core.rotation import log_so3, rpy_to_matrix
+
+    angle = float(np.linalg.norm(log_so3(rpy_to_matrix(*rpy) @ model.home.rotation.T)))
+    limit = model.workspace.max_angle
+    if angle <= limit + 1e-9:
+        return ""
+    return (f"{angle:.4f} rad from the home orientation, beyond [workspace] max_angle = "
+            f"{limit:g} rad of {model.name} (no target may turn that far): give one within it")
+
+
 def run(args: argparse.Namespace) -> int:
     from cdprctl.core.rotation import rpy_to_matrix
     from cdprctl.tda.workspace import Grid, wrench_feasible_workspace
@@ -79,6 +92,10 @@ def run(args: argparse.Namespace) -> int:
         if given is None:
             return 2
         rpy = given
+        why = _beyond_max_angle(model, rpy)
+        if why:
+            print(f"cdprctl workspace: error: --rpy = {args.rpy!r}: {why}", file=sys.stderr)
+            return 2
     wrench = _floats(args.wrench, 6, "--wrench", "N, N·m")
     if wrench is None:
         return 2

@@ -131,6 +131,10 @@ class Result:
     tensions_outside_limits_while_healthy: int = 0
     recovered: str = ""
     notes: list[str] = field(default_factory=list)
+    # the cables' contacts at the plant's true pose over the run (sim_backend/contact.py), and
+    # the least distance met (mm; inf: nothing to check)
+    contacts: int = 0
+    least_clearance_mm: float = math.inf
 
     @property
     def invariants_hold(self) -> bool:
@@ -204,6 +208,8 @@ def run(model: RobotModel, sc: Scenario, seed: int = 0, observe: float = 2.5) ->
         res.fault_kind = c.data.fault_kind.value if c.data.fault_kind is not None else ""
         _recover(cl, res, watch, t_fault + sc.duration)
     finally:
+        res.contacts = len(cl.plant.contact.contacts)
+        res.least_clearance_mm = cl.plant.contact.least * 1e3
         cl.close()
     return res
 

@@ -101,3 +101,8 @@ class Clearance:
         return (f"{self.interference.describe()} apart, under the clearance "
                 f"{self.limit * 1e3:.2f} mm" if d < self.limit else
                 f"{self.interference.describe()} apart")  # fmt: skip
+
+    def pair_at(self, x: FloatArray) -> str:
+        """What comes closest at the coordinates ``x``, in words (what against what)."""
+        self._measure(np.asarray(x, dtype=float))
+        return self.interference.name(int(self.interference.best[0]))

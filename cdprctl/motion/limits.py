@@ -19,6 +19,9 @@ from cdprctl.motion.clearance import Clearance
 from cdprctl.motion.trajectory import coordinates_rotation
 from cdprctl.tda.workspace import Margins, hold_wrench
 
+#: m (or rad, a rotation alone): a straight move's line sampled this often (``line_refusal``)
+LINE_STEP = 0.02
+
 
 class SoftLimits:
     def __init__(self, model: RobotModel, external: FloatArray | None = None):
@@ -189,3 +192,16 @@ class SoftLimits:
             else:
                 hi = mid
         return start + lo * d, why
+
+    def line_refusal(self, start: FloatArray, target: FloatArray) -> str:
+        """Why the straight line from the coordinates ``start`` to ``target`` (a move's, at
+        rest at both ends) leaves the soft limits, with where and the rule broken, or "":
+        ``ray_end`` sampled every ``LINE_STEP``. The one rule of a move's line: the gateway
+        refuses with it before replying, the command desk keeps it as the last guard."""
+        start = np.array(start, dtype=float)  # a copy: the loop moves a reference it is given
+        end, why = self.ray_end(start, np.asarray(target, dtype=float) - start, 1.0,
+                                step=LINE_STEP)  # fmt: skip
+        if not why:
+            return ""
+        where = np.round(end[:3], 4).tolist()
+        return f"the line to the target leaves the soft limits after {where} m: {why}"

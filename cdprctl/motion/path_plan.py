@@ -19,6 +19,7 @@ the pair and the distance).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -80,6 +81,11 @@ class PathPlan:
     start: FloatArray = field(default_factory=lambda: np.zeros(6))  # coordinates, at rest
     waypoints: list[Waypoint] = field(default_factory=list)
     durations: list[float | None] = field(default_factory=list)  # s, each segment's least
+    # m: the cables' least distance met at the checked samples (inf: nothing to check), what
+    # and where (the pair, the file's line, the time), and the limit ([interference] clearance)
+    min_clearance: float = math.inf
+    min_clearance_at: str = ""
+    clearance_limit: float = 0.0
 
     def starts_at(self, x: FloatArray) -> bool:
         """Whether the plan holds from the trajectory coordinates ``x`` (``START_TOLERANCE``)."""
@@ -90,6 +96,13 @@ class PathPlan:
         return (f"{n} segment{'s' if n != 1 else ''}, {self.duration:.2f} s; checked at "
                 f"{self.samples} samples ≤ {self.spacing * 1e3:.1f} mm apart, smallest tension "
                 f"margin {self.min_margin:.1f} N ({self.min_margin_at})")  # fmt: skip
+
+    def clearance_text(self) -> str:
+        """The least clearance met, with its pair, line and time, and the limit."""
+        if not math.isfinite(self.min_clearance):
+            return "clearance: nothing to check (one cable, no body, no obstacle)"
+        return (f"least clearance {self.min_clearance * 1e3:.2f} mm: {self.min_clearance_at}; "
+                f"limit {self.clearance_limit * 1e3:.2f} mm ([interference] clearance)")
 
 
 def coordinates_of(model: RobotModel, pose: tuple[float, ...] | FloatArray) -> FloatArray:
@@ -282,7 +295,11 @@ def _play_and_check(
             f"{why}"
         )
     steps_apart = np.linalg.norm(np.diff(P[:, :3], axis=0), axis=1)  # a segment: 2 samples at least
-    j = int(np.argmin(margin))
+    j, jc = int(np.argmin(margin)), int(np.argmin(lim.nearest))
+    near_at = ""
+    if lim.clearance.active:
+        pair = lim.clearance.pair_at(lim.nearest_at[jc])
+        near_at = f"{pair} ({segments[seg_of[jc]].where}, t = {times[jc]:.2f} s)"
     return PathPlan(
         segments=segments,
         duration=t,
@@ -294,4 +311,7 @@ def _play_and_check(
         start=start.copy(),
         waypoints=list(waypoints),
         durations=list(durations),
+        min_clearance=float(lim.nearest[jc]),
+        min_clearance_at=near_at,
+        clearance_limit=lim.clearance.limit,
     )

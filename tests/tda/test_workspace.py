@@ -167,3 +167,29 @@ def test_the_home_star_only_on_the_slice_through_home(rowc):
     near = fine.axes()[2][round(hz / step)]
     assert _homes(fig) == [f"z = {near:.3g} m (home)"]
     plt.close(fig)
+
+
+
+@pytest.mark.parametrize("robot, rpy", [("rowc", "0,0,0.3"), ("rowc", "0.2,0.2,0"),
+                                        ("seed000", "-0.1,0,0")])  # fmt: skip
+def test_an_orientation_beyond_max_angle_is_refused_in_one_line(robot, rpy, capsys):
+    """The angle from the robot's home orientation (scipy's rotations, apart from the
+    project's), not a coordinate's size: seed000's home is rolled 30°, so its roll −0.1 rad
+    is 0.62 rad from it. Refused beyond ``max_angle`` in one line, exit 2; at it (rowc turned
+    0.2 rad about z), taken."""
+    from scipy.spatial.transform import Rotation
+
+    model = load_robot(ROOT / "config" / f"{robot}.toml")
+    cfg = str(ROOT / "config" / f"{robot}.toml")
+    given = Rotation.from_euler("xyz", [float(v) for v in rpy.split(",")])
+    angle = (given * Rotation.from_euler("xyz", model.home.rpy).inv()).magnitude()
+    assert angle > model.workspace.max_angle
+    assert main(["workspace", "--config", cfg, "--rpy", rpy, "--grid", "1:1:1,1:1:1,1:1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"cdprctl workspace: error: --rpy = '{rpy}': {angle:.4f} rad from the "
+                          f"home orientation, beyond [workspace] max_angle = "
+                          f"{model.workspace.max_angle:g} rad of {robot}")  # fmt: skip
+    if robot == "rowc":
+        assert main(["workspace", "--config", cfg, "--rpy", "0,0,0.2", "--grid",
+                     "1.5:1.5:1,0.35:0.35:1,0.59:0.59:1"]) == 0  # fmt: skip

@@ -21,7 +21,7 @@ import numpy as np
 from cdprctl.control.command_types import NOTHING, Command, CommandKind, Plan, accepted
 from cdprctl.control.states import HEALTHY_STATES, State
 from cdprctl.core.realtime import sharing_the_interpreter
-from cdprctl.core.rotation import FloatArray, rpy_to_matrix
+from cdprctl.core.rotation import rpy_to_matrix
 from drivers.vocabulary import Lifecycle
 
 if TYPE_CHECKING:
@@ -97,7 +97,8 @@ class CommandDesk:
                 d.events.append((d.time, "move ignored: pose or speed not finite/in range"))
                 return None
             target = c.trajectory.coordinates(pose[:3], rpy_to_matrix(*pose[3:]))
-            why = self._line_leaves_limits(target)
+            # the gateway refused it already from the snapshot's reference; this one holds now
+            why = c.limits.line_refusal(c.trajectory.position, target)
             if why:
                 d.events.append((d.time, f"move ignored: {why}"))
                 return None
@@ -118,17 +119,6 @@ class CommandDesk:
                 d.events.append((d.time, f"TDA options rejected: {'; '.join(errors)}"))
                 return None
         return NOTHING
-
-    def _line_leaves_limits(self, target: FloatArray) -> str:
-        """Where the straight line from the reference to ``target`` (coordinates) leaves the
-        soft limits, or "" (``SoftLimits.ray_end``, sampled every 2 cm)."""
-        tr = self.ctl.trajectory
-        start = tr.position.copy()
-        end, why = self.ctl.limits.ray_end(start, target - start, 1.0, step=0.02)
-        if not why:
-            return ""
-        where = np.round(end[:3], 4).tolist()
-        return f"the line to the target leaves the soft limits after {where} m: {why}"
 
     # -- in the cycle ------------------------------------------------------------------------------
     def handle(self, t: float) -> None:

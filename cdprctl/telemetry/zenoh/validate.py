@@ -117,7 +117,7 @@ class CommandValidator:
         loaded now, at the gateway's start: at the first move of a first run (an empty kernel
         cache) they made its reply wait 5 s."""
         with contextlib.suppress(CommandError):
-            self._move({"position": [float(v) for v in self.model.home.position]})
+            self._move({"position": [float(v) for v in self.model.home.position]}, None)
 
     def parse(self, payload: bytes, kind: str = "") -> dict[str, Any]:
         limit = MAX_PATH_PAYLOAD if kind == "path" else MAX_PAYLOAD
@@ -154,7 +154,7 @@ class CommandValidator:
                 f"(only in: {', '.join(ALLOWED_STATES[kind])})"
             )
         if kind == "move":
-            return "move", self._move(d)
+            return "move", self._move(d, snap)
         if kind == "set_tda":
             return "set_tda", {"tda": self._set_tda(d)}
         if kind == "impose":
@@ -212,7 +212,11 @@ class CommandValidator:
         # it was made (no second planning beside the loop), and plans again otherwise
         return {"text": text, "name": name, "plan": plan}
 
-    def _move(self, d: dict[str, Any]) -> dict[str, Any]:
+    def _move(self, d: dict[str, Any], snap: dict[str, Any] | None) -> dict[str, Any]:
+        """A target pose checked where it is (the workspace, the tilt, the tensions, the soft
+        limits) and, with the loop's snapshot, the straight line to it from the reference
+        there (``SoftLimits.line_refusal``: the desk's own rule, which it checks again from
+        the reference it holds when the command arrives)."""
         m, c, ws = self.model, self.model.control, self.model.workspace
         if "position" not in d:
             raise CommandError("move: position (m, base frame) is required")
@@ -250,14 +254,16 @@ class CommandValidator:
                 f"cannot be held within the tension limits ({out.status.name}: {out.message})"
             )
         target = pose_coordinates(m, p, R)
-        # the clearance a target must keep depends on where the motion starts (no closer than
-        # there, when that is under it), which the daemon knows: here only no contact (0 m)
+        # the target alone: no contact (0 m); the clearance it must keep depends on where the
+        # motion starts (no closer than there, when that is under it): the line's check below
         margin, ok = self.limits.check(target[None], near=0.0)
+        where = f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad"
         if not ok[0]:
-            raise CommandError(
-                f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad: "
-                f"{self.limits.why(target, float(margin[0]), near=0.0)}"
-            )
+            raise CommandError(f"{where}: {self.limits.why(target, float(margin[0]), near=0.0)}")
+        if snap is not None and np.all(np.isfinite(snap["reference"])):
+            why = self.limits.line_refusal(snap["reference"], target)
+            if why:
+                raise CommandError(f"{where}: {why}")
         return {"pose": np.concatenate([p, rpy]).tolist(), "speed": speed, "accel": accel}
 
     def _gripper(self, d: dict[str, Any], snap: dict[str, Any] | None) -> dict[str, Any]:

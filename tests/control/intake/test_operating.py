@@ -16,6 +16,7 @@ from cdprctl.motion.path_file import parse_path
 from cdprctl.motion.path_plan import plan_path
 from cdprctl.motion.trajectory import pose_coordinates
 from cdprctl.robot_file import load_robot
+from cdprctl.telemetry.zenoh.validate import CommandError, CommandValidator
 from sim_backend.faults import FaultEvent, FaultInjector
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -294,3 +295,10 @@ def test_a_move_whose_line_leaves_the_limits_is_refused(rowc):
         assert "tension margin" in why
         x = float(why.split("after [", 1)[1].split(",", 1)[0])
         assert 0.45 < x < 2.55  # between the arms
+        # one rule: the gateway, given the reference the loop publishes, refuses it in the
+        # same words before it replies
+        gateway = CommandValidator(model, commands_enabled=True)
+        with pytest.raises(CommandError) as exc:
+            gateway.check("move", {"position": [2.55, 0.38, 1.05]}, "enabled",
+                          {"reference": c.data.reference.copy()})  # fmt: skip
+        assert str(exc.value).endswith(why.removeprefix("move ignored: "))

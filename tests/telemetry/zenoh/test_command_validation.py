@@ -302,3 +302,51 @@ def test_a_gripper_command_on_a_robot_with_one_becomes_that_grippers_and_needs_o
         "gripper": 0, "grip": "travel", "value": 0.1}  # fmt: skip
     with pytest.raises(CommandError, match="give exactly one of travel"):
         v.check("gripper", {}, "enabled")
+
+
+def _lp_margin(model, p):
+    """N: the tension margin at ``p`` (home orientation) by scipy's LP, apart from the
+    project's margins: max t with W f = the wrench to hold, t_min + t ≤ f ≤ t_max − t."""
+    from scipy.optimize import linprog
+
+    from cdprctl.geometry.kinematics import wrench_matrix
+
+    n, R = model.n_cables, model.home.rotation
+    W = wrench_matrix(model, p, R)
+    w = -(model.gravity_wrench(R) + np.asarray(model.control.external_wrench, dtype=float))
+    eye = np.eye(n)
+    lp = linprog(np.r_[np.zeros(n), -1.0], A_eq=np.c_[W, np.zeros(6)], b_eq=w,
+                 A_ub=np.r_[np.c_[-eye, np.ones(n)], np.c_[eye, np.ones(n)]],
+                 b_ub=np.r_[-model.tension_min, model.tension_max],
+                 bounds=[(None, None)] * (n + 1))  # fmt: skip
+    assert lp.status == 0, lp.message
+    return -lp.fun
+
+
+def test_a_move_whose_straight_line_leaves_the_limits_is_refused_before_the_reply(rowc):
+    """rowc's workspace box widened into a U (both ends of its top held, the middle not): with
+    the loop's snapshot the gateway refuses the move the desk would ignore, with the desk's
+    message, where the line leaves the held region; scipy's LP along the line finds the same
+    point. Without a snapshot only the target is checked, and it is held."""
+    ws = dataclasses.replace(rowc.workspace, position_min=np.array([0.3, 0.33, 0.3]),
+                             position_max=np.array([2.7, 0.40, 1.3]))  # fmt: skip
+    model = dataclasses.replace(rowc, workspace=ws)
+    v = CommandValidator(model, commands_enabled=True)
+    a, b = np.array([0.45, 0.38, 1.05]), np.array([2.55, 0.38, 1.05])
+    move = {"position": b.tolist()}
+    assert v.check("move", move, "enabled")[1]["pose"][:3] == b.tolist()
+    snap = {"reference": np.r_[a, 0.0, 0.0, 0.0]}
+    with pytest.raises(CommandError) as exc:
+        v.check("move", move, "enabled", snap)
+    why = str(exc.value)
+    assert why.startswith("position = [2.55, 0.38, 1.05] m, rpy = [0.0, 0.0, 0.0] rad: the "
+                          "line to the target leaves the soft limits after [")  # fmt: skip
+    assert "the tension margin is" in why and "N required" in why
+    x = float(why.split("after [", 1)[1].split(",", 1)[0])
+    need = model.soft_margin
+    # the LP every 5 mm from the start: held up to x, and not 1 mm beyond it
+    for xi in np.arange(a[0], x, 0.005):
+        assert _lp_margin(model, np.array([xi, a[1], a[2]])) >= need - 1e-6, xi
+    assert _lp_margin(model, np.array([x + 0.001, a[1], a[2]])) < need
+    # a line the limits hold: taken with the snapshot too
+    assert v.check("move", {"position": [0.6, 0.38, 1.05]}, "enabled", snap)[0] == "move"

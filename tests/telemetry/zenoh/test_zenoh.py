@@ -892,6 +892,50 @@ def test_path_and_pause_resume_over_zenoh(robot_and_client, tmp_path):
         client.last(), "\n".join(robot.lines[-20:]))
 
 
+LAMP = """
+[[cell.obstacles]]
+name = "the lamp"
+kind = "box"
+centre = [1.04, 0.34, 0.294]  # m: 0.4 of cable 1's length from its attachment at x = 1.8 m
+half_extents = [0.005, 0.005, 0.005]  # m
+"""
+
+
+def test_a_move_whose_line_meets_the_cell_is_refused_in_the_reply(robot_and_client, tmp_path):
+    """rowc with a lamp standing where cable 1 passes halfway along the line from home to
+    x = 2.1 m: the gateway refuses that move in its reply, naming where the line leaves the
+    limits, the cable, the lamp and the clearance; the daemon never sees it (no "move
+    ignored" event) and the target stays. A move whose line passes clear is taken."""
+    robot_file = tmp_path / "rowc_lamp.toml"
+    robot_file.write_text(f'base = "{CONFIG / "rowc.toml"}"\n{LAMP}')
+    robot, client = robot_and_client(["--accept-commands", "--allow-unauthenticated-commands"],
+                                     robot_file=str(robot_file))  # fmt: skip
+    assert client.wait(lambda: client.states and client.last()["state"] == "ready")
+    client.put("enable", {"id": "e"})
+    assert client.wait(lambda: client.last()["state"] == "enabled"), "\n".join(robot.lines)
+    before = client.last()["target"]
+    client.put("move", {"position": [2.1, 0.35, 0.59], "id": "through"})
+    assert client.wait(lambda: client.reply("through") is not None)
+    reply = client.reply("through")
+    assert reply["ok"] is False
+    assert reply["reason"].startswith("position = [2.1, 0.35, 0.59] m, rpy = [0.0, 0.0, 0.0] rad: "
+                                      "the line to the target leaves the soft limits after [")
+    assert ("cable 1 and the lamp: " in reply["reason"]
+            and "under the clearance 5.00 mm ([interference] clearance)" in reply["reason"])
+    x = float(reply["reason"].split("after [", 1)[1].split(",", 1)[0])
+    assert 1.5 < x < 1.8  # short of where cable 1 meets the lamp
+    time.sleep(0.5)
+    assert client.last()["target"] == before and client.last()["state"] == "enabled"
+    client.put("move", {"position": [1.5, 0.35, 0.65], "id": "clear"})
+    assert client.wait(lambda: (client.reply("clear") or {}).get("ok")), client.replies
+    assert client.wait(lambda: np.allclose(client.last()["pose"]["position"], [1.5, 0.35, 0.65],
+                                           atol=2e-3) and client.last()["state"] == "enabled")
+    assert before != client.last()["target"]
+    assert not any("move ignored" in x for x in robot.lines), robot.lines
+    assert any("command move id=through: rejected" in x for x in robot.lines), robot.lines
+    assert robot.stop() == 0
+
+
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed")
 def test_the_jog_tool_in_tmux_moves_the_platform(robot_and_client):
     """`cdprctl jog` in a real terminal (a tmux pane): E enables, a held d (repeated every

@@ -1,0 +1,112 @@
+"""What ``cdprctl check-config`` and ``cdprctl path check`` say of the cables' clearance (issue
+67): the least distance with its pair and the limit, measured by brute force apart from the
+project's kernel (``tools/clearance_check.py``: numpy, each cable sampled every 0.1 mm); and a
+path that comes closer than the limit refused, naming the file's line and the pair. The cell
+here: rowc with a lamp (a 10 mm cube) beside cable 1's sweep between x = 1.5 and 2.1 m."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cdprctl.cli import main
+from cdprctl.robot_file import load_robot
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "tools"))
+import clearance_check as brute  # noqa: E402
+
+LAMP = """
+[[cell.obstacles]]
+name = "the lamp"
+kind = "box"
+centre = [1.04, 0.34, {z}]  # m
+half_extents = [0.005, 0.005, 0.005]  # m
+"""
+
+
+def _pair(check, p, R, words: str) -> float:
+    """m: the brute force's distance between the two cables ``words`` names ("cables 5 and
+    6") at the pose ``p``, ``R`` (a symmetric robot ties pairs: the one printed must be one)."""
+    names = [c.name for c in check.model.cables]
+    i, j = (names.index(n) for n in re.fullmatch(r"cables (\S+) and (\S+)", words).groups())
+    from cdprctl.geometry.kinematics import inverse_kinematics
+
+    inverse_kinematics(check.model, check.kin, p, R)
+    B = p + np.asarray(check.model.attachments) @ R.T
+    E = np.array(check.kin.exit_points, dtype=float)
+    return brute.sampled(B[i], E[i], brute.to_segment(B[j], E[j]), brute.STEP)
+
+
+def _mm(text: str, after: str) -> float:
+    return float(re.search(re.escape(after) + r" ([0-9.]+) mm", text).group(1)) / 1e3
+
+
+@pytest.mark.parametrize("name", ["rowc", "caroca"])
+def test_check_config_prints_the_clearance_at_home_and_over_the_box(name, capsys):
+    """The home pose's least distance and the box's least at the home orientation, each as
+    the brute force finds it at the pose printed, with its pair; the box's least no larger
+    than the brute force at the box's corners. CAROCA's low corner is under the limit and
+    says so."""
+    path = ROOT / "config" / f"{name}.toml"
+    model = load_robot(path)
+    assert main(["check-config", str(path)]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("clearance"))
+    check = brute.Clearance(model)
+    R = model.home.rotation
+    home = check.at(model.home.position, R)
+    least = min(home.values())
+    assert _mm(line, "at home") == pytest.approx(least[0], abs=6e-5)
+    said = re.search(r"at home [0-9.]+ mm \((.+?)\)", line).group(1)
+    assert _pair(check, model.home.position, R, said) == pytest.approx(least[0], abs=6e-5)
+    box = re.search(r"orientation ([0-9.]+) mm \((.+?) at \[(.+?)\] m\)", line)
+    at = np.array([float(v) for v in box.group(3).split(",")])
+    there = min(check.at(at, R).values())
+    assert float(box.group(1)) / 1e3 == pytest.approx(there[0], abs=6e-5)
+    assert _pair(check, at, R, box.group(2)) == pytest.approx(there[0], abs=6e-5)
+    ws = model.workspace
+    for corner in np.array(np.meshgrid(*zip(ws.position_min, ws.position_max, strict=True)
+                                       )).reshape(3, -1).T:  # fmt: skip
+        assert min(check.at(corner, R).values())[0] >= float(box.group(1)) / 1e3 - 6e-5
+    assert ("UNDER the limit" in line) == (float(box.group(1)) / 1e3 < model.interference.clearance)
+    assert "limit 5.00 mm ([interference] clearance)" in line
+
+
+def _lamp_robot(tmp_path, z: float) -> str:
+    f = tmp_path / "rowc_lamp.toml"
+    f.write_text(f'base = "{ROOT / "config" / "rowc.toml"}"\n' + LAMP.format(z=z))
+    return str(f)
+
+
+def test_path_check_refuses_a_path_into_the_lamp_naming_the_line_and_pair(tmp_path, capsys):
+    cfg = _lamp_robot(tmp_path, 0.294)
+    path = tmp_path / "into.csv"
+    path.write_text("x, y, z\n1.5, 0.35, 0.65\n1.5, 0.35, 0.59\n2.1, 0.35, 0.59\n")
+    assert main(["path", "check", str(path), "--config", cfg]) == 2
+    err = capsys.readouterr().err
+    assert f"{path} rejected: line 4 (segment 3): at t = " in err
+    assert "cable 1 and the lamp: " in err and "under the clearance 5.00 mm" in err
+
+
+def test_path_check_prints_the_least_clearance_the_brute_force_finds(tmp_path, capsys):
+    """The lamp 44 mm lower: cable 1 passes it clear; the least printed is the brute force's
+    least along the straight line (every 1 mm, each cable every 0.1 mm), within 0.1 mm."""
+    cfg = _lamp_robot(tmp_path, 0.25)
+    path = tmp_path / "past.csv"
+    path.write_text("x, y, z\n2.1, 0.35, 0.59\n")
+    assert main(["path", "check", str(path), "--config", cfg]) == 0
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if "least clearance" in x)
+    printed = _mm(line, "least clearance")
+    assert "cable 1 and the lamp (line 2, t = " in line
+    assert "limit 5.00 mm ([interference] clearance)" in line
+    model = load_robot(cfg)
+    check = brute.Clearance(model)
+    xs = np.arange(1.5, 2.1 + 1e-9, 0.001)
+    least = min(check.at(np.array([x, 0.35, 0.59]), model.home.rotation)["cell"][0] for x in xs)
+    assert 5e-3 < least < 20e-3  # the lamp is what comes closest, clear of the limit
+    assert printed == pytest.approx(least, abs=1e-4)
