@@ -20,9 +20,9 @@ def friction_entry(model: RobotModel, fits: list[WinchFriction], motion_time: fl
         "time": now_iso(),
         "simulated": simulated,
         "motion_time": motion_time,
-        "viscous": [max(0.0, f.viscous) for f in fits],  # N·m·s/rad
-        "coulomb": [max(0.0, f.coulomb) for f in fits],  # N·m
-        "stribeck": [max(0.0, f.stribeck) for f in fits],  # N·m
+        "viscous": [stored_terms(f)[0] for f in fits],  # N·m·s/rad
+        "coulomb": [stored_terms(f)[1] for f in fits],  # N·m
+        "stribeck": [stored_terms(f)[2] for f in fits],  # N·m
         "pulley": [
             f.pulley if f.pulley is not None else w.pulley_friction
             for f, w in zip(fits, files, strict=True)
@@ -32,6 +32,26 @@ def friction_entry(model: RobotModel, fits: list[WinchFriction], motion_time: fl
         "std": [list(f.std) for f in fits],  # viscous, Coulomb, Stribeck, inertia
         "residual_rms": [f.residual_rms for f in fits],  # N·m
     }
+
+
+def stored_terms(f: WinchFriction) -> tuple[float, float, float]:
+    """(viscous, Coulomb, Stribeck) of a fit as the record keeps them and the command prints
+    them: a term below zero (within its noise: ``friction.refusal`` refuses one beyond 3 σ)
+    is kept as 0. The law's friction never pushes the motion on: a negative Coulomb or
+    viscous term would, and a negative Stribeck term (a breakaway below the Coulomb level)
+    is not the law's and, fed forward, would push the drive below its Coulomb level at
+    every start."""
+    return max(0.0, f.viscous), max(0.0, f.coulomb), max(0.0, f.stribeck)
+
+
+def clipped_note(f: WinchFriction) -> str:
+    """The one line that says which fitted terms came out below zero and are kept as 0 (""
+    when none did)."""
+    neg = [f"{name} {x:.3g} ± {sd:.2g}" for name, x, sd in
+           (("viscous", f.viscous, f.std[0]), ("Coulomb", f.coulomb, f.std[1]),
+            ("Stribeck", f.stribeck, f.std[2])) if x < 0.0]  # fmt: skip
+    return (f"fitted {', '.join(neg)} below zero, kept as 0 (friction never drives the "
+            "motion)") if neg else ""
 
 
 def friction_terms(record: CalibrationRecord) -> tuple[list[float], ...] | None:

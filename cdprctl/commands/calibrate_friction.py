@@ -151,13 +151,15 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_d
     """Each winch's terms and σ (with --sim, the simulated robot's beside them); the record
     updated when accepted on a robot."""
     from cdprctl.calibration.calibration_record import save
-    from cdprctl.calibration.friction_record import friction_entry
+    from cdprctl.calibration.friction_record import clipped_note, friction_entry, stored_terms
 
     truth = getattr(sim, "truth", None)
     rows = []
     for i, (c, f) in enumerate(zip(model.cables, cal.fits, strict=True)):
-        row = {"cable": c.name, "viscous": f.viscous, "coulomb": f.coulomb,
-               "stribeck": f.stribeck, "inertia": f.inertia, "std": list(f.std),
+        viscous, coulomb, stribeck = stored_terms(f)  # as the record keeps them
+        row = {"cable": c.name, "viscous": viscous, "coulomb": coulomb,
+               "stribeck": stribeck, "clipped": clipped_note(f), "inertia": f.inertia,
+               "std": list(f.std),
                "pulley": f.pulley, "pulley_std": f.pulley_std, "pulley_note": f.pulley_note,
                "residual_rms": f.residual_rms, "residual_limit": f.residual_limit}  # fmt: skip
         if truth is not None:
@@ -189,7 +191,7 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_d
                          f"{p['stribeck']:.3g}]")  # fmt: skip
             mu = (f"; pulley μ {r['pulley']:.3g} ± {r['pulley_std']:.2g}"
                   if r["pulley"] is not None else f"; pulley: {r['pulley_note']}")  # fmt: skip
-            log(line + mu)
+            log(line + mu + (f" ({r['clipped']})" if r["clipped"] else ""))
         tail = (f"; the record updated: {written} (the next cdprctl run applies it)" if written
                 else " (--sim: no record written)" if sim is not None else "")  # fmt: skip
         log(f"{WHO}: friction {'accepted' if cal.accepted else 'refused: ' + cal.reason}{tail}")

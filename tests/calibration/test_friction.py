@@ -228,3 +228,35 @@ def test_the_status_and_the_start_up_say_which_friction_is_in_use(tmp_path):
     s = friction_summary(model, tmp_path)
     assert s["source"] == "calibrated" and s["viscous"] == viscous
     assert "Coulomb 0..0.027 N·m" in friction_line(back)
+
+
+def test_the_printed_terms_are_the_recorded_ones(capsys):
+    """A Stribeck term fitted below zero (within its noise) is printed as the record keeps
+    it, 0, with the line that says so; the JSON and the record agree winch by winch."""
+    import argparse
+    import json
+
+    from cdprctl.calibration.friction import WinchFriction
+    from cdprctl.calibration.friction_procedure import FrictionCalibration
+    from cdprctl.calibration.friction_record import friction_entry
+    from cdprctl.commands.calibrate_friction import _report
+
+    model = load_robot(CONFIG / "rowc.toml")
+    m = model.n_cables
+    fits = [WinchFriction(4e-4, 0.02, 0.01, 1.5e-4, (1e-5, 1e-3, 2e-3, 1e-5), None, None,
+                          1e-3, 2e-3, 100, "no pulley") for _ in range(m)]  # fmt: skip
+    fits[3].stribeck = -0.0021
+    cal = FrictionCalibration(fits, [0.0] * 6, [[0.0] * 6], 120.0, True, "accepted")
+    args = argparse.Namespace(json=True)
+    assert _report(args, model, cal, None, None, None, print) == 0
+    rows = json.loads(capsys.readouterr().out)["winches"]
+    entry = friction_entry(model, fits, 120.0, True)
+    for key in ("viscous", "coulomb", "stribeck"):
+        assert [r[key] for r in rows] == entry[key]
+    assert rows[3]["stribeck"] == 0.0
+    assert rows[3]["clipped"].startswith("fitted Stribeck -0.0021 ± 0.002 below zero, kept as 0")
+    assert all(r["clipped"] == "" for i, r in enumerate(rows) if i != 3)
+    _report(argparse.Namespace(json=False), model, cal, None, None, None, print)
+    out = capsys.readouterr().out.splitlines()
+    assert "Stribeck 0 ± 0.002 N·m" in out[3] and "kept as 0" in out[3]
+    assert "Stribeck 0.01 ± 0.002 N·m" in out[2] and "kept as 0" not in out[2]
