@@ -244,8 +244,7 @@ class CableSpace:
         self._commanded[:] = d.hold_tensions
         d.tension_error[:] = 0.0
         d.internal_tension_error[:] = 0.0
-        self._fast_error[:] = 0.0
-        d.ext_estimate[:] = 0.0
+        self._fast_error[:] = 0.0  # (data.ext_estimate: zeroed by the observer's reset)
         self.give[:] = 0.0
         self.settle[:] = 0.0
         self._settle_time = math.nan
@@ -280,15 +279,16 @@ class CableSpace:
             decay = math.exp(-self.iff * d.dt)
             force_feedback_kernel(d.tension_error, self.reference.k, decay, self.give)
 
-    def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
-        """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the
-        measured tensions (``disturbance_kernel``), while ``integrate`` — held while the
+    def estimate_disturbance(self, W: FloatArray, integrate: bool, ext: FloatArray) -> None:
+        """``ext`` (``data.ext_estimate``; N, N·m at P, base frame), integrated in place: the
+        external wrench from the measured tensions (``disturbance_kernel``), while
+        ``integrate`` — held while the
         feedback or the distribution saturates, so that a force beyond what the cables can
         hold is not wound up (the feed-forward then stays infeasible and the supervisor
         stops: ``FaultKind.TENSION_DISTRIBUTION``)."""
         d = self.data
         if integrate and self.disturbance_gain > 0.0:
-            disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
+            disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, ext)
 
     def measure(
         self, torque: FloatArray, velocity: FloatArray, sampled_at: FloatArray, N: FloatArray,
