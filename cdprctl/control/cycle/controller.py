@@ -90,7 +90,7 @@ class Controller:
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
         self.observer = WrenchObserver(model, d, self.winches)
-        self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
+        self.cable_space = CableSpace(model, d)
         self.load_cells = LoadCellCheck(model, self.winches)  # tension_source.py
         self._rotor_term = np.zeros(model.n_cables)  # N·m, for its check
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
@@ -212,7 +212,9 @@ class Controller:
         self.winches.update(d.tensions, self.at.kin.WT, tr.acceleration, st.velocity, active,
                             d.torques)  # fmt: skip
         if self.cable_space.enabled:
-            self.cable_space.targets(active, st.position)  # → data.motor_target
+            ref = self.reference  # → data.motor_target
+            self.cable_space.targets(active, st.position, ref.reference_kin.length, ref.k,
+                                     self.estimator.winding)  # fmt: skip
         ph[5] = (clock() - t5) * 1e6
 
     def _step_time(self, t: float) -> float:
@@ -238,7 +240,7 @@ class Controller:
         if cs.enabled and d.state in OBSERVED_STATES:
             np.copyto(d.stretch_tensions, d.tensions)
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N,
-                       st.tension)  # fmt: skip
+                       self.winches.terms, st.tension)  # fmt: skip
             cs.estimate_disturbance(
                 self.at.kin.W,
                 d.state is not STOPPING
@@ -247,7 +249,7 @@ class Controller:
                 d.ext_estimate,
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
-            cs.force_feedback(stopping=d.state is STOPPING)
+            cs.force_feedback(self.reference.k, stopping=d.state is STOPPING)
         elif self._stretch_due:
             self.refresh_stretch_tensions()
 
