@@ -153,22 +153,13 @@ def test_no_module_stands_loose_beside_the_layers_packages():
     assert loose == ["__init__.py", "cli.py"]
 
 
-# circles left, each with why it stands (an exact list: a new circle fails, and so does one
-# of these once it is gone, so the list is kept true)
-CIRCLES_LEFT = [
-    # the desk hands a command to the controller's stages; the controller asks the desk
-    # each cycle (issue 66, point 1: the desk to be given ports, not the controller)
-    ["cdprctl.control.cycle.controller", "cdprctl.control.intake.desk"],
-]
-
-
 def test_the_tree_imports_without_a_circle():
     """No module imports, through others, itself — under ``TYPE_CHECKING`` and in function
     bodies too (a late import hides a circle; it does not remove it)."""
     mods = modules_under(ROOT, "cdprctl", "drivers", "sim_backend")
     graph = {name: imports_within(name, path, set(mods)) for name, path in mods.items()}
     assert "cdprctl.geometry.kinematics" in graph["cdprctl.control.cycle.estimator"]
-    assert circles(graph) == CIRCLES_LEFT
+    assert circles(graph) == []
 
 
 def test_the_circle_check_sees_a_late_and_a_type_only_import(tmp_path):

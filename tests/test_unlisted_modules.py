@@ -236,9 +236,9 @@ def test_a_platform_frame_jog_goes_along_the_platforms_axes():
     model = load_robot(CONFIG / "rowc.toml")
     tr = Trajectory(model, 0.004)
     tr.reset(np.r_[model.home.position, 0.0, 0.0, 0.15])
-    jog = Jog(model, ControlData(model.n_cables, 0), tr, SoftLimits(model))
+    jog = Jog(model, ControlData(model.n_cables, 0))
     cmd = Command(CommandKind("jog"), velocity=np.array([0.1, 0, 0, 0, 0, 0]), frame="platform")
-    plan = jog.plan(cmd)
+    plan = jog.plan(cmd, tr, SoftLimits(model))
     assert plan is not None and plan.target is not None
     d = plan.target[:3] - tr.position[:3]
     np.testing.assert_allclose(d / np.linalg.norm(d), [np.cos(0.15), np.sin(0.15), 0.0], atol=1e-9)

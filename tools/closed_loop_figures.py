@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.control.command_types import Command
+from cdprctl.control.command_types import SetTdaCommand
 from cdprctl.control.states import State
 from cdprctl.core.rotation import log_so3
 from cdprctl.experiments.ark2020 import deflection_reference
@@ -62,7 +62,7 @@ def move(model: RobotModel, goal: list[float], seconds: float) -> str:
 
 def lateral(model: RobotModel, tda: TDAOptions, seconds: float) -> str:
     with enabled(model) as cl:
-        cl.controller.submit(Command("set_tda", tda=tda))
+        cl.controller.submit(SetTdaCommand(tda=tda))
         cl.run(2.0)
         y0 = cl.plant.position[1]
         n0 = len(cl.log["t"])

@@ -21,7 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cdprctl.control.command_types import Command  # noqa: E402
+from cdprctl.control.command_types import EnableCommand, MoveCommand, ResetCommand  # noqa: E402
 from cdprctl.control.states import FaultKind, State  # noqa: E402
 from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
 from cdprctl.experiments.scenarios import Result, Scenario, Watch  # noqa: E402
@@ -72,7 +72,7 @@ def main() -> None:
         injector.attach(cl.net)
         cl.startup()
         c = cl.controller
-        c.submit(Command("enable"))
+        c.submit(EnableCommand())
         n = round(args.minutes * 60.0 / cl.period)
         next_move = 1.0
         last_state = c.data.state
@@ -97,12 +97,12 @@ def main() -> None:
                     faults[key] += 1
                 last_state = c.data.state
             if c.data.state is State.FAULT and i % 250 == 0:
-                c.submit(Command("reset"))
+                c.submit(ResetCommand())
             elif c.data.state is State.READY and i % 250 == 0:
-                c.submit(Command("enable"))
+                c.submit(EnableCommand())
             elif c.data.state is State.ENABLED and t >= next_move:
                 goal = rng.uniform(lo, hi)
-                c.submit(Command("move", pose=np.concatenate([goal, [0.0, 0.0, 0.0]])))
+                c.submit(MoveCommand(pose=np.concatenate([goal, [0.0, 0.0, 0.0]])))
                 counts["moves"] += 1
                 next_move = t + 4.0
         contact = cl.plant.contact  # the cables at the plant's true pose, every step

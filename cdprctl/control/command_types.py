@@ -1,11 +1,12 @@
-"""What an operator can ask of the controller: the command kinds, the command record, and in
-which states each kind is acted on — one table, read by the controller and the gateway."""
+"""What an operator can ask of the controller: the command kinds, one frozen type per kind
+(``Command`` the union; ``command`` builds one by kind), and in which states each kind is acted
+on — one table, read by the controller and the gateway."""
 
 from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 from cdprctl.control.states import State
 from cdprctl.core.rotation import FloatArray
@@ -33,30 +34,114 @@ class GripKind(enum.StrEnum):
     RELEASE = "release"  # as open as the redundancy allows
 
 
-@dataclass
-class Command:
-    kind: CommandKind
-    pose: FloatArray | None = None  # move: x, y, z (m), roll, pitch, yaw (rad)
-    speed: float = 1.0  # move: fraction of the velocity limits
-    accel: float = 1.0  # move: fraction of the acceleration limits
+class _ByKind(type):
+    """``Command(kind, **fields)`` builds the kind's own type (``command``)."""
+
+    def __call__(cls, *args: Any, **fields: Any) -> Any:
+        if cls is Command:
+            return command(*args, **fields)
+        return super().__call__(*args, **fields)
+
+
+class Command(metaclass=_ByKind):
+    """What an operator asks: one frozen type per kind below, each with only its own fields
+    (built outside the loop: the gateway's parsing, the daemon's scripted clients, a test);
+    the desk dispatches on ``kind``. ``Command(kind, **fields)`` builds the kind's type."""
+
+    kind: ClassVar[CommandKind]
+
+
+# eq=False: a command is an event, compared by identity (its arrays have no truth value).
+@dataclass(frozen=True, eq=False)
+class EnableCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.ENABLE
+
+
+@dataclass(frozen=True, eq=False)
+class DisableCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.DISABLE
+
+
+@dataclass(frozen=True, eq=False)
+class StopCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.STOP
+    category: int = 2  # IEC 60204-1's stop category (0, 1, 2; docs/safety.md)
+
+
+@dataclass(frozen=True, eq=False)
+class ResetCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.RESET
+
+
+@dataclass(frozen=True, eq=False)
+class MoveCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.MOVE
+    pose: FloatArray | None = None  # x, y, z (m), roll, pitch, yaw (rad)
+    speed: float = 1.0  # fraction of the velocity limits
+    accel: float = 1.0  # fraction of the acceleration limits
+
+
+@dataclass(frozen=True, eq=False)
+class SetTdaCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.SET_TDA
     tda: TDAOptions | None = None
-    gripper: int = 0  # gripper: index in [[grippers]]
+
+
+@dataclass(frozen=True, eq=False)
+class GripperCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.GRIPPER
+    gripper: int = 0  # index in [[grippers]]
     grip: GripKind = GripKind.TRAVEL
-    value: float = 0.0  # gripper: travel (m) or squeeze force (N)
-    # jog: velocity vx, vy, vz (m/s), ωx, ωy, ωz (rad/s) in ``frame`` ("base" or "platform")
+    value: float = 0.0  # travel (m) or squeeze force (N)
+
+    def __post_init__(self) -> None:  # checked once here: the cycle never meets an unknown
+        object.__setattr__(self, "grip", GripKind(self.grip))
+
+
+@dataclass(frozen=True, eq=False)
+class JogCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.JOG
+    # velocity vx, vy, vz (m/s), ωx, ωy, ωz (rad/s) in ``frame`` ("base" or "platform")
     velocity: FloatArray | None = None
     frame: str = "base"
-    category: int = 2  # stop: IEC 60204-1's stop category (0, 1, 2; docs/safety.md)
-    text: str = ""  # path: the file's content (CSV or G-code, motion/path_file.py)
-    name: str = ""  # path: where it came from, for the messages
-    # path: (plan, offset) checked already from where the robot rests (the gateway, --path)
-    plan: Any = None
 
-    def __post_init__(self) -> None:
-        # built outside the loop (the gateway, the daemon, a test): the kinds are checked
-        # here, once, so the cycle never meets an unknown one
-        self.kind = CommandKind(self.kind)
-        self.grip = GripKind(self.grip)
+
+@dataclass(frozen=True, eq=False)
+class PathCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.PATH
+    text: str = ""  # the file's content (CSV or G-code, motion/path_file.py)
+    name: str = ""  # where it came from, for the messages
+    plan: Any = None  # (plan, offset) checked already from where the robot rests (--path)
+
+
+@dataclass(frozen=True, eq=False)
+class PauseCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.PAUSE
+
+
+@dataclass(frozen=True, eq=False)
+class ResumeCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.RESUME
+
+
+@dataclass(frozen=True, eq=False)
+class AbortCommand(Command):
+    kind: ClassVar[CommandKind] = CommandKind.ABORT
+
+
+#: each kind's type
+COMMAND_TYPES: dict[CommandKind, type[Command]] = {
+    t.kind: t
+    for t in (EnableCommand, DisableCommand, StopCommand, ResetCommand, MoveCommand,
+              SetTdaCommand, GripperCommand, JogCommand, PathCommand, PauseCommand,
+              ResumeCommand, AbortCommand)
+}  # fmt: skip
+
+
+def command(kind: CommandKind | str, **fields: Any) -> Command:
+    """A command of ``kind`` (a ``CommandKind`` or its name) with ``fields``, those of its
+    kind only (another's: TypeError naming it)."""
+    return COMMAND_TYPES[CommandKind(kind)](**fields)
 
 
 @dataclass(frozen=True)

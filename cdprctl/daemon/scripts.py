@@ -10,7 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.command_types import (
+    Command,
+    DisableCommand,
+    EnableCommand,
+    MoveCommand,
+    PathCommand,
+)
 from cdprctl.control.data import ControlData
 from cdprctl.control.states import State
 from cdprctl.core.realtime import sharing_the_interpreter
@@ -45,17 +51,17 @@ def demo_script(model: RobotModel, force: float = 0.0) -> list[Step]:
     a, b = demo_targets(model)
 
     def move(p: np.ndarray) -> Command:
-        return Command(CommandKind.MOVE, pose=np.concatenate([p, model.home.rpy]))
+        return MoveCommand(pose=np.concatenate([p, model.home.rpy]))
 
     return [
-        (0.3, Command(CommandKind.ENABLE)),
+        (0.3, EnableCommand()),
         (1.0, move(a)),
         (4.0, move(home)),
         *([(7.0, Disturbance(force))] if force else []),
         (10.0, move(b)),
         (13.0, move(home)),
         *([(16.0, Disturbance(0.0))] if force else []),
-        (19.0, Command(CommandKind.DISABLE)),
+        (19.0, DisableCommand()),
     ]
 
 
@@ -87,12 +93,12 @@ class PathScript:
         if not self._path_sent:
             if d.state is State.READY and not self._enable_sent:
                 self._enable_sent = True
-                return Command(CommandKind.ENABLE)
+                return EnableCommand()
             if d.state is State.ENABLED and not d.motion:  # enabled and holding
                 self._path_sent = True
                 self._sent_cycle = d.cycle
-                return Command(CommandKind.PATH, text=self.text, name=self.name,
-                               plan=(self.plan, 0))  # fmt: skip
+                return PathCommand(text=self.text, name=self.name,
+                                   plan=(self.plan, 0))  # fmt: skip
             return None
         if d.cycle < self._sent_cycle + 3:  # the loop has not taken it yet
             return None

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.command_types import DisableCommand, ResetCommand, StopCommand
 from cdprctl.control.data import PHASES
 from cdprctl.control.intake.desk import FULL
 from cdprctl.control.lifecycle.loop import LoopStats
@@ -242,7 +242,7 @@ class Daemon:
             self._io_loop(duration, demo, force, path)
         except Exception as exc:  # the I/O thread must not die silently: stop the run
             self.say(f"cdprctl run: I/O thread failed: {type(exc).__name__}: {exc}", err=True)
-            self.manager.submit(Command(CommandKind.DISABLE))
+            self.manager.submit(DisableCommand())
             self._await_disabled(time.monotonic())
             self.finished.set()
 
@@ -291,7 +291,7 @@ class Daemon:
                 self.say(self.report.status_line(now, self.status_every, true))
                 next_status += self.status_every
             if demo and not script and duration is not None and d.state is State.FAULT:
-                submit(Command(CommandKind.RESET))  # a long demo run carries on after a fault
+                submit(ResetCommand())  # a long demo run carries on after a fault
             if demo and not script and duration is not None and d.state is State.READY:
                 # with --duration the demo plays again while a whole round still fits
                 again = demo_script(self.model, force)
@@ -310,8 +310,8 @@ class Daemon:
                     how = ": decelerating, then the drives disabled" if drives_on else ""
                     self.say(f"[t={d.time:9.3f}] stop requested by {self._stopped_by}{how}")
                 if drives_on:
-                    submit(Command(CommandKind.STOP))
-                    submit(Command(CommandKind.DISABLE))
+                    submit(StopCommand())
+                    submit(DisableCommand())
             if stopping_since is not None and (
                 d.state in DRIVES_OFF or now - stopping_since > self._stop_wait
             ):

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.command_types import command
 from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.model.robot import RobotModel
 from sim_backend.network import LockStep
@@ -33,7 +33,7 @@ class ClosedLoop:
         self.manager.startup()
 
     def command(self, kind: str, **kw: Any) -> None:
-        self.controller.submit(Command(CommandKind(kind), **kw))
+        self.controller.submit(command(kind, **kw))
 
     def run(self, seconds: float, until: Any = None, each: Any = None, record: bool = True) -> None:
         """``seconds`` of control cycles and simulation; after each cycle ``each(self)`` (a

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, CommandKind, GripKind
+from cdprctl.control.command_types import GripKind, GripperCommand
 from cdprctl.control.states import State
 from cdprctl.experiments.closed_loop import ClosedLoop
 from cdprctl.geometry.gripper_mechanics import GraspState
@@ -165,7 +165,7 @@ def gripper_sweep(
     wait = 0.0
     for j, travel in (hold or {}).items():
         wait = max(wait, abs(travel - float(c.grippers.grasp.travel[j])) / c.grippers.GRIP_SPEED)
-        c.submit(Command(CommandKind.GRIPPER, gripper=j, grip=GripKind.TRAVEL, value=travel))
+        c.submit(GripperCommand(gripper=j, grip=GripKind.TRAVEL, value=travel))
         cl.run(0.01, record=False)
     cl.run(wait + 2.0 if hold else 0.0, record=False)
     _check(cl, "moving the held grippers")
@@ -173,13 +173,13 @@ def gripper_sweep(
     if not math.isfinite(lo):
         cl.close()
         raise ExperimentError("no feasible travel for the gripper here")
-    c.submit(Command(CommandKind.GRIPPER, gripper=gripper, grip=GripKind.TRAVEL, value=lo + 0.001))
+    c.submit(GripperCommand(gripper=gripper, grip=GripKind.TRAVEL, value=lo + 0.001))
     gr = c.grippers
     cl.run(max(abs(lo - gr.grasp.travel[gripper]) / gr.GRIP_SPEED, 0.0) + 4.0, record=False)
     _check(cl, "opening the gripper")
     end = min(hi, travel_to) if travel_to is not None else hi
     end -= 0.001
-    c.submit(Command(CommandKind.GRIPPER, gripper=gripper, grip=GripKind.TRAVEL, value=end))
+    c.submit(GripperCommand(gripper=gripper, grip=GripKind.TRAVEL, value=end))
     cable = int(c.grippers.set.cables[gripper])
     params = c.grippers.set.params(gripper, math.inf)
     d0 = spring_deformation(cl, cable)

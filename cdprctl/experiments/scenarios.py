@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, CommandKind
+from cdprctl.control.command_types import EnableCommand, MoveCommand, ResetCommand
 from cdprctl.control.cycle.controller import Controller
 from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.control.states import State
@@ -238,7 +238,7 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     if not math.isfinite(t_clear):
         res.recovered = "no (the fault is permanent)"
         if c.data.state is State.FAULT:
-            c.submit(Command(CommandKind.RESET))
+            c.submit(ResetCommand())
             _steps(cl, watch, 1.0)
             res.notes.append(
                 f"reset with the fault still present: {c.data.state.value} {c.data.fault_reason}"
@@ -250,15 +250,15 @@ def _recover(cl: ClosedLoop, res: Result, watch: Watch, t_clear: float) -> None:
     # measured until the platform rests on the brakes
     _steps(cl, watch, 3.0, until=lambda: c.data.state is not State.STOPPING
            and (c.data.state is not State.ESTOP or c.supervisor.estop.settled))  # fmt: skip
-    c.submit(Command(CommandKind.RESET))
+    c.submit(ResetCommand())
     _steps(cl, watch, 1.0)
     if c.data.state is not State.READY:
         res.recovered = f"no: reset left it {c.data.state.value} {c.data.fault_reason}"
         return
-    c.submit(Command(CommandKind.ENABLE))
+    c.submit(EnableCommand())
     _steps(cl, watch, 0.5)
     before = cl.plant.position.copy()
-    c.submit(Command(CommandKind.MOVE, pose=np.concatenate([START, cl.model.home.rpy])))
+    c.submit(MoveCommand(pose=np.concatenate([START, cl.model.home.rpy])))
     _steps(cl, watch, 4.0)
     err = np.linalg.norm(cl.plant.position - START) * 1e3
     ok = c.data.state is State.ENABLED and err < 2.0
@@ -324,7 +324,7 @@ def _sigkill(model: RobotModel, cl: ClosedLoop, res: Result, watch: Watch, sc: S
     c2 = m2.controller
     try:
         m2.startup()
-        c2.submit(Command(CommandKind.ENABLE))
+        c2.submit(EnableCommand())
         p0 = cl.plant.position.copy()
         jump = 0.0
         for _ in range(round(1.0 / cl.period)):

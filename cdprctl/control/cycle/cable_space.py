@@ -54,14 +54,14 @@ from cdprctl.control.cycle.cable_kernels import (
     motor_target_kernel,
     tension_hold_kernel,
 )
-from cdprctl.control.cycle.estimator import Estimator
-from cdprctl.control.cycle.reference_pose import ReferencePose
-from cdprctl.control.cycle.torques import WinchTorques
 from cdprctl.control.data import ControlData
 from cdprctl.core.numerics import min2
 from cdprctl.core.rotation import FloatArray
 from cdprctl.geometry.stiffness import lowest_mode
 from cdprctl.model.robot import RobotModel
+
+#: the winding (``Estimator.winding``): the cable law's terms, l_zero (m), r/G (m/rad)
+Winding = tuple[tuple, FloatArray, FloatArray]
 
 #: the external-wrench estimate's bandwidth: the platform's lowest mode over this
 DISTURBANCE_BELOW_MODE = 6.0
@@ -113,13 +113,12 @@ class CableSpace:
     # winch-on-cable modes (23-34 Hz), short beside anything a user commands.
     ENABLE_SETTLE = 0.5
 
-    def __init__(self, model: RobotModel, data: ControlData, reference: ReferencePose,
-                 estimator: Estimator, winches: WinchTorques):  # fmt: skip
+    def __init__(self, model: RobotModel, data: ControlData):
+        """The stages it reads are given in each call: the lengths and stiffness at the
+        reference (``ReferencePose``), the winding (``Estimator.winding``), the winch law's
+        terms (``WinchTorques.terms``, which a friction calibration replaces)."""
         self.enabled = model.drives.holds_lengths
         self.data = data
-        self.reference = reference  # the lengths at the reference: the targets'
-        self.estimator = estimator
-        self.winches = winches
         # s: the instant each drive sampled its last feedback taken, and that sample's motor
         # speed (rad/s): the measured tensions step by the samples' own interval
         self._last_sampled = np.full(model.n_cables, -math.inf)
@@ -172,11 +171,13 @@ class CableSpace:
         self._deviation_rate = np.zeros(m)
         self._no_cells = np.full(m, math.nan)  # N: no load cell on any cable
 
-    def targets(self, active: bool, motor_position: FloatArray) -> None:
-        """``data.motor_target`` (rad): from the reference pose and the commanded tensions
-        when ``active``, carried on from where the drives went during a stall
-        (``_after_stall``), else the motors' own ``motor_position`` (rad); ``expected`` (N)."""
-        self._targets(active, motor_position)
+    def targets(self, active: bool, motor_position: FloatArray, lengths: FloatArray,
+                k: FloatArray, winding: Winding) -> None:  # fmt: skip
+        """``data.motor_target`` (rad): from the reference pose (its cables' ``lengths`` m
+        and stiffness ``k`` N/m) and the commanded tensions on the ``winding`` when
+        ``active``, carried on from where the drives went during a stall (``_after_stall``),
+        else the motors' own ``motor_position`` (rad); ``expected`` (N)."""
+        self._targets(active, motor_position, lengths, k, winding)
         self._after_stall(active)
 
     def _after_stall(self, active: bool) -> None:
@@ -203,20 +204,20 @@ class CableSpace:
             self.CATCH_UP,
         )  # fmt: skip
 
-    def _targets(self, active: bool, motor_position: FloatArray) -> None:
+    def _targets(self, active: bool, motor_position: FloatArray, lengths: FloatArray,
+                 k: FloatArray, winding: Winding) -> None:  # fmt: skip
         d = self.data
         if not active:
             d.motor_target[:] = motor_position
             self.expected[:] = d.tensions
             return
-        e = self.estimator
+        law, l_zero, drum_ratio = winding
         motor_target_kernel(
-            self.reference.reference_kin.length, d.tensions, e._law, e.l_zero, e.drum_ratio,
-            self.give, d.motor_target,
+            lengths, d.tensions, law, l_zero, drum_ratio, self.give, d.motor_target
         )  # fmt: skip
         if math.isnan(self._settle_time):  # the first active cycle: what the motors lack
             np.subtract(d.motor_target, motor_position, out=self._settle0)
-            np.multiply(self._settle0, e.drum_ratio, out=self._settle0)
+            np.multiply(self._settle0, drum_ratio, out=self._settle0)
             self._settle_time = 0.0
         else:
             self._settle_time += d.dt
@@ -228,9 +229,9 @@ class CableSpace:
         self._share.fill(1.0 - x * x * (3.0 - 2.0 * x))
         np.multiply(self._settle0, self._share, out=self.settle)
         # paid out like the force feedback's give: the motor angle less settle / (r/G)
-        np.divide(self.settle, e.drum_ratio, out=self._settle_rad)
+        np.divide(self.settle, drum_ratio, out=self._settle_rad)
         np.subtract(d.motor_target, self._settle_rad, out=d.motor_target)
-        np.multiply(self.reference.k, self.settle, out=self.expected)
+        np.multiply(k, self.settle, out=self.expected)
         np.subtract(d.tensions, self.expected, out=self.expected)
         # within the cables' range: a length the model has wrong by millimetres would make
         # hundreds of newtons of a stiff cable
@@ -244,55 +245,55 @@ class CableSpace:
         self._commanded[:] = d.hold_tensions
         d.tension_error[:] = 0.0
         d.internal_tension_error[:] = 0.0
-        self._fast_error[:] = 0.0
-        d.ext_estimate[:] = 0.0
+        self._fast_error[:] = 0.0  # (data.ext_estimate: zeroed by the observer's reset)
         self.give[:] = 0.0
         self.settle[:] = 0.0
         self._settle_time = math.nan
         self._measured_for = 0.0
         self._last_sampled[:] = -math.inf  # the first sample after enabling starts the count
 
-    def warm_up(self, N: FloatArray) -> None:
+    def warm_up(self, N: FloatArray, terms: tuple) -> None:
         """``measure``'s and ``_after_stall``'s kernels compiled, past the brake-release
         window (on throwaway outputs: the caller keeps what it needs; enabling starts the
         measurement afresh)."""
         zeros = np.zeros(self.data.measured_tensions.shape[0])
         self._measured_for = math.inf
-        self.measure(zeros, zeros, zeros, N)
+        self.measure(zeros, zeros, zeros, N, terms)
         self._measured_for = 0.0
         self._last_sampled[:] = -math.inf
         s, T = np.zeros((5, zeros.shape[0])), self._period
         after_stall_kernel(s[0], s[1], s[2], s[3], s[4], 2.0 * T, T, 2.0 * T, True, self.CATCH_UP)
 
-    def force_feedback(self, stopping: bool = False) -> None:
+    def force_feedback(self, k: FloatArray, stopping: bool = False) -> None:
         """``give`` (m): each cable paid out by the integral of its tension error, leaking
         back (``force_feedback_kernel``), at the rate ``self.iff`` (rad/s). ``stopping`` (a
         controlled stop): instead, each cable that carries less than it should is reeled in
         to its tension at ``TENSION_HOLD`` rad/s, no faster than ``[control] max_velocity``
-        (``tension_hold_kernel``)."""
+        (``tension_hold_kernel``). ``k`` (N/m): the cables' stiffness at the reference."""
         d = self.data
         if stopping:
             tension_hold_kernel(
-                self._fast_error, self.reference.k, self.TENSION_HOLD * d.dt,
+                self._fast_error, k, self.TENSION_HOLD * d.dt,
                 self._reel_speed * d.dt, d.measured_tensions, self._t_lo, self.give,
             )  # fmt: skip
         elif self.iff > 0.0:
             decay = math.exp(-self.iff * d.dt)
-            force_feedback_kernel(d.tension_error, self.reference.k, decay, self.give)
+            force_feedback_kernel(d.tension_error, k, decay, self.give)
 
-    def estimate_disturbance(self, W: FloatArray, integrate: bool) -> None:
-        """``data.ext_estimate`` (N, N·m at P, base frame): the external wrench from the
-        measured tensions (``disturbance_kernel``), while ``integrate`` — held while the
+    def estimate_disturbance(self, W: FloatArray, integrate: bool, ext: FloatArray) -> None:
+        """``ext`` (``data.ext_estimate``; N, N·m at P, base frame), integrated in place: the
+        external wrench from the measured tensions (``disturbance_kernel``), while
+        ``integrate`` — held while the
         feedback or the distribution saturates, so that a force beyond what the cables can
         hold is not wound up (the feed-forward then stays infeasible and the supervisor
         stops: ``FaultKind.TENSION_DISTRIBUTION``)."""
         d = self.data
         if integrate and self.disturbance_gain > 0.0:
-            disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, d.ext_estimate)
+            disturbance_kernel(W, d.tension_error, self.disturbance_gain * d.dt, ext)
 
     def measure(
         self, torque: FloatArray, velocity: FloatArray, sampled_at: FloatArray, N: FloatArray,
-        cells: FloatArray | None = None,
+        terms: tuple, cells: FloatArray | None = None,
     ) -> None:  # fmt: skip
         """``data.measured_tensions`` (N) from the drives' ``torque`` (N·m) and ``velocity``
         (rad/s), sampled at ``sampled_at`` (s, each drive's SYNC), the rotor's inertia taken out at
@@ -307,13 +308,14 @@ class CableSpace:
         by the cycle's 8 ms instead of the 2 ms it covered: 136 N, the force feedback paid
         out 0.52 rad, the drive reversed and faulted on its following error (seed000, 500 Hz,
         lock-step; docs/control.md "Measured tensions"). ``cells`` (N per cable, NaN: none):
-        the load cells' tensions, measured where a cable has one (``tension_source.py``)."""
-        d, w = self.data, self.winches
+        the load cells' tensions, measured where a cable has one (``tension_source.py``);
+        ``terms``: the winch law's (``WinchTorques.terms``)."""
+        d = self.data
         self._measured_for += d.dt
         if self._measured_for <= self._release:
             return
         measured_tension_kernel(
-            torque, velocity, sampled_at, w.terms, self.expected, self.MEASURED_TENSION_FILTER,
+            torque, velocity, sampled_at, terms, self.expected, self.MEASURED_TENSION_FILTER,
             self.SUPERVISION_FILTER, self._measuring, d.measured_tensions, d.tension_error,
             self._no_cells if cells is None else cells,
         )  # fmt: skip

@@ -32,7 +32,7 @@ from cdprctl.control.cycle.tension_source import LoadCellCheck
 from cdprctl.control.cycle.torques import WinchTorques
 from cdprctl.control.cycle.wrench import PoseController
 from cdprctl.control.data import ControlData
-from cdprctl.control.intake.desk import CommandDesk, Verdict
+from cdprctl.control.intake.desk import CommandDesk, DeskPorts, Verdict
 from cdprctl.control.intake.jog import Jog
 from cdprctl.control.intake.path_follower import PathFollower
 from cdprctl.control.states import (
@@ -90,7 +90,7 @@ class Controller:
         self.ext_wrench = np.array(c.external_wrench, dtype=float)  # N, N·m, known
         d.ext_total[:] = self.ext_wrench
         self.observer = WrenchObserver(model, d, self.winches)
-        self.cable_space = CableSpace(model, d, self.reference, e, self.winches)
+        self.cable_space = CableSpace(model, d)
         self.load_cells = LoadCellCheck(model, self.winches)  # tension_source.py
         self._rotor_term = np.zeros(model.n_cables)  # N·m, for its check
         self.grippers = GripperControl(model, d, gs, e, self.at, self.winches,
@@ -109,12 +109,12 @@ class Controller:
         self.interference = d.interference = Interference(model)
         watch = ClearanceWatch(self.interference)
         self._clearance = self.interference.arrays if watch.active else None
-        self.supervisor = Supervisor(c, d, drives, tr.stop_here, tension_limits, torque_limits,
-                                     model.safety, self.machine, watch)  # fmt: skip
+        self.supervisor = Supervisor(c, d, drives, tension_limits, torque_limits, model.safety,
+                                     self.machine, watch)  # fmt: skip
         # targets set by commands (submit, outside the loop) keep the soft limits
         self.limits = SoftLimits(model, self.ext_wrench)
-        self.jog = Jog(model, d, tr, self.limits)
-        self.path = PathFollower(model, d, tr, self.limits)
+        self.jog = Jog(model, d)
+        self.path = PathFollower(model, d)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,
         # the known external wrench and the trajectory's inertial load, distributed like the
         # commanded ones) at the estimated pose. The commanded tensions, PD feedback included,
@@ -131,7 +131,10 @@ class Controller:
         self._last_t = -math.inf  # s, the last cycle's time
         # s: position mode, the most the reference moves on across a stall of the loop
         self._extrapolation = model.drives.target_extrapolation
-        self.desk = CommandDesk(self)
+        self.desk = CommandDesk(DeskPorts(
+            model, d, self.machine, drives, tr, self.limits, self.jog, self.path, self.supervisor,
+            self.distribution, self.grippers, self.restart, self.pose6,
+        ))  # fmt: skip
         d.gains = {
             "force_feedback": self.cable_space.iff,
             "disturbance_bandwidth": self.cable_space.disturbance_bandwidth,
@@ -174,8 +177,8 @@ class Controller:
         ph[1] = (t2 - t1) * 1e6
         # 2. reference ← the trajectory and its sources, after the supervisor's checks
         last = e.last_fk
-        self.jog.update(t)
-        self.path.update(t)
+        self.jog.update(t, tr)
+        self.path.update(t, tr)
         self.supervisor.supervise(
             t,
             fk.status,
@@ -184,8 +187,8 @@ class Controller:
             tr.finished and not self.path.holds_motion,
             e.position,
         )
-        if d.motion and tr.finished and not self.path.holds_motion:
-            d.motion = "" if self.path.plan is None else d.motion
+        self._brake_if_asked()
+        self.desk.motion_ended(tr.finished and not self.path.holds_motion)
         tr.update(self._reference_step(gap))  # → io.reference
         if self.cable_space.enabled:  # position mode: the working pose, at the reference
             self.reference.update(io.reference, e)  # → io.working
@@ -202,13 +205,16 @@ class Controller:
         if active:
             out = self.distribution.distribute(self.at)
             self.supervisor.distribution(t, self.distribution.bad_cycles, out)
+            self._brake_if_asked()
         t5 = clock()
         ph[4] = (t5 - t4) * 1e6
         # 5. torques, targets ← tensions
         self.winches.update(d.tensions, self.at.kin.WT, tr.acceleration, st.velocity, active,
                             d.torques)  # fmt: skip
         if self.cable_space.enabled:
-            self.cable_space.targets(active, st.position)  # → data.motor_target
+            ref = self.reference  # → data.motor_target
+            self.cable_space.targets(active, st.position, ref.reference_kin.length, ref.k,
+                                     self.estimator.winding)  # fmt: skip
         ph[5] = (clock() - t5) * 1e6
 
     def _step_time(self, t: float) -> float:
@@ -234,15 +240,16 @@ class Controller:
         if cs.enabled and d.state in OBSERVED_STATES:
             np.copyto(d.stretch_tensions, d.tensions)
             cs.measure(st.torque, st.velocity, st.sampled_at, self.distribution.current.ns.N,
-                       st.tension)  # fmt: skip
+                       self.winches.terms, st.tension)  # fmt: skip
             cs.estimate_disturbance(
                 self.at.kin.W,
                 d.state is not STOPPING
                 and d.saturation >= 1.0
                 and self.distribution.bad_cycles == 0,
+                d.ext_estimate,
             )
             d.ext_total += d.ext_estimate  # fed forward: the pose law and the TDA see it
-            cs.force_feedback(stopping=d.state is STOPPING)
+            cs.force_feedback(self.reference.k, stopping=d.state is STOPPING)
         elif self._stretch_due:
             self.refresh_stretch_tensions()
 
@@ -254,6 +261,7 @@ class Controller:
             why = self.load_cells.check(t, st.torque, st.velocity, accel, st.tension)
             if why:
                 self.supervisor.fault(t, LOAD_CELL, why)
+                self._brake_if_asked()
 
     def _reference_step(self, gap: float) -> float:
         """s the reference moves on this cycle, ``gap`` s after the last. Position mode: as
@@ -275,6 +283,33 @@ class Controller:
         self.supervisor.fault(
             t, FaultKind.INTERNAL, f"internal error: {type(exc).__name__}: {exc}"
         )
+        self._brake_if_asked()
+
+    def _brake_if_asked(self) -> None:
+        """A fault's controlled stop: the reference braked to rest where it is, at once."""
+        if self.supervisor.take_stop():
+            self.trajectory.stop_here()
+
+    def restart(self) -> None:
+        """Enable (the desk): every stage starts afresh from the holding pose — the reference
+        there, the holding tensions commanded, the integrals, the observer, the measured
+        tensions, the load cells' checks and the saturation of before forgotten, the grippers
+        holding their travel, no stop since."""
+        self.trajectory.reset(self.pose6())
+        self.reference.restart()
+        self.distribution.restart()
+        self.pose.reset()
+        self.observer.reset(self.io.estimate)
+        self.cable_space.start_measuring()
+        self.load_cells.reset()
+        self.grippers.hold()
+        self.supervisor.restart()
+
+    def start_from(self, motor_position: FloatArray) -> None:
+        """The start-up's first guess (``initialise.py``): the motors at ``motor_position``
+        (rad), the cables stretched by the minimum tensions."""
+        np.copyto(self.data.motor_position, motor_position)
+        self.data.stretch_tensions[:] = self.model.tension_min
 
     def refresh_stretch_tensions(self) -> None:
         """The feed-forward tensions for the estimator's stretch (``Distribution.stretch``)."""

@@ -211,6 +211,12 @@ class Distribution:
             self.bad_cycles += 1
         return out
 
+    def restart(self) -> None:
+        """Command the last feasible tensions again, the feedback unsaturated (enable; the
+        start-up's fixed point): what was saturated before a fault is not this run's."""
+        np.copyto(self.data.tensions, self.data.hold_tensions)
+        self.data.saturation = 1.0
+
     def _saturate(self, t_prev: FloatArray | None, at: WorkingPose) -> TDAOutput | None:
         """The solution for ``w_ff + s w_fb`` with the largest ``s`` in [0, 1] the cables can
         produce (``w_fb``: the PID's feedback wrench, ``w_ff`` the rest: weight, inertia, the

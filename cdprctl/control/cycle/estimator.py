@@ -61,6 +61,9 @@ class Estimator:
         self.l_zero = self.l_home.copy()
         self.law = compliance_of(c)  # the cable law's terms (cdprctl.core.numerics)
         self._law = kernel_args(self.law)
+        # the winding as the cable-space kernels take it: (the law's terms, l_zero m, r/G
+        # m/rad), arrays written in place (calibrate): handed to the cable space in each call
+        self.winding = (self._law, self.l_zero, self.drum_ratio)
         # A gripper cable's length is the jaw's travel plus the pose (Sensors 2019 §2.4): the
         # pose comes from the other cables, the grippers take the redundancy (docs/gripper.md).
         grip = {g.cable for g in model.grippers}

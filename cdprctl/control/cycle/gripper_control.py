@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, GripKind
+from cdprctl.control.command_types import GripKind, GripperCommand
 from cdprctl.control.cycle.distribution import Distribution
 from cdprctl.control.cycle.estimator import Estimator
 from cdprctl.control.cycle.grasp import GraspSensor
@@ -132,7 +132,7 @@ class GripperControl:
             dist.t_max,
         )
 
-    def command(self, t: float, cmd: Command) -> None:
+    def command(self, t: float, cmd: GripperCommand) -> None:
         gs, j, d = self.set, cmd.gripper, self.data
         if not 0 <= j < gs.n:
             d.events.append((t, f"gripper {j} refused: the robot has {gs.n} gripper(s)"))

@@ -7,25 +7,69 @@ tests and scripts call it directly) checks a command's payload and plans what ne
 mailbox, or refused with the reason (also an event). ``handle`` (in the cycle) acts on each
 queued command whose kind the state accepts (``commands.ACCEPTED_IN``), through the handlers
 below; the cycle checks nothing twice. One rule decides which motion source moves the
-reference (``_take_motion``)."""
+reference (``_take_motion``). The desk sees the controller through its ports (``DeskPorts``):
+what it asks, named, not the controller."""
 
 from __future__ import annotations
 
 import collections
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import NOTHING, Command, CommandKind, Plan, accepted
+from cdprctl.control.command_types import (
+    NOTHING,
+    Command,
+    CommandKind,
+    GripperCommand,
+    JogCommand,
+    MoveCommand,
+    PathCommand,
+    Plan,
+    SetTdaCommand,
+    StopCommand,
+    accepted,
+)
+from cdprctl.control.cycle.distribution import Distribution
+from cdprctl.control.cycle.gripper_control import GripperControl
+from cdprctl.control.data import ControlData
+from cdprctl.control.intake.jog import Jog
+from cdprctl.control.intake.path_follower import PathFollower
 from cdprctl.control.states import HEALTHY_STATES, State
+from cdprctl.control.supervision.state_machine import StateMachine
+from cdprctl.control.supervision.supervisor import DrivePort, Supervisor
 from cdprctl.core.realtime import sharing_the_interpreter
-from cdprctl.core.rotation import rpy_to_matrix
+from cdprctl.core.rotation import FloatArray, rpy_to_matrix
+from cdprctl.model.robot import RobotModel
+from cdprctl.motion.limits import SoftLimits
+from cdprctl.motion.trajectory import Trajectory
 from drivers.vocabulary import Lifecycle
 
-if TYPE_CHECKING:
-    from cdprctl.control.cycle.controller import Controller
+
+@dataclass(frozen=True)
+class DeskPorts:
+    """What the desk works with, handed over by the controller: the loop's data and the
+    state machine it asks; the drives' lifecycle; the trajectory and the motion sources a
+    command moves, the soft limits it is checked against; the supervisor's stops and faults;
+    the distribution a TDA switch changes; the grippers; ``restart()`` the cycle's stages
+    afresh at the holding pose (enable); ``pose6()`` the estimated pose as trajectory
+    coordinates."""
+
+    model: RobotModel
+    data: ControlData
+    machine: StateMachine
+    drives: DrivePort
+    trajectory: Trajectory
+    limits: SoftLimits
+    jog: Jog
+    path: PathFollower
+    supervisor: Supervisor
+    distribution: Distribution
+    grippers: GripperControl
+    restart: Callable[[], None]
+    pose6: Callable[[], FloatArray]
 
 
 @dataclass(frozen=True)
@@ -45,13 +89,14 @@ FULL = Verdict(False, "the command mailbox is full")
 
 
 class CommandDesk:
-    def __init__(self, ctl: Controller):
-        self.ctl = ctl
+    def __init__(self, ctl: DeskPorts):
+        self.ctl = ctl  # the controller's ports: the only way the desk reaches it
         self.data = ctl.data
         self.machine = ctl.machine  # the state changes the commands ask for
         # each command queued with what submit planned for it
         self.mailbox: collections.deque[tuple[Command, Plan]] = collections.deque(maxlen=MAILBOX)
-        self._handlers: dict[CommandKind, Callable[[float, Command, Plan], None]] = {
+        # one handler per kind, each taking its kind's type (``command_types.py``)
+        self._handlers: dict[CommandKind, Callable[[float, Any, Plan], None]] = {
             CommandKind.ENABLE: self._enable,
             CommandKind.DISABLE: self._disable,
             CommandKind.STOP: self._stop,
@@ -86,7 +131,7 @@ class CommandDesk:
         """What ``cmd`` needs planned (``NOTHING`` for most kinds), or None when it cannot be
         acted on (why: written as an event)."""
         c, d = self.ctl, self.data
-        if cmd.kind is CommandKind.MOVE:
+        if isinstance(cmd, MoveCommand):
             pose = None if cmd.pose is None else np.asarray(cmd.pose, dtype=float)
             if (
                 pose is None
@@ -103,17 +148,17 @@ class CommandDesk:
                 d.events.append((d.time, f"move ignored: {why}"))
                 return None
             return Plan(target=target)
-        if cmd.kind is CommandKind.JOG:
+        if isinstance(cmd, JogCommand):
             why = self._take_motion(d.time, "jog", ask_only=True)  # again in the cycle: a
             if why:  # path may end meanwhile
                 d.events.append((d.time, f"jog ignored: {why}"))
                 return None
-            return c.jog.plan(cmd)
-        if cmd.kind is CommandKind.PATH:
-            return c.path.plan_path(cmd)
+            return c.jog.plan(cmd, c.trajectory, c.limits)
+        if isinstance(cmd, PathCommand):
+            return c.path.plan_path(cmd, c.trajectory, c.limits)
         if cmd.kind is CommandKind.RESUME:
-            return c.path.plan_resume(cmd)
-        if cmd.kind is CommandKind.SET_TDA:
+            return c.path.plan_resume(c.trajectory, c.limits)
+        if isinstance(cmd, SetTdaCommand):
             errors = ["no options"] if cmd.tda is None else cmd.tda.validate(c.model)
             if errors:
                 d.events.append((d.time, f"TDA options rejected: {'; '.join(errors)}"))
@@ -138,9 +183,16 @@ class CommandDesk:
         if by == "jog":
             return "a path is running (pause or abort it first)" if c.path.plan is not None else ""
         if not ask_only:
-            c.path.abort(t)
+            c.path.abort(t, c.trajectory)
             c.jog.active = False
         return ""
+
+    def motion_ended(self, standing: bool) -> None:
+        """In the cycle, after the motion sources: ``data.motion`` back to holding ("") once
+        the reference stands (``standing``: the trajectory finished, no path between
+        segments or dwelling) and no path is left to play."""
+        if standing and self.data.motion and self.ctl.path.plan is None:
+            self.data.motion = ""
 
     def _enable(self, t: float, cmd: Command, plan: Plan) -> None:
         c, d = self.ctl, self.data
@@ -149,17 +201,7 @@ class CommandDesk:
             d.events.append((t, f"enable refused: drives {c.drives.lifecycle.value} "
                              f"{c.drives.error}"))  # fmt: skip
             return
-        c.trajectory.reset(c.pose6())
-        c.reference.restart()
-        d.tensions[:] = d.hold_tensions
-        c.pose.reset()
-        c.observer.reset(c.io.estimate)
-        c.cable_space.start_measuring()
-        c.load_cells.reset()
-        # a fresh start: the saturation of before the fault is not this run's
-        d.saturation, d.saturated_for = 1.0, 0.0
-        c.grippers.hold()
-        d.stop_category = -1
+        c.restart()  # every stage afresh from the holding pose (Controller.restart)
         c.drives.begin_activate()
         self.machine.request(State.ENABLING, t, "enabling the drives with holding torques")
 
@@ -180,11 +222,11 @@ class CommandDesk:
             self.ctl.supervisor.clear_fault()
         self._take_motion(t, "stop")
         self.ctl.trajectory.stop_here()
-        self.data.stop_category = 1
+        self.ctl.supervisor.stop_asked(1)
         self.machine.request(State.DISABLING, t, "disable requested: decelerating, "
                              "then the drives disabled")  # fmt: skip
 
-    def _stop(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _stop(self, t: float, cmd: StopCommand, plan: Plan) -> None:
         """IEC 60204-1's categories: 0 the drives off at once (the brakes stop the platform),
         1 decelerate then disable (``disable``), 2 decelerate and hold, powered."""
         d, sup = self.data, self.ctl.supervisor
@@ -198,7 +240,7 @@ class CommandDesk:
         elif d.state in (State.ENABLED, State.MOVING):
             self._take_motion(t, "stop")
             self.ctl.trajectory.stop_here()
-            d.stop_category = 2
+            sup.stop_asked(2)
             self.machine.request(State.ENABLED, t, "stop: decelerating, then holding")
         else:
             d.events.append((t, f"stop category 2 ignored in {d.state.value}"))
@@ -207,7 +249,7 @@ class CommandDesk:
         c, d = self.ctl, self.data
         if self._still_stopping(t, cmd):
             return
-        d.stop_category = -1
+        c.supervisor.stop_asked(-1)
         if d.state is State.STOPPING:  # a category 2 stop holding: back to holding, enabled
             c.supervisor.clear_fault()
             c.trajectory.reset(c.pose6())
@@ -222,7 +264,7 @@ class CommandDesk:
         c.trajectory.reset(c.pose6())
         self.machine.request(State.READY, t, "fault reset")
 
-    def _move(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _move(self, t: float, cmd: MoveCommand, plan: Plan) -> None:
         if plan.target is None or cmd.pose is None:  # not through submit(): nothing to act on
             return
         c = self.ctl
@@ -231,17 +273,18 @@ class CommandDesk:
         self.data.motion = "move"
         self.machine.request(State.MOVING, t, f"move to {np.round(cmd.pose, 4).tolist()}")
 
-    def _jog(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _jog(self, t: float, cmd: JogCommand, plan: Plan) -> None:
         c, d = self.ctl, self.data
         why = self._take_motion(t, "jog")
         if why:
             d.events.append((t, f"jog ignored: {why}"))
             return
-        c.jog.command(t, plan)
+        if c.jog.command(t, plan, c.trajectory):  # a segment to follow
+            d.motion = "jog"
         if c.jog.active and d.state is not State.MOVING:
             self.machine.request(State.MOVING, t, "jog")
 
-    def _path(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _path(self, t: float, cmd: PathCommand, plan: Plan) -> None:
         c, d = self.ctl, self.data
         assert plan.path is not None  # submit planned it
         path, offset = plan.path
@@ -249,7 +292,8 @@ class CommandDesk:
             d.events.append((t, f"path {path.name} not started: the robot moved since it was "
                              "checked"))  # fmt: skip
             return
-        c.path.start(t, path, offset)
+        c.path.start(t, path, offset, c.trajectory)
+        d.motion = "path"
         self.machine.request(State.MOVING, t, f"path {path.name}: {path.summary()}")
 
     def _pause(self, t: float, cmd: Command, plan: Plan) -> None:
@@ -257,7 +301,7 @@ class CommandDesk:
         if path.plan is None or path.paused:
             self.data.events.append((t, "pause ignored: no running path"))
             return
-        path.pause(t)
+        path.pause(t, self.ctl.trajectory)
 
     def _resume(self, t: float, cmd: Command, plan: Plan) -> None:
         c = self.ctl
@@ -265,18 +309,19 @@ class CommandDesk:
             self.data.events.append((t, "resume ignored: no paused path"))
             return
         path, offset = plan.path
-        c.path.start(t, path, offset)
+        c.path.start(t, path, offset, c.trajectory)
+        self.data.motion = "path"
         self.machine.request(State.MOVING, t, f"path {path.name} resumed at segment "
                              f"{offset + 1}")  # fmt: skip
 
     def _abort(self, t: float, cmd: Command, plan: Plan) -> None:
-        self.ctl.path.abort(t)
-        self.ctl.jog.stop()
+        self.ctl.path.abort(t, self.ctl.trajectory)
+        self.ctl.jog.stop(self.ctl.trajectory)
 
-    def _gripper(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _gripper(self, t: float, cmd: GripperCommand, plan: Plan) -> None:
         self.ctl.grippers.command(t, cmd)
 
-    def _set_tda(self, t: float, cmd: Command, plan: Plan) -> None:
+    def _set_tda(self, t: float, cmd: SetTdaCommand, plan: Plan) -> None:
         c, d, opts = self.ctl, self.data, cmd.tda
         if opts is None:
             return

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprctl.control.command_types import NOTHING, Command, Plan
+from cdprctl.control.command_types import NOTHING, JogCommand, Plan
 from cdprctl.control.data import ControlData
 from cdprctl.control.intake.motion_source import MotionSource
 from cdprctl.core.rotation import FloatArray
@@ -21,31 +21,30 @@ from cdprctl.motion.trajectory import Trajectory, coordinates_rotation
 
 
 class Jog(MotionSource):
-    def __init__(
-        self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
-    ):
-        super().__init__(model, data, trajectory, limits)
+    def __init__(self, model: RobotModel, data: ControlData):
+        super().__init__(model, data)
         self.deadman = model.control.jog_deadman  # s
         self._bound: FloatArray | None = None  # where the last jog's limits ended it
         self.active = False
         self.last = 0.0  # s, loop time of the last jog command
         self._rest = [0.0] * 6  # the segment ends at rest (ruckig's target velocity)
 
-    def plan(self, cmd: Command) -> Plan | None:
-        """Outside the loop (``CommandDesk.submit``): the jog's segment, along its velocity to
-        where the soft limits end it (ruckig brakes to stop there; a zero velocity: a stop,
-        no target). None (with an event) when the command is unusable."""
+    def plan(self, cmd: JogCommand, trajectory: Trajectory, limits: SoftLimits) -> Plan | None:
+        """Outside the loop (``CommandDesk.submit``): the jog's segment from the
+        ``trajectory``'s reference, along its velocity to where the soft ``limits`` end it
+        (ruckig brakes to stop there; a zero velocity: a stop, no target). None (with an
+        event) when the command is unusable."""
         d = self.data
         v = None if cmd.velocity is None else np.asarray(cmd.velocity, dtype=float)
         if v is None or v.shape != (6,) or not np.all(np.isfinite(v)) or np.any(
-            np.abs(v) > self.trajectory.limits * (1 + 1e-9)
+            np.abs(v) > trajectory.limits * (1 + 1e-9)
         ) or cmd.frame not in ("base", "platform"):  # fmt: skip
             d.events.append((d.time, "jog ignored: velocity not 6 finite numbers within the "
                              "configured limits, or frame not base/platform"))  # fmt: skip
             return None
         if not np.any(v):
             return NOTHING  # a stop
-        start = self.trajectory.position.copy()
+        start = trajectory.position.copy()
         if cmd.frame == "platform":
             R = coordinates_rotation(self.model.home.rotation, start[3:])
             v = np.concatenate([R @ v[:3], R @ v[3:]])
@@ -53,9 +52,9 @@ class Jog(MotionSource):
         speed, turn = float(np.linalg.norm(v[:3])), float(np.linalg.norm(v[3:]))
         reach = float(np.linalg.norm(ws.position_max - ws.position_min))
         horizon = reach / speed if speed > 0 else 2.0 * ws.max_angle / turn  # s
-        end, why = self.limits.ray_end(start, v, horizon, step=0.02)
-        vmax = np.maximum(np.abs(v), FLOOR * self.trajectory.limits)
-        segment = Plan(target=end, limits=(vmax.tolist(), self.trajectory.full_acceleration))
+        end, why = limits.ray_end(start, v, horizon, step=0.02)
+        vmax = np.maximum(np.abs(v), FLOOR * trajectory.limits)
+        segment = Plan(target=end, limits=(vmax.tolist(), trajectory.full_acceleration))
         # one event per bound met, not one per repeated command (the end moves by a bisection
         # step as the reference approaches it)
         bound = end if why else None
@@ -66,31 +65,33 @@ class Jog(MotionSource):
         self._bound = bound
         return segment
 
-    def command(self, t: float, plan: Plan) -> None:
-        """Follow a jog's ``plan`` (its segment, from ``plan`` by ``CommandDesk.submit``)."""
+    def command(self, t: float, plan: Plan, tr: Trajectory) -> bool:
+        """Follow a jog's ``plan`` (its segment, from ``plan`` by ``CommandDesk.submit``) on
+        the trajectory ``tr``;
+        whether it set a segment to follow (False: a stop, or already at the bound)."""
         if plan.target is None or plan.limits is None:  # a zero velocity: stop
-            self.stop()
-            return
-        tr = self.trajectory
+            self.stop(tr)
+            return False
         if tr.finished and float(np.max(np.abs(plan.target - tr.position))) < 1e-9:
-            return  # already at the bound: nothing to move, no state to change
+            return False  # already at the bound: nothing to move, no state to change
         vmax, amax = plan.limits
-        self.trajectory.set_segment(plan.target, self._rest, vmax, amax)
+        tr.set_segment(plan.target, self._rest, vmax, amax)
         self.active = True
         self.last = t
-        self.data.motion = "jog"
+        return True
 
-    def stop(self) -> None:
+    def stop(self, tr: Trajectory) -> None:
+        """A jog under way braked to rest on ``tr``."""
         if self.active:
-            self.trajectory.stop_here()
+            tr.stop_here()
         self.active = False
 
-    def update(self, t: float) -> None:
-        """The deadman: no jog for ``deadman`` s → a jerk-limited stop."""
+    def update(self, t: float, trajectory: Trajectory) -> None:
+        """The deadman: no jog for ``deadman`` s → a jerk-limited stop of ``trajectory``."""
         if self.active and t - self.last > self.deadman:
             self.active = False
-            if not self.trajectory.finished:
-                self.trajectory.stop_here()
+            if not trajectory.finished:
+                trajectory.stop_here()
                 self.data.events.append(
                     (t, f"jog: no jog command for {self.deadman:g} s (deadman): stopping")
                 )

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, Plan
+from cdprctl.control.command_types import NOTHING, PathCommand, Plan
 from cdprctl.control.data import ControlData
 from cdprctl.control.intake.motion_source import MotionSource
 from cdprctl.control.states import State
@@ -23,10 +23,8 @@ from cdprctl.motion.waypoints import PathFileError
 
 
 class PathFollower(MotionSource):
-    def __init__(
-        self, model: RobotModel, data: ControlData, trajectory: Trajectory, limits: SoftLimits
-    ):
-        super().__init__(model, data, trajectory, limits)
+    def __init__(self, model: RobotModel, data: ControlData):
+        super().__init__(model, data)
         self.plan: PathPlan | None = None
         self.k = 0  # the segment under way (0-based, in ``plan``)
         self.offset = 0  # segments of the original path before ``plan`` (after a resume)
@@ -39,33 +37,35 @@ class PathFollower(MotionSource):
         self._started = 0.0  # s: when the plan under way started
 
     # -- outside the loop (Controller.submit) ----------------------------------------------------
-    def plan_path(self, cmd: Command) -> Plan | None:
-        """Parse and check the whole path from where the reference is (motion/path_plan.py);
+    def plan_path(self, cmd: PathCommand, tr: Trajectory, limits: SoftLimits) -> Plan | None:
+        """Parse and check the whole path from where the reference of ``tr`` is, against the
+        soft ``limits`` (motion/path_plan.py);
         None (an event naming the line and the rule) when it is refused. The loop starts it
         only in ENABLED (``ACCEPTED_IN``) with the reference still there, at rest."""
-        d, tr = self.data, self.trajectory
+        d = self.data
         name = cmd.name or "(payload)"
         if cmd.plan is not None and cmd.plan[0].starts_at(tr.position):
             return Plan(path=cmd.plan)  # checked already (the gateway, --path) from there
         try:
             plan = plan_text(self.model, cmd.text, tr.position.copy(), self.model.control.period,
-                             self.limits, name)  # fmt: skip
+                             limits, name)  # fmt: skip
         except (PathFileError, PathRejectedError) as exc:
             d.events.append((d.time, f"path {name} rejected: {exc}"))
             return None
         return Plan(path=(plan, 0))
 
-    def plan_resume(self, cmd: Command) -> Plan | None:
-        """The rest of a paused path from where it stands, checked again."""
+    def plan_resume(self, tr: Trajectory, limits: SoftLimits) -> Plan | None:
+        """The rest of a paused path from where the reference of ``tr`` stands, checked
+        against the soft ``limits`` again."""
         if self.plan is None or not self.paused:
-            return Plan(path=cmd.plan)  # the loop says so (CommandDesk._resume)
+            return NOTHING  # the loop says so (CommandDesk._resume)
         k, offset = self.remaining()
         plan = self.plan
         durations = [None, *plan.durations[k + 1 :]]
         try:
-            here = self.trajectory.position.copy()
+            here = tr.position.copy()
             rest = plan_path(self.model, plan.waypoints[k:], here, self.model.control.period,
-                             self.limits, plan.name, durations)  # fmt: skip
+                             limits, plan.name, durations)  # fmt: skip
         except PathRejectedError as exc:
             self.data.events.append((self.data.time, f"resume refused: {exc}"))
             return None
@@ -77,7 +77,8 @@ class PathFollower(MotionSource):
         """True while the path runs (in a dwell too): its state stays MOVING."""
         return self.plan is not None and not self.paused
 
-    def start(self, t: float, plan: PathPlan, offset: int = 0) -> None:
+    def start(self, t: float, plan: PathPlan, offset: int, tr: Trajectory) -> None:
+        """Play ``plan`` (the path's segments from ``offset`` on) on the trajectory ``tr``."""
         d = self.data
         resumed = self.paused and self.plan is not None
         self._played = d.path_elapsed if resumed else 0.0
@@ -85,11 +86,10 @@ class PathFollower(MotionSource):
         d.path_elapsed, d.path_time_left = self._played, plan.duration
         self.plan, self.offset, self.paused = plan, offset, False
         self.k = -1
-        d.motion = "path"
         d.path_segments = offset + len(plan.segments)
-        self._next(t)
+        self._next(t, tr)
 
-    def _next(self, t: float) -> None:
+    def _next(self, t: float, tr: Trajectory) -> None:
         d, plan = self.data, self.plan
         assert plan is not None
         self.k += 1
@@ -97,10 +97,10 @@ class PathFollower(MotionSource):
             self._end(t, "done", f"path {plan.name}: done")
             return
         s = plan.segments[self.k]
-        self._seg_start[:] = self.trajectory.position
+        self._seg_start[:] = tr.position
         self._seg_length = math.dist(s.target, self._seg_start)  # in the 6 coordinates
         self._dwell_until = math.nan
-        self.trajectory.set_segment(s.target, s.velocity, s.max_velocity, s.max_acceleration,
+        tr.set_segment(s.target, s.velocity, s.max_velocity, s.max_acceleration,
                                     s.minimum_duration)  # fmt: skip
         d.path_state = "running"
         d.path_segment = self.offset + self.k + 1
@@ -115,8 +115,9 @@ class PathFollower(MotionSource):
             d.path_time_left = 0.0
         d.events.append((t, why))
 
-    def update(self, t: float) -> None:
-        """Before the supervisor looks at the trajectory: the next segment when one ends."""
+    def update(self, t: float, tr: Trajectory) -> None:
+        """Before the supervisor looks at the trajectory ``tr``: the next segment when one
+        ends."""
         d, plan = self.data, self.plan
         if plan is None or self.paused:
             return
@@ -126,7 +127,6 @@ class PathFollower(MotionSource):
             return
         d.path_elapsed = self._played + t - self._started
         d.path_time_left = max(0.0, self._ends_at - t)
-        tr = self.trajectory
         s = plan.segments[self.k]
         total = self._seg_length
         left = math.dist(s.target, tr.position)
@@ -139,20 +139,22 @@ class PathFollower(MotionSource):
                 d.path_state = "dwell"
             if t < self._dwell_until:
                 return
-        self._next(t)
+        self._next(t, tr)
 
-    def pause(self, t: float) -> None:
+    def pause(self, t: float, tr: Trajectory) -> None:
+        """The path braked to rest on ``tr`` and held there."""
         if self.plan is None:
             return
         self.paused = True
-        self.trajectory.stop_here()
+        tr.stop_here()
         self.data.path_state = "paused"
         self.data.events.append((t, f"path paused in segment {self.data.path_segment}"))
 
-    def abort(self, t: float) -> None:
+    def abort(self, t: float, tr: Trajectory) -> None:
+        """The path braked to rest on ``tr`` and forgotten."""
         if self.plan is None and not self.paused:
             return
-        self.trajectory.stop_here()
+        tr.stop_here()
         self._end(t, "aborted", f"path aborted in segment {self.data.path_segment}")
 
     def remaining(self) -> tuple[int, int]:

@@ -24,11 +24,10 @@ def initialise(ctl: Controller, now: float, st: WinchStates) -> None:
     TDA under gravity) → READY. Raises RuntimeError, naming what failed."""
     d, e, dist, model = ctl.data, ctl.estimator, ctl.distribution, ctl.model
     e.reset(model.home.position, model.home.rotation)
-    d.motor_position[:] = st.position
     # The stretch depends on the tensions, which depend on the pose: a fixed point, from the
     # minimum tensions (soft cables, e.g. the Sensors 2019 springs, need a few iterations;
     # steel ones one or two).
-    d.stretch_tensions[:] = model.tension_min
+    ctl.start_from(st.position)
     last = np.full(model.n_cables, np.inf)
     for _ in range(MAX_ITERATIONS):
         fk = e.update(now, st.position, d.stretch_tensions)
@@ -65,7 +64,7 @@ def initialise(ctl: Controller, now: float, st: WinchStates) -> None:
             f"start-up: the encoders disagree with every pose "
             f"({fk.status.name}, residual {fk.residual:.3g} m)"
         )
-    d.tensions[:] = d.hold_tensions
+    dist.restart()  # the holding tensions commanded
     e.velocity[:] = 0.0
     e.omega[:] = 0.0
     ctl.trajectory.reset(ctl.pose6())

@@ -99,8 +99,9 @@ def warm_up(controller: Controller) -> None:
     offset = c.reference.offset.copy()
     c.reference.update(c.io.reference, c.estimator)  # the next cycle computes it afresh
     c.reference.offset[:] = offset
-    c.cable_space.targets(True, zeros)
-    c.cable_space.warm_up(ns.N)
+    ref = c.reference
+    c.cable_space.targets(True, zeros, ref.reference_kin.length, ref.k, c.estimator.winding)
+    c.cable_space.warm_up(ns.N, c.winches.terms)
     disturbance_kernel(est.kin.W, zeros, 0.0, np.zeros(6))
     force_feedback_kernel(zeros, np.ones(m), 0.5, np.zeros(m))
     tension_hold_kernel(zeros, np.ones(m), 0.5, 0.0, zeros, zeros, np.zeros(m))

@@ -101,14 +101,13 @@ class Supervisor:
     # stands before the platform does: in torque mode the pose loop lags it by tens of mm)
     AT_REST = 0.005
 
-    def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort, stop_here,
+    def __init__(self, config: ControlConfig, data: ControlData, drives: DrivePort,
                  tension_limits: np.ndarray | None = None,
                  torque_limits: np.ndarray | None = None,
                  safety: SafetyConfig | None = None,
                  machine: StateMachine | None = None,
                  clearance: ClearanceWatch | None = None):  # fmt: skip
-        """``stop_here()``: the trajectory's stop at the current pose (the controlled stop);
-        ``tension_limits`` (N, per cable): the internal tension error that faults (position
+        """``tension_limits`` (N, per cable): the internal tension error that faults (position
         mode), None: not checked; ``safety``: each fault kind's stop category; ``machine``:
         the state machine its transitions are asked of (the controller's; None: its own);
         ``clearance``: the cables' clearance check (None: not checked)."""
@@ -124,7 +123,8 @@ class Supervisor:
         self._at_limit = False  # a drive at its torque limit this cycle
         self.data = data
         self.drives = drives
-        self._stop_here = stop_here
+        # a controlled stop asked of the trajectory (``take_stop``: the controller brakes it)
+        self._stop_asked = False
         # s: the longest a disable decelerates before the brakes close anyway (a trajectory
         # that never stands must not keep the drives on): twice the limits' own stop time
         # (a jerk-limited stop from the top speed takes v/a + a/j), at least 3 s
@@ -180,7 +180,7 @@ class Supervisor:
         category = self.stop_of[kind]
         if category > 0 and self.drives.lifecycle is ACTIVE:
             d.stop_category = category
-            self._stop_here()
+            self._stop_asked = True
             self._stop_until = t + self.config.stop_duration
             self.machine.request(STOPPING, t, f"controlled stop, holding the pose (category "
                            f"{category})")  # fmt: skip
@@ -193,10 +193,26 @@ class Supervisor:
         self.drives.begin_deactivate()
         self.machine.request(s, t, why)
 
+    def take_stop(self) -> bool:
+        """Whether a fault since the last call asked for the controlled stop (the reference
+        braked to rest where it is: ``Trajectory.stop_here``, the caller's to do at once)."""
+        asked, self._stop_asked = self._stop_asked, False
+        return asked
+
     def holding_after_stop(self, t: float) -> bool:
         """A category 2 stop done: holding the pose powered until a reset or disable."""
         d = self.data
         return d.state is STOPPING and d.stop_category == 2 and t >= self._stop_until
+
+    def restart(self) -> None:
+        """Enable: no stop since, and the saturation of before a fault not this run's."""
+        self.data.saturated_for = 0.0
+        self.data.stop_category = -1
+
+    def stop_asked(self, category: int) -> None:
+        """A stop the operator asked for (``CommandDesk``): 1 decelerate then disable, 2
+        decelerate and hold; -1 none since a reset (docs/safety.md)."""
+        self.data.stop_category = category
 
     def clear_fault(self) -> None:
         self.data.fault_reason = ""

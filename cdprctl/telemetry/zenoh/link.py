@@ -11,7 +11,17 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.control.command_types import Command, CommandKind, GripKind
+from cdprctl.control.command_types import (
+    Command,
+    GripKind,
+    GripperCommand,
+    JogCommand,
+    MoveCommand,
+    PathCommand,
+    SetTdaCommand,
+    StopCommand,
+    command,
+)
 from cdprctl.model.robot import RobotModel
 from cdprctl.telemetry.helper import HelperProcess, close_queue
 from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
@@ -76,7 +86,7 @@ class TelemetryLink:
             self.dropped_events += 1
 
     def take_commands(self, limit: int = 32) -> list[Command]:
-        out = []
+        out: list[Command] = []
         for _ in range(limit):
             try:
                 kind, params = self.commands.get_nowait()
@@ -84,8 +94,7 @@ class TelemetryLink:
                 break
             if kind == "move":
                 out.append(
-                    Command(
-                        CommandKind.MOVE,
+                    MoveCommand(
                         pose=np.array(params["pose"], dtype=float),
                         speed=params["speed"],
                         accel=params["accel"],
@@ -93,26 +102,24 @@ class TelemetryLink:
                 )
             elif kind == "gripper":
                 out.append(
-                    Command(
-                        CommandKind.GRIPPER,
+                    GripperCommand(
                         gripper=int(params["gripper"]),
                         grip=GripKind(params["grip"]),
                         value=float(params["value"]),
                     )
                 )
             elif kind == "set_tda":
-                out.append(Command(CommandKind.SET_TDA, tda=params["tda"]))
+                out.append(SetTdaCommand(tda=params["tda"]))
             elif kind == "jog":
-                out.append(Command(CommandKind.JOG, velocity=np.array(params["velocity"]),
-                                   frame=params["frame"]))  # fmt: skip
+                out.append(JogCommand(velocity=np.array(params["velocity"]), frame=params["frame"]))
             elif kind == "path":
                 plan = params.get("plan")
-                out.append(Command(CommandKind.PATH, text=params["text"], name=params["name"],
-                                   plan=None if plan is None else (plan, 0)))  # fmt: skip
+                out.append(PathCommand(text=params["text"], name=params["name"],
+                                       plan=None if plan is None else (plan, 0)))  # fmt: skip
             elif kind == "stop":
-                out.append(Command(CommandKind.STOP, category=int(params["category"])))
+                out.append(StopCommand(category=int(params["category"])))
             else:
-                out.append(Command(CommandKind(kind)))
+                out.append(command(kind))  # the kinds without fields
         return out
 
     def close(self) -> None:

@@ -28,18 +28,12 @@ COMPONENTS = (
     "estimator", "trajectory", "reference", "pose", "winches", "distribution", "observer",
     "cable_space", "grippers", "supervisor", "limits", "jog", "path",
 )  # fmt: skip
-# Links still there (issue 66 has them as the next steps), holder → held: the cable space
-# reads the reference's lengths and stiffness, the estimator's calibration (l_zero and r/G,
-# written at start-up) and the winches' law; the grippers read the estimate, the working
-# pose (position mode: the reference), the trajectory, the winches, and impose on the
-# distribution; the supervisor holds the trajectory's stop; the jog and the path feed the
-# trajectory and check against the soft limits.
+# Links still there (issue 66 has them as the next steps), holder → held: the grippers
+# read the estimate, the working pose (position mode: the reference), the trajectory, the
+# winches, and impose on the distribution.
 LEFT_HELD = {
-    ("cable_space", "estimator"), ("cable_space", "reference"), ("cable_space", "winches"),
     ("grippers", "estimator"), ("grippers", "trajectory"), ("grippers", "winches"),
     ("grippers", "distribution"),
-    ("supervisor", "trajectory"),
-    ("jog", "trajectory"), ("jog", "limits"), ("path", "trajectory"), ("path", "limits"),
     # the winch law's terms a friction calibration replaces at start-up: one set, read by the
     # torques, the cable space, the grasp sensing and the observer alike (docs/friction.md)
     ("observer", "winches"),

@@ -75,9 +75,8 @@ def rig(category: int):
     d.state = State.MOVING
     drives = FakeDrives(model.n_cables, Lifecycle.ACTIVE)
     safety = SafetyConfig(stop_category={"tracking": category})
-    stops: list[bool] = []
-    s = Supervisor(model.control, d, drives, lambda: stops.append(True), safety=safety)
-    return s, d, drives, stops
+    s = Supervisor(model.control, d, drives, safety=safety)
+    return s, d, drives
 
 
 def healthy(s, t, **kw):
@@ -86,9 +85,9 @@ def healthy(s, t, **kw):
 
 
 def test_category_2_holds_powered_past_the_stop_duration_until_a_reset():
-    s, d, drives, stops = rig(2)
+    s, d, drives = rig(2)
     s.fault(1.0, FaultKind.TRACKING, "tracking error 60 mm")
-    assert d.state is State.STOPPING and d.stop_category == 2 and stops == [True]
+    assert d.state is State.STOPPING and d.stop_category == 2 and s.take_stop()
     end = 1.0 + s.config.stop_duration
     for t in np.arange(1.0, end + 5.0, 0.01):
         healthy(s, float(t))
@@ -101,29 +100,29 @@ def test_category_2_holds_powered_past_the_stop_duration_until_a_reset():
 def test_a_category_1_stop_is_never_a_hold_a_reset_may_end():
     """Past stop_duration a category 1 stop is the supervisor's to end (disabled, FAULT): a
     reset handled before it does so in that cycle must not take it as a category 2 hold."""
-    s, _, _, _ = rig(1)
+    s, _, _ = rig(1)
     s.fault(1.0, FaultKind.TRACKING, "x")
     assert not s.holding_after_stop(1.0 + s.config.stop_duration + 1.0)
 
 
 def test_category_1_disables_after_the_stop_duration():
-    s, d, drives, _ = rig(1)
+    s, d, drives = rig(1)
     s.fault(1.0, FaultKind.TRACKING, "tracking error 60 mm")
     healthy(s, 1.0 + s.config.stop_duration)
     assert d.state is State.FAULT and drives.calls == ["deactivate"] and d.stop_category == 1
 
 
 def test_category_0_disables_at_once():
-    s, d, drives, stops = rig(0)
+    s, d, drives = rig(0)
     s.fault(1.0, FaultKind.TRACKING, "tracking error 60 mm")
-    assert d.state is State.FAULT and drives.calls == ["deactivate"] and not stops
+    assert d.state is State.FAULT and drives.calls == ["deactivate"] and not s.take_stop()
     assert d.stop_category == 0
 
 
 def test_a_category_2_hold_is_watched_and_a_failure_disables_at_once():
     """While a category 2 stop holds, the checks go on: the encoders disagreeing then is a
     fault during the stop — the drives off at once (category 0)."""
-    s, d, drives, _ = rig(2)
+    s, d, drives = rig(2)
     s.fault(1.0, FaultKind.TRACKING, "x")
     t = 1.0 + s.config.stop_duration + 1.0
     healthy(s, t)
@@ -135,7 +134,7 @@ def test_a_category_2_hold_is_watched_and_a_failure_disables_at_once():
 
 
 def test_a_drive_fault_takes_category_0_whatever_tracking_takes():
-    s, d, _, _ = rig(2)
+    s, d, _ = rig(2)
     s.fault(1.0, FaultKind.DRIVE_FAULT, "drive")
     assert d.state is State.FAULT and d.stop_category == 0
 

@@ -30,8 +30,7 @@ def rig(state: State, lifecycle: Lifecycle = Lifecycle.ACTIVE):
     d = ControlData(ROWC.n_cables, 0)
     d.state = state
     drives = FakeDrives(ROWC.n_cables, lifecycle)
-    stops: list[bool] = []
-    return Supervisor(CFG, d, drives, lambda: stops.append(True)), d, drives, stops
+    return Supervisor(CFG, d, drives), d, drives
 
 
 def healthy(s: Supervisor, t: float = 1.0, **kw) -> None:
@@ -113,7 +112,7 @@ CASES = [
 
 @pytest.mark.parametrize("name,start,lc,act,end,kind", CASES, ids=[c[0] for c in CASES])
 def test_transition(name, start, lc, act, end, kind):
-    s, d, drives, _ = rig(start, lc)
+    s, d, drives = rig(start, lc)
     act(s, d, drives)
     assert d.state is end, d.events
     assert d.fault_kind is kind
@@ -125,9 +124,9 @@ def test_transition(name, start, lc, act, end, kind):
 
 
 def test_during_the_stop_is_counted_but_keeps_the_first_reason():
-    s, d, drives, stops = rig(State.MOVING)
+    s, d, drives = rig(State.MOVING)
     s.fault(1.0, FaultKind.OVER_SPEED, "too fast")
-    assert d.state is State.STOPPING and stops == [True]
+    assert d.state is State.STOPPING and s.take_stop() and not s.take_stop()
     drives.lifecycle = Lifecycle.ERROR
     healthy(s, 1.01)
     assert [k for _, k in d.faults] == [FaultKind.OVER_SPEED, FaultKind.DURING_STOP]
@@ -135,14 +134,14 @@ def test_during_the_stop_is_counted_but_keeps_the_first_reason():
 
 
 def test_over_speed_must_persist():
-    s, d, _, _ = rig(State.ENABLED)
+    s, d, _ = rig(State.ENABLED)
     fast = 1.5 * CFG.max_speed
     for i in range(14):  # 28 ms at 2 ms
         healthy(s, 1.0 + 0.002 * i, speed=fast)
     assert d.state is State.ENABLED
     healthy(s, 1.0 + Supervisor.OVER_SPEED_FOR, speed=fast)
     assert d.state is State.STOPPING and d.fault_kind is FaultKind.OVER_SPEED
-    s2, d2, _, _ = rig(State.ENABLED)  # a dip below the limit starts the count again
+    s2, d2, _ = rig(State.ENABLED)  # a dip below the limit starts the count again
     for i in range(30):
         healthy(s2, 1.0 + 0.002 * i, speed=fast if i % 10 else 0.0)
     assert d2.state is State.ENABLED
@@ -156,7 +155,7 @@ def test_a_condition_from_before_a_fault_must_persist_anew():
     d.state = State.ENABLED
     drives = FakeDrives(ROWC.n_cables, Lifecycle.ACTIVE)
     limits = np.full(ROWC.n_cables, 2.6)
-    s = Supervisor(CFG, d, drives, lambda: None, torque_limits=limits)
+    s = Supervisor(CFG, d, drives, torque_limits=limits)
     drives.states.torque[1] = 2.6
     healthy(s, 1.0)  # at the limit from 1.0 s
     s.fault(1.01, FaultKind.DRIVE_FAULT, "another drive")
@@ -174,7 +173,7 @@ def test_a_condition_from_before_a_fault_must_persist_anew():
 @pytest.mark.parametrize("start", list(State))
 def test_transition_table_is_enforced(start):
     for to in State:
-        s, d, _, _ = rig(start)
+        s, d, _ = rig(start)
         s.set_state(to, 1.0, "test")
         if to in TRANSITIONS[start]:
             assert d.state is to
@@ -283,7 +282,7 @@ def test_enable_starts_with_no_saturation_carried_over(controller):
 def test_a_disable_that_never_comes_to_rest_disables_after_disable_within():
     """The drives are not kept on by a deceleration that does not end: disable_within after
     entering DISABLING (not after the start of time) the brakes close, the reason said."""
-    s, d, drives, _ = rig(State.ENABLED)
+    s, d, drives = rig(State.ENABLED)
     s.set_state(State.DISABLING, 100.0, "disable")
     s.supervise(100.0 + 0.99 * s.disable_within, FKStatus.CONVERGED, 0.0, 0.1, False)
     assert d.state is State.DISABLING and drives.lifecycle is Lifecycle.ACTIVE
@@ -295,7 +294,7 @@ def test_a_disable_that_never_comes_to_rest_disables_after_disable_within():
 def test_the_disables_bounds_are_strict_at_rest_and_in_time():
     """At exactly AT_REST m/s a platform is not yet at rest; at exactly disable_within s in
     DISABLING the deceleration has not yet timed out (both: beyond the bound, not at it)."""
-    s, d, drives, _ = rig(State.ENABLED)
+    s, d, drives = rig(State.ENABLED)
     s.set_state(State.DISABLING, 1.0, "disable")
     s.supervise(1.5, FKStatus.CONVERGED, 0.0, s.AT_REST, True)
     assert d.state is State.DISABLING
@@ -307,11 +306,11 @@ def test_the_disables_bounds_are_strict_at_rest_and_in_time():
 
 @pytest.mark.parametrize("path_state", ["", "running", "stopped", "done", "aborted"])
 def test_a_finished_trajectory_is_a_reached_target_unless_the_path_is_paused(path_state):
-    s, d, _, _ = rig(State.MOVING)
+    s, d, _ = rig(State.MOVING)
     d.path_state = path_state
     s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
     assert d.state is State.ENABLED and d.events[-1][1].endswith("target reached")
-    s, d, _, _ = rig(State.MOVING)
+    s, d, _ = rig(State.MOVING)
     d.path_state = "paused"
     s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, True)
     assert d.events[-1][1].endswith("path paused, holding")
@@ -329,6 +328,5 @@ def test_a_disable_decelerates_for_at_most_twice_the_limits_stop_time(limits, wi
     cfg = dataclasses.replace(CFG, max_velocity=v, max_acceleration=a, max_jerk=j,
                               max_angular_velocity=w, max_angular_acceleration=al,
                               max_angular_jerk=ze)  # fmt: skip
-    s = Supervisor(cfg, ControlData(ROWC.n_cables, 0), FakeDrives(ROWC.n_cables, Lifecycle.ACTIVE),
-                   lambda: None)  # fmt: skip
+    s = Supervisor(cfg, ControlData(ROWC.n_cables, 0), FakeDrives(ROWC.n_cables, Lifecycle.ACTIVE))
     assert s.disable_within == pytest.approx(within, rel=1e-12)

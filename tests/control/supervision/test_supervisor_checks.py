@@ -32,7 +32,7 @@ def rig(state: State = State.ENABLED, position_mode: bool = False):
     d = ControlData(M, 0)
     d.state = state
     drives = FakeDrives(M, Lifecycle.ACTIVE)
-    s = Supervisor(CFG, d, drives, lambda: None,
+    s = Supervisor(CFG, d, drives,
                    TENSION_LIMITS if position_mode else None,
                    TORQUE_LIMITS if position_mode else None)  # fmt: skip
     return s, d, drives
@@ -236,7 +236,7 @@ def test_the_tension_check_stands_alone_without_a_torque_check():
     the first cycle."""
     d = ControlData(M, 0)
     d.state = State.ENABLED
-    s = Supervisor(CFG, d, FakeDrives(M, Lifecycle.ACTIVE), lambda: None, TENSION_LIMITS, None)
+    s = Supervisor(CFG, d, FakeDrives(M, Lifecycle.ACTIVE), TENSION_LIMITS, None)
     d.internal_tension_error[1] = 2.0 * TENSION_LIMITS[1]
     run(s, 1.0, 1.0 + TensionDisagreement.TENSION_FOR)
     assert d.fault_kind is FaultKind.CABLE_TENSION
@@ -362,13 +362,13 @@ def test_limits_in_the_reasons_are_in_milli_units():
     d = ControlData(M, 0)
     d.state = State.ENABLED
     v = FakeDrives(M, Lifecycle.ACTIVE)
-    s = Supervisor(cfg, d, v, lambda: None)
+    s = Supervisor(cfg, d, v)
     run(s, 1.0, 1.0, fk_residual=2.5)
     assert "residual 2500.00 mm > 2000 mm" in d.fault_reason, d.fault_reason
     d = ControlData(M, 0)
     d.state = State.ENABLED
     v = FakeDrives(M, Lifecycle.ACTIVE)
-    s = Supervisor(cfg, d, v, lambda: None)
+    s = Supervisor(cfg, d, v)
     v.states.feedback_age[:] = 2.5
     run(s, 1.0, 1.1, dt=0.01)
     assert "> 2000 ms" in d.fault_reason, d.fault_reason
