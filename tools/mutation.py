@@ -46,30 +46,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
-from mutation_equivalents import (  # noqa: E402
-    skip_all_but,
-    skip_known_equivalents,
-    skip_out_of_scope,
-    skip_unsampled,
-)
-from mutation_report import report  # noqa: E402
-from mutation_session import (  # noqa: E402
-    EXCLUDE_OPERATORS,
-    OUT,
-    TARGETS,
-    Target,
-    has_mutants,
-    kept_is_complete,
-    kept_survivors,
-    module_digest,
-    outcome,
-    resume_killed,
-    session_is_stale,
-    survivors_to_run,
-    tool,
-)
+# run as a script, tools/ is on sys.path
+import mutation_equivalents as eqv
+import mutation_session as ms
+from mutation_report import report
+from mutation_session import OUT, ROOT, TARGETS, Target, tool
 
 REPORT = ROOT / "docs" / "mutation.md"
 
@@ -97,7 +78,7 @@ def sync_tree(dest: Path) -> None:
 
 
 def config_text(t: Target, timeout: float, command: str) -> str:
-    excludes = ",\n    ".join(json.dumps(e) for e in EXCLUDE_OPERATORS)
+    excludes = ",\n    ".join(json.dumps(e) for e in ms.EXCLUDE_OPERATORS)
     return f"""[cosmic-ray]
 module-path = "{t.module}"
 timeout = {timeout:.0f}
@@ -183,20 +164,20 @@ def init_session(t: Target, tree: Path, cfg: Path, db: Path, run, log, fresh: bo
     """A new session: cosmic-ray's init and filters, then the mutants known beforehand (a
     known equivalent, outside the scope, killed in a kept partial session, or, for
     ``survivors``, all but the kept session's survivors) marked so that exec skips them."""
-    (OUT / f"{t.name}.sha256").write_text(module_digest(tree, t.module) + "\n")
+    (OUT / f"{t.name}.sha256").write_text(ms.module_digest(tree, t.module) + "\n")
     run(tool("cosmic-ray"), "init", str(cfg), str(db), "--force")
     run(tool("cr-filter-operators"), str(db), str(cfg))
     run(tool("cr-filter-pragma"), str(db))
-    n = skip_known_equivalents(db, tree, t.module)
+    n = eqv.skip_known_equivalents(db, tree, t.module)
     log(f"{t.name}: {n} mutants equivalent by a known rule, not run")
-    n = skip_out_of_scope(db, tree, t.module, list(t.scope), t.left_out)
+    n = eqv.skip_out_of_scope(db, tree, t.module, list(t.scope), t.left_out)
     if n:
         log(f"{t.name}: {n} mutants outside {', '.join(t.scope)}, left out")
-    n = 0 if fresh else resume_killed(db, t, tree)
+    n = 0 if fresh else ms.resume_killed(db, t, tree)
     if n:
         log(f"{t.name}: {n} mutants killed in a kept partial session, not run again")
-    if survivors and not fresh and kept_is_complete(t, tree):
-        n = skip_all_but(db, kept_survivors(t, tree))
+    if survivors and not fresh and ms.kept_is_complete(t, tree):
+        n = eqv.skip_all_but(db, ms.kept_survivors(t, tree))
         log(f"{t.name}: only the kept session's survivors again ({n} mutants counted as "
             "kept)")
 
@@ -205,7 +186,7 @@ def resume_session(t: Target, tree: Path, db: Path, log, survivors: bool) -> Non
     """A kept session goes on; with ``survivors`` its survivors' results are dropped so that
     exec runs them again, against today's tests."""
     if survivors:
-        again = survivors_to_run(t, tree)
+        again = ms.survivors_to_run(t, tree)
         with sqlite3.connect(db) as con:
             con.executemany("DELETE FROM work_results WHERE job_id = ?",
                             [(j,) for j in again])  # fmt: skip
@@ -228,8 +209,8 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     def run(*cmd: str, check: bool = True) -> subprocess.CompletedProcess:
         return subprocess.run(cmd, cwd=tree, env=env, check=check, capture_output=True, text=True)
 
-    if survivors and not db.exists() and not fresh and kept_is_complete(t, tree) and not (
-            kept_survivors(t, tree)):  # fmt: skip
+    if survivors and not db.exists() and not fresh and ms.kept_is_complete(t, tree) and not (
+            ms.kept_survivors(t, tree)):  # fmt: skip
         log(f"{t.name}: its kept session has no survivors left: nothing to run")
         return
     start = time.monotonic()
@@ -239,16 +220,16 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
         return
     command, baseline = measured
     cfg.write_text(config_text(t, max(t.timeout, 4.0 * baseline), command))
-    if db.exists() and not has_mutants(db):  # made by a look into it before init, say
+    if db.exists() and not ms.has_mutants(db):  # made by a look into it before init, say
         db.unlink()
-    if db.exists() and not fresh and session_is_stale(t, tree):
+    if db.exists() and not fresh and ms.session_is_stale(t, tree):
         log(f"{t.name}: {t.module} changed since its session was made: starting it anew")
         fresh = True
     if fresh or not db.exists():
         init_session(t, tree, cfg, db, run, log, fresh, survivors)
     else:
         resume_session(t, tree, db, log, survivors)
-    n = skip_unsampled(db, t.sample, t.sample_why, kept_survivors(t, tree))  # after the kept
+    n = eqv.skip_unsampled(db, t.sample, t.sample_why, ms.kept_survivors(t, tree))  # after the kept
     # kills: those stay run
     if n:
         log(f"{t.name}: {n} mutants outside its {100 * t.sample:.0f} % sample, not run")
@@ -256,7 +237,8 @@ def run_target(t: Target, tree: Path, log, fresh: bool, survivors: bool) -> None
     took = time.monotonic() - start
     if fresh or not (OUT / f"{t.name}.seconds").exists():  # a whole session's time
         (OUT / f"{t.name}.seconds").write_text(f"{took:.0f}\n")
-    log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s); {outcome(t, tree)}")
+    log(f"{t.name}: done in {took:.0f} s (the tests alone: {baseline:.0f} s); "
+        f"{ms.outcome(t, tree)}")
 
 
 def main(argv: list[str] | None = None) -> int:
