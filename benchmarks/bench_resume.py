@@ -34,19 +34,14 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--rounds", type=int, default=4)
-    ap.add_argument("--config", default=str(ROOT / "config" / "rowc.toml"))
-    a = ap.parse_args()
+def start_daemon(config: str, endpoint: str) -> tuple[subprocess.Popen, list[str]] | None:
+    """``cdprctl run --sim`` on ``config`` with its gateway listening on ``endpoint`` and the
+    timing at 20 Hz (windows of 50 ms, so a missed period is placed to 50 ms); with its
+    output up to "ready", or None (the output printed) where it never got there."""
     import tempfile
 
-    from cdprctl.telemetry.zenoh.session import open_session
-
-    # the timing at 20 Hz: windows of 50 ms, so a missed period is placed to 50 ms
     cfg = Path(tempfile.mkdtemp()) / "robot.toml"
-    cfg.write_text(f'base = "{Path(a.config).resolve()}"\n[zenoh]\ntiming_rate = 20\n')
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    cfg.write_text(f'base = "{Path(config).resolve()}"\n[zenoh]\ntiming_rate = 20\n')
     daemon = subprocess.Popen(
         [sys.executable, "-m", "cdprctl.cli", "run", "--config", str(cfg), "--sim", "--no-demo",
          "--status", "0", "--zenoh-listen", endpoint, "--no-multicast-scouting",
@@ -59,64 +54,99 @@ def main() -> int:
     for line in daemon.stdout:
         lines.append(line)
         if line.startswith("ready"):
-            break
-    else:
-        print("".join(lines))
-        return 1
-    session = open_session(connect=[endpoint], multicast_scouting=False)
-    prefix = "cdpr/" + next(x for x in lines if x.startswith("cdprctl run:")).split()[2].rstrip(",")
-    timing: list[tuple[float, dict[str, Any]]] = []
-    state: dict[str, Any] = {}
+            return daemon, lines
+    print("".join(lines))
+    os.killpg(daemon.pid, signal.SIGTERM)
+    daemon.wait(timeout=30)
+    return None
 
-    def on_timing(sample: Any) -> None:
-        timing.append((time.monotonic(), json.loads(sample.payload.to_bytes())))
 
-    def on_state(sample: Any) -> None:
-        state.update(json.loads(sample.payload.to_bytes()))
+class Client:
+    """A Zenoh client of the daemon's gateway: its timing windows (each with the time it came)
+    and its last state, the commands sent."""
 
-    subs = [session.declare_subscriber(f"{prefix}/timing", on_timing),
-            session.declare_subscriber(f"{prefix}/state", on_state)]  # fmt: skip
+    def __init__(self, endpoint: str, prefix: str):
+        from cdprctl.telemetry.zenoh.session import open_session
 
-    def put(kind: str, payload: dict[str, Any] | None = None) -> None:
-        session.put(f"{prefix}/cmd/{kind}", json.dumps(payload or {}))
+        self.session = open_session(connect=[endpoint], multicast_scouting=False)
+        self.prefix = prefix
+        self.timing: list[tuple[float, dict[str, Any]]] = []
+        self.state: dict[str, Any] = {}
+        self.subs = [
+            self.session.declare_subscriber(f"{prefix}/timing", self._on_timing),
+            self.session.declare_subscriber(f"{prefix}/state", self._on_state),
+        ]
 
-    def wait(what: Any, timeout: float = 20.0) -> None:
+    def _on_timing(self, sample: Any) -> None:
+        self.timing.append((time.monotonic(), json.loads(sample.payload.to_bytes())))
+
+    def _on_state(self, sample: Any) -> None:
+        self.state.update(json.loads(sample.payload.to_bytes()))
+
+    def put(self, kind: str, payload: dict[str, Any] | None = None) -> None:
+        self.session.put(f"{self.prefix}/cmd/{kind}", json.dumps(payload or {}))
+
+    def wait(self, what: Any, timeout: float = 20.0) -> None:
         deadline = time.monotonic() + timeout
         while not what():
             if time.monotonic() > deadline:
-                raise TimeoutError(json.dumps(state)[:500])
+                raise TimeoutError(json.dumps(self.state)[:500])
             time.sleep(0.02)
 
-    def path_state() -> str:
-        return str((state.get("path") or {}).get("state", ""))
+    def path_state(self) -> str:
+        return str((self.state.get("path") or {}).get("state", ""))
 
-    pauses, resumes = [], []
-    try:
-        time.sleep(1.0)
-        put("enable")
-        wait(lambda: state.get("state") == "enabled")
-        text = (ROOT / "paths" / "rowc_wipe.csv").read_text()
-        for _ in range(a.rounds):
-            put("path", {"name": "wipe", "text": text})
-            wait(lambda: path_state() == "running", 40.0)
-            time.sleep(1.5)
-            pauses.append(time.monotonic())
-            put("pause")
-            wait(lambda: path_state() == "paused" and state.get("state") == "enabled")
-            time.sleep(1.5)
-            resumes.append(time.monotonic())
-            put("resume")
-            wait(lambda: path_state() == "running")
-            time.sleep(1.5)
-            put("abort")
-            wait(lambda: path_state() in ("aborted", "done") and state.get("state") == "enabled")
-            time.sleep(0.5)
-    finally:
-        for s in subs:
+    def close(self) -> None:
+        for s in self.subs:
             s.undeclare()
-        session.close()
+        self.session.close()
+
+
+def rounds(c: Client, n: int) -> tuple[list[float], list[float]]:
+    """``n`` rounds of the wipe path: run, pause, resume, abort; the times each pause and each
+    resume was sent (s, monotonic)."""
+    pauses, resumes = [], []
+    time.sleep(1.0)
+    c.put("enable")
+    c.wait(lambda: c.state.get("state") == "enabled")
+    text = (ROOT / "paths" / "rowc_wipe.csv").read_text()
+    for _ in range(n):
+        c.put("path", {"name": "wipe", "text": text})
+        c.wait(lambda: c.path_state() == "running", 40.0)
+        time.sleep(1.5)
+        pauses.append(time.monotonic())
+        c.put("pause")
+        c.wait(lambda: c.path_state() == "paused" and c.state.get("state") == "enabled")
+        time.sleep(1.5)
+        resumes.append(time.monotonic())
+        c.put("resume")
+        c.wait(lambda: c.path_state() == "running")
+        time.sleep(1.5)
+        c.put("abort")
+        c.wait(lambda: c.path_state() in ("aborted", "done") and c.state.get("state") == "enabled")
+        time.sleep(0.5)
+    return pauses, resumes
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--config", default=str(ROOT / "config" / "rowc.toml"))
+    a = ap.parse_args()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    started = start_daemon(a.config, endpoint)
+    if started is None:
+        return 1
+    daemon, lines = started
+    prefix = "cdpr/" + next(x for x in lines if x.startswith("cdprctl run:")).split()[2].rstrip(",")
+    client = Client(endpoint, prefix)
+    try:
+        pauses, resumes = rounds(client, a.rounds)
+    finally:
+        client.close()
         os.killpg(daemon.pid, signal.SIGTERM)
         daemon.wait(timeout=30)
+    timing = client.timing
 
     # the timing's "missed" counts from the start: each window's own is the difference
     stamps = [t for t, _ in timing]

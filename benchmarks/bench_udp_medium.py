@@ -57,61 +57,70 @@ def main() -> None:
     ours = CyclicUdpMulticastBus(GROUP, port=port, fd=False)
     other = CyclicUdpMulticastBus(GROUP, port=port, fd=False)  # fills our queue for the reads
     peer = subprocess.Popen([sys.executable, "-c", PEER, GROUP, str(port)], stdout=subprocess.PIPE)
+    times: dict[str, list[float]] = {k: [] for k in ("send", "sendto", "sendmmsg", "recv", "drain")}
     try:
         assert peer.stdout is not None
         peer.stdout.readline()
-        msg = can.Message(arbitration_id=0x201, data=bytearray(8), is_extended_id=False)
-        datagram = pack_message(msg)
-        dest = (GROUP, port)
         raw = socket.socket(fileno=os.dup(ours.fileno()))
-        times: dict[str, list[float]] = {
-            k: [] for k in ("send", "sendto", "sendmmsg", "recv", "drain")
-        }
-
-        def settle() -> None:
-            time.sleep(args.period)
-            list(ours.drain_frames())
-            list(other.drain_frames())
-            time.sleep(args.period)
-
         for _ in range(args.rounds):
-            settle()
-            t0 = time.perf_counter()
-            for _ in range(FRAMES_OUT):
-                ours.send(msg, timeout=0)
-            times["send"].append(time.perf_counter() - t0)
-            settle()
-            t0 = time.perf_counter()
-            for _ in range(FRAMES_OUT):
-                raw.sendto(datagram, dest)
-            times["sendto"].append(time.perf_counter() - t0)
-            settle()
-            t0 = time.perf_counter()
-            for _ in range(FRAMES_OUT):
-                ours.stage(msg)
-            ours.flush()
-            times["sendmmsg"].append(time.perf_counter() - t0)
-            for how in ("recv", "drain"):
-                settle()
-                for _ in range(FRAMES_IN):
-                    other.send(msg, timeout=0)
-                list(other.drain_frames())
-                time.sleep(args.period)
-                t0 = time.perf_counter()
-                if how == "recv":
-                    n = 0
-                    while ours.recv(0) is not None:
-                        n += 1
-                else:
-                    n = sum(1 for _ in ours.drain_frames())
-                if n:
-                    times[how].append((time.perf_counter() - t0) / n)
+            one_round(ours, other, raw, (GROUP, port), args.period, times)
         raw.close()
     finally:
         peer.kill()
         peer.wait()
         ours.shutdown()
         other.shutdown()
+    print_results(times, args.rounds, args.period)
+
+
+def one_round(ours, other, raw: socket.socket, dest: tuple[str, int], period: float,
+              times: dict[str, list[float]]) -> None:  # fmt: skip
+    """One round of each way to write (s per cycle's frames) and to read (s per frame), each
+    after a period asleep with both queues drained; appended to ``times``."""
+    msg = can.Message(arbitration_id=0x201, data=bytearray(8), is_extended_id=False)
+    datagram = pack_message(msg)
+
+    def settle() -> None:
+        time.sleep(period)
+        list(ours.drain_frames())
+        list(other.drain_frames())
+        time.sleep(period)
+
+    settle()
+    t0 = time.perf_counter()
+    for _ in range(FRAMES_OUT):
+        ours.send(msg, timeout=0)
+    times["send"].append(time.perf_counter() - t0)
+    settle()
+    t0 = time.perf_counter()
+    for _ in range(FRAMES_OUT):
+        raw.sendto(datagram, dest)
+    times["sendto"].append(time.perf_counter() - t0)
+    settle()
+    t0 = time.perf_counter()
+    for _ in range(FRAMES_OUT):
+        ours.stage(msg)
+    ours.flush()
+    times["sendmmsg"].append(time.perf_counter() - t0)
+    for how in ("recv", "drain"):
+        settle()
+        for _ in range(FRAMES_IN):
+            other.send(msg, timeout=0)
+        list(other.drain_frames())
+        time.sleep(period)
+        t0 = time.perf_counter()
+        if how == "recv":
+            n = 0
+            while ours.recv(0) is not None:
+                n += 1
+        else:
+            n = sum(1 for _ in ours.drain_frames())
+        if n:
+            times[how].append((time.perf_counter() - t0) / n)
+
+
+def print_results(times: dict[str, list[float]], rounds: int, period: float) -> None:
+    """Median and p99 (µs) of each way, and the medium's floor of a rowc cycle."""
 
     def line(name: str, xs: list[float], what: str) -> None:
         if xs:
@@ -119,9 +128,7 @@ def main() -> None:
             p50, p99 = np.median(a), np.percentile(a, 99)
             print(f"  {name:34s} median {p50:6.1f} us  p99 {p99:6.1f} us  ({what})")
 
-    print(
-        f"{args.rounds} rounds, each after {args.period * 1e3:g} ms asleep, a peer process reading:"
-    )
+    print(f"{rounds} rounds, each after {period * 1e3:g} ms asleep, a peer process reading:")
     line(f"write {FRAMES_OUT} frames, python-can send", times["send"], "one sendto each")
     line(f"write {FRAMES_OUT} frames, bare sendto", times["sendto"], "the kernel alone")
     line(f"write {FRAMES_OUT} frames, stage + flush", times["sendmmsg"], "the driver's path")

@@ -63,30 +63,7 @@ class SimNetwork:
             owners: dict[int, Any] = {}
             self.rpdo_owners.append(owners)
             for c, n in zip(bcfg.cables, bcfg.node_ids, strict=True):
-                w = model.cables[c].winch
-                if self.protocol == "odrive":
-                    from sim_backend.drives.odrive import ODriveAxis
-
-                    drive: Any = ODriveAxis(
-                        n, c, plant, w.torque_limit, self.cfg.comm_timeout,
-                        self.cfg.torque_constant,
-                    )  # fmt: skip
-                else:
-                    drive = Cia402Drive(
-                        n,
-                        c,
-                        plant,
-                        self.cfg.rated_torque,
-                        w.encoder_counts_per_rev,
-                        w.torque_limit,
-                        self.cfg.comm_timeout,
-                        self.cfg.position_gains(w.rotor_inertia),
-                        owners,
-                        self.cfg.target_extrapolation,
-                    )
-                if encoders == "incremental" and self.protocol != "odrive":
-                    drive.axis.incremental = True
-                    drive.axis.zero_counter()
+                drive = self._drive(c, n, owners, encoders)
                 table[n] = drive
                 self.drives[c] = drive
             self.nodes.append(table)
@@ -106,6 +83,28 @@ class SimNetwork:
         if self.protocol != "odrive":
             for b, table in enumerate(self.nodes):
                 self._send(b, [m for d in table.values() for m in d.boot_up()])
+
+    def _drive(self, c: int, n: int, owners: dict[int, Any], encoders: str) -> Any:
+        """Cable ``c``'s simulated drive, node ``n``, of the robot file's protocol (a CiA 402
+        drive takes its RPDOs' COB-IDs into its bus's ``owners``)."""
+        w = self.model.cables[c].winch
+        if self.protocol == "odrive":
+            from sim_backend.drives.odrive import ODriveAxis
+
+            drive: Any = ODriveAxis(
+                n, c, self.plant, w.torque_limit, self.cfg.comm_timeout,
+                self.cfg.torque_constant,
+            )  # fmt: skip
+        else:
+            drive = Cia402Drive(
+                n, c, self.plant, self.cfg.rated_torque, w.encoder_counts_per_rev,
+                w.torque_limit, self.cfg.comm_timeout, self.cfg.position_gains(w.rotor_inertia),
+                owners, self.cfg.target_extrapolation,
+            )  # fmt: skip
+        if encoders == "incremental" and self.protocol != "odrive":
+            drive.axis.incremental = True
+            drive.axis.zero_counter()
+        return drive
 
     def bus_index_of(self, cable: int) -> int:
         return self._bus_of[cable]

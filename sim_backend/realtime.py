@@ -137,40 +137,50 @@ def run_realtime(
     # before the clock starts, or it was the first step's lateness (50 ms)
     gc.collect()
     gc.freeze()
-    t0 = time.monotonic()
-    next_status = status_every
-    woke_on: Any = None
-    clock = SimClock(t0)
     try:
-        last = t0
-        while not stop["flag"]:
-            now = time.monotonic()
-            elapsed = now - last
-            if elapsed > 0 or woke_on is not None:
-                late.step(now - t0, elapsed)
-                clock.lag += max(0.0, elapsed - net.MAX_CATCH_UP)
-                clock.wall_minus_mono = time.time() - time.monotonic()
-                net.advance_until(now - t0 - clock.lag, clock.arrival, first=woke_on)
-                woke_on = None
-                last = now
-                if between is not None and not between(net):
-                    break
-            sim_t = now - t0
-            if duration is not None and sim_t >= duration:
-                break
-            if status_every and sim_t >= next_status:
-                print_fn(status_line(sim_t, plant, net), flush=True)
-                next_status += status_every
-            # sleep until the next step, or until a frame comes (one bus is enough to wake)
-            wait = step - (time.monotonic() - now)
-            if wait > 0:
-                try:
-                    woke_on = net.buses[0].recv(wait)  # handled at once by the next advance
-                except can.CanError:  # the link down: the drives hear nothing meanwhile
-                    time.sleep(wait)
-                    woke_on = None
+        _loop(net, step, duration, late, status_every, print_fn, between, stop)
     finally:
         gc.unfreeze()
         for s, h in old.items():
             signal.signal(s, h)
     return net
+
+
+def _loop(net: SimNetwork, step: float, duration: float | None, late: LateSteps,
+          status_every: float, print_fn: Any, between: Callable[[SimNetwork], bool] | None,
+          stop: dict[str, bool]) -> None:  # fmt: skip
+    """The simulated robot in real time until ``stop["flag"]``, ``duration`` (s) or
+    ``between``: each wake-up advances the network to the time now (the frames at their
+    arrival), then it sleeps until the next ``step`` (s) or a frame."""
+    plant = net.plant
+    t0 = time.monotonic()
+    next_status = status_every
+    woke_on: Any = None
+    clock = SimClock(t0)
+    last = t0
+    while not stop["flag"]:
+        now = time.monotonic()
+        elapsed = now - last
+        if elapsed > 0 or woke_on is not None:
+            late.step(now - t0, elapsed)
+            clock.lag += max(0.0, elapsed - net.MAX_CATCH_UP)
+            clock.wall_minus_mono = time.time() - time.monotonic()
+            net.advance_until(now - t0 - clock.lag, clock.arrival, first=woke_on)
+            woke_on = None
+            last = now
+            if between is not None and not between(net):
+                break
+        sim_t = now - t0
+        if duration is not None and sim_t >= duration:
+            break
+        if status_every and sim_t >= next_status:
+            print_fn(status_line(sim_t, plant, net), flush=True)
+            next_status += status_every
+        # sleep until the next step, or until a frame comes (one bus is enough to wake)
+        wait = step - (time.monotonic() - now)
+        if wait > 0:
+            try:
+                woke_on = net.buses[0].recv(wait)  # handled at once by the next advance
+            except can.CanError:  # the link down: the drives hear nothing meanwhile
+                time.sleep(wait)
+                woke_on = None

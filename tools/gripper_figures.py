@@ -29,10 +29,14 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     OUT.mkdir(parents=True, exist_ok=True)
-    seed = load_robot(ROOT / "config" / "seed000.toml")
-    grip = load_robot(ROOT / "config" / "seed000_grippers.toml")
-    gs = GripperSet(grip)
+    planner(load_robot(ROOT / "config" / "seed000.toml"), plt)
+    travel_and_sensing(load_robot(ROOT / "config" / "seed000_grippers.toml"), plt)
+    print(f"\nfigures: {OUT}")
 
+
+def planner(seed, plt) -> None:
+    """§4.1: the energy TDA's tension planner on seed000 (cable 1's tension, cable 8's
+    spring), printed and drawn (planner.png)."""
     pl = ge.tension_planner(seed, sweep=20.0)
     print("## §4.1 tension planner (seed000, 20 s sweep)")
     print(f"cable 1 energy range: ({pl['u_range'][0]:.2f}, {pl['u_range'][1]:.2f}) J")
@@ -55,6 +59,12 @@ def main() -> None:
     fig.suptitle("Sensors 2019 §4.1: tension planner (Fig. 19-20), our loop and plant")
     fig.savefig(OUT / "planner.png", dpi=110)
 
+
+def travel_and_sensing(grip, plt) -> None:
+    """§4.2: gripper 1's travel against the actuator energy, open (eq. 37) and closed on a
+    rigid object (eq. 41), and the grasp sensing's table over object sizes and stiffnesses
+    (travel_energy.png, sensing.png)."""
+    gs = GripperSet(grip)
     fig, ax = plt.subplots(figsize=(7, 5))
     open_run = ge.gripper_sweep(grip, 0, hold={1: 0.447})
     p = gs.params(0, math.inf)
@@ -106,7 +116,6 @@ def main() -> None:
     ax.legend()
     fig.suptitle("Sensors 2019 §4.2 (Fig. 22-24): gripper 1 against actuator energy")
     fig.savefig(OUT / "travel_energy.png", dpi=110)
-    print(f"\nfigures: {OUT}")
 
 
 if __name__ == "__main__":

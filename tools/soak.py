@@ -49,6 +49,50 @@ def fault_schedule(minutes: float, seed: int) -> list[FaultEvent]:
     return events
 
 
+def fault_key(kind: FaultKind | None, reason: str) -> str:
+    """How a stop is counted: its kind, an internal fault by what failed, a drive's fault with
+    its EMCY code."""
+    internal = kind is FaultKind.INTERNAL  # keep what failed
+    key = reason if internal else kind.value if kind else "?"
+    # its EMCY code
+    if kind is FaultKind.DRIVE_FAULT and "0x" in reason:
+        key += " " + reason[reason.index("0x") :][:6]
+    return key
+
+
+def summary_of(minutes: float, seed: int, cycles: int, wall_s: float, comp: np.ndarray,
+               events: list[FaultEvent], injector: FaultInjector, faults: collections.Counter,
+               counts: collections.Counter, checked: Result, state: State) -> dict:  # fmt: skip
+    """The soak's JSON summary: the compute time per cycle (µs), the faults injected and
+    detected, the state changes and the invariants' violations."""
+    violations = {
+        what: n
+        for what, n in (
+            ("non-finite torque", checked.nonfinite_torques),
+            ("torque beyond limit", checked.torques_over_limit),
+            ("tension outside limits while healthy", checked.tensions_outside_limits_while_healthy),
+        )
+        if n
+    }
+    return {
+        "simulated_minutes": minutes,
+        "seed": seed,
+        "cycles": cycles,
+        "wall_seconds": round(wall_s, 1),
+        "compute_us": {
+            "p50": round(float(np.percentile(comp, 50)), 1),
+            "p99": round(float(np.percentile(comp, 99)), 1),
+            "max": round(float(comp.max()), 1),
+        },
+        "faults_injected": dict(collections.Counter(e.kind for e in events)),
+        "frames": dict(injector.counts),
+        "faults_detected_by_reason": dict(faults),
+        "state_changes": dict(counts),
+        "invariant_violations": violations,
+        "final_state": state.value,
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=30.0)
@@ -88,13 +132,7 @@ def main() -> None:
                 if c.data.state is State.STOPPING or (
                     c.data.state is State.FAULT and last_state is not State.STOPPING
                 ):
-                    kind = c.data.fault_kind
-                    internal = kind is FaultKind.INTERNAL  # keep what failed
-                    key = c.data.fault_reason if internal else kind.value if kind else "?"
-                    # its EMCY code
-                    if kind is FaultKind.DRIVE_FAULT and "0x" in c.data.fault_reason:
-                        key += " " + c.data.fault_reason[c.data.fault_reason.index("0x") :][:6]
-                    faults[key] += 1
+                    faults[fault_key(c.data.fault_kind, c.data.fault_reason)] += 1
                 last_state = c.data.state
             if c.data.state is State.FAULT and i % 250 == 0:
                 c.submit(ResetCommand())
@@ -106,35 +144,12 @@ def main() -> None:
                 counts["moves"] += 1
                 next_move = t + 4.0
         contact = cl.plant.contact  # the cables at the plant's true pose, every step
-    comp = np.array(compute)
-    violations = {
-        what: n
-        for what, n in (
-            ("non-finite torque", checked.nonfinite_torques),
-            ("torque beyond limit", checked.torques_over_limit),
-            ("tension outside limits while healthy", checked.tensions_outside_limits_while_healthy),
-        )
-        if n
-    }
-    summary = {
-        "simulated_minutes": args.minutes,
-        "seed": args.seed,
-        "cycles": int(n),
-        "wall_seconds": round(time.perf_counter() - wall0, 1),
-        "compute_us": {
-            "p50": round(float(np.percentile(comp, 50)), 1),
-            "p99": round(float(np.percentile(comp, 99)), 1),
-            "max": round(float(comp.max()), 1),
-        },
-        "faults_injected": dict(collections.Counter(e.kind for e in events)),
-        "frames": dict(injector.counts),
-        "faults_detected_by_reason": dict(faults),
-        "state_changes": dict(counts),
-        "invariant_violations": violations,
-        "cable_contacts": len(contact.contacts),
-        "closest_cables": contact.least_what,
-        "final_state": c.data.state.value,
-    }
+    summary = summary_of(args.minutes, args.seed, int(n), time.perf_counter() - wall0,
+                         np.array(compute), events, injector, faults, counts, checked,
+                         c.data.state)  # fmt: skip
+    summary["cable_contacts"] = len(contact.contacts)
+    summary["closest_cables"] = contact.least_what
+    violations = summary["invariant_violations"]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(summary, indent=1))
     print(json.dumps(summary, indent=1))

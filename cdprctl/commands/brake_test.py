@@ -11,9 +11,13 @@ from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
-from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, records_dir, save_or_keep
+from cdprctl.commands.records import (
+    EXIT_STATE_DIR,
+    procedure_start,
+    records_after_configure,
+    save_or_keep,
+)
 from cdprctl.commands.sim import add_bus_arguments
-from drivers.simulated import simulated_robot
 
 WHO = "cdprctl brake-test"
 KIND = "brake-test"
@@ -155,13 +159,11 @@ def run(args: argparse.Namespace) -> int:
     weak = _weak_brake_index(who, args.weak_brake, args.sim, model)
     if weak == -1:
         return 2
-    where = bus_and_records(who, model, args, args.sim)
+    where = procedure_start(who, model, args, args.sim)
     if isinstance(where, int):
         return where
-    overrides, simulated, found = where
     state_dir: Path | None  # found again once the drives say they are simulated
-    state_dir = found
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
+    overrides, simulated, state_dir, log = where
     resumed = _kept(args, model, state_dir, log)
     if resumed is None:
         return 2
@@ -170,13 +172,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         log(f"{WHO}: {model.name}: configuring the drives")
         driver.configure()
-        if not simulated and simulated_robot(model, overrides, driver):
-            simulated = True  # simulated drives behind a kernel CAN interface (HIL)
-            state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-            if state_dir is None:
-                return EXIT_STATE_DIR
-        if simulated:
-            log(f"{WHO}: a simulated robot: the record goes to {state_dir}")
+        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
+                                                       simulated, state_dir, log)  # fmt: skip
+        if state_dir is None:
+            return EXIT_STATE_DIR
         if kept:
             clear_latched_fault(driver, log, WHO)
             check_identities(identities, list(getattr(driver, "identities", [])),

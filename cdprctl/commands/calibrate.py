@@ -14,9 +14,13 @@ import numpy as np
 
 from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
-from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, keep_record, records_dir
+from cdprctl.commands.records import (
+    EXIT_STATE_DIR,
+    keep_record,
+    procedure_start,
+    records_after_configure,
+)
 from cdprctl.commands.sim import add_bus_arguments
-from drivers.simulated import simulated_robot
 
 
 def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
@@ -32,21 +36,6 @@ def _robot_and_bus(p: argparse.ArgumentParser, **default: Any) -> None:
     add_bus_arguments(p, **default)
 
 
-
-
-def _simulated_after_configure(model: Any, overrides: dict[str, Any], driver: Any,
-                               args: argparse.Namespace, simulated: bool,
-                               state_dir: Path | None,
-                               log: Callable[[str], None]) -> tuple[bool, Path | None]:  # fmt: skip
-    """(simulated, the record's directory) once the drives have said who they are: simulated
-    drives behind a kernel CAN interface (HIL) write where a simulated robot's records go
-    (None: refused, said)."""
-    if not simulated and simulated_robot(model, overrides, driver):
-        simulated = True
-        state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-    if simulated and state_dir is not None:
-        log(f"{WHO}: a simulated robot: the record goes to {state_dir}")
-    return simulated, state_dir
 
 
 def add_parser(sub: Any) -> None:
@@ -69,6 +58,23 @@ def add_parser(sub: Any) -> None:
     )  # fmt: skip
     _robot_and_bus(p)
     methods = p.add_subparsers(dest="method", required=True, metavar="METHOD")
+    kp = _known_pose_parser(methods)
+    sp = _self_parser(methods)
+    gp = _geometry_parser(methods)
+    fp = _friction_parser(methods)
+    for method in (kp, sp, gp, fp):
+        _robot_and_bus(method, default=argparse.SUPPRESS)
+    for method in (sp, gp):
+        method.add_argument(
+            "--resume", action="store_true",
+            help="go on from the samples of a run stopped midway (kept in the state "
+            "directory), on the same robot file and options, the drives not reset since",
+        )  # fmt: skip
+    _geometry_options(gp)
+
+
+def _known_pose_parser(methods: Any) -> Any:
+    """``calibrate known-pose``: its options."""
     kp = methods.add_parser(
         "known-pose",
         help="the platform stands at a known pose (the home fixture by default)",
@@ -78,6 +84,11 @@ def add_parser(sub: Any) -> None:
     kp.add_argument("--pose", metavar="X,Y,Z,ROLL,PITCH,YAW",
                     help="m, rad; default: the home pose")
     kp.add_argument("--json", action="store_true", help="print the result as JSON")
+    return kp
+
+
+def _self_parser(methods: Any) -> Any:
+    """``calibrate self``: its options."""
     sp = methods.add_parser(
         "self",
         help="from an unknown pose near home, with the drives only",
@@ -91,6 +102,11 @@ def add_parser(sub: Any) -> None:
     sp.add_argument(
         "--fit-drum-scales", action="store_true", help="identify each drum's pay-out scale too"
     )
+    return sp
+
+
+def _geometry_parser(methods: Any) -> Any:
+    """``calibrate geometry``: its options."""
     gp = methods.add_parser(
         "geometry",
         help="the anchors, drums and encoders' zeros, from a start near home (a few minutes "
@@ -101,28 +117,11 @@ def add_parser(sub: Any) -> None:
         "and the encoders' zeros; refused when the residuals are more than the drives' "
         "resolution explains or the data do not decide them (docs/homing.md).",
     )
-    fp = methods.add_parser(
-        "friction",
-        help="each winch's friction (viscous, Coulomb, Stribeck) and pulley loss, from its "
-        "drive's torque while the platform goes out and back at three speeds (about two "
-        "minutes of motion)",
-        description="Move the platform out and back along three lines from where it stands, "
-        "every cable by position, at three speeds; fit each winch's friction with the statics "
-        "and the internal tensions taken out; refused when the residuals are more than the "
-        "torque's noise explains; written into the calibration record, which the next "
-        "cdprctl run applies (docs/friction.md).",
-    )
-    from cdprctl.commands.calibrate_friction import add_arguments
+    return gp
 
-    add_arguments(fp)
-    for method in (kp, sp, gp, fp):
-        _robot_and_bus(method, default=argparse.SUPPRESS)
-    for method in (sp, gp):
-        method.add_argument(
-            "--resume", action="store_true",
-            help="go on from the samples of a run stopped midway (kept in the state "
-            "directory), on the same robot file and options, the drives not reset since",
-        )  # fmt: skip
+
+def _geometry_options(gp: Any) -> None:
+    """``calibrate geometry``'s own options (after the common ones, as its help lists them)."""
     gp.add_argument("--poses", type=int, default=None, help="poses to sample (25; 10..80)")
     gp.add_argument("--fill", type=float, default=None,
                     help="fraction of the workspace box the poses span (the robot file's "
@@ -138,6 +137,24 @@ def add_parser(sub: Any) -> None:
                     "record for it to the state directory (then: cdprctl run --config "
                     "FILE)")  # fmt: skip
 
+
+def _friction_parser(methods: Any) -> Any:
+    """``calibrate friction``: its options (``calibrate_friction``'s)."""
+    fp = methods.add_parser(
+        "friction",
+        help="each winch's friction (viscous, Coulomb, Stribeck) and pulley loss, from its "
+        "drive's torque while the platform goes out and back at three speeds (about two "
+        "minutes of motion)",
+        description="Move the platform out and back along three lines from where it stands, "
+        "every cable by position, at three speeds; fit each winch's friction with the statics "
+        "and the internal tensions taken out; refused when the residuals are more than the "
+        "torque's noise explains; written into the calibration record, which the next "
+        "cdprctl run applies (docs/friction.md).",
+    )
+    from cdprctl.commands.calibrate_friction import add_arguments
+
+    add_arguments(fp)
+    return fp
 
 def run(args: argparse.Namespace) -> int:
     """Calibrate the robot's encoders: the drives are configured, enabled, the platform held
@@ -165,14 +182,12 @@ def run(args: argparse.Namespace) -> int:
         from cdprctl.commands.calibrate_friction import run_friction
 
         return run_friction(args, model)
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     pose = _pose_or_checked(args, model)
-    where = bus_and_records(WHO, model, args, False)
+    where = procedure_start(WHO, model, args, False)
     if isinstance(where, int):
         return where
-    overrides, simulated, found = where
     state_dir: Path | None  # found again once the drives say they are simulated
-    state_dir = found
+    overrides, simulated, state_dir, log = where
     opt = None if pose is not None else SelfOptions(
         travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales)  # fmt: skip
     resumed = _self_progress(args, model, opt, state_dir, log)
@@ -184,8 +199,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         log(f"cdprctl calibrate: {model.name}, {args.method}: configuring the drives")
         driver.configure()
-        simulated, state_dir = _simulated_after_configure(model, overrides, driver, args,
-                                                          simulated, state_dir, log)  # fmt: skip
+        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
+                                                       simulated, state_dir, log)  # fmt: skip
         if state_dir is None:
             return EXIT_STATE_DIR
         if progress is not None:

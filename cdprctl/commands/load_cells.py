@@ -13,9 +13,13 @@ from typing import Any
 
 from cdprctl.commands.common import load_or_report
 from cdprctl.commands.parsing import command_parser
-from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, keep_record, records_dir
+from cdprctl.commands.records import (
+    EXIT_STATE_DIR,
+    keep_record,
+    procedure_start,
+    records_after_configure,
+)
 from cdprctl.commands.sim import add_bus_arguments
-from drivers.simulated import simulated_robot
 
 WHO = "cdprctl load-cells zero"
 EXAMPLES = """examples:
@@ -86,13 +90,11 @@ def zero(args: argparse.Namespace) -> int:
         print(f"{WHO}: error: {model.name} has no load cells: add [[sensors.load_cells]] to "
               f"{args.config} (docs/config.md)", file=sys.stderr)  # fmt: skip
         return 2
-    where = bus_and_records(WHO, model, args, args.sim)
+    where = procedure_start(WHO, model, args, args.sim)
     if isinstance(where, int):
         return where
-    overrides, simulated, found = where
     state_dir: Path | None  # found again once the drives say they are simulated
-    state_dir = found
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
+    overrides, simulated, state_dir, log = where
     sim = on_stand(model) if args.sim else None
     if sim is not None:
         driver = sim.driver
@@ -102,11 +104,10 @@ def zero(args: argparse.Namespace) -> int:
         driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
     try:
         driver.configure()
-        if not simulated and simulated_robot(model, overrides, driver):
-            simulated = True  # simulated drives behind a kernel CAN interface (HIL)
-            state_dir = records_dir(WHO, model.name, args.state_dir, simulated)
-            if state_dir is None:
-                return EXIT_STATE_DIR
+        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
+                                                       simulated, state_dir)  # fmt: skip
+        if state_dir is None:
+            return EXIT_STATE_DIR
         record = tare(model, driver, args.seconds, simulated, log)
     except (DriverError, LoadCellError) as exc:
         print(f"{WHO}: failed: {exc}", file=sys.stderr)

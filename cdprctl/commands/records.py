@@ -74,3 +74,36 @@ def bus_and_records(who: str, model: Any, args: Any,
     if state_dir is None:
         return EXIT_STATE_DIR
     return overrides, simulated, state_dir
+
+
+def procedure_start(
+    who: str, model: Any, args: Any, in_process: bool
+) -> tuple[dict[str, Any], bool, Path, Callable[[str], None]] | int:
+    """``bus_and_records`` (the record's directory may still change once the drives say they
+    are simulated: ``records_after_configure``), and where the procedure says what it does:
+    standard error when its result goes to standard output as JSON (``--json``), else
+    standard output."""
+    where = bus_and_records(who, model, args, in_process)
+    if isinstance(where, int):
+        return where
+    overrides, simulated, state_dir = where
+    log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
+    return overrides, simulated, state_dir, log
+
+
+def records_after_configure(who: str, model: Any, args: Any, overrides: dict[str, Any],
+                            driver: Any, simulated: bool, state_dir: Path | None,
+                            log: Callable[[str], None] | None = None,
+                            ) -> tuple[bool, Path | None]:  # fmt: skip
+    """(simulated, the record's directory) once the configured drives have said who they are:
+    simulated drives behind a kernel CAN interface (HIL) write where a simulated robot's
+    records go (None: refused, said in one line; the caller exits :data:`EXIT_STATE_DIR`).
+    ``log``: where a simulated robot's directory is said, if anywhere."""
+    from drivers.simulated import simulated_robot
+
+    if not simulated and simulated_robot(model, overrides, driver):
+        simulated = True
+        state_dir = records_dir(who, model.name, args.state_dir, simulated)
+    if log is not None and simulated and state_dir is not None:
+        log(f"{who}: a simulated robot: the record goes to {state_dir}")
+    return simulated, state_dir

@@ -221,14 +221,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - 
     m = lengths.shape[0]
     free_len, length, W = k[7], k[9], k[10]  # KinArrays: free_len, length, W
     tol, step_tol, max_iter, max_residual = limits
-    s = 0.0
-    for i in range(m):
-        s += lengths[i]
-    s += p[0] + p[1] + p[2]
-    for i in range(3):
-        for j in range(3):
-            s += R[i, j]
-    if not math.isfinite(s):
+    if not _finite_input(lengths, p, R):
         info[0], info[1], info[2] = math.inf, 0.0, 3.0  # BAD_INPUT
         return
     lhs, rhs, L, y, step, p_new, R_new, E, A, B = work
@@ -248,18 +241,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - 
             _converged(info, math.sqrt(cost / m), it, max_residual)
             return
         it += 1
-        for a in range(6):
-            acc = 0.0
-            for i in range(m):
-                acc += W[a, i] * res[i]
-            rhs[a] = acc
-            for b in range(a, 6):
-                acc = 0.0
-                for i in range(m):
-                    acc += W[a, i] * W[b, i]
-                lhs[a, b] = acc
-                lhs[b, a] = acc
-            lhs[a, a] += mu
+        _normal_equations(W, res, mu, lhs, rhs)
         if not _cholesky_solve6(lhs, rhs, L, y, step):
             info[0], info[1], info[2] = math.sqrt(cost / m), it, 2.0
             return
@@ -269,13 +251,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - 
         for a in range(6):
             big = max(big, abs(step[a]))
         if big < step_tol:
-            # residual after the step to first order: δl = −Wᵀ δX
-            lin = 0.0
-            for i in range(m):
-                r_i = res[i]
-                for a in range(6):
-                    r_i -= W[a, i] * step[a]
-                lin += r_i * r_i
+            lin = _linearised_cost(W, res, step)
             copy_pose(p_new, R_new, p, R)
             _converged(info, math.sqrt(lin / m), it, max_residual)
             return
@@ -284,10 +260,7 @@ def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - 
             mu = mu * 100.0 + 1e-6
             ik_kernel(k, p, R)
             continue
-        cost_new = 0.0
-        for i in range(m):
-            e = length[i] - lengths[i]
-            cost_new += e * e
+        cost_new = _cost(length, lengths)
         if cost_new < cost:
             copy_pose(p_new, R_new, p, R)
             cost = cost_new
@@ -304,6 +277,62 @@ def fk_kernel(k, lengths, p, R, limits, res, info, work):  # pragma: no cover - 
         _converged(info, rms, it, max_residual)
     else:
         info[0], info[1], info[2] = rms, it, 1.0  # MAX_ITERATIONS
+
+
+@cycle_kernel
+def _finite_input(lengths, p, R):  # pragma: no cover - compiled
+    """Whether the measured lengths and the warm start hold no NaN nor infinity (their sum is
+    finite: a NaN or an infinity anywhere makes it not)."""
+    s = 0.0
+    for i in range(lengths.shape[0]):
+        s += lengths[i]
+    s += p[0] + p[1] + p[2]
+    for i in range(3):
+        for j in range(3):
+            s += R[i, j]
+    return math.isfinite(s)
+
+
+@cycle_kernel
+def _normal_equations(W, res, mu, lhs, rhs):  # pragma: no cover - compiled
+    """``lhs`` ← W Wᵀ + μ I and ``rhs`` ← W res: the damped Gauss-Newton system of the
+    Levenberg-Marquardt step (``W`` the wrench matrix, 6 × m; ``res`` the length residuals, m;
+    ``mu`` the damping, m²)."""
+    m = res.shape[0]
+    for a in range(6):
+        acc = 0.0
+        for i in range(m):
+            acc += W[a, i] * res[i]
+        rhs[a] = acc
+        for b in range(a, 6):
+            acc = 0.0
+            for i in range(m):
+                acc += W[a, i] * W[b, i]
+            lhs[a, b] = acc
+            lhs[b, a] = acc
+        lhs[a, a] += mu
+
+
+@cycle_kernel
+def _linearised_cost(W, res, step):  # pragma: no cover - compiled
+    """Σ residual² (m²) after ``step`` to first order: δl = −Wᵀ δX."""
+    lin = 0.0
+    for i in range(res.shape[0]):
+        r_i = res[i]
+        for a in range(6):
+            r_i -= W[a, i] * step[a]
+        lin += r_i * r_i
+    return lin
+
+
+@cycle_kernel
+def _cost(length, lengths):  # pragma: no cover - compiled
+    """Σ (l(X) − l_meas)² (m²): the squared length residuals of the pose ``length`` is of."""
+    cost = 0.0
+    for i in range(lengths.shape[0]):
+        e = length[i] - lengths[i]
+        cost += e * e
+    return cost
 
 
 @cycle_kernel

@@ -110,81 +110,26 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+# the sections without which there is no robot (a None: its reader said why)
+_REQUIRED = ("name", "gravity", "platform", "cables", "home", "workspace", "drives", "control",
+             "zenoh", "foxglove", "ros2", "grippers")  # fmt: skip
+
+
 def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     """Validate an already-parsed TOML document (see :func:`load_robot`)."""
     rd = TableReader(file)
     rd.check_keys(data, TOP_KEYS, "")
-    name = rd.string(data, "name", "")
-    source = rd.string(data, "source", "", required=False, default="") or ""
-    gravity = rd.vector(data, "gravity", "", "m/s²")
-
-    platform = _read_platform(rd, data)
-    winch_table = rd.table(data, "winch", "", required=False)
-    default_winch = read_winch(rd, winch_table, "winch", None) if winch_table else None
-    cables = read_cables(rd, data, winch_table is not None, default_winch)
-    home = _read_home(rd, data)
-    workspace = _read_workspace(rd, data)
-    drives = None
-    if cables is not None:
-        rated = max(c.winch.torque_limit for c in cables)
-        drives = read_drives(rd, data, [c.name for c in cables], name or "robot", rated, rated)
-    control = read_control(rd, data, [c.name for c in cables] if cables else [])
-    zenoh = read_zenoh(rd, data, name or "robot")
-    foxglove = read_foxglove(rd, data)
-    ros2 = read_ros2(rd, data)
-    grippers = read_grippers(rd, data, cables)
-    anchors = np.array([c.anchor for c in cables], float) if cables else None
-    calibration = read_calibration(rd, data, len(cables or ()), anchors)
-    safety = read_safety(rd, data)
-    paths = read_paths(rd, data)
-    interference = read_interference(rd, data)
-    sensors = read_sensors(rd, data, [c.name for c in cables or ()],
-                           drives.buses if drives else (),
-                           drives.controller_node_id if drives else 127,
-                           drives.driver if drives else "cia402")  # fmt: skip
-
-    if (
-        rd.errors
-        or name is None
-        or gravity is None
-        or platform is None
-        or cables is None
-        or home is None
-        or workspace is None
-        or drives is None
-        or control is None
-        or zenoh is None
-        or foxglove is None
-        or ros2 is None
-        or grippers is None
-    ):
+    parts = _read_sections(rd, data)
+    if rd.errors or any(parts[k] is None for k in _REQUIRED):
         raise ConfigError(rd.errors or [f"{file}: invalid"])
-
     # the grippers' drives stay in torque mode: their cables' tensions squeeze the jaws,
     # which position mode would hold as lengths instead (64 mm of tracking error in
     # seed000_grippers' demo, all eight drives in position mode; lock-step)
-    drives = dataclasses.replace(drives, torque_cables=tuple(sorted(g.cable for g in grippers)))
-    model = RobotModel(
-        name=name,
-        source=source,
-        source_file=file,
-        gravity=gravity,
-        platform=platform,
-        cables=tuple(cables),
-        home=home,
-        workspace=workspace,
-        drives=drives,
-        control=control,
-        zenoh=zenoh,
-        foxglove=foxglove,
-        ros2=ros2,
-        grippers=grippers,
-        calibration=calibration,
-        safety=safety,
-        paths=paths,
-        interference=interference,
-        sensors=sensors,
+    parts["drives"] = dataclasses.replace(
+        parts["drives"], torque_cables=tuple(sorted(g.cable for g in parts["grippers"]))
     )
+    parts["cables"] = tuple(parts["cables"])
+    model = RobotModel(source_file=file, **parts)
     # Checks that need the assembled geometry.
     from cdprctl.robot_file.checks import check_model  # late import: checks use the kinematics
 
@@ -192,6 +137,43 @@ def parse_robot(data: dict[str, Any], file: str) -> RobotModel:
     if errors:
         raise ConfigError(errors)
     return model
+
+
+def _read_sections(rd: TableReader, data: dict[str, Any]) -> dict[str, Any]:
+    """Every section of the document by its ``RobotModel`` field, each read by its own reader
+    (None where it is missing or wrong: the reader has said why in ``rd.errors``, in the
+    document's order); the sections that name the cables after them."""
+    name = rd.string(data, "name", "")
+    out: dict[str, Any] = {
+        "name": name,
+        "source": rd.string(data, "source", "", required=False, default="") or "",
+        "gravity": rd.vector(data, "gravity", "", "m/s²"),
+        "platform": _read_platform(rd, data),
+    }
+    winch_table = rd.table(data, "winch", "", required=False)
+    default_winch = read_winch(rd, winch_table, "winch", None) if winch_table else None
+    cables = read_cables(rd, data, winch_table is not None, default_winch)
+    names = [c.name for c in cables or ()]
+    out |= {"cables": cables, "home": _read_home(rd, data),
+            "workspace": _read_workspace(rd, data), "drives": None}  # fmt: skip
+    if cables is not None:
+        rated = max(c.winch.torque_limit for c in cables)
+        out["drives"] = read_drives(rd, data, names, name or "robot", rated, rated)
+    drives = out["drives"]
+    anchors = np.array([c.anchor for c in cables], float) if cables else None
+    out["control"] = read_control(rd, data, names)
+    out["zenoh"] = read_zenoh(rd, data, name or "robot")
+    out["foxglove"] = read_foxglove(rd, data)
+    out["ros2"] = read_ros2(rd, data)
+    out["grippers"] = read_grippers(rd, data, cables)
+    out["calibration"] = read_calibration(rd, data, len(cables or ()), anchors)
+    out["safety"] = read_safety(rd, data)
+    out["paths"] = read_paths(rd, data)
+    out["interference"] = read_interference(rd, data)
+    out["sensors"] = read_sensors(rd, data, names, drives.buses if drives else (),
+                                  drives.controller_node_id if drives else 127,
+                                  drives.driver if drives else "cia402")  # fmt: skip
+    return out
 
 
 def _read_platform(rd: TableReader, data: dict[str, Any]) -> Platform | None:

@@ -22,7 +22,7 @@ from canopen import SdoAbortedError
 from drivers.cia402 import protocol as p
 from sim_backend.drives import pdo
 from sim_backend.drives.axis import OD_STO_INPUTS, Cia402Axis
-from sim_backend.drives.dictionary import Dictionary
+from sim_backend.drives.dictionary import NMT_RESETS, NMT_STATE_OF, Dictionary
 from sim_backend.drives.sync_clock import SyncClock
 from sim_backend.plant import CdprPlant
 
@@ -95,18 +95,12 @@ class Cia402Drive:
         """NMT (CiA 301 §7.3.2): the state; a reset restores the objects (node: all of them,
         the drive's state machine restarted; communication: 0x1000-0x1FFF) and ends with
         the boot-up message, in PRE-OPERATIONAL."""
-        if command == p.NMT_START:
-            self.nmt = p.HB_OPERATIONAL
-        elif command == p.NMT_STOP:
-            self.nmt = p.HB_STOPPED
-        elif command == p.NMT_PRE_OPERATIONAL:
-            self.nmt = p.HB_PRE_OPERATIONAL
-        elif command in (p.NMT_RESET_NODE, p.NMT_RESET_COMMUNICATION):
+        if command in NMT_STATE_OF:
+            self.nmt = NMT_STATE_OF[command]
+        elif command in NMT_RESETS:
+            self.dictionary.reset_by(command)
             if command == p.NMT_RESET_NODE:
-                self.dictionary.reset(0x0000, 0x10000)
                 self.axis.reset()
-            else:
-                self.dictionary.reset(0x1000, 0x2000)
             self.axis.set_following_error()
             self.pdos.compile()
             self.nmt = p.HB_PRE_OPERATIONAL

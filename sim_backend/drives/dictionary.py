@@ -22,9 +22,17 @@ import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary, ODVariable
 
+from drivers.cia402 import protocol as p
 from drivers.cia402.objects import variables
 
 EDS = Path(__file__).with_name("cdprctl_winch_drive.eds")
+# NMT (CiA 301 §7.3.2): the state each command but a reset puts a node in
+NMT_STATE_OF = {
+    p.NMT_START: p.HB_OPERATIONAL,
+    p.NMT_STOP: p.HB_STOPPED,
+    p.NMT_PRE_OPERATIONAL: p.HB_PRE_OPERATIONAL,
+}
+NMT_RESETS = (p.NMT_RESET_NODE, p.NMT_RESET_COMMUNICATION)
 
 Key = tuple[int, int]
 Hook = Callable[[int, int, int], None]  # (index, sub, value)
@@ -74,6 +82,14 @@ class Dictionary:
             if first <= var.index < end and isinstance(var.default, int):  # numbers
                 key = (var.index, var.subindex)
                 self.values[key] = int(self._stored.get(key, var.default))
+
+    def reset_by(self, command: int) -> None:
+        """The objects an NMT reset restores (CiA 301 §7.3.2.2): reset node all of them, reset
+        communication 0x1000-0x1FFF."""
+        if command == p.NMT_RESET_NODE:
+            self.reset(0x0000, 0x10000)
+        else:
+            self.reset(0x1000, 0x2000)
 
     def value(self, index: int, sub: int) -> int | float | None:
         """An object's value now: live from the drive, else the stored number (None: not a

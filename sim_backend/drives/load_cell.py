@@ -26,7 +26,7 @@ from cdprctl.model.robot import RobotModel
 from cdprctl.model.sensors import LoadCell
 from drivers.cia402 import protocol as p
 from sim_backend.drives import pdo
-from sim_backend.drives.dictionary import Dictionary
+from sim_backend.drives.dictionary import NMT_RESETS, NMT_STATE_OF, Dictionary
 from sim_backend.plant import CdprPlant
 
 EDS = Path(__file__).with_name("cdprctl_load_cell.eds")
@@ -71,15 +71,10 @@ class LoadCellNode:
     # -- frames in ------------------------------------------------------------------------------
     def on_nmt(self, command: int) -> list[can.Message]:
         """NMT (CiA 301 §7.3.2); a reset restores the objects and ends with the boot-up."""
-        if command == p.NMT_START:
-            self.nmt = p.HB_OPERATIONAL
-        elif command == p.NMT_STOP:
-            self.nmt = p.HB_STOPPED
-        elif command == p.NMT_PRE_OPERATIONAL:
-            self.nmt = p.HB_PRE_OPERATIONAL
-        elif command in (p.NMT_RESET_NODE, p.NMT_RESET_COMMUNICATION):
-            first = 0x0000 if command == p.NMT_RESET_NODE else 0x1000
-            self.dictionary.reset(first, 0x10000 if first == 0 else 0x2000)
+        if command in NMT_STATE_OF:
+            self.nmt = NMT_STATE_OF[command]
+        elif command in NMT_RESETS:
+            self.dictionary.reset_by(command)
             self.compile()
             self.nmt = p.HB_PRE_OPERATIONAL
             self.last_hb = -math.inf

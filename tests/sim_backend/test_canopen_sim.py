@@ -9,7 +9,6 @@ refused unless 0x6502 has them."""
 from __future__ import annotations
 
 import dataclasses
-import threading
 import time
 import uuid
 
@@ -18,68 +17,36 @@ import canopen
 import pytest
 from canopen.objectdictionary import ODVariable
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
-from conftest import CONFIG, canopen_network
+from conftest import CONFIG
+from stepped_sim import SteppedSim, master_of
 
 from cdprctl.model.drives import default_drives
 from cdprctl.robot_file import load_robot
 from drivers.cia402 import protocol as p
 from drivers.cia402.objects import variables
 from sim_backend.drives.dictionary import EDS
-from sim_backend.network import SimNetwork
-from sim_backend.plant import CdprPlant
 
 NODES = range(1, 9)
 
 
-class Robot:
+class Robot(SteppedSim):
     """rowc's eight drives on one bus, nodes 1-8, stepped by a thread in real time."""
 
     def __init__(self, channel: str):
         model = load_robot(CONFIG / "rowc.toml")
         drives = default_drives(model.name, model.n_cables, model.drives.rated_torque)
-        self.model = dataclasses.replace(model, drives=drives)
-        self.plant = CdprPlant(self.model)
-        self.net = SimNetwork(
-            self.model, self.plant, {"interface": "inprocess", "channel": channel}
-        )
-        # a step before the thread: the physics kernels compile at their first call (seconds
-        # on a cold cache, the drives deaf meanwhile: the scanner found none in 3 s in a
-        # mutation session's fresh tree)
-        self.net.advance(0.001)
-        self.lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="sim", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            with self.lock:
-                self.net.advance(0.001)
-            time.sleep(0.001)
+        model = dataclasses.replace(model, drives=drives)
+        super().__init__(model, {"interface": "inprocess", "channel": channel})
 
     def drive(self, node: int):
         return self.net.nodes[0][node]
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-        self.net.close()
 
 
 @pytest.fixture
 def rig():
     channel = f"canopen-{uuid.uuid4().hex}"
-    robot = Robot(channel)
-    network = canopen_network()
-    network.connect(interface="inprocess", channel=channel)
-    nodes = {n: network.add_node(n, str(EDS)) for n in NODES}
-    for node in nodes.values():
-        node.sdo.RESPONSE_TIMEOUT = 1.0  # generous: a loaded machine
-    try:
-        yield robot, network, nodes
-    finally:
-        network.disconnect()
-        robot.close()
+    with master_of(Robot(channel), channel, EDS, NODES) as robot_network_nodes:
+        yield robot_network_nodes
 
 
 def test_the_scanner_finds_every_drive(rig):

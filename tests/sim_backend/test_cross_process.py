@@ -28,6 +28,15 @@ from sim_backend.plant import equilibrium_tensions
 GROUP = "239.74.163.2"
 
 
+def _terminate(proc: subprocess.Popen, timeout: float) -> None:
+    """SIGTERM, and SIGKILL when ``proc`` has not ended ``timeout`` s later."""
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
 
 def stopped_under_load(text: str) -> bool:
     """A run that did not finish its move stopped the safe way because of this VM's load: a
@@ -279,12 +288,7 @@ def test_daemon_sigkilled_mid_motion_then_restarted(tmp_path):
     finally:
         for p in procs:
             if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+                _terminate(p, 10.0)
 
 
 def test_calibrate_then_run_across_processes(tmp_path, sim_process):
@@ -325,12 +329,7 @@ def test_calibrate_then_run_across_processes(tmp_path, sim_process):
         ready = out.wait_for("ready: pose [", 120.0)
         reached = ready and out.wait_for("moving -> enabled: target reached", 60.0)
     finally:
-        daemon.send_signal(signal.SIGTERM)
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-            daemon.wait()
+        _terminate(daemon, 30.0)
     text = out.text()
     assert ready is not None, text
     pose = [float(v) for v in ready[1].split("[", 1)[1].split("]", 1)[0].split(",")]

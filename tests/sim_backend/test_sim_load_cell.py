@@ -8,61 +8,36 @@ the standard way, and the cell's errors (offset, drift, a dead cell)."""
 from __future__ import annotations
 
 import struct
-import threading
 import time
 import uuid
 
 import canopen
 import pytest
-from conftest import CONFIG, canopen_network
+from conftest import CONFIG
+from stepped_sim import SteppedSim, master_of
 
 from cdprctl.robot_file import load_robot
 from sim_backend.drives.load_cell import EDS
-from sim_backend.network import SimNetwork
 from sim_backend.plant import CdprPlant
 
 CELLS = range(21, 25)  # the cells of cables 1-4, on rowc's first bus
 
 
-class Robot:
+class Robot(SteppedSim):
+    """rowc_load_cells on two buses, at rest at home, stepped by a thread in real time."""
+
     def __init__(self, channels: list[str]):
-        self.model = load_robot(CONFIG / "rowc_load_cells.toml")
-        self.plant = CdprPlant(self.model)
-        self.plant.set_pose(self.model.home.position, self.model.home.rotation, None)
-        self.net = SimNetwork(self.model, self.plant,
-                              {"interface": "inprocess", "channels": channels})  # fmt: skip
-        self.net.advance(0.001)  # the physics compiled before the thread (see test_canopen_sim)
-        self.lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="sim", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            with self.lock:
-                self.net.advance(0.001)
-            time.sleep(0.001)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2.0)
-        self.net.close()
+        model = load_robot(CONFIG / "rowc_load_cells.toml")
+        plant = CdprPlant(model)
+        plant.set_pose(model.home.position, model.home.rotation, None)
+        super().__init__(model, {"interface": "inprocess", "channels": channels}, plant)
 
 
 @pytest.fixture
 def rig():
     channels = [f"cells-{uuid.uuid4().hex}-{b}" for b in range(2)]
-    robot = Robot(channels)
-    network = canopen_network()
-    network.connect(interface="inprocess", channel=channels[0])
-    nodes = {n: network.add_node(n, str(EDS)) for n in CELLS}
-    for node in nodes.values():
-        node.sdo.RESPONSE_TIMEOUT = 1.0  # generous: a loaded machine
-    try:
-        yield robot, network, nodes
-    finally:
-        network.disconnect()
-        robot.close()
+    with master_of(Robot(channels), channels[0], EDS, CELLS) as robot_network_nodes:
+        yield robot_network_nodes
 
 
 def _tpdo(network: canopen.Network, cob_id: int, syncs: int = 5) -> list[bytes]:

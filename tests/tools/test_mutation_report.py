@@ -1,5 +1,6 @@
-"""The mutation report (tools/mutation.py) is made of the results kept in the repository where
-no session is at hand, and refuses them once the module is no longer the file they are of."""
+"""The mutation report (tools/mutation_report.py) is made of the results kept in the
+repository where no session is at hand, and refuses them once the module is no longer the
+file they are of."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools"))
-import mutation as mu  # noqa: E402
+import mutation_report as mr  # noqa: E402
+import mutation_session as mu  # noqa: E402
 
 
 def kept_only(tmp_path, monkeypatch, t, mutants, seconds, equivalents=()):
@@ -50,12 +52,12 @@ def test_kept_results_make_the_report_until_the_module_changes(tmp_path, monkeyp
                        "- return x + 1 / + return x - 1", "killed")  # fmt: skip
     entry = kept_only(tmp_path, monkeypatch, t, [killed, killed, survivor], 60)
     assert entry["killed"] == 2 and len(entry["others"]) == 1
-    text = mu.report([t], tmp_path)
+    text = mr.report([t], tmp_path)
     assert "| m | `m.py` | 3 | 2 | 1 | 0 | 66.7 % | 1 min |" in text
     assert "`m.py:2` NumberReplacer: `- return x + 1 / + return x + 2`" in text
     assert json.loads(mu.RESULTS.read_text())["m"] == entry  # kept as it was
     module.write_text("def f(x):\n    return x + 2\n")
-    text = mu.report([t], tmp_path)
+    text = mr.report([t], tmp_path)
     assert "| m | `m.py` | not run (the file changed since its session: `--fresh m`)" in text
 
 
@@ -72,11 +74,11 @@ def test_mutants_outside_a_targets_scope_are_left_out_of_its_score_and_said(tmp_
                         "- return x * 2 / + return x + 2", "out_of_scope")  # fmt: skip
     entry = kept_only(tmp_path, monkeypatch, t, [killed, outside, outside], 60)
     assert entry["killed"] == 1 and entry["out_of_scope"] == 2 and entry["others"] == []
-    text = mu.report([t], tmp_path)
+    text = mr.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "- m: 2 mutants outside kept left out — too slow" in text
     monkeypatch.setattr(mu, "LEFT_OUT", [{"module": "n.py", "why": "slower still"}])
-    assert "- `n.py`: slower still" in mu.report([t], tmp_path)
+    assert "- `n.py`: slower still" in mr.report([t], tmp_path)
 
 
 def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_printed(
@@ -100,7 +102,7 @@ def test_a_partial_session_is_listed_but_not_scored_and_equivalents_match_as_pri
     pending = mu.Mutant("m.py", "core/ReplaceBinaryOperator_Add_Sub", 2, "return x + 1",
                         "- return x + 1 / + return x - 1", "pending")  # fmt: skip
     kept_only(tmp_path, monkeypatch, t, [survivor, alive, pending], None, equivalents)
-    text = mu.report([t], tmp_path)
+    text = mr.report([t], tmp_path)
     assert "**No module's session is complete yet.**" in text
     assert "Not yet in the score: m (1 of 3 not run yet)." in text
     assert "`m.py:2` ReplaceBinaryOperator_Add_Mul: `- return x + 1 / + return x * 1`" in text
@@ -196,7 +198,7 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
                          "skipped")  # an operator left out: in no sample  # fmt: skip
     entry = kept_only(tmp_path, monkeypatch, t, [killed, unsampled, unsampled, left_out], 60)
     assert entry["killed"] == 1 and len(entry["others"]) == 3  # the unsampled kept whole
-    text = mu.report([t], tmp_path)
+    text = mr.report([t], tmp_path)
     assert "| m | `m.py` | 1 | 1 | 0 | 0 | 100.0 % | 1 min |" in text
     assert "in the 1 of 1 modules whose session is complete (1 of them a sample: 2 mutants " \
         "not run)" in text
@@ -207,9 +209,9 @@ def test_a_sampled_module_is_scored_on_what_ran_and_says_how_much_did_not(tmp_pa
                           "line": r"return x \+ 1", "why": "y"}  # fmt: skip
     monkeypatch.setattr(mu, "load_equivalents", lambda: [entry_of_unsampled])
     monkeypatch.setattr(mu, "TARGETS", [t])
-    assert "matched no survivor" not in mu.report([t], tmp_path)
+    assert "matched no survivor" not in mr.report([t], tmp_path)
     entry_of_unsampled["line"] = r"return x \+ 3"  # of no mutant at all: stale
-    assert "matched no survivor" in mu.report([t], tmp_path)
+    assert "matched no survivor" in mr.report([t], tmp_path)
 
 
 def test_a_survivors_only_run_moves_the_killed_out_of_the_kept_survivors_once(tmp_path):

@@ -5,6 +5,7 @@ sent again for a SYNC held up after them."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 
@@ -23,6 +24,17 @@ from test_drivers_frames import (
 from cdprctl.robot_file import load_robot
 from drivers import DriveFaultError, DriverOperationError, Lifecycle
 from drivers.cia402 import protocol as p
+
+
+@contextlib.contextmanager
+def first_read(seed):
+    """(driver, its peer, the frames it ignored so far): rowc's eight drives configured and
+    their first feedback read."""
+    drv, peer = make(seed, Cia402Script(range(1, 9)))
+    with drv:
+        drv.configure()
+        drv.read(peer.t)
+        yield drv, peer, drv.stats.frames_ignored
 
 
 @pytest.fixture
@@ -52,12 +64,7 @@ def test_a_short_emcy_is_ignored_and_counted_and_a_padded_heartbeat_is_read_from
     """An EMCY must be 8 bytes (CiA 301 §7.2.7): a 4-byte one is no fault and no velocity
     (TPDO2's length), one frame ignored; a heartbeat padded to 2 bytes (some devices pad)
     gives its NMT state from byte 0."""
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
-        drv.read(peer.t)
-        before = drv.stats.frames_ignored
+    with first_read(seed) as (drv, peer, before):
         velocity = drv.states.velocity.copy()
         peer.bus.send(frame(p.EMCY + 2, b"\x10\x23\x01\x00"))
         peer.bus.send(frame(p.HEARTBEAT + 5, bytes([p.HB_PRE_OPERATIONAL, 0x05])))
@@ -158,12 +165,7 @@ def test_frames_of_the_wrong_length_for_their_kind_are_ignored_and_counted(seed)
     velocity, an 8-byte TPDO2 no EMCY and no SDO answer, a 6- or 2-byte TPDO2 no velocity, an empty
     heartbeat no sign of life, a 4-byte SDO answer no answer (CiA 301: always 8) — each one
     frame ignored, nothing of the drive changed."""
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
-        drv.read(peer.t)
-        before = drv.stats.frames_ignored
+    with first_read(seed) as (drv, peer, before):
         velocity, last_hb = drv.states.velocity.copy(), drv.liveness.last_hb.copy()
         for arb, data in [
             (p.TPDO1 + 3, b"\x01\x02\x03\x04"),
