@@ -8,6 +8,7 @@ import ctypes.util
 import gc
 import os
 import sys
+import threading
 from collections.abc import Iterator
 
 MCL_CURRENT, MCL_FUTURE = 1, 2
@@ -179,13 +180,45 @@ def sharing_the_interpreter() -> Iterator[None]:
     or a resumed path planned in the I/O thread): the interpreter hands its lock to a waiting
     thread after ``SHORT_SWITCH`` instead of 5 ms, so the loop waits that long for it, not a
     period (rowc at 250 Hz: 14-17 periods missed within 1 s of a resume,
-    benchmarks/bench_resume.py)."""
+    benchmarks/bench_resume.py); and a ``SCHED_FIFO`` thread computes at the normal scheduler
+    at nice ``LONG_WORK_NICE`` meanwhile, its own priority given back after. At the I/O
+    thread's FIFO priority a path's plan spent its CPU's real-time budget (the kernel's
+    ``sched_rt_runtime_us``, 950 ms a second), and the kernel then held every real-time task
+    there, the simulated robot's too, for the rest of the second: its drives deaf 52 ms, the
+    daemon stopped on their silence (README's ``run --sim --path``, every time)."""
     old = sys.getswitchinterval()
     sys.setswitchinterval(SHORT_SWITCH)
+    own = _out_of_real_time()
     try:
         yield
     finally:
         sys.setswitchinterval(old)
+        if own is not None:
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(own[0]))
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), own[1])
+
+
+#: the niceness of long work taken out of real time: ahead of the machine's normal work, so
+#: it seldom sits preempted while it holds the interpreter's lock the loop waits for
+LONG_WORK_NICE = -20
+
+
+def _out_of_real_time() -> tuple[int, int] | None:
+    """The calling thread, if at ``SCHED_FIFO``, at the normal scheduler with nice
+    ``LONG_WORK_NICE``; returns its FIFO priority and niceness to give back, or None where
+    nothing was changed (another policy, or refused)."""
+    tid = threading.get_native_id()
+    try:
+        if os.sched_getscheduler(0) != os.SCHED_FIFO:
+            return None
+        own = (os.sched_getparam(0).sched_priority, os.getpriority(os.PRIO_PROCESS, tid))
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (OSError, AttributeError):
+        return None
+    with contextlib.suppress(OSError):
+        os.setpriority(os.PRIO_PROCESS, tid, LONG_WORK_NICE)
+    return own
 
 
 def restore_gc() -> None:
