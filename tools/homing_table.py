@@ -15,7 +15,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+# the homing tests' robots (test_homing, and the conftest it imports), after the project's
+# own packages: tests/drivers/ would otherwise stand for drivers/
+sys.path[:0] = [str(ROOT)]
+sys.path += [str(ROOT / "tests"), str(ROOT / "tests" / "calibration")]
 
 from test_homing import pose_error, robot_at, start_pose  # noqa: E402
 
