@@ -45,8 +45,9 @@ from cdprctl.control.states import (
     FaultKind,
 )
 from cdprctl.control.supervision.clearance_watch import ClearanceWatch
+from cdprctl.control.supervision.drive_port import DrivePort
 from cdprctl.control.supervision.state_machine import StateMachine
-from cdprctl.control.supervision.supervisor import DrivePort, Supervisor
+from cdprctl.control.supervision.supervisor import Supervisor
 from cdprctl.core.numerics import count_kernel, min2
 from cdprctl.core.rotation import FloatArray
 from cdprctl.geometry.gripper_mechanics import GripperSet

@@ -38,8 +38,9 @@ from cdprctl.control.data import ControlData
 from cdprctl.control.intake.jog import Jog
 from cdprctl.control.intake.path_follower import PathFollower
 from cdprctl.control.states import HEALTHY_STATES, State
+from cdprctl.control.supervision.drive_port import DrivePort
 from cdprctl.control.supervision.state_machine import StateMachine
-from cdprctl.control.supervision.supervisor import DrivePort, Supervisor
+from cdprctl.control.supervision.supervisor import Supervisor
 from cdprctl.core.realtime import sharing_the_interpreter
 from cdprctl.core.rotation import FloatArray, rpy_to_matrix
 from cdprctl.model.robot import RobotModel

@@ -25,7 +25,7 @@ allocates but the event text of a transition, a fault or the e-stop.
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from cdprctl.control.states import (
 )
 from cdprctl.control.supervision.cable_checks import TensionDisagreement
 from cdprctl.control.supervision.clearance_watch import ClearanceWatch
+from cdprctl.control.supervision.drive_port import DrivePort, driver_fault_kind
 from cdprctl.control.supervision.estop import EmergencyStop
 from cdprctl.control.supervision.persistence import Persistence
 from cdprctl.control.supervision.state_machine import TRANSITIONS as TRANSITIONS
@@ -53,38 +54,14 @@ from cdprctl.core.rotation import FloatArray
 from cdprctl.geometry.forward_kinematics import FKStatus
 from cdprctl.model.control import ControlConfig
 from cdprctl.model.safety import SafetyConfig
-from drivers.errors import DriveFaultError, DriverError, DriverTimeoutError, SafeTorqueOffError
-from drivers.vocabulary import ACTIVE, ERROR, Lifecycle, WinchStates
+from drivers.errors import DriveFaultError, SafeTorqueOffError
+from drivers.vocabulary import ACTIVE, ERROR
 
 # bound once (on 3.11 reading an enum member builds a method wrapper: states.py)
 _FK_FAILED = (FKStatus.DEGENERATE, FKStatus.BAD_INPUT)
 # m: the estimated position where a caller gives none (a test of the checks alone)
 _NOWHERE = np.zeros(3)
 _NOWHERE.flags.writeable = False
-
-
-class DrivePort(Protocol):
-    """What the control side may see and ask of the drives (``drive_view.DriveView``); the
-    manager owns their I/O."""
-
-    @property
-    def lifecycle(self) -> Lifecycle: ...
-    @property
-    def error(self) -> DriverError | None: ...
-    @property
-    def states(self) -> WinchStates: ...
-
-    def begin_activate(self) -> None: ...
-    def begin_deactivate(self) -> None: ...
-    def begin_recover(self, settle: float = 0.5) -> None: ...
-
-
-def driver_fault_kind(err: DriverError | None) -> FaultKind:
-    if isinstance(err, DriveFaultError):
-        return FaultKind.DRIVE_FAULT
-    if isinstance(err, DriverTimeoutError):
-        return FaultKind.DRIVE_SILENT
-    return FaultKind.DRIVES
 
 
 class Supervisor:
