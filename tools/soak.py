@@ -26,6 +26,7 @@ from cdprctl.control.states import FaultKind, State  # noqa: E402
 from cdprctl.experiments.closed_loop import ClosedLoop  # noqa: E402
 from cdprctl.experiments.scenarios import Result, Scenario, Watch  # noqa: E402
 from cdprctl.robot_file import load_robot  # noqa: E402
+from sim_backend.contact import ContactRecorder  # noqa: E402
 from sim_backend.faults import FaultEvent, FaultInjector  # noqa: E402
 
 
@@ -62,9 +63,11 @@ def fault_key(kind: FaultKind | None, reason: str) -> str:
 
 def summary_of(minutes: float, seed: int, cycles: int, wall_s: float, comp: np.ndarray,
                events: list[FaultEvent], injector: FaultInjector, faults: collections.Counter,
-               counts: collections.Counter, checked: Result, state: State) -> dict:  # fmt: skip
+               counts: collections.Counter, checked: Result, state: State,
+               contact: ContactRecorder) -> dict:  # fmt: skip
     """The soak's JSON summary: the compute time per cycle (µs), the faults injected and
-    detected, the state changes and the invariants' violations."""
+    detected, the state changes, the invariants' violations and the cables' contacts at the
+    plant's true pose (``contact``: the plant's ContactRecorder)."""
     violations = {
         what: n
         for what, n in (
@@ -89,6 +92,8 @@ def summary_of(minutes: float, seed: int, cycles: int, wall_s: float, comp: np.n
         "faults_detected_by_reason": dict(faults),
         "state_changes": dict(counts),
         "invariant_violations": violations,
+        "cable_contacts": len(contact.contacts),
+        "closest_cables": contact.least_what,
         "final_state": state.value,
     }
 
@@ -146,9 +151,7 @@ def main() -> None:
         contact = cl.plant.contact  # the cables at the plant's true pose, every step
     summary = summary_of(args.minutes, args.seed, int(n), time.perf_counter() - wall0,
                          np.array(compute), events, injector, faults, counts, checked,
-                         c.data.state)  # fmt: skip
-    summary["cable_contacts"] = len(contact.contacts)
-    summary["closest_cables"] = contact.least_what
+                         c.data.state, contact)  # fmt: skip
     violations = summary["invariant_violations"]
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(summary, indent=1))
