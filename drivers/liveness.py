@@ -22,6 +22,13 @@ from drivers.vocabulary import MISSED_FEEDBACK, DriverStats, WinchStates
 #: (or a failing encoder): five times the supervisor's speed limit
 PLAUSIBLE_CABLE_SPEED = 5.0
 
+#: s without a step of simulated drives after which a read's silence is theirs — a starved
+#: simulator (they step every 0.5 ms), whose drives were deaf — not the drives' own
+DRIVES_STALL = 0.005
+#: s: a stall longer than this counts as silence again (a simulator hung, not starved: the
+#: simulated robot catches up on at most 0.5 s, ``SimNetwork.MAX_CATCH_UP``)
+DRIVES_STALL_LIMIT = 0.5
+
 
 class Liveness:
     """Per-cable liveness state (arrays, written in place by the protocol and the kernel)."""
@@ -49,6 +56,11 @@ class Liveness:
         # position samples no motor can make, in a row, per cable (a protocol may replace it
         # by a view of its own decoding state)
         self.implausible = np.zeros(m, dtype=np.int64)
+        # s of the monotonic clock when simulated drives last stepped (a view of one float the
+        # simulated robot's process writes), None for real drives: they have processors of
+        # their own, and a simulator starved by a busy machine must not pass for a silent drive
+        self.drives_ran_at: np.ndarray | None = None
+        self.stalled_reads = np.zeros(1, dtype=np.int64)  # reads whose silence was excused
 
     @classmethod
     def of_winches(cls, cables: Sequence[Any], period: float, stats: DriverStats,
@@ -81,14 +93,27 @@ class Liveness:
         nothing; the first read: one period)."""
         gap = t - self.last_read if math.isfinite(self.last_read) else self.period
         self.last_read = t
+        if self.drives_stall(t) > 0.0:  # deaf, not silent: the simulator was not run
+            add_count(self.stalled_reads, 0, 1)
+            return 0.0
         return min2(max2(gap, 0.0), 2.0 * self.period)
+
+    def drives_stall(self, t: float) -> float:
+        """s simulated drives have not stepped for at ``t`` (s, monotonic) when that is more
+        than ``DRIVES_STALL`` and at most ``DRIVES_STALL_LIMIT``: a stall ridden through (the
+        heartbeat's timeout lengthened by it too); else, and always for real drives, 0."""
+        ran = self.drives_ran_at
+        if ran is None:
+            return 0.0
+        stall = t - ran.item(0)
+        return stall if DRIVES_STALL < stall <= DRIVES_STALL_LIMIT else 0.0
 
     def update(self, t: float, gap: float, states: WinchStates) -> bool:
         """The cycle's bookkeeping (``liveness_kernel``) after the feedback was decoded, the
         ages into ``states``; True when a cable is past a limit (``error`` says which)."""
         missed, late = liveness_kernel(
             self.fresh, self.fb_stamp, self.missed, self.silent, self.last_hb, t, gap,
-            self.started, self.feedback_timeout, self.heartbeat_timeout,
+            self.started, self.feedback_timeout, self.heartbeat_timeout + self.drives_stall(t),
             states.feedback_age, states.sampled_at,
         )  # fmt: skip
         if missed:
@@ -102,6 +127,14 @@ class Liveness:
             self.last_hb.copy(), 0.0, 0.002, True, self.feedback_timeout,
             self.heartbeat_timeout, states.feedback_age.copy(), states.sampled_at.copy(),
         )  # fmt: skip
+
+    def _hung(self, t: float) -> str:
+        """The words for simulated drives that have not stepped for a while at ``t``."""
+        ran = self.drives_ran_at
+        if ran is None or t - ran.item(0) <= DRIVES_STALL_LIMIT:
+            return ""
+        return (f" (the simulated robot has not stepped for {(t - ran.item(0)) * 1e3:.0f} ms: "
+                f"its process hung, beyond the {DRIVES_STALL_LIMIT * 1e3:g} ms ridden through)")
 
     def error(self, c: int, t: float, where: str, feedback: str,
               age: float) -> DriverError | None:  # fmt: skip
@@ -118,17 +151,17 @@ class Liveness:
             return DriverTimeoutError(
                 f"{where}: no {feedback} for {self.silent[c] * 1e3:.1f} ms "
                 f"of running cycles ({int(self.missed[c])} reads, last {age * 1e3:.1f} ms ago; "
-                f"feedback_timeout {self.feedback_timeout * 1e3:g} ms){why}",
+                f"feedback_timeout {self.feedback_timeout * 1e3:g} ms){why}{self._hung(t)}",
                 c,
             )
         if (
             self.started
             and math.isfinite(self.last_hb[c])
-            and t - self.last_hb[c] > self.heartbeat_timeout
+            and t - self.last_hb[c] > self.heartbeat_timeout + self.drives_stall(t)
         ):
             return DriverTimeoutError(
                 f"{where} lost: no heartbeat for {t - self.last_hb[c]:.3f} s "
-                f"(timeout {self.heartbeat_timeout:g} s)",
+                f"(timeout {self.heartbeat_timeout:g} s){self._hung(t)}",
                 c,
             )
         return None

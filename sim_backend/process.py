@@ -33,7 +33,10 @@ import numpy as np
 from cdprctl.model.robot import RobotModel
 from drivers.pair_bus import socket_pair
 
-POSE_FLOATS = 5  # [sequence, simulated time s, x, y, z m in the world frame]
+# [sequence, simulated time s, x, y, z m in the world frame, the monotonic clock's s at the
+# end of the last step]: the last, read alone, tells the daemon its drives were not run
+POSE_FLOATS = 6
+STEPPED_AT = 5
 READY_WITHIN = 300.0  # s: a first start on a machine compiles the physics (about a minute)
 STOP_WITHIN = 5.0  # s for the child to end after SIGTERM before it is killed
 CONTROL_MAX = 1 << 16  # bytes of one control message
@@ -122,6 +125,13 @@ class SimulatedRobotProcess:
         self._send("brake_close_time", seconds)
 
     @property
+    def stepped_at(self) -> np.ndarray:
+        """A view (one float, s of the monotonic clock) of when the child last stepped its
+        drives: the liveness's word that a silence is a starved simulator's, not a drive's
+        (``drivers.liveness.Liveness.drives_ran_at``)."""
+        return self._pose[STEPPED_AT : STEPPED_AT + 1]
+
+    @property
     def position(self) -> np.ndarray:
         """The platform's true position (m, world frame), as the child last wrote it."""
         for _ in range(100):
@@ -187,6 +197,7 @@ def serve(start: Start) -> int:
         pose[1] = t
         pose[2:5] = plant.position
         pose[0] += 1.0
+        pose[STEPPED_AT] = time.monotonic()  # one aligned float: read whole, no sequence
 
     def say(text: str, **_: Any) -> None:
         kind = "ready" if text == "cdprctl sim: ready" else "say"

@@ -102,6 +102,7 @@ class Daemon:
 
                 self.sim = SimulatedRobotProcess(model, as_built, realtime, self.say)
                 self.driver = create_driver(model, period=period, bus_overrides=self.sim.overrides)
+                self.driver.liveness.drives_ran_at = self.sim.stepped_at
             else:
                 self.driver = create_driver(model, period=period, bus_overrides=overrides)
         except BaseException:  # a stop signal while they were built: their buses closed
@@ -127,8 +128,20 @@ class Daemon:
     def _close_buses(self) -> None:
         if self.driver is not None:
             self.driver.shutdown()
-        if self.sim is not None:
-            self.sim.close()
+        self._close_sim()
+
+    def _close_sim(self) -> None:
+        """The simulated robot's process ended, and the reads it was not run for said."""
+        if self.sim is None:
+            return
+        liveness = self.driver.liveness if self.driver is not None else None
+        if liveness is not None:
+            liveness.drives_ran_at = None  # the view of its page released: the page closes
+            if stalled := int(liveness.stalled_reads[0]):
+                self.say(f"cdprctl run: {stalled} reads without feedback ridden through: the "
+                         "simulated robot was not run meanwhile (a busy machine), its drives "
+                         "deaf — the simulator's lateness, not a drive's silence")  # fmt: skip
+        self.sim.close()
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -185,8 +198,7 @@ class Daemon:
             notify("STOPPING=1")
             io.join(timeout=2.0)
             self.driver.shutdown()
-            if self.sim is not None:
-                self.sim.close()
+            self._close_sim()
         self._drain_events()
         self.links.close()
         for line in self.report.finish(self.driver.stats.as_dict()):
