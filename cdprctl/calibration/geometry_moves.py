@@ -38,24 +38,29 @@ def retreat_to(here: np.ndarray, origin: np.ndarray) -> np.ndarray:
 HOLD_AFTER_IDENTIFYING = 1.0
 
 
-def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
-    """``compute()`` in a thread while the session holds the platform, cycle by cycle: the
-    drives want their SYNC and targets every period (an idle bus left their velocity readings
-    at 10³ rad/s and a following-error fault at the next move, across processes).
+def held_while(ses: Session, task: Callable[[], np.ndarray]) -> np.ndarray:
+    """``task()`` (picklable: a module-level function or a ``functools.partial`` of one)
+    while the session holds the platform, cycle by cycle: the drives want their SYNC and
+    targets every period (an idle bus left their velocity readings at 10³ rad/s and a
+    following-error fault at the next move, across processes).
 
     On a simulated clock (lock-step: the driver's ``clock`` is not the wall's) nothing waits
-    for it: ``compute()`` runs here, then the platform is held ``HOLD_AFTER_IDENTIFYING``.
-    Held for as long as the thread took (5-8 s of wall time here: 900-1100 blocks of 0.05 s),
-    the same seed gave other samples from run to run and under load."""
+    for it: ``task()`` runs here, then the platform is held ``HOLD_AFTER_IDENTIFYING``.
+    Held for as long as it took (5-8 s of wall time here: 900-1100 blocks of 0.05 s), the
+    same seed gave other samples from run to run and under load. In real time it runs in a
+    process of its own (``core.child_compute``), started from a thread at the normal
+    scheduler off the loop's CPU (``realtime.worker_thread``), which it inherits: computed in
+    a thread of this process, it held the interpreter's lock the holder's cycles wait for."""
     import time
 
     if ses.driver.clock is not time.monotonic:
-        out = compute()
+        out = task()
         ses.run(HOLD_AFTER_IDENTIFYING)
         return out
     import threading
 
     from cdprctl.core import realtime as rt
+    from cdprctl.core.child_compute import compute_in_child
 
     results: list[np.ndarray] = []
     failed: list[BaseException] = []
@@ -63,18 +68,17 @@ def held_while(ses: Session, compute: Callable[[], np.ndarray]) -> np.ndarray:
     loop_cpu = rt.loop_cpu(ses.model.control.cpu) if held_in_real_time else None
 
     def work() -> None:
-        if held_in_real_time:  # never preempted while it holds the interpreter's lock
+        if held_in_real_time:  # what the child inherits: out of FIFO, off the loop's CPU
             rt.worker_thread(loop_cpu)
         try:
-            results.append(compute())
+            results.append(compute_in_child(task))
         except BaseException as exc:  # re-raised in the caller's thread
             failed.append(exc)
 
     worker = threading.Thread(target=work, name="cdprctl-identify", daemon=True)
     worker.start()
-    with rt.sharing_the_interpreter():  # the lock back to the holder's cycle within 0.1 ms
-        while worker.is_alive():
-            ses.run(0.05)
+    while worker.is_alive():
+        ses.run(0.05)
     if failed:
         raise failed[0]
     return results[0]

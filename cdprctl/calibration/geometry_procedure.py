@@ -13,6 +13,7 @@ A tension nearing its limit stops a move where it is (the sample is taken there)
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -106,6 +107,12 @@ def geometry_calibrate(model: RobotModel, driver: WinchDriver,
                                reason == "accepted", reason, ratio, eq_ratio)  # fmt: skip
 
 
+def start_pose(model: RobotModel, near: Samples) -> np.ndarray:
+    """The start's pose (m; rotation vector rad) identified from the samples around it on the
+    file's geometry (module-level: ``held_while`` runs it in a process of its own)."""
+    return Identification(model, False).solve(near).poses[0]
+
+
 def where_stopped(model: RobotModel, progress: Progress, n_poses: int) -> str:
     """Where a calibration of ``n_poses`` (the start included) stopped, in words."""
     if progress.near is None:
@@ -124,10 +131,10 @@ def _visit(ses: Session, poses: np.ndarray, opt: GeometryOptions, progress: Prog
     if progress.near is None:
         near = sample_around_start(ses, SelfOptions(), progress)
         progress.near = progress.samples
-        start = held_while(ses, lambda: Identification(model, False).solve(near).poses[0])
+        start = held_while(ses, functools.partial(start_pose, model, near))
     else:  # identified again, the drives off: the same samples, the same start
         near = Samples(*progress.arrays(progress.near))
-        start = Identification(model, False).solve(near).poses[0]
+        start = start_pose(model, near)
     poses[0] = start
     log(f"the start: [{start[0]:.4f}, {start[1]:.4f}, {start[2]:.4f}] m (from the "
         "samples around it, on the file's geometry)")  # fmt: skip

@@ -97,21 +97,28 @@ def helper_thread(loop_cpu_index: int | None, loop_priority: int) -> None:
     _beside_the_loop(loop_cpu_index, max(1, loop_priority - 1))
 
 
-#: SCHED_FIFO priority of a long computation in the loop's process: the lowest real-time one
-WORKER_PRIORITY = 1
+#: the niceness of long work in the loop's process taken out of real time: ahead of the
+#: machine's normal work (two busy processes at nice 0 get ~1 % of a CPU beside it), so it
+#: seldom sits preempted while it holds the interpreter's lock the loop waits for
+LONG_WORK_NICE = -20
 
 
 def worker_thread(loop_cpu_index: int | None) -> None:
-    """For a thread of the loop's process that computes for seconds while the loop holds the
-    drives (the geometric calibration's identification): the CPUs but the loop's, and
-    ``SCHED_FIFO`` at ``WORKER_PRIORITY`` — below the loop, its helpers and a simulated robot
-    on the machine, above all of the machine's normal work. At the normal scheduler, other
-    work preempted it while it held the interpreter's lock, and the loop waiting for that lock
-    sent no SYNC for over 100 ms (CAROCA beside two busy processes: the drives' comm_timeout,
-    EMCY 0x8130); a copy of the loop's priority on its CPU starved the loop, and one below the
-    loop on the other CPU would starve a simulated robot there (a FIFO task runs until it
-    blocks). Best effort, silent."""
-    _beside_the_loop(loop_cpu_index, WORKER_PRIORITY)
+    """For a thread of the loop's process that starts and waits for long work while the loop
+    holds the drives (the geometric calibration's identification, in a process of its own
+    that inherits this thread's settings: ``core.child_compute``): the CPUs but the loop's,
+    at the normal scheduler with nice ``LONG_WORK_NICE``. At ``SCHED_FIFO`` 1 (until
+    2026-12-07, computing in this thread) its seconds of work spent its CPU's real-time
+    budget (the kernel's ``sched_rt_runtime_us``, 950 ms a second), and the kernel then held
+    every real-time task there — a simulated robot's too — for the rest of the second (its
+    drives deaf; "stepped 156 ms late"); a copy of the loop's priority on its CPU would
+    starve the loop. Best effort, silent."""
+    tid = threading.get_native_id()
+    with contextlib.suppress(OSError, AttributeError):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    with contextlib.suppress(OSError, AttributeError):
+        os.setpriority(os.PRIO_PROCESS, tid, LONG_WORK_NICE)
+    _off_the_loops_cpu(loop_cpu_index)
 
 
 def _beside_the_loop(loop_cpu_index: int | None, priority: int) -> None:
@@ -122,6 +129,11 @@ def _beside_the_loop(loop_cpu_index: int | None, priority: int) -> None:
     except (OSError, AttributeError):
         with contextlib.suppress(OSError, AttributeError):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    _off_the_loops_cpu(loop_cpu_index)
+
+
+def _off_the_loops_cpu(loop_cpu_index: int | None) -> None:
+    """The calling thread on the CPUs but the loop's, where there is another (silent)."""
     others = ALLOWED_CPUS - {loop_cpu_index}
     if loop_cpu_index is not None and others:
         with contextlib.suppress(OSError, AttributeError):
@@ -197,11 +209,6 @@ def sharing_the_interpreter() -> Iterator[None]:
             with contextlib.suppress(OSError):
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(own[0]))
                 os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), own[1])
-
-
-#: the niceness of long work taken out of real time: ahead of the machine's normal work, so
-#: it seldom sits preempted while it holds the interpreter's lock the loop waits for
-LONG_WORK_NICE = -20
 
 
 def _out_of_real_time() -> tuple[int, int] | None:

@@ -120,8 +120,10 @@ def test_the_tension_loop_learns_a_ramps_rate_and_is_the_plain_loop_at_rest():
 def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_held_in_real_time():
     """Lock-step: the platform held a fixed time after the identification, whatever it took in
     wall time (the same seed gives the same figures); real time: held cycle by cycle for as
-    long as the identification's thread runs, its error raised in the caller."""
-    import threading
+    long as the identification runs (in a process of its own: the tasks are picklable, the
+    standard library's here), its error raised in the caller."""
+    import functools
+    import math
     import time
 
     from cdprctl.calibration import geometry_moves as gp
@@ -130,22 +132,17 @@ def test_the_start_is_identified_in_a_fixed_hold_on_a_simulated_clock_and_while_
     ses = SimpleNamespace(run=held.append, driver=SimpleNamespace(clock=lambda: 0.0))
     assert gp.held_while(ses, lambda: np.ones(6)).tolist() == [1.0] * 6  # type: ignore[arg-type]
     assert held == [gp.HOLD_AFTER_IDENTIFYING]
-    go = threading.Event()
     held.clear()
 
     def hold(duration: float) -> None:
         held.append(duration)
-        if len(held) == 3:
-            go.set()  # the identification ends after three holds
-
-    def compute() -> np.ndarray:
-        go.wait(5.0)
-        raise ValueError("singular")
+        time.sleep(0.01)
 
     ses = SimpleNamespace(run=hold, driver=SimpleNamespace(clock=time.monotonic))
-    with pytest.raises(ValueError, match="singular"):
-        gp.held_while(ses, compute)  # type: ignore[arg-type]
-    assert len(held) >= 3 and set(held) == {0.05}
+    assert gp.held_while(ses, functools.partial(time.sleep, 0.3)) is None  # type: ignore[arg-type]
+    assert len(held) >= 20 and set(held) == {0.05}  # held for the 0.3 s and the child's start
+    with pytest.raises(ValueError, match="math domain error"):
+        gp.held_while(ses, functools.partial(math.sqrt, -1.0))  # type: ignore[arg-type]
 
 
 def test_the_position_held_cables_are_damped_on_their_filtered_tension_after_the_brakes_open():
