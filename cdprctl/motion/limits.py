@@ -25,6 +25,8 @@ LINE_STEP = 0.02
 #: a tenth of a millimetre, finer than a position typed to 4 decimals, coarser than the
 #: micrometres a robot at rest stands off the position it was sent to
 SAME_POSITION = 1e-4
+#: rad: and this close to its start's orientation, a translation alone (the same reasoning)
+SAME_ORIENTATION = 1e-4
 
 
 def angle_words(angle: float) -> str:
@@ -228,7 +230,7 @@ class SoftLimits:
         where = np.round(end[:3], 4).tolist()
         turn = self._turn(start, target)
         angle = float(np.linalg.norm(turn))
-        if angle == 0.0:
+        if angle <= SAME_ORIENTATION:
             return f"the line to the target leaves the soft limits after {where} m: {why}"
         allowed = angle_words(float(np.linalg.norm(self._turn(start, end))))
         if np.linalg.norm(target[:3] - start[:3]) <= SAME_POSITION:
