@@ -14,7 +14,7 @@ from cdprctl import __version__
 def _cmd_check_config(args: argparse.Namespace) -> int:
     from cdprctl.commands.check_config import run
 
-    return run(args.file)
+    return run(args.file, strict=args.strict)
 
 
 def _add_check_config(sub: argparse._SubParsersAction) -> None:
@@ -22,9 +22,17 @@ def _add_check_config(sub: argparse._SubParsersAction) -> None:
         "check-config",
         help="validate a robot description and print its summary",
         description="Validate a robot description (TOML). Prints a summary (cables, limits, "
-        "mass, cable lengths at the home pose) or every error found; exit code 1 on error.",
+        "mass, cable lengths at the home pose) or every error found; exit code 1 on error. "
+        "A limit the file's geometry breaks (the cables under the clearance at home or in the "
+        "workspace box) is a warning: the first line says 'valid, with N warnings' instead of "
+        "OK, each warning under it; exit code 0 (cdprctl run accepts the file), 1 with --strict.",
     )
     p.add_argument("file", help="robot description, e.g. config/seed000.toml")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="exit code 1 on a warning too (for CI: a file that must be clean)",
+    )
     p.set_defaults(func=_cmd_check_config)
 
 

@@ -126,3 +126,50 @@ def test_a_documented_offline_command_runs_as_written(where, text, tmp_path, mon
         if opt == "--plot":
             made = list(tmp_path.glob(f"{value}*"))
             assert made, f"{where}: --plot {value}: nothing written"
+
+
+#: the documented moves, in order: (where, robot, the ``send`` line's fields)
+MOVES = [
+    (w, shlex.split(t)[shlex.split(t).index("--robot") + 1], shlex.split(t))
+    for w, t in COMMANDS
+    if shlex.split(t)[0] == "send" and "move" in shlex.split(t) and "--robot" in shlex.split(t)
+]
+
+
+def test_the_commands_page_shows_a_move():
+    assert any(w.startswith("docs/commands.md") for w, _, _ in MOVES), MOVES
+
+
+@pytest.mark.parametrize("doc", sorted({w.split(":")[0] for w, _, _ in MOVES}))
+def test_a_documented_move_is_one_the_gateway_takes(doc):
+    """Each documented ``cdprctl send ... move`` as the robot it names (config/<name>.toml)
+    would take it once enabled: its fields read as ``send`` reads them, the payload parsed and
+    checked by the gateway's own validator with the reference where the page's earlier moves
+    left it (home first) — the workspace, the tilt, the tensions and the straight line's soft
+    limits. A move the robot would refuse fails here, naming the line and the reason."""
+    import json
+
+    import numpy as np
+
+    from cdprctl.commands.zenoh_tools import fields_payload
+    from cdprctl.core.rotation import rpy_to_matrix
+    from cdprctl.motion.trajectory import pose_coordinates
+    from cdprctl.robot_file import load_robot
+    from cdprctl.telemetry.zenoh.validate import CommandError, CommandValidator
+
+    reference: dict[str, np.ndarray] = {}
+    for where, robot, argv in (m for m in MOVES if m[0].startswith(doc + ":")):
+        path = ROOT / "config" / f"{robot.replace('-', '_')}.toml"
+        assert path.exists(), f"{where}: no config/{path.name} for --robot {robot}"
+        model = load_robot(path)
+        gateway = CommandValidator(model, commands_enabled=True)
+        home = pose_coordinates(model, model.home.position, model.home.rotation)
+        fields = fields_payload(argv[argv.index("move") + 1 :])
+        payload = gateway.parse(json.dumps(fields).encode(), "move")
+        try:
+            _, out = gateway.check("move", payload, "enabled",
+                                   {"reference": reference.get(robot, home)})  # fmt: skip
+        except CommandError as exc:
+            pytest.fail(f"{where}: cdprctl {' '.join(argv)}: refused: {exc}")
+        pose = np.asarray(out["pose"], dtype=float)
+        reference[robot] = pose_coordinates(model, pose[:3], rpy_to_matrix(*pose[3:]))

@@ -40,15 +40,17 @@ def ros2_summary(model: RobotModel) -> str:
 CLEARANCE_GRID = 11
 
 
-def clearance_summary(model: RobotModel) -> str:
+def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
     """The cables' least distance (``[interference]``, docs/clearance.md) at the home pose and
     over the workspace box at the home orientation (``CLEARANCE_GRID`` points per axis), each
-    with its pair, against the limit."""
+    with its pair, against the limit; and a warning for each of the two under the limit (a
+    robot under it at home may move only where its cables get no closer; the box's points
+    under it the soft limits refuse: docs/clearance.md)."""
     from cdprctl.motion.clearance import Clearance
 
     c = Clearance(model)
     if not c.active:
-        return "clearance   nothing to check (one cable, no body, no obstacle)"
+        return "clearance   nothing to check (one cable, no body, no obstacle)", []
     ws = model.workspace
     axes = [np.linspace(ws.position_min[k], ws.position_max[k], CLEARANCE_GRID) for k in range(3)]
     box = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -56,24 +58,53 @@ def clearance_summary(model: RobotModel) -> str:
                         np.c_[box, np.zeros((len(box), 3))]])  # fmt: skip
     dist, _ = c.at(coords)
     j = 1 + int(np.argmin(dist[1:]))
-    words = []
+    limit = f"the [interference] clearance {c.limit * 1e3:.2f} mm"
+    words, warnings = [], []
     for name, k in (("at home", 0), ("over the workspace box at the home orientation", j)):
         under = " UNDER the limit" if dist[k] < c.limit else ""
         at = "" if k == 0 else f" at {np.round(coords[k, :3], 4).tolist()} m"
         words.append(f"{name} {dist[k] * 1e3:.2f} mm ({c.pair_at(coords[k])}{at}){under}")
+    if dist[0] < c.limit:
+        warnings.append(
+            f"at the home pose {c.pair_at(coords[0])} are {dist[0] * 1e3:.2f} mm apart, under "
+            f"{limit}: from home the robot may move only where they get no closer "
+            "(docs/clearance.md)"
+        )
+    n_under = int(np.count_nonzero(dist[1:] < c.limit))
+    if n_under:
+        warnings.append(
+            f"{n_under} of {len(box)} points of the [workspace] box at the home orientation are "
+            f"under {limit} (least {dist[j] * 1e3:.2f} mm, {c.pair_at(coords[j])} at "
+            f"{np.round(coords[j, :3], 4).tolist()} m): the soft limits refuse them, so the "
+            "robot cannot reach all of its stated workspace (docs/clearance.md)"
+        )
     return (f"clearance   limit {c.limit * 1e3:.2f} mm ([interference] clearance); "
-            + "; ".join(words) + f" ({CLEARANCE_GRID} points per axis; docs/clearance.md)")
+            + "; ".join(words) + f" ({CLEARANCE_GRID} points per axis; docs/clearance.md)"
+            ), warnings  # fmt: skip
 
 
-def summary(model: RobotModel) -> str:
+def verdict(file: str, warnings: list[str]) -> list[str]:
+    """The summary's first line and its warnings: ``OK`` only with none."""
+    if not warnings:
+        return [f"{file}: OK"]
+    n = len(warnings)
+    return [f"{file}: valid, with {n} warning{'s' if n != 1 else ''}"] + [
+        f"  warning: {w}" for w in warnings
+    ]
+
+
+def summary(model: RobotModel) -> tuple[str, list[str]]:
+    """What ``check-config`` prints of ``model``, and its warnings (the first line says they
+    are there, each under it)."""
     home = model.home
     data = KinematicsData(model)
     inverse_kinematics(model, data, home.position, home.rotation)
     k = model.cable_stiffness(data.length)
     pf = model.platform
     rpy_deg = ", ".join(f"{math.degrees(a):.2f}" for a in home.rpy)
+    clearance, warnings = clearance_summary(model)
     lines = [
-        f"{model.source_file}: OK",
+        *verdict(str(model.source_file), warnings),
         f"robot       {model.name}  ({model.source})",
         f"cables      {model.n_cables} (redundancy r = {model.redundancy})"
         + (", swivel pulleys" if model.has_pulleys else ""),
@@ -81,7 +112,7 @@ def summary(model: RobotModel) -> str:
         f"inertia diag {np.round(np.diag(pf.inertia), 4).tolist()} kg·m²",
         f"gravity     {model.gravity.tolist()} m/s²",
         f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
-        clearance_summary(model),
+        clearance,
         safety_summary(model),
         ros2_summary(model),
         "",
@@ -100,10 +131,12 @@ def summary(model: RobotModel) -> str:
             f"K_B {g.k_b:g} N/m, L21 {g.free_travel:g} m (object {obj}), guide "
             f"0-{g.travel_max:g} m, friction {g.guide_friction:g} N"
         )
-    return "\n".join(lines)
+    return "\n".join(lines), warnings
 
 
-def run(file: str) -> int:
+def run(file: str, strict: bool = False) -> int:
+    """0 the file is usable (with warnings or none), 1 it has errors ``cdprctl run`` would
+    refuse, or warnings under ``strict``."""
     try:
         model = load_robot(file)
     except ConfigError as exc:
@@ -112,11 +145,16 @@ def run(file: str) -> int:
         for e in exc.errors:
             print(f"  {e}", file=sys.stderr)
         return 1
-    print(summary(model))
+    text, warnings = summary(model)
+    print(text)
     from cdprctl.telemetry.zenoh.security import command_security_problems
     from cdprctl.telemetry.zenoh.zenoh_files import missing_files
 
     problems = missing_files(model.zenoh.config_file) + command_security_problems(model.zenoh)
     for p in problems:  # cdprctl run would refuse to start with these
         print(f"{file}: {p}", file=sys.stderr)
-    return 1 if problems else 0
+    if strict and warnings and not problems:
+        n = len(warnings)
+        print(f"{file}: {n} warning{'s' if n != 1 else ''} (above) and --strict: exit 1",
+              file=sys.stderr)  # fmt: skip
+    return 1 if problems or (strict and warnings) else 0

@@ -49,7 +49,7 @@ def cli_main(argv: Sequence[str]) -> int:
 def run(config_dir: Path = CONFIG_DIR, out_dir: Path = Path("out")) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     seed = load_robot(config_dir / "seed000.toml")
-    print(summary(seed))
+    print(summary(seed)[0])
     print("\n== Sensors 2019 §3: cable 8 held at 100 J, minimum total energy")
     code = cli_main(
         ["tda", "--config", str(config_dir / "seed000.toml"),

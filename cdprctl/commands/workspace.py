@@ -29,7 +29,8 @@ or both.
 EPILOG = """\
 examples:
   cdprctl workspace --config config/rowc.toml --wrench 0,30,0,0,0,0 --plot out/ws_rowc
-  cdprctl workspace --config config/seed000.toml --grid 0:14:40,0:8:40,0:3:40 --json"""
+  cdprctl workspace --config config/seed000.toml --grid 0:14:40,0:8:40,0:3:40 --json
+  cdprctl workspace --config config/cogiro.toml --rpy 0,0,10deg   # --rpy: rad, or deg suffix"""
 
 
 def add_parser(sub: Any) -> None:
@@ -37,7 +38,9 @@ def add_parser(sub: Any) -> None:
                        "on a grid (JSON, slice plots)", run, description=DESCRIPTION,
                        epilog=EPILOG)  # fmt: skip
     p.add_argument("--rpy", metavar="ROLL,PITCH,YAW",
-                   help="orientation (rad; default: the home one)")  # fmt: skip
+                   help="orientation in RADIANS (default: the home one), e.g. 0,0,0.2; a value "
+                   "ending in deg is in degrees, e.g. 0,0,10deg; a bare value beyond pi is "
+                   "refused (degrees meant as radians)")  # fmt: skip
     p.add_argument(
         "--wrench",
         default="0,0,0,0,0,0",
@@ -66,6 +69,35 @@ def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:
     return v
 
 
+#: what ends a ``--rpy`` value given in degrees
+DEGREES = ("deg", "°")
+
+
+def _angles(text: str) -> np.ndarray | str:
+    """``--rpy``: three angles, radians unless a value ends in ``deg`` (or ``°``); the
+    angles (rad), or why they are refused: a bare value beyond π is taken for degrees typed
+    as radians (30 would wrap to 1.4159 rad), and refused with its value in radians."""
+    parts = [x.strip() for x in text.split(",")]
+    out = np.empty(len(parts))
+    for k, part in enumerate(parts):
+        unit = next((u for u in DEGREES if part.endswith(u)), "")
+        try:
+            v = float(part.removesuffix(unit)) if unit else float(part)
+        except ValueError:
+            return "must be 3 finite numbers (rad, or each ending in deg)"
+        if not np.isfinite(v):
+            return "must be 3 finite numbers (rad, or each ending in deg)"
+        if not unit and abs(v) > np.pi:
+            name = ("roll", "pitch", "yaw")[k] if len(parts) == 3 else f"value {k + 1}"
+            return (f"{name} = {part} is taken in radians and is beyond pi; did you mean "
+                    f"degrees? {part}° = {np.radians(v):.4f} rad: write it {part}deg or "
+                    f"{np.radians(v):.4f}")  # fmt: skip
+        out[k] = np.radians(v) if unit else v
+    if len(out) != 3:
+        return "must be 3 finite numbers (rad, or each ending in deg)"
+    return out
+
+
 def _beyond_max_angle(model: Any, rpy: np.ndarray) -> str:
     """Why the orientation ``rpy`` (rad) is beyond the robot's ``[workspace] max_angle`` from
     its home orientation (the limit every target keeps), or ""."""
@@ -75,8 +107,9 @@ def _beyond_max_angle(model: Any, rpy: np.ndarray) -> str:
     limit = model.workspace.max_angle
     if angle <= limit + 1e-9:
         return ""
-    return (f"{angle:.4f} rad from the home orientation, beyond [workspace] max_angle = "
-            f"{limit:g} rad of {model.name} (no target may turn that far): give one within it")
+    return (f"{angle:.4f} rad ({np.degrees(angle):.2f}°) from the home orientation, beyond "
+            f"[workspace] max_angle = {limit:g} rad ({np.degrees(limit):.2f}°) of {model.name} "
+            "(no target may turn that far): give one within it")  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
@@ -88,8 +121,9 @@ def run(args: argparse.Namespace) -> int:
         return 1
     rpy = np.array(model.home.rpy, dtype=float)
     if args.rpy is not None:
-        given = _floats(args.rpy, 3, "--rpy", "rad")
-        if given is None:
+        given = _angles(args.rpy)
+        if isinstance(given, str):
+            print(f"cdprctl workspace: error: --rpy = {args.rpy!r}: {given}", file=sys.stderr)
             return 2
         rpy = given
         why = _beyond_max_angle(model, rpy)

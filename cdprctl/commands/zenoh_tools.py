@@ -56,6 +56,18 @@ def _value(text: str) -> Any:
     return text
 
 
+def fields_payload(fields: list[str]) -> dict[str, Any]:
+    """A command's payload from ``send``'s ``KEY=VALUE`` fields (a comma list is a vector:
+    position=1.8,0.35,0.5); ValueError names a field that is not one."""
+    payload = {}
+    for f in fields:
+        if "=" not in f:
+            raise ValueError(f"{f!r} is not KEY=VALUE")
+        k, v = f.split("=", 1)
+        payload[k] = _value(v)
+    return payload
+
+
 def send(args: argparse.Namespace) -> int:
     """Send a command and wait for its reply. Fields as key=value (a comma list is a vector:
     position=1.8,0.35,0.5) or as one JSON object with --json. Commands: enable, disable, stop
@@ -79,13 +91,11 @@ def send(args: argparse.Namespace) -> int:
             print("cdprctl send: error: --json must be a JSON object", file=sys.stderr)
             return 2
     else:
-        payload = {}
-        for f in args.fields:
-            if "=" not in f:
-                print(f"cdprctl send: error: {f!r} is not KEY=VALUE", file=sys.stderr)
-                return 2
-            k, v = f.split("=", 1)
-            payload[k] = _value(v)
+        try:
+            payload = fields_payload(args.fields)
+        except ValueError as exc:
+            print(f"cdprctl send: error: {exc}", file=sys.stderr)
+            return 2
     if args.file:
         try:
             payload["text"] = Path(args.file).read_text(encoding="utf-8")

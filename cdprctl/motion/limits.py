@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from cdprctl.core.rotation import FloatArray
+from cdprctl.core.rotation import FloatArray, log_so3
 from cdprctl.geometry.gripper_mechanics import GripperSet
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.clearance import Clearance
@@ -21,6 +21,17 @@ from cdprctl.tda.workspace import Margins, hold_wrench
 
 #: m (or rad, a rotation alone): a straight move's line sampled this often (``line_refusal``)
 LINE_STEP = 0.02
+#: m: a move's target this close to its start's position is a rotation alone (``line_refusal``):
+#: a tenth of a millimetre, finer than a position typed to 4 decimals, coarser than the
+#: micrometres a robot at rest stands off the position it was sent to
+SAME_POSITION = 1e-4
+#: rad: and this close to its start's orientation, a translation alone (the same reasoning)
+SAME_ORIENTATION = 1e-4
+
+
+def angle_words(angle: float) -> str:
+    """An angle (rad) as a refusal says it: degrees first, then radians."""
+    return f"{math.degrees(angle):.2f}° ({angle:.4f} rad)"
 
 
 class SoftLimits:
@@ -141,14 +152,14 @@ class SoftLimits:
                         f"[{ws.position_min[k]:g}, {ws.position_max[k]:g}] m")  # fmt: skip
         angle = float(np.linalg.norm(coord[3:]))
         if angle > ws.max_angle + 1e-6:
-            return (f"the tilt {angle:.4f} rad from the home orientation exceeds "
-                    f"workspace.max_angle = {ws.max_angle:g} rad")  # fmt: skip
+            return (f"the tilt {angle_words(angle)} from the home orientation exceeds "
+                    f"workspace.max_angle = {ws.max_angle:g} rad "
+                    f"({math.degrees(ws.max_angle):.2f}°)")  # fmt: skip
         if self.clearance.active:
             for x in (coord,) if at is None else (coord, at):
                 gap = self.clearance.least(x)[0][0]
                 if gap < self._clearance(near):
-                    where = "" if x is coord else (
-                        f"on the way to it, at {np.round(x[:3], 4).tolist()} m, ")  # fmt: skip
+                    where = "" if x is coord else self._on_the_way(x)
                     since = "" if near is None else (
                         f"; closer than the {(near + 1e-6) * 1e3:.2f} mm the motion started at")
                     return (f"{where}{self.clearance.describe(x)} ([interference] clearance"
@@ -161,15 +172,25 @@ class SoftLimits:
             f"distribution comes that close to a tension limit; workspace.wrench_margin)"
         )
 
+    @staticmethod
+    def _on_the_way(x: FloatArray) -> str:
+        """Where between two samples the way came closest: the position and, turned, the
+        tilt (a rotation alone stays at one position)."""
+        tilt = float(np.linalg.norm(x[3:]))
+        turned = f" turned {angle_words(tilt)} from the home orientation" if tilt else ""
+        return f"on the way to it, at {np.round(x[:3], 4).tolist()} m{turned}, "
+
     def ray_end(
         self, start: FloatArray, direction: FloatArray, horizon: float, step: float = 0.005
     ) -> tuple[FloatArray, str]:
         """How far a straight motion from ``start`` along ``direction`` (6 coordinates, any
         scale) may go within the limits, up to ``horizon`` (in units of ``direction``):
-        sampled every ``step`` m (or rad, for a rotation alone) then bisected to 1/64 of a
-        step. Returns the end and what bounds it ("" when the horizon does)."""
+        sampled every ``step`` m of its translation or ``step`` rad of its rotation, whichever
+        needs more samples (a turn with a small translation is sampled as a turn), then
+        bisected to 1/64 of a step. Returns the end and what bounds it ("" when the horizon
+        does)."""
         d = np.asarray(direction, dtype=float)
-        scale = float(np.linalg.norm(d[:3])) or float(np.linalg.norm(d[3:]))
+        scale = max(float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:])))
         if scale == 0.0:
             return np.array(start, dtype=float), "no direction"
         n = max(2, math.ceil(horizon * scale / step) + 1)
@@ -197,11 +218,30 @@ class SoftLimits:
         """Why the straight line from the coordinates ``start`` to ``target`` (a move's, at
         rest at both ends) leaves the soft limits, with where and the rule broken, or "":
         ``ray_end`` sampled every ``LINE_STEP``. The one rule of a move's line: the gateway
-        refuses with it before replying, the command desk keeps it as the last guard."""
+        refuses with it before replying, the command desk keeps it as the last guard. Where
+        the move turns, it says the rotation refused (its angle and axis from the start) and
+        how much of it the limits allow; a rotation alone is named as one, not by the
+        position it stays at."""
         start = np.array(start, dtype=float)  # a copy: the loop moves a reference it is given
-        end, why = self.ray_end(start, np.asarray(target, dtype=float) - start, 1.0,
-                                step=LINE_STEP)  # fmt: skip
+        target = np.asarray(target, dtype=float)
+        end, why = self.ray_end(start, target - start, 1.0, step=LINE_STEP)
         if not why:
             return ""
         where = np.round(end[:3], 4).tolist()
-        return f"the line to the target leaves the soft limits after {where} m: {why}"
+        turn = self._turn(start, target)
+        angle = float(np.linalg.norm(turn))
+        if angle <= SAME_ORIENTATION:
+            return f"the line to the target leaves the soft limits after {where} m: {why}"
+        allowed = angle_words(float(np.linalg.norm(self._turn(start, end))))
+        if np.linalg.norm(target[:3] - start[:3]) <= SAME_POSITION:
+            axis = np.round(turn / angle, 4).tolist()
+            return (f"the rotation to the target, {angle_words(angle)} about {axis} (base frame) "
+                    f"at {where} m, leaves the soft limits after {allowed}: {why}")  # fmt: skip
+        return (f"the line to the target leaves the soft limits after {where} m and {allowed} "
+                f"of its {angle_words(angle)} rotation: {why}")  # fmt: skip
+
+    def _turn(self, a: FloatArray, b: FloatArray) -> FloatArray:
+        """rad: the rotation vector (base frame) from the orientation of the coordinates
+        ``a`` to that of ``b``."""
+        Ra, Rb = self.rotations(np.array([a, b]))
+        return log_so3(Rb @ Ra.T)

@@ -110,3 +110,40 @@ def test_path_check_prints_the_least_clearance_the_brute_force_finds(tmp_path, c
     least = min(check.at(np.array([x, 0.35, 0.59]), model.home.rotation)["cell"][0] for x in xs)
     assert 5e-3 < least < 20e-3  # the lamp is what comes closest, clear of the limit
     assert printed == pytest.approx(least, abs=1e-4)
+
+
+def test_check_config_warns_when_the_home_pose_is_under_the_clearance(tmp_path, capsys):
+    """seed000's home pose: cable 2 3.61 mm from the platform's cube (the brute force), under
+    the 5 mm limit. check-config does not say OK: the first line counts the warnings, each
+    follows it naming the pair, the distance and the limit; exit 0 (``cdprctl run`` accepts
+    the file: docs/clearance.md), 1 under ``--strict``. rowc, clear everywhere, says OK and
+    passes ``--strict``; rowc asked for 40 mm (more than its 33.4 mm at home) warns too."""
+    path = ROOT / "config" / "seed000.toml"
+    model = load_robot(path)
+    check = brute.Clearance(model)
+    d, what = min(check.at(model.home.position, model.home.rotation).values())
+    assert 3e-3 < d < model.interference.clearance  # the case of the issue, as measured apart
+    assert main(["check-config", str(path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == f"{path}: valid, with 2 warnings"
+    home = re.fullmatch(r"  warning: at the home pose (.+?) are ([0-9.]+) mm apart, under the "
+                        r"\[interference\] clearance 5\.00 mm: .*", out[1])  # fmt: skip
+    assert home, out[1]
+    assert home.group(1) == what == "cable 2 and the platform's cube"
+    assert float(home.group(2)) / 1e3 == pytest.approx(d, abs=6e-5)
+    box = re.fullmatch(r"  warning: (\d+) of 1331 points of the \[workspace\] box at the home "
+                       r"orientation are under .*", out[2])  # fmt: skip
+    assert box and 0 < int(box.group(1)) <= 1331, out[2]
+    assert not any(line.endswith(": OK") for line in out)
+    assert main(["check-config", "--strict", str(path)]) == 1
+    assert "2 warnings (above) and --strict: exit 1" in capsys.readouterr().err
+
+    rowc = ROOT / "config" / "rowc.toml"
+    assert main(["check-config", "--strict", str(rowc)]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == f"{rowc}: OK"
+    tight = tmp_path / "rowc_40mm.toml"
+    tight.write_text(f'base = "{rowc}"\n[interference]\nclearance = 0.040\n')
+    assert main(["check-config", str(tight)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].endswith(": valid, with 2 warnings")
+    assert "under the [interference] clearance 40.00 mm" in out[1]

@@ -10,6 +10,8 @@ sweep."""
 from __future__ import annotations
 
 import dataclasses
+import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -165,3 +167,47 @@ def test_the_supervisor_rides_through_a_shallow_dip_and_stops_on_a_deep_or_lasti
     assert watch.check(0.4) is None and watch.limit == pytest.approx(0.003 - watch.NOISE, abs=2e-5)
     at(0.0028)
     assert watch.check(0.41) is None and watch.check(0.5) is None
+
+
+def test_a_rotation_alone_is_refused_naming_the_rotation_and_the_limit(caroca, rowc):
+    """CAROCA turned about y at its home position: its cables 1 and 8 come under the clearance
+    before 0.6 rad (3.2 mm there). The refusal names the rotation asked (degrees and rad, its
+    axis) and how far it may turn, not the position it stays at; the brute force
+    (tools/clearance_check.py, numpy, 0.1 mm) finds the cables clear at the angle allowed and
+    under the clearance 1/64 of the line's step beyond it. Beyond max_angle (rowc turned
+    0.25 rad about z, its limit 0.2 rad) the refusal names the limit in both units too."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import clearance_check as brute
+
+    lim = SoftLimits(caroca)
+    start = _home(caroca)
+    why = lim.line_refusal(start, start + np.array([0, 0, 0, 0, 0.6, 0]))
+    m = re.fullmatch(r"the rotation to the target, 34\.38° \(0\.6000 rad\) about \[0\.0, 1\.0, "
+                     r"0\.0\] \(base frame\) at \[0\.0, 0\.0, 1\.0\] m, leaves the soft limits "
+                     r"after ([0-9.]+)° \(([0-9.]+) rad\): cables (1 and 8|4 and 5): [0-9.]+ mm "
+                     r"apart, under the clearance 5\.00 mm \(\[interference\] clearance\)", why)
+    assert m, why
+    allowed = float(m.group(2))
+    assert float(m.group(1)) == pytest.approx(np.degrees(allowed), abs=0.01)
+    check = brute.Clearance(caroca)
+    p = caroca.home.position
+
+    def least(angle: float) -> float:
+        return check.at(p, brute.rotation(np.array([0.0, angle, 0.0])))["cables"][0]
+
+    assert least(allowed - 1e-4) >= caroca.interference.clearance - 6e-5
+    assert least(allowed + 0.02 / 64 + 1e-4) < caroca.interference.clearance
+    assert not lim.line_refusal(start, start + np.array([0, 0, 0, 0, allowed - 1e-3, 0]))
+
+    rl = SoftLimits(rowc)
+    start = _home(rowc)
+    why = rl.line_refusal(start, start + np.array([0, 0, 0, 0, 0, 0.25]))
+    assert why.startswith("the rotation to the target, 14.32° (0.2500 rad) about [0.0, 0.0, "
+                          "1.0] (base frame) at [1.5, 0.35, 0.59] m, leaves the soft limits "
+                          "after 11.4")  # fmt: skip
+    assert why.endswith("exceeds workspace.max_angle = 0.2 rad (11.46°)")
+    # a move that also translates says both: where, and how much of its rotation
+    why = rl.line_refusal(start, start + np.array([0.1, 0, 0, 0, 0, 0.25]))
+    assert re.match(r"the line to the target leaves the soft limits after \[1\.5\d+, 0\.35, "
+                    r"0\.59\] m and 11\.4\d° \(0\.19\d+ rad\) of its 14\.32° \(0\.2500 rad\) "
+                    r"rotation: the tilt ", why), why

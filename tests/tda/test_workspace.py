@@ -187,9 +187,49 @@ def test_an_orientation_beyond_max_angle_is_refused_in_one_line(robot, rpy, caps
     assert main(["workspace", "--config", cfg, "--rpy", rpy, "--grid", "1:1:1,1:1:1,1:1:1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
-    assert err.startswith(f"cdprctl workspace: error: --rpy = '{rpy}': {angle:.4f} rad from the "
-                          f"home orientation, beyond [workspace] max_angle = "
-                          f"{model.workspace.max_angle:g} rad of {robot}")  # fmt: skip
+    limit = model.workspace.max_angle
+    assert err.startswith(f"cdprctl workspace: error: --rpy = '{rpy}': {angle:.4f} rad "
+                          f"({np.degrees(angle):.2f}°) from the home orientation, beyond "
+                          f"[workspace] max_angle = {limit:g} rad ({np.degrees(limit):.2f}°) "
+                          f"of {robot}")  # fmt: skip
     if robot == "rowc":
         assert main(["workspace", "--config", cfg, "--rpy", "0,0,0.2", "--grid",
                      "1.5:1.5:1,0.35:0.35:1,0.59:0.59:1"]) == 0  # fmt: skip
+
+
+@pytest.mark.parametrize("rpy, words", [
+    ("0,0,30", "yaw = 30 is taken in radians and is beyond pi; did you mean degrees? 30° = "
+               "0.5236 rad: write it 30deg or 0.5236"),
+    ("-90,0,0", "roll = -90 is taken in radians and is beyond pi; did you mean degrees? -90° = "
+                "-1.5708 rad"),
+    ("0,0,x", "must be 3 finite numbers (rad, or each ending in deg)"),
+    ("0,0", "must be 3 finite numbers (rad, or each ending in deg)"),
+])  # fmt: skip
+def test_rpy_is_radians_and_degrees_meant_as_radians_are_refused(rpy, words, capsys):
+    """``--rpy 0,0,30`` once turned rowc by 30 rad (1.4159 rad once wrapped) and said so only
+    through max_angle: a bare angle beyond pi is refused in one line with its value in
+    radians, exit 2, before any point is computed."""
+    cfg = str(ROOT / "config" / "rowc.toml")
+    assert main(["workspace", "--config", cfg, "--rpy", rpy, "--grid", "1:1:1,1:1:1,1:1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"cdprctl workspace: error: --rpy = '{rpy}': {words}"), err
+
+
+def test_rpy_in_degrees_with_the_deg_suffix(capsys):
+    """``0,0,10deg`` is rowc turned 10° about z: the orientation the JSON reports (rad) is
+    scipy's rotation of 10° about z, and the verdict the one of the same angle in radians;
+    "°" stands for "deg"."""
+    from scipy.spatial.transform import Rotation
+
+    cfg = str(ROOT / "config" / "rowc.toml")
+    grid = "1.2:1.8:3,0.35:0.35:1,0.5:0.7:3"
+    out = {}
+    for rpy in ("0,0,10deg", "0deg, 0, 10°", "0,0,0.17453292519943295"):
+        assert main(["workspace", "--config", cfg, "--rpy", rpy, "--grid", grid, "--json"]) == 0
+        out[rpy] = json.loads(capsys.readouterr().out)
+    said = Rotation.from_euler("xyz", out["0,0,10deg"]["rpy"])
+    assert (said * Rotation.from_euler("z", 10, degrees=True).inv()).magnitude() < 1e-12
+    for rpy in ("0deg, 0, 10°", "0,0,0.17453292519943295"):
+        assert out[rpy]["rpy"] == pytest.approx(out["0,0,10deg"]["rpy"], abs=1e-15)
+        assert out[rpy]["margin"] == out["0,0,10deg"]["margin"]

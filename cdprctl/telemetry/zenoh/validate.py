@@ -232,8 +232,9 @@ class CommandValidator:
         angle = float(np.linalg.norm(log_so3(R @ m.home.rotation.T)))
         if angle > ws.max_angle:
             raise CommandError(
-                f"rpy = {np.round(rpy, 4).tolist()} rad is {angle:.3f} rad from the home "
-                f"orientation, more than workspace.max_angle = {ws.max_angle:g} rad"
+                f"rpy = {np.round(rpy, 4).tolist()} rad is {angle:.3f} rad "
+                f"({math.degrees(angle):.2f}°) from the home orientation, more than "
+                f"workspace.max_angle = {ws.max_angle:g} rad ({math.degrees(ws.max_angle):.2f}°)"
             )
         speed = accel = 1.0
         if "max_velocity" in d:

@@ -292,7 +292,7 @@ def test_a_move_whose_line_leaves_the_limits_is_refused(rowc):
         why = events(cl)[-1]
         assert why.startswith("move ignored: the line to the target leaves the soft limits "
                               "after [")  # fmt: skip
-        assert "tension margin" in why
+        assert "] m: the tension margin is" in why  # a translation: no rotation named
         x = float(why.split("after [", 1)[1].split(",", 1)[0])
         assert 0.45 < x < 2.55  # between the arms
         # one rule: the gateway, given the reference the loop publishes, refuses it in the
@@ -302,3 +302,20 @@ def test_a_move_whose_line_leaves_the_limits_is_refused(rowc):
             gateway.check("move", {"position": [2.55, 0.38, 1.05]}, "enabled",
                           {"reference": c.data.reference.copy()})  # fmt: skip
         assert str(exc.value).endswith(why.removeprefix("move ignored: "))
+
+
+def test_a_rotation_alone_beyond_max_angle_is_refused_naming_the_rotation(rowc):
+    """A move to the same position turned 0.25 rad about z (rowc's max_angle 0.2 rad): the
+    desk's refusal names the rotation in degrees and rad, and the limit, and nothing moves."""
+    with enabled(rowc) as cl:
+        c = cl.controller
+        before = c.trajectory.position.copy()
+        cl.command("move", pose=np.r_[rowc.home.position, 0.0, 0.0, 0.25])
+        assert not c.desk.mailbox
+        why = events(cl)[-1]
+        assert why.startswith("move ignored: the rotation to the target, 14.32° (0.2500 rad) "
+                              "about [0.0, 0.0, 1.0] (base frame) at [1.5, 0.35, 0.59] m, leaves "
+                              "the soft limits after 11.4")  # fmt: skip
+        assert why.endswith("exceeds workspace.max_angle = 0.2 rad (11.46°)")
+        cl.run(0.2)
+        assert np.array_equal(c.trajectory.position, before)

@@ -218,8 +218,26 @@ def test_a_jog_is_refused_beyond_the_linear_limit_on_x_y_z_and_the_angular_one_o
 def test_a_tilt_beyond_the_workspace_is_refused_to_the_tenth_of_a_milliradian(v):
     with pytest.raises(CommandError) as exc:
         v.check("move", {"position": [1.5, 0.35, 0.59], "rpy": [0.0, 0.0, 0.212345]}, "enabled")
-    assert str(exc.value) == ("rpy = [0.0, 0.0, 0.2123] rad is 0.212 rad from the home "
-                              "orientation, more than workspace.max_angle = 0.2 rad")  # fmt: skip
+    assert str(exc.value) == ("rpy = [0.0, 0.0, 0.2123] rad is 0.212 rad (12.17°) from the "
+                              "home orientation, more than workspace.max_angle = 0.2 rad "
+                              "(11.46°)")  # fmt: skip
+
+
+def test_a_rotation_alone_that_brings_cables_within_the_clearance_is_refused_as_a_rotation():
+    """CAROCA at home turned 0.6 rad about y (its max_angle): the target alone is clear of
+    contact, the way there comes under the clearance; the refusal names the rotation, not
+    only the position it stays at (the desk's words: tests/motion/test_clearance_limits.py)."""
+    caroca = load_robot(CONFIG / "caroca.toml")
+    v = CommandValidator(caroca, commands_enabled=True)
+    move = {"position": [0.0, 0.0, 1.0], "rpy": [0.0, 0.6, 0.0]}
+    with pytest.raises(CommandError) as exc:
+        v.check("move", move, "enabled", {"reference": np.array([0, 0, 1.0, 0, 0, 0])})
+    assert str(exc.value).startswith(
+        "position = [0.0, 0.0, 1.0] m, rpy = [0.0, 0.6, 0.0] rad: the rotation to the target, "
+        "34.38° (0.6000 rad) about [0.0, 1.0, 0.0] (base frame) at [0.0, 0.0, 1.0] m, leaves "
+        "the soft limits after 3"
+    )
+    assert str(exc.value).endswith("under the clearance 5.00 mm ([interference] clearance)")
 
 
 def test_a_direction_too_short_is_refused(v):
