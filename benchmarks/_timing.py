@@ -147,13 +147,24 @@ def timed_daemon_run(args: list[str], timing: Path, on_ready: Callable[[], objec
         return {k: z[k] for k in z.files}
 
 
+def bench_parser(doc: str | None) -> argparse.ArgumentParser:
+    """A benchmark's options, described by the first paragraph of its docstring ``doc``."""
+    return argparse.ArgumentParser(description=None if doc is None else doc.split("\n\n")[0])
+
+
+def loop_options(ap: argparse.ArgumentParser, seconds: float, rate: float) -> None:
+    """The options of a benchmark that runs a loop: ``--seconds`` of each run (default
+    ``seconds``), ``--rate`` the loop's rate in Hz (default ``rate``)."""
+    ap.add_argument("--seconds", type=float, default=seconds, help="s of each run")
+    ap.add_argument("--rate", type=float, default=rate, help="the loop's rate, Hz")
+
+
 def ab_arguments(**more: tuple[type, object]) -> argparse.Namespace:
     """The A/B loop benchmarks' options: rounds, seconds a run, the loop's rate (Hz), and
     ``more`` (name → (type, default))."""
-    ap = argparse.ArgumentParser()
+    ap = bench_parser(None)
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--rate", type=float, default=500.0)
+    loop_options(ap, seconds=20.0, rate=500.0)
     for name, (kind, default) in more.items():
         ap.add_argument(f"--{name}", type=kind, default=default)
     return ap.parse_args()

@@ -15,7 +15,6 @@ Run: ``.venv/bin/python benchmarks/bench_compute_floor.py [--seconds 15] [--rate
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import os
 import subprocess
@@ -26,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import busy_processes, machine_line
+from _timing import bench_parser, busy_processes, loop_options, machine_line
 from bench_floor import PRIORITY
 
 SOURCE = r"""
@@ -83,9 +82,8 @@ def run(exe: str, period_ns: int, cycles: int, n: int, cpu: int, priority: int) 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seconds", type=float, default=15.0)
-    ap.add_argument("--rate", type=float, default=1000.0)
+    ap = bench_parser(__doc__)
+    loop_options(ap, seconds=15.0, rate=1000.0)
     ap.add_argument("--work", type=float, default=200.0, help="µs of work a cycle (calibrated)")
     ap.add_argument("--hog", type=int, default=0, help="busy processes beside it")
     ap.add_argument("--priority", type=int, default=PRIORITY)

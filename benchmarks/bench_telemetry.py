@@ -16,7 +16,6 @@ Run: ``.venv/bin/python benchmarks/bench_telemetry.py [--rounds 3] [--seconds 30
 
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _timing import free_port, machine_line
+from _timing import bench_parser, free_port, loop_options, machine_line
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -151,11 +150,10 @@ def describe(late: np.ndarray, gaps: np.ndarray) -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = bench_parser(__doc__)
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--seconds", type=float, default=30.0)
+    loop_options(ap, seconds=30.0, rate=500.0)
     ap.add_argument("--segment", type=float, default=3.0, help="flood on/off segments, s")
-    ap.add_argument("--rate", type=float, default=500.0, help="loop rate, Hz")
     args = ap.parse_args()
     print(machine_line())
     pooled: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"A": [], "on": [], "off": []}

@@ -10,40 +10,32 @@ Writes the markdown table that docs/homing.md quotes.
 
 from __future__ import annotations
 
-import argparse
 import math
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _tables import ROOT, markdown_head, table_options, write_table  # test_homing: on the path
+from test_homing import robot_at
 
-ROOT = Path(__file__).resolve().parents[1]
-# the homing tests' robots (test_homing, and the conftest it imports), after the project's
-# own packages: tests/drivers/ would otherwise stand for drivers/
-sys.path[:0] = [str(ROOT)]
-sys.path += [str(ROOT / "tests"), str(ROOT / "tests" / "calibration")]
-
-from test_homing import robot_at  # noqa: E402
-
-from cdprctl.calibration.geometry_file import calibrated_robot_text  # noqa: E402
-from cdprctl.calibration.geometry_moves import motor_goals, move  # noqa: E402
-from cdprctl.calibration.geometry_plan import GeometryOptions  # noqa: E402
-from cdprctl.calibration.geometry_procedure import (  # noqa: E402
+from cdprctl.calibration.geometry_file import calibrated_robot_text
+from cdprctl.calibration.geometry_moves import motor_goals, move
+from cdprctl.calibration.geometry_plan import GeometryOptions
+from cdprctl.calibration.geometry_procedure import (
     geometry_calibrate,
     geometry_record,
 )
-from cdprctl.calibration.procedure import force_cables  # noqa: E402
-from cdprctl.calibration.session import CalibrationFailedError, Session  # noqa: E402
-from cdprctl.calibration.startup_checks import offsets  # noqa: E402
-from cdprctl.control.cycle.estimator import Estimator  # noqa: E402
-from cdprctl.core.rotation import exp_so3, log_so3  # noqa: E402
-from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics  # noqa: E402
-from cdprctl.model.calibration import reference_anchors  # noqa: E402
-from cdprctl.robot_file import load_robot  # noqa: E402
-from cdprctl.tda.hold import equilibrium_tensions  # noqa: E402
-from sim_backend.plant_errors import PlantErrors  # noqa: E402
+from cdprctl.calibration.procedure import force_cables
+from cdprctl.calibration.session import CalibrationFailedError, Session
+from cdprctl.calibration.startup_checks import offsets
+from cdprctl.control.cycle.estimator import Estimator
+from cdprctl.core.rotation import exp_so3, log_so3
+from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
+from cdprctl.model.calibration import reference_anchors
+from cdprctl.robot_file import load_robot
+from cdprctl.tda.hold import equilibrium_tensions
+from sim_backend.plant_errors import PlantErrors
 
 
 def start_near_home(model, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -169,20 +161,17 @@ def run(robot: str, seed: int, poses: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, default=5)
+    ap = table_options("geometry_table.md", seeds=5)
     ap.add_argument("--first", type=int, default=1,
                     help="the first seed (a table split over processes)")
     ap.add_argument("--poses", type=int, default=25)
     ap.add_argument("--robots", nargs="+", default=["rowc", "caroca", "cogiro"])
-    ap.add_argument("--out", default=str(ROOT / "docs" / "geometry_table.md"))
     args = ap.parse_args()
-    lines = [
+    lines = markdown_head(
         "| robot | accepted | anchors: error, max mm (worst σ mm; worst error/σ) | drums: "
         "error, max % | pose at 10 test poses, median / max: mm, mrad | motion s | "
-        "residuals / noise: lengths; equilibrium |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
-    ]
+        "residuals / noise: lengths; equilibrium |"
+    )
     for robot in args.robots:
         rows = []
         for seed in range(args.first, args.first + args.seeds):
@@ -203,7 +192,7 @@ def main() -> None:
             f" mm, {rng('rot_med', done)} / {rng('rot_max', done)} mrad | "
             f"{rng('motion', done, '.0f')} | {rng('ratio', done)}; {rng('balance', done)} |"
         )
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    write_table(args.out, lines)
     print("\n".join(lines))
 
 

@@ -8,24 +8,14 @@ table that docs/homing.md quotes.
 
 from __future__ import annotations
 
-import argparse
-import sys
-from pathlib import Path
-
 import numpy as np
+from _tables import ROOT, markdown_head, table_options, write_table  # test_homing: on the path
+from test_homing import pose_error, robot_at, start_pose
 
-ROOT = Path(__file__).resolve().parents[1]
-# the homing tests' robots (test_homing, and the conftest it imports), after the project's
-# own packages: tests/drivers/ would otherwise stand for drivers/
-sys.path[:0] = [str(ROOT)]
-sys.path += [str(ROOT / "tests"), str(ROOT / "tests" / "calibration")]
-
-from test_homing import pose_error, robot_at, start_pose  # noqa: E402
-
-from cdprctl.calibration.procedure import self_calibrate  # noqa: E402
-from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
-from cdprctl.robot_file import load_robot  # noqa: E402
-from sim_backend.plant_errors import PlantErrors  # noqa: E402
+from cdprctl.calibration.procedure import self_calibrate
+from cdprctl.calibration.session import CalibrationFailedError
+from cdprctl.robot_file import load_robot
+from sim_backend.plant_errors import PlantErrors
 
 
 def run(robot: str, seeds: int, errors: bool) -> list[str]:
@@ -75,20 +65,17 @@ def run(robot: str, seeds: int, errors: bool) -> list[str]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, default=20)
-    ap.add_argument("--out", default=str(ROOT / "docs" / "homing_table.md"))
+    ap = table_options("homing_table.md", seeds=20)
     args = ap.parse_args()
-    lines = [
+    lines = markdown_head(
         "| robot | plant errors | calibrated | position error mm, median / max | rotation "
         "error mrad, median / max | predicted σ, worst axis, median: mm / mrad | the refused "
-        "ones' errors: mm, mrad (median / max) |",
-        "| --- | --- | --- | --- | --- | --- | --- |",
-    ]
+        "ones' errors: mm, mrad (median / max) |"
+    )
     for robot in ("rowc", "caroca"):
         for errors in (False, True):
             lines += run(robot, args.seeds, errors)
-    Path(args.out).write_text("\n".join(lines) + "\n")
+    write_table(args.out, lines)
     print("\n".join(lines))
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from cdprctl.core.state_dir import default_state_dir
-from cdprctl.core.state_file import iso_utc, read_json, write_atomically
+from cdprctl.core.state_file import iso_utc, read_json, write_json
 from cdprctl.model.robot import RobotModel
 
 __all__ = ["default_state_dir"]  # re-exported: where the daemon and the commands look
@@ -119,9 +119,8 @@ def now_iso() -> str:
 
 
 def save(record: CalibrationRecord, state_dir: Path) -> Path:
-    """Written atomically (``state_file.write_atomically``)."""
-    text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
-    return write_atomically(record_path(Path(state_dir)), text + "\n")
+    """Written atomically (``state_file.write_json``)."""
+    return write_json(record_path(Path(state_dir)), FORMAT, record)
 
 
 def load(state_dir: Path) -> CalibrationRecord:

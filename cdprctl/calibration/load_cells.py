@@ -8,7 +8,6 @@ atomically; a simulated robot's never where a real robot's records live) and app
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -16,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.core.state_file import iso_utc, read_json, write_atomically
+from cdprctl.core.state_file import iso_utc, read_json, write_json
 from cdprctl.model.robot import RobotModel
 
 FILE_NAME = "load_cells.json"
@@ -91,9 +90,8 @@ def record_path(state_dir: Path) -> Path:
 
 
 def save(record: LoadCellRecord, state_dir: Path) -> Path:
-    """Written atomically (``state_file.write_atomically``)."""
-    text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
-    return write_atomically(record_path(state_dir), text + "\n")
+    """Written atomically (``state_file.write_json``)."""
+    return write_json(record_path(state_dir), FORMAT, record)
 
 
 def load(state_dir: Path) -> LoadCellRecord:

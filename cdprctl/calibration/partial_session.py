@@ -8,12 +8,11 @@ docs/safety.md, "Brake test")."""
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from pathlib import Path
 from typing import Any
 
-from cdprctl.core.state_file import read_json, write_atomically
+from cdprctl.core.state_file import read_json, write_json
 
 FORMAT = 1
 # the file of each procedure (a kind), in the state directory
@@ -52,8 +51,7 @@ def path_of(state_dir: Path, kind: str) -> Path:
 
 
 def save(partial: PartialSession, state_dir: Path) -> Path:
-    text = json.dumps({"format": FORMAT, **dataclasses.asdict(partial)}, indent=1)
-    return write_atomically(path_of(state_dir, partial.kind), text + "\n")
+    return write_json(path_of(state_dir, partial.kind), FORMAT, partial)
 
 
 def load(state_dir: Path, kind: str) -> PartialSession:

@@ -7,14 +7,13 @@ import argparse
 import dataclasses
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import command_parser, load_or_report
 from cdprctl.commands.records import (
     EXIT_STATE_DIR,
+    drives_closed,
     procedure_start,
-    records_after_configure,
     save_or_keep,
 )
 from cdprctl.commands.sim import add_bus_arguments
@@ -159,42 +158,35 @@ def run(args: argparse.Namespace) -> int:
     weak = _weak_brake_index(who, args.weak_brake, args.sim, model)
     if weak == -1:
         return 2
-    where = procedure_start(who, model, args, args.sim)
-    if isinstance(where, int):
-        return where
-    state_dir: Path | None  # found again once the drives say they are simulated
-    overrides, simulated, state_dir, log = where
-    resumed = _kept(args, model, state_dir, log)
+    proc = procedure_start(who, model, args, args.sim)
+    if isinstance(proc, int):
+        return proc
+    overrides, log = proc.overrides, proc.log
+    resumed = _kept(args, model, proc.state_dir, log)
     if resumed is None:
         return 2
     kept, started, identities = resumed
     sim, driver = _drivers(args, model, weak, overrides)
-    try:
-        log(f"{WHO}: {model.name}: configuring the drives")
-        driver.configure()
-        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
-                                                       simulated, state_dir, log)  # fmt: skip
-        if state_dir is None:
-            return EXIT_STATE_DIR
-        if kept:
-            clear_latched_fault(driver, log, WHO)
-            check_identities(identities, list(getattr(driver, "identities", [])),
-                             [c.name for c in model.cables], path_of(state_dir, KIND))
-        test = BrakeTest(model, driver, log, simulated=simulated)
-        record = test.run(kept, started)
-    except BrakeTestStoppedError as exc:
-        _stopped(args, model, exc, state_dir, simulated, driver, overrides)
-        return 1
-    except PartialSessionError as exc:
-        print(f"{WHO}: error: cannot resume: {exc}", file=sys.stderr)
-        return 1
-    except (DriverError, BrakeTestFailedError) as exc:
-        print(f"{WHO}: failed: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        driver.shutdown()
-        if sim is not None:
-            sim.net.close()
+    with drives_closed(driver, sim):
+        try:
+            state_dir = proc.configure(driver, model.name)
+            if state_dir is None:
+                return EXIT_STATE_DIR
+            if kept:
+                clear_latched_fault(driver, log, WHO)
+                check_identities(identities, list(getattr(driver, "identities", [])),
+                                 [c.name for c in model.cables], path_of(state_dir, KIND))
+            test = BrakeTest(model, driver, log, simulated=proc.simulated)
+            record = test.run(kept, started)
+        except BrakeTestStoppedError as exc:
+            _stopped(args, model, exc, proc.state_dir, proc.simulated, driver, overrides)
+            return 1
+        except PartialSessionError as exc:
+            print(f"{WHO}: error: cannot resume: {exc}", file=sys.stderr)
+            return 1
+        except (DriverError, BrakeTestFailedError) as exc:
+            print(f"{WHO}: failed: {exc}", file=sys.stderr)
+            return 1
     if remove(state_dir, KIND):
         log(f"{WHO}: completed: the stopped test's results ({path_of(state_dir, KIND)}) "
             "removed")  # fmt: skip

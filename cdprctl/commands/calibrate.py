@@ -16,9 +16,9 @@ from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.common import command_parser, load_or_report, parse_pose
 from cdprctl.commands.records import (
     EXIT_STATE_DIR,
+    drives_closed,
     keep_record,
     procedure_start,
-    records_after_configure,
 )
 from cdprctl.commands.sim import add_bus_arguments
 
@@ -183,51 +183,47 @@ def run(args: argparse.Namespace) -> int:
 
         return run_friction(args, model)
     pose = _pose_or_checked(args, model)
-    where = procedure_start(WHO, model, args, False)
-    if isinstance(where, int):
-        return where
-    state_dir: Path | None  # found again once the drives say they are simulated
-    overrides, simulated, state_dir, log = where
+    proc = procedure_start(WHO, model, args, False)
+    if isinstance(proc, int):
+        return proc
+    log = proc.log
     opt = None if pose is not None else SelfOptions(
         travel=args.travel, tilt=args.tilt, fit_drum_scales=args.fit_drum_scales)  # fmt: skip
-    resumed = _self_progress(args, model, opt, state_dir, log)
+    resumed = _self_progress(args, model, opt, proc.state_dir, log)
     if isinstance(resumed, int):
         return resumed
     progress, identities = resumed
-    driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
+    driver = create_driver(model, period=model.control.period, bus_overrides=proc.overrides)
     ident = None
-    try:
-        log(f"cdprctl calibrate: {model.name}, {args.method}: configuring the drives")
-        driver.configure()
-        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
-                                                       simulated, state_dir, log)  # fmt: skip
-        if state_dir is None:
-            return EXIT_STATE_DIR
-        if progress is not None:
-            clear_latched_fault(driver, log, WHO)
-            if why := check_reference(model, driver, progress, identities,
-                                      path_of(state_dir, "self")):  # fmt: skip
-                print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
-                return 1
-        with moves_held(model, False, log):
-            if pose is not None:
-                record = known_pose(model, driver, pose, log)
-            elif opt is not None:
-                record, ident = self_calibrate(model, driver, opt, log, progress)
-    except CalibrationStoppedError as exc:
-        _self_stopped(args, model, exc, opt, state_dir, simulated, driver, overrides)
-        return 1
-    except (DriverError, CalibrationFailedError) as exc:
-        if isinstance(exc, CalibrationFailedError) and exc.record is not None:
-            remove(state_dir, "self")  # every sample taken, the identification refused
-        print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        driver.shutdown()
+    with drives_closed(driver):
+        try:
+            state_dir = proc.configure(driver, f"{model.name}, {args.method}")
+            if state_dir is None:
+                return EXIT_STATE_DIR
+            if progress is not None:
+                clear_latched_fault(driver, log, WHO)
+                if why := check_reference(model, driver, progress, identities,
+                                          path_of(state_dir, "self")):  # fmt: skip
+                    print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+                    return 1
+            with moves_held(model, False, log):
+                if pose is not None:
+                    record = known_pose(model, driver, pose, log)
+                elif opt is not None:
+                    record, ident = self_calibrate(model, driver, opt, log, progress)
+        except CalibrationStoppedError as exc:
+            _self_stopped(args, model, exc, opt, proc.state_dir, proc.simulated, driver,
+                          proc.overrides)  # fmt: skip
+            return 1
+        except (DriverError, CalibrationFailedError) as exc:
+            if isinstance(exc, CalibrationFailedError) and exc.record is not None:
+                remove(proc.state_dir, "self")  # every sample taken, the identification refused
+            print(f"cdprctl calibrate: failed: {exc}", file=sys.stderr)
+            return 1
     if opt is not None and remove(state_dir, "self"):
         log(f"{WHO}: completed: the stopped run's samples ({path_of(state_dir, 'self')}) "
             "removed")  # fmt: skip
-    record.simulated = simulated
+    record.simulated = proc.simulated
     return _report_homing(args, record, ident, state_dir, log)
 
 

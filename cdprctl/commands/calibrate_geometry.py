@@ -17,7 +17,7 @@ import numpy as np
 
 from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.common import load_or_report
-from cdprctl.commands.records import EXIT_STATE_DIR, keep_record, records_dir
+from cdprctl.commands.records import EXIT_STATE_DIR, drives_closed, keep_record, records_dir
 from cdprctl.commands.resume import (
     keep,
     load_to_resume,
@@ -132,37 +132,36 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
         return started
     poses, progress, identities = started
     driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
-    try:
-        log(f"{WHO}: {model.name}, geometry: configuring the drives")
-        driver.configure()
-        if not simulated and simulated_robot(model, overrides, driver):
-            simulated = True  # simulated drives behind a kernel CAN interface (HIL)
-            if args.resume and not args.state_dir:
-                print(f"{WHO}: error: cannot resume: the drives are simulated ones (0x1018), "
-                      "whose sessions are kept apart: give --state-dir DIR, the directory "
-                      "of the stopped run", file=sys.stderr)  # fmt: skip
-                return 2
-            state_dir, go_on = _state_dir(args, model, simulated, log)
-            if not go_on:
-                return EXIT_STATE_DIR
-        if simulated and state_dir is not None:
-            log(f"{WHO}: a simulated robot: its record and samples go to {state_dir}")
-        kept_in = path_of(state_dir, KIND) if state_dir is not None else None
-        if args.resume:
-            clear_latched_fault(driver, log, WHO)
-            if why := check_reference(model, driver, progress, identities, kept_in):
-                print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
-                return 1
-        with moves_held(model, not args.no_realtime, log):
-            cal = geometry_calibrate(model, driver, opt, log, poses, progress)
-    except CalibrationStoppedError as exc:
-        _stopped(args, model, exc, opt, poses, state_dir, simulated, driver, overrides)
-        return 1
-    except (DriverError, CalibrationFailedError) as exc:
-        print(f"{WHO}: failed: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        driver.shutdown()
+    with drives_closed(driver):
+        try:
+            log(f"{WHO}: {model.name}, geometry: configuring the drives")
+            driver.configure()
+            if not simulated and simulated_robot(model, overrides, driver):
+                simulated = True  # simulated drives behind a kernel CAN interface (HIL)
+                if args.resume and not args.state_dir:
+                    print(f"{WHO}: error: cannot resume: the drives are simulated ones (0x1018), "
+                          "whose sessions are kept apart: give --state-dir DIR, the directory "
+                          "of the stopped run", file=sys.stderr)  # fmt: skip
+                    return 2
+                state_dir, go_on = _state_dir(args, model, simulated, log)
+                if not go_on:
+                    return EXIT_STATE_DIR
+            if simulated and state_dir is not None:
+                log(f"{WHO}: a simulated robot: its record and samples go to {state_dir}")
+            kept_in = path_of(state_dir, KIND) if state_dir is not None else None
+            if args.resume:
+                clear_latched_fault(driver, log, WHO)
+                if why := check_reference(model, driver, progress, identities, kept_in):
+                    print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+                    return 1
+            with moves_held(model, not args.no_realtime, log):
+                cal = geometry_calibrate(model, driver, opt, log, poses, progress)
+        except CalibrationStoppedError as exc:
+            _stopped(args, model, exc, opt, poses, state_dir, simulated, driver, overrides)
+            return 1
+        except (DriverError, CalibrationFailedError) as exc:
+            print(f"{WHO}: failed: {exc}", file=sys.stderr)
+            return 1
     if remove(state_dir, KIND):
         log(f"{WHO}: completed: the stopped run's samples ({kept_in}) removed")
     return _report(args, model, cal, state_dir, simulated, driver, log)

@@ -8,16 +8,15 @@ import dataclasses
 import inspect
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from cdprctl.commands.common import load_or_report
 from cdprctl.commands.parsing import command_parser
 from cdprctl.commands.records import (
     EXIT_STATE_DIR,
+    drives_closed,
     keep_record,
     procedure_start,
-    records_after_configure,
 )
 from cdprctl.commands.sim import add_bus_arguments
 
@@ -90,32 +89,25 @@ def zero(args: argparse.Namespace) -> int:
         print(f"{WHO}: error: {model.name} has no load cells: add [[sensors.load_cells]] to "
               f"{args.config} (docs/config.md)", file=sys.stderr)  # fmt: skip
         return 2
-    where = procedure_start(WHO, model, args, args.sim)
-    if isinstance(where, int):
-        return where
-    state_dir: Path | None  # found again once the drives say they are simulated
-    overrides, simulated, state_dir, log = where
+    proc = procedure_start(WHO, model, args, args.sim)
+    if isinstance(proc, int):
+        return proc
     sim = on_stand(model) if args.sim else None
     if sim is not None:
         driver = sim.driver
     else:
         from drivers import create_driver
 
-        driver = create_driver(model, period=model.control.period, bus_overrides=overrides)
-    try:
-        driver.configure()
-        simulated, state_dir = records_after_configure(WHO, model, args, overrides, driver,
-                                                       simulated, state_dir)  # fmt: skip
-        if state_dir is None:
-            return EXIT_STATE_DIR
-        record = tare(model, driver, args.seconds, simulated, log)
-    except (DriverError, LoadCellError) as exc:
-        print(f"{WHO}: failed: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        driver.shutdown()
-        if sim is not None:
-            sim.net.close()
+        driver = create_driver(model, period=model.control.period, bus_overrides=proc.overrides)
+    with drives_closed(driver, sim):
+        try:
+            state_dir = proc.configure(driver, None)
+            if state_dir is None:
+                return EXIT_STATE_DIR
+            record = tare(model, driver, args.seconds, proc.simulated, proc.log)
+        except (DriverError, LoadCellError) as exc:
+            print(f"{WHO}: failed: {exc}", file=sys.stderr)
+            return 1
     result: dict[str, Any] = {"offsets": record.offsets, "std": record.std}
     if not keep_record(WHO, save, record, state_dir, result):
         return EXIT_STATE_DIR

@@ -7,8 +7,9 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Callable
-from dataclasses import asdict
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -76,11 +77,50 @@ def bus_and_records(who: str, model: Any, args: Any,
     return overrides, simulated, state_dir
 
 
-def procedure_start(
-    who: str, model: Any, args: Any, in_process: bool
-) -> tuple[dict[str, Any], bool, Path, Callable[[str], None]] | int:
+@dataclass
+class Procedure:
+    """Where a procedure (brake test, tare, calibration) keeps its record and says what it does,
+    from ``procedure_start``; ``simulated`` and ``state_dir`` found again by :meth:`configure`."""
+
+    who: str
+    model: Any
+    args: Any
+    overrides: dict[str, Any]
+    simulated: bool
+    state_dir: Path
+    log: Callable[[str], None]
+
+    def configure(self, driver: Any, doing: str | None) -> Path | None:
+        """``driver`` configured, then the record's directory (``records_after_configure``):
+        None when it is refused, said in one line (the caller exits :data:`EXIT_STATE_DIR`).
+        ``doing``: what the procedure is doing, said with "configuring the drives" and where a
+        simulated robot's record goes; None says neither."""
+        if doing is not None:
+            self.log(f"{self.who}: {doing}: configuring the drives")
+        driver.configure()
+        self.simulated, state_dir = records_after_configure(
+            self.who, self.model, self.args, self.overrides, driver, self.simulated,
+            self.state_dir, None if doing is None else self.log)  # fmt: skip
+        if state_dir is not None:
+            self.state_dir = state_dir
+        return state_dir
+
+
+@contextmanager
+def drives_closed(driver: Any, sim: Any = None) -> Iterator[None]:
+    """However a procedure on the drives ends (its except clauses having said why): the drives
+    shut down (disabled, brakes on) and the in-process simulated robot's bus, if any, closed."""
+    try:
+        yield
+    finally:
+        driver.shutdown()
+        if sim is not None:
+            sim.net.close()
+
+
+def procedure_start(who: str, model: Any, args: Any, in_process: bool) -> Procedure | int:
     """``bus_and_records`` (the record's directory may still change once the drives say they
-    are simulated: ``records_after_configure``), and where the procedure says what it does:
+    are simulated: :meth:`Procedure.configure`), and where the procedure says what it does:
     standard error when its result goes to standard output as JSON (``--json``), else
     standard output."""
     where = bus_and_records(who, model, args, in_process)
@@ -88,7 +128,7 @@ def procedure_start(
         return where
     overrides, simulated, state_dir = where
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    return overrides, simulated, state_dir, log
+    return Procedure(who, model, args, overrides, simulated, state_dir, log)
 
 
 def records_after_configure(who: str, model: Any, args: Any, overrides: dict[str, Any],

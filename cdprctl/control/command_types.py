@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, dataclass_transform
 
 from cdprctl.control.states import State
 from cdprctl.core.rotation import FloatArray
@@ -43,37 +43,38 @@ class _ByKind(type):
         return super().__call__(*args, **fields)
 
 
+@dataclass_transform(frozen_default=True, eq_default=False)
 class Command(metaclass=_ByKind):
     """What an operator asks: one frozen type per kind below, each with only its own fields
     (built outside the loop: the gateway's parsing, the daemon's scripted clients, a test);
-    the desk dispatches on ``kind``. ``Command(kind, **fields)`` builds the kind's type."""
+    the desk dispatches on ``kind``. ``Command(kind, **fields)`` builds the kind's type.
+    Each type is made a frozen dataclass here, compared by identity (``eq=False``): a command
+    is an event, and its arrays have no truth value."""
 
     kind: ClassVar[CommandKind]
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        dataclass(frozen=True, eq=False)(cls)
 
-# eq=False: a command is an event, compared by identity (its arrays have no truth value).
-@dataclass(frozen=True, eq=False)
+
 class EnableCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.ENABLE
 
 
-@dataclass(frozen=True, eq=False)
 class DisableCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.DISABLE
 
 
-@dataclass(frozen=True, eq=False)
 class StopCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.STOP
     category: int = 2  # IEC 60204-1's stop category (0, 1, 2; docs/safety.md)
 
 
-@dataclass(frozen=True, eq=False)
 class ResetCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.RESET
 
 
-@dataclass(frozen=True, eq=False)
 class MoveCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.MOVE
     pose: FloatArray | None = None  # x, y, z (m), roll, pitch, yaw (rad)
@@ -81,13 +82,11 @@ class MoveCommand(Command):
     accel: float = 1.0  # fraction of the acceleration limits
 
 
-@dataclass(frozen=True, eq=False)
 class SetTdaCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.SET_TDA
     tda: TDAOptions | None = None
 
 
-@dataclass(frozen=True, eq=False)
 class GripperCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.GRIPPER
     gripper: int = 0  # index in [[grippers]]
@@ -98,7 +97,6 @@ class GripperCommand(Command):
         object.__setattr__(self, "grip", GripKind(self.grip))
 
 
-@dataclass(frozen=True, eq=False)
 class JogCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.JOG
     # velocity vx, vy, vz (m/s), ωx, ωy, ωz (rad/s) in ``frame`` ("base" or "platform")
@@ -106,7 +104,6 @@ class JogCommand(Command):
     frame: str = "base"
 
 
-@dataclass(frozen=True, eq=False)
 class PathCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.PATH
     text: str = ""  # the file's content (CSV or G-code, motion/path_file.py)
@@ -114,17 +111,14 @@ class PathCommand(Command):
     plan: Any = None  # (plan, offset) checked already from where the robot rests (--path)
 
 
-@dataclass(frozen=True, eq=False)
 class PauseCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.PAUSE
 
 
-@dataclass(frozen=True, eq=False)
 class ResumeCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.RESUME
 
 
-@dataclass(frozen=True, eq=False)
 class AbortCommand(Command):
     kind: ClassVar[CommandKind] = CommandKind.ABORT
 

@@ -24,8 +24,16 @@ PATH_STATES = ("", "running", "dwell", "paused", "done", "aborted", "stopped")
 
 class ControlData:
     def __init__(self, m: int, g: int):
-        """``m`` cables, ``g`` grippers."""
-        # supervisor
+        """``m`` cables, ``g`` grippers; each stage's outputs allocated once here."""
+        self._supervision()
+        self._pose_control()
+        self._cable_outputs(m)
+        self._gripper_outputs(g)
+        self._bound(m)
+        self._motion()
+
+    def _supervision(self) -> None:
+        """The state, its faults and stops, the loop's clock and its logs."""
         self.state = State.INIT
         self.fault_reason = ""
         self.fault_kind: FaultKind | None = None
@@ -42,7 +50,9 @@ class ControlData:
         self.events: collections.deque[tuple[float, str]] = collections.deque(maxlen=256)
         # (t, kind) of every fault, for counting by kind (the daemon's summary, the soak)
         self.faults: collections.deque[tuple[float, FaultKind]] = collections.deque(maxlen=256)
-        # pose control (wrench.py)
+
+    def _pose_control(self) -> None:
+        """The pose controller's outputs: the error, the wrench asked for, its saturation."""
         self.pose_error = np.zeros(6)  # m, rad: desired − estimated
         self.wrench = np.zeros(6)  # N, N·m: what the cables were asked for
         self.feedback_wrench = np.zeros(6)  # N, N·m: the PID's part of it (wrench.py)
@@ -54,6 +64,9 @@ class ControlData:
         self.saturated_cycles = 0
         self.ext_total = np.zeros(6)  # N, N·m: the known external wrench, jaws' weight included
         self.ext_estimate = np.zeros(6)  # N, N·m at P, base frame: the observer's (observer.py)
+
+    def _cable_outputs(self, m: int) -> None:
+        """Per cable (``m``): the tension distribution's and the winch torques' outputs."""
         # tension distribution (distribution.py)
         self.tensions = np.zeros(m)  # N, commanded
         self.hold_tensions = np.zeros(m)  # N, the last feasible distribution
@@ -72,13 +85,19 @@ class ControlData:
         # winch torques (torques.py)
         self.torques = np.zeros(m)  # N·m, motor, commanded (the feed-forward in position mode)
         self.motor_target = np.zeros(m)  # rad: each winch's position target (cable_space.py)
-        # grippers (gripper_control.py)
+
+    def _gripper_outputs(self, g: int) -> None:
+        """Per gripper (``g``, gripper_control.py), and each phase's time of the last cycle."""
         self.jb_load = np.zeros(g)  # N, what each jB carries
         self.grip_target = np.full(g, math.nan)  # m, commanded travel
         self.grip_imposed = np.full(g, math.nan)  # m, ramping towards it
         # µs per phase of the last cycle (PHASES; the manager's read/write, the rest the
         # controller's)
         self.phase_us = np.zeros(len(PHASES))
+
+    def _bound(self, m: int) -> None:
+        """What the controller binds or sets once: the estimator's and trajectory's arrays,
+        the grasp sensor, the clearance, the TDA method and the gains."""
         # references, bound by the controller: estimator and trajectory arrays, the grasp
         # sensor, the TDA options in use, the drives' motor angles
         self.position: np.ndarray = np.zeros(3)  # m, P in the base frame
@@ -96,7 +115,9 @@ class ControlData:
         # where the loop's gains come from, set once (controller.py): force_feedback rad/s,
         # disturbance_bandwidth Hz, pose_bandwidth Hz per axis (torque mode's, set by hand)
         self.gains: dict[str, Any] = {}
-        # what moves the reference (MOTIONS), and a path's progress (path_follower.py)
+
+    def _motion(self) -> None:
+        """What moves the reference, and a path's progress (path_follower.py)."""
         self.motion = ""
         self.path_state = ""  # PATH_STATES
         self.path_segment = 0  # 1-based, 0: no path

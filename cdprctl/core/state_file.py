@@ -5,6 +5,7 @@ line when missing, unreadable or of another format."""
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import json
 import os
@@ -32,6 +33,13 @@ def write_atomically(path: Path, text: str) -> Path:
     finally:
         os.close(dfd)
     return path
+
+
+def write_json(path: Path, fmt: int, record: Any) -> Path:
+    """The dataclass ``record`` as a JSON object of format ``fmt`` (what :func:`read_json`
+    reads back), written atomically to ``path``."""
+    text = json.dumps({"format": fmt, **dataclasses.asdict(record)}, indent=1)
+    return write_atomically(path, text + "\n")
 
 
 def read_json(path: Path, fmt: int, what: str, error: type[Exception]) -> dict[str, Any]:

@@ -15,8 +15,8 @@ from cdprctl.telemetry.snapshot import controller_values
 
 
 class Link(Protocol):
-    """What the daemon asks of a link (``telemetry.link.TelemetryLink``,
-    ``telemetry.foxglove_view.FoxgloveLink``)."""
+    """What the daemon asks of a link (``telemetry.helper.SnapshotLink``'s: the gateway's
+    ``TelemetryLink``, ``FoxgloveLink``, ``Ros2Link``)."""
 
     period: float  # s between the values it wants
     helper: HelperProcess  # its process: started by ``Links.start``

@@ -90,16 +90,23 @@ class TableReader:
             self.error_missing(full, unit, what)
         return full, value
 
+    def _of_kind(self, parent: dict[str, Any], key: str, path: str, what: str, rule: str,
+                 required: bool, default: Any, ok: Callable[[Any], bool]) -> Any:  # fmt: skip
+        """A unitless value that is ``what`` when ``ok``: ``default`` where absent (reported
+        when ``required``), None after reporting ``rule`` where it is not."""
+        full, value = self._given(parent, key, path, "", what, required)
+        if value is _MISSING:
+            return default
+        if not ok(value):
+            self.error(full, value, "", rule)
+            return None
+        return value
+
     def table(
         self, parent: dict[str, Any], key: str, path: str, *, required: bool = True
     ) -> dict[str, Any] | None:
-        full, value = self._given(parent, key, path, "", "a table", required)
-        if value is _MISSING:
-            return None
-        if not isinstance(value, dict):
-            self.error(full, value, "", "must be a table")
-            return None
-        return value
+        return self._of_kind(parent, key, path, "a table", "must be a table", required, None,
+                             lambda v: isinstance(v, dict))  # fmt: skip
 
     def string(
         self,
@@ -110,13 +117,9 @@ class TableReader:
         required: bool = True,
         default: str | None = None,
     ) -> str | None:
-        full, value = self._given(parent, key, path, "", "a string", required)
-        if value is _MISSING:
-            return default
-        if not isinstance(value, str) or not value.strip():
-            self.error(full, value, "", "must be a non-empty string")
-            return None
-        return value
+        return self._of_kind(parent, key, path, "a string", "must be a non-empty string",
+                             required, default,
+                             lambda v: isinstance(v, str) and bool(v.strip()))  # fmt: skip
 
     def number(
         self,

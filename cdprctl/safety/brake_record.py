@@ -5,12 +5,11 @@ test passed and is younger than ``[safety] brake_test_interval``."""
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cdprctl.core.state_file import iso_utc, read_json, write_atomically
+from cdprctl.core.state_file import iso_utc, read_json, write_json
 from cdprctl.model.robot import RobotModel
 
 FILE_NAME = "brake_test.json"
@@ -58,8 +57,7 @@ def record_path(state_dir: Path) -> Path:
 
 
 def save(record: BrakeTestRecord, state_dir: Path) -> Path:
-    text = json.dumps({"format": FORMAT, **dataclasses.asdict(record)}, indent=1)
-    return write_atomically(record_path(state_dir), text + "\n")
+    return write_json(record_path(state_dir), FORMAT, record)
 
 
 def load(state_dir: Path) -> BrakeTestRecord:

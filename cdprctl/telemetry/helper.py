@@ -11,11 +11,15 @@ of a traceback and a wait for a process that had already died."""
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import signal
 import sys
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
+
+from cdprctl.model.robot import RobotModel
+from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
 def helper_entry(target: Callable[..., None], failed: Any, *args: Any) -> None:
@@ -72,6 +76,50 @@ class HelperProcess:
         if self.process.is_alive():
             self.process.terminate()
             self.process.join(timeout=2.0)
+
+
+class SnapshotLink:
+    """The daemon's side of a helper fed one way by the loop's shared-memory snapshot (the
+    Zenoh gateway's ``TelemetryLink``, ``FoxgloveLink``, ``Ros2Link``): the snapshot, the stop
+    and ready events, the queues made with ``queue``, wanted once a ``period`` s (``due``),
+    and one order to close them in: the helper stopped before its queues and snapshot go.
+    A subclass makes its process with ``start_helper``."""
+
+    def __init__(self, model: RobotModel, period: float):
+        self.ctx = mp.get_context("spawn")  # never fork a process that has threads
+        self.model = model
+        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
+        self.stop = self.ctx.Event()
+        self.ready = self.ctx.Event()
+        self.period = period  # s
+        self._rate = Decimator(period)
+        self._queues: list[Any] = []
+
+    def queue(self, maxsize: int) -> Any:
+        """A queue to the helper or from it, closed with the link."""
+        q = self.ctx.Queue(maxsize=maxsize)
+        self._queues.append(q)
+        return q
+
+    def start_helper(self, name: str, what: str, target: Callable[..., None],
+                     *args: Any) -> None:  # fmt: skip
+        """The helper: ``target(*args)`` in a process ``name``, ``what`` it is in words."""
+        self.helper = HelperProcess(self.ctx, name, what, target, args, self.ready)
+
+    def due(self) -> bool:
+        """Whether the link's period has come (then the caller ``write``s)."""
+        return self._rate.due()
+
+    def write(self, values: dict[str, Any], stats: Any = None) -> None:
+        """The loop's values (``snapshot.controller_values``) into the snapshot."""
+        self.snapshot.write(values)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.helper.stop()
+        for q in self._queues:
+            close_queue(q)
+        self.snapshot.close()
 
 
 def paced(stop: Any, period: float, alive: Callable[[], bool] | None = None) -> Iterator[float]:

@@ -128,10 +128,10 @@ def test_an_unwritable_state_directory_is_refused_before_motion_in_one_line(tmp_
 
 def test_a_write_that_fails_after_the_motion_keeps_the_result_as_json(tmp_path, monkeypatch,
                                                                        capsys):  # fmt: skip
-    def full_disk(path, text):
+    def full_disk(path, fmt, record):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(brake_record, "write_atomically", full_disk)
+    monkeypatch.setattr(brake_record, "write_json", full_disk)
     code = main(["brake-test", "--config", ROWC, "--sim", "--state-dir", str(tmp_path)])
     cap = capsys.readouterr()
     assert code == 4 and "Traceback" not in cap.err

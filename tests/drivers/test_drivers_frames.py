@@ -150,11 +150,19 @@ def make(model, script, name="cia402"):
     return drv, peer
 
 
-def test_cia402_configure_frames(seed):
+@contextlib.contextmanager
+def configured(model):
+    """(driver, peer, script): eight scripted CiA 402 nodes (1-8) and the driver on their bus,
+    configured; the driver shut down at the end."""
     script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
+    drv, peer = make(model, script)
     with drv:
         drv.configure()
+        yield drv, peer, script
+
+
+def test_cia402_configure_frames(seed):
+    with configured(seed) as (drv, peer, _):
         assert drv.lifecycle is Lifecycle.INACTIVE
         # PRE-OPERATIONAL, set-up by SDO, then NMT start (all nodes)
         assert peer.sent(p.NMT)[:2] == [bytes([0x80, 0x00]), bytes([0x01, 0x00])]
@@ -185,10 +193,7 @@ def test_cia402_configure_frames(seed):
 
 
 def test_cia402_enable_sequence_follows_transition_table(seed):
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, _):
         drv.activate()
         assert drv.lifecycle is Lifecycle.ACTIVE
         cws = [struct.unpack("<H", d[:2])[0] for d in peer.sent(p.RPDO1 + 5)]
@@ -274,10 +279,7 @@ def test_a_position_step_no_motor_can_make_is_dropped_then_reported(seed):
     """A corrupted position (a flipped high bit) is dropped like a lost frame and counted;
     if every later frame disagrees the same way (a failing encoder), the feedback timeout
     names the implausible jumps."""
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, script):
         cycles(drv, peer, 2)
         before = drv.states.position[0]
         script.position[1] += 1 << 24  # 256 motor turns in 2 ms
@@ -319,10 +321,7 @@ def test_cia402_emcy_is_a_typed_fault_and_reset_recovers(seed):
 
 
 def test_cia402_missing_feedback_tolerated_then_fault(seed):
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, script):
         script.drop_tpdo.add(2)
         for k in range(round(seed.drives.feedback_timeout / 0.002) + 2):
             cycles(drv, peer)
@@ -334,10 +333,7 @@ def test_cia402_missing_feedback_tolerated_then_fault(seed):
 
 
 def test_cia402_lost_heartbeat(seed):
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, script):
         script.silent.add(6)
         t_end = peer.t + seed.drives.heartbeat_timeout + 0.05
         while peer.t < t_end and drv.lifecycle is Lifecycle.INACTIVE:
@@ -364,10 +360,7 @@ STATUSWORD_SEEN_AS = [
 def test_every_power_state_reaches_the_control_side_as_its_drive_state(seed, sw, seen):
     """A statusword of each CiA 402 power state, from one drive, through the cyclic decoding
     tables: the control side's drive state of that cable, the others untouched."""
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, script):
         script.statusword[3] = sw
         cycles(drv, peer, 2)
         drv.read(peer.t)
@@ -376,10 +369,7 @@ def test_every_power_state_reaches_the_control_side_as_its_drive_state(seed, sw,
 
 
 def test_cia402_ignores_foreign_and_malformed_frames(seed):
-    script = Cia402Script(range(1, 9))
-    drv, peer = make(seed, script)
-    with drv:
-        drv.configure()
+    with configured(seed) as (drv, peer, _):
         junk = [
             frame(0x123, b"\1\2"),
             frame(p.TPDO1 + 1, b"\0\0"),

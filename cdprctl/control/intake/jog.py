@@ -1,10 +1,10 @@
 """A jog: a velocity command held alive by its sender (``docs/operating.md``).
 
-``Controller.submit`` turns each jog command into a segment along its direction that ends
-where the soft limits do (``motion.limits.SoftLimits.ray_end``): ruckig brakes before the
-bound and stops at it, never past. The sender repeats the command; when none has arrived for
-``[control] jog_deadman`` s the jog stops, jerk-limited, wherever that ends (an operator
-who let go, a lost link)."""
+The command desk's ``submit`` (``desk.CommandDesk``) turns each jog command into a segment
+along its direction that ends where the soft limits do (``motion.limits.SoftLimits.ray_end``):
+ruckig brakes before the bound and stops at it, never past. The sender repeats the command;
+when none has arrived for ``[control] jog_deadman`` s the jog stops, jerk-limited, wherever
+that ends (an operator who let go, a lost link)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 trajectory when the last one ends (or its dwell has passed), the progress written into
 ``ControlData`` (``path_segment``, ``path_fraction``, ``path_state``, ``path_elapsed``,
 ``path_time_left``: the plan's duration less the time it has played). Pause brakes onto the
-path and holds; resume continues with a plan ``Controller.submit`` made from where it stands;
+path and holds; resume continues with a plan the desk's ``submit`` made from where it stands;
 abort brakes and forgets the path; a fault or a stop ends it ("stopped")."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class PathFollower(MotionSource):
         self._played = 0.0  # s the path had played before the plan under way (a resume)
         self._started = 0.0  # s: when the plan under way started
 
-    # -- outside the loop (Controller.submit) ----------------------------------------------------
+    # -- outside the loop (the desk's submit) ---------------------------------------------------
     def plan_path(self, cmd: PathCommand, tr: Trajectory, limits: SoftLimits) -> Plan | None:
         """Parse and check the whole path from where the reference of ``tr`` is, against the
         soft ``limits`` (motion/path_plan.py);

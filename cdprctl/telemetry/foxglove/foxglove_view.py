@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import contextlib
 import json
-import multiprocessing as mp
 import queue
 import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import Decimator, HelperProcess, NewStates, close_queue, paced
+from cdprctl.telemetry.helper import NewStates, SnapshotLink, paced
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
 
@@ -93,38 +92,23 @@ def foxglove_main(
         snap.close()
 
 
-class FoxgloveLink:
+class FoxgloveLink(SnapshotLink):
     """The daemon's side: starts the view process, writes its snapshot, forwards events.
     Used by the daemon's I/O thread only — never by the loop."""
 
     def __init__(self, model: RobotModel, host: str, port: int):
-        ctx = mp.get_context("spawn")  # never fork a process that has threads
-        self.model = model
+        super().__init__(model, 1.0 / model.foxglove.rate)
         self.host, self.port = host, port
-        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
-        self.events: Any = ctx.Queue(maxsize=1000)
-        self.stop = ctx.Event()
-        self.ready = ctx.Event()
-        self.helper = HelperProcess(
-            ctx, "cdprctl-foxglove", "the Foxglove view", foxglove_main,
-            (model, self.snapshot.name, self.events, self.stop, self.ready, host, port),
-            self.ready,
-        )
-        self.period = 1.0 / model.foxglove.rate  # s
-        self._rate = Decimator(self.period)
+        self.events: Any = self.queue(maxsize=1000)
+        self.start_helper(
+            "cdprctl-foxglove", "the Foxglove view", foxglove_main,
+            model, self.snapshot.name, self.events, self.stop, self.ready, host, port,
+        )  # fmt: skip
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the view serves: (line, to stderr)."""
         return [(f"foxglove: ws://{self.host}:{self.port} — the live 3D view (open it in "
                  "Foxglove: docs/foxglove.md)", False)]  # fmt: skip
-
-    def due(self) -> bool:
-        """Whether the view's period has come (then the caller ``write``s)."""
-        return self._rate.due()
-
-    def write(self, values: dict[str, Any], stats: Any = None) -> None:
-        """The loop's values (``snapshot.controller_values``) into the view's snapshot."""
-        self.snapshot.write(values)
 
     def event(self, t: float, text: str, kind: str = "event") -> None:
         if kind == "fault" and not text:  # a fault reset: the log says so in its own line
@@ -135,9 +119,3 @@ class FoxgloveLink:
     def take_commands(self) -> list[Any]:
         """The view takes no commands."""
         return []
-
-    def close(self) -> None:
-        self.stop.set()
-        self.helper.stop()
-        close_queue(self.events)
-        self.snapshot.close()

@@ -6,12 +6,11 @@ follows ROS 2's naming is a ROS 2 publisher to every node on the domain. It take
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import time
 from typing import Any
 
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import Decimator, HelperProcess, NewStates, paced
+from cdprctl.telemetry.helper import NewStates, SnapshotLink, paced
 from cdprctl.telemetry.ros2.ros2_frames import Ros2Frames, topics, types
 from cdprctl.telemetry.snapshot import SharedSnapshot
 
@@ -63,22 +62,14 @@ def ros2_main(model: RobotModel, snapshot_name: str, stop: Any, ready: Any) -> N
         del dp, domain  # the participant before its domain
 
 
-class Ros2Link:
+class Ros2Link(SnapshotLink):
     """The daemon's side: starts the ROS 2 process, writes its snapshot. Used by the daemon's
     I/O thread only — never by the loop."""
 
     def __init__(self, model: RobotModel):
-        ctx = mp.get_context("spawn")  # never fork a process that has threads
-        self.model = model
-        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
-        self.stop = ctx.Event()
-        self.ready = ctx.Event()
-        self.helper = HelperProcess(
-            ctx, "cdprctl-ros2", "the ROS 2 link", ros2_main,
-            (model, self.snapshot.name, self.stop, self.ready), self.ready,
-        )  # fmt: skip
-        self.period = 1.0 / model.ros2.rate  # s
-        self._rate = Decimator(self.period)
+        super().__init__(model, 1.0 / model.ros2.rate)
+        self.start_helper("cdprctl-ros2", "the ROS 2 link", ros2_main, model,
+                          self.snapshot.name, self.stop, self.ready)  # fmt: skip
 
     def announcement(self) -> list[tuple[str, bool]]:
         from cdprctl.model.ros2 import localhost_only
@@ -91,20 +82,9 @@ class Ros2Link:
                  f"{self.model.ros2.rate:g} Hz (publishing only: docs/ros2.md)",
                  False)]  # fmt: skip
 
-    def due(self) -> bool:
-        return self._rate.due()
-
-    def write(self, values: dict[str, Any], stats: Any = None) -> None:
-        self.snapshot.write(values)
-
     def event(self, t: float, text: str, kind: str = "event") -> None:
         return  # the state and diagnostics topics carry the state; no log topic yet
 
     def take_commands(self) -> list[Any]:
         """ROS 2 takes no commands (docs/ros2.md: plain DDS has no authentication)."""
         return []
-
-    def close(self) -> None:
-        self.stop.set()
-        self.helper.stop()
-        self.snapshot.close()

@@ -4,7 +4,6 @@ never by the loop."""
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import queue
 import time
 from typing import Any
@@ -23,30 +22,23 @@ from cdprctl.control.command_types import (
     command,
 )
 from cdprctl.model.robot import RobotModel
-from cdprctl.telemetry.helper import HelperProcess, close_queue
-from cdprctl.telemetry.snapshot import SharedSnapshot, timing_values
+from cdprctl.telemetry.helper import SnapshotLink
+from cdprctl.telemetry.snapshot import timing_values
 
 
-class TelemetryLink:
+class TelemetryLink(SnapshotLink):
     def __init__(self, model: RobotModel, summary: dict[str, Any]):
         from cdprctl.telemetry.zenoh.gateway import gateway_main
 
-        ctx = mp.get_context("spawn")  # never fork a process that has threads
-        self.model = model
-        self.snapshot = SharedSnapshot(model.n_cables, g=len(model.grippers))
-        self.commands: Any = ctx.Queue(maxsize=32)
-        self.events: Any = ctx.Queue(maxsize=1000)
-        self.stop = ctx.Event()
-        self.ready = ctx.Event()
-        self.said = ctx.SimpleQueue()  # the gateway's line on whom it reached
+        super().__init__(model, 1.0 / model.zenoh.state_rate)  # s: the state's rate
+        self.commands: Any = self.queue(maxsize=32)
+        self.events: Any = self.queue(maxsize=1000)
+        self.said = self.ctx.SimpleQueue()  # the gateway's line on whom it reached
         self.dropped_events = 0
-        self.helper = HelperProcess(
-            ctx, "cdprctl-zenoh", "the Zenoh gateway", gateway_main,
-            (model, self.snapshot.name, self.commands, self.events, self.stop, self.ready,
-             summary, self.said), self.ready,
-        )  # fmt: skip
+        self.start_helper("cdprctl-zenoh", "the Zenoh gateway", gateway_main, model,
+                          self.snapshot.name, self.commands, self.events, self.stop, self.ready,
+                          summary, self.said)  # fmt: skip
         self._next_timing = 0.0
-        self.period = 1.0 / model.zenoh.state_rate  # s: the state's rate
 
     def announcement(self) -> list[tuple[str, bool]]:
         """What ``cdprctl run`` says once the gateway runs: (line, to stderr)."""
@@ -68,9 +60,9 @@ class TelemetryLink:
         """Every tick of the daemon's I/O thread (it wakes at the state's rate)."""
         return True
 
-    def write(self, values: dict[str, Any], stats: Any) -> None:
+    def write(self, values: dict[str, Any], stats: Any = None) -> None:
         """The loop's values (``snapshot.controller_values``) into the snapshot, the loop's
-        timing with them at ``zenoh.timing_rate``."""
+        timing (``stats``, the daemon's always) with them at ``zenoh.timing_rate``."""
         now = time.monotonic()
         if now >= self._next_timing:
             # percentiles over the cycles since the last report (docs/telemetry.md)
@@ -123,9 +115,5 @@ class TelemetryLink:
         return out
 
     def close(self) -> None:
-        self.stop.set()
-        self.helper.stop()
-        for q in (self.commands, self.events):
-            close_queue(q)
+        super().close()
         self.said.close()
-        self.snapshot.close()
