@@ -60,6 +60,7 @@ class WinchFriction:
     residual_limit: float
     samples: int
     pulley_note: str = ""
+    source: str = "torques"  # "load cell": the cable's tension measured (``fit_measured``)
 
     @property
     def explained(self) -> bool:
@@ -188,6 +189,57 @@ def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarra
             residual_limit=RESIDUAL_FACTOR * float(noise[i]), samples=n, pulley_note=notes[i],
         ))  # fmt: skip
     return fits
+
+
+def fit_measured(s: np.ndarray, line: np.ndarray, speed: np.ndarray, acceleration: np.ndarray,
+                 torque: np.ndarray, load: np.ndarray, load_rate: np.ndarray, noise: float,
+                 wrap: np.ndarray) -> WinchFriction:  # fmt: skip
+    """One winch's friction where its cable's tension is measured (a load cell): its drive's
+    ``torque`` less ``load`` (both N·m, n: ``r`` × the cell's tension at each sample) is the
+    friction and the rotor's inertia alone (``τ − r t = f(θ̇) + J θ̈``), fitted winch by
+    winch: no internal tensions to take out, so no projection. Beside the law:
+
+    * a statics series per line (``line_statics``): what depends on the pose alone, a cell's
+      offset or its scale error on the tension's even part;
+    * ``load_rate`` (N·m/s, the rate of ``load``) times a fitted time ``δ`` (s): the drive
+      holds its torque's feed-forward over a period while the tension goes on changing, and
+      its loop's catching up leaves the rotor accelerating early in the period and slowing
+      late (measured in the simulated robot, every physics step: ∓0.1 rad/s² per rad/s of
+      speed at the period's end on rowc), an inertial torque at the sample's instant that
+      the period's mean acceleration does not carry; it goes with the tension's rate, which
+      is odd in the motion as the viscous term is (rowc: 5-8 % off without it, δ ≈ −2 ms).
+
+    ``speed``, ``acceleration``: the motor's (rad/s, rad/s², n); ``noise`` the torque's σ at
+    rest (N·m, the residual's limit); ``wrap`` the cable's wrap on its pulley (rad, n; 0:
+    none): with a pulley, its μ from the capstan's first-order term ``r t β tanh(θ̇/ω_ε)``
+    (the cell on the platform's side), kept as ``fit_winches`` keeps it."""
+    net = torque - load
+    X = np.concatenate([line_statics(s, line), friction_regressors(speed),
+                        acceleration[:, None], load_rate[:, None]], axis=1)  # fmt: skip
+    d, wrapped = X.shape[1] - 5, bool(np.max(wrap) > 0.0)
+    if wrapped:
+        X = np.c_[X, wrap * load * np.tanh(speed / FRICTION_SMOOTHING)]
+    scale = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
+    inv = np.linalg.pinv((X / scale).T @ (X / scale), rcond=1e-12, hermitian=True)
+    c = inv @ ((X / scale).T @ net) / scale
+    res = net - X @ c
+    rank = int(np.linalg.matrix_rank(X / scale))
+    cov = float(res @ res) / max(1, len(net) - rank) * inv / np.outer(scale, scale)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    pulley, pulley_sd, note = None, None, "" if wrapped else "no pulley"
+    if wrapped:
+        mu, mu_sd = float(c[-1]), float(sd[-1])
+        if mu_sd <= PULLEY_DECIDED * max(abs(mu), PULLEY_FLOOR):
+            pulley, pulley_sd = mu, mu_sd
+        else:
+            note = f"not decided by the data: μ = {mu:.3f} ± {mu_sd:.3f}"
+    return WinchFriction(
+        viscous=float(c[d]), coulomb=float(c[d + 1]), stribeck=float(c[d + 2]),
+        inertia=float(c[d + 3]), std=(float(sd[d]), float(sd[d + 1]), float(sd[d + 2]),
+                                      float(sd[d + 3])),
+        pulley=pulley, pulley_std=pulley_sd, residual_rms=float(np.sqrt(np.mean(res**2))),
+        residual_limit=RESIDUAL_FACTOR * float(noise), samples=len(net), pulley_note=note,
+        source="load cell")  # fmt: skip
 
 
 def refusal(names: list[str], fits: list[WinchFriction]) -> str:

@@ -23,7 +23,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cdprctl.calibration.friction import WinchFriction, fit_winches, null_projectors, refusal
+from cdprctl.calibration.friction import (
+    WinchFriction,
+    fit_measured,
+    fit_winches,
+    null_projectors,
+    refusal,
+)
 from cdprctl.calibration.geometry_moves import RETREAT_SPEED, GoalOf, motor_goals, move
 from cdprctl.calibration.geometry_plan import (
     PATH_MARGIN,
@@ -170,13 +176,15 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
     log(f"friction calibration: out and back along {len(ends)} lines of up to "
         f"{opt.travel:g} m from [{start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f}] m, "
         f"{opt.repeats}x at each of {', '.join(f'{v:g}' for v in opt.speeds)} m/s")  # fmt: skip
-    rows: list[np.ndarray] = []  # per cycle: line, time, motor angles, speeds, torques
+    # per cycle: line, time, motor angles, speeds, torques, the cells' tensions (NaN: none)
+    rows: list[np.ndarray] = []
     m = model.n_cables
     on = [0]
 
     def sample(_: float) -> None:
         st = ses.states
-        rows.append(np.r_[on[0], driver.clock(), st.position, st.velocity, st.torque])
+        rows.append(np.r_[on[0], driver.clock(), st.position, st.velocity, st.torque,
+                          st.tension])  # fmt: skip
 
     moved = 0.0
     try:
@@ -204,7 +212,7 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
         ses.close()
     data = np.array(rows)
     line, t, theta = data[:, 0].astype(int), data[:, 1], data[:, 2 : 2 + m]
-    tau = data[:, 2 + 2 * m :]
+    tau, cell = data[:, 2 + 2 * m : 2 + 3 * m], data[:, 2 + 3 * m :]
     s = np.zeros(len(t))
     Q, wrap = np.empty((len(t), m, m)), np.empty((len(t), m))
     for j, (grid, W, wraps) in enumerate(grids):
@@ -215,10 +223,39 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
     w, acc = motion_of(theta, t, driver.period)
     # the residual's limit: the noise at rest and one torque count (tension_noise: N, √12)
     count = tension_noise(model) * np.sqrt(12.0) * ses.ratio
-    fits = fit_winches(s, line, Q, w, acc, tau, np.hypot(noise, count), wrap)
+    limit = np.hypot(noise, count)
+    cells = measured_winches(cell)
+    # the projection where any cable has no cell (all winches' equations together)
+    projected = fit_winches(s, line, Q, w, acc, tau, limit, wrap) if len(cells) < m else []
+    fits = [_measured(s, line, w, acc, tau, ses.ratio[i] * cell[:, i], t, driver.period,
+                      limit, wrap, i)
+            if i in cells else projected[i] for i in range(m)]  # fmt: skip
     why = refusal([c.name for c in model.cables], fits)
     return FrictionCalibration(fits, start.tolist(), [e.tolist() for e in ends], moved,
                                not why, why or "accepted")  # fmt: skip
+
+
+#: a cable's cell heard at this fraction of the samples at least: its winch fitted on it
+CELL_HEARD = 0.9
+
+
+def measured_winches(cell: np.ndarray) -> list[int]:
+    """The winches whose cable's load cell (``cell``: N, (n, m), NaN: none, or not heard) gave
+    a tension at ``CELL_HEARD`` of the samples or more."""
+    return [int(i) for i in np.flatnonzero(np.mean(np.isfinite(cell), axis=0) >= CELL_HEARD)]
+
+
+def _measured(s: np.ndarray, line: np.ndarray, w: np.ndarray, acc: np.ndarray, tau: np.ndarray,
+              load: np.ndarray, t: np.ndarray, period: float, limit: np.ndarray,
+              wrap: np.ndarray, i: int) -> WinchFriction:  # fmt: skip
+    """Winch ``i`` fitted on its cell (``load``: r × its tension, N·m, at the times ``t``,
+    s), on the samples it was heard at; its rate by the motion's fit (``motion_of``) over
+    the load with a lost frame's gap filled in."""
+    k = np.isfinite(load)
+    filled = np.interp(np.arange(len(load)), np.flatnonzero(k), load[k])
+    rate = motion_of(filled[:, None], t, period)[0][:, 0]
+    return fit_measured(s[k], line[k], w[k, i], acc[k, i], tau[k, i], load[k], rate[k],
+                        float(limit[i]), wrap[k, i])  # fmt: skip
 
 
 def _leg(ses: Session, a: np.ndarray, b: np.ndarray, goal_of: GoalOf, opt: GeometryOptions,

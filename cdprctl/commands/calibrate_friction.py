@@ -146,11 +146,30 @@ def _start_pose(model: Any, driver: Any, theta_zero: np.ndarray,
     return np.r_[e.position, 0.0, 0.0, 0.0]
 
 
+def _winch_line(r: dict[str, Any]) -> str:
+    """One winch's line of the text report: its terms ± 1 σ, what it was fitted on, the
+    residual against its limit, the simulated robot's terms labelled "plant:" (--sim)."""
+    sd = r["std"]
+    on = "its load cell" if r["fitted_on"] == "load cell" else "the torques"
+    line = (f"  winch {r['cable']} (fitted on {on}): viscous {r['viscous']:.4g} ± {sd[0]:.2g} "
+            f"N·m·s/rad, Coulomb {r['coulomb']:.4g} ± {sd[1]:.2g} N·m, Stribeck "
+            f"{r['stribeck']:.3g} ± {sd[2]:.2g} N·m, inertia {r['inertia']:.3g} kg·m², "
+            f"residual {r['residual_rms']:.2g} N·m (refused beyond {r['residual_limit']:.2g})")
+    if "plant" in r:
+        p = r["plant"]
+        line += (f" [plant: viscous {p['viscous']:.4g}, Coulomb {p['coulomb']:.4g}, "
+                 f"Stribeck {p['stribeck']:.3g}]")  # fmt: skip
+    mu = (f"; pulley μ {r['pulley']:.3g} ± {r['pulley_std']:.2g}"
+          if r["pulley"] is not None else f"; pulley: {r['pulley_note']}")  # fmt: skip
+    return line + mu + (f" ({r['clipped']})" if r["clipped"] else "")
+
+
 def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_dir: Any,
             sim: Any, log: Any) -> int:  # fmt: skip
     """Each winch's terms and σ (with --sim, the simulated robot's beside them); the record
     updated when accepted on a robot."""
     from cdprctl.calibration.calibration_record import save
+    from cdprctl.calibration.friction import RESIDUAL_FACTOR
     from cdprctl.calibration.friction_record import clipped_note, friction_entry, stored_terms
 
     truth = getattr(sim, "truth", None)
@@ -161,7 +180,8 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_d
                "stribeck": stribeck, "clipped": clipped_note(f), "inertia": f.inertia,
                "std": list(f.std),
                "pulley": f.pulley, "pulley_std": f.pulley_std, "pulley_note": f.pulley_note,
-               "residual_rms": f.residual_rms, "residual_limit": f.residual_limit}  # fmt: skip
+               "residual_rms": f.residual_rms, "residual_limit": f.residual_limit,
+               "fitted_on": f.source}  # fmt: skip
         if truth is not None:
             w = truth.cables[i].winch
             row["plant"] = {"viscous": w.viscous_friction, "coulomb": w.coulomb_friction,
@@ -177,21 +197,12 @@ def _report(args: argparse.Namespace, model: Any, cal: Any, record: Any, state_d
                           "motion_time": cal.motion_time, "record": written},
                          indent=1))  # fmt: skip
     else:
+        log(f"{WHO}: each term ± 1 σ of the fit (the samples' noise only: a bias is not in it, "
+            "docs/friction.md); residual: the RMS of what the law leaves, against its limit "
+            f"({RESIDUAL_FACTOR:g}x the torque's noise at rest), beyond which the fit is "
+            "refused")  # fmt: skip
         for r in rows:
-            sd = r["std"]
-            line = (f"  winch {r['cable']}: viscous {r['viscous']:.4g} ± {sd[0]:.2g} "
-                    "N·m·s/rad, "
-                    f"Coulomb {r['coulomb']:.4g} ± {sd[1]:.2g} N·m, Stribeck "
-                    f"{r['stribeck']:.3g} ± {sd[2]:.2g} N·m, inertia {r['inertia']:.3g} kg·m²"
-                    f", residual {r['residual_rms']:.2g} N·m (limit "
-                    f"{r['residual_limit']:.2g})")  # fmt: skip
-            if "plant" in r:
-                p = r["plant"]
-                line += (f" [simulated robot: {p['viscous']:.4g}, {p['coulomb']:.4g}, "
-                         f"{p['stribeck']:.3g}]")  # fmt: skip
-            mu = (f"; pulley μ {r['pulley']:.3g} ± {r['pulley_std']:.2g}"
-                  if r["pulley"] is not None else f"; pulley: {r['pulley_note']}")  # fmt: skip
-            log(line + mu + (f" ({r['clipped']})" if r["clipped"] else ""))
+            log(_winch_line(r))
         tail = (f"; the record updated: {written} (the next cdprctl run applies it)" if written
                 else " (--sim: no record written)" if sim is not None else "")  # fmt: skip
         log(f"{WHO}: friction {'accepted' if cal.accepted else 'refused: ' + cal.reason}{tail}")

@@ -41,12 +41,23 @@ def friction_off(cl: ClosedLoop, seed: int, low: float = 0.3, high: float = 0.5)
     return scales
 
 
-def jet_run(model: RobotModel, seed: int | None) -> JetRun:
+def jet_run(model: RobotModel, seed: int | None, truth: RobotModel | None = None,
+            identified: tuple[list[float], ...] | None = None) -> JetRun:  # fmt: skip
     """The run of the module docstring on ``model`` (``seed``: the winches' friction off the
-    file by ``friction_off``; None: as the file says)."""
+    file by ``friction_off``; None: as the file says). ``truth``: the simulated winches'
+    friction that robot's instead (``plant_errors.PlantErrors``, as ``calibrate friction
+    --sim --plant-errors`` draws it); ``identified``: the friction the controller applies
+    (viscous, Coulomb, Stribeck, pulley μ per winch: a friction calibration's, as ``run``
+    applies the record's) in place of the file's."""
     with ClosedLoop(model) as cl:
         if seed is not None:
             friction_off(cl, seed)
+        if truth is not None:  # in place: the physics' bundle holds these arrays
+            for name, key in (("viscous", "viscous_friction"), ("coulomb", "coulomb_friction"),
+                              ("stribeck", "stribeck_friction")):  # fmt: skip
+                getattr(cl.plant, name)[:] = [getattr(c.winch, key) for c in truth.cables]
+        if identified is not None:
+            cl.controller.winches.apply_friction(*identified)
         d = cl.controller.data
         cl.startup()
         cl.command("enable")
