@@ -16,30 +16,20 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 
-from cdprctl.calibration.friction_procedure import friction_calibrate  # noqa: E402
 from cdprctl.calibration.friction_record import friction_entry  # noqa: E402
+from cdprctl.experiments.friction_on_plant import friction_on_plant  # noqa: E402
 from cdprctl.experiments.load_cells import jet_run  # noqa: E402
 from cdprctl.model.robot import RobotModel  # noqa: E402
 from cdprctl.robot_file import load_robot  # noqa: E402
-from sim_backend.network import LockStep  # noqa: E402
-from sim_backend.plant import CdprPlant  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
 
 
 def identified(model: RobotModel, truth: RobotModel) -> tuple[list[float], ...]:
     """(viscous, Coulomb, Stribeck, pulley μ) per winch as a friction calibration on the
     simulated ``truth`` records them (``friction_entry``: what ``run`` applies)."""
-    plant = CdprPlant(truth)
-    plant.set_pose(model.home.position, model.home.rotation, None)
-    with LockStep(model, plant=plant) as ls:
-        ls.driver.configure()
-        start = np.r_[model.home.position, 0.0, 0.0, 0.0]
-        cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables), start,
-                                 log=lambda s: None)  # fmt: skip
+    cal = friction_on_plant(model, truth)
     if not cal.accepted:
         raise SystemExit(f"{model.name}: the friction calibration was refused: {cal.reason}")
     e = friction_entry(model, cal.fits, cal.motion_time, True)

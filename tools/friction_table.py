@@ -19,11 +19,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-from cdprctl.calibration.friction_procedure import friction_calibrate  # noqa: E402
 from cdprctl.calibration.session import CalibrationFailedError  # noqa: E402
+from cdprctl.experiments.friction_on_plant import friction_on_plant  # noqa: E402
 from cdprctl.robot_file import load_robot  # noqa: E402
-from sim_backend.network import LockStep  # noqa: E402
-from sim_backend.plant import CdprPlant  # noqa: E402
 from sim_backend.plant_errors import PlantErrors  # noqa: E402
 
 
@@ -33,18 +31,12 @@ def run(robot: str, seed: int, cells: bool = False) -> dict:
     their largest (% of the term) and whether it was accepted."""
     model = load_robot(ROOT / "config" / f"{robot}{'_load_cells' if cells else ''}.toml")
     truth = PlantErrors(seed, 0.0, 0.0, friction=(0.3, 0.5), stribeck=0.5).apply(model)[0]
-    plant = CdprPlant(truth)
-    plant.set_pose(model.home.position, model.home.rotation, None)
     t0 = time.monotonic()
     row: dict = {"robot": robot, "seed": seed}
-    with LockStep(model, plant=plant) as ls:
-        ls.driver.configure()
-        start = np.r_[model.home.position, 0.0, 0.0, 0.0]
-        try:
-            cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables), start,
-                                     log=lambda s: None)  # fmt: skip
-        except CalibrationFailedError as exc:
-            return {**row, "stopped": str(exc), "wall": time.monotonic() - t0}
+    try:
+        cal = friction_on_plant(model, truth)
+    except CalibrationFailedError as exc:
+        return {**row, "stopped": str(exc), "wall": time.monotonic() - t0}
     pairs = list(zip(cal.fits, [c.winch for c in truth.cables], strict=True))
     err = {
         "viscous": [f.viscous / x.viscous_friction - 1 for f, x in pairs],

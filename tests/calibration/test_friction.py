@@ -200,19 +200,11 @@ def test_rowc_in_lockstep_with_each_winch_off_the_file():
     within 15 % and viscous within 15 % of the simulated robot's (seeds 2 and 3 measured 8 and
     12 %: the 5 % of issue 68 is not reached on rowc, docs/friction.md), the Stribeck term
     within 25 %."""
-    from cdprctl.calibration.friction_procedure import friction_calibrate
-    from sim_backend.network import LockStep
-    from sim_backend.plant import CdprPlant
+    from cdprctl.experiments.friction_on_plant import friction_on_plant
 
     model = load_robot(CONFIG / "rowc.toml")
     truth = PlantErrors(1, 0.0, 0.0, friction=(0.3, 0.5), stribeck=0.5).apply(model)[0]
-    plant = CdprPlant(truth)
-    plant.set_pose(model.home.position, model.home.rotation, None)
-    with LockStep(model, plant=plant) as ls:
-        ls.driver.configure()
-        start = np.r_[model.home.position, 0.0, 0.0, 0.0]
-        cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables), start,
-                                 log=lambda s: None)  # fmt: skip
+    cal = friction_on_plant(model, truth)
     assert cal.accepted, cal.reason
     for c, f in zip(truth.cables, cal.fits, strict=True):
         w = c.winch
@@ -229,19 +221,11 @@ def test_rowc_with_load_cells_identifies_every_winch_within_5_percent(seed):
     viscous and Coulomb terms within issue 68's 5 % of the simulated robot's. The projection
     left rowc 8-13 % off (docs/friction.md), and without the tension's rate term the cells
     gave 6-8 % on the viscous terms (seeds 1 and 2): either coming back fails here."""
-    from cdprctl.calibration.friction_procedure import friction_calibrate
-    from sim_backend.network import LockStep
-    from sim_backend.plant import CdprPlant
+    from cdprctl.experiments.friction_on_plant import friction_on_plant
 
     model = load_robot(CONFIG / "rowc_load_cells.toml")
     truth = PlantErrors(seed, 0.0, 0.0, friction=(0.3, 0.5), stribeck=0.5).apply(model)[0]
-    plant = CdprPlant(truth)
-    plant.set_pose(model.home.position, model.home.rotation, None)
-    with LockStep(model, plant=plant) as ls:
-        ls.driver.configure()
-        start = np.r_[model.home.position, 0.0, 0.0, 0.0]
-        cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables), start,
-                                 log=lambda s: None)  # fmt: skip
+    cal = friction_on_plant(model, truth)
     assert cal.accepted, cal.reason
     for c, f in zip(truth.cables, cal.fits, strict=True):
         w = c.winch
