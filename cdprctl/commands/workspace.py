@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.common import command_parser, load_or_report
+from cdprctl.core.angles import user_angles
 
 DESCRIPTION = """\
 For every point of a grid, whether the cables can hold the platform there, at the given
@@ -69,33 +70,10 @@ def _floats(text: str, n: int, what: str, unit: str) -> np.ndarray | None:
     return v
 
 
-#: what ends a ``--rpy`` value given in degrees
-DEGREES = ("deg", "°")
-
-
 def _angles(text: str) -> np.ndarray | str:
-    """``--rpy``: three angles, radians unless a value ends in ``deg`` (or ``°``); the
-    angles (rad), or why they are refused: a bare value beyond π is taken for degrees typed
-    as radians (30 would wrap to 1.4159 rad), and refused with its value in radians."""
-    parts = [x.strip() for x in text.split(",")]
-    out = np.empty(len(parts))
-    for k, part in enumerate(parts):
-        unit = next((u for u in DEGREES if part.endswith(u)), "")
-        try:
-            v = float(part.removesuffix(unit)) if unit else float(part)
-        except ValueError:
-            return "must be 3 finite numbers (rad, or each ending in deg)"
-        if not np.isfinite(v):
-            return "must be 3 finite numbers (rad, or each ending in deg)"
-        if not unit and abs(v) > np.pi:
-            name = ("roll", "pitch", "yaw")[k] if len(parts) == 3 else f"value {k + 1}"
-            return (f"{name} = {part} is taken in radians and is beyond pi; did you mean "
-                    f"degrees? {part}° = {np.radians(v):.4f} rad: write it {part}deg or "
-                    f"{np.radians(v):.4f}")  # fmt: skip
-        out[k] = np.radians(v) if unit else v
-    if len(out) != 3:
-        return "must be 3 finite numbers (rad, or each ending in deg)"
-    return out
+    """``--rpy``: three angles (rad), or why they are refused (``core.angles``' rule)."""
+    got = user_angles(text.split(","))
+    return got if isinstance(got, str) else np.array(got)
 
 
 def _beyond_max_angle(model: Any, rpy: np.ndarray) -> str:

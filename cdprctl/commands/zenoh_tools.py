@@ -20,6 +20,7 @@ from cdprctl.commands.zenoh_session import (
     tool_session,
     why_no_answer,
 )
+from cdprctl.core.angles import user_angles
 
 
 def add_parsers(sub: Any) -> None:
@@ -59,12 +60,18 @@ def _value(text: str) -> Any:
 def fields_payload(fields: list[str]) -> dict[str, Any]:
     """A command's payload from ``send``'s ``KEY=VALUE`` fields (a comma list is a vector:
     position=1.8,0.35,0.5); ValueError names a field that is not one."""
-    payload = {}
+    payload: dict[str, Any] = {}
     for f in fields:
         if "=" not in f:
             raise ValueError(f"{f!r} is not KEY=VALUE")
         k, v = f.split("=", 1)
-        payload[k] = _value(v)
+        if k == "rpy":  # radians, or degrees where a value ends in deg: sent in radians
+            angles = user_angles(v.split(","))
+            if isinstance(angles, str):
+                raise ValueError(f"rpy: {angles}")
+            payload[k] = angles
+        else:
+            payload[k] = _value(v)
     return payload
 
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprctl.control.command_types import ACCEPTED_IN, CommandKind
 from cdprctl.control.states import State
+from cdprctl.core.angles import degrees_hint
 from cdprctl.core.rotation import log_so3, rpy_to_matrix
 from cdprctl.geometry.gripper_mechanics import GripperSet
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
@@ -222,6 +223,9 @@ class CommandValidator:
             raise CommandError("move: position (m, base frame) is required")
         p = _vector(d, "position", "m")
         rpy = _vector(d, "rpy", "rad") if "rpy" in d else np.array(m.home.rpy, dtype=float)
+        for k, a in enumerate(rpy):  # 30 typed for degrees wrapped to 1.4159 rad unsaid
+            if hint := degrees_hint(k, f"{a:g}", float(a)):
+                raise CommandError(f"rpy = {np.round(rpy, 4).tolist()} rad: {hint}")
         for i, axis in enumerate("xyz"):
             if not ws.position_min[i] <= p[i] <= ws.position_max[i]:
                 raise CommandError(

@@ -223,6 +223,16 @@ def test_a_tilt_beyond_the_workspace_is_refused_to_the_tenth_of_a_milliradian(v)
                               "(11.46°)")  # fmt: skip
 
 
+def test_an_angle_beyond_pi_is_refused_as_degrees_typed_as_radians(v):
+    """30 for a yaw of 30° was 1.4159 rad after wrapping, refused only by max_angle as 1.416
+    rad (81.13°): the sender never saw that its 30 was read in radians."""
+    with pytest.raises(CommandError) as exc:
+        v.check("move", {"position": [1.5, 0.35, 0.59], "rpy": [0.0, 0.0, 30]}, "enabled")
+    assert str(exc.value) == ("rpy = [0.0, 0.0, 30.0] rad: yaw = 30 is taken in radians and is "
+                              "beyond pi; did you mean degrees? 30° = 0.5236 rad: write it "
+                              "30deg or 0.5236")  # fmt: skip
+
+
 def test_a_rotation_alone_that_brings_cables_within_the_clearance_is_refused_as_a_rotation():
     """CAROCA at home turned 0.6 rad about y (its max_angle): the target alone is clear of
     contact, the way there comes under the clearance; the refusal names the rotation, not
