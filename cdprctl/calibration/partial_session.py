@@ -68,6 +68,17 @@ def load(state_dir: Path, kind: str) -> PartialSession:
     return partial
 
 
+def keep_in_data(path: Path, key: str, value: Any) -> None:
+    """``value`` under ``key`` in the procedure's data of the partial session at ``path``
+    (what a resume found that a later one could no longer see: a drive's reset, which the
+    refused resume's own set-up clears)."""
+    stored = read_json(path, FORMAT, "stopped session to resume", PartialSessionError)
+    fields = {f.name for f in dataclasses.fields(PartialSession)}
+    partial = PartialSession(**{k: v for k, v in stored.items() if k in fields})
+    partial.data[key] = value
+    write_json(path, FORMAT, partial)
+
+
 def remove(state_dir: Path | None, kind: str) -> bool:
     """Remove the partial session of ``kind`` (a completed procedure); whether there was one."""
     if state_dir is None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,9 @@ class Progress:
     moved: float = 0.0  # s the platform moved
     stopped_theta: np.ndarray | None = None  # rad: the motors where a stop left them
     started: float = dataclasses.field(default_factory=time.time)  # s since the epoch
+    # why a resume was refused for the drives' reset: kept in the file, as the refused
+    # resume's set-up wrote the drives' settings again and a later one could not see it
+    drives_reset: str = ""
 
     @property
     def samples(self) -> int:
@@ -55,7 +59,8 @@ class Progress:
         return {"theta": rows(self.theta), "tension": rows(self.tension),
                 "guess": rows(self.guess), "near": self.near,
                 "start_targets": vec(self.start_targets), "here": vec(self.here),
-                "moved": self.moved, "stopped_theta": vec(self.stopped_theta)}  # fmt: skip
+                "moved": self.moved, "stopped_theta": vec(self.stopped_theta),
+                "drives_reset": self.drives_reset}  # fmt: skip
 
     @classmethod
     def from_data(cls, data: dict[str, Any], started: float) -> Progress:
@@ -64,7 +69,8 @@ class Progress:
 
         p = cls(near=data.get("near"), start_targets=vec(data.get("start_targets")),
                 here=vec(data.get("here")), moved=float(data.get("moved", 0.0)),
-                stopped_theta=vec(data.get("stopped_theta")), started=started)  # fmt: skip
+                stopped_theta=vec(data.get("stopped_theta")), started=started,
+                drives_reset=str(data.get("drives_reset", "")))  # fmt: skip
         for th, t, g in zip(data["theta"], data["tension"], data["guess"], strict=True):
             p.add(np.array(th), np.array(t), np.array(g))
         return p
@@ -103,10 +109,18 @@ def check_reference(model: Any, driver: Any, progress: Progress, identities: lis
     were taken on (``path``: its file), else why not, in one line: a drive exchanged
     (0x1018), reset since the stop (``reset_since_setup``: an incremental counter restarted),
     or a motor reading more than ``MOVED_SINCE_STOP`` of cable from where the stop left it."""
-    from cdprctl.calibration.partial_session import PartialSessionError, check_identities
+    from cdprctl.calibration.partial_session import (
+        PartialSessionError,
+        check_identities,
+        keep_in_data,
+    )
 
     names = [c.name for c in model.cables]
     fix = "start over without --resume"
+    if progress.drives_reset:
+        return (f"the drives of cables {progress.drives_reset} were reset (power-up or NMT "
+                f"reset) since {path} was measured, as an earlier --resume found (its set-up "
+                f"wrote their settings again: the reset no longer shows): {fix}")  # fmt: skip
     try:
         check_identities(identities, list(getattr(driver, "identities", [])), names, path)
     except PartialSessionError as exc:
@@ -114,6 +128,9 @@ def check_reference(model: Any, driver: Any, progress: Progress, identities: lis
     reset = driver.reset_since_setup
     if model.drives.encoders != "absolute" and reset is not None and any(reset):
         which = ", ".join(names[i] for i, r in enumerate(reset) if r)
+        progress.drives_reset = which
+        if path is not None and Path(path).is_file():
+            keep_in_data(Path(path), "drives_reset", which)
         return (f"the drives of cables {which} were reset (power-up or NMT reset) since {path} "
                 "was measured: their incremental encoders lost the zero its samples were "
                 f"taken on: {fix}")  # fmt: skip

@@ -13,7 +13,14 @@ import pytest
 from conftest import CONFIG
 from test_homing import pose_error, robot_at, start_pose
 
-from cdprctl.calibration.partial_session import clear_latched_fault, path_of, timing_cause
+from cdprctl.calibration.partial_session import (
+    PartialSession,
+    clear_latched_fault,
+    load,
+    path_of,
+    save,
+    timing_cause,
+)
 from cdprctl.calibration.procedure import self_calibrate
 from cdprctl.calibration.progress import CalibrationStoppedError, Progress, check_reference
 from cdprctl.cli import main
@@ -90,7 +97,7 @@ def test_self_stopped_midway_resumes_from_its_samples_and_finds_the_start():
     assert dp < 1.0 and dr < 1.0, (dp, dr)
 
 
-def test_a_resume_after_a_drive_reset_or_with_its_encoder_moved_is_refused():
+def test_a_resume_after_a_drive_reset_or_with_its_encoder_moved_is_refused(tmp_path):
     """A drive that went silent mid-move stops ``self`` (the line says what a feedback timeout
     can be: the machine's load or the drive); its drive then power-cycled: the incremental
     encoder's zero the samples were taken on is gone — refused in one line; and, should a
@@ -110,11 +117,22 @@ def test_a_resume_after_a_drive_reset_or_with_its_encoder_moved_is_refused():
         driver = _second_driver(ls, model)
         driver.configure()
         ids = list(ls.driver.identities)
-        why = check_reference(model, driver, stop.progress, ids, "F")
-        assert why == ("the drives of cables 3 were reset (power-up or NMT reset) since F "
+        kept = save(PartialSession("self", model.name, "h", {}, "f", "pose 1", 0,
+                                   stop.progress.to_data(), "t", 0.0), tmp_path)  # fmt: skip
+        progress = Progress.from_data(load(tmp_path, "self").data, 0.0)
+        why = check_reference(model, driver, progress, ids, kept)
+        assert why == (f"the drives of cables 3 were reset (power-up or NMT reset) since {kept} "
                        "was measured: their incremental encoders lost the zero its samples "
                        "were taken on: start over without --resume")  # fmt: skip
-        driver.reset_since_setup[:] = [False] * 8  # a driver that cannot tell
+        # the refused resume's set-up wrote the drives' settings again: the next resume's
+        # drives no longer show the reset, the partial session does (it let a second through)
+        driver.reset_since_setup[:] = [False] * 8
+        again = Progress.from_data(load(tmp_path, "self").data, 0.0)
+        assert check_reference(model, driver, again, ids, kept).startswith(
+            "the drives of cables 3 were reset (power-up or NMT reset) since ")
+        assert "as an earlier --resume found" in check_reference(model, driver, again, ids, kept)
+        # a driver that cannot tell, on a session that never saw it: the encoders' distance
+        assert stop.progress.drives_reset == ""
         assert check_reference(model, driver, stop.progress, ids, "F") == ""
         ratio = model.cables[2].winch.drum_radius / model.cables[2].winch.gear_ratio
         assert stop.progress.stopped_theta is not None
