@@ -22,9 +22,11 @@ TIMEOUT = 120.0
 
 
 def start(script: Path, cwd: Path) -> subprocess.CompletedProcess[str]:
-    """``script --help`` when it parses arguments, else ``import script`` with its directory
-    first on the path; in a fresh interpreter with this one's environment."""
-    if "ArgumentParser(" in script.read_text(encoding="utf-8"):
+    """``script --help`` when it is a script that parses arguments, else ``import script``
+    (a helper module of the tools, such as ``_tables.py``'s parser options) with its
+    directory first on the path; in a fresh interpreter with this one's environment."""
+    text = script.read_text(encoding="utf-8")
+    if "ArgumentParser(" in text and 'if __name__ == "__main__"' in text:
         argv = [sys.executable, str(script), "--help"]
     else:
         code = f"import sys; sys.path[0] = {str(script.parent)!r}; import {script.stem}"
