@@ -11,14 +11,19 @@ DEGREES = ("deg", "°")
 NAMES = ("roll", "pitch", "yaw")
 
 
+def meant_degrees(text: str, value: float) -> str:
+    """What an angle ``value`` typed as ``text`` beyond π likely was: degrees."""
+    return f"did you mean degrees? {text}° = {math.radians(value):.4f} rad"
+
+
 def degrees_hint(k: int, text: str, value: float, n: int = 3) -> str:
     """Why a bare angle ``value`` (typed ``text``, the ``k``-th of ``n``) beyond π is refused,
     with what the user likely meant; "" within ±π."""
     if abs(value) <= math.pi:
         return ""
     name = NAMES[k] if n == 3 else f"value {k + 1}"
-    return (f"{name} = {text} is taken in radians and is beyond pi; did you mean degrees? "
-            f"{text}° = {math.radians(value):.4f} rad: write it {text}deg or "
+    return (f"{name} = {text} is taken in radians and is beyond pi; "
+            f"{meant_degrees(text, value)}: write it {text}deg or "
             f"{math.radians(value):.4f}")  # fmt: skip
 
 

@@ -15,6 +15,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from cdprctl.core.angles import meant_degrees
 from cdprctl.core.rotation import FloatArray
 
 _MISSING = object()
@@ -156,7 +157,8 @@ class TableReader:
             self.error(full, value, unit, f"must be >= {minimum:g}")
             return None
         if maximum is not None and x > maximum:
-            self.error(full, value, unit, f"must be <= {maximum:g}")
+            hint = f" rad ({meant_degrees(f'{x:g}', x)})" if unit == "rad" and x > math.pi else ""
+            self.error(full, value, unit, f"must be <= {maximum:g}{hint}")
             return None
         return x
 

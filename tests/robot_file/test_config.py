@@ -390,6 +390,11 @@ def with_key(table: str, line: str) -> str:
     ("table", "line", "expected"),
     [
         ("control", "rate = 20000.0", "control.rate = 20000 Hz must be <= 10000"),
+        # degrees typed for radians (a newcomer's 11.5 for 11.5°): named as such
+        ("workspace", "max_angle = 11.5", "workspace.max_angle = 11.5 rad must be <= 3.14159 "
+         "rad (did you mean degrees? 11.5° = 0.2007 rad)"),
+        ("home", "rpy = [0.0, 0.0, 30.0]", "home.rpy = [0, 0, 30] must be within ±pi rad each "
+         "(did you mean degrees? 30° = 0.5236 rad)"),
         ("control", "disturbance_bandwidth = 50.0",
          "control.disturbance_bandwidth = 50 Hz must be <= 5"),
         ("control", "force_feedback = 11.0",

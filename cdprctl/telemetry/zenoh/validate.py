@@ -148,7 +148,7 @@ class CommandValidator:
         for key in d:
             if key != "id" and key not in allowed:
                 known = ", ".join(sorted(allowed)) or "none"
-                raise CommandError(f"{kind}: field {key!r} is unknown (allowed: {known}, id)")
+                raise CommandError(f"field {key!r} is unknown (allowed: {known}, id)")
         if kind in ALLOWED_STATES and state not in ALLOWED_STATES[kind]:
             raise CommandError(
                 f"{kind} is not accepted in state {state} "
@@ -220,7 +220,7 @@ class CommandValidator:
         the reference it holds when the command arrives)."""
         m, c, ws = self.model, self.model.control, self.model.workspace
         if "position" not in d:
-            raise CommandError("move: position (m, base frame) is required")
+            raise CommandError("position (m, base frame) is required")
         p = _vector(d, "position", "m")
         rpy = _vector(d, "rpy", "rad") if "rpy" in d else np.array(m.home.rpy, dtype=float)
         for k, a in enumerate(rpy):  # 30 typed for degrees wrapped to 1.4159 rad unsaid
