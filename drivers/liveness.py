@@ -61,6 +61,7 @@ class Liveness:
         # their own, and a simulator starved by a busy machine must not pass for a silent drive
         self.drives_ran_at: np.ndarray | None = None
         self.stalled_reads = np.zeros(1, dtype=np.int64)  # reads whose silence was excused
+        self.stall = 0.0  # s: the simulated drives' stall at the last read (``drives_stall``)
 
     @classmethod
     def of_winches(cls, cables: Sequence[Any], period: float, stats: DriverStats,
@@ -93,7 +94,8 @@ class Liveness:
         nothing; the first read: one period)."""
         gap = t - self.last_read if math.isfinite(self.last_read) else self.period
         self.last_read = t
-        if self.drives_stall(t) > 0.0:  # deaf, not silent: the simulator was not run
+        self.stall = self.drives_stall(t)  # once a read: the gap and the heartbeat's timeout
+        if self.stall > 0.0:  # deaf, not silent: the simulator was not run
             add_count(self.stalled_reads, 0, 1)
             return 0.0
         return min2(max2(gap, 0.0), 2.0 * self.period)
@@ -113,7 +115,7 @@ class Liveness:
         ages into ``states``; True when a cable is past a limit (``error`` says which)."""
         missed, late = liveness_kernel(
             self.fresh, self.fb_stamp, self.missed, self.silent, self.last_hb, t, gap,
-            self.started, self.feedback_timeout, self.heartbeat_timeout + self.drives_stall(t),
+            self.started, self.feedback_timeout, self.heartbeat_timeout + self.stall,
             states.feedback_age, states.sampled_at,
         )  # fmt: skip
         if missed:
@@ -157,7 +159,7 @@ class Liveness:
         if (
             self.started
             and math.isfinite(self.last_hb[c])
-            and t - self.last_hb[c] > self.heartbeat_timeout + self.drives_stall(t)
+            and t - self.last_hb[c] > self.heartbeat_timeout + self.stall
         ):
             return DriverTimeoutError(
                 f"{where} lost: no heartbeat for {t - self.last_hb[c]:.3f} s "

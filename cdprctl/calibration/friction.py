@@ -136,6 +136,12 @@ def null_projectors(W: np.ndarray, r: np.ndarray) -> np.ndarray:
     return np.eye(m)[None] - U @ np.swapaxes(U, 1, 2)
 
 
+def pulley_decided(mu: float, sd: float) -> bool:
+    """Whether the data decide a pulley's μ fitted as ``mu`` ± ``sd``: its σ within
+    ``PULLEY_DECIDED`` of it (of ``PULLEY_FLOOR`` where it is smaller)."""
+    return sd <= PULLEY_DECIDED * max(abs(mu), PULLEY_FLOOR)
+
+
 def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarray,
                 acceleration: np.ndarray, torque: np.ndarray, noise: np.ndarray,
                 wrap: np.ndarray) -> list[WinchFriction]:  # fmt: skip
@@ -164,7 +170,7 @@ def fit_winches(s: np.ndarray, line: np.ndarray, Q: np.ndarray, speed: np.ndarra
         decided = []
         for i in (int(x) for x in np.flatnonzero(pulleys)):
             mu, sd = float(cp[i, -1]), float(np.sqrt(covp[i * (p + 1) + p, i * (p + 1) + p]))
-            if sd <= PULLEY_DECIDED * max(abs(mu), PULLEY_FLOOR):
+            if pulley_decided(mu, sd):
                 decided.append(i)
                 pulley[i], pulley_std[i] = mu, sd
             else:
@@ -229,7 +235,7 @@ def fit_measured(s: np.ndarray, line: np.ndarray, speed: np.ndarray, acceleratio
     pulley, pulley_sd, note = None, None, "" if wrapped else "no pulley"
     if wrapped:
         mu, mu_sd = float(c[-1]), float(sd[-1])
-        if mu_sd <= PULLEY_DECIDED * max(abs(mu), PULLEY_FLOOR):
+        if pulley_decided(mu, mu_sd):
             pulley, pulley_sd = mu, mu_sd
         else:
             note = f"not decided by the data: μ = {mu:.3f} ± {mu_sd:.3f}"

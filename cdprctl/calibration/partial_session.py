@@ -57,24 +57,27 @@ def save(partial: PartialSession, state_dir: Path) -> Path:
 def load(state_dir: Path, kind: str) -> PartialSession:
     """The partial session of ``kind`` in ``state_dir``; :class:`PartialSessionError`."""
     path = path_of(state_dir, kind)
-    data = read_json(path, FORMAT, "stopped session to resume", PartialSessionError)
-    fields = {f.name for f in dataclasses.fields(PartialSession)}
-    try:
-        partial = PartialSession(**{k: v for k, v in data.items() if k in fields})
-    except TypeError as exc:
-        raise PartialSessionError(f"{path}: {exc}") from None
+    partial = _read(path)
     if partial.kind != kind:
         raise PartialSessionError(f"{path}: a {partial.kind} session, not a {kind} one")
     return partial
+
+
+def _read(path: Path) -> PartialSession:
+    """The partial session at ``path``, of whichever kind; :class:`PartialSessionError`."""
+    data = read_json(path, FORMAT, "stopped session to resume", PartialSessionError)
+    fields = {f.name for f in dataclasses.fields(PartialSession)}
+    try:
+        return PartialSession(**{k: v for k, v in data.items() if k in fields})
+    except TypeError as exc:
+        raise PartialSessionError(f"{path}: {exc}") from None
 
 
 def keep_in_data(path: Path, key: str, value: Any) -> None:
     """``value`` under ``key`` in the procedure's data of the partial session at ``path``
     (what a resume found that a later one could no longer see: a drive's reset, which the
     refused resume's own set-up clears)."""
-    stored = read_json(path, FORMAT, "stopped session to resume", PartialSessionError)
-    fields = {f.name for f in dataclasses.fields(PartialSession)}
-    partial = PartialSession(**{k: v for k, v in stored.items() if k in fields})
+    partial = _read(path)
     partial.data[key] = value
     write_json(path, FORMAT, partial)
 
