@@ -16,17 +16,21 @@ def moves_held(model: Any, realtime: bool, log: Callable[[str], None]) -> Iterat
     loop's CPU (a late cycle is a tension spike on stiff cables: rowc's moves stopped short,
     a following error). Given back after."""
     from cdprctl.core import realtime as rt
+    from cdprctl.core.cpu_idle import CpuWakeupLatency
 
+    awake = CpuWakeupLatency()
     try:
         for w in rt.lock_memory_and_freeze_gc(False, model.control.freeze_gc):
             log(f"cdprctl calibrate: warning: {w}")
         if realtime:
-            for w in rt.schedule_realtime(model.control.sched_priority, model.control.cpu):
+            for w in (*rt.schedule_realtime(model.control.sched_priority, model.control.cpu),
+                      *awake.hold(model.control.cpu_wakeup_latency)):  # fmt: skip
                 log(f"cdprctl calibrate: warning: {w}")
         yield
     finally:
         if realtime:
             rt.leave_realtime()
+        awake.release()
         rt.restore_gc()
 
 

@@ -29,6 +29,7 @@ from cdprctl.control.lifecycle.loop import LoopStats
 from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.control.states import State
 from cdprctl.core import realtime as rt
+from cdprctl.core.cpu_idle import CpuWakeupLatency
 from cdprctl.daemon.links import Links, links_of
 from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script
@@ -176,8 +177,10 @@ class Daemon:
         self.say(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
         notify("READY=1")
+        awake = CpuWakeupLatency()
         if self.realtime:  # the helper threads started below leave the loop's CPU and priority
-            for w in rt.schedule_realtime(m.control.sched_priority, m.control.cpu):
+            for w in (*rt.schedule_realtime(m.control.sched_priority, m.control.cpu),
+                      *awake.hold(m.control.cpu_wakeup_latency)):  # fmt: skip
                 self.say(f"warning: {w}", err=True)
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip
@@ -191,6 +194,7 @@ class Daemon:
         finally:
             if self.realtime:
                 rt.leave_realtime()
+            awake.release()
             if wd is not None:
                 wd.stop()
             if self.timing_file:

@@ -52,7 +52,9 @@ SAFETY_KEYS = (
     "max_fk_residual",
     "max_tension_disagreement",
 )
-REALTIME_KEYS = ("sleep_margin", "sched_priority", "cpu", "lock_memory", "freeze_gc")
+REALTIME_KEYS = (
+    "sleep_margin", "sched_priority", "cpu", "lock_memory", "freeze_gc", "cpu_wakeup_latency",
+)
 METHODS = ("pinv", "closed-form", "barycenter", "min-2-norm", "min-1-norm", "sotda", "energy", "qp")
 
 
@@ -118,6 +120,9 @@ class ControlConfig:
     cpu: int = -1  # CPU to pin the loop to; -1: the last one
     lock_memory: bool = True
     freeze_gc: bool = True
+    # s: the idle CPUs' longest wake-up while the loop runs (the kernel's PM QoS request, as
+    # cyclictest makes it; core/cpu_idle.py); negative: the machine's idle states left alone
+    cpu_wakeup_latency: float = 0.0
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -161,6 +166,7 @@ REALTIME_FIELDS = (
     Number("cpu", "", minimum=-1, integer=True),
     Flag("lock_memory"),
     Flag("freeze_gc"),
+    Number("cpu_wakeup_latency", "s", minimum=-1.0, maximum=0.01),
 )
 
 

@@ -12,10 +12,12 @@ import re
 import shutil
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -161,6 +163,18 @@ def test_daemon_bad_config_exit_code(tmp_path, capsys):
     bad.write_text((CONFIG / "rowc.toml").read_text().replace("mass = 8.0", "mass = -8.0"))
     assert main(["run", "--config", str(bad), "--sim"]) == 1
     assert "platform.mass = -8 kg must be > 0" in capsys.readouterr().err
+
+
+def test_the_udev_rule_opens_the_wake_up_latency_to_the_units_group():
+    """systemd/99-cdprctl.rules: the device the daemon holds (core/cpu_idle.py), writable by
+    the group the unit runs as — a rule naming another device or group grants nothing."""
+    from cdprctl.core.cpu_idle import PM_QOS_DEVICE
+
+    unit = (ROOT / "systemd" / "cdprctl.service").read_text()
+    (group,) = re.findall(r"^Group=(\S+)$", unit, re.M)
+    rules = [line for line in (ROOT / "systemd" / "99-cdprctl.rules").read_text().splitlines()
+             if line.strip() and not line.startswith("#")]  # fmt: skip
+    assert rules == [f'KERNEL=="{Path(PM_QOS_DEVICE).name}", GROUP="{group}", MODE="0660"']
 
 
 def test_unit_file_verifies(tmp_path):
@@ -377,13 +391,16 @@ def test_a_stop_signal_a_library_swallowed_still_ends_the_start_up():
     assert signal.getsignal(signal.SIGTERM) is previous[signal.SIGTERM]
 
 
-def test_the_loop_alone_runs_at_sched_fifo():
+def test_the_loop_alone_runs_at_sched_fifo(tmp_path):
     """The start-up (a minute of compiles on a first run) and the shut-down run at the normal
     scheduler; only the loop at SCHED_FIFO, pinned (a start-up at FIFO held a second daemon's
-    loop on the same CPU for 0.7 s: a lost heartbeat, a fault)."""
+    loop on the same CPU for 0.7 s: a lost heartbeat, a fault), and only the loop holds the
+    CPUs' wake-up latency (cdprctl/core/cpu_idle.py)."""
     from cdprctl.control.lifecycle.manager import ControllerManager
+    from cdprctl.core import cpu_idle
     from cdprctl.daemon.service import Daemon
     from cdprctl.robot_file import load_robot
+    from tests.core.test_cpu_idle import open_on
 
     seen: dict[str, int] = {}
     model = load_robot(CONFIG / "rowc.toml")  # not the test process's memory locked for good
@@ -396,8 +413,12 @@ def test_the_loop_alone_runs_at_sched_fifo():
         seen["start-up"] = os.sched_getscheduler(0)
         return startup(self, *a, **k)
 
+    device = tmp_path / "cpu_dma_latency"
+    device.write_bytes(b"")
+
     def watched_run(self, *a, **k):
         seen["loop"] = os.sched_getscheduler(0)
+        seen["awake in the loop"] = open_on(device)
         return run(self, *a, **k)
 
     shutdown = d.driver.shutdown
@@ -405,9 +426,11 @@ def test_the_loop_alone_runs_at_sched_fifo():
     def watched_shutdown() -> None:  # right after the loop
         seen["shut-down"] = os.sched_getscheduler(0)
         seen["cpus"] = len(os.sched_getaffinity(0))
+        seen["awake after"] = open_on(device)
         shutdown()
 
     with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cpu_idle, "PM_QOS_DEVICE", str(device))
         mp.setattr(ControllerManager, "startup", watched_startup)
         mp.setattr(ControllerManager, "run", watched_run)
         mp.setattr(d.driver, "shutdown", watched_shutdown)
@@ -416,6 +439,8 @@ def test_the_loop_alone_runs_at_sched_fifo():
         finally:
             rt.leave_realtime()
     assert seen["start-up"] == os.SCHED_OTHER
+    assert seen["awake in the loop"] and not seen["awake after"]
+    assert device.read_bytes() == struct.pack("=i", 0)  # the default: the CPUs never halt
     if seen["loop"] != os.SCHED_FIFO:
         pytest.skip("SCHED_FIFO not permitted here")
     assert seen["shut-down"] == os.SCHED_OTHER and seen["cpus"] == len(rt.ALLOWED_CPUS)
