@@ -30,6 +30,7 @@ from cdprctl.calibration.friction import (
     null_projectors,
     refusal,
 )
+from cdprctl.calibration.friction_progress import FrictionProgress, FrictionStoppedError
 from cdprctl.calibration.geometry_moves import RETREAT_SPEED, GoalOf, motor_goals, move
 from cdprctl.calibration.geometry_plan import (
     PATH_MARGIN,
@@ -44,6 +45,7 @@ from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.limits import SoftLimits
 from drivers.base import WinchDriver
+from drivers.errors import DriverError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +140,9 @@ def motion_of(theta: np.ndarray, t: np.ndarray, period: float) -> tuple[np.ndarr
 
     n = max(5, round(MOTION_WINDOW / period) | 1)
     w, a = np.zeros_like(theta), np.zeros_like(theta)
-    cuts = np.flatnonzero(np.diff(t) > 1.5 * period) + 1
+    # a run resumed in another process: its clock restarted (or went on, far later)
+    step = np.diff(t)
+    cuts = np.flatnonzero((step > 1.5 * period) | (step <= 0.0)) + 1
     for k in np.split(np.arange(len(t)), cuts):
         if len(k) >= n:
             w[k] = savgol_filter(theta[k], n, 3, deriv=1, delta=period, axis=0)
@@ -158,27 +162,31 @@ def _where(theta: np.ndarray, grid: np.ndarray) -> np.ndarray:
 
 
 def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.ndarray,
-                       start: np.ndarray, opt: FrictionOptions | None = None,
-                       log: Callable[[str], None] = print) -> FrictionCalibration:  # fmt: skip
-    """From the platform at rest at ``start`` (6: m, rotation vector from home) with the
+                       here: np.ndarray, opt: FrictionOptions | None = None,
+                       log: Callable[[str], None] = print,
+                       kept: FrictionProgress | None = None) -> FrictionCalibration:  # fmt: skip
+    """From the platform at rest at ``here`` (6: m, rotation vector from home) with the
     encoders' zeros ``theta_zero`` (rad, the calibration record's): the moves, the samples,
-    the fits. Raises :class:`CalibrationFailedError` (drives disabled) when a move stops and
-    the way back does too, or the drives fault; a fit refused comes back with ``accepted``
-    False and the reason."""
+    the fits; ``kept``: a stopped run's (``--resume``: its lines, from its start, which the
+    platform goes back to first; its round trips not made again). Raises
+    :class:`FrictionStoppedError` (drives disabled, what was measured in it) when a move
+    stops and the platform went back, the way back stops too, or the drives fault; a fit
+    refused comes back with ``accepted`` False and the reason."""
     opt = opt or FrictionOptions()
-    ends = choose_lines(model, start, opt.travel, opt.lines)
+    start = kept.start if kept is not None else here
+    ends = kept.ends if kept is not None else choose_lines(model, start, opt.travel, opt.lines)
     ses = Session(model, driver, log)
     ses.t_stop_low, ses.t_stop_high = tension_bounds(model, STOP_MARGIN)
     kin = KinematicsData(model)
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     goal_of = motor_goals(model, theta_zero, kin.length.copy(), ses.ratio)
     grids = [_grid(model, goal_of, start, end) for end in ends]
+    plan = [(j, v) for j in range(len(ends)) for v in opt.speeds for _ in range(opt.repeats)]
     log(f"friction calibration: out and back along {len(ends)} lines of up to "
         f"{opt.travel:g} m from [{start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f}] m, "
         f"{opt.repeats}x at each of {', '.join(f'{v:g}' for v in opt.speeds)} m/s")  # fmt: skip
     # per cycle: line, time, motor angles, speeds, torques, the cells' tensions (NaN: none)
     rows: list[np.ndarray] = []
-    m = model.n_cables
     on = [0]
 
     def sample(_: float) -> None:
@@ -186,31 +194,89 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
         rows.append(np.r_[on[0], driver.clock(), st.position, st.velocity, st.torque,
                           st.tension])  # fmt: skip
 
-    moved = 0.0
+    progress = kept
+    k = kept.done if kept is not None else 0
     try:
-        ses.tension_goal[:] = goal_of(start)[1]
+        ses.tension_goal[:] = goal_of(here)[1]
         ses.enable()
         ses.run(opt.settle_time)
-        rest: list[np.ndarray] = []
-
-        def at_rest(_: float) -> None:
-            rest.append(ses.states.torque.copy())
-
-        ses.run(opt.noise_time, at_rest)
-        noise = np.std(np.array(rest), axis=0)
-        for j, end in enumerate(ends):
+        if progress is None:
+            progress = FrictionProgress(start.copy(), ends, _noise_at_rest(ses, opt),
+                                        np.empty((0, 2 + 4 * model.n_cables)))  # fmt: skip
+        else:
+            log(f"  resumed: {progress.done} of {len(plan)} round trips kept "
+                f"({progress.samples} samples)")  # fmt: skip
+            _to_start(ses, model, here, start, goal_of, opt.speeds[0])
+        for k in range(progress.done, len(plan)):
+            j, v = plan[k]
             on[0] = j
-            for v in opt.speeds:
-                g = dataclasses.replace(GeometryOptions.of(model), speed=v)
-                for _ in range(opt.repeats):
-                    for a, b in ((start, end), (end, start)):
-                        moved += _leg(ses, a, b, goal_of, g, sample, start)
-                        ses.run(opt.settle_time)
-            log(f"  line {j + 1}/{len(ends)} to [{end[0]:.3f}, {end[1]:.3f}, {end[2]:.3f}] m "
-                "done")  # fmt: skip
+            g = dataclasses.replace(GeometryOptions.of(model), speed=v)
+            took = 0.0
+            for a, b in ((start, ends[j]), (ends[j], start)):
+                took += _leg(ses, a, b, goal_of, g, sample, start)
+                ses.run(opt.settle_time)
+            progress.rows = np.vstack([progress.rows, np.array(rows)])
+            rows.clear()
+            progress.done, progress.moved = k + 1, progress.moved + took
+            if k + 1 == len(plan) or plan[k + 1][0] != j:
+                log(f"  line {j + 1}/{len(ends)} to [{ends[j][0]:.3f}, {ends[j][1]:.3f}, "
+                    f"{ends[j][2]:.3f}] m done")  # fmt: skip
+    except (DriverError, CalibrationFailedError) as exc:
+        at = (f"round trip {k + 1} of {len(plan)} (line {plan[k][0] + 1}, {plan[k][1]:g} m/s)"
+              if progress is not None else "the start (the torques' noise at rest)")
+        raise stopped(exc, progress, ses, at) from None
     finally:
         ses.close()
-    data = np.array(rows)
+    return _fitted(model, driver, ses, progress, grids)
+
+
+def _noise_at_rest(ses: Session, opt: FrictionOptions) -> np.ndarray:
+    """The torques' standard deviation (N·m per winch) over ``opt.noise_time`` at rest."""
+    rest: list[np.ndarray] = []
+
+    def at_rest(_: float) -> None:
+        rest.append(ses.states.torque.copy())
+
+    ses.run(opt.noise_time, at_rest)
+    return np.std(np.array(rest), axis=0)
+
+
+def _to_start(ses: Session, model: RobotModel, here: np.ndarray, start: np.ndarray,
+              goal_of: GoalOf, speed: float) -> None:  # fmt: skip
+    """A resumed run's platform from where it stands (``here``) back to its lines' start, at
+    the slowest speed, where the model holds the way there (else refused: the platform was
+    moved since the stop)."""
+    far = float(np.linalg.norm(here[:3] - start[:3]))
+    if far < 1e-3:
+        return
+    if not line_is_held(model, KinematicsData(model), here, start,
+                        tension_bounds(model, PATH_MARGIN)):  # fmt: skip
+        raise CalibrationFailedError(
+            f"the platform stands {far * 1e3:.0f} mm from the stopped run's start "
+            f"[{start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f}] m and the way there nears a "
+            "tension limit: bring it nearer, or start over without --resume")  # fmt: skip
+    g = dataclasses.replace(GeometryOptions.of(model), speed=speed)
+    move(ses, here, start, goal_of, g, stop=False)
+    ses.run(0.5)
+
+
+def stopped(exc: Exception, progress: FrictionProgress | None, ses: Session,
+            at: str) -> FrictionStoppedError:  # fmt: skip
+    """``exc`` (a :class:`CalibrationFailedError` or a driver's error) as a stop that keeps
+    ``progress`` (the round trips done), with what points at the machine's load."""
+    from cdprctl.calibration.partial_session import timing_cause
+
+    cause = timing_cause(ses.driver.error, ses.missed_periods, ses.cycles)
+    if progress is not None:
+        progress.stopped_theta = np.array(ses.states.position, float)
+    return FrictionStoppedError(str(exc), progress, at, cause)
+
+
+def _fitted(model: RobotModel, driver: WinchDriver, ses: Session, progress: FrictionProgress,
+            grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> FrictionCalibration:
+    """Each winch's friction fitted on every sample of ``progress``."""
+    m, noise = model.n_cables, progress.noise
+    data = progress.rows
     line, t, theta = data[:, 0].astype(int), data[:, 1], data[:, 2 : 2 + m]
     tau, cell = data[:, 2 + 2 * m : 2 + 3 * m], data[:, 2 + 3 * m :]
     s = np.zeros(len(t))
@@ -231,8 +297,9 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
                       limit, wrap, i)
             if i in cells else projected[i] for i in range(m)]  # fmt: skip
     why = refusal([c.name for c in model.cables], fits)
-    return FrictionCalibration(fits, start.tolist(), [e.tolist() for e in ends], moved,
-                               not why, why or "accepted")  # fmt: skip
+    return FrictionCalibration(fits, progress.start.tolist(),
+                               [e.tolist() for e in progress.ends], progress.moved, not why,
+                               why or "accepted")  # fmt: skip
 
 
 #: a cable's cell heard at this fraction of the samples at least: its winch fitted on it

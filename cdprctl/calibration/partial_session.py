@@ -20,6 +20,7 @@ FILES = {
     "geometry": "calibration-geometry.partial.json",
     "self": "calibration-self.partial.json",
     "brake-test": "brake_test.partial.json",
+    "friction": "calibration-friction.partial.json",
 }
 # the docs a timing fault points at: the machine's load, not the robot
 REALTIME_DOCS = 'docs/control.md, "Real time" and "Late and missed periods"'

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from cdprctl.calibration.friction_progress import FrictionProgress
 from cdprctl.calibration.session import CalibrationFailedError
 
 
@@ -103,10 +104,11 @@ def stopped(exc: Exception, progress: Progress, ses: Any, at: str) -> Calibratio
 MOVED_SINCE_STOP = 0.05
 
 
-def check_reference(model: Any, driver: Any, progress: Progress, identities: list[Any],
-                    path: Any) -> str:  # fmt: skip
+def check_reference(model: Any, driver: Any, progress: Progress | FrictionProgress,
+                    identities: list[Any], path: Any) -> str:  # fmt: skip
     """"" when the drives, configured, read on the encoder reference ``progress``'s samples
-    were taken on (``path``: its file), else why not, in one line: a drive exchanged
+    (a calibration's or a friction calibration's) were taken on (``path``: its file), else
+    why not, in one line: a drive exchanged
     (0x1018), reset since the stop (``reset_since_setup``: an incremental counter restarted),
     or a motor reading more than ``MOVED_SINCE_STOP`` of cable from where the stop left it."""
     from cdprctl.calibration.partial_session import (

@@ -7,6 +7,7 @@ simulated robot in this process (lock-step), each winch's friction drawn off the
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from typing import Any
@@ -14,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.calibrating import WHO, moves_held
-from cdprctl.commands.records import bus_and_records
+from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, records_dir
 
 
 def add_arguments(fp: Any) -> None:
@@ -32,12 +33,34 @@ def add_arguments(fp: Any) -> None:
     fp.add_argument("--json", action="store_true", help="print the result as JSON")
     fp.add_argument("--no-realtime", action="store_true",
                     help="do not ask for SCHED_FIFO and CPU pinning while it moves")
+    fp.add_argument("--resume", action="store_true",
+                    help="go on from a run stopped midway (its round trips kept in the state "
+                    "directory), with the robot file and options it was started with")
+
+
+KIND = "friction"
+# what a stopped run's samples were measured with, and where each is set
+WHERE = {"travel": "--travel", "plant_errors": "--plant-errors",
+         "pulley_friction": "--pulley-friction",
+         "encoder_zeros": "the calibration record's (a homing since the stop)"}  # fmt: skip
+
+
+def plan_of(args: argparse.Namespace, opt: Any, theta_zero: np.ndarray) -> dict[str, Any]:
+    """What the samples follow: the moves' options, the encoders' zeros they were taken on
+    and, with --sim, the simulated robot's friction."""
+    plan = {**dataclasses.asdict(opt), "encoder_zeros": [float(x) for x in theta_zero]}
+    plan["speeds"] = list(plan["speeds"])
+    if args.sim:
+        plan.update(plant_errors=args.plant_errors, pulley_friction=args.pulley_friction)
+    return plan
 
 
 def run_friction(args: argparse.Namespace, model: Any) -> int:
     """Exit 0 accepted (the record updated, unless --sim), 1 refused or stopped (the reason in
     one line), 2 bad options, 4 the state directory cannot take the record."""
     from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
+    from cdprctl.calibration.friction_progress import FrictionStoppedError
+    from cdprctl.calibration.partial_session import path_of, remove
     from cdprctl.calibration.session import CalibrationFailedError
     from drivers.errors import DriverError
 
@@ -50,21 +73,32 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
         return 2
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
     opt = FrictionOptions(travel=args.travel)
-    sim, driver, record, state_dir = None, None, None, None
+    sim, driver, record, state_dir, overrides = None, None, None, None, {}
     try:
         if args.sim:
+            state_dir = records_dir(WHO, model.name, args.state_dir, True)
+            if state_dir is None:
+                return EXIT_STATE_DIR
             sim = _lockstep(args, model)
             driver = sim.driver
             driver.configure()
             theta_zero = np.zeros(model.n_cables)
-            start = np.r_[model.home.position, 0.0, 0.0, 0.0]
+            here = np.r_[model.home.position, 0.0, 0.0, 0.0]
         else:
             got = _on_the_robot(args, model, log)
             if isinstance(got, int):
                 return got
-            driver, record, state_dir, theta_zero, start = got
+            driver, record, state_dir, overrides, theta_zero, here = got
+        kept = _kept(args, model, driver, state_dir, plan_of(args, opt, theta_zero), log)
+        if isinstance(kept, int):
+            return kept
         with moves_held(model, not (args.no_realtime or args.sim), log):
-            cal = friction_calibrate(model, driver, theta_zero, start, opt, log)
+            cal = friction_calibrate(model, driver, theta_zero, here, opt, log, kept)
+    except FrictionStoppedError as exc:
+        simulated = args.sim or bool(record is not None and record.simulated)
+        _stopped(args, model, exc, state_dir, simulated, driver, overrides,
+                 plan_of(args, opt, theta_zero))  # fmt: skip
+        return 1
     except (DriverError, CalibrationFailedError) as exc:
         print(f"{WHO}: failed: {exc}", file=sys.stderr)
         return 1
@@ -73,7 +107,66 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
             sim.close()
         elif driver is not None:
             driver.shutdown()
+    if state_dir is not None and remove(state_dir, KIND):
+        log(f"{WHO}: completed: the stopped run's samples ({path_of(state_dir, KIND)}) removed")
     return _report(args, model, cal, record, state_dir, sim, log)
+
+
+def _kept(args: argparse.Namespace, model: Any, driver: Any, state_dir: Any,
+          plan: dict[str, Any], log: Any) -> Any:  # fmt: skip
+    """A stopped run's progress with ``--resume`` (None without), checked against this robot
+    file, these options and these drives; else the exit code after one line."""
+    from cdprctl.calibration.calibration_record import geometry_hash
+    from cdprctl.calibration.friction_progress import FrictionProgress
+    from cdprctl.calibration.partial_session import clear_latched_fault, path_of
+    from cdprctl.calibration.progress import check_reference
+    from cdprctl.commands.resume import load_to_resume, replaced_warning
+
+    if not args.resume:
+        replaced_warning(state_dir, KIND, log, WHO)
+        return None
+    partial = load_to_resume(WHO, state_dir, KIND, model.name, geometry_hash(model), plan,
+                             WHERE)  # fmt: skip
+    if partial is None:
+        return 2
+    progress = FrictionProgress.from_data(partial.data, partial.started)
+    log(f"{WHO}: {model.name}, friction: resuming the run stopped at {partial.stopped_at} "
+        f"({progress.done} round trips, {progress.samples} samples kept)")  # fmt: skip
+    clear_latched_fault(driver, log, WHO)
+    if args.sim:  # a new simulated robot at home each run, its zeros there: the same reference
+        return progress
+    if why := check_reference(model, driver, progress, partial.identities,
+                              path_of(state_dir, KIND)):  # fmt: skip
+        print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+        return 1
+    return progress
+
+
+def _stopped(args: argparse.Namespace, model: Any, exc: Any, state_dir: Any, simulated: bool,
+             driver: Any, overrides: dict[str, Any], plan: dict[str, Any]) -> None:  # fmt: skip
+    """A run stopped midway: the round trips made kept, one line."""
+    from cdprctl.commands.resume import keep, new_partial, resume_command, stopped_line
+
+    p = exc.progress
+    done = p.done if p is not None else 0
+    data = p.to_data() if p is not None else {}
+    partial = new_partial(KIND, model, plan, str(exc), exc.at, done, data,
+                          p.started if p is not None else 0.0, simulated,
+                          list(getattr(driver, "identities", [])))  # fmt: skip
+    words = f"{done} round trips ({p.samples if p is not None else 0} samples)"
+    kept = keep(WHO, state_dir, partial, words)
+    resume = resume_command(WHO, args, overrides, _options_again(args))
+    print(stopped_line(WHO, exc.at, str(exc), kept, exc.cause, resume,
+                       kept.startswith(words + " kept")), file=sys.stderr)  # fmt: skip
+
+
+def _options_again(args: argparse.Namespace) -> str:
+    """``friction`` and the options of this run that its resume must be given again."""
+    given = [("--sim", args.sim), (f"--plant-errors {args.plant_errors}", args.plant_errors
+             is not None), (f"--pulley-friction {args.pulley_friction}",
+             args.pulley_friction is not None), (f"--travel {args.travel:g}", args.travel != 0.4),
+             ("--no-realtime", args.no_realtime)]  # fmt: skip
+    return " ".join(["friction", *(text for text, on in given if on)])
 
 
 def _lockstep(args: argparse.Namespace, model: Any) -> Any:
@@ -96,9 +189,9 @@ def _lockstep(args: argparse.Namespace, model: Any) -> Any:
 
 
 def _on_the_robot(args: argparse.Namespace, model: Any, log: Any) -> Any:
-    """(driver, record, state directory, the encoders' zeros, the start pose) on the robot
-    over its buses, the drives configured and checked against the record; an exit code after
-    one line when it cannot go on."""
+    """(driver, record, state directory, bus overrides, the encoders' zeros, where the
+    platform stands) on the robot over its buses, the drives configured and checked against
+    the record; an exit code after one line when it cannot go on."""
     from cdprctl.calibration.calibration_record import CalibrationError
     from cdprctl.calibration.startup_checks import (
         check_drives,
@@ -128,7 +221,8 @@ def _on_the_robot(args: argparse.Namespace, model: Any, log: Any) -> Any:
         print(f"{WHO}: error: {exc}", file=sys.stderr)
         return 1
     theta_zero, scale = offsets(record)
-    return driver, record, state_dir, theta_zero, _start_pose(model, driver, theta_zero, scale)
+    return (driver, record, state_dir, overrides, theta_zero,
+            _start_pose(model, driver, theta_zero, scale))
 
 
 def _start_pose(model: Any, driver: Any, theta_zero: np.ndarray,

@@ -302,15 +302,10 @@ def test_a_resume_on_another_robot_file_or_with_other_options_is_refused_in_one_
         ROWC, "--travel", "0.04", method="self")  # fmt: skip
 
 
-def test_a_brake_test_stopped_after_cable_3_resumes_at_cable_4(tmp_path, monkeypatch, capsys):
-    """`cdprctl brake-test --sim`, a drive fault while cable 4's brake is under its test
-    torque: exit 1, one line — cables 1-3 kept, the command that resumes; on another robot
-    file (another hold) that command is refused in one line; as given, it tests cables 4 to 8
-    only, the record holds all eight (the first three those kept, dated from the first test:
-    the interval counts from it) and the stopped test's file is removed."""
+def lock_steps_recorded(monkeypatch) -> list:
+    """Every lock-step simulated robot a command makes from now, in order (a ``--sim``
+    command makes its own: a test reaches its bus through this list)."""
     import sim_backend.network
-    from cdprctl.safety.brake_record import load
-    from cdprctl.safety.brake_test import BrakeTest
 
     made: list = []
 
@@ -320,6 +315,19 @@ def test_a_brake_test_stopped_after_cable_3_resumes_at_cable_4(tmp_path, monkeyp
             made.append(self)
 
     monkeypatch.setattr(sim_backend.network, "LockStep", Recorded)
+    return made
+
+
+def test_a_brake_test_stopped_after_cable_3_resumes_at_cable_4(tmp_path, monkeypatch, capsys):
+    """`cdprctl brake-test --sim`, a drive fault while cable 4's brake is under its test
+    torque: exit 1, one line — cables 1-3 kept, the command that resumes; on another robot
+    file (another hold) that command is refused in one line; as given, it tests cables 4 to 8
+    only, the record holds all eight (the first three those kept, dated from the first test:
+    the interval counts from it) and the stopped test's file is removed."""
+    from cdprctl.safety.brake_record import load
+    from cdprctl.safety.brake_test import BrakeTest
+
+    made = lock_steps_recorded(monkeypatch)
     one = BrakeTest._one
 
     def faulted_after_cable_3(self, c, name):
