@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import gc
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -173,7 +174,13 @@ def ab_arguments(**more: tuple[type, object]) -> argparse.Namespace:
 @contextlib.contextmanager
 def busy_processes(n: int) -> Iterator[None]:
     """``n`` busy Python processes at normal priority for the duration (the machine's other
-    work: a camera node, a build), killed at the end."""
+    work: a camera node, a build), killed at the end — a SIGTERM to the benchmark too (it
+    left them running, and every later measurement beside them)."""
+
+    def terminated(*_: object) -> None:
+        raise SystemExit(143)
+
+    old = signal.signal(signal.SIGTERM, terminated)
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
     try:
         yield
@@ -181,3 +188,4 @@ def busy_processes(n: int) -> Iterator[None]:
         for h in hogs:
             h.kill()
             h.wait()
+        signal.signal(signal.SIGTERM, old)

@@ -73,6 +73,9 @@ def test_energy_line_plot(capsys, tmp_path):
     "args,message",
     [
         (["--pose", "1,2,3"], "--pose = '1,2,3': needs 6 comma-separated numbers"),
+        (["--pose", "7,4,1.5,30,0,0"], "--pose = '7,4,1.5,30,0,0': roll = 30 is taken in "
+         "radians and is beyond pi; did you mean degrees? 30° = 0.5236 rad: write it 30deg"),
+        (["--pose", "7,4,x,0,0,0"], "--pose = '7,4,x': not numbers (m, m, m)"),
         (["--wrench", "0,0,nan,0,0,0"], "must be finite"),
         (["--method", "energy", "--impose", "9:energy=1"], "no cable '9'"),
         (["--method", "energy", "--impose", "1:power=1"], "quantity must be energy (J)"),
@@ -87,6 +90,15 @@ def test_bad_arguments_get_clear_errors(capsys, args, message):
     code = main(["tda", "--config", SEED, *args])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_pose_takes_its_angles_in_degrees_where_they_say_so(capsys):
+    """``--pose 7,4,1.5,30deg,0,0`` is the pose of 0.5236 rad (the Sensors 2019 one)."""
+    _, in_rad = run_json(capsys, "--config", SEED, "--pose", SEED_POSE, "--wrench",
+                         "200,0,0,-0.5,0,0")  # fmt: skip
+    _, in_deg = run_json(capsys, "--config", SEED, "--pose", "7,4,1.5,30deg,0,0", "--wrench",
+                         "200,0,0,-0.5,0,0")  # fmt: skip
+    assert in_deg["tensions"] == pytest.approx(in_rad["tensions"], abs=1e-9)
 
 
 def test_infeasible_wrench_exit_code(capsys):
