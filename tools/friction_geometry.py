@@ -24,6 +24,7 @@ from test_homing import robot_at
 from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
 from cdprctl.calibration.geometry_plan import GeometryOptions
 from cdprctl.calibration.geometry_procedure import geometry_calibrate
+from cdprctl.calibration.session import CalibrationFailedError
 from cdprctl.model.calibration import reference_anchors
 from cdprctl.model.robot import RobotModel
 from cdprctl.robot_file import load_robot
@@ -66,8 +67,11 @@ def geometry_line(name: str, model: RobotModel, truth: RobotModel, start: np.nda
                   poses: int) -> str:  # fmt: skip
     with robot_at(model, start, model.home.rotation, truth) as ls:
         ls.driver.configure()
-        cal = geometry_calibrate(model, ls.driver, GeometryOptions.of(model, poses=poses),
-                                 log=lambda s: None)  # fmt: skip
+        try:
+            cal = geometry_calibrate(model, ls.driver, GeometryOptions.of(model, poses=poses),
+                                     log=lambda s: None)  # fmt: skip
+        except CalibrationFailedError as exc:
+            return f"  controller with {name}: stopped: {exc}"
     r = cal.result
     err = np.max(np.linalg.norm(np.asarray(r.anchors) - np.asarray(truth.anchors), axis=1))
     return (f"  controller with {name}: accepted {cal.accepted}, equilibrium "
