@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from cdprctl.core.state_dir import default_state_dir
-from cdprctl.core.state_file import iso_utc, read_json, write_json
+from cdprctl.core.state_file import iso_utc, read_dataclass, write_json
 from cdprctl.model.robot import RobotModel
 
 __all__ = ["default_state_dir"]  # re-exported: where the daemon and the commands look
@@ -125,10 +125,5 @@ def save(record: CalibrationRecord, state_dir: Path) -> Path:
 
 def load(state_dir: Path) -> CalibrationRecord:
     """The record in ``state_dir``; :class:`CalibrationError` saying what is wrong."""
-    path = record_path(state_dir)
-    data = read_json(path, FORMAT, "calibration record", CalibrationError)
-    fields = {f.name for f in dataclasses.fields(CalibrationRecord)}
-    try:
-        return CalibrationRecord(**{k: v for k, v in data.items() if k in fields})
-    except TypeError as exc:
-        raise CalibrationError(f"{path}: {exc}") from None
+    return read_dataclass(CalibrationRecord, record_path(state_dir), FORMAT, "calibration record",
+                          CalibrationError)  # fmt: skip

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.core.state_file import iso_utc, read_json, write_json
+from cdprctl.core.state_file import iso_utc, read_dataclass, write_json
 from cdprctl.model.robot import RobotModel
 
 FILE_NAME = "load_cells.json"
@@ -96,12 +96,8 @@ def save(record: LoadCellRecord, state_dir: Path) -> Path:
 
 def load(state_dir: Path) -> LoadCellRecord:
     """The record in ``state_dir``; LoadCellError saying what is wrong."""
-    data = read_json(record_path(state_dir), FORMAT, "load cells' record", LoadCellError)
-    fields = {f.name for f in dataclasses.fields(LoadCellRecord)}
-    try:
-        return LoadCellRecord(**{k: v for k, v in data.items() if k in fields})
-    except TypeError as exc:
-        raise LoadCellError(f"{record_path(state_dir)}: {exc}") from None
+    return read_dataclass(LoadCellRecord, record_path(state_dir), FORMAT, "load cells' record",
+                          LoadCellError)  # fmt: skip
 
 
 def apply(record: LoadCellRecord, model: RobotModel, driver: Any) -> None:

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from cdprctl.core.state_file import read_json, write_json
+from cdprctl.core.state_file import read_dataclass, write_json
 
 FORMAT = 1
 # the file of each procedure (a kind), in the state directory
@@ -66,12 +66,8 @@ def load(state_dir: Path, kind: str) -> PartialSession:
 
 def _read(path: Path) -> PartialSession:
     """The partial session at ``path``, of whichever kind; :class:`PartialSessionError`."""
-    data = read_json(path, FORMAT, "stopped session to resume", PartialSessionError)
-    fields = {f.name for f in dataclasses.fields(PartialSession)}
-    try:
-        return PartialSession(**{k: v for k, v in data.items() if k in fields})
-    except TypeError as exc:
-        raise PartialSessionError(f"{path}: {exc}") from None
+    return read_dataclass(PartialSession, path, FORMAT, "stopped session to resume",
+                          PartialSessionError)  # fmt: skip
 
 
 def keep_in_data(path: Path, key: str, value: Any) -> None:

@@ -11,7 +11,9 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+T = TypeVar("T")
 
 
 def write_atomically(path: Path, text: str) -> Path:
@@ -54,6 +56,19 @@ def read_json(path: Path, fmt: int, what: str, error: type[Exception]) -> dict[s
     if not isinstance(data, dict) or data.pop("format", None) != fmt:
         raise error(f"{path}: not a {what} of format {fmt}")
     return data
+
+
+def read_dataclass(cls: type[T], path: Path, fmt: int, what: str,
+                   error: type[Exception]) -> T:  # fmt: skip
+    """The dataclass ``cls`` a state file of format ``fmt`` holds (``read_json``): its keys
+    that are fields of ``cls`` (a newer program's extra keys left out); ``error`` naming the
+    file when a field is missing or its value does not fit."""
+    data = read_json(path, fmt, what, error)
+    fields = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    try:
+        return cls(**{k: v for k, v in data.items() if k in fields})
+    except TypeError as exc:
+        raise error(f"{path}: {exc}") from None
 
 
 def iso_utc(t: float | None = None) -> str:
