@@ -21,15 +21,15 @@ import numpy as np
 from _tables import ROOT  # test_homing on the path
 from test_homing import robot_at
 
-from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
+from cdprctl.calibration.friction_procedure import FrictionOptions
+from cdprctl.calibration.friction_record import stored_terms
 from cdprctl.calibration.geometry_plan import GeometryOptions
 from cdprctl.calibration.geometry_procedure import geometry_calibrate
 from cdprctl.calibration.session import CalibrationFailedError
+from cdprctl.experiments.friction_on_plant import friction_on_plant
 from cdprctl.model.calibration import reference_anchors
 from cdprctl.model.robot import RobotModel
 from cdprctl.robot_file import load_robot
-from sim_backend.network import LockStep
-from sim_backend.plant import CdprPlant
 from sim_backend.plant_errors import PlantErrors
 
 
@@ -46,21 +46,15 @@ def friction_of(model: RobotModel) -> list[tuple[float, float, float]]:
     return [(x.viscous_friction, x.coulomb_friction, x.stribeck_friction) for x in w]
 
 
-def identified(model: RobotModel, truth: RobotModel, travel: float) -> list[tuple]:
-    """Each winch's friction as ``calibrate friction`` finds it on ``truth`` (at home); the
-    terms as the record keeps them (none below zero)."""
-    plant = CdprPlant(truth)
-    plant.set_pose(model.home.position, model.home.rotation, None)
-    with LockStep(model, plant=plant) as ls:
-        ls.driver.configure()
-        cal = friction_calibrate(model, ls.driver, np.zeros(model.n_cables),
-                                 np.r_[model.home.position, 0.0, 0.0, 0.0],
-                                 FrictionOptions(travel=travel), log=lambda s: None)  # fmt: skip
+def identified(model: RobotModel, truth: RobotModel, travel: float) -> list[tuple] | None:
+    """Each winch's friction as ``calibrate friction`` finds it on ``truth`` (at home), the
+    terms as the record keeps them; None when the fit is refused (said)."""
+    cal = friction_on_plant(model, truth, FrictionOptions(travel=travel))
     pairs = zip(cal.fits, friction_of(truth), strict=True)
     worst = max(abs(f.viscous / w[0] - 1.0) for f, w in pairs)
-    print(f"  friction identified: accepted {cal.accepted}, the worst viscous term "
-          f"{100 * worst:.1f} % off the plant's", flush=True)  # fmt: skip
-    return [(max(f.viscous, 0.0), max(f.coulomb, 0.0), max(f.stribeck, 0.0)) for f in cal.fits]
+    print(f"  friction identified: {'accepted' if cal.accepted else 'refused: ' + cal.reason}, "
+          f"the worst viscous term {100 * worst:.1f} % off the plant's", flush=True)  # fmt: skip
+    return [stored_terms(f) for f in cal.fits] if cal.accepted else None
 
 
 def geometry_line(name: str, model: RobotModel, truth: RobotModel, start: np.ndarray,
@@ -99,8 +93,9 @@ def main() -> None:
         for name, terms in (("the file's friction", friction_of(model)),
                             ("the friction identified", identified(model, truth, args.travel)),
                             ("the plant's friction", friction_of(truth))):  # fmt: skip
-            print(geometry_line(name, with_friction(model, terms), truth, start, args.poses),
-                  flush=True)  # fmt: skip
+            if terms is not None:
+                print(geometry_line(name, with_friction(model, terms), truth, start,
+                                    args.poses), flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -195,35 +195,33 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
                           st.tension])  # fmt: skip
 
     progress = kept
-    k = kept.done if kept is not None else 0
+    at = "the start (the torques' noise at rest)" if kept is None else "the way to the start"
     try:
         ses.tension_goal[:] = goal_of(here)[1]
         ses.enable()
         ses.run(opt.settle_time)
         if progress is None:
-            progress = FrictionProgress(start.copy(), ends, _noise_at_rest(ses, opt),
-                                        np.empty((0, 2 + 4 * model.n_cables)))  # fmt: skip
+            progress = FrictionProgress(start.copy(), ends, _noise_at_rest(ses, opt), [])
         else:
             log(f"  resumed: {progress.done} of {len(plan)} round trips kept "
                 f"({progress.samples} samples)")  # fmt: skip
-            _to_start(ses, model, here, start, goal_of, opt.speeds[0])
+            _to_start(ses, model, here, start, goal_of, min(opt.speeds), opt.settle_time)
         for k in range(progress.done, len(plan)):
             j, v = plan[k]
+            at = f"round trip {k + 1} of {len(plan)} (line {j + 1}, {v:g} m/s)"
             on[0] = j
             g = dataclasses.replace(GeometryOptions.of(model), speed=v)
             took = 0.0
             for a, b in ((start, ends[j]), (ends[j], start)):
                 took += _leg(ses, a, b, goal_of, g, sample, start)
                 ses.run(opt.settle_time)
-            progress.rows = np.vstack([progress.rows, np.array(rows)])
+            progress.trips.append(np.array(rows))
             rows.clear()
             progress.done, progress.moved = k + 1, progress.moved + took
             if k + 1 == len(plan) or plan[k + 1][0] != j:
                 log(f"  line {j + 1}/{len(ends)} to [{ends[j][0]:.3f}, {ends[j][1]:.3f}, "
                     f"{ends[j][2]:.3f}] m done")  # fmt: skip
     except (DriverError, CalibrationFailedError) as exc:
-        at = (f"round trip {k + 1} of {len(plan)} (line {plan[k][0] + 1}, {plan[k][1]:g} m/s)"
-              if progress is not None else "the start (the torques' noise at rest)")
         raise stopped(exc, progress, ses, at) from None
     finally:
         ses.close()
@@ -242,10 +240,11 @@ def _noise_at_rest(ses: Session, opt: FrictionOptions) -> np.ndarray:
 
 
 def _to_start(ses: Session, model: RobotModel, here: np.ndarray, start: np.ndarray,
-              goal_of: GoalOf, speed: float) -> None:  # fmt: skip
-    """A resumed run's platform from where it stands (``here``) back to its lines' start, at
-    the slowest speed, where the model holds the way there (else refused: the platform was
-    moved since the stop)."""
+              goal_of: GoalOf, speed: float, settle: float) -> None:  # fmt: skip
+    """A resumed run's platform from where it stands (``here``) back to its lines' start at
+    ``speed`` (m/s), where the model holds the way there (else refused: the platform was
+    moved since the stop), a tension nearing its limit stopping it (the way is new: the
+    nominal model's word on it is not the robot's); then ``settle`` s at rest."""
     far = float(np.linalg.norm(here[:3] - start[:3]))
     if far < 1e-3:
         return
@@ -256,8 +255,13 @@ def _to_start(ses: Session, model: RobotModel, here: np.ndarray, start: np.ndarr
             f"[{start[0]:.3f}, {start[1]:.3f}, {start[2]:.3f}] m and the way there nears a "
             "tension limit: bring it nearer, or start over without --resume")  # fmt: skip
     g = dataclasses.replace(GeometryOptions.of(model), speed=speed)
-    move(ses, here, start, goal_of, g, stop=False)
-    ses.run(0.5)
+    done, _ = move(ses, here, start, goal_of, g)
+    if done < 1.0:
+        raise CalibrationFailedError(
+            f"the way back to the stopped run's start stopped at {done:.0%} "
+            f"({ses.stopped_by}): bring the platform nearer to [{start[0]:.3f}, "
+            f"{start[1]:.3f}, {start[2]:.3f}] m, or start over without --resume")  # fmt: skip
+    ses.run(settle)
 
 
 def stopped(exc: Exception, progress: FrictionProgress | None, ses: Session,

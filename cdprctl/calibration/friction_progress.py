@@ -23,9 +23,11 @@ class FrictionProgress:
     start: np.ndarray  # 6: m, rotation vector from home: where every line starts
     ends: list[np.ndarray]  # each line's far end (6)
     noise: np.ndarray  # N·m per winch: the torques' standard deviation at rest
-    # per cycle of the round trips done: line, clock (s), motor angles (rad), speeds (rad/s),
-    # torques (N·m), the cells' tensions (N, NaN: none) — ``friction_procedure``'s layout
-    rows: np.ndarray
+    # each round trip done, its samples one a cycle: line, clock (s), motor angles (rad),
+    # speeds (rad/s), torques (N·m), the cells' tensions (N, NaN: none) —
+    # ``friction_procedure``'s layout; joined only once the drives are off (a copy of every
+    # sample between two round trips held the drives without a SYNC for up to 130 ms)
+    trips: list[np.ndarray]
     done: int = 0  # round trips completed, in the plan's order (line, speed, repeat)
     moved: float = 0.0  # s the platform moved in them
     stopped_theta: np.ndarray | None = None  # rad: the motors where a stop left them
@@ -34,7 +36,12 @@ class FrictionProgress:
 
     @property
     def samples(self) -> int:
-        return len(self.rows)
+        return sum(len(t) for t in self.trips)
+
+    @property
+    def rows(self) -> np.ndarray:
+        """Every sample kept, in order (a copy)."""
+        return np.concatenate(self.trips) if self.trips else np.empty((0, 0))
 
     def to_data(self) -> dict[str, Any]:
         """JSON: the samples as their float64 bytes in base64 (~10⁵ rows of 34 numbers: as
@@ -57,7 +64,7 @@ class FrictionProgress:
         stopped = data.get("stopped_theta")
         return cls(start=np.array(data["start"], float),
                    ends=[np.array(e, float) for e in data["ends"]],
-                   noise=np.array(data["noise"], float), rows=rows.astype(float),
+                   noise=np.array(data["noise"], float), trips=[rows.astype(float)],
                    done=int(data["done"]), moved=float(data["moved"]),
                    stopped_theta=None if stopped is None else np.array(stopped, float),
                    started=started,

@@ -53,8 +53,9 @@ def add_parser(sub: Any) -> None:
         "\nexit codes: 0 calibrated (the record written), 1 refused or stopped (the reason in "
         "one line),\n2 a bad option, 4 the state directory cannot take the record. A simulated "
         "robot's record\n(drives on udp_multicast) goes to "
-        "~/.local/state/cdprctl/simulated/<robot> (docs/homing.md).\nA self or geometry "
-        "run stopped by a fault keeps its samples: the same command with --resume goes on.",
+        "~/.local/state/cdprctl/simulated/<robot> (docs/homing.md).\nA self, geometry or "
+        "friction run stopped by a fault keeps its samples: the same command with --resume\n"
+        "goes on.",
     )  # fmt: skip
     _robot_and_bus(p)
     methods = p.add_subparsers(dest="method", required=True, metavar="METHOD")

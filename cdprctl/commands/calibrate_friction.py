@@ -16,6 +16,7 @@ import numpy as np
 
 from cdprctl.commands.calibrating import WHO, moves_held
 from cdprctl.commands.records import EXIT_STATE_DIR, bus_and_records, records_dir
+from cdprctl.commands.resume import state_dir_or_warn
 
 
 def add_arguments(fp: Any) -> None:
@@ -29,7 +30,8 @@ def add_arguments(fp: Any) -> None:
                     "one")  # fmt: skip
     fp.add_argument("--pulley-friction", type=float, default=None, metavar="MU",
                     help="with --sim: every pulley's μ in the simulated robot")  # fmt: skip
-    fp.add_argument("--travel", type=float, default=0.4, help="m of each line at most (0.4)")
+    fp.add_argument("--travel", type=float, default=None,
+                    help="m of each line at most (default 0.4: FrictionOptions)")
     fp.add_argument("--json", action="store_true", help="print the result as JSON")
     fp.add_argument("--no-realtime", action="store_true",
                     help="do not ask for SCHED_FIFO and CPU pinning while it moves")
@@ -40,15 +42,18 @@ def add_arguments(fp: Any) -> None:
 
 KIND = "friction"
 # what a stopped run's samples were measured with, and where each is set
-WHERE = {"travel": "--travel", "plant_errors": "--plant-errors",
+WHERE = {"travel": "--travel", "period": "[control] rate", "plant_errors": "--plant-errors",
          "pulley_friction": "--pulley-friction",
          "encoder_zeros": "the calibration record's (a homing since the stop)"}  # fmt: skip
 
 
-def plan_of(args: argparse.Namespace, opt: Any, theta_zero: np.ndarray) -> dict[str, Any]:
-    """What the samples follow: the moves' options, the encoders' zeros they were taken on
-    and, with --sim, the simulated robot's friction."""
-    plan = {**dataclasses.asdict(opt), "encoder_zeros": [float(x) for x in theta_zero]}
+def plan_of(args: argparse.Namespace, model: Any, opt: Any,
+            theta_zero: np.ndarray) -> dict[str, Any]:  # fmt: skip
+    """What the samples follow: the moves' options, the control period (s) they were taken
+    at (the fit's speeds come from it), the encoders' zeros and, with --sim, the simulated
+    robot's friction."""
+    plan = {**dataclasses.asdict(opt), "period": model.control.period,
+            "encoder_zeros": [float(x) for x in theta_zero]}  # fmt: skip
     plan["speeds"] = list(plan["speeds"])
     if args.sim:
         plan.update(plant_errors=args.plant_errors, pulley_friction=args.pulley_friction)
@@ -57,14 +62,15 @@ def plan_of(args: argparse.Namespace, opt: Any, theta_zero: np.ndarray) -> dict[
 
 def run_friction(args: argparse.Namespace, model: Any) -> int:
     """Exit 0 accepted (the record updated, unless --sim), 1 refused or stopped (the reason in
-    one line), 2 bad options, 4 the state directory cannot take the record."""
+    one line), 2 bad options or a resume refused, 4 the state directory cannot take the
+    record (with --resume: cannot be read)."""
     from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
     from cdprctl.calibration.friction_progress import FrictionStoppedError
     from cdprctl.calibration.partial_session import path_of, remove
     from cdprctl.calibration.session import CalibrationFailedError
     from drivers.errors import DriverError
 
-    if not 0.05 <= args.travel <= 2.0:
+    if args.travel is not None and not 0.05 <= args.travel <= 2.0:
         print(f"{WHO}: error: --travel = {args.travel} m: must be in [0.05, 2]", file=sys.stderr)
         return 2
     if not args.sim and (args.plant_errors is not None or args.pulley_friction is not None):
@@ -72,12 +78,13 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
               "give --sim", file=sys.stderr)  # fmt: skip
         return 2
     log = (lambda s: print(s, file=sys.stderr, flush=True)) if args.json else print
-    opt = FrictionOptions(travel=args.travel)
+    opt = FrictionOptions() if args.travel is None else FrictionOptions(travel=args.travel)
     sim, driver, record, state_dir, overrides = None, None, None, None, {}
     try:
-        if args.sim:
-            state_dir = records_dir(WHO, model.name, args.state_dir, True)
-            if state_dir is None:
+        if args.sim:  # no record: a directory it cannot write keeps no stop, said
+            state_dir = (records_dir(WHO, model.name, args.state_dir, True) if args.resume
+                         else state_dir_or_warn(WHO, model.name, args.state_dir, True, log))
+            if state_dir is None and args.resume:
                 return EXIT_STATE_DIR
             sim = _lockstep(args, model)
             driver = sim.driver
@@ -89,7 +96,7 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
             if isinstance(got, int):
                 return got
             driver, record, state_dir, overrides, theta_zero, here = got
-        kept = _kept(args, model, driver, state_dir, plan_of(args, opt, theta_zero), log)
+        kept = _kept(args, model, driver, state_dir, plan_of(args, model, opt, theta_zero), log)
         if isinstance(kept, int):
             return kept
         with moves_held(model, not (args.no_realtime or args.sim), log):
@@ -97,7 +104,7 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
     except FrictionStoppedError as exc:
         simulated = args.sim or bool(record is not None and record.simulated)
         _stopped(args, model, exc, state_dir, simulated, driver, overrides,
-                 plan_of(args, opt, theta_zero))  # fmt: skip
+                 plan_of(args, model, opt, theta_zero))  # fmt: skip
         return 1
     except (DriverError, CalibrationFailedError) as exc:
         print(f"{WHO}: failed: {exc}", file=sys.stderr)
@@ -129,7 +136,13 @@ def _kept(args: argparse.Namespace, model: Any, driver: Any, state_dir: Any,
                              WHERE)  # fmt: skip
     if partial is None:
         return 2
-    progress = FrictionProgress.from_data(partial.data, partial.started)
+    try:
+        progress = FrictionProgress.from_data(partial.data, partial.started)
+    except (KeyError, TypeError, ValueError) as exc:  # binascii.Error is a ValueError
+        print(f"{WHO}: error: cannot resume: {path_of(state_dir, KIND)} holds no friction "
+              f"calibration's samples ({type(exc).__name__}: {exc}): start over without "
+              "--resume", file=sys.stderr)  # fmt: skip
+        return 2
     log(f"{WHO}: {model.name}, friction: resuming the run stopped at {partial.stopped_at} "
         f"({progress.done} round trips, {progress.samples} samples kept)")  # fmt: skip
     clear_latched_fault(driver, log, WHO)
@@ -162,9 +175,10 @@ def _stopped(args: argparse.Namespace, model: Any, exc: Any, state_dir: Any, sim
 
 def _options_again(args: argparse.Namespace) -> str:
     """``friction`` and the options of this run that its resume must be given again."""
-    given = [("--sim", args.sim), (f"--plant-errors {args.plant_errors}", args.plant_errors
-             is not None), (f"--pulley-friction {args.pulley_friction}",
-             args.pulley_friction is not None), (f"--travel {args.travel:g}", args.travel != 0.4),
+    given = [("--sim", args.sim),
+             (f"--plant-errors {args.plant_errors}", args.plant_errors is not None),
+             (f"--pulley-friction {args.pulley_friction}", args.pulley_friction is not None),
+             (f"--travel {args.travel}", args.travel is not None),
              ("--no-realtime", args.no_realtime)]  # fmt: skip
     return " ".join(["friction", *(text for text, on in given if on)])
 

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from cdprctl.commands.parsing import command_parser as command_parser  # re-exported
+from cdprctl.core.angles import user_angles
 from cdprctl.model import ConfigError, RobotModel
 from cdprctl.robot_file import load_robot
 
@@ -28,18 +29,28 @@ def load_or_report(path: str, who: str = "") -> RobotModel | None:
         return None
 
 
-def parse_pose(text: str, what: str, model: Any = None) -> np.ndarray:
-    """``x,y,z,roll,pitch,yaw`` (m, rad) → array; SystemExit naming the rule otherwise, and,
-    given the ``model``, for a position outside its workspace box (where no file of it
-    promises the cables can hold the platform)."""
+def pose_or_why(text: str) -> np.ndarray | str:
+    """``x,y,z,roll,pitch,yaw`` (m, then rad or each angle ending in deg: ``core.angles``' rule,
+    a bare angle beyond pi refused as degrees typed for radians) → 6 values (m, rad); else why
+    not, in words."""
+    parts = text.split(",")
     try:
-        values = [float(v) for v in text.split(",")]
+        position = [float(v) for v in parts[:3]]
     except ValueError:
-        values = []
-    if len(values) != 6 or not all(np.isfinite(values)):
-        raise SystemExit(
-            f"{what} = {text!r}: expected six finite numbers x,y,z,roll,pitch,yaw (m, rad)"
-        )
+        position = []
+    if len(parts) != 6 or len(position) != 3 or not all(np.isfinite(position)):
+        return "expected six finite numbers x,y,z,roll,pitch,yaw (m, then rad or deg)"
+    angles = user_angles(parts[3:])
+    return angles if isinstance(angles, str) else np.array([*position, *angles])
+
+
+def parse_pose(text: str, what: str, model: Any = None) -> np.ndarray:
+    """``x,y,z,roll,pitch,yaw`` (``pose_or_why``) → array (m, rad); SystemExit naming the rule
+    otherwise, and, given the ``model``, for a position outside its workspace box (where no
+    file of it promises the cables can hold the platform)."""
+    values = pose_or_why(text)
+    if isinstance(values, str):
+        raise SystemExit(f"{what} = {text!r}: {values}")
     if model is not None:
         ws = model.workspace
         for k, axis in enumerate("xyz"):
@@ -49,4 +60,4 @@ def parse_pose(text: str, what: str, model: Any = None) -> np.ndarray:
                     f"[{ws.position_min[k]:g}, {ws.position_max[k]:g}] m ([workspace] of "
                     f"{model.source_file})"
                 )
-    return np.array(values)
+    return values

@@ -1,8 +1,9 @@
 """What the long procedures' commands share about a stop midway (``calibrate geometry``,
-``calibrate self``, ``brake-test``): the state directory its partial session goes to, the
-session read back for ``--resume`` and checked against this run's robot and options, the
-partial session written when the procedure stops, and the one line that says where it
-stopped, why, what was kept and how to go on (docs/homing.md, docs/safety.md)."""
+``calibrate self``, ``calibrate friction``, ``brake-test``): the state directory its partial
+session goes to, the session read back for ``--resume`` and checked against this run's robot
+and options, the partial session written when the procedure stops, and the one line that says
+where it stopped, why, what was kept and how to go on (docs/homing.md, docs/safety.md,
+docs/friction.md)."""
 
 from __future__ import annotations
 
@@ -60,7 +61,10 @@ def replaced_warning(state_dir: Path | None, kind: str, log: Callable[[str], Non
 def keep(who: str, state_dir: Path | None, partial: ps.PartialSession, words: str) -> str:
     """``partial`` (``words``: what it holds) written to ``state_dir``: "WORDS kept in FILE",
     or why it was not."""
-    if partial.kept == 0:
+    if partial.kept == 0:  # a run started over: an earlier stop's file goes, as it was told
+        if state_dir is not None and ps.remove(state_dir, partial.kind):
+            return ("nothing measured yet to keep (the earlier stopped session's file, which "
+                    "this run replaces, removed)")  # fmt: skip
         return "nothing measured yet to keep"
     if state_dir is None:
         return f"{words} measured, not kept (no state directory to write: give --state-dir DIR)"
@@ -96,6 +100,9 @@ def resume_command(head: str, args: Any, overrides: dict[str, Any], tail: str) -
     directory and bus options this run was given, then ``tail`` (the method, its options)."""
     from cdprctl.commands.sim import bus_options
 
+    invoked = sys.argv[0] if sys.argv else ""
+    if Path(invoked).name == "cdprctl" and head.startswith("cdprctl "):
+        head = invoked + head[len("cdprctl"):]  # as typed: .venv/bin/cdprctl pastes, cdprctl not
     parts = [head, "--config", str(args.config)]
     if getattr(args, "state_dir", None):
         parts += ["--state-dir", str(args.state_dir)]

@@ -10,8 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.commands.common import command_parser, load_or_report
-from cdprctl.core.angles import user_angles
+from cdprctl.commands.common import command_parser, load_or_report, pose_or_why
 from cdprctl.core.rotation import rpy_to_matrix
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics, kinematics_ok
 from cdprctl.model import RobotModel
@@ -106,20 +105,6 @@ def parse_floats(text: str, n: int, name: str, unit: str) -> np.ndarray:
     return values
 
 
-def parse_pose(text: str) -> tuple[np.ndarray, np.ndarray]:
-    """``--pose``: the position (m) and rotation matrix; its angles in rad, or each ending in
-    deg (``core.angles``: a bare one beyond pi refused as degrees typed for radians)."""
-    parts = text.split(",")
-    if len(parts) != 6:
-        raise UsageError(f"--pose = {text!r}: needs 6 comma-separated numbers (m, m, m, then "
-                         "rad or deg)")  # fmt: skip
-    position = parse_floats(",".join(parts[:3]), 3, "pose", "m, m, m")
-    angles = user_angles(parts[3:])
-    if isinstance(angles, str):
-        raise UsageError(f"--pose = {text!r}: {angles}")
-    return position, rpy_to_matrix(*angles)
-
-
 def parse_imposition(text: str, model: RobotModel) -> Imposition:
     try:
         cable, rest = text.split(":", 1)
@@ -172,7 +157,10 @@ def run(args: argparse.Namespace) -> int:
 
 def compute(model: RobotModel, args: argparse.Namespace) -> tuple[dict[str, Any], dict[str, Any]]:
     if args.pose:
-        position, R = parse_pose(args.pose)
+        pose = pose_or_why(args.pose)
+        if isinstance(pose, str):
+            raise UsageError(f"--pose = {args.pose!r}: {pose}")
+        position, R = pose[:3], rpy_to_matrix(*pose[3:])
     else:
         position, R = model.home.position, model.home.rotation
     w_ext = parse_floats(args.wrench, 6, "wrench", "N, N, N, N·m, N·m, N·m")

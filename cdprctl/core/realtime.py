@@ -9,7 +9,8 @@ import gc
 import os
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 MCL_CURRENT, MCL_FUTURE = 1, 2
 
@@ -41,6 +42,31 @@ def schedule_realtime(priority: int, cpu: int) -> list[str]:
     except (OSError, AttributeError, ValueError) as exc:
         warnings.append(f"CPU affinity to CPU {cpu} not applied ({exc})")
     return warnings
+
+
+@contextlib.contextmanager
+def realtime_loop(control: Any, on: bool, warn: Callable[[str], None]) -> Iterator[None]:
+    """The loop's real-time settings for the body of the ``with`` (the daemon's loop, a
+    calibration's cycles), with ``on``: ``SCHED_FIFO`` and the CPU of ``control`` (the
+    robot's ``[control]``: ``schedule_realtime``) and the CPUs kept awake
+    (``cpu_wakeup_latency``: ``core/cpu_idle.py``), each refusal given to ``warn``; given
+    back at its end, whatever ended it (the normal scheduler first: the shut-down's work
+    comes after, and the CPUs' request released even if that failed)."""
+    from cdprctl.core.cpu_idle import CpuWakeupLatency
+
+    awake = CpuWakeupLatency()
+    try:
+        if on:
+            for w in (*schedule_realtime(control.sched_priority, control.cpu),
+                      *awake.hold(control.cpu_wakeup_latency)):  # fmt: skip
+                warn(w)
+        yield
+    finally:
+        try:
+            if on:
+                leave_realtime()
+        finally:
+            awake.release()
 
 
 def leave_realtime() -> None:

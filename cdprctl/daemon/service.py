@@ -29,7 +29,6 @@ from cdprctl.control.lifecycle.loop import LoopStats
 from cdprctl.control.lifecycle.manager import ControllerManager
 from cdprctl.control.states import State
 from cdprctl.core import realtime as rt
-from cdprctl.core.cpu_idle import CpuWakeupLatency
 from cdprctl.daemon.links import Links, links_of
 from cdprctl.daemon.report import RunReport, config_summary, gains_line
 from cdprctl.daemon.scripts import Disturbance, PathScript, demo_script
@@ -177,30 +176,25 @@ class Daemon:
         self.say(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
         notify("READY=1")
-        awake = CpuWakeupLatency()
-        if self.realtime:  # the helper threads started below leave the loop's CPU and priority
-            for w in (*rt.schedule_realtime(m.control.sched_priority, m.control.cpu),
-                      *awake.hold(m.control.cpu_wakeup_latency)):  # fmt: skip
-                self.say(f"warning: {w}", err=True)
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip
         interval = watchdog_interval()
         wd = Watchdog(lambda: d.cycle, interval, on_start=self._helper_thread) if interval else None
-        if wd is not None:
-            wd.start()
-        io.start()
-        try:
-            self.manager.run(self._should_stop, self.stats, after=self._cycle_done.set)
+        try:  # the helper threads started in it leave the loop's CPU and priority
+            with rt.realtime_loop(m.control, self.realtime,
+                                  lambda w: self.say(f"warning: {w}", err=True)):  # fmt: skip
+                if wd is not None:
+                    wd.start()
+                io.start()
+                self.manager.run(self._should_stop, self.stats, after=self._cycle_done.set)
         finally:
-            if self.realtime:
-                rt.leave_realtime()
-            awake.release()
             if wd is not None:
                 wd.stop()
             if self.timing_file:
                 self.stats.save(self.timing_file, m.control.period)
             notify("STOPPING=1")
-            io.join(timeout=2.0)
+            if io.ident is not None:
+                io.join(timeout=2.0)
             self.driver.shutdown()
             self._close_sim()
         self._drain_events()

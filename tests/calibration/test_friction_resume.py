@@ -23,7 +23,8 @@ ROWC = CONFIG / "rowc.toml"
 def test_the_progress_reads_back_to_the_same_bits():
     rng = np.random.default_rng(5)
     p = FrictionProgress(rng.normal(size=6), [rng.normal(size=6) for _ in range(3)],
-                         rng.uniform(size=8), rng.normal(size=(50, 34)), done=2, moved=12.5,
+                         rng.uniform(size=8),
+                         [rng.normal(size=(20, 34)), rng.normal(size=(30, 34))], done=2, moved=12.5,
                          stopped_theta=rng.normal(size=8), started=1.7e9)  # fmt: skip
     back = FrictionProgress.from_data(json.loads(json.dumps(p.to_data())), p.started)
     for a, b in ((p.start, back.start), (p.noise, back.noise), (p.rows, back.rows),
@@ -97,3 +98,56 @@ def test_a_friction_calibration_stopped_midway_resumes_from_its_round_trips(
     for c, w in zip(model.cables, result["winches"], strict=True):
         assert w["viscous"] == pytest.approx(c.winch.viscous_friction, rel=0.15)
         assert w["coulomb"] == pytest.approx(c.winch.coulomb_friction, rel=0.15)
+
+
+def test_the_motion_is_fitted_apart_on_either_side_of_a_resume():
+    """A resumed run's clock restarts (lock-step) or jumps (another process): the kept samples
+    and the new ones are fitted apart (``motion_of``), not as one motion through the jump —
+    here two runs at 2 rad/s from different angles, the second's clock from 0 again."""
+    from cdprctl.calibration.friction_procedure import motion_of
+
+    period = 0.004
+    t1 = 100.0 + period * np.arange(200)
+    t2 = period * np.arange(200)
+    theta = np.r_[1.0 + 2.0 * (t1 - t1[0]), 5.0 + 2.0 * t2][:, None]
+    w, a = motion_of(theta, np.r_[t1, t2], period)
+    assert np.allclose(w, 2.0, atol=1e-9) and np.allclose(a, 0.0, atol=1e-6)
+
+
+def test_a_resume_at_another_control_rate_is_refused(tmp_path, capsys):
+    """The fit's speeds come from the period the samples were taken at: a run stopped at
+    rowc's 250 Hz is not resumed by rowc_1khz.toml (the same robot, its geometry's hash the
+    same), in one line naming the rate."""
+    from cdprctl.calibration.friction_procedure import FrictionOptions
+    from cdprctl.calibration.partial_session import save
+    from cdprctl.commands.calibrate_friction import KIND, plan_of
+    from cdprctl.commands.resume import new_partial
+
+    model = load_robot(ROWC)
+    args = type("Args", (), {"sim": True, "plant_errors": None, "pulley_friction": None})()
+    plan = plan_of(args, model, FrictionOptions(), np.zeros(model.n_cables))
+    progress = FrictionProgress(np.zeros(6), [np.ones(6)], np.ones(8), [np.zeros((3, 34))],
+                                done=1)  # fmt: skip
+    save(new_partial(KIND, model, plan, "a fault", "round trip 2 of 9", 1, progress.to_data(),
+                     1.7e9, True, []), tmp_path)  # fmt: skip
+    argv = ["calibrate", "--config", str(CONFIG / "rowc_1khz.toml"), "--state-dir",
+            str(tmp_path), "friction", "--sim", "--resume"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "was planned with period = 0.004, this run's is 0.001 ([control] " \
+        "rate)" in err[0], err  # fmt: skip
+
+
+def test_the_resume_command_is_the_one_the_user_typed(monkeypatch):
+    """A stop's resume command starts as the user started it (``.venv/bin/cdprctl``: a bare
+    ``cdprctl`` is not on the PATH of the README's install, and a pasted line failed)."""
+    import argparse
+
+    from cdprctl.commands.resume import resume_command
+
+    args = argparse.Namespace(config="config/rowc.toml", state_dir=None)
+    monkeypatch.setattr("sys.argv", [".venv/bin/cdprctl", "calibrate"])
+    assert resume_command("cdprctl calibrate", args, {}, "friction") == \
+        ".venv/bin/cdprctl calibrate --config config/rowc.toml friction --resume"  # fmt: skip
+    monkeypatch.setattr("sys.argv", ["/usr/lib/python3/pytest"])
+    assert resume_command("cdprctl brake-test", args, {}, "").startswith("cdprctl brake-test ")

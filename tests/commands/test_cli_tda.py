@@ -72,10 +72,10 @@ def test_energy_line_plot(capsys, tmp_path):
 @pytest.mark.parametrize(
     "args,message",
     [
-        (["--pose", "1,2,3"], "--pose = '1,2,3': needs 6 comma-separated numbers"),
+        (["--pose", "1,2,3"], "--pose = '1,2,3': expected six finite numbers x,y,z,roll,pitch,yaw"),
         (["--pose", "7,4,1.5,30,0,0"], "--pose = '7,4,1.5,30,0,0': roll = 30 is taken in "
          "radians and is beyond pi; did you mean degrees? 30° = 0.5236 rad: write it 30deg"),
-        (["--pose", "7,4,x,0,0,0"], "--pose = '7,4,x': not numbers (m, m, m)"),
+        (["--pose", "7,4,x,0,0,0"], "--pose = '7,4,x,0,0,0': expected six finite numbers"),
         (["--wrench", "0,0,nan,0,0,0"], "must be finite"),
         (["--method", "energy", "--impose", "9:energy=1"], "no cable '9'"),
         (["--method", "energy", "--impose", "1:power=1"], "quantity must be energy (J)"),
@@ -115,3 +115,17 @@ def test_a_wrench_with_a_minus_first_is_a_value_not_an_option(capsys):
     assert code == 0 and r["status"] == "OK"
     code, far = run_json(capsys, "--config", ROWC, "--wrench", "-3000,0,0,0,0,0")
     assert code == 3 and far["status"] == "INFEASIBLE"  # beyond the cables, as any wrench
+
+
+@pytest.mark.parametrize("argv", [
+    ["calibrate", "--config", SEED, "known-pose", "--pose", "7,4,1.5,30,0,0"],
+    ["sim", "--config", SEED, "--start-pose", "7,4,1.5,30,0,0"],
+])  # fmt: skip
+def test_every_pose_a_user_types_takes_degrees_by_one_rule(capsys, argv):
+    """``calibrate known-pose --pose`` and ``sim --start-pose`` read a pose as ``tda --pose``
+    does (commands/common.pose_or_why): a bare 30 was 30 rad, and known-pose wrote the
+    encoders' zeros for that pose without a word. Refused before any bus is opened."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert "roll = 30 is taken in radians and is beyond pi; did you mean degrees? 30° = " \
+        "0.5236 rad" in str(exc.value)  # fmt: skip
