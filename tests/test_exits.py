@@ -100,6 +100,18 @@ def test_a_rejected_path_is_one_line_and_exit_2(tmp_path):
     assert_clean(out)
 
 
+def test_a_rate_no_bus_can_carry_is_refused_before_the_start_up():
+    """``--rate 7000`` on rowc (four drives a bus): one line naming the bus, its load and the
+    fix, exit 2, at once — it came after the start-up's simulated robot and drives, then a
+    line of the simulated robot's contacts."""
+    code, out, _ = cdprctl("run", "--config", ROWC, "--sim", "--rate", "7000")
+    assert code == 2
+    assert out.strip() == ("cdprctl run: error: --rate = 7000 Hz: CAN bus 0 (virtual "
+                           "cdpr-rowc-a, 1000000 bit/s): 801.8 % load at 7000 Hz (1145 bits per "
+                           "cycle, 4 drives): more than the bus can carry; lower the rate, split "
+                           "the drives over more buses or raise the bitrate (and 1 more bus)")
+
+
 def test_a_busy_view_port_fails_at_once_naming_the_port():
     with socket.socket() as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

@@ -170,6 +170,14 @@ def checked_model(args: argparse.Namespace) -> tuple[Any, Any, bool]:
         model = dataclasses.replace(
             model, control=dataclasses.replace(model.control, rate=args.rate)
         )
+        from drivers.busload import check_bus_load
+
+        # refused now, not after the start-up's minute: the drivers' own check (the same rule)
+        _, overloaded = check_bus_load(model.drives, args.rate, model.sensors.load_cells)
+        if overloaded:
+            n = len(overloaded) - 1
+            more = f" (and {n} more bus{'es' if n > 1 else ''})" if n else ""
+            raise usage(f"--rate = {args.rate:g} Hz: {overloaded[0]}{more}")
     zo = zenoh_overrides(args)
     if zo:
         model = dataclasses.replace(model, zenoh=dataclasses.replace(model.zenoh, **zo))
