@@ -30,7 +30,7 @@ from cdprctl.calibration.friction import (
     null_projectors,
     refusal,
 )
-from cdprctl.calibration.friction_progress import FrictionProgress, FrictionStoppedError
+from cdprctl.calibration.friction_progress import FrictionProgress
 from cdprctl.calibration.geometry_moves import RETREAT_SPEED, GoalOf, motor_goals, move
 from cdprctl.calibration.geometry_plan import (
     PATH_MARGIN,
@@ -40,6 +40,7 @@ from cdprctl.calibration.geometry_plan import (
     tension_bounds,
     tension_noise,
 )
+from cdprctl.calibration.progress import stopped
 from cdprctl.calibration.session import CalibrationFailedError, Session
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
@@ -169,7 +170,7 @@ def friction_calibrate(model: RobotModel, driver: WinchDriver, theta_zero: np.nd
     encoders' zeros ``theta_zero`` (rad, the calibration record's): the moves, the samples,
     the fits; ``kept``: a stopped run's (``--resume``: its lines, from its start, which the
     platform goes back to first; its round trips not made again). Raises
-    :class:`FrictionStoppedError` (drives disabled, what was measured in it) when a move
+    :class:`CalibrationStoppedError` (drives disabled, what was measured in it) when a move
     stops and the platform went back, the way back stops too, or the drives fault; a fit
     refused comes back with ``accepted`` False and the reason."""
     opt = opt or FrictionOptions()
@@ -262,18 +263,6 @@ def _to_start(ses: Session, model: RobotModel, here: np.ndarray, start: np.ndarr
             f"({ses.stopped_by}): bring the platform nearer to [{start[0]:.3f}, "
             f"{start[1]:.3f}, {start[2]:.3f}] m, or start over without --resume")  # fmt: skip
     ses.run(settle)
-
-
-def stopped(exc: Exception, progress: FrictionProgress | None, ses: Session,
-            at: str) -> FrictionStoppedError:  # fmt: skip
-    """``exc`` (a :class:`CalibrationFailedError` or a driver's error) as a stop that keeps
-    ``progress`` (the round trips done), with what points at the machine's load."""
-    from cdprctl.calibration.partial_session import timing_cause
-
-    cause = timing_cause(ses.driver.error, ses.missed_periods, ses.cycles)
-    if progress is not None:
-        progress.stopped_theta = np.array(ses.states.position, float)
-    return FrictionStoppedError(str(exc), progress, at, cause)
 
 
 def _fitted(model: RobotModel, driver: WinchDriver, ses: Session, progress: FrictionProgress,

@@ -1,7 +1,7 @@
 """What a friction calibration measured so far (:class:`FrictionProgress`): its lines, the
 torques' noise at rest, and every cycle's sample of the round trips completed, so that a
 calibration stopped midway (a drive fault, a feedback timeout, a move that neared a tension
-limit) keeps them (:class:`FrictionStoppedError`, a partial session in the state directory:
+limit) keeps them (``progress.CalibrationStoppedError``, a partial session in the state directory:
 ``partial_session.py``) and ``--resume`` goes on from the first round trip not yet made, the
 fit taking every sample (docs/friction.md). A round trip stopped midway is dropped: out and back
 at one speed is what cancels the statics."""
@@ -14,8 +14,6 @@ import time
 from typing import Any
 
 import numpy as np
-
-from cdprctl.calibration.session import CalibrationFailedError
 
 
 @dataclasses.dataclass
@@ -69,14 +67,3 @@ class FrictionProgress:
                    stopped_theta=None if stopped is None else np.array(stopped, float),
                    started=started,
                    drives_reset=str(data.get("drives_reset", "")))  # fmt: skip
-
-
-class FrictionStoppedError(CalibrationFailedError):
-    """A friction calibration stopped midway (drives disabled, brakes on): the message the
-    fault's, ``progress`` what it kept (None: nothing yet — the lines not chosen, the noise
-    not measured), ``at`` where it stopped (words), ``cause`` what points at the machine's
-    load ("" when nothing does: ``partial_session.timing_cause``)."""
-
-    def __init__(self, message: str, progress: FrictionProgress | None, at: str, cause: str):
-        super().__init__(message)
-        self.progress, self.at, self.cause = progress, at, cause

@@ -79,21 +79,25 @@ class Progress:
 
 class CalibrationStoppedError(CalibrationFailedError):
     """A calibration stopped midway (drives disabled, brakes on): the message the fault's,
-    ``progress`` what it measured, ``at`` where it stopped (words), ``cause`` what points at
-    the machine's load ("" when nothing does: ``partial_session.timing_cause``)."""
+    ``progress`` what it measured (a geometric or self calibration's, a friction
+    calibration's; None: nothing yet), ``at`` where it stopped (words), ``cause`` what points
+    at the machine's load ("" when nothing does: ``partial_session.timing_cause``)."""
 
-    def __init__(self, message: str, progress: Progress, at: str, cause: str):
+    def __init__(self, message: str, progress: Any, at: str, cause: str):
         super().__init__(message)
         self.progress, self.at, self.cause = progress, at, cause
 
 
-def stopped(exc: Exception, progress: Progress, ses: Any, at: str) -> CalibrationStoppedError:
+def stopped(exc: Exception, progress: Progress | FrictionProgress | None, ses: Any,
+            at: str) -> CalibrationStoppedError:  # fmt: skip
     """``exc`` (a :class:`CalibrationFailedError` or a driver's error) as a stop that keeps
-    ``progress``; ``ses`` the session (its missed periods, its driver's error)."""
+    ``progress`` (None: nothing measured yet); ``ses`` the session (its missed periods, its
+    driver's error)."""
     from cdprctl.calibration.partial_session import timing_cause
 
     cause = timing_cause(ses.driver.error, ses.missed_periods, ses.cycles)
-    progress.stopped_theta = np.array(ses.states.position, float)
+    if progress is not None:
+        progress.stopped_theta = np.array(ses.states.position, float)
     return CalibrationStoppedError(str(exc), progress, at, cause)
 
 
@@ -105,18 +109,23 @@ MOVED_SINCE_STOP = 0.05
 
 
 def check_reference(model: Any, driver: Any, progress: Progress | FrictionProgress,
-                    identities: list[Any], path: Any) -> str:  # fmt: skip
+                    identities: list[Any], path: Any, log: Any = None,
+                    who: str = "") -> str:  # fmt: skip
     """"" when the drives, configured, read on the encoder reference ``progress``'s samples
     (a calibration's or a friction calibration's) were taken on (``path``: its file), else
-    why not, in one line: a drive exchanged
+    why not, in one line; with ``log``, a fault the drives still latch from the stop reset
+    first (said by ``who``: ``partial_session.clear_latched_fault``). Why not: a drive exchanged
     (0x1018), reset since the stop (``reset_since_setup``: an incremental counter restarted),
     or a motor reading more than ``MOVED_SINCE_STOP`` of cable from where the stop left it."""
     from cdprctl.calibration.partial_session import (
         PartialSessionError,
         check_identities,
+        clear_latched_fault,
         keep_in_data,
     )
 
+    if log is not None:
+        clear_latched_fault(driver, log, who)
     names = [c.name for c in model.cables]
     fix = "start over without --resume"
     if progress.drives_reset:

@@ -161,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     """Calibrate the robot's encoders: the drives are configured, enabled, the platform held
     (known-pose) or moved near its start (self), the drives disabled (brakes on), and the
     record written atomically to the state directory, where ``cdprctl run`` reads it."""
-    from cdprctl.calibration.partial_session import clear_latched_fault, path_of, remove
+    from cdprctl.calibration.partial_session import path_of, remove
     from cdprctl.calibration.procedure import SelfOptions, known_pose, self_calibrate
     from cdprctl.calibration.progress import CalibrationStoppedError, check_reference
     from cdprctl.calibration.session import CalibrationFailedError
@@ -201,12 +201,10 @@ def run(args: argparse.Namespace) -> int:
             state_dir = proc.configure(driver, f"{model.name}, {args.method}")
             if state_dir is None:
                 return EXIT_STATE_DIR
-            if progress is not None:
-                clear_latched_fault(driver, log, WHO)
-                if why := check_reference(model, driver, progress, identities,
-                                          path_of(state_dir, "self")):  # fmt: skip
-                    print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
-                    return 1
+            if progress is not None and (why := check_reference(
+                    model, driver, progress, identities, path_of(state_dir, "self"), log, WHO)):
+                print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+                return 1
             with moves_held(model, False, log):
                 if pose is not None:
                     record = known_pose(model, driver, pose, log)

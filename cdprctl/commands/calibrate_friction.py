@@ -65,8 +65,8 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
     one line), 2 bad options or a resume refused, 4 the state directory cannot take the
     record (with --resume: cannot be read)."""
     from cdprctl.calibration.friction_procedure import FrictionOptions, friction_calibrate
-    from cdprctl.calibration.friction_progress import FrictionStoppedError
     from cdprctl.calibration.partial_session import path_of, remove
+    from cdprctl.calibration.progress import CalibrationStoppedError
     from cdprctl.calibration.session import CalibrationFailedError
     from drivers.errors import DriverError
 
@@ -101,7 +101,7 @@ def run_friction(args: argparse.Namespace, model: Any) -> int:
             return kept
         with moves_held(model, not (args.no_realtime or args.sim), log):
             cal = friction_calibrate(model, driver, theta_zero, here, opt, log, kept)
-    except FrictionStoppedError as exc:
+    except CalibrationStoppedError as exc:
         simulated = args.sim or bool(record is not None and record.simulated)
         _stopped(args, model, exc, state_dir, simulated, driver, overrides,
                  plan_of(args, model, opt, theta_zero))  # fmt: skip
@@ -125,7 +125,7 @@ def _kept(args: argparse.Namespace, model: Any, driver: Any, state_dir: Any,
     file, these options and these drives; else the exit code after one line."""
     from cdprctl.calibration.calibration_record import geometry_hash
     from cdprctl.calibration.friction_progress import FrictionProgress
-    from cdprctl.calibration.partial_session import clear_latched_fault, path_of
+    from cdprctl.calibration.partial_session import path_of
     from cdprctl.calibration.progress import check_reference
     from cdprctl.commands.resume import load_to_resume, replaced_warning
 
@@ -145,11 +145,10 @@ def _kept(args: argparse.Namespace, model: Any, driver: Any, state_dir: Any,
         return 2
     log(f"{WHO}: {model.name}, friction: resuming the run stopped at {partial.stopped_at} "
         f"({progress.done} round trips, {progress.samples} samples kept)")  # fmt: skip
-    clear_latched_fault(driver, log, WHO)
     if args.sim:  # a new simulated robot at home each run, its zeros there: the same reference
         return progress
     if why := check_reference(model, driver, progress, partial.identities,
-                              path_of(state_dir, KIND)):  # fmt: skip
+                              path_of(state_dir, KIND), log, WHO):  # fmt: skip
         print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
         return 1
     return progress

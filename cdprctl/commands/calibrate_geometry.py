@@ -110,7 +110,7 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
     1 refused or stopped (the reason in one line), 2 bad options."""
     from cdprctl.calibration.geometry_plan import GeometryOptions
     from cdprctl.calibration.geometry_procedure import geometry_calibrate
-    from cdprctl.calibration.partial_session import clear_latched_fault, path_of, remove
+    from cdprctl.calibration.partial_session import path_of, remove
     from cdprctl.calibration.progress import CalibrationStoppedError, check_reference
     from cdprctl.calibration.session import CalibrationFailedError
     from drivers import create_driver
@@ -149,11 +149,10 @@ def run_geometry(args: argparse.Namespace, model: Any) -> int:
             if simulated and state_dir is not None:
                 log(f"{WHO}: a simulated robot: its record and samples go to {state_dir}")
             kept_in = path_of(state_dir, KIND) if state_dir is not None else None
-            if args.resume:
-                clear_latched_fault(driver, log, WHO)
-                if why := check_reference(model, driver, progress, identities, kept_in):
-                    print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
-                    return 1
+            if args.resume and (why := check_reference(model, driver, progress, identities,
+                                                        kept_in, log, WHO)):  # fmt: skip
+                print(f"{WHO}: error: cannot resume: {why}", file=sys.stderr)
+                return 1
             with moves_held(model, not args.no_realtime, log):
                 cal = geometry_calibrate(model, driver, opt, log, poses, progress)
         except CalibrationStoppedError as exc:
