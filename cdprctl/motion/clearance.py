@@ -1,6 +1,6 @@
 """The cables' clearance as a soft limit (issue 67): the least distance between two cables, a
-cable and the platform's body, a cable and the cell (``cdprctl/geometry/interference.py``) at each
-sample of a motion, and between two samples.
+cable and the platform's body, a cable and the cell, the body and the cell
+(``cdprctl/geometry/interference.py``) at each sample of a motion, and between two samples.
 
 Between samples the check does not trust the sampling step; it bounds what can happen there.
 Every distance measured is 1-Lipschitz in the motion of the points it is measured between:

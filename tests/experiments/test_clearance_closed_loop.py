@@ -14,7 +14,7 @@ import pytest
 
 from cdprctl.control.states import FaultKind, State
 from cdprctl.experiments.closed_loop import ClosedLoop
-from cdprctl.geometry.interference import Interference, check_pose
+from cdprctl.geometry.interference import OBSTACLE, Interference, check_pose
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.interference import Box, InterferenceConfig
 from cdprctl.robot_file import load_robot
@@ -47,8 +47,16 @@ def _with_box(model, gap: float, pose=None, cable: int = 0):
             cfg.clearance, cfg.attachment_exclusion, cfg.body, (*cfg.obstacles, box)))  # fmt: skip
         g = Interference(out)
         g.update(kin)
-        centre = centre + (gap - g.distance[-len(model.cables)]) * n
+        centre = (
+            centre + (gap - g.distance[_check(g, cable, len(out.interference.obstacles) - 1)]) * n
+        )
     return out
+
+
+def _check(g, cable, obstacle):
+    """The row of ``g.checks`` of ``cable`` against ``obstacle`` (0-based)."""
+    rows = (g.checks[:, 0] == OBSTACLE) & (g.checks[:, 1] == cable) & (g.checks[:, 2] == obstacle)
+    return int(np.flatnonzero(rows)[0])
 
 
 @pytest.fixture(scope="module")
@@ -133,3 +141,50 @@ def test_the_recorder_records_a_contact_and_says_it(rowc):
     clear = ContactRecorder(rowc)
     clear.update(0.0, home, R)
     assert clear.report().startswith("no contact; the closest: cables")
+
+
+def test_pushed_toward_a_fixture_the_platform_stops_before_touching_it(rowc):
+    """The platform's body against the cell: a 20 mm block 5.5 mm from the body's −x face at
+    its rest pose (the face's middle, 5 cm and more from the cables at the corners). Held,
+    clear; pushed toward it, the supervisor stops the robot under the clearance, the plant
+    having recorded no contact, and the telemetry and the scene name the body and the block."""
+    p, R = _rest(rowc)
+    face = p + R @ np.array([-0.1, 0.0, 0.0])  # rowc's body: half extents 0.1, 0.05, 0.1 m
+    block = Box("the fixture", face + R @ np.array([-0.0055 - 0.01, 0.0, 0.0]),
+                np.full(3, 0.01), R.copy())  # fmt: skip
+    cfg = rowc.interference
+    model = dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (block,)))  # fmt: skip
+    with ClosedLoop(model) as cl:
+        cl.startup()
+        cl.command("enable")
+        cl.run(1.5)
+        d = cl.controller.data
+        assert d.state is State.ENABLED, d.fault_reason
+        g = d.interference
+        assert g.minimum == pytest.approx(0.0055, abs=2e-4)
+        assert g.describe().startswith("the platform's body and the fixture")
+        state = _state(model, d)
+        c = state["clearance"]
+        assert c["kind"] == "platform" and c["between"] == ["body", "the fixture"]
+        scene = SceneBuilder(SceneLayout.from_model(model)).build(state)
+        assert scene.closest[1].startswith("the platform's body and the fixture: ")
+
+        def push(c):
+            c.plant.ext_force[PUSH] = 0.0 if d.fault_kind is not None else -300.0
+
+        cl.run(2.0, each=push, until=lambda c: d.state is State.FAULT)
+    assert d.fault_kind is FaultKind.CLEARANCE, d.fault_reason
+    assert "the platform's body and the fixture" in d.fault_reason, d.fault_reason
+    assert cl.plant.contact.contacts == [] and 0.0 < cl.plant.contact.least < 0.0055
+
+
+def _state(model, d):
+    """The state payload of ``d`` read back through the shared memory."""
+    snap = SharedSnapshot(model.n_cables)
+    try:
+        snap.write(controller_values(d))
+        return state_payload(snap.read(), [c.name for c in model.cables], "",
+                             parts=clearance_parts(model))  # fmt: skip
+    finally:
+        snap.close()

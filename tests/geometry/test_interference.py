@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from alloc_probe import peak_bytes
-from scipy.optimize import lsq_linear
+from scipy.optimize import linprog, lsq_linear
 
 from cdprctl.core.rotation import exp_so3, rpy_to_matrix
-from cdprctl.geometry.interference import BODY, CABLE, Interference, check_pose
+from cdprctl.geometry.interference import BODY, CABLE, PLATFORM, Interference, check_pose
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import ConfigError
 from cdprctl.model.interference import Box, InterferenceConfig, Plane
@@ -146,6 +146,22 @@ def to_halfspace(point, normal):
     return lambda X: np.maximum((X - point) @ normal, 0.0)
 
 
+def ref_box_box(ca, Ra, ha, cb, Rb, hb):
+    """min over the two solid boxes of |x − y| (BVLS over both boxes' own coordinates,
+    ``x = ca + Ra u``, ``y = cb + Rb v``, ``|u| <= ha``, ``|v| <= hb``: exact)."""
+    A = np.hstack([Ra, -Rb])
+    h = np.concatenate([ha, hb])
+    x = lsq_linear(A, cb - ca, bounds=(-h, h), method="bvls").x
+    return float(np.linalg.norm(A @ x - (cb - ca)))
+
+
+def ref_box_halfspace(c, R, h, point, normal):
+    """How far the solid box is above the plane (0 if it reaches it): scipy's linprog, the
+    least height ``normal·(c + R u)`` over ``|u| <= h``."""
+    res = linprog(R.T @ normal, bounds=list(zip(-h, h, strict=True)), method="highs")
+    return max(float(normal @ (c - point)) + float(res.fun), 0.0)
+
+
 def reference(model, cfg, kin, p, R, sample_pairs=False):
     """{(kind, i, k): distance} for every check, by the references above."""
     B = p + model.attachments @ R.T  # attachments, base frame
@@ -175,6 +191,13 @@ def reference(model, cfg, kin, p, R, sample_pairs=False):
             dist = to_halfspace(ob.point, ob.normal)
         for i in range(m):
             out[(2, i, k)] = sampled(lambda t: dist(on_segment(B[i], E[i])(t)))  # noqa: B023
+        for b, part in enumerate(cfg.body):
+            c, Rb, h = p + R @ part.centre, R @ part.rotation, part.half_extents
+            if isinstance(ob, Box):
+                d = ref_box_box(c, Rb, h, ob.centre, ob.rotation, ob.half_extents)
+            else:
+                d = ref_box_halfspace(c, Rb, h, ob.point, ob.normal)
+            out[(PLATFORM, b, k)] = d
     return out
 
 
@@ -199,7 +222,15 @@ def compare(model, cfg, poses, kernel_class=Interference, sample_pairs=False):
         gap = np.linalg.norm(check.closest[:, :3] - check.closest[:, 3:], axis=1)
         off = max(off, float(np.max(np.abs(gap - got))))
         B = p + model.attachments @ R.T
-        for c, (_, i, _) in enumerate(keys):
+        for c, (kind, i, k) in enumerate(keys):
+            if kind == PLATFORM:  # on the body's part and on the obstacle
+                part, ob = cfg.body[i], cfg.obstacles[k]
+                on = to_box(p + R @ part.centre, R @ part.rotation, part.half_extents)
+                there = (to_box(ob.centre, ob.rotation, ob.half_extents) if isinstance(ob, Box)
+                         else to_halfspace(ob.point, ob.normal))  # fmt: skip
+                off = max(off, float(on(check.closest[c, None, :3])[0]),
+                          float(there(check.closest[c, None, 3:])[0]))  # fmt: skip
+                continue
             on_cable = to_segment(B[i], kin.exit_points[i])(check.closest[c, None, :3])
             off = max(off, float(on_cable[0]))
     return worst, wrong_pair, off
@@ -255,7 +286,7 @@ def test_pairs_sharing_an_anchor_are_excluded(robots):
 
 # -- degenerate segments ------------------------------------------------------------------------
 def seg(P0, P1, Q0, Q1):
-    from cdprctl.geometry.interference import segment_segment
+    from cdprctl.geometry.distance import segment_segment
 
     return segment_segment(*P0, *P1, *Q0, *Q1)
 
@@ -307,7 +338,7 @@ BOX = np.array([[0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1.0, 0.5, 0.25]])
     ([1.5, 0, 3], [3, 0, 1], None),  # near the edge x = 1, z = 0.25: from the reference
 ])  # fmt: skip
 def test_segment_against_a_box(S, F, want):
-    from cdprctl.geometry.interference import segment_box
+    from cdprctl.geometry.distance import segment_box
 
     S, F = np.array(S, float), np.array(F, float)
     d, *pts = segment_box(BOX, 0, *S, *F)
@@ -321,7 +352,7 @@ def test_segment_against_a_box(S, F, want):
 
 
 def test_segment_against_a_plane():
-    from cdprctl.geometry.interference import segment_plane
+    from cdprctl.geometry.distance import segment_plane
 
     floor = np.array([[0.0, 0.0, 1.0, 0.5]])  # z = 0.5, free above
     d, *pts = segment_plane(floor, 0, 0.0, 0.0, 2.0, 1.0, 0.0, 1.0)
@@ -363,27 +394,45 @@ def test_the_attachments_neighbourhood_is_left_out():
 
 
 # -- planted bugs ---------------------------------------------------------------------------------
-PLANTED = {
-    "segment clamp removed": ("s = _clamp01((b * f - c * e) / denom) if",
+PLANTED = {  # (module, the line's text, the bug)
+    "segment clamp removed": ("distance", "s = _clamp01((b * f - c * e) / denom) if",
                               "s = ((b * f - c * e) / denom) if"),
-    "box: one face of each pair": ("for face in (h, -h):", "for face in (h, h):"),
+    "box: one face of each pair": ("distance", "for face in (h, -h):", "for face in (h, h):"),
+    "box against box: the obstacle's edges left out": (
+        "distance", "for e in range(24):", "for e in range(12):"),
+    "box against plane: the corner along the normal": (
+        "distance", "u0 = -boxes[row, 12] if g0 > 0.0 else",
+        "u0 = -boxes[row, 12] if g0 < 0.0 else"),
 }
+
+
+def _load(name, source, folder):
+    """``source`` as the module ``name``, registered (the planted interference imports the
+    planted distance by that name)."""
+    path = folder / f"{name}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.mark.parametrize("bug", list(PLANTED))
 def test_a_planted_bug_fails_the_comparison(robots, bug, tmp_path):
-    old, new = PLANTED[bug]
-    source = (ROOT / "cdprctl" / "geometry" / "interference.py").read_text()
-    assert source.count(old) == 1
-    path = tmp_path / f"planted_{bug.split()[0].strip(':')}.py"
-    path.write_text(source.replace(old, new))
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[path.stem] = module
+    where, old, new = PLANTED[bug]
+    geometry = ROOT / "cdprctl" / "geometry"
+    source = {m: (geometry / f"{m}.py").read_text() for m in ("distance", "interference")}
+    assert source[where].count(old) == 1
+    source[where] = source[where].replace(old, new)
+    tag = "".join(ch for ch in bug if ch.isalnum())[:24]
+    names = (f"planted_distance_{tag}", f"planted_interference_{tag}")
     try:
-        spec.loader.exec_module(module)
-        failed = []
+        distance = _load(names[0], source["distance"], tmp_path)
+        module = _load(names[1], source["interference"].replace(
+            "from cdprctl.geometry.distance import", f"from {names[0]} import"), tmp_path)
+        failed = [box_pairs_worst(distance, 50) > TOL]
         for name in ("rowc", "caroca", "cogiro"):
             model, cfg = robots[name]
             worst, wrong, _ = compare(model, cfg, random_poses(model, 20, 1),
@@ -391,7 +440,79 @@ def test_a_planted_bug_fails_the_comparison(robots, bug, tmp_path):
             failed.append(worst > TOL or wrong > 0)
         assert any(failed)
     finally:
-        del sys.modules[path.stem]
+        for name in names:
+            sys.modules.pop(name, None)
+
+
+# -- the body against the cell --------------------------------------------------------------------
+def random_box(rng, spread):
+    """A box row (centre within ``spread`` m of the origin, any orientation, half extents
+    0.01-1 m) and its parts."""
+    c = rng.uniform(-spread, spread, 3)
+    axis = rng.normal(size=3)
+    R = exp_so3(axis / np.linalg.norm(axis) * rng.uniform(0.0, math.pi))
+    h = rng.uniform(0.01, 1.0, 3)
+    return np.concatenate([c, R.ravel(), h]), c, R, h
+
+
+def box_pairs_worst(distance, n, seed=67):
+    """The worst disagreement (m) of ``distance.box_box`` and ``box_plane`` with the
+    references over ``n`` random pairs each (the body's box at a random pose, apart, touching
+    and overlapping), and of their points: on their boxes, the gap the distance."""
+    rng = np.random.default_rng(seed)
+    worst = 0.0
+    for k in range(n):
+        body, cb, Rb, hb = random_box(rng, 0.5)
+        ob, co, Ro, ho = random_box(rng, 0.5 + 3.0 * k / n)  # overlapping to far apart
+        axis = rng.normal(size=3)
+        p, R = rng.uniform(-1, 1, 3), exp_so3(axis / np.linalg.norm(axis) * rng.uniform(0, 3))
+        boxes = np.array([body, ob])
+        d, *pts = distance.box_box(boxes, 0, 1, p, R)
+        a, q = np.array(pts[:3]), np.array(pts[3:])
+        want = ref_box_box(p + R @ cb, R @ Rb, hb, co, Ro, ho)
+        on_body = to_box(p + R @ cb, R @ Rb, hb)(a[None])[0]
+        on_obstacle = to_box(co, Ro, ho)(q[None])[0]
+        worst = max(worst, abs(d - want), on_body, on_obstacle, abs(np.linalg.norm(a - q) - d))
+        n_ = rng.normal(size=3)
+        n_ /= np.linalg.norm(n_)
+        point = rng.uniform(-2, 2, 3)
+        planes = np.array([[*n_, n_ @ point]])
+        d, *pts = distance.box_plane(boxes, 0, planes, 0, p, R)
+        a, q = np.array(pts[:3]), np.array(pts[3:])
+        want = ref_box_halfspace(p + R @ cb, R @ Rb, hb, point, n_)
+        on_body = to_box(p + R @ cb, R @ Rb, hb)(a[None])[0]
+        on_plane = to_halfspace(point, n_)(q[None])[0]
+        worst = max(worst, abs(d - want), on_body, on_plane, abs(np.linalg.norm(a - q) - d))
+    return worst
+
+
+def test_the_body_against_a_box_or_a_plane_agrees_with_the_references():
+    """``box_box`` against BVLS over both boxes' coordinates and ``box_plane`` against
+    linprog, 400 random pairs each (a third of them overlapping): within 1e-9 m, the closest
+    points on their shapes and as far apart as the distance."""
+    from cdprctl.geometry import distance
+
+    assert box_pairs_worst(distance, 400) < 1e-9
+
+
+def test_the_platform_driven_into_an_obstacle_is_named():
+    """rowc's body against a box beside its home pose and a floor under it: both clear at
+    home, and the box's check 0 and named once the platform is moved into it."""
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    home = model.home.position
+    fixture = _box("a fixture", home + np.array([0.45, 0.0, 0.0]), [0.1, 0.1, 0.1])
+    cfg = _with(model, None, (_plane("the floor", [0, 0, home[2] - 0.3], [0, 0, 1]), fixture))
+    r = Interference(model, cfg)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, home, model.home.rotation)
+    r.update(kin)
+    platform = r.distance[r.checks[:, 0] == PLATFORM]
+    assert len(platform) == 2 * len(cfg.body) and np.all(platform > 0)
+    inverse_kinematics(model, kin, home + np.array([0.3, 0.0, 0.0]), model.home.rotation)
+    r.update(kin)
+    c = int(np.flatnonzero((r.checks[:, 0] == PLATFORM) & (r.checks[:, 2] == 1))[0])
+    assert r.distance[c] == 0.0 and r.minimum == 0.0
+    assert r.describe(c) == f"the platform's {cfg.body[0].name} and a fixture: 0.00 mm"
 
 
 # -- no allocation -----------------------------------------------------------------------------

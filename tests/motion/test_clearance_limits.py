@@ -211,3 +211,28 @@ def test_a_rotation_alone_is_refused_naming_the_rotation_and_the_limit(caroca, r
     assert re.match(r"the line to the target leaves the soft limits after \[1\.5\d+, 0\.35, "
                     r"0\.59\] m and 11\.4\d° \(0\.19\d+ rad\) of its 14\.32° \(0\.2500 rad\) "
                     r"rotation: the tilt ", why), why
+
+
+def test_the_platform_is_kept_off_a_fixture_by_jogs_and_paths(rowc):
+    """rowc's body (0.2 m x 0.1 m x 0.2 m) 0.2 m from a crate in +x: a jog toward it stops
+    where the body is ``clearance`` from it (face to face: 0.195 m, the sampling's step/64),
+    a path ending with the body in it is refused naming the body and the crate, one stopping
+    short of it is planned."""
+    home = np.asarray(rowc.home.position)
+    crate = Box("the crate", home + np.array([0.1 + 0.2 + 0.05, 0, 0]), np.full(3, 0.05), np.eye(3))
+    cfg = rowc.interference
+    model = dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    lim = SoftLimits(model)
+    start = _home(model)
+    end, why = lim.ray_end(start, X, 0.5, step=0.02)
+    assert 0.195 - 0.02 / 64 - 1e-4 <= end[0] - start[0] <= 0.195 + 1e-4
+    assert why.startswith("the platform's body and the crate: ")
+    x, y, z = home
+    with pytest.raises(PathRejectedError, match=r"line 3: .*the platform's body and the crate: "
+                       r"0\.00 mm apart, under the clearance 5\.00 mm"):  # fmt: skip
+        plan_text(model, f"x, y, z\n{x + 0.1}, {y}, {z}\n{x + 0.3}, {y}, {z}\n", start,
+                  model.control.period, lim)  # fmt: skip
+    plan = plan_text(model, f"x, y, z\n{x + 0.1}, {y}, {z}\n{x + 0.15}, {y}, {z}\n", start,
+                     model.control.period, lim)  # fmt: skip
+    assert plan.samples > 2

@@ -202,6 +202,7 @@ def closest_pair(state: dict[str, Any]) -> tuple[FloatArray, str, bool] | None:
         return None
     points = np.array(c["points"], dtype=float)
     a, b = c["between"]
-    what = f"cables {a} and {b}" if c["kind"] == "cable" else f"cable {a} and {b}"
+    what = {"cable": f"cables {a} and {b}", "platform": f"the platform's {a} and {b}"}.get(
+        c["kind"], f"cable {a} and {b}")
     under = c["limit"] is not None and c["distance"] < c["limit"]
     return points, f"{what}: {c['distance'] * 1e3:.1f} mm", under

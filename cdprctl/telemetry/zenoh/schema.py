@@ -125,7 +125,9 @@ def state_payload(
     }
 
 
-CHECK_KINDS = ("cable", "body", "obstacle")
+#: ``Interference.checks[:, 0]`` in words (``geometry/interference.py``: CABLE, BODY, OBSTACLE,
+#: PLATFORM: the platform's body against an obstacle)
+CHECK_KINDS = ("cable", "body", "obstacle", "platform")
 
 
 def clearance_parts(model: Any) -> tuple[list[str], list[str]]:
@@ -138,23 +140,28 @@ def clearance_payload(
     c: np.ndarray, cables: list[str], parts: tuple[list[str], list[str]]
 ) -> dict[str, Any] | None:
     """The least distance at the estimate (m), what it is between (the cable, then the other
-    cable, body part or obstacle), the closest points on each (m, base frame) and the
-    clearance (m); None with nothing to check."""
+    cable, body part or obstacle; or the body's part, then the obstacle), the closest points
+    on each (m, base frame) and the clearance (m); None with nothing to check."""
     if not np.all(np.isfinite(c[1:4])):
         return None
     kind, i, k = int(c[1]), int(c[2]), int(c[3])
     if kind == 0:
-        other = cables[k]
+        first, other = cables[i], cables[k]
+    elif kind == 3:  # the body's part i against obstacle k
+        first, other = _part(parts[0], i, "body"), _part(parts[1], k, "obstacle")
     else:
-        names = parts[kind - 1]
-        other = names[k] if k < len(names) else f"{CHECK_KINDS[kind]} {k + 1}"
+        first, other = cables[i], _part(parts[kind - 1], k, CHECK_KINDS[kind])
     return {
         "distance": _float(c[0]),
         "kind": CHECK_KINDS[kind],
-        "between": [cables[i], other],
+        "between": [first, other],
         "points": [_floats(c[4:7]), _floats(c[7:10])],
         "limit": _float(c[10]),
     }
+
+
+def _part(names: list[str], k: int, kind: str) -> str:
+    return names[k] if k < len(names) else f"{kind} {k + 1}"
 
 
 def _motion(snap: dict[str, np.ndarray]) -> dict[str, Any]:
