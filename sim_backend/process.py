@@ -62,13 +62,15 @@ class Start:
 class SimulatedRobotProcess:
     """The daemon's handle on the child: ``overrides`` (the buses a driver joins it on),
     ``disturb``, ``schedule``, ``set_brake_close_time``, ``position``, ``poll`` (its lines),
-    ``close``. Blocks in the constructor until the child's drives are up."""
+    ``close`` (then ``contacts``: how many it recorded). Blocks in the constructor until the
+    child's drives are up."""
 
     def __init__(self, model: RobotModel, as_built: RobotModel | None, realtime: bool,
                  print_fn: Any = print) -> None:  # fmt: skip
         from cdprctl.core import realtime as rt
 
         self.print = print_fn
+        self.contacts = 0  # the contacts the simulated robot recorded (said as it ends)
         ours, theirs = zip(*(socket_pair() for _ in model.drives.buses), strict=True)
         self._control, child_control = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
         pose_fd = os.memfd_create("cdprctl-sim-pose")
@@ -150,6 +152,8 @@ class SimulatedRobotProcess:
                 return
             if kind == "say":
                 self.print(value)
+            elif kind == "contacts":
+                self.contacts = int(value)
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -199,12 +203,15 @@ def serve(start: Start) -> int:
         pose[0] += 1.0
         pose[STEPPED_AT] = time.monotonic()  # one aligned float: read whole, no sequence
 
+    def tell(kind: str, value: Any) -> None:
+        with contextlib.suppress(OSError):
+            control.send(pickle.dumps((kind, value)), socket.MSG_DONTWAIT)
+
     def say(text: str, **_: Any) -> None:
         kind = "ready" if text == "cdprctl sim: ready" else "say"
         if kind == "ready":
             publish(0.0)
-        with contextlib.suppress(OSError):
-            control.send(pickle.dumps((kind, text)), socket.MSG_DONTWAIT)
+        tell(kind, text)
 
     if os.getppid() != parent:
         return 0  # the daemon is gone already
@@ -245,6 +252,7 @@ def serve(start: Start) -> int:
                        realtime=realtime if start.realtime else None)  # fmt: skip
     net.close()
     say(f"cdprctl run: the simulated robot: {plant.contact.report()}")
+    tell("contacts", len(plant.contact.contacts))
     if late.count:
         say(late.summary().replace("cdprctl sim:", "cdprctl run: the simulated robot:"))
     return 0

@@ -50,6 +50,8 @@ DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
 # where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
 DEMO_ENDS = frozenset({State.READY, State.FAULT, State.ESTOP})  # what a stop waits for
 SCRIPT_STOPS = frozenset({State.FAULT, State.ESTOP})  # a scripted client sends nothing more
+#: the exit code of a run whose simulated robot recorded a contact (sim_backend/contact.py)
+CONTACT_EXIT = 4
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -211,6 +213,10 @@ class Daemon:
             code = 0 if d.path_state == "done" else 3
         else:
             code = 0 if d.state is not State.FAULT or self.stop_requested.is_set() else 3
+        if code == 0 and self.sim is not None and self.sim.contacts:
+            self.say(f"cdprctl run: exit {CONTACT_EXIT}: the simulated robot recorded "
+                     f"{self.sim.contacts} contact(s) (above)", err=True)  # fmt: skip
+            code = CONTACT_EXIT
         for s, h in old.items():  # a signal during the shut-down above only asked again
             signal.signal(s, h)
         return code

@@ -51,10 +51,11 @@ def gone(pid: int, within: float) -> bool:
     return False
 
 
-def run_sim(args: list[str], during: Any = None, code: int = 0) -> str:
-    """``cdprctl run --sim`` on rowc with ``args``; ``during(daemon, child)`` once the daemon
-    is ready; the whole output. Asserts exit ``code`` and no simulated robot left running."""
-    config = str(CONFIG / "rowc.toml")
+def run_sim(args: list[str], during: Any = None, code: int = 0, config: str = "") -> str:
+    """``cdprctl run --sim`` on rowc (or ``config``) with ``args``; ``during(daemon, child)``
+    once the daemon is ready; the whole output. Asserts exit ``code`` and no simulated robot
+    left running."""
+    config = config or str(CONFIG / "rowc.toml")
     cmd = [*CLI, "run", "--config", config, "--sim", "--no-realtime", *args]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
@@ -89,6 +90,22 @@ def test_the_loop_never_steps_the_plant_and_the_jet_and_true_pose_cross(tmp_path
     assert min(ys) == pytest.approx(0.35, abs=1e-3) and max(ys) > 0.352  # pushed along y
     z = np.load(timing)
     assert len(z["compute"]) > 500 and "plant" not in z.files
+
+
+def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
+    """A lamp standing in cable 1 at home (rowc, 0.3 m from the attachment): the run is
+    otherwise clean (ready, 1 s, no demo), the simulated robot records the contact, and the
+    exit is 4 with a line saying why (0 without the lamp: the other tests here)."""
+    robot = tmp_path / "rowc_lamp.toml"
+    base = CONFIG / "rowc.toml"
+    robot.write_text(f'base = "{base}"\n\n[[cell.obstacles]]\nname = "the lamp"\n'
+                     'kind = "box"\ncentre = [1.1195, 0.3688, 0.3882]\n'
+                     "half_extents = [0.01, 0.01, 0.01]\n")  # fmt: skip
+    out = run_sim(["--no-demo", "--duration", "1"], code=4, config=str(robot))
+    assert "the simulated robot: 1 contact(s), the first at t = " in out, out
+    assert "cable 1 and the lamp: 0.00 mm" in out
+    assert out.rstrip().endswith("cdprctl run: exit 4: the simulated robot recorded 1 "
+                                 "contact(s) (above)")  # fmt: skip
 
 
 def stall_for(seconds: float, ctrl_c: bool = False) -> Any:
