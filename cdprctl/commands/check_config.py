@@ -36,51 +36,69 @@ def ros2_summary(model: RobotModel) -> str:
             f"{r.rate:g} Hz (docs/ros2.md)")
 
 
-#: points per axis of the workspace box the clearance is measured over (at home orientation)
+#: points per axis of the workspace box the clearance is measured over
 CLEARANCE_GRID = 11
+#: the rotations of the box's points: ``max_angle`` about the base's ±x, ±y, ±z
+TURNS = ("+x", "-x", "+y", "-y", "+z", "-z")
 
 
 def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
-    """The cables' least distance (``[interference]``, docs/clearance.md) at the home pose and
-    over the workspace box at the home orientation (``CLEARANCE_GRID`` points per axis), each
-    with its pair, against the limit; and a warning for each of the two under the limit (a
-    robot under it at home may move only where its cables get no closer; the box's points
-    under it the soft limits refuse: docs/clearance.md)."""
+    """The cables' least distance (``[interference]``, docs/clearance.md) at the home pose,
+    over the workspace box at the home orientation (``CLEARANCE_GRID`` points per axis) and
+    over the box turned ``max_angle`` about each of ``TURNS``, each with its pair and where,
+    against the limit; and a warning for each under the limit (a robot under it at home may
+    move only where its cables get no closer; the box's poses under it the soft limits
+    refuse: docs/clearance.md)."""
     from cdprctl.motion.clearance import Clearance
 
     c = Clearance(model)
     if not c.active:
         return "clearance   nothing to check (one cable, no body, no obstacle)", []
-    ws = model.workspace
-    axes = [np.linspace(ws.position_min[k], ws.position_max[k], CLEARANCE_GRID) for k in range(3)]
-    box = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    coords = np.vstack([np.r_[model.home.position, 0.0, 0.0, 0.0],
-                        np.c_[box, np.zeros((len(box), 3))]])  # fmt: skip
-    dist, _ = c.at(coords)
-    j = 1 + int(np.argmin(dist[1:]))
     limit = f"the [interference] clearance {c.limit * 1e3:.2f} mm"
-    words, warnings = [], []
-    for name, k in (("at home", 0), ("over the workspace box at the home orientation", j)):
-        under = " UNDER the limit" if dist[k] < c.limit else ""
-        at = "" if k == 0 else f" at {np.round(coords[k, :3], 4).tolist()} m"
-        words.append(f"{name} {dist[k] * 1e3:.2f} mm ({c.pair_at(coords[k])}{at}){under}")
-    if dist[0] < c.limit:
+    home = np.r_[model.home.position, 0.0, 0.0, 0.0]
+    d_home, _ = c.at(home)
+    under = " UNDER the limit" if d_home[0] < c.limit else ""
+    words = [f"at home {d_home[0] * 1e3:.2f} mm ({c.pair_at(home)}){under}"]
+    warnings = []
+    if d_home[0] < c.limit:
         warnings.append(
-            f"at the home pose {c.pair_at(coords[0])} are {dist[0] * 1e3:.2f} mm apart, under "
+            f"at the home pose {c.pair_at(home)} are {d_home[0] * 1e3:.2f} mm apart, under "
             f"{limit}: from home the robot may move only where they get no closer "
             "(docs/clearance.md)"
         )
-    n_under = int(np.count_nonzero(dist[1:] < c.limit))
-    if n_under:
-        warnings.append(
-            f"{n_under} of {len(box)} points of the [workspace] box at the home orientation are "
-            f"under {limit} (least {dist[j] * 1e3:.2f} mm, {c.pair_at(coords[j])} at "
-            f"{np.round(coords[j, :3], 4).tolist()} m): the soft limits refuse them, so the "
-            "robot cannot reach all of its stated workspace (docs/clearance.md)"
-        )
+    for name, coords in _box_poses(model):
+        dist, _ = c.at(coords)
+        j = int(np.argmin(dist))
+        where = f"at {np.round(coords[j, :3], 4).tolist()} m"
+        if np.any(coords[j, 3:]):
+            where += f" turned about {TURNS[j * len(TURNS) // len(coords)]}"
+        under = " UNDER the limit" if dist[j] < c.limit else ""
+        words.append(f"over the workspace box {name} {dist[j] * 1e3:.2f} mm "
+                     f"({c.pair_at(coords[j])} {where}){under}")  # fmt: skip
+        if n_under := int(np.count_nonzero(dist < c.limit)):
+            warnings.append(
+                f"{n_under} of {len(coords)} poses of the [workspace] box {name} are under "
+                f"{limit} (least {dist[j] * 1e3:.2f} mm, {c.pair_at(coords[j])} {where}): the "
+                "soft limits refuse them, so the robot cannot reach all of its stated "
+                "workspace (docs/clearance.md)"
+            )
     return (f"clearance   limit {c.limit * 1e3:.2f} mm ([interference] clearance); "
             + "; ".join(words) + f" ({CLEARANCE_GRID} points per axis; docs/clearance.md)"
             ), warnings  # fmt: skip
+
+
+def _box_poses(model: RobotModel) -> list[tuple[str, np.ndarray]]:
+    """The workspace box's grid as trajectory coordinates (m, rad from home): at the home
+    orientation, and turned ``max_angle`` about each of ``TURNS`` (in that order)."""
+    ws = model.workspace
+    axes = [np.linspace(ws.position_min[k], ws.position_max[k], CLEARANCE_GRID) for k in range(3)]
+    box = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    out = [("at the home orientation", np.c_[box, np.zeros((len(box), 3))])]
+    if ws.max_angle > 0.0:
+        turns = [np.eye(3)[k] * sign * ws.max_angle for k in range(3) for sign in (1.0, -1.0)]
+        out.append((f"turned {ws.max_angle:g} rad", np.vstack([np.c_[box, np.tile(t, (len(box), 1))]
+                                                               for t in turns])))  # fmt: skip
+    return out
 
 
 def verdict(file: str, warnings: list[str]) -> list[str]:

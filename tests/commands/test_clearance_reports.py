@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from cdprctl.cli import main
+from cdprctl.core.rotation import exp_so3
 from cdprctl.robot_file import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -31,9 +32,10 @@ half_extents = [0.005, 0.005, 0.005]  # m
 
 def _pair(check, p, R, words: str) -> float:
     """m: the brute force's distance between the two cables ``words`` names ("cables 5 and
-    6") at the pose ``p``, ``R`` (a symmetric robot ties pairs: the one printed must be one)."""
+    6", or "cable 7 and cable 8" where the names say "cable") at the pose ``p``, ``R`` (a
+    symmetric robot ties pairs: the one printed must be one)."""
     names = [c.name for c in check.model.cables]
-    i, j = (names.index(n) for n in re.fullmatch(r"cables (\S+) and (\S+)", words).groups())
+    i, j = (names.index(n) for n in words.removeprefix("cables ").split(" and "))
     from cdprctl.geometry.kinematics import inverse_kinematics
 
     inverse_kinematics(check.model, check.kin, p, R)
@@ -46,7 +48,7 @@ def _mm(text: str, after: str) -> float:
     return float(re.search(re.escape(after) + r" ([0-9.]+) mm", text).group(1)) / 1e3
 
 
-@pytest.mark.parametrize("name", ["rowc", "caroca"])
+@pytest.mark.parametrize("name", ["rowc", "caroca", "cogiro"])
 def test_check_config_prints_the_clearance_at_home_and_over_the_box(name, capsys):
     """The home pose's least distance and the box's least at the home orientation, each as
     the brute force finds it at the pose printed, with its pair; the box's least no larger
@@ -72,8 +74,20 @@ def test_check_config_prints_the_clearance_at_home_and_over_the_box(name, capsys
     for corner in np.array(np.meshgrid(*zip(ws.position_min, ws.position_max, strict=True)
                                        )).reshape(3, -1).T:  # fmt: skip
         assert min(check.at(corner, R).values())[0] >= float(box.group(1)) / 1e3 - 6e-5
-    assert ("UNDER the limit" in line) == (float(box.group(1)) / 1e3 < model.interference.clearance)
+    level, tilted = line.split("; over the workspace box turned")
+    assert ("UNDER the limit" in level.split("home orientation")[1]) == (
+        float(box.group(1)) / 1e3 < model.interference.clearance)  # fmt: skip
     assert "limit 5.00 mm ([interference] clearance)" in line
+    # turned max_angle: the least printed is the brute force's at the pose printed
+    turned = re.search(r"turned ([0-9.]+) rad ([0-9.]+) mm \((.+?) at \[(.+?)\] m turned about "
+                       r"([+-])([xyz])\)", line)  # fmt: skip
+    assert turned and float(turned.group(1)) == model.workspace.max_angle, line
+    at = np.array([float(v) for v in turned.group(4).split(",")])
+    axis = np.eye(3)["xyz".index(turned.group(6))] * (1.0 if turned.group(5) == "+" else -1.0)
+    R = exp_so3(axis * model.workspace.max_angle) @ model.home.rotation
+    there = min(check.at(at, R).values())
+    assert float(turned.group(2)) / 1e3 == pytest.approx(there[0], abs=6e-5)
+    assert ("UNDER the limit" in tilted) == (there[0] < model.interference.clearance)
 
 
 def _lamp_robot(tmp_path, z: float) -> str:
@@ -125,18 +139,21 @@ def test_check_config_warns_when_the_home_pose_is_under_the_clearance(tmp_path, 
     assert 3e-3 < d < model.interference.clearance  # the case of the issue, as measured apart
     assert main(["check-config", str(path)]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0] == f"{path}: valid, with 2 warnings"
+    assert out[0] == f"{path}: valid, with 3 warnings"
     home = re.fullmatch(r"  warning: at the home pose (.+?) are ([0-9.]+) mm apart, under the "
                         r"\[interference\] clearance 5\.00 mm: .*", out[1])  # fmt: skip
     assert home, out[1]
     assert home.group(1) == what == "cable 2 and the platform's cube"
     assert float(home.group(2)) / 1e3 == pytest.approx(d, abs=6e-5)
-    box = re.fullmatch(r"  warning: (\d+) of 1331 points of the \[workspace\] box at the home "
+    box = re.fullmatch(r"  warning: (\d+) of 1331 poses of the \[workspace\] box at the home "
                        r"orientation are under .*", out[2])  # fmt: skip
     assert box and 0 < int(box.group(1)) <= 1331, out[2]
+    turned = re.fullmatch(r"  warning: (\d+) of 7986 poses of the \[workspace\] box turned "
+                          r"0\.6 rad are under .*", out[3])  # fmt: skip
+    assert turned and 0 < int(turned.group(1)) <= 7986, out[3]
     assert not any(line.endswith(": OK") for line in out)
     assert main(["check-config", "--strict", str(path)]) == 1
-    assert "2 warnings (above) and --strict: exit 1" in capsys.readouterr().err
+    assert "3 warnings (above) and --strict: exit 1" in capsys.readouterr().err
 
     rowc = ROOT / "config" / "rowc.toml"
     assert main(["check-config", "--strict", str(rowc)]) == 0
@@ -145,5 +162,5 @@ def test_check_config_warns_when_the_home_pose_is_under_the_clearance(tmp_path, 
     tight.write_text(f'base = "{rowc}"\n[interference]\nclearance = 0.040\n')
     assert main(["check-config", str(tight)]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0].endswith(": valid, with 2 warnings")
+    assert out[0].endswith(": valid, with 3 warnings")
     assert "under the [interference] clearance 40.00 mm" in out[1]
