@@ -12,10 +12,13 @@ exponential map has singular values 1 and ``sinc(θ/2) ≤ 1``), the body's corn
 exit point on its swivel pulley moves by its chord (mm and less at a path's spacing). With
 ``Δ`` twice the largest of these, the distance between samples ``k−1`` and ``k`` is at least
 ``(d_{k−1} + d_k − Δ) / 2``. Where that bound falls under the clearance while both samples
-are clear, the interval is sampled again ``Δ / REFINE_STEP`` times, linearly in the
-coordinates: a dip between two of those sub-samples is then under ``REFINE_STEP / 2``
-(0.05 mm). Only intervals near the clearance pay for it; a path's 2 mm spacing and a
-move's 2 cm steps need no finer sampling of their own.
+are clear, the interval is bisected, linearly in the coordinates, each half by the same bound
+(``Δ`` times its share), until every part is clear by it or its bound is under
+``REFINE_STEP``: a dip left between two measured points is then under ``REFINE_STEP / 2``
+(0.05 mm) — the guarantee of sampling the interval every ``REFINE_STEP``, for a few
+measurements where that took ``Δ / REFINE_STEP`` (400 for a jog's 2 cm steps). Only
+intervals near the clearance pay for it; a path's 2 mm spacing and a move's 2 cm steps need
+no finer sampling of their own.
 """
 
 from __future__ import annotations
@@ -76,24 +79,41 @@ class Clearance:
         where = c.copy()
         if not continuous:
             return dist, where
-        limit = self.limit
         for k in range(1, len(c)):
-            if min(dist[k - 1], dist[k]) < limit:
+            if min(dist[k - 1], dist[k]) < self.limit:
                 continue  # a sample already fails there
             step = c[k] - c[k - 1]
             moved = float(np.linalg.norm(step[:3]) + self.radius * np.linalg.norm(step[3:]))
             chord = float(np.max(np.linalg.norm(exits[k] - exits[k - 1], axis=1)))
             bound = 2.0 * max(moved, chord)  # m: the most the distance changes between them
-            if 0.5 * (dist[k - 1] + dist[k] - bound) >= limit:
-                continue
-            n = math.ceil(bound / REFINE_STEP)
-            s = np.arange(1, n)[:, None] / n
-            sub = c[k - 1] + s * step
-            d_sub, _ = self.at(sub)
-            j = int(np.argmin(d_sub))
-            if d_sub[j] < dist[k]:
-                dist[k], where[k] = d_sub[j], sub[j]
+            d, s = self._dip(c[k - 1], step, dist[k - 1], dist[k], bound)
+            if d < dist[k]:
+                dist[k], where[k] = d, c[k - 1] + s * step
         return dist, where
+
+    def _dip(self, start: FloatArray, step: FloatArray, d0: float, d1: float,
+             bound: float) -> tuple[float, float]:  # fmt: skip
+        """(m, fraction): the least distance found on ``start + s step``, ``s`` in [0, 1],
+        whose ends are ``d0``, ``d1`` m clear and along which the distance changes by at most
+        ``bound`` m. Bisection by the bound of the module's doc: a part ``[a, b]`` is at
+        least ``(d_a + d_b − bound (b − a)) / 2``; it is split while that is under the limit
+        (or under the least found) and its own bound is ``REFINE_STEP`` or more, so a dip
+        left between two measured points is under ``REFINE_STEP / 2`` deep — as sampling
+        the whole way every ``REFINE_STEP``, for a few measurements instead of
+        ``bound / REFINE_STEP``."""
+        best, best_s = math.inf, 0.0
+        parts = [(0.0, 1.0, d0, d1)]
+        while parts:
+            a, b, da, db = parts.pop()
+            span = bound * (b - a)
+            if span < REFINE_STEP or 0.5 * (da + db - span) >= min(self.limit, best):
+                continue
+            m = 0.5 * (a + b)
+            dm = self._measure(start + m * step)
+            if dm < best:
+                best, best_s = dm, m
+            parts += [(a, m, da, dm), (m, b, dm, db)]
+        return best, best_s
 
     def describe(self, x: FloatArray) -> str:
         """What comes closest at the coordinates ``x``, how close, and the limit."""
