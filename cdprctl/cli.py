@@ -7,6 +7,7 @@ import re
 import signal
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from cdprctl import __version__
 
@@ -51,8 +52,19 @@ def _light_parser(command: str) -> argparse.ArgumentParser:
     return parser
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse taking a value that starts like a negative number as a value: ``--grid
+    -1.5:1.5:20,...``, ``--pose -0.5,0,1``, ``--wrench -30,0,0,0,0,0`` (argparse takes only
+    ``-1.5`` alone so, and stopped the others on "expected one argument"). No option of
+    cdprctl starts with a digit. Subcommands' parsers are of this class too."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
+
+
 def _top_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="cdprctl",
         description="Controller and tools for cable-driven parallel robots (SI units throughout).",
     )

@@ -113,6 +113,22 @@ def test_grid_parse_names_the_part():
             Grid.parse(bad)
 
 
+def test_a_value_starting_with_a_minus_is_a_value(capsys):
+    """``--grid -1.5:1.5:3,...`` and ``--wrench -30,...`` as typed, without ``=`` (argparse
+    took them for options: "expected one argument", a newcomer's trial); the same points
+    as with ``=``."""
+    cfg = str(ROOT / "config" / "caroca.toml")
+    spaced = ["--grid", "-1.5:1.5:3,-2:2:3,0.3:2.5:3", "--wrench", "-30,0,0,0,0,0"]
+    joined = ["--grid=-1.5:1.5:3,-2:2:3,0.3:2.5:3", "--wrench=-30,0,0,0,0,0"]
+    outs = []
+    for args in (spaced, joined):
+        assert main(["workspace", "--config", cfg, *args, "--json"]) == 0
+        outs.append(json.loads(capsys.readouterr().out))
+    for out in outs:  # the timings apart
+        out.pop("seconds", None), out.pop("clearance_seconds", None)
+    assert outs[0] == outs[1] and outs[0]["points"][0] == [-1.5, -2.0, 0.3]
+
+
 def test_cli_json_and_plot(tmp_path, capsys):
     rc = main(["workspace", "--config", str(ROOT / "config" / "rowc.toml"), "--wrench",
                "0,30,0,0,0,0", "--grid", "0.5:2.5:5,0.35:0.35:1,0.3:0.7:3", "--json",
