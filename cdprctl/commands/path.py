@@ -58,10 +58,14 @@ def check(args: argparse.Namespace) -> int:
               "x,y,z,roll,pitch,yaw (m, rad)", file=sys.stderr)  # fmt: skip
         return 2
     pose = np.array(given + home[len(given):], dtype=float)
+    limits, start = SoftLimits(model), coordinates_of(model, pose)
+    if args.start and (outside := _outside(model, limits, start)):
+        print(f"cdprctl path check: error: --from = {args.start!r}: {outside} ([workspace] of "
+              f"{model.source_file}): no robot stands there to start a path", file=sys.stderr)
+        return 2
     period = 1.0 / (args.rate or model.control.rate)
     try:
-        plan = plan_text(model, text, coordinates_of(model, pose), period, SoftLimits(model),
-                         args.file, args.units)  # fmt: skip
+        plan = plan_text(model, text, start, period, limits, args.file, args.units)
     except (PathFileError, PathRejectedError) as exc:
         print(f"cdprctl path check: {args.file} rejected: {exc}"
               f"{units_hint(text, args.units, str(exc))}", file=sys.stderr)  # fmt: skip
@@ -77,3 +81,14 @@ def check(args: argparse.Namespace) -> int:
     n = len(plan.segments)
     print(f"ok: the path holds ({n} segment{'s' if n != 1 else ''}, {plan.duration:.2f} s)")
     return 0
+
+
+def _outside(model: Any, limits: Any, start: np.ndarray) -> str:
+    """Why the start coordinates (m, rad from home) are outside the workspace box or beyond
+    its tilt, in the soft limits' words; "" when inside (a start under the tension margin or
+    the clearance is a path's to leave: the plan takes it as its floor)."""
+    ws = model.workspace
+    p, tilt = start[:3], float(np.linalg.norm(start[3:]))
+    inside = (np.all(p >= ws.position_min - 1e-6) and np.all(p <= ws.position_max + 1e-6)
+              and tilt <= ws.max_angle + 1e-6)  # fmt: skip
+    return "" if inside else limits.why(start, float("inf"))

@@ -373,7 +373,14 @@ def test_path_check_plans_offline_and_hints_at_millimetres(tmp_path, capsys):
     # a start left of the origin is a pose, not an option argparse cannot find
     wipe = str(ROOT / "paths" / "rowc_wipe.csv")
     assert main(["path", "check", wipe, "--config", cfg, "--from", "-1.5,0.35,0.59"]) == 2
-    assert "x = -1.5000 m is outside the workspace box" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # the start is refused as the start, not blamed on the file's first line with its units
+    assert err.startswith("cdprctl path check: error: --from = '-1.5,0.35,0.59': x = -1.5000 m "
+                          "is outside the workspace box [0.5, 2.5] m ([workspace] of ")  # fmt: skip
+    assert "line" not in err and "millimetres" not in err and err.count("\n") == 1
+    assert main(["path", "check", wipe, "--config", cfg, "--from", "1.5,0.35,0.59,0,0,0.5"]) == 2
+    assert "the tilt 28.65° (0.5000 rad) from the home orientation exceeds" in (
+        capsys.readouterr().err)
 
 
 def test_run_takes_units_for_its_path(tmp_path, capsys):
