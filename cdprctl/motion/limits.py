@@ -187,8 +187,8 @@ class SoftLimits:
         scale) may go within the limits, up to ``horizon`` (in units of ``direction``):
         sampled every ``step`` m of its translation or ``step`` rad of its rotation, whichever
         needs more samples (a turn with a small translation is sampled as a turn), then
-        bisected to 1/64 of a step. Returns the end and what bounds it ("" when the horizon
-        does)."""
+        bisected to 1/64 of a step. Returns the end and what bounds it there, with its value
+        just past the end ("" when the horizon does)."""
         d = np.asarray(direction, dtype=float)
         scale = max(float(np.linalg.norm(d[:3])), float(np.linalg.norm(d[3:])))
         if scale == 0.0:
@@ -212,6 +212,11 @@ class SoftLimits:
                 lo = mid
             else:
                 hi = mid
+        # what breaks just past the end, not at the sample first found (a step further on)
+        way = np.array([start + lo * d, start + hi * d])
+        margin, ok = self.check(way, floor=floor, continuous=True, near=near)
+        if not ok[1]:
+            why = self.why(way[1], float(margin[1]), floor, self.nearest_at[1], near)
         return start + lo * d, why
 
     def line_refusal(self, start: FloatArray, target: FloatArray) -> str:

@@ -89,6 +89,10 @@ def test_a_straight_motion_stops_short_where_brute_force_finds_the_clearance(car
     travelled = end[0] - start[0]
     assert first - step / 64 - 1e-4 <= travelled <= first + 1e-4
     assert f"cable {CABLE + 1} and the lamp" in why and "mm apart, under the clearance 5.00" in why
+    # the distance said is the one just past the end (within the bisection's 1/64 step and
+    # the bound's doubling of it), not the one at the sample first found too close
+    said = float(why.split("the lamp: ")[1].split(" mm")[0]) / 1e3
+    assert lim.clearance.limit - 2.0 * step / 64 - 1e-4 <= said <= lim.clearance.limit  # 2 decimals
 
 
 @pytest.mark.parametrize("offset, refused", [(0.0055, True), (0.0080, False)])
