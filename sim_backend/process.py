@@ -34,9 +34,11 @@ from cdprctl.model.robot import RobotModel
 from drivers.pair_bus import socket_pair
 
 # [sequence, simulated time s, x, y, z m in the world frame, the monotonic clock's s at the
-# end of the last step]: the last, read alone, tells the daemon its drives were not run
-POSE_FLOATS = 6
+# end of the last step, the contacts recorded so far]: the last two, each read alone, tell the
+# daemon its drives were not run, and (at its end, even after a kill) how many contacts
+POSE_FLOATS = 7
 STEPPED_AT = 5
+CONTACTS = 6
 READY_WITHIN = 300.0  # s: a first start on a machine compiles the physics (about a minute)
 STOP_WITHIN = 5.0  # s for the child to end after SIGTERM before it is killed
 CONTROL_MAX = 1 << 16  # bytes of one control message
@@ -70,7 +72,7 @@ class SimulatedRobotProcess:
         from cdprctl.core import realtime as rt
 
         self.print = print_fn
-        self.contacts = 0  # the contacts the simulated robot recorded (said as it ends)
+        self.contacts = 0  # the contacts the simulated robot recorded (read as it ends)
         ours, theirs = zip(*(socket_pair() for _ in model.drives.buses), strict=True)
         self._control, child_control = socket.socketpair(socket.AF_UNIX, socket.SOCK_DGRAM)
         pose_fd = os.memfd_create("cdprctl-sim-pose")
@@ -152,8 +154,6 @@ class SimulatedRobotProcess:
                 return
             if kind == "say":
                 self.print(value)
-            elif kind == "contacts":
-                self.contacts = int(value)
 
     def close(self) -> None:
         if self.proc.poll() is None:
@@ -164,6 +164,7 @@ class SimulatedRobotProcess:
                 self.proc.kill()
                 self.proc.wait()
         self.poll()
+        self.contacts = int(self._pose[CONTACTS])  # the page's: no message a full queue drops
         self._control.close()
         self._pose = np.zeros(POSE_FLOATS)  # the page's last view released before it closes
         with contextlib.suppress(BufferError):
@@ -202,16 +203,14 @@ def serve(start: Start) -> int:
         pose[2:5] = plant.position
         pose[0] += 1.0
         pose[STEPPED_AT] = time.monotonic()  # one aligned float: read whole, no sequence
-
-    def tell(kind: str, value: Any) -> None:
-        with contextlib.suppress(OSError):
-            control.send(pickle.dumps((kind, value)), socket.MSG_DONTWAIT)
+        pose[CONTACTS] = len(plant.contact.contacts)
 
     def say(text: str, **_: Any) -> None:
         kind = "ready" if text == "cdprctl sim: ready" else "say"
         if kind == "ready":
             publish(0.0)
-        tell(kind, text)
+        with contextlib.suppress(OSError):
+            control.send(pickle.dumps((kind, text)), socket.MSG_DONTWAIT)
 
     if os.getppid() != parent:
         return 0  # the daemon is gone already
@@ -251,8 +250,8 @@ def serve(start: Start) -> int:
                        print_fn=say, between=between, signals=False,
                        realtime=realtime if start.realtime else None)  # fmt: skip
     net.close()
+    pose[CONTACTS] = len(plant.contact.contacts)
     say(f"cdprctl run: the simulated robot: {plant.contact.report()}")
-    tell("contacts", len(plant.contact.contacts))
     if late.count:
         say(late.summary().replace("cdprctl sim:", "cdprctl run: the simulated robot:"))
     return 0

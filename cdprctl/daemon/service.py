@@ -50,8 +50,9 @@ DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
 # where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
 DEMO_ENDS = frozenset({State.READY, State.FAULT, State.ESTOP})  # what a stop waits for
 SCRIPT_STOPS = frozenset({State.FAULT, State.ESTOP})  # a scripted client sends nothing more
-#: the exit code of a run whose simulated robot recorded a contact (sim_backend/contact.py)
-CONTACT_EXIT = 4
+#: the exit code of a run whose simulated robot recorded a contact (sim_backend/contact.py);
+#: 4 is startup.NOT_CALIBRATED's
+CONTACT_EXIT = 5
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died

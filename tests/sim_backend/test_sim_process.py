@@ -95,16 +95,21 @@ def test_the_loop_never_steps_the_plant_and_the_jet_and_true_pose_cross(tmp_path
 def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
     """A lamp standing in cable 1 at home (rowc, 0.3 m from the attachment): the run is
     otherwise clean (ready, 1 s, no demo), the simulated robot records the contact, and the
-    exit is 4 with a line saying why (0 without the lamp: the other tests here)."""
+    exit is 5 with a line saying why (0 without the lamp: the other tests here; 4 is "not
+    calibrated")."""
     robot = tmp_path / "rowc_lamp.toml"
+    from cdprctl.daemon.service import CONTACT_EXIT
+    from cdprctl.daemon.startup import NOT_CALIBRATED
+
+    assert CONTACT_EXIT == 5 and CONTACT_EXIT not in (0, 1, 2, 3, NOT_CALIBRATED)
     base = CONFIG / "rowc.toml"
     robot.write_text(f'base = "{base}"\n\n[[cell.obstacles]]\nname = "the lamp"\n'
                      'kind = "box"\ncentre = [1.1195, 0.3688, 0.3882]\n'
                      "half_extents = [0.01, 0.01, 0.01]\n")  # fmt: skip
-    out = run_sim(["--no-demo", "--duration", "1"], code=4, config=str(robot))
+    out = run_sim(["--no-demo", "--duration", "1"], code=5, config=str(robot))
     assert "the simulated robot: 1 contact(s), the first at t = " in out, out
     assert "cable 1 and the lamp: 0.00 mm" in out
-    assert out.rstrip().endswith("cdprctl run: exit 4: the simulated robot recorded 1 "
+    assert out.rstrip().endswith("cdprctl run: exit 5: the simulated robot recorded 1 "
                                  "contact(s) (above)")  # fmt: skip
 
 
