@@ -3,8 +3,9 @@ measures (``cdprctl/geometry/interference.py``: cable against cable, the platfor
 here at the plant's true pose after each step, and every contact recorded — so that a test
 or a run shows whether the controller stopped the robot before one happened.
 
-A contact is a distance of 0 (two cables touching or crossing, a cable into the body or an
-obstacle). Measured once per ``CdprPlant.step`` (a control period): at the top speed of a
+A contact is a distance of 0 or less (two cables touching or crossing, a cable into the body
+or an obstacle, the platform's body into an obstacle: against a plane, negative). Measured
+once per ``CdprPlant.step`` (a control period): at the top speed of a
 shipped robot (1 m/s) and 4 ms a step the platform moves 4 mm between two measurements, so
 a grazing touch shorter than that can pass unseen; the least distance met (``least``) says
 how near it came.

@@ -2,7 +2,8 @@
 against segment, segment against a box, segment against a plane's solid side, and a box of the
 platform's body against an obstacle of the cell (a box, a plane). Scalars in, scalars out:
 nothing here allocates, so ``interference_kernel`` (``interference.py``) may call them in the
-control cycle. Distances m (0 when touching or overlapping); a box is a row of 15 floats:
+control cycle. Distances m (0 when touching or overlapping, but a box against a plane: signed,
+negative in it); a box is a row of 15 floats:
 centre, rotation row-major (box axes → the row's frame), half extents."""
 
 from __future__ import annotations
@@ -190,8 +191,10 @@ def box_plane(boxes, row, planes, plane, p, R):  # pragma: no cover - compiled
     """``(d, a, q)`` flattened: the least distance (m) between the body's box ``row``
     (platform frame) at the pose ``p``, ``R`` and the solid side of ``plane`` (base frame,
     ``n·x <= d``); ``a`` the box's corner deepest towards the plane, ``q`` its foot on the
-    plane (base frame; the corner itself when it is in the solid). That corner lies against
-    the normal along each of the box's axes: its height ``n·c − d − Σ h_k |n·a_k|``."""
+    plane (base frame). That corner lies against the normal along each of the box's axes:
+    its height ``n·c − d − Σ h_k |n·a_k|``, **signed**: negative, how deep the box is in the
+    solid (a platform resting on the floor may then not be pushed deeper, where a 0 would
+    say nothing of how deep)."""
     nx, ny, nz, off = planes[plane, 0], planes[plane, 1], planes[plane, 2], planes[plane, 3]
     # the normal in the platform frame, then along each of the box's axes
     wx = R[0, 0] * nx + R[1, 0] * ny + R[2, 0] * nz
@@ -206,8 +209,6 @@ def box_plane(boxes, row, planes, plane, p, R):  # pragma: no cover - compiled
     x, y, z = box_point(boxes, row, u0, u1, u2)
     ax, ay, az = to_base(p, R, x, y, z)
     h = nx * ax + ny * ay + nz * az - off
-    if h <= 0.0:  # the corner is in the solid: a point of both
-        return 0.0, ax, ay, az, ax, ay, az
     return h, ax, ay, az, ax - h * nx, ay - h * ny, az - h * nz
 
 

@@ -85,7 +85,9 @@ class InterferenceArrays(NamedTuple):
     unit normal, offset ``d`` (m: ``n·x = d`` on the plane, ``n·x > d`` free);
     ``exclusion`` (1,) m. Outputs: ``distance`` (n,) m, ``closest`` (n, 6) m, base frame —
     the point on cable ``i``, then the point on the other; ``best`` (1,) int64, the check of
-    the least distance (the first of equals)."""
+    the least distance plus its ``slack`` (the first of equals); ``slack`` (n,) m, an input:
+    how far under the clearance each check may go (0 but for a motion that starts under it:
+    :meth:`Interference.relax`)."""
 
     checks: np.ndarray
     boxes: FloatArray
@@ -94,6 +96,7 @@ class InterferenceArrays(NamedTuple):
     distance: FloatArray
     closest: FloatArray
     best: np.ndarray
+    slack: FloatArray
 
 
 class Interference:
@@ -138,6 +141,8 @@ class Interference:
         self.distance = np.full(n, math.inf)  # m
         self.closest = np.zeros((n, 6))  # m, base frame: on cable i (body part i), the other
         self.best = np.zeros(1, dtype=np.int64)
+        self.slack = np.zeros(n)  # m: see InterferenceArrays
+        self._under = np.zeros(n, dtype=bool)  # relax's: the checks under its bound
         self.arrays = kernel_args(
             InterferenceArrays(
                 self.checks,
@@ -147,6 +152,7 @@ class Interference:
                 self.distance,
                 self.closest,
                 self.best,
+                self.slack,
             )
         )
         self.cable_names = [str(getattr(c, "name", i + 1)) for i, c in
@@ -161,8 +167,29 @@ class Interference:
 
     @property
     def minimum(self) -> float:
-        """m: the least distance of the last pose (``inf`` with nothing to check)."""
+        """m: the least distance of the last pose (``inf`` with nothing to check); with a
+        slack set, the distance of the check closest to its own floor (``effective``)."""
         return float(self.distance[self.best[0]]) if len(self.distance) else math.inf
+
+    @property
+    def effective(self) -> float:
+        """m: the least distance plus its check's slack, to compare with the clearance
+        (``minimum`` when no slack is set)."""
+        if not len(self.distance):
+            return math.inf
+        c = self.best[0]
+        return float(self.distance[c] + self.slack[c])
+
+    def relax(self, limit: float, below: float | None = None) -> None:
+        """Each check now under ``below`` (m, default ``limit``) may stay where it is but get
+        no closer than ``limit`` asks: its slack ``limit − d`` (0 for the others), so that its
+        distance plus its slack is ``limit`` here. A robot under the clearance may leave it,
+        check by check: the checks that are clear keep the whole clearance. No allocation
+        (the cycle's supervisor calls it)."""
+        np.less(self.distance, limit if below is None else below, out=self._under)
+        np.subtract(limit, self.distance, out=self.slack)
+        np.fmax(self.slack, 0.0, out=self.slack)  # fmax: a NaN distance gets none
+        np.multiply(self.slack, self._under, out=self.slack)
 
     def describe(self, c: int | None = None) -> str:
         """Check ``c`` (default the least) in words: what against what, the distance (mm)."""
@@ -207,7 +234,7 @@ def _plane_row(plane: Plane) -> FloatArray:
 def interference_kernel(k, p, R, g):  # pragma: no cover - compiled
     """Every check of ``g`` (:class:`InterferenceArrays`) at the pose ``p`` (m, base frame),
     ``R`` (platform → base) whose inverse kinematics ``k`` (``KinArrays``) holds."""
-    checks, boxes, planes, distance, closest, best = g[0], g[1], g[2], g[4], g[5], g[6]
+    checks, boxes, planes, distance, closest, best, slack = g[0], g[1], g[2], g[4], g[5], g[6], g[7]
     best[0] = 0
     least = math.inf
     for c in range(checks.shape[0]):
@@ -222,8 +249,8 @@ def interference_kernel(k, p, R, g):  # pragma: no cover - compiled
         else:
             d = _cable_check(k, p, R, g, c)
         distance[c] = d
-        if d < least:
-            least = d
+        if d + slack[c] < least:
+            least = d + slack[c]
             best[0] = c
 
 

@@ -53,6 +53,30 @@ class Clearance:
             points.append(box.centre + (signs * box.half_extents) @ np.asarray(box.rotation).T)
         # m: the farthest a point of the platform (attachment, body corner) is from P
         self.radius = float(np.max(np.linalg.norm(np.vstack(points), axis=1)))
+        # m per check: the slack of a motion that starts under the clearance (``relax_from``)
+        self._slack = np.zeros(len(self.interference.distance))
+
+    def relax_from(self, x: FloatArray) -> float | None:
+        """A motion from the coordinates ``x``: each check under the clearance there may go
+        on no closer than it is (``Interference.relax``), the others keep the clearance —
+        taken by the measurements while ``use_slack(True)``. Returns the least distance at
+        ``x`` (m) when it is under the clearance, else None (nothing relaxed)."""
+        g = self.interference
+        g.slack.fill(0.0)
+        self._slack.fill(0.0)
+        d = self._measure(np.asarray(x, dtype=float))
+        if not self.active or d >= self.limit:
+            return None
+        g.relax(self.limit + 1e-6)  # 1 µm: the start itself passes
+        self._slack[:] = g.slack
+        return d
+
+    def use_slack(self, on: bool) -> None:
+        """The last ``relax_from``'s slack in the measurements (``on``), or none."""
+        if on:
+            self.interference.slack[:] = self._slack
+        else:
+            self.interference.slack.fill(0.0)
 
     def at(self, coords: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(n,) the least distance (m) at each sample of ``coords`` (n, 6) and (n, m, 3) the
@@ -66,9 +90,11 @@ class Clearance:
         return dist, exits
 
     def _measure(self, x: FloatArray) -> float:
+        """m: the least distance at ``x``, each check's slack added (``Interference.effective``):
+        under ``limit`` is too close."""
         inverse_kinematics(self.model, self._kin, x[:3], exp_so3(x[3:]) @ self._home)
         self.interference.update(self._kin)
-        return self.interference.minimum
+        return self.interference.effective
 
     def least(self, coords: FloatArray, continuous: bool = False) -> tuple[FloatArray, FloatArray]:
         """(n,) m: the least distance at each sample of ``coords``, and (n, 6) the coordinates
@@ -101,12 +127,15 @@ class Clearance:
         left between two measured points is under ``REFINE_STEP / 2`` deep — as sampling
         the whole way every ``REFINE_STEP``, for a few measurements instead of
         ``bound / REFINE_STEP``."""
+        if not math.isfinite(bound):  # no bound: nothing between the ends can be vouched for
+            return math.nan, 0.5
         best, best_s = math.inf, 0.0
         parts = [(0.0, 1.0, d0, d1)]
         while parts:
             a, b, da, db = parts.pop()
-            span = bound * (b - a)
-            if span < REFINE_STEP or 0.5 * (da + db - span) >= min(self.limit, best):
+            span = bound * (b - a)  # a dip under what was found by < REFINE_STEP / 2 may stay
+            floor = min(self.limit, best) - 0.5 * REFINE_STEP
+            if span < REFINE_STEP or 0.5 * (da + db - span) >= floor:
                 continue
             m = 0.5 * (a + b)
             dm = self._measure(start + m * step)
@@ -116,11 +145,18 @@ class Clearance:
         return best, best_s
 
     def describe(self, x: FloatArray) -> str:
-        """What comes closest at the coordinates ``x``, how close, and the limit."""
+        """What comes closest at the coordinates ``x``, how close, and the limit (for a check
+        a motion started under, where it started)."""
         d = self._measure(np.asarray(x, dtype=float))
-        return (f"{self.interference.describe()} apart, under the clearance "
-                f"{self.limit * 1e3:.2f} mm" if d < self.limit else
-                f"{self.interference.describe()} apart")  # fmt: skip
+        g = self.interference
+        if not d < self.limit:
+            return f"{g.describe()} apart"
+        slack = float(g.slack[g.best[0]])
+        if slack > 0.0:
+            start = (self.limit - slack) * 1e3 + 1e-3  # mm: relax_from's 1 µm given back
+            return (f"{g.describe()} apart, closer than the {start:.2f} mm the motion started "
+                    f"at, under the clearance {self.limit * 1e3:.2f} mm")
+        return f"{g.describe()} apart, under the clearance {self.limit * 1e3:.2f} mm"
 
     def pair_at(self, x: FloatArray) -> str:
         """What comes closest at the coordinates ``x``, in words (what against what)."""

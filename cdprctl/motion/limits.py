@@ -75,11 +75,15 @@ class SoftLimits:
         floor: float | None = None,
         continuous: bool = False,
         near: float | None = None,
+        clearance: bool = True,
     ) -> tuple[FloatArray, FloatArray]:
         """For samples ``coords`` (n, 6): (margin N, ok bool) per sample; ``floor`` (N) lowers
-        the required margin (a motion that starts below it), ``near`` (m) the clearance (one
-        that starts under it); ``continuous``: the samples are one motion, checked between
-        them too (``Clearance.least``). The box and the tilt are checked to 1 µm / 1 µrad."""
+        the required margin (a motion that starts below it); ``near`` (m, not None: a motion
+        that starts under the clearance, ``near_of``): each check under it at the start may go
+        no closer than it was, the others keep the clearance; ``continuous``: the samples are
+        one motion, checked between them too (``Clearance.least``); ``clearance`` False: the
+        box, the tilt and the tensions only. The box and the tilt are checked to 1 µm /
+        1 µrad."""
         c = np.asarray(coords, dtype=float).reshape(-1, 6)
         ws = self.model.workspace
         if acceleration is None and len(c) > 1 and not np.ptp(c[:, 3:], axis=0).any():
@@ -98,24 +102,22 @@ class SoftLimits:
             & (np.linalg.norm(c[:, 3:], axis=1) <= ws.max_angle + 1e-6)
             & (margin >= need)
         )
-        if self.clearance.active:
+        if self.clearance.active and clearance:
+            self.clearance.use_slack(near is not None)
             self.nearest, self.nearest_at = self.clearance.least(c, continuous)
-            ok &= self.nearest >= self._clearance(near)
+            ok &= self.nearest >= self.clearance.limit
         else:
             self.nearest, self.nearest_at = np.full(len(c), math.inf), c
         return margin, ok
 
     def near_of(self, start: FloatArray) -> float | None:
-        """m: the clearance a motion from the coordinates ``start`` keeps: None (the
-        configured one) when it starts clear, else no closer than it starts."""
+        """A motion from the coordinates ``start``: None when it starts clear (the configured
+        clearance everywhere), else its least distance there (m), each check under the
+        clearance then kept no closer than it starts (``Clearance.relax_from``; in force in
+        ``check`` and ``why`` given this as ``near``)."""
         if not self.clearance.active:
             return None
-        d = float(self.clearance.least(start)[0][0])
-        return None if d >= self.clearance.limit else d - 1e-6
-
-    def _clearance(self, near: float | None) -> float:
-        """m: the clearance required (``near``: a motion's start under it)."""
-        return self.clearance.limit if near is None else min(self.clearance.limit, near)
+        return self.clearance.relax_from(np.asarray(start, dtype=float).reshape(6))
 
     def along(
         self, coords: FloatArray, acceleration: FloatArray | None = None
@@ -141,9 +143,11 @@ class SoftLimits:
         floor: float | None = None,
         at: FloatArray | None = None,
         near: float | None = None,
+        clearance: bool = True,
     ) -> str:
         """Which rule the sample ``coord`` breaks, with the values and units; ``at``: where the
-        way to it came closest (``nearest_at``), ``near`` the clearance's floor used."""
+        way to it came closest (``nearest_at``); ``near``, ``clearance`` as ``check`` took
+        them."""
         ws = self.model.workspace
         p = coord[:3]
         for k, axis in enumerate("xyz"):
@@ -155,15 +159,12 @@ class SoftLimits:
             return (f"the tilt {angle_words(angle)} from the home orientation exceeds "
                     f"workspace.max_angle = {ws.max_angle:g} rad "
                     f"({math.degrees(ws.max_angle):.2f}°)")  # fmt: skip
-        if self.clearance.active:
+        if self.clearance.active and clearance:
+            self.clearance.use_slack(near is not None)
             for x in (coord,) if at is None else (coord, at):
-                gap = self.clearance.least(x)[0][0]
-                if gap < self._clearance(near):
+                if self.clearance.least(x)[0][0] < self.clearance.limit:
                     where = "" if x is coord else self._on_the_way(x)
-                    since = "" if near is None else (
-                        f"; closer than the {(near + 1e-6) * 1e3:.2f} mm the motion started at")
-                    return (f"{where}{self.clearance.describe(x)} ([interference] clearance"
-                            f"{since})")  # fmt: skip
+                    return f"{where}{self.clearance.describe(x)} ([interference] clearance)"
         need = self.required if floor is None else min(self.required, floor)
         if not math.isfinite(margin):
             return "the cables' geometry is degenerate there (a cable of zero length)"

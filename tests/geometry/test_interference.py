@@ -156,10 +156,10 @@ def ref_box_box(ca, Ra, ha, cb, Rb, hb):
 
 
 def ref_box_halfspace(c, R, h, point, normal):
-    """How far the solid box is above the plane (0 if it reaches it): scipy's linprog, the
-    least height ``normal·(c + R u)`` over ``|u| <= h``."""
+    """How far the solid box is above the plane, signed (negative: how deep it reaches into
+    the solid): scipy's linprog, the least height ``normal·(c + R u)`` over ``|u| <= h``."""
     res = linprog(R.T @ normal, bounds=list(zip(-h, h, strict=True)), method="highs")
-    return max(float(normal @ (c - point)) + float(res.fun), 0.0)
+    return float(normal @ (c - point)) + float(res.fun)
 
 
 def reference(model, cfg, kin, p, R, sample_pairs=False):
@@ -220,7 +220,7 @@ def compare(model, cfg, poses, kernel_class=Interference, sample_pairs=False):
         if want[int(check.best[0])] - want.min() > TOL:
             wrong_pair += 1
         gap = np.linalg.norm(check.closest[:, :3] - check.closest[:, 3:], axis=1)
-        off = max(off, float(np.max(np.abs(gap - got))))
+        off = max(off, float(np.max(np.abs(gap - np.abs(got)))))  # a plane's is signed
         B = p + model.attachments @ R.T
         for c, (kind, i, k) in enumerate(keys):
             if kind == PLATFORM:  # on the body's part and on the obstacle
@@ -482,7 +482,7 @@ def box_pairs_worst(distance, n, seed=67):
         want = ref_box_halfspace(p + R @ cb, R @ Rb, hb, point, n_)
         on_body = to_box(p + R @ cb, R @ Rb, hb)(a[None])[0]
         on_plane = to_halfspace(point, n_)(q[None])[0]
-        worst = max(worst, abs(d - want), on_body, on_plane, abs(np.linalg.norm(a - q) - d))
+        worst = max(worst, abs(d - want), on_body, on_plane, abs(np.linalg.norm(a - q) - abs(d)))
     return worst
 
 

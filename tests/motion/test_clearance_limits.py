@@ -21,7 +21,7 @@ from cdprctl.control.supervision.clearance_watch import ClearanceWatch
 from cdprctl.core.rotation import exp_so3
 from cdprctl.geometry.interference import Interference
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
-from cdprctl.model.interference import Box, InterferenceConfig
+from cdprctl.model.interference import Box, InterferenceConfig, Plane
 from cdprctl.motion.clearance import REFINE_STEP
 from cdprctl.motion.limits import SoftLimits
 from cdprctl.motion.path_plan import PathRejectedError, plan_text
@@ -130,15 +130,57 @@ def test_a_path_into_the_lamp_is_refused_naming_segment_pair_and_distance(caroca
     assert plan.samples > 2
 
 
-def test_a_motion_from_under_the_clearance_may_leave_it_but_get_no_closer(caroca):
+@pytest.mark.parametrize("step", [0.005, 0.02])  # a jog's 2 cm steps: between them too
+def test_a_motion_from_under_the_clearance_may_leave_it_but_get_no_closer(caroca, step):
+    """From 3 mm of the lamp: back out freely; on, stopped at once (the way between two
+    samples checked against the start's floor too: a review found a 2 cm step went straight
+    through the lamp, the samples either side being clear of the start's 3 mm)."""
     model = _with_lamp(caroca, 0.0)
     lim = SoftLimits(model)
     s, d = _dense(model, _home(model), X, 0.35, step=1e-4)
     inside = _home(model) + s[np.argmax(d < 0.003)] * X  # 3 mm from the lamp
-    back, why = lim.ray_end(inside, -X, 0.2)
+    back, why = lim.ray_end(inside, -X, 0.2, step=step)
     assert why == "" and back[0] == pytest.approx(inside[0] - 0.2)
-    on, why = lim.ray_end(inside, X, 0.2)
+    on, why = lim.ray_end(inside, X, 0.2, step=step)
     assert on[0] - inside[0] < 0.005 and "the lamp" in why
+    assert re.search(r"closer than the 2\.9\d mm the motion started at, under the clearance "
+                     r"5\.00 mm \(\[interference\] clearance\)$", why), why
+
+
+def _on_a_table(rowc):
+    """rowc with its body (half height 0.1 m) 2 mm into a table at home, and a crate 0.2 m
+    from the body's +x face."""
+    home = np.asarray(rowc.home.position)
+    table = Plane("the table", home - np.array([0.0, 0.0, 0.1 - 0.002]), np.array([0.0, 0.0, 1.0]))
+    crate = Box("the crate", home + np.array([0.1 + 0.2 + 0.05, 0, 0]), np.full(3, 0.05),
+                np.eye(3))  # fmt: skip
+    cfg = rowc.interference
+    return dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (table, crate)))  # fmt: skip
+
+
+def test_a_platform_resting_on_the_floor_keeps_every_other_check(rowc):
+    """rowc's body resting 2 mm into a table (a plane: a signed distance, −2 mm) beside a
+    crate: a jog along the table stops at the crate as it does without the table (each
+    check its own floor: the table's contact does not switch the others off), a jog into
+    the table stops at once, a jog up off it goes."""
+    home = np.asarray(rowc.home.position)
+    model = _on_a_table(rowc)
+    lim = SoftLimits(model)
+    start = _home(model)
+    g = Interference(model)
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, home, model.home.rotation)
+    g.update(kin)
+    assert g.minimum == pytest.approx(-0.002, abs=1e-9) and "the table" in g.describe()
+    end, why = lim.ray_end(start, X, 0.5, step=0.02)
+    assert 0.195 - 0.02 / 64 - 1e-4 <= end[0] - start[0] <= 0.195 + 1e-4
+    assert "the crate" in why
+    down, why = lim.ray_end(start, -np.eye(6)[2], 0.1, step=0.02)
+    assert down[2] - start[2] > -0.001 and "the table" in why
+    assert "closer than the -2.00 mm the motion started at" in why
+    up, why = lim.ray_end(start, np.eye(6)[2], 0.05, step=0.02)
+    assert why == "" and up[2] == pytest.approx(start[2] + 0.05)
 
 
 def test_the_supervisor_rides_through_a_shallow_dip_and_stops_on_a_deep_or_lasting_one(caroca):
@@ -240,3 +282,31 @@ def test_the_platform_is_kept_off_a_fixture_by_jogs_and_paths(rowc):
     plan = plan_text(model, f"x, y, z\n{x + 0.1}, {y}, {z}\n{x + 0.15}, {y}, {z}\n", start,
                      model.control.period, lim)  # fmt: skip
     assert plan.samples > 2
+
+
+def test_the_supervisor_keeps_every_other_check_of_a_platform_resting_on_the_floor(rowc):
+    """The supervisor's floor is per check as the soft limits' is: rowc's body 2 mm into a
+    table at the first supervised cycle; the table's check may stay there (less NOISE), the
+    crate's keeps the clearance — the platform pushed within 4 mm of the crate stops, as
+    one pressed 0.6 mm deeper into the table does."""
+    home = np.asarray(rowc.home.position)
+    model = _on_a_table(rowc)
+    g, kin = Interference(model), KinematicsData(model)
+
+    def at(dx, dz=0.0):
+        inverse_kinematics(model, kin, home + np.array([dx, 0.0, dz]), model.home.rotation)
+        g.update(kin)
+
+    watch = ClearanceWatch(g)
+    at(0.0)
+    assert watch.check(0.0) is None and watch.limit == pytest.approx(-0.002 - watch.NOISE)
+    at(0.1)  # along the table, 0.1 m from the crate
+    assert watch.check(0.1) is None
+    at(0.2 - 0.004)  # 4 mm from the crate: by 1 mm under the clearance, at once
+    why = watch.check(0.2)
+    assert why is not None and "the platform's body and the crate: 4.00 mm" in why
+    assert "under the limit 5.00 mm" in why and "by more than 0.5 mm" in why
+    at(0.0, -0.0006)  # back, and 0.6 mm deeper into the table: past its NOISE
+    why = watch.check(0.3)
+    assert why is not None and "the platform's body and the table: -2.60 mm" in why
+    assert "under the limit -2.50 mm" in why

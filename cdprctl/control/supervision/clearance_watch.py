@@ -1,5 +1,5 @@
 """The cables' clearance every cycle (issue 67): the least distance between two cables, a
-cable and the platform's body, a cable and the cell at the estimated pose
+cable and the platform's body, a cable and the cell, the body and the cell at the estimated pose
 (``cdprctl/geometry/interference.py``, into ``ControlData.interference``), and the supervisor's
 check of it (``FaultKind.CLEARANCE``).
 
@@ -17,8 +17,10 @@ stays too close.
 
 A robot enabled under the clearance (its geometry, or after such a stop) may move out of
 it: the soft limits then allow no closer than where the motion started, and this check
-takes the distance at the first supervised cycle, less ``NOISE``, as its limit until the
-state leaves the supervised ones (``StateMachine.forget_when_unsupervised``).
+takes, for each check under the clearance at the first supervised cycle, its distance there
+less ``NOISE`` as that check's limit (``Interference.relax``: the other checks keep the whole
+clearance — a platform resting on the floor does not switch off its cables' checks), until
+the state leaves the supervised ones (``StateMachine.forget_when_unsupervised``).
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ class ClearanceWatch:
         supervised run takes its limit anew."""
         if not on:
             self.limit = math.nan
+            self.interference.slack.fill(0.0)
             self._under.held(t, False)
         return False
 
@@ -55,13 +58,18 @@ class ClearanceWatch:
         if not self.active:
             return None
         g = self.interference
-        d = g.distance.item(g.best.item(0))
         if self.limit != self.limit:  # the first supervised cycle
+            d = g.distance.item(g.best.item(0))
             self.limit = self.clearance if d >= self.clearance else d - self.NOISE
-        deep = d < self.limit - self.NOISE
-        if not (self._under.held(t, d < self.limit) or deep):
+            if d < self.clearance:  # those checks no closer than here, less NOISE
+                g.relax(self.clearance + self.NOISE, below=self.clearance)
+        c = g.best.item(0)
+        e = g.distance.item(c) + g.slack.item(c)  # m: against the clearance
+        deep = e < self.clearance - self.NOISE
+        if not (self._under.held(t, e < self.clearance) or deep):
             return None
         how = (f"by more than {self.NOISE * 1e3:.1f} mm" if deep else
                f"for {self.HOLD * 1e3:.0f} ms")  # fmt: skip
-        return (f"clearance: {g.describe()} apart, under the limit {self.limit * 1e3:.2f} mm "
+        limit = self.clearance - g.slack.item(c)  # m: this check's
+        return (f"clearance: {g.describe()} apart, under the limit {limit * 1e3:.2f} mm "
                 f"([interference] clearance {self.clearance * 1e3:.2f} mm) {how}")  # fmt: skip

@@ -259,12 +259,14 @@ class CommandValidator:
                 f"cannot be held within the tension limits ({out.status.name}: {out.message})"
             )
         target = pose_coordinates(m, p, R)
-        # the target alone: no contact (0 m); the clearance it must keep depends on where the
-        # motion starts (no closer than there, when that is under it): the line's check below
-        margin, ok = self.limits.check(target[None], near=0.0)
+        # the target alone: its box, tilt and tensions; the clearance it must keep depends on
+        # where the motion starts (no closer than there, when that is under it): the line's
+        # check below
+        margin, ok = self.limits.check(target[None], clearance=False)
         where = f"position = {np.round(p, 4).tolist()} m, rpy = {np.round(rpy, 4).tolist()} rad"
         if not ok[0]:
-            raise CommandError(f"{where}: {self.limits.why(target, float(margin[0]), near=0.0)}")
+            why = self.limits.why(target, float(margin[0]), clearance=False)
+            raise CommandError(f"{where}: {why}")
         if snap is not None and np.all(np.isfinite(snap["reference"])):
             why = self.limits.line_refusal(snap["reference"], target)
             if why:

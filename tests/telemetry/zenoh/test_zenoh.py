@@ -866,18 +866,6 @@ def test_check_config_names_open_commands(tmp_path, capsys):
     assert check(str(f)) == 0
 
 
-#: paths/rowc_wipe.csv's six strokes, blends and dwells 0.1 m long instead of 0.5 m (played
-#: in ~4 s instead of ~17 s)
-SHORT_WIPE = """x, y, z, speed, blend, dwell
-1.4, 0.35, 0.59, 0.2, 0, 0.3
-1.5, 0.35, 0.60, 0.2, 1, 0
-1.6, 0.35, 0.59, 0.2, 0, 0.3
-1.5, 0.35, 0.58, 0.2, 1, 0
-1.4, 0.35, 0.59, 0.2, 0, 0
-1.5, 0.35, 0.59, 0.1, 0, 0
-"""
-
-
 def test_path_and_pause_resume_over_zenoh(robot_and_client, tmp_path):
     """cmd/path with a path file's text: a bad one rejected in the reply naming the line; a
     good one played with its progress in state, paused and resumed, to its end."""
@@ -890,7 +878,8 @@ def test_path_and_pause_resume_over_zenoh(robot_and_client, tmp_path):
     assert client.reply("bad")["reason"] == (
         "path bad.ngc: line 2, column 1: G28 is refused: it goes to a stored home position; "
         "the robot's home is not a G-code one")
-    client.put("path", {"id": "p", "name": "wipe", "text": SHORT_WIPE})
+    text = (ROOT / "paths" / "rowc_wipe.csv").read_text()
+    client.put("path", {"id": "p", "name": "wipe", "text": text})
     assert client.wait(lambda: (client.reply("p") or {}).get("ok")), client.replies
     assert client.wait(lambda: (client.last().get("path") or {}).get("segment", 0) >= 2)
     s = client.last()
