@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from cdprctl.core.rotation import exp_so3
-from cdprctl.geometry.interference import CABLE, Interference
+from cdprctl.geometry.interference import BODY, CABLE, Interference
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model import RobotModel
 from cdprctl.robot_file import parse_robot
@@ -103,7 +103,7 @@ def least(model: RobotModel, poses: list[tuple[np.ndarray, np.ndarray]]) -> dict
     pair_rows = [c for c, (kind, i, j, *_) in enumerate(check.checks)
                  if kind == CABLE and (int(i), int(j)) in PAIRS]  # fmt: skip
     cable_rows = [c for c, row in enumerate(check.checks) if row[0] == CABLE]
-    body_rows = [c for c, row in enumerate(check.checks) if row[0] != CABLE]
+    body_rows = [c for c, row in enumerate(check.checks) if row[0] == BODY]  # rowc: no cell
     out = {k: (np.inf, None, "") for k in ("crossed", "cables", "body")}
     for p, R in poses:
         inverse_kinematics(model, kin, p, R)

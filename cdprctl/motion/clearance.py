@@ -149,14 +149,21 @@ class Clearance:
         a motion started under, where it started)."""
         d = self._measure(np.asarray(x, dtype=float))
         g = self.interference
+        c = int(g.best[0])
+        slack = float(g.slack[c])
+        floor = self.limit - slack + (1e-6 if slack > 0.0 else 0.0)  # m: this pair's
+        mm = float(g.distance[c]) * 1e3
+        # two decimals, three where two would print the floor itself ("5.00 mm, under 5.00");
+        # within a µm of it, "at" it
+        said = f"{mm:.3f}" if f"{mm:.2f}" == f"{floor * 1e3:.2f}" else f"{mm:.2f}"
+        under = "at" if floor * 1e3 - mm < 1e-3 else "under"
+        what = f"{g.name(c)}: {said} mm apart"
         if not d < self.limit:
-            return f"{g.describe()} apart"
-        slack = float(g.slack[g.best[0]])
+            return what
         if slack > 0.0:
-            start = (self.limit - slack) * 1e3 + 1e-3  # mm: relax_from's 1 µm given back
-            return (f"{g.describe()} apart, closer than the {start:.2f} mm the motion started "
-                    f"at, under the clearance {self.limit * 1e3:.2f} mm")
-        return f"{g.describe()} apart, under the clearance {self.limit * 1e3:.2f} mm"
+            return (f"{what}, closer than the {floor * 1e3:.2f} mm the motion started at, {under} "
+                    f"the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
+        return f"{what}, {under} the clearance {self.limit * 1e3:.2f} mm"
 
     def pair_at(self, x: FloatArray) -> str:
         """What comes closest at the coordinates ``x``, in words (what against what)."""

@@ -495,6 +495,33 @@ def test_the_body_against_a_box_or_a_plane_agrees_with_the_references():
     assert box_pairs_worst(distance, 400) < 1e-9
 
 
+@pytest.mark.parametrize("obstacle, want", [
+    (([0.4, 0.0, 0.0], [0.1, 0.1, 0.1], 0.0), 0.2),  # parallel faces
+    (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], 0.0), 0.0),  # the body inside the obstacle
+    (([0.0, 0.0, 0.0], [0.01, 0.01, 0.01], 0.0), 0.0),  # the obstacle inside the body
+    (([0.1 + 0.1 * math.sqrt(2), 0.0, 0.0], [0.1, 0.1, 0.1], math.pi / 4), 0.0),  # edge on face
+    (([0.3 + 0.1 * math.sqrt(2), 0.0, 0.0], [0.1, 0.1, 0.1], math.pi / 4), 0.2),  # edge to face
+])  # fmt: skip
+def test_the_body_against_a_box_in_the_common_cases(obstacle, want):
+    """Axis-aligned and turned boxes a random pair rarely gives (a cell's fixtures are):
+    the distance exact, and as BVLS finds it; crossed thin bars, touching and apart."""
+    from cdprctl.geometry import distance
+
+    (c, h, yaw), p, R = obstacle, np.zeros(3), np.eye(3)
+    Rz = rpy_to_matrix(0.0, 0.0, yaw)
+    body = np.array([0.0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.1, 0.1, 0.1])
+    boxes = np.array([body, np.concatenate([c, Rz.ravel(), h])])
+    d, *_ = distance.box_box(boxes, 0, 1, p, R)
+    assert d == pytest.approx(want, abs=1e-12)
+    ref = ref_box_box(np.zeros(3), np.eye(3), body[12:], np.array(c), Rz, np.array(h))
+    assert d == pytest.approx(ref, abs=1e-9)
+    bars = np.array([[0.0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1.0, 0.01, 0.01],
+                     [0.0, 0, 0.05, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.01, 1.0, 0.01]])  # fmt: skip
+    assert distance.box_box(bars, 0, 1, p, R)[0] == pytest.approx(0.03, abs=1e-12)
+    bars[1, 2] = 0.0  # crossed through each other, no vertex of either inside the other
+    assert distance.box_box(bars, 0, 1, p, R)[0] == 0.0
+
+
 def test_the_platform_driven_into_an_obstacle_is_named():
     """rowc's body against a box beside its home pose and a floor under it: both clear at
     home, and the box's check 0 and named once the platform is moved into it."""
