@@ -20,6 +20,10 @@ from cdprctl.geometry.interference import Interference
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 
+#: the exit code of ``cdprctl run --sim`` and ``cdprctl sim`` whose simulated robot recorded a
+#: contact where they would have exited 0 (4 is ``daemon.startup.NOT_CALIBRATED``)
+CONTACT_EXIT = 5
+
 
 class ContactRecorder:
     def __init__(self, model: RobotModel):

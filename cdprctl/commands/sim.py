@@ -203,6 +203,7 @@ def run(args: argparse.Namespace) -> int:
     platform physics, in real time. The platform starts at rest at the home pose, cables
     pre-tensioned to the equilibrium. Stop with Ctrl-C or SIGTERM."""
     from drivers.errors import DriverError
+    from sim_backend.contact import CONTACT_EXIT
     from sim_backend.realtime import LateSteps, run_realtime
 
     model = load_or_report(args.config)
@@ -268,8 +269,9 @@ def run(args: argparse.Namespace) -> int:
         return 1
     net.close()
     print(late.summary(), flush=True)
+    print(f"cdprctl sim: {plant.contact.report()}", flush=True)
     print("cdprctl sim: stopped", flush=True)
-    return 0
+    return CONTACT_EXIT if plant.contact.contacts else 0
 
 
 BRAKE_CLOSE_MAX = 0.5  # s

@@ -40,8 +40,10 @@ from cdprctl.daemon.startup import (
     start_up,
     stop_if_interrupted,
 )
+from cdprctl.geometry.interference import check_pose
 from cdprctl.model.robot import RobotModel
 from cdprctl.tda import tda_options_of
+from sim_backend.contact import CONTACT_EXIT
 
 if TYPE_CHECKING:
     from sim_backend.process import SimulatedRobotProcess
@@ -50,9 +52,6 @@ DRIVES_OFF = frozenset({State.READY, State.FAULT, State.ESTOP, State.INIT})
 # where a demo played once ends (an e-stop too: its reset is the operator's, never the demo's)
 DEMO_ENDS = frozenset({State.READY, State.FAULT, State.ESTOP})  # what a stop waits for
 SCRIPT_STOPS = frozenset({State.FAULT, State.ESTOP})  # a scripted client sends nothing more
-#: the exit code of a run whose simulated robot recorded a contact (sim_backend/contact.py);
-#: 4 is startup.NOT_CALIBRATED's
-CONTACT_EXIT = 5
 
 class Daemon:
     # after a signal the I/O thread ends the run with a controlled stop; if it cannot (it died
@@ -178,6 +177,11 @@ class Daemon:
         p = d.position
         self.say(f"ready: pose [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, holding tensions "
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
+        g = check_pose(m, d.position, d.rotation)  # at the estimated start pose (before the loop)
+        if g.minimum < g.clearance:
+            self.say(f"warning: at the start pose {g.describe()} apart, under the clearance "
+                     f"{g.clearance * 1e3:.2f} mm: a motion may only leave it, no closer "
+                     "(docs/clearance.md)", err=True)  # fmt: skip
         notify("READY=1")
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip

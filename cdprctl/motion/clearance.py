@@ -169,3 +169,15 @@ class Clearance:
         """What comes closest at the coordinates ``x``, in words (what against what)."""
         self._measure(np.asarray(x, dtype=float))
         return self.interference.name(int(self.interference.best[0]))
+
+    def closest_at(self, x: FloatArray) -> tuple[float, str]:
+        """At the coordinates ``x``: the distance (m, as measured: not lifted by a slack) of
+        the pair closest to its limit and that pair in words, with where its motion started
+        when it started under the clearance."""
+        self._measure(np.asarray(x, dtype=float))
+        g = self.interference
+        c = int(g.best[0])
+        slack = float(g.slack[c])
+        started = (f", under the clearance since the start ({(self.limit - slack) * 1e3 + 1e-3:.2f}"
+                   " mm there: no closer allowed)" if slack > 0.0 else "")  # fmt: skip
+        return float(g.distance[c]), f"{g.name(c)}{started}"

@@ -296,9 +296,9 @@ def _play_and_check(
         )
     steps_apart = np.linalg.norm(np.diff(P[:, :3], axis=0), axis=1)  # a segment: 2 samples at least
     j, jc = int(np.argmin(margin)), int(np.argmin(lim.nearest))
-    near_at = ""
-    if lim.clearance.active:
-        pair = lim.clearance.pair_at(lim.nearest_at[jc])
+    near_at, least = "", float(lim.nearest[jc])
+    if lim.clearance.active:  # the distance as measured, the pair (and its start's floor)
+        least, pair = lim.clearance.closest_at(lim.nearest_at[jc])
         near_at = f"{pair} ({segments[seg_of[jc]].where}, t = {times[jc]:.2f} s)"
     return PathPlan(
         segments=segments,
@@ -311,7 +311,7 @@ def _play_and_check(
         start=start.copy(),
         waypoints=list(waypoints),
         durations=list(durations),
-        min_clearance=float(lim.nearest[jc]),
+        min_clearance=least,
         min_clearance_at=near_at,
         clearance_limit=lim.clearance.limit,
     )

@@ -92,14 +92,24 @@ def test_the_loop_never_steps_the_plant_and_the_jet_and_true_pose_cross(tmp_path
     assert len(z["compute"]) > 500 and "plant" not in z.files
 
 
+def _lamp_robot(tmp_path) -> Any:
+    """rowc with a 20 mm lamp standing in cable 1 at home, 0.3 m from its attachment."""
+    robot = tmp_path / "rowc_lamp.toml"
+    base = CONFIG / "rowc.toml"
+    robot.write_text(f'base = "{base}"\n\n[[cell.obstacles]]\nname = "the lamp"\n'
+                     'kind = "box"\ncentre = [1.1195, 0.3688, 0.3882]\n'
+                     "half_extents = [0.01, 0.01, 0.01]\n")  # fmt: skip
+    return robot
+
+
 def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
     """A lamp standing in cable 1 at home (rowc, 0.3 m from the attachment): the run is
     otherwise clean (ready, 1 s, no demo), the simulated robot records the contact, and the
     exit is 5 with a line saying why (0 without the lamp: the other tests here; 4 is "not
     calibrated")."""
     robot = tmp_path / "rowc_lamp.toml"
-    from cdprctl.daemon.service import CONTACT_EXIT
     from cdprctl.daemon.startup import NOT_CALIBRATED
+    from sim_backend.contact import CONTACT_EXIT
 
     assert CONTACT_EXIT == 5 and CONTACT_EXIT not in (0, 1, 2, 3, NOT_CALIBRATED)
     base = CONFIG / "rowc.toml"
@@ -109,8 +119,23 @@ def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
     out = run_sim(["--no-demo", "--duration", "1"], code=5, config=str(robot))
     assert "the simulated robot: 1 contact(s), the first at t = " in out, out
     assert "cable 1 and the lamp: 0.00 mm" in out
+    # and said at the start, before any motion: the robot stands under the clearance
+    assert ("warning: at the start pose cable 1 and the lamp: 0.00 mm apart, under the "
+            "clearance 5.00 mm: a motion may only leave it, no closer") in out  # fmt: skip
     assert out.rstrip().endswith("cdprctl run: exit 5: the simulated robot recorded 1 "
                                  "contact(s) (above)")  # fmt: skip
+
+
+def test_the_simulated_robot_on_its_own_says_its_contacts_and_exits_5(tmp_path):
+    """``cdprctl sim`` (the simulated robot of a cross-process or HIL set-up, its own
+    command) with the same lamp through cable 1: it says the contact as it stops and exits 5
+    (it said nothing: a newcomer drove a body into a crate across processes, both exit 0)."""
+    robot = _lamp_robot(tmp_path)
+    cmd = [*CLI, "sim", "--config", str(robot), "--duration", "1", "--no-realtime"]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 5, out.stdout + out.stderr
+    assert "cdprctl sim: 1 contact(s), the first at t = " in out.stdout
+    assert "cable 1 and the lamp: 0.00 mm" in out.stdout
 
 
 def stall_for(seconds: float, ctrl_c: bool = False) -> Any:
