@@ -155,18 +155,18 @@ def run(args: argparse.Namespace) -> int:
         )
         print()
         return 0
-    print(
-        f"{model.name}: {n_ok} of {len(feasible)} points wrench-feasible "
-        f"({res.volume:.4g} m³ at {grid.cell_volume():.3g} m³ per point); "
-        f"{res.method} in {res.seconds:.2f} s"
-    )
+    unit = grid.measure_unit  # a planar grid's is an area, a line's a length
+    size = (f" ({res.volume:.4g} {unit} at {grid.cell_volume():.3g} {unit} per point)"
+            if unit else "")  # fmt: skip
+    print(f"{model.name}: {n_ok} of {len(feasible)} points wrench-feasible{size}; "
+          f"{res.method} in {res.seconds:.2f} s")  # fmt: skip
     if n_ok:
         p = res.points[feasible]
         print(f"  feasible x {p[:, 0].min():.3f}..{p[:, 0].max():.3f} m, "
               f"y {p[:, 1].min():.3f}..{p[:, 1].max():.3f} m, "
               f"z {p[:, 2].min():.3f}..{p[:, 2].max():.3f} m; "
               f"largest margin {res.margin.max():.1f} N")  # fmt: skip
-    print(clearance_summary(res))
+    print(clearance_summary(res, unit))
     return 0
 
 
@@ -177,18 +177,19 @@ def why_each(res: Any) -> list[str]:
     return [words[c] for c in code]
 
 
-def clearance_summary(res: Any) -> str:
-    """The interference-free points, both, and why the others fail (the pairs that bound the
-    clearance most often)."""
+def clearance_summary(res: Any, unit: str = "m³") -> str:
+    """The interference-free points, both (their volume in ``unit``: "" says none), and why
+    the others fail (the pairs that bound the clearance most often)."""
     n, clear, usable = len(res.margin), res.clear, res.usable
     if not len(res.clearance):
         return "  interference: nothing to check (one cable, no body, no obstacle)"
     tension_only = int(np.count_nonzero(~res.feasible & clear))
     clearance_only = int(np.count_nonzero(res.feasible & ~clear))
     both = int(np.count_nonzero(~res.feasible & ~clear))
+    size = f" ({res.usable_volume:.4g} {unit})" if unit else ""
     text = (f"  interference-free (cables, body, cell ≥ {res.limit * 1e3:.2f} mm apart): "
             f"{int(clear.sum())} of {n} points, in {res.clearance_seconds:.2f} s; both: "
-            f"{int(usable.sum())} ({res.usable_volume:.4g} m³); failing: {tension_only} on "
+            f"{int(usable.sum())}{size}; failing: {tension_only} on "
             f"the tension only, {clearance_only} on the clearance only, {both} on both"
             )  # fmt: skip
     blocked = res.pair[~clear & np.isfinite(res.clearance)]

@@ -149,6 +149,11 @@ class Grid:
                 v *= (self.hi[k] - self.lo[k]) / (self.n[k] - 1)
         return v
 
+    @property
+    def measure_unit(self) -> str:
+        """The unit of ``cell_volume``: m³, m² (a planar grid), m (a line), "" (one point)."""
+        return ("", "m", "m²", "m³")[sum(1 for k in range(3) if self.n[k] > 1)]
+
     @staticmethod
     def parse(text: str) -> Grid:
         """``x0:x1:nx,y0:y1:ny,z0:z1:nz`` (m, counts); raises ValueError naming the part."""

@@ -129,6 +129,18 @@ def test_a_value_starting_with_a_minus_is_a_value(capsys):
     assert outs[0] == outs[1] and outs[0]["points"][0] == [-1.5, -2.0, 0.3]
 
 
+def test_the_measure_is_in_the_grids_own_unit(capsys):
+    """A planar grid's feasible set is an area (m²), a line's a length (m), one point's
+    nothing: a newcomer read "0.2 m³ at 0.1 m³ per point" for two points on a line."""
+    cfg = str(ROOT / "config" / "rowc.toml")
+    for grid, words in (("1.4:1.6:3,0.35:0.35:1,0.5:0.7:3", "(0.09 m² at 0.01 m² per point)"),
+                        ("1.4:1.6:3,0.35:0.35:1,0.59:0.59:1", "(0.3 m at 0.1 m per point)"),
+                        ("1.5:1.5:1,0.35:0.35:1,0.59:0.59:1", "1 of 1 points wrench-feasible;")):
+        assert main(["workspace", "--config", cfg, "--grid", grid]) == 0
+        out = capsys.readouterr().out
+        assert words in out and "m³" not in out, out
+
+
 def test_cli_json_and_plot(tmp_path, capsys):
     rc = main(["workspace", "--config", str(ROOT / "config" / "rowc.toml"), "--wrench",
                "0,30,0,0,0,0", "--grid", "0.5:2.5:5,0.35:0.35:1,0.3:0.7:3", "--json",
