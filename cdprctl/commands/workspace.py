@@ -20,9 +20,9 @@ and the tension margin: how far (N) the best tension distribution stays from the
 (negative: by how much the least-violating one exceeds a limit). Redundancy 2: an exact 2-D
 linear programme per point (compiled); otherwise scipy's linprog (HiGHS) per point. And
 whether it is interference-free: every pair of cables, each cable and the platform's body,
-each cable and the cell's obstacles at least [interference] clearance apart (the least
-distance and its pair per point). Each point that fails says why: the tension, the clearance
-or both.
+each cable and the cell's obstacles, the body and the obstacles at least [interference]
+clearance apart (the least distance and its pair per point). Each point that fails says
+why: the tension, the clearance or both.
 --json prints {"points": [[x, y, z], ...], "feasible": [...], "margin": [N, ...],
 "clearance": [m, ...], "clear": [...], "usable": [...], "why": [...], "pair": [index into
 "pairs"], "volume": m³, "volume_usable": m³, ...} with x varying fastest, then y, then z."""
