@@ -107,15 +107,11 @@ def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
     otherwise clean (ready, 1 s, no demo), the simulated robot records the contact, and the
     exit is 5 with a line saying why (0 without the lamp: the other tests here; 4 is "not
     calibrated")."""
-    robot = tmp_path / "rowc_lamp.toml"
     from cdprctl.daemon.startup import NOT_CALIBRATED
     from sim_backend.contact import CONTACT_EXIT
 
     assert CONTACT_EXIT == 5 and CONTACT_EXIT not in (0, 1, 2, 3, NOT_CALIBRATED)
-    base = CONFIG / "rowc.toml"
-    robot.write_text(f'base = "{base}"\n\n[[cell.obstacles]]\nname = "the lamp"\n'
-                     'kind = "box"\ncentre = [1.1195, 0.3688, 0.3882]\n'
-                     "half_extents = [0.01, 0.01, 0.01]\n")  # fmt: skip
+    robot = _lamp_robot(tmp_path)
     out = run_sim(["--no-demo", "--duration", "1"], code=5, config=str(robot))
     assert "the simulated robot: 1 contact(s), the first at t = " in out, out
     assert "cable 1 and the lamp: 0.00 mm" in out
