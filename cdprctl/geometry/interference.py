@@ -142,7 +142,6 @@ class Interference:
         self.closest = np.zeros((n, 6))  # m, base frame: on cable i (body part i), the other
         self.best = np.zeros(1, dtype=np.int64)
         self.slack = np.zeros(n)  # m: see InterferenceArrays
-        self._under = np.zeros(n, dtype=bool)  # relax's: the checks under its bound
         self.arrays = kernel_args(
             InterferenceArrays(
                 self.checks,
@@ -185,11 +184,8 @@ class Interference:
         no closer than ``limit`` asks: its slack ``limit − d`` (0 for the others), so that its
         distance plus its slack is ``limit`` here. A robot under the clearance may leave it,
         check by check: the checks that are clear keep the whole clearance. No allocation
-        (the cycle's supervisor calls it)."""
-        np.less(self.distance, limit if below is None else below, out=self._under)
-        np.subtract(limit, self.distance, out=self.slack)
-        np.fmax(self.slack, 0.0, out=self.slack)  # fmax: a NaN distance gets none
-        np.multiply(self.slack, self._under, out=self.slack)
+        (the cycle's supervisor calls it): compiled."""
+        relax_kernel(self.distance, self.slack, limit, limit if below is None else below)
 
     def describe(self, c: int | None = None) -> str:
         """Check ``c`` (default the least) in words: what against what, the distance (mm)."""
@@ -252,6 +248,15 @@ def interference_kernel(k, p, R, g):  # pragma: no cover - compiled
         if d + slack[c] < least:
             least = d + slack[c]
             best[0] = c
+
+
+@interference_njit
+def relax_kernel(distance, slack, limit, below):  # pragma: no cover - compiled
+    """``slack`` (m) ``limit − d`` for each distance ``d`` under ``below``, else 0 (a NaN
+    distance: 0)."""
+    for c in range(distance.shape[0]):
+        d = distance[c]
+        slack[c] = max(limit - d, 0.0) if d < below else 0.0
 
 
 @interference_njit

@@ -554,6 +554,22 @@ def test_a_check_takes_no_block():
     assert peak_bytes(lambda: r.update(kin), calls=3) == 0
 
 
+def test_relaxing_the_checks_takes_no_block():
+    """``Interference.relax`` (the supervisor's, in the control cycle, at the first supervised
+    cycle of a robot under the clearance) takes no block, and relaxes only the checks under
+    ``below``."""
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    kin = KinematicsData(model)
+    inverse_kinematics(model, kin, model.home.position, model.home.rotation)
+    r = Interference(model)
+    r.update(kin)
+    least = r.minimum
+    assert peak_bytes(lambda: r.relax(least + 0.0015, below=least + 0.001), calls=3) == 0
+    under = r.distance < least + 0.001
+    assert np.all(r.slack[under] == pytest.approx(least + 0.0015 - r.distance[under]))
+    assert np.all(r.slack[~under] == 0.0) and under.any() and not under.all()
+
+
 def test_the_probe_sees_an_allocating_check():
     """The same window sees a check that builds an array (the probe is not blind)."""
     model = load_robot(ROOT / "config" / "rowc.toml")
