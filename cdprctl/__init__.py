@@ -1,7 +1,7 @@
 """cdprctl: real-time controller daemon for cable-driven parallel robots."""
 
-from cdprctl.core.kernel_cache import fresh_kernel_caches
+from cdprctl.core.kernel_cache import choose_kernel_cache
 
 __version__ = "0.1.0"
 
-fresh_kernel_caches()  # before any kernel loads: stale caches go (core/kernel_cache.py)
+choose_kernel_cache()  # before any kernel is compiled: a cache per version of the sources

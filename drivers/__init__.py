@@ -1,5 +1,6 @@
 """Hardware abstraction for winch drives over python-can (see drivers.base)."""
 
+import cdprctl  # noqa: F401  first: the kernels' cache chosen before any is compiled (core/kernel_cache.py)
 from drivers.base import WinchDriver
 from drivers.cia402.driver import Cia402Driver
 from drivers.errors import (

@@ -1,64 +1,95 @@
-"""The compiled kernels' on-disk cache kept consistent with the sources.
+"""The compiled kernels' on-disk cache, one per version of the sources.
 
 numba keys a cached kernel by its own source file's stamp (modification time and size) only:
 a kernel that calls a kernel of another module carries that callee's code in its cache entry,
 and after an upgrade that changed the callee's module alone (``git pull`` touches the files it
 changes) the caller would load its old code — ``interference_kernel`` (``geometry/
-interference.py``) with an old ``box_box`` (``geometry/distance.py``), silently. So, before
-any kernel loads: a digest of the stamps of every source file of the packages that hold
-kernels; where it differs from the one recorded with the caches, every cache file of those
-packages is removed (the kernels compile afresh, about a minute once) and the new digest
-recorded. Stamps, not contents: ~300 ``stat`` calls, about a millisecond an import.
+interference.py``) with an old ``box_box`` (``geometry/distance.py``), silently
+(``tests/core/test_kernel_cache.py`` shows numba doing it). So, before any kernel loads, the
+cache directory is chosen by a digest of the stamps of every source file of the packages
+that hold kernels (``NUMBA_CACHE_DIR``, inherited by the processes this one starts): other
+sources, another directory, compiled afresh (about a minute, once); a process still running
+older sources keeps writing into its own. Nothing is deleted but directories of other digests
+untouched for ``KEEP_DAYS``.
 
-Where ``NUMBA_CACHE_DIR`` is set (``tools/mutation.py`` keeps a cache per mutant, removing the
-mutated module's importers' entries itself) or the packages are not writable (an installed
-copy: numba then caches per user), nothing is done.
+Where: ``.kernel-cache/<digest>`` beside the packages when that is writable (shared by the
+tree's users and by User-Mode Linux's guest, which sees the tree), else
+``$CACHE_DIRECTORY/kernels`` (systemd's ``CacheDirectory=``) or ``~/.cache/cdprctl/kernels``.
+A ``NUMBA_CACHE_DIR`` already set (``tools/mutation.py``'s per-mutant caches) is kept.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import sys
+import time
 from pathlib import Path
 
 #: the packages beside each other that hold cached kernels
 PACKAGES = ("cdprctl", "drivers", "sim_backend")
-#: where the digest of the sources the caches were built from is kept
-STAMP = Path("__pycache__") / "kernel-sources.digest"
+#: days a cache directory of other sources is kept after its last use
+KEEP_DAYS = 7.0
 
 
 def sources_digest(root: Path, packages: tuple[str, ...] = PACKAGES) -> str:
-    """The digest of the (path, mtime ns, size) of every ``.py`` under ``root``'s ``packages``."""
+    """The digest of the (path, mtime ns, size) of every ``.py`` file under ``root``'s
+    ``packages`` (an entry that cannot be read, say an editor's lock link, is left out)."""
     h = hashlib.sha256()
     for name in packages:
         for path in sorted((root / name).rglob("*.py")):
-            st = path.stat()
+            try:
+                st = path.stat()
+            except OSError:
+                continue
             h.update(f"{path.relative_to(root)}:{st.st_mtime_ns}:{st.st_size}\n".encode())
-    return h.hexdigest()
+    return h.hexdigest()[:20]
 
 
-def fresh_kernel_caches(root: Path | None = None, packages: tuple[str, ...] = PACKAGES) -> int:
-    """Remove the kernel caches of ``root``'s ``packages`` (default: where this package
-    stands) if their sources changed since they were recorded; how many files were removed."""
+def kernel_cache_dir(root: Path, packages: tuple[str, ...] = PACKAGES) -> Path | None:
+    """The cache directory of the sources under ``root`` now (created), or None when none
+    can be written (numba's own default then)."""
+    digest = sources_digest(root, packages)
+    bases = [root / ".kernel-cache"]
+    if os.environ.get("CACHE_DIRECTORY"):  # systemd's CacheDirectory= (a service user's)
+        bases.append(Path(os.environ["CACHE_DIRECTORY"].split(":")[0]) / "kernels")
+    home = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    bases.append(Path(home) / "cdprctl" / "kernels")
+    for base in bases:
+        try:
+            (base / digest).mkdir(parents=True, exist_ok=True)
+            os.utime(base / digest)  # in use: not pruned
+        except OSError:
+            continue
+        if os.access(base / digest, os.W_OK):
+            _prune(base, digest)
+            return base / digest
+    return None
+
+
+def _prune(base: Path, keep: str) -> None:
+    """Remove the cache directories of other sources unused for ``KEEP_DAYS`` (best effort)."""
+    old = time.time() - KEEP_DAYS * 86400.0
+    for other in base.iterdir():
+        try:
+            if other.name != keep and other.is_dir() and other.stat().st_mtime < old:
+                shutil.rmtree(other, ignore_errors=True)
+        except OSError:
+            continue
+
+
+def choose_kernel_cache(root: Path | None = None, packages: tuple[str, ...] = PACKAGES) -> None:
+    """``NUMBA_CACHE_DIR`` for the sources under ``root`` (default: where this package stands),
+    unless one is set already; numba, if loaded already, told too."""
     if os.environ.get("NUMBA_CACHE_DIR"):
-        return 0
+        return
     root = Path(__file__).resolve().parents[2] if root is None else root
-    stamp = root / packages[0] / STAMP
-    if not os.access(stamp.parent if stamp.parent.exists() else root / packages[0], os.W_OK):
-        return 0
-    try:
-        digest = sources_digest(root, packages)
-        if stamp.exists() and stamp.read_text() == digest:
-            return 0
-        removed = 0
-        for name in packages:
-            for cache in (root / name).rglob("__pycache__/*.nb[ic]"):
-                cache.unlink(missing_ok=True)
-                removed += 1
-        stamp.parent.mkdir(exist_ok=True)
-        tmp = stamp.with_suffix(f".{os.getpid()}")
-        tmp.write_text(digest)
-        tmp.replace(stamp)  # whole: a process starting beside this one reads one or the other
-        return removed
-    except OSError:  # a read-only or vanishing tree: numba's own keys are all there is
-        return 0
+    path = kernel_cache_dir(root, packages)
+    if path is None:
+        return
+    os.environ["NUMBA_CACHE_DIR"] = str(path)
+    if "numba" in sys.modules:  # read when a kernel is cached, not only at numba's import
+        from numba.core import config
+
+        setattr(config, "CACHE_DIR", str(path))  # noqa: B010  (not in the stubs)

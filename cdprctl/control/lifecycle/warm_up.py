@@ -23,6 +23,7 @@ from cdprctl.control.cycle.cable_kernels import (
 )
 from cdprctl.control.cycle.estimator import Estimator
 from cdprctl.core.numerics import count_kernel, largest, worst_ratio
+from cdprctl.geometry.interference import relax_kernel
 from cdprctl.tda import ImposedQuantity, Imposition, TDAMethod, TDAOptions, TensionDistributor
 from cdprctl.tda.nullspace import NullSpace
 from cdprctl.tda.planar import feasible_scale_kernel
@@ -107,6 +108,7 @@ def warm_up(controller: Controller) -> None:
     tension_hold_kernel(zeros, np.ones(m), 0.5, 0.0, zeros, zeros, np.zeros(m))
     worst_ratio(zeros, np.ones(m))  # the supervisor's position-mode checks
     largest(zeros)  # the supervisor's feedback age
+    relax_kernel(zeros, zeros.copy(), 0.0, 0.0)  # the supervisor's clearance, under it at start
     for a, v in zip(arrays, saved, strict=True):
         a[:] = v
     d.wrench[:] = 0.0
