@@ -55,6 +55,7 @@ class Clearance:
         self.radius = float(np.max(np.linalg.norm(np.vstack(points), axis=1)))
         # m per check: the slack of a motion that starts under the clearance (``relax_from``)
         self._slack = np.zeros(len(self.interference.distance))
+        self.started = ""  # that start's closest pair and distance, in words ("": clear)
 
     def relax_from(self, x: FloatArray) -> float | None:
         """A motion from the coordinates ``x``: each check under the clearance there may go
@@ -66,7 +67,9 @@ class Clearance:
         self._slack.fill(0.0)
         d = self._measure(np.asarray(x, dtype=float))
         if not self.active or d >= self.limit:
+            self.started = ""
             return None
+        self.started = g.describe()  # the start's closest pair and its distance, in words
         g.relax(self.limit + 1e-6)  # 1 µm: the start itself passes
         self._slack[:] = g.slack
         return d
