@@ -96,7 +96,7 @@ def test_a_rejected_path_is_one_line_and_exit_2(tmp_path):
     bad.write_text("x,y,z\n100,200,300\n")
     code, out, _ = cdprctl("run", "--config", ROWC, "--sim", "--path", str(bad))
     assert code == 2
-    assert f"cdprctl run: path {bad} rejected: line 2:" in out
+    assert f"cdprctl run: path {bad} rejected: line 2 (the end of segment 1): waypoint" in out
     assert_clean(out)
 
 

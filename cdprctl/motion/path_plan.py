@@ -157,11 +157,12 @@ def plan_path(
     start = np.asarray(start, dtype=float)
     targets = [coordinates_of(model, w.pose) for w in waypoints]
     near = lim.near_of(start)  # a path from under the clearance gets no closer
-    for w, x in zip(waypoints, targets, strict=True):  # the waypoints themselves first
+    for k, (w, x) in enumerate(zip(waypoints, targets, strict=True)):  # the waypoints first
         margin, ok = lim.check(x[None], near=near)
         if not ok[0]:
-            raise PathRejectedError(f"{w.where}: waypoint {(np.round(w.pose, 4) + 0.0).tolist()}: "
-                               f"{lim.why(x, float(margin[0]), near=near)}")  # fmt: skip
+            pose = (np.round(w.pose, 4) + 0.0).tolist()
+            raise PathRejectedError(f"{w.where} (the end of segment {k + 1}): waypoint {pose}: "
+                                    f"{lim.why(x, float(margin[0]), near=near)}")  # fmt: skip
         if w.speed is not None and w.speed > c.max_velocity * (1 + 1e-9):
             raise PathRejectedError(f"{w.where}: speed {w.speed:g} m/s exceeds the configured "
                                f"[control] max_velocity = {c.max_velocity:g} m/s")  # fmt: skip

@@ -275,8 +275,9 @@ def test_the_platform_is_kept_off_a_fixture_by_jogs_and_paths(rowc):
     assert 0.195 - 0.02 / 64 - 1e-4 <= end[0] - start[0] <= 0.195 + 1e-4
     assert why.startswith("the platform's body and the crate: ")
     x, y, z = home
-    with pytest.raises(PathRejectedError, match=r"line 3: .*the platform's body and the crate: "
-                       r"0\.00 mm apart, under the clearance 5\.00 mm"):  # fmt: skip
+    with pytest.raises(PathRejectedError, match=r"line 3 \(the end of segment 2\): .*the "
+                       r"platform's body and the crate: 0\.00 mm apart, under the clearance "
+                       r"5\.00 mm"):  # fmt: skip
         plan_text(model, f"x, y, z\n{x + 0.1}, {y}, {z}\n{x + 0.3}, {y}, {z}\n", start,
                   model.control.period, lim)  # fmt: skip
     plan = plan_text(model, f"x, y, z\n{x + 0.1}, {y}, {z}\n{x + 0.15}, {y}, {z}\n", start,

@@ -166,7 +166,8 @@ def test_a_gcode_file_in_metres_gets_the_hint(tmp_path, capsys):
     f.write_text(metres)
     assert main(["path", "check", str(f), "--config", str(ROOT / "config" / "rowc.toml")]) == 2
     err = capsys.readouterr().err
-    assert "line 2: waypoint [0.0015, 0.0004, 0.0006" in err and "a file in metres?" in err
+    assert "line 2 (the end of segment 1): waypoint [0.0015, 0.0004, 0.0006" in err
+    assert "a file in metres?" in err
 
 
 @pytest.mark.parametrize("name", CAM_FILES)

@@ -256,8 +256,9 @@ def test_run_path_rejects_before_enabling(tmp_path, capsys):
                "--status", "0", "--path", str(bad)])  # fmt: skip
     out = capsys.readouterr()
     assert rc == 2
-    assert (f"cdprctl run: path {bad} rejected: line 3: waypoint [2.9, 0.35, 0.59, 0.0, 0.0, "
-            "0.0]: x = 2.9000 m is outside the workspace box [0.5, 2.5] m") in out.err
+    assert (f"cdprctl run: path {bad} rejected: line 3 (the end of segment 2): waypoint "
+            "[2.9, 0.35, 0.59, 0.0, 0.0, 0.0]: x = 2.9000 m is outside the workspace box "
+            "[0.5, 2.5] m") in out.err
     assert "enabling" not in out.out
     assert math.isfinite(1.0)
 
@@ -425,7 +426,8 @@ def test_a_blend_passes_no_faster_than_the_slower_segment_allows(rowc):
 
 def test_a_rejected_waypoint_is_named_to_the_tenth_of_a_millimetre(rowc):
     start = pose_coordinates(rowc, START[:3], rowc.home.rotation)
-    with pytest.raises(PathRejectedError, match=r"line 2: waypoint \[2\.6123, 0\.35, 0\.59, "):
+    with pytest.raises(PathRejectedError, match=r"line 2 \(the end of segment 1\): waypoint "
+                       r"\[2\.6123, 0\.35, 0\.59, "):  # fmt: skip
         plan_path(rowc, parse_path("x, y, z\n2.61234, 0.35, 0.59\n", START), start,
                   rowc.control.period)  # fmt: skip
 

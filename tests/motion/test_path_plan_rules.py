@@ -242,8 +242,8 @@ def test_a_rows_time_is_met_to_two_periods(rowc):
 def test_a_refused_waypoint_is_named_without_negative_zeros(rowc):
     """``-0.0`` in an error reads as a sign error the file does not have."""
     far = Waypoint((5.0, -0.00001, 0.59, -0.00002, 0.0, 0.0), None, None, False, 0.0, "row 2")
-    with pytest.raises(pp.PathRejectedError, match=r"row 2: waypoint \[5\.0, 0\.0, 0\.59, 0\.0, "
-                       r"0\.0, 0\.0\]: "):  # fmt: skip
+    with pytest.raises(pp.PathRejectedError, match=r"row 2 \(the end of segment \d\): waypoint "
+                       r"\[5\.0, 0\.0, 0\.59, 0\.0, 0\.0, 0\.0\]: "):  # fmt: skip
         pp.plan_path(rowc, [far], start_of(rowc), rowc.control.period)
 
 

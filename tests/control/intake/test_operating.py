@@ -102,7 +102,8 @@ def test_infeasible_waypoint_rejected_before_any_motion(rowc):
         cl.command("path", text=text, name="bad.csv")
         assert not c.desk.mailbox
         why = events(cl)[-1]
-        assert why.startswith("path bad.csv rejected: line 3: waypoint [0.55, 0.35, 1.25")
+        assert why.startswith("path bad.csv rejected: line 3 (the end of segment 2): "
+                              "waypoint [0.55, 0.35, 1.25")
         assert "tension margin" in why and "N required" in why
         cl.run(0.5)
         assert c.data.state.value == "enabled" and c.data.path_state == ""
