@@ -52,4 +52,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_kinematics.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .kernel-cache
