@@ -56,13 +56,13 @@ def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
         return "clearance   nothing to check (one cable, no body, no obstacle)", []
     limit = f"the [interference] clearance {c.limit * 1e3:.2f} mm"
     home = np.r_[model.home.position, 0.0, 0.0, 0.0]
-    d_home, _ = c.at(home)
-    under = " UNDER the limit" if d_home[0] < c.limit else ""
-    words = [f"at home {d_home[0] * 1e3:.2f} mm ({c.pair_at(home)}){under}"]
+    d_home, pair = c.closest_at(home)  # no slack here: the least pair, its distance
+    under = " UNDER the limit" if d_home < c.limit else ""
+    words = [f"at home {d_home * 1e3:.2f} mm ({pair}){under}"]
     warnings = []
-    if d_home[0] < c.limit:
+    if d_home < c.limit:
         warnings.append(
-            f"at the home pose {c.pair_at(home)} are {d_home[0] * 1e3:.2f} mm apart, under "
+            f"at the home pose {pair} are {d_home * 1e3:.2f} mm apart, under "
             f"{limit}: from home the robot may move only where they get no closer "
             "(docs/clearance.md)"
         )
@@ -73,12 +73,13 @@ def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
         if np.any(coords[j, 3:]):
             where += f" turned about {TURNS[j * len(TURNS) // len(coords)]}"
         under = " UNDER the limit" if dist[j] < c.limit else ""
+        pair = c.pair_at(coords[j])
         words.append(f"over the workspace box {name} {dist[j] * 1e3:.2f} mm "
-                     f"({c.pair_at(coords[j])} {where}){under}")  # fmt: skip
+                     f"({pair} {where}){under}")  # fmt: skip
         if n_under := int(np.count_nonzero(dist < c.limit)):
             warnings.append(
                 f"{n_under} of {len(coords)} poses of the [workspace] box {name} are under "
-                f"{limit} (least {dist[j] * 1e3:.2f} mm, {c.pair_at(coords[j])} {where}): the "
+                f"{limit} (least {dist[j] * 1e3:.2f} mm, {pair} {where}): the "
                 "soft limits refuse them, so the robot cannot reach all of its stated "
                 "workspace (docs/clearance.md)"
             )

@@ -59,7 +59,7 @@ def check(args: argparse.Namespace) -> int:
         return 2
     pose = np.array(given + home[len(given):], dtype=float)
     limits, start = SoftLimits(model), coordinates_of(model, pose)
-    if args.start and (outside := _outside(model, limits, start)):
+    if args.start and (outside := limits.outside(start)):
         print(f"cdprctl path check: error: --from = {args.start!r}: {outside} ([workspace] of "
               f"{model.source_file}): no robot stands there to start a path", file=sys.stderr)
         return 2
@@ -82,13 +82,3 @@ def check(args: argparse.Namespace) -> int:
     print(f"ok: the path holds ({n} segment{'s' if n != 1 else ''}, {plan.duration:.2f} s)")
     return 0
 
-
-def _outside(model: Any, limits: Any, start: np.ndarray) -> str:
-    """Why the start coordinates (m, rad from home) are outside the workspace box or beyond
-    its tilt, in the soft limits' words; "" when inside (a start under the tension margin or
-    the clearance is a path's to leave: the plan takes it as its floor)."""
-    ws = model.workspace
-    p, tilt = start[:3], float(np.linalg.norm(start[3:]))
-    inside = (np.all(p >= ws.position_min - 1e-6) and np.all(p <= ws.position_max + 1e-6)
-              and tilt <= ws.max_angle + 1e-6)  # fmt: skip
-    return "" if inside else limits.why(start, float("inf"))

@@ -168,7 +168,8 @@ class Interference:
     def minimum(self) -> float:
         """m: the least distance of the last pose (``inf`` with nothing to check); with a
         slack set, the distance of the check closest to its own floor (``effective``)."""
-        return float(self.distance[self.best[0]]) if len(self.distance) else math.inf
+        # .item(): a Python float, no numpy scalar (the cycle's supervisor reads it)
+        return self.distance.item(self.best.item(0)) if len(self.distance) else math.inf
 
     @property
     def effective(self) -> float:
@@ -176,8 +177,8 @@ class Interference:
         (``minimum`` when no slack is set)."""
         if not len(self.distance):
             return math.inf
-        c = self.best[0]
-        return float(self.distance[c] + self.slack[c])
+        c = self.best.item(0)
+        return self.distance.item(c) + self.slack.item(c)
 
     def relax(self, limit: float, below: float | None = None) -> None:
         """Each check now under ``below`` (m, default ``limit``) may stay where it is but get

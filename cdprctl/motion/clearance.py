@@ -34,6 +34,9 @@ from cdprctl.model.robot import RobotModel
 
 #: m: the displacement bound of one refined sub-interval (what a dip there may hide: half)
 REFINE_STEP = 1e-4
+#: m: how far under its start a pair that starts under the clearance may be measured (the
+#: start itself passes)
+START_TOLERANCE = 1e-6
 
 
 class Clearance:
@@ -70,7 +73,7 @@ class Clearance:
             self.started = ""
             return None
         self.started = g.describe()  # the start's closest pair and its distance, in words
-        g.relax(self.limit + 1e-6)  # 1 µm: the start itself passes
+        g.relax(self.limit + START_TOLERANCE)
         self._slack[:] = g.slack
         return d
 
@@ -154,7 +157,7 @@ class Clearance:
         g = self.interference
         c = int(g.best[0])
         slack = float(g.slack[c])
-        floor = self.limit - slack + (1e-6 if slack > 0.0 else 0.0)  # m: this pair's
+        floor = self._floor(c)
         mm = float(g.distance[c]) * 1e3
         # two decimals, three where two would print the floor itself ("5.00 mm, under 5.00");
         # within a µm of it, "at" it
@@ -180,7 +183,12 @@ class Clearance:
         self._measure(np.asarray(x, dtype=float))
         g = self.interference
         c = int(g.best[0])
-        slack = float(g.slack[c])
-        started = (f", under the clearance since the start ({(self.limit - slack) * 1e3 + 1e-3:.2f}"
-                   " mm there: no closer allowed)" if slack > 0.0 else "")  # fmt: skip
+        started = (f", under the clearance since the start ({self._floor(c) * 1e3:.2f} mm "
+                   "there: no closer allowed)" if g.slack[c] > 0.0 else "")  # fmt: skip
         return float(g.distance[c]), f"{g.name(c)}{started}"
+
+    def _floor(self, c: int) -> float:
+        """m: the least distance check ``c`` may come to: where its motion started, for one
+        that started under the clearance (``relax_from``), else the clearance."""
+        slack = float(self.interference.slack[c])
+        return self.limit - slack + START_TOLERANCE if slack > 0.0 else self.limit

@@ -148,17 +148,9 @@ class SoftLimits:
         """Which rule the sample ``coord`` breaks, with the values and units; ``at``: where the
         way to it came closest (``nearest_at``); ``near``, ``clearance`` as ``check`` took
         them."""
-        ws = self.model.workspace
-        p = coord[:3]
-        for k, axis in enumerate("xyz"):
-            if p[k] < ws.position_min[k] - 1e-6 or p[k] > ws.position_max[k] + 1e-6:
-                return (f"{axis} = {p[k]:.4f} m is outside the workspace box "
-                        f"[{ws.position_min[k]:g}, {ws.position_max[k]:g}] m")  # fmt: skip
-        angle = float(np.linalg.norm(coord[3:]))
-        if angle > ws.max_angle + 1e-6:
-            return (f"the tilt {angle_words(angle)} from the home orientation exceeds "
-                    f"workspace.max_angle = {ws.max_angle:g} rad "
-                    f"({math.degrees(ws.max_angle):.2f}°)")  # fmt: skip
+        outside = self.outside(coord)
+        if outside:
+            return outside
         if self.clearance.active and clearance:
             self.clearance.use_slack(near is not None)
             for x in (coord,) if at is None else (coord, at):
@@ -172,6 +164,22 @@ class SoftLimits:
             f"the tension margin is {margin:.2f} N < {need:.2f} N required (the best "
             f"distribution comes that close to a tension limit; workspace.wrench_margin)"
         )
+
+    def outside(self, coord: FloatArray) -> str:
+        """Why the coordinates ``coord`` are outside the workspace box or beyond its tilt
+        (to 1 µm / 1 µrad, as ``check``), or "" when inside."""
+        ws = self.model.workspace
+        p = coord[:3]
+        for k, axis in enumerate("xyz"):
+            if p[k] < ws.position_min[k] - 1e-6 or p[k] > ws.position_max[k] + 1e-6:
+                return (f"{axis} = {p[k]:.4f} m is outside the workspace box "
+                        f"[{ws.position_min[k]:g}, {ws.position_max[k]:g}] m")  # fmt: skip
+        angle = float(np.linalg.norm(coord[3:]))
+        if angle > ws.max_angle + 1e-6:
+            return (f"the tilt {angle_words(angle)} from the home orientation exceeds "
+                    f"workspace.max_angle = {ws.max_angle:g} rad "
+                    f"({math.degrees(ws.max_angle):.2f}°)")  # fmt: skip
+        return ""
 
     @staticmethod
     def _on_the_way(x: FloatArray) -> str:
@@ -202,9 +210,10 @@ class SoftLimits:
         if ok.all():
             return coords[-1], ""
         bad = int(np.argmin(ok))
-        why = self.why(coords[bad], float(margin[bad]), floor, self.nearest_at[bad], near)
         if bad == 0:
+            why = self.why(coords[0], float(margin[0]), floor, self.nearest_at[0], near)
             return np.array(start, dtype=float), why
+        first = (coords[bad], float(margin[bad]), self.nearest_at[bad].copy())  # if all else fails
         lo, hi = s[bad - 1], s[bad]
         for _ in range(6):
             mid = 0.5 * (lo + hi)
@@ -216,9 +225,9 @@ class SoftLimits:
         # what breaks just past the end, not at the sample first found (a step further on)
         way = np.array([start + lo * d, start + hi * d])
         margin, ok = self.check(way, floor=floor, continuous=True, near=near)
-        if not ok[1]:
-            why = self.why(way[1], float(margin[1]), floor, self.nearest_at[1], near)
-        return start + lo * d, why
+        if ok[1]:  # the bisection's resolution: the sample first found says why
+            return start + lo * d, self.why(first[0], first[1], floor, first[2], near)
+        return start + lo * d, self.why(way[1], float(margin[1]), floor, self.nearest_at[1], near)
 
     def line_refusal(self, start: FloatArray, target: FloatArray) -> str:
         """Why the straight line from the coordinates ``start`` to ``target`` (a move's, at

@@ -301,7 +301,8 @@ def _play_and_check(
     if lim.clearance.active:  # the distance as measured, the pair (and its start's floor)
         least, pair = lim.clearance.closest_at(lim.nearest_at[jc])
         near_at = f"{pair} ({segments[seg_of[jc]].where}, t = {times[jc]:.2f} s)"
-        if lim.near is not None and "since the start" not in pair:  # the start's is less
+        g = lim.clearance.interference
+        if lim.near is not None and g.slack[g.best[0]] == 0.0:  # another pair than the start's
             near_at += f"; the start under the clearance: {lim.clearance.started}"
     return PathPlan(
         segments=segments,

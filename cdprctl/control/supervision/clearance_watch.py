@@ -59,17 +59,16 @@ class ClearanceWatch:
             return None
         g = self.interference
         if self.limit != self.limit:  # the first supervised cycle
-            d = g.distance.item(g.best.item(0))
+            d = g.minimum
             self.limit = self.clearance if d >= self.clearance else d - self.NOISE
             if d < self.clearance:  # those checks no closer than here, less NOISE
                 g.relax(self.clearance + self.NOISE, below=self.clearance)
-        c = g.best.item(0)
-        e = g.distance.item(c) + g.slack.item(c)  # m: against the clearance
+        e = g.effective  # m: against the clearance
         deep = e < self.clearance - self.NOISE
         if not (self._under.held(t, e < self.clearance) or deep):
             return None
         how = (f"by more than {self.NOISE * 1e3:.1f} mm" if deep else
                f"for {self.HOLD * 1e3:.0f} ms")  # fmt: skip
-        limit = self.clearance - g.slack.item(c)  # m: this check's
+        limit = self.clearance - g.slack.item(g.best.item(0))  # m: this check's
         return (f"clearance: {g.describe()} apart, under the limit {limit * 1e3:.2f} mm "
                 f"([interference] clearance {self.clearance * 1e3:.2f} mm) {how}")  # fmt: skip
