@@ -6,6 +6,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +123,24 @@ def end_processes(procs: list[subprocess.Popen], grace: float = 10.0) -> None:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+
+
+def rest_of_output(proc: subprocess.Popen, timeout: float) -> str:
+    """What ``proc`` still writes to its text ``stdout`` until it ends (killed after ``timeout``
+    s), read through the same buffered stream as the test's ``readline`` calls before it.
+    ``communicate(timeout=...)`` reads the raw pipe instead and loses what ``readline`` had
+    already buffered: a warning written just after ``ready:`` went missing that way."""
+    assert proc.stdout is not None
+    out: list[str] = []
+    reader = threading.Thread(target=lambda: out.append(proc.stdout.read()), daemon=True)
+    reader.start()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    reader.join(timeout=10)
+    return "".join(out)
 
 
 def canopen_network():

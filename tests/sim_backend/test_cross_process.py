@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import CONFIG, end_processes, without_table
+from conftest import CONFIG, end_processes, rest_of_output, without_table
 
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.robot_file import load_robot
@@ -179,7 +179,7 @@ def test_daemon_against_sim_process_over_udp_multicast(tmp_path, sim_process):
             if "moving -> enabled: target reached" in line or "FAULT" in line:
                 break
         daemon.send_signal(signal.SIGTERM)
-        out, _ = daemon.communicate(timeout=30)
+        out = rest_of_output(daemon, 30)
         lines.append(out)
     finally:
         if daemon.poll() is None:
@@ -431,7 +431,7 @@ def test_a_starved_simulated_robot_says_so_itself(tmp_path, sim_process):
     sim.send_signal(signal.SIGCONT)
     time.sleep(0.3)
     sim.send_signal(signal.SIGTERM)
-    out, _ = sim.communicate(timeout=20)
+    out = rest_of_output(sim, 20)
     said = re.search(r"the simulated robot stepped ([\d.]+) ms late at t=[\d.]+ s: this "
                      r"process was not run \(a busy machine\)", out)  # fmt: skip
     assert said and float(said[1]) >= 140.0, out

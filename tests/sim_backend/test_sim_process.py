@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import CONFIG
+from conftest import CONFIG, rest_of_output
 
 CLI = [sys.executable, "-m", "cdprctl.cli"]
 
@@ -66,7 +66,7 @@ def run_sim(args: list[str], during: Any = None, code: int = 0, config: str = ""
             assert head[-1], "".join(head)
         if during is not None:
             during(proc, await_child(proc))
-        out = "".join(head) + proc.communicate(timeout=120)[0]
+        out = "".join(head) + rest_of_output(proc, 120)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -114,10 +114,10 @@ def test_a_contact_in_the_simulated_robot_is_the_exit_code(tmp_path):
     robot = _lamp_robot(tmp_path)
     out = run_sim(["--no-demo", "--duration", "1"], code=5, config=str(robot))
     assert "the simulated robot: 1 contact(s), the first at t = " in out, out
-    assert "cable 1 and the lamp: 0.00 mm" in out
+    assert "cable 1 and the lamp: 0.00 mm" in out, out
     # and said at the start, before any motion: the robot stands under the clearance
     assert ("warning: at the start pose cable 1 and the lamp: 0.00 mm apart, under the "
-            "clearance 5.00 mm: a motion may only leave it, no closer") in out  # fmt: skip
+            "clearance 5.00 mm: a motion may only leave it, no closer") in out, out  # fmt: skip
     assert out.rstrip().endswith("cdprctl run: exit 5: the simulated robot recorded 1 "
                                  "contact(s) (above)")  # fmt: skip
 

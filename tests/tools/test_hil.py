@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from candump_witness import check_candump
-from conftest import CONFIG, canopen_network, end_processes, without_table
+from conftest import CONFIG, canopen_network, end_processes, rest_of_output, without_table
 
 from cdprctl.robot_file import load_robot
 from drivers import create_driver
@@ -222,7 +222,7 @@ def test_the_demo_over_vcan0_with_candump_as_witness(tmp_path, processes):
             if "FAULT" in line or "fault" in line.split(":")[-1]:
                 break
         daemon.send_signal(signal.SIGTERM)
-        out, _ = daemon.communicate(timeout=60)
+        out = rest_of_output(daemon, 60)
         text = "".join(lines) + out
     finally:
         dump.send_signal(signal.SIGINT)
@@ -262,7 +262,7 @@ def test_a_link_that_goes_down_is_said_and_never_crashes_the_daemon(tmp_path, pr
         subprocess.run([ip, "link", "set", "up", "vcan0"], check=True)
     time.sleep(1.0)
     daemon.send_signal(signal.SIGTERM)
-    out, _ = daemon.communicate(timeout=60)
+    out = rest_of_output(daemon, 60)
     text = "".join(lines) + out
     print(text)  # what it said (pytest -rP shows it)
     assert "Traceback" not in text, text

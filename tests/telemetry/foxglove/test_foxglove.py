@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import rest_of_output
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
@@ -105,7 +106,7 @@ def test_live_view_of_the_daemon(tmp_path):
         channels, got = asyncio.run(watch(f"ws://127.0.0.1:{port}", 2.0))
     finally:
         proc.terminate()
-        out = proc.communicate(timeout=30)[0]
+        out = rest_of_output(proc, 30)
     assert {t: c["schemaName"] for t, c in channels.items()} == {
         "/tf": "foxglove.FrameTransforms", "/scene": "foxglove.SceneUpdate",
         "/log": "foxglove.Log", "/signals": "cdprctl.signals"}, channels  # fmt: skip
