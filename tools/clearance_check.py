@@ -14,6 +14,11 @@ every 0.1 mm.
   (the point in the box's frame, its excess over the half extents).
 * **Cable against the cell** (``[[cell.obstacles]]``): the whole cable, to each box and
   half-space.
+* **The platform's body against the cell**: each box of the body against each obstacle box,
+  the 12 edges of each sampled against the other, solid (two boxes' least distance is had at
+  a corner or on an edge of one of them; boxes that overlap have an edge in the other: 0);
+  against a half-space, the least of the body box's 8 corners' signed distances (negative in
+  it).
 * **The grid**: the ``[workspace]`` box every ``--step`` (m, per axis), at the home orientation
   and turned from it about the 26 axes of a cube's faces, edges and corners by each angle of
   ``--angles`` (fractions of ``max_angle``), plus ``--random`` rotations (axis uniform, angle
@@ -78,6 +83,20 @@ def to_segment(a: np.ndarray, b: np.ndarray) -> Callable[[np.ndarray], np.ndarra
                              .sum(axis=1))  # fmt: skip
 
 
+def edges(centre: np.ndarray, R: np.ndarray, half: np.ndarray) -> list[tuple]:
+    """The 12 edges of a box (centre, axes ``R``, ``half`` extents; m) as segment ends."""
+    corners = {c: centre + R @ (np.array(c) * half) for c in itertools.product((-1, 1), repeat=3)}
+    return [(corners[a], corners[b]) for a, b in itertools.combinations(corners, 2)
+            if sum(x != y for x, y in zip(a, b, strict=True)) == 1]  # fmt: skip
+
+
+def box_to_box(one: tuple, other: tuple, step: float) -> float:
+    """m: two boxes' least distance (each ``(centre, R, half)``), their edges sampled."""
+    return min(sampled(a, b, to_box(*target), step)
+               for source, target in ((one, other), (other, one))
+               for a, b in edges(*source))  # fmt: skip
+
+
 def to_box(
     centre: np.ndarray, R: np.ndarray, half: np.ndarray
 ) -> Callable[[np.ndarray], np.ndarray]:
@@ -116,7 +135,7 @@ class Clearance:
         self.pairs = [(i, j) for i, j in itertools.combinations(range(m.n_cables), 2)
                       if np.linalg.norm(A[i] - A[j]) >= SHARED
                       and np.linalg.norm(b[i] - b[j]) >= SHARED]  # fmt: skip
-        self.least = {k: Least() for k in ("cables", "body", "cell")}
+        self.least = {k: Least() for k in ("cables", "body", "cell", "platform")}
 
     def at(self, p: np.ndarray, R: np.ndarray, turn: str = "") -> dict[str, tuple[float, str]]:
         """Every kind's least distance (m) and what, at the pose ``p`` (m), ``R`` (``turn``:
@@ -146,6 +165,16 @@ class Clearance:
                 d = sampled(B[i], E[i], dist, self.step)
                 if d < out["cell"][0]:
                     out["cell"] = (d, f"cable {self.names[i]} and {ob.name}")
+        for part, ob in itertools.product(cfg.body, cfg.obstacles):
+            body = (p + R @ part.centre, R @ part.rotation, part.half_extents)
+            if isinstance(ob, Box):
+                d = box_to_box(body, (ob.centre, ob.rotation, ob.half_extents), self.step)
+            else:
+                d = min(float((c - ob.point) @ ob.normal) for c in
+                        (body[0] + body[1] @ (np.array(s) * body[2])
+                         for s in itertools.product((-1, 1), repeat=3)))  # fmt: skip
+            if d < out["platform"][0]:
+                out["platform"] = (d, f"the platform's {part.name} and {ob.name}")
         for k, (d, what) in out.items():
             if what:
                 where = f"p = {np.round(p, 4).tolist()} m, {turn}"
@@ -210,16 +239,17 @@ def main() -> None:
                 row[3] += 1
                 n += 1
         c, b = check.least["cables"], check.least["body"]
-        below = sum(x.below for x in check.least.values())
+        below = sum(int(row[2]) for row in by_turn.values())  # poses, whatever kind
         print(
             f"| {model.name} | {n} | {c.distance * 1e3:.2f}, {c.what} | "
             f"{b.distance * 1e3:.2f}, {b.what or 'no body'} | {below} | "
             f"{time.perf_counter() - t0:.0f} |",
             flush=True,
         )
-        for x in (c, b):
+        for kind, x in check.least.items():  # the cell's two kinds: only where the file has one
             if x.what:
-                print(f"    {x.what}: {x.where}", file=sys.stderr)
+                print(f"    {kind}: least {x.distance * 1e3:.2f} mm, {x.what}: {x.where}",
+                      file=sys.stderr)  # fmt: skip
         for label, (cab, body, below_n, poses) in by_turn.items():
             print(
                 f"    {label}: cables {cab * 1e3:.2f} mm, body {body * 1e3:.2f} mm, "

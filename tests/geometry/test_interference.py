@@ -11,6 +11,7 @@ file's sections, no allocation per call, and two planted bugs that the compariso
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import math
 import os
@@ -493,6 +494,38 @@ def test_the_body_against_a_box_or_a_plane_agrees_with_the_references():
     from cdprctl.geometry import distance
 
     assert box_pairs_worst(distance, 400) < 1e-9
+
+
+def test_the_brute_force_tool_measures_the_platform_against_the_cell_as_the_references():
+    """``tools/clearance_check.py`` (the brute force a user runs on a robot file, apart from
+    the kernel): its body-against-obstacle distances against BVLS and linprog on 60 random
+    pairs (overlapping to far apart), within its sampling (0.1 mm: at most 0.05 mm above,
+    never below); and on rowc with a cell, its platform's least the kernel's, pose by pose."""
+    sys.path.insert(0, str(ROOT / "tools"))
+    import clearance_check as brute
+
+    rng = np.random.default_rng(670)
+    for k in range(60):
+        _, cb, Rb, hb = random_box(rng, 0.5)
+        _, co, Ro, ho = random_box(rng, 0.5 + 3.0 * k / 60)
+        want = ref_box_box(cb, Rb, hb, co, Ro, ho)
+        got = brute.box_to_box((cb, Rb, hb), (co, Ro, ho), brute.STEP)
+        assert want - 1e-9 <= got <= want + brute.STEP / 2, (k, got, want)
+    model = load_robot(ROOT / "config" / "rowc.toml")
+    cfg = _with(model, None, CELLS["rowc"][1])
+    check = brute.Clearance(dataclasses.replace(model, interference=cfg))
+    kernel, kin = Interference(model, cfg), KinematicsData(model)
+    seen = set()
+    for p, R in random_poses(model, 8, 671):
+        inverse_kinematics(model, kin, p, R)
+        kernel.update(kin)
+        platform = kernel.checks[:, 0] == PLATFORM
+        c = int(np.flatnonzero(platform)[np.argmin(kernel.distance[platform])])
+        d, what = check.at(p, R)["platform"]
+        assert kernel.distance[c] - 1e-9 <= d <= kernel.distance[c] + brute.STEP / 2, (p, d)
+        assert what == kernel.name(c)
+        seen.add(what)
+    assert len(seen) >= 2  # more than one obstacle was the nearest
 
 
 @pytest.mark.parametrize("obstacle, want", [
