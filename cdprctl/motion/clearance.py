@@ -159,16 +159,17 @@ class Clearance:
         slack = float(g.slack[c])
         floor = self._floor(c)
         mm = float(g.distance[c]) * 1e3
-        # two decimals, three where two would print the floor itself ("5.00 mm, under 5.00");
-        # within a µm of it, "at" it
-        said = f"{mm:.3f}" if f"{mm:.2f}" == f"{floor * 1e3:.2f}" else f"{mm:.2f}"
+        # as many decimals as tell the distance from its floor ("3.612 mm, closer than the
+        # 3.613 mm", not "... than the 3.61 mm"), two at least, four (0.1 µm) at most; within
+        # a µm of it, "at" it
+        digits = next((k for k in (2, 3) if f"{mm:.{k}f}" != f"{floor * 1e3:.{k}f}"), 4)
         under = "at" if floor * 1e3 - mm < 1e-3 else "under"
-        what = f"{g.name(c)}: {said} mm apart"
+        what = f"{g.name(c)}: {mm:.{digits}f} mm apart"
         if not d < self.limit:
             return what
         if slack > 0.0:
-            return (f"{what}, closer than the {floor * 1e3:.2f} mm the motion started at, {under} "
-                    f"the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
+            return (f"{what}, closer than the {floor * 1e3:.{digits}f} mm the motion started "
+                    f"at, {under} the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
         return f"{what}, {under} the clearance {self.limit * 1e3:.2f} mm"
 
     def pair_at(self, x: FloatArray) -> str:

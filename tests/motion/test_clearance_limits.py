@@ -330,3 +330,23 @@ def test_a_path_from_under_the_clearance_reports_the_distance_it_starts_at(rowc)
     assert plan.min_clearance == pytest.approx(0.003, abs=1e-6)
     assert "least clearance 3.00 mm: the platform's body and the crate, under the clearance " \
            "since the start (3.00 mm there: no closer allowed)" in plan.clearance_text()
+
+
+def test_a_refusal_from_under_the_clearance_prints_the_two_distances_apart():
+    """seed000 stands 3.61 mm from its cube at home (its paper's geometry); its demo's first
+    move, on the way down and along x, came closer by a few µm and was refused with "3.612 mm
+    apart, closer than the 3.61 mm the motion started at" (the floor at two decimals, the
+    distance at three: as if 3.612 were closer than 3.61). Each is printed to the decimals that
+    tell them apart, the distance the smaller."""
+    model = load_robot(ROOT / "config" / "seed000.toml")
+    lim = SoftLimits(model)
+    for direction in ([1.0, 0, -0.33, 0, 0, 0], [0.0, 1, 0, 0, 0, 0], [-1.0, 0, 0, 0, 0, 0]):
+        _, why = lim.ray_end(_home(model), np.array(direction), 0.05, step=0.0005)
+        said = re.search(r"cube: ([\d.]+) mm apart, closer than the ([\d.]+) mm the motion", why)
+        if said is None:
+            continue  # this direction leaves the cube (or its end is another limit)
+        d, floor = said.groups()
+        assert len(d) == len(floor) and float(d) < float(floor), why
+        break
+    else:
+        raise AssertionError("no direction from home came closer to the cube")
