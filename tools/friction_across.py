@@ -24,6 +24,7 @@ from _tables import ROOT
 
 from cdprctl.calibration.friction_record import stored_terms
 from cdprctl.experiments.friction_on_plant import friction_on_plant
+from cdprctl.model import RobotModel
 from cdprctl.robot_file import load_robot
 from sim_backend.plant_errors import PlantErrors
 
@@ -47,6 +48,30 @@ def as_built_text(config: Path, terms: list[tuple[float, float, float]]) -> str:
     if k != len(terms):  # a file whose cables come from its base: not handled
         raise SystemExit(f"friction_across: {config} lists {k} cables of {len(terms)}")
     return "\n".join(out[:-1]) + "\n"
+
+
+def cables_file(config: Path) -> Path:
+    """The file of ``config``'s chain of ``base`` files that lists the cables."""
+    import tomllib
+
+    path = config
+    while "[[cables]]" not in path.read_text():
+        base = tomllib.loads(path.read_text()).get("base")
+        if base is None:
+            raise SystemExit(f"friction_across: no [[cables]] in {config} or its base files")
+        path = (path.parent / base).resolve()
+    return path
+
+
+def as_built_of(model: RobotModel, config: Path, terms: list) -> str:
+    """The as-built robot file: the cables' file of ``config`` with each winch's ``terms``,
+    named as ``model`` (``cdprctl sim --as-built`` takes the same robot only: a file whose
+    base lists the cables, such as rowc_load_cells.toml, is its base as built)."""
+    text = as_built_text(cables_file(config), terms)
+    lines = text.splitlines()
+    k = next(i for i, x in enumerate(lines) if x.startswith("name ="))
+    lines[k] = f"name = {json.dumps(model.name)}"
+    return "\n".join(lines) + "\n"
 
 
 def across(config: Path, truth: Path, state: Path) -> dict:
@@ -80,7 +105,8 @@ def across(config: Path, truth: Path, state: Path) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--robot", default="rowc")
+    ap.add_argument("--robot", default="rowc",
+                    help="a file of config/ (rowc, cogiro, rowc_load_cells, ...)")  # fmt: skip
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     config = ROOT / "config" / f"{args.robot}.toml"
@@ -90,7 +116,7 @@ def main() -> None:
              for c in truth.cables]  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         built = Path(tmp) / "as_built.toml"
-        built.write_text(as_built_text(config, terms))
+        built.write_text(as_built_of(model, config, terms))
         lock = friction_on_plant(model, load_robot(built))
         got = across(config, built, Path(tmp) / "state")
     print("winch | across: viscous, Coulomb | lock-step: viscous, Coulomb | difference %")
