@@ -118,11 +118,16 @@ def end_processes(procs: list[subprocess.Popen], grace: float = 10.0) -> None:
     for proc in procs:
         if proc.poll() is None:
             proc.terminate()
-            try:
-                proc.wait(timeout=grace)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            wait_or_kill(proc, grace)
+
+
+def wait_or_kill(proc: subprocess.Popen, timeout: float) -> None:
+    """``proc`` ended by itself within ``timeout`` s, else killed."""
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def rest_of_output(proc: subprocess.Popen, timeout: float) -> str:
@@ -134,11 +139,7 @@ def rest_of_output(proc: subprocess.Popen, timeout: float) -> str:
     out: list[str] = []
     reader = threading.Thread(target=lambda: out.append(proc.stdout.read()), daemon=True)
     reader.start()
-    try:
-        proc.wait(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+    wait_or_kill(proc, timeout)
     reader.join(timeout=10)
     return "".join(out)
 
