@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import Any
 
 import numpy as np
 
@@ -102,6 +103,25 @@ def _box_poses(model: RobotModel) -> list[tuple[str, np.ndarray]]:
     return out
 
 
+def cell_summary(model: RobotModel) -> list[str]:
+    """The platform's body and the cell's obstacles as read, each by its name and its table
+    (the messages name a shape by its name; a file error by its table, counted from 0)."""
+    from cdprctl.model.interference import Box
+
+    def vec(v: Any) -> str:
+        return str(np.round(np.asarray(v, dtype=float), 4).tolist())
+
+    cfg = model.interference
+    body = [f"platform.body.boxes[{k}] {b.name!r}: centre {vec(b.centre)} m, half extents "
+            f"{vec(b.half_extents)} m" for k, b in enumerate(cfg.body)]  # fmt: skip
+    cell = [f"cell.obstacles[{k}] {o.name!r}: " + (
+        f"box, centre {vec(o.centre)} m, half extents {vec(o.half_extents)} m"
+        if isinstance(o, Box) else f"plane through {vec(o.point)} m, normal {vec(o.normal)}")
+        for k, o in enumerate(cfg.obstacles)]  # fmt: skip
+    return [f"body        {'; '.join(body) or 'none given ([[platform.body.boxes]])'}",
+            f"cell        {'; '.join(cell) or 'no obstacle given ([[cell.obstacles]])'}"]
+
+
 def verdict(file: str, warnings: list[str]) -> list[str]:
     """The summary's first line and its warnings: ``OK`` only with none."""
     if not warnings:
@@ -132,6 +152,7 @@ def summary(model: RobotModel) -> tuple[str, list[str]]:
         f"gravity     {model.gravity.tolist()} m/s²",
         f"home        position {home.position.tolist()} m, rpy [{rpy_deg}] deg",
         clearance,
+        *cell_summary(model),
         safety_summary(model),
         ros2_summary(model),
         "",

@@ -76,20 +76,39 @@ def read_interference(rd: TableReader, data: dict[str, Any]) -> InterferenceConf
     if isinstance(platform, dict):
         bt = rd.table(platform, "body", "platform", required=False) or {}
         rd.check_keys(bt, BODY_KEYS, "platform.body")
-        for k, raw in enumerate(_tables(rd, bt, "boxes", "platform.body")):
+        boxes = _tables(rd, bt, "boxes", "platform.body")
+        _unique_names(rd, boxes, "platform.body.boxes", "box")
+        for k, raw in enumerate(boxes):
             box = _box(rd, raw, f"platform.body.boxes[{k}]", BOX_KEYS, f"box {k + 1}")
             if box is not None:
                 body.append(box)
     obstacles: list[Box | Plane] = []
     cell = rd.table(data, "cell", "", required=False) or {}
     rd.check_keys(cell, CELL_KEYS, "cell")
-    for k, raw in enumerate(_tables(rd, cell, "obstacles", "cell")):
+    tables = _tables(rd, cell, "obstacles", "cell")
+    _unique_names(rd, tables, "cell.obstacles", "obstacle")
+    for k, raw in enumerate(tables):
         obstacle = _obstacle(rd, raw, f"cell.obstacles[{k}]", f"obstacle {k + 1}")
         if obstacle is not None:
             obstacles.append(obstacle)
     if clearance is None or exclusion is None:
         return d  # the errors are in ``rd``
     return InterferenceConfig(clearance, exclusion, tuple(body), tuple(obstacles))
+
+
+def _unique_names(rd: TableReader, tables: list[dict[str, Any]], path: str, kind: str) -> None:
+    """Each name once among ``tables`` (messages name a shape by it: two alike would say one
+    where the other is meant); an unnamed one is called "``kind`` N", N its place from 1."""
+    seen: dict[str, int] = {}
+    for k, t in enumerate(tables):
+        name = t.get("name", f"{kind} {k + 1}")
+        if not isinstance(name, str):
+            continue  # its own error, from the reader
+        if name in seen:
+            rd.error(f"{path}[{k}].name", name, "", f"must differ from {path}[{seen[name]}]'s: "
+                     f"messages name each by it (one without a name is '{kind} N', N its place "
+                     "from 1)")  # fmt: skip
+        seen.setdefault(name, k)
 
 
 def _tables(rd: TableReader, parent: dict[str, Any], key: str, path: str) -> list[dict[str, Any]]:
@@ -106,7 +125,7 @@ def _box(rd: TableReader, t: dict[str, Any], path: str, keys: tuple[str, ...],
     name = rd.string(t, "name", path, required=False, default=default_name)
     centre = rd.vector(t, "centre", path, "m")
     half = rd.vector(t, "half_extents", path, "m")
-    rpy = rd.vector(t, "rpy", path, "rad", required=False, default=np.zeros(3))
+    rpy = rd.rpy(t, "rpy", path)
     if half is not None and not np.all(half > 0.0):
         rd.error(f"{path}.half_extents", half, "m", "must all be > 0 (m: half the box's sides)")
         half = None

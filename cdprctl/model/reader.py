@@ -188,6 +188,16 @@ class TableReader:
             return None
         return arr
 
+    def rpy(self, parent: dict[str, Any], key: str, path: str) -> FloatArray | None:
+        """Roll, pitch, yaw (rad; default zeros), each within ±π: a value beyond it is taken
+        for degrees typed as radians and refused with what it likely meant."""
+        rpy = self.vector(parent, key, path, "rad", required=False, default=np.zeros(3))
+        if rpy is not None and (far := [a for a in rpy if abs(a) > math.pi]):
+            self.error(f"{path}.{key}", rpy.tolist(), "rad", "must be within ±pi rad each ("
+                       + meant_degrees(f"{far[0]:g}", float(far[0])) + ")")  # fmt: skip
+            return None
+        return rpy
+
     def matrix3(self, parent: dict[str, Any], key: str, path: str, unit: str) -> FloatArray | None:
         """A 3×3 matrix given as 3 rows, or its diagonal as 3 numbers."""
         what = "3 numbers (diagonal) or 3 rows of 3 numbers"

@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from cdprctl.core.angles import meant_degrees
 from cdprctl.model.cables import read_cables, read_winch
 from cdprctl.model.calibration import read_calibration
 from cdprctl.model.control import read_control
@@ -215,11 +214,7 @@ def _read_home(rd: TableReader, data: dict[str, Any]) -> Pose | None:
     if t is None:
         return None
     position = rd.vector(t, "position", "home", "m")
-    rpy = rd.vector(t, "rpy", "home", "rad", required=False, default=np.zeros(3))
-    if rpy is not None and (far := [a for a in rpy if abs(a) > math.pi]):
-        rd.error("home.rpy", rpy.tolist(), "rad", "must be within ±pi rad each ("
-                 + meant_degrees(f"{far[0]:g}", float(far[0])) + ")")  # fmt: skip
-        rpy = None
+    rpy = rd.rpy(t, "rpy", "home")
     if position is None or rpy is None:
         return None
     return Pose(position=position, rpy=rpy)

@@ -164,3 +164,26 @@ def test_check_config_warns_when_the_home_pose_is_under_the_clearance(tmp_path, 
     out = capsys.readouterr().out.splitlines()
     assert out[0].endswith(": valid, with 3 warnings")
     assert "under the [interference] clearance 40.00 mm" in out[1]
+
+
+def test_check_config_lists_the_body_and_the_cell_by_name_and_table(tmp_path, capsys):
+    """Which obstacles the file gave, each by the name messages use and by the table a file
+    error names (counted from 0): an unnamed obstacle is "obstacle N", N from 1 (a newcomer
+    could not tell which number an unnamed box had without a message naming it)."""
+    robot = tmp_path / "cell.toml"
+    robot.write_text(f'base = "{ROOT / "config" / "rowc.toml"}"\n\n'
+                     '[[cell.obstacles]]\nname = "crate"\nkind = "box"\n'
+                     "centre = [1.95, 0.35, 0.59]\nhalf_extents = [0.05, 0.05, 0.05]\n\n"
+                     '[[cell.obstacles]]\nkind = "plane"\npoint = [0.0, 0.0, -0.2]\n'
+                     "normal = [0.0, 0.0, 2.0]\n")  # fmt: skip
+    assert main(["check-config", str(robot)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert ("body        platform.body.boxes[0] 'body': centre [0.0, 0.0, 0.0] m, half extents "
+            "[0.1, 0.05, 0.1] m") in out  # fmt: skip
+    assert ("cell        cell.obstacles[0] 'crate': box, centre [1.95, 0.35, 0.59] m, half "
+            "extents [0.05, 0.05, 0.05] m; cell.obstacles[1] 'obstacle 2': plane through "
+            "[0.0, 0.0, -0.2] m, normal [0.0, 0.0, 1.0]") in out  # fmt: skip
+    assert main(["check-config", str(ROOT / "config" / "cogiro.toml")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert "body        none given ([[platform.body.boxes]])" in out
+    assert "cell        no obstacle given ([[cell.obstacles]])" in out

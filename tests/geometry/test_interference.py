@@ -660,6 +660,24 @@ def test_the_sections_are_read():
      "config/rowc.toml: cell.obstacles[0].normal = [0, 0, 0] must be a non-zero vector"),
     (lambda d: d.update(cell={"obstacles": {"kind": "plane"}}),
      "config/rowc.toml: cell.obstacles = {...} must be an array of tables [[cell.obstacles]]"),
+    # two alike: a message naming one would mean the other (a newcomer named a crate "floor")
+    (lambda d: d.update(cell={"obstacles": [
+        {"kind": "plane", "name": "floor", "point": [0, 0, 0], "normal": [0, 0, 1]},
+        {"kind": "box", "name": "floor", "centre": [2, 0, 0], "half_extents": [1, 1, 1]}]}),
+     "config/rowc.toml: cell.obstacles[1].name = 'floor' must differ from cell.obstacles[0]'s: "
+     "messages name each by it (one without a name is 'obstacle N', N its place from 1)"),
+    (lambda d: d.update(cell={"obstacles": [  # a name another one's number gives it
+        {"kind": "plane", "name": "obstacle 2", "point": [0, 0, 0], "normal": [0, 0, 1]},
+        {"kind": "plane", "point": [0, 0, -1], "normal": [0, 0, 1]}]}),
+     "config/rowc.toml: cell.obstacles[1].name = 'obstacle 2' must differ from "
+     "cell.obstacles[0]'s"),
+    (lambda d: d["platform"]["body"]["boxes"].append(dict(d["platform"]["body"]["boxes"][0])),
+     "config/rowc.toml: platform.body.boxes[1].name = 'body' must differ from "
+     "platform.body.boxes[0]'s: messages name each by it (one without a name is 'box N'"),
+    (lambda d: d.update(cell={"obstacles": [  # degrees typed as radians, as [home] rpy
+        {"kind": "box", "centre": [2, 0, 0], "half_extents": [1, 1, 1], "rpy": [0, 0, 10]}]}),
+     "config/rowc.toml: cell.obstacles[0].rpy = [0, 0, 10] must be within ±pi rad each (did "
+     "you mean degrees? 10° = 0.1745 rad)"),
 ])  # fmt: skip
 def test_a_bad_section_is_one_line(edit, message):
     with pytest.raises(ConfigError) as exc:
