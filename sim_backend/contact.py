@@ -62,4 +62,5 @@ class ContactRecorder:
         if not self.contacts:
             return f"no contact; the closest: {self.least_what}"
         t, what = self.contacts[0]
-        return f"{len(self.contacts)} contact(s), the first at t = {t:.3f} s: {what}"
+        deepest = f"; the deepest: {self.least_what}" if self.least < 0.0 else ""
+        return f"{len(self.contacts)} contact(s), the first at t = {t:.3f} s: {what}{deepest}"

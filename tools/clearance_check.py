@@ -1,6 +1,8 @@
 """The cables' clearance over a robot's documented workspace by brute force, apart from the
-project's kernel (``cdprctl/geometry/interference.py``; issue 67): numpy only, every cable sampled
-every 0.1 mm.
+project's kernel (``cdprctl/geometry/interference.py``; issue 67): numpy, every cable sampled
+every 0.1 mm, and where a cable or the body meets a box, scipy's qhull for how deep (signed: the
+least translation that parts them, from the hull of the two shapes' Minkowski difference, as
+the kernel reports it by its separating axes).
 
 * **A cable** is the segment from its attachment ``p + R b_i`` to its exit point (the anchor;
   with a swivel pulley, the tangent point as ``cdprctl/geometry/kinematics.py`` computes it: the one
@@ -92,9 +94,28 @@ def edges(centre: np.ndarray, R: np.ndarray, half: np.ndarray) -> list[tuple]:
 
 def box_to_box(one: tuple, other: tuple, step: float) -> float:
     """m: two boxes' least distance (each ``(centre, R, half)``), their edges sampled."""
-    return min(sampled(a, b, to_box(*target), step)
-               for source, target in ((one, other), (other, one))
-               for a, b in edges(*source))  # fmt: skip
+    d = min(sampled(a, b, to_box(*target), step)
+            for source, target in ((one, other), (other, one))
+            for a, b in edges(*source))  # fmt: skip
+    return signed(d, corners(*one), corners(*other))
+
+
+def corners(centre: np.ndarray, R: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The eight corners (8, 3) of a box (centre, axes ``R``, ``half`` extents; m)."""
+    return np.array([centre + R @ (np.array(c) * half) for c in itertools.product((-1, 1),
+                                                                                  repeat=3)])
+
+
+def signed(d: float, A: np.ndarray, B: np.ndarray) -> float:
+    """``d`` (m) where two convex shapes (their vertices ``A``, ``B``) are apart; where they
+    meet (``d`` under 1 nm), minus how deep: the origin's distance to the nearest facet of the
+    hull of ``A − B`` (0 touching)."""
+    if d > 1e-9:
+        return d
+    from scipy.spatial import ConvexHull
+
+    b = ConvexHull(np.array([a - x for a in A for x in B])).equations[:, 3]
+    return float(np.max(b)) if np.all(b < 0.0) else 0.0
 
 
 def to_box(
@@ -153,8 +174,9 @@ class Clearance:
             length = float(np.linalg.norm(E[i] - B[i]))
             start = B[i] + (E[i] - B[i]) * (cfg.attachment_exclusion / length)
             for box in cfg.body if length > cfg.attachment_exclusion else ():
-                d = sampled(start, E[i], to_box(p + R @ box.centre, R @ box.rotation,
-                                                box.half_extents), self.step)  # fmt: skip
+                shape = (p + R @ box.centre, R @ box.rotation, box.half_extents)
+                d = signed(sampled(start, E[i], to_box(*shape), self.step),
+                           np.array([start, E[i]]), corners(*shape))  # fmt: skip
                 if d < out["body"][0]:
                     out["body"] = (d, f"cable {self.names[i]} and the platform's {box.name}")
             for ob in cfg.obstacles:
@@ -163,6 +185,9 @@ class Clearance:
                 else:
                     dist = lambda P, ob=ob: np.maximum((P - ob.point) @ ob.normal, 0.0)  # noqa: E731
                 d = sampled(B[i], E[i], dist, self.step)
+                if isinstance(ob, Box):
+                    d = signed(d, np.array([B[i], E[i]]),
+                               corners(ob.centre, ob.rotation, ob.half_extents))  # fmt: skip
                 if d < out["cell"][0]:
                     out["cell"] = (d, f"cable {self.names[i]} and {ob.name}")
         for part, ob in itertools.product(cfg.body, cfg.obstacles):

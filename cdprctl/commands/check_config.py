@@ -50,6 +50,7 @@ def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
     against the limit; and a warning for each under the limit (a robot under it at home may
     move only where its cables get no closer; the box's poses under it the soft limits
     refuse: docs/clearance.md)."""
+    from cdprctl.geometry.interference import distance_words
     from cdprctl.motion.clearance import Clearance
 
     c = Clearance(model)
@@ -59,11 +60,11 @@ def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
     home = np.r_[model.home.position, 0.0, 0.0, 0.0]
     d_home, pair = c.closest_at(home)  # no slack here: the least pair, its distance
     under = " UNDER the limit" if d_home < c.limit else ""
-    words = [f"at home {d_home * 1e3:.2f} mm ({pair}){under}"]
+    words = [f"at home {distance_words(d_home, apart='')} ({pair}){under}"]
     warnings = []
     if d_home < c.limit:
         warnings.append(
-            f"at the home pose {pair} are {d_home * 1e3:.2f} mm apart, under "
+            f"at the home pose {pair} are {distance_words(d_home)}, under "
             f"{limit}: from home the robot may move only where they get no closer "
             "(docs/clearance.md)"
         )
@@ -75,12 +76,12 @@ def clearance_summary(model: RobotModel) -> tuple[str, list[str]]:
             where += f" turned about {TURNS[j * len(TURNS) // len(coords)]}"
         under = " UNDER the limit" if dist[j] < c.limit else ""
         pair = c.pair_at(coords[j])
-        words.append(f"over the workspace box {name} {dist[j] * 1e3:.2f} mm "
+        words.append(f"over the workspace box {name} {distance_words(dist[j], apart='')} "
                      f"({pair} {where}){under}")  # fmt: skip
         if n_under := int(np.count_nonzero(dist < c.limit)):
             warnings.append(
                 f"{n_under} of {len(coords)} poses of the [workspace] box {name} are under "
-                f"{limit} (least {dist[j] * 1e3:.2f} mm, {pair} {where}): the "
+                f"{limit} (least {distance_words(dist[j], apart='')}, {pair} {where}): the "
                 "soft limits refuse them, so the robot cannot reach all of its stated "
                 "workspace (docs/clearance.md)"
             )

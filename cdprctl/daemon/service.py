@@ -179,7 +179,7 @@ class Daemon:
                     f"{d.hold_tensions.min():.1f}..{d.hold_tensions.max():.1f} N")  # fmt: skip
         g = check_pose(m, d.position, d.rotation)  # at the estimated start pose (before the loop)
         if g.minimum < g.clearance:
-            self.say(f"warning: at the start pose {g.describe()} apart, under the clearance "
+            self.say(f"warning: at the start pose {g.describe()}, under the clearance "
                      f"{g.clearance * 1e3:.2f} mm: a motion may only leave it, no closer "
                      "(docs/clearance.md)", err=True)  # fmt: skip
         notify("READY=1")

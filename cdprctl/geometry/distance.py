@@ -2,9 +2,14 @@
 against segment, segment against a box, segment against a plane's solid side, and a box of the
 platform's body against an obstacle of the cell (a box, a plane). Scalars in, scalars out:
 nothing here allocates, so ``interference_kernel`` (``interference.py``) may call them in the
-control cycle. Distances m (0 when touching or overlapping, but a box against a plane: signed,
-negative in it); a box is a row of 15 floats:
-centre, rotation row-major (box axes → the row's frame), half extents."""
+control cycle. Distances m, **signed** wherever a solid is met: 0 touching, negative overlapping
+— a cable through a box or a box in a box by how deep, the least translation that takes one out
+of the other (the separating-axis test over the candidate axes of two convex polyhedra: the face
+normals of each and the cross products of their edges; Ericson 2005, §4.4 and §5.5), a box in a
+plane's solid side by its deepest corner's depth — so that a cable or a platform already in a
+fixture may leave it and never go deeper, where a 0 said nothing of how deep. A cable against a
+cable is unsigned. A box is a row of 15 floats: centre, rotation row-major (box axes → the row's
+frame), half extents."""
 
 from __future__ import annotations
 
@@ -87,6 +92,54 @@ def _box_slope(ox, oy, oz, dx, dy, dz, hx, hy, hz, t):  # pragma: no cover - com
 
 
 @interference_njit
+def _push(nx, ny, nz, lo, hi, r, best, ux, uy, uz):  # pragma: no cover - compiled
+    """The separating-axis step: along the unit axis ``n``, where one shape spans ``[lo,
+    hi]`` and the other ``[−r, r]``, the shorter way out (``lo`` past ``r`` along ``+n``, or
+    ``hi`` past ``−r`` along ``−n``) if it is shorter than ``best``: ``(depth, u)``, ``u``
+    the unit way the first shape goes."""
+    up, down = r - lo, hi + r
+    if up <= down and up < best:
+        return up, nx, ny, nz
+    if down < up and down < best:
+        return down, -nx, -ny, -nz
+    return best, ux, uy, uz
+
+
+@interference_njit
+def _unit(k):  # pragma: no cover - compiled
+    """The unit vector along axis ``k`` (0, 1, 2)."""
+    return (1.0 if k == 0 else 0.0), (1.0 if k == 1 else 0.0), (1.0 if k == 2 else 0.0)
+
+
+@interference_njit
+def _segment_in_box(ox, oy, oz, dx, dy, dz, hx, hy, hz):  # pragma: no cover - compiled
+    """``(−depth, a, q)`` of the segment ``o + t d`` (``t`` in [0, 1]) overlapping the box
+    ``|x| <= h`` (box frame): ``depth`` (m) the least translation that takes it out, over
+    the box's three face normals and the segment's direction across each of the box's edges
+    (the faces of their Minkowski sum); ``a`` the segment's end deepest against that way out,
+    ``q`` where it goes to (``a`` + depth × the way)."""
+    best, ux, uy, uz = math.inf, 0.0, 0.0, 1.0
+    ex, ey, ez = ox + dx, oy + dy, oz + dz
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    for k in range(6):
+        if k < 3:  # the box's face normal k
+            nx, ny, nz = _unit(k)
+        else:  # d × the box's axis k − 3
+            ax, ay, az = _unit(k - 3)
+            nx, ny, nz = dy * az - dz * ay, dz * ax - dx * az, dx * ay - dy * ax
+            norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if norm <= 1e-9 * length:
+                continue  # along that axis (or a point): the face normals have it
+            nx, ny, nz = nx / norm, ny / norm, nz / norm
+        s0, s1 = nx * ox + ny * oy + nz * oz, nx * ex + ny * ey + nz * ez
+        r = hx * abs(nx) + hy * abs(ny) + hz * abs(nz)
+        best, ux, uy, uz = _push(nx, ny, nz, min(s0, s1), max(s0, s1), r, best, ux, uy, uz)
+    deep = (ux * ox + uy * oy + uz * oz) > (ux * ex + uy * ey + uz * ez)
+    ax, ay, az = (ex, ey, ez) if deep else (ox, oy, oz)
+    return -best, ax, ay, az, ax + best * ux, ay + best * uy, az + best * uz
+
+
+@interference_njit
 def segment_box(boxes, row, sx, sy, sz, fx, fy, fz):  # pragma: no cover - compiled
     """``(d, a, q)`` flattened: the least distance (m) between the segment ``S F`` and box
     ``row`` of ``boxes`` (all in the box row's frame), its point ``a`` on the segment and ``q``
@@ -126,6 +179,10 @@ def segment_box(boxes, row, sx, sy, sz, fx, fy, fz):  # pragma: no cover - compi
     px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
     qx, qy, qz = min(hx, max(-hx, px)), min(hy, max(-hy, py)), min(hz, max(-hz, pz))
     d = math.sqrt((px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2)
+    if d == 0.0:  # in the box: how deep, and the way out (``a`` the deepest end, ``q`` out)
+        depth, ax, ay, az, bx, by, bz = _segment_in_box(ox, oy, oz, dx, dy, dz, hx, hy, hz)
+        if depth < 0.0:  # touching only (0): the point of contact as it is
+            d, px, py, pz, qx, qy, qz = depth, ax, ay, az, bx, by, bz
     # back to the row's frame: x = c + R x'
     return (d,
             cx + r0 * px + r1 * py + r2 * pz,
@@ -213,6 +270,63 @@ def box_plane(boxes, row, planes, plane, p, R):  # pragma: no cover - compiled
 
 
 @interference_njit
+def _axis(boxes, row, k, R, turned):  # pragma: no cover - compiled
+    """Box ``row``'s axis ``k`` (a unit vector: column ``k`` of its rotation) in the base
+    frame: turned by ``R`` for a box of the platform's body (``turned``)."""
+    x, y, z = boxes[row, 3 + k], boxes[row, 6 + k], boxes[row, 9 + k]
+    if not turned:
+        return x, y, z
+    return (R[0, 0] * x + R[0, 1] * y + R[0, 2] * z,
+            R[1, 0] * x + R[1, 1] * y + R[1, 2] * z,
+            R[2, 0] * x + R[2, 1] * y + R[2, 2] * z)  # fmt: skip
+
+
+@interference_njit
+def _radius(boxes, row, R, turned, nx, ny, nz):  # pragma: no cover - compiled
+    """Half the extent (m) of box ``row`` along the unit ``n`` (base frame)."""
+    r = 0.0
+    for k in range(3):
+        ax, ay, az = _axis(boxes, row, k, R, turned)
+        r += boxes[row, 12 + k] * abs(nx * ax + ny * ay + nz * az)
+    return r
+
+
+@interference_njit
+def _box_in_box(boxes, row, obstacle, p, R):  # pragma: no cover - compiled
+    """``(−depth, a, q)`` of the body's box ``row`` (platform frame, at ``p``, ``R``)
+    overlapping the obstacle's box (base frame): ``depth`` (m) the least translation that
+    takes the body's box out, over the 15 candidate axes (each box's three face normals, the
+    nine cross products of their axes); ``a`` the body's corner deepest against that way out,
+    ``q`` where it goes to (``a`` + depth × the way; base frame)."""
+    bx, by, bz = to_base(p, R, boxes[row, 0], boxes[row, 1], boxes[row, 2])
+    cx, cy, cz = boxes[obstacle, 0] - bx, boxes[obstacle, 1] - by, boxes[obstacle, 2] - bz
+    best, ux, uy, uz = math.inf, 0.0, 0.0, 1.0
+    for k in range(15):
+        if k < 3:
+            nx, ny, nz = _axis(boxes, row, k, R, True)
+        elif k < 6:
+            nx, ny, nz = _axis(boxes, obstacle, k - 3, R, False)
+        else:  # the body's axis (k − 6) // 3 across the obstacle's (k − 6) % 3
+            ax, ay, az = _axis(boxes, row, (k - 6) // 3, R, True)
+            ex, ey, ez = _axis(boxes, obstacle, (k - 6) % 3, R, False)
+            nx, ny, nz = ay * ez - az * ey, az * ex - ax * ez, ax * ey - ay * ex
+            norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if norm <= 1e-9:
+                continue  # parallel axes: the face normals have it
+            nx, ny, nz = nx / norm, ny / norm, nz / norm
+        mine = _radius(boxes, row, R, True, nx, ny, nz)
+        s = -(nx * cx + ny * cy + nz * cz)  # the body's centre along n, the obstacle's at 0
+        best, ux, uy, uz = _push(nx, ny, nz, s - mine, s + mine,
+                                 _radius(boxes, obstacle, R, False, nx, ny, nz), best, ux, uy,
+                                 uz)  # fmt: skip
+    for k in range(3):  # the corner deepest against the way out
+        ax, ay, az = _axis(boxes, row, k, R, True)
+        h = boxes[row, 12 + k] if ux * ax + uy * ay + uz * az < 0.0 else -boxes[row, 12 + k]
+        bx, by, bz = bx + h * ax, by + h * ay, bz + h * az
+    return -best, bx, by, bz, bx + best * ux, by + best * uy, bz + best * uz
+
+
+@interference_njit
 def box_box(boxes, row, obstacle, p, R):  # pragma: no cover - compiled
     """``(d, a, q)`` flattened: the least distance (m) between the body's box ``row``
     (platform frame) at the pose ``p``, ``R`` and the obstacle's box ``obstacle`` (base
@@ -222,7 +336,8 @@ def box_box(boxes, row, obstacle, p, R):  # pragma: no cover - compiled
     edge, or degenerate cases of those (Ericson 2005, §5.5): each of the 24 edges (12 a box)
     against the other box, solid (``segment_box``), covers them all. Overlapping ones share a
     vertex of the overlap, which is a vertex of one inside the other or an edge of one
-    through a face of the other: some edge meets the other box, and the least is 0."""
+    through a face of the other: some edge meets the other box. Then the depth, signed
+    (``_box_in_box``)."""
     best, ax, ay, az, qx, qy, qz = math.inf, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for e in range(24):
         mine = e < 12  # the body's edges (base frame) against the obstacle, then the other way
@@ -244,4 +359,6 @@ def box_box(boxes, row, obstacle, p, R):  # pragma: no cover - compiled
             else:  # the point on the body is the box's, the obstacle's the edge's
                 ax, ay, az = to_base(p, R, q0, q1, q2)
                 qx, qy, qz = to_base(p, R, a0, a1, a2)
+    if best <= 0.0:
+        return _box_in_box(boxes, row, obstacle, p, R)
     return best, ax, ay, az, qx, qy, qz

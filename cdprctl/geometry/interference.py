@@ -189,11 +189,12 @@ class Interference:
         relax_kernel(self.distance, self.slack, limit, limit if below is None else below)
 
     def describe(self, c: int | None = None) -> str:
-        """Check ``c`` (default the least) in words: what against what, the distance (mm)."""
+        """Check ``c`` (default the least) in words: what against what, how far apart or how
+        deep in each other (``distance_words``)."""
         if not len(self.distance):
             return "nothing to check"
         c = int(self.best[0]) if c is None else c
-        return f"{self.name(c)}: {self.distance[c] * 1e3:.2f} mm"
+        return f"{self.name(c)}: {distance_words(float(self.distance[c]))}"
 
     def name(self, c: int) -> str:
         """Check ``c`` in words: what against what."""
@@ -207,6 +208,14 @@ class Interference:
         if kind == PLATFORM:
             return f"the platform's {self.body_names[i]} and {self.obstacle_names[k]}"
         return f"cable {cable[i]} and {self.obstacle_names[k]}"
+
+
+def distance_words(d: float, digits: int = 2, apart: str = " apart") -> str:
+    """A signed distance ``d`` (m) in words: "4.75 mm apart", or where the shapes overlap
+    "overlapping by 12.00 mm" (how deep: ``distance.py``); ``digits`` decimals of mm, and
+    what rounds to zero is "0.00 mm apart" (no "-0.00"); ``apart`` what follows a distance."""
+    mm = round(d * 1e3, digits) + 0.0
+    return f"{mm:.{digits}f} mm{apart}" if mm >= 0.0 else f"overlapping by {-mm:.{digits}f} mm"
 
 
 def check_pose(model: CableLayout, position: FloatArray, rotation: FloatArray) -> Interference:

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from cdprctl.core.rotation import FloatArray, exp_so3
-from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.interference import Interference, distance_words
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 
@@ -164,12 +164,12 @@ class Clearance:
         # a µm of it, "at" it
         digits = next((k for k in (2, 3) if f"{mm:.{k}f}" != f"{floor * 1e3:.{k}f}"), 4)
         under = "at" if floor * 1e3 - mm < 1e-3 else "under"
-        what = f"{g.name(c)}: {mm:.{digits}f} mm apart"
+        what = f"{g.name(c)}: {distance_words(mm / 1e3, digits)}"
         if not d < self.limit:
             return what
         if slack > 0.0:
-            return (f"{what}, closer than the {floor * 1e3:.{digits}f} mm the motion started "
-                    f"at, {under} the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
+            return (f"{what}, closer than the motion started at ({distance_words(floor, digits)}"
+                    f"), {under} the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
         return f"{what}, {under} the clearance {self.limit * 1e3:.2f} mm"
 
     def pair_at(self, x: FloatArray) -> str:
@@ -184,7 +184,7 @@ class Clearance:
         self._measure(np.asarray(x, dtype=float))
         g = self.interference
         c = int(g.best[0])
-        started = (f", under the clearance since the start ({self._floor(c) * 1e3:.2f} mm "
+        started = (f", under the clearance since the start ({distance_words(self._floor(c))} "
                    "there: no closer allowed)" if g.slack[c] > 0.0 else "")  # fmt: skip
         return float(g.distance[c]), f"{g.name(c)}{started}"
 

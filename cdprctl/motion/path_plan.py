@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cdprctl.core.rotation import FloatArray, rpy_to_matrix
+from cdprctl.geometry.interference import distance_words
 from cdprctl.model.robot import RobotModel
 from cdprctl.motion.gcode import looks_like_metres
 from cdprctl.motion.limits import SoftLimits
@@ -101,7 +102,9 @@ class PathPlan:
         """The least clearance met, with its pair, line and time, and the limit."""
         if not math.isfinite(self.min_clearance):
             return "clearance: nothing to check (one cable, no body, no obstacle)"
-        return (f"least clearance {self.min_clearance * 1e3:.2f} mm: {self.min_clearance_at}; "
+        least = (f"{self.min_clearance * 1e3:.2f} mm" if self.min_clearance >= 0.0 else
+                 distance_words(self.min_clearance))  # fmt: skip
+        return (f"least clearance {least}: {self.min_clearance_at}; "
                 f"limit {self.clearance_limit * 1e3:.2f} mm ([interference] clearance)")
 
 

@@ -132,12 +132,15 @@ def test_the_recorder_records_a_contact_and_says_it(rowc):
     poses = [home + s * toward for s in np.arange(0.0, 0.012, 0.001)] + [home]  # in and back
     for k, p in enumerate(poses):
         rec.update(0.1 * k, p, R)
-    touching = [check_pose(model, p, R).minimum == 0.0 for p in poses]
-    first = touching.index(True)
-    assert rec.least == 0.0 and len(rec.contacts) == 1  # one contact, entered once
+    depth = [check_pose(model, p, R).minimum for p in poses]
+    first = next(k for k, d in enumerate(depth) if d <= 0.0)
+    assert rec.least == min(depth) < 0.0 and len(rec.contacts) == 1  # one contact, entered once
     assert rec.contacts[0][0] == pytest.approx(0.1 * first)
-    assert rec.report().startswith(f"1 contact(s), the first at t = {0.1 * first:.3f} s: "
-                                   "cable 1 and the bracket: 0.00 mm")  # fmt: skip
+    deepest = int(np.argmin(depth))
+    assert rec.report() == (
+        f"1 contact(s), the first at t = {0.1 * first:.3f} s: cable 1 and the bracket: "
+        f"overlapping by {-depth[first] * 1e3:.2f} mm; the deepest: cable 1 and the bracket: "
+        f"overlapping by {-depth[deepest] * 1e3:.2f} mm at t = {0.1 * deepest:.3f} s")
     clear = ContactRecorder(rowc)
     clear.update(0.0, home, R)
     assert clear.report().startswith("no contact; the closest: cables")

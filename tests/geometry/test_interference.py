@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import itertools
 import math
 import os
 import sys
@@ -22,6 +23,7 @@ import numpy as np
 import pytest
 from alloc_probe import peak_bytes
 from scipy.optimize import linprog, lsq_linear
+from scipy.spatial import ConvexHull
 
 from cdprctl.core.rotation import exp_so3, rpy_to_matrix
 from cdprctl.geometry.interference import BODY, CABLE, PLATFORM, Interference, check_pose
@@ -147,6 +149,30 @@ def to_halfspace(point, normal):
     return lambda X: np.maximum((X - point) @ normal, 0.0)
 
 
+def corners(c, R, h):
+    """The eight corners (8, 3) of the box (centre, axes R, half extents)."""
+    return np.array([c + R @ (np.array(s) * h) for s in itertools.product((-1, 1), repeat=3)])
+
+
+def ref_depth(A, B):
+    """How deep two convex polyhedra (their vertices ``A``, ``B``) overlap, signed (≤ 0: the
+    least translation that parts them, −; None: apart): qhull's hull of their Minkowski
+    difference ``A − B`` holds the origin, and its facet nearest the origin is how far
+    (scipy's ConvexHull: facets ``n·x + b ≤ 0``, unit ``n``; not the kernel's axes)."""
+    hull = ConvexHull(np.array([a - b for a in A for b in B]))
+    b = hull.equations[:, 3]
+    return float(np.max(b)) if np.all(b < 0.0) else None
+
+
+def signed(d, A, B):
+    """``d`` (m, ≥ 0) where the shapes are apart; where they meet (``d`` under 1 nm), the
+    depth of the overlap by ``ref_depth`` (0 touching)."""
+    if d > 1e-9:
+        return d
+    depth = ref_depth(A, B)
+    return 0.0 if depth is None else depth
+
+
 def ref_box_box(ca, Ra, ha, cb, Rb, hb):
     """min over the two solid boxes of |x − y| (BVLS over both boxes' own coordinates,
     ``x = ca + Ra u``, ``y = cb + Rb v``, ``|u| <= ha``, ``|v| <= hb``: exact)."""
@@ -181,21 +207,28 @@ def reference(model, cfg, kin, p, R, sample_pairs=False):
             out[(CABLE, i, j)] = d
     e = cfg.attachment_exclusion
     for k, part in enumerate(cfg.body):
-        dist = to_box(p + R @ part.centre, R @ part.rotation, part.half_extents)
+        c, Rb, h = p + R @ part.centre, R @ part.rotation, part.half_extents
+        dist = to_box(c, Rb, h)
         for i in range(m):
             u = (E[i] - B[i]) / np.linalg.norm(E[i] - B[i])
-            out[(BODY, i, k)] = sampled(lambda t: dist(on_segment(B[i] + e * u, E[i])(t)))  # noqa: B023
+            d = sampled(lambda t: dist(on_segment(B[i] + e * u, E[i])(t)))  # noqa: B023
+            out[(BODY, i, k)] = signed(d, np.array([B[i] + e * u, E[i]]), corners(c, Rb, h))
     for k, ob in enumerate(cfg.obstacles):
         if isinstance(ob, Box):
             dist = to_box(ob.centre, ob.rotation, ob.half_extents)
         else:
             dist = to_halfspace(ob.point, ob.normal)
         for i in range(m):
-            out[(2, i, k)] = sampled(lambda t: dist(on_segment(B[i], E[i])(t)))  # noqa: B023
+            d = sampled(lambda t: dist(on_segment(B[i], E[i])(t)))  # noqa: B023
+            if isinstance(ob, Box):
+                d = signed(d, np.array([B[i], E[i]]), corners(ob.centre, ob.rotation,
+                                                              ob.half_extents))  # fmt: skip
+            out[(2, i, k)] = d
         for b, part in enumerate(cfg.body):
             c, Rb, h = p + R @ part.centre, R @ part.rotation, part.half_extents
             if isinstance(ob, Box):
-                d = ref_box_box(c, Rb, h, ob.centre, ob.rotation, ob.half_extents)
+                d = signed(ref_box_box(c, Rb, h, ob.centre, ob.rotation, ob.half_extents),
+                           corners(c, Rb, h), corners(ob.centre, ob.rotation, ob.half_extents))
             else:
                 d = ref_box_halfspace(c, Rb, h, ob.point, ob.normal)
             out[(PLATFORM, b, k)] = d
@@ -229,8 +262,9 @@ def compare(model, cfg, poses, kernel_class=Interference, sample_pairs=False):
                 on = to_box(p + R @ part.centre, R @ part.rotation, part.half_extents)
                 there = (to_box(ob.centre, ob.rotation, ob.half_extents) if isinstance(ob, Box)
                          else to_halfspace(ob.point, ob.normal))  # fmt: skip
-                off = max(off, float(on(check.closest[c, None, :3])[0]),
-                          float(there(check.closest[c, None, 3:])[0]))  # fmt: skip
+                off = max(off, float(on(check.closest[c, None, :3])[0]))
+                if got[c] >= 0.0:  # overlapping: q is where the body's corner goes out to
+                    off = max(off, float(there(check.closest[c, None, 3:])[0]))
                 continue
             on_cable = to_segment(B[i], kin.exit_points[i])(check.closest[c, None, :3])
             off = max(off, float(on_cable[0]))
@@ -329,8 +363,9 @@ BOX = np.array([[0.0, 0.0, 0.0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1.0, 0.5, 0.25]])
 
 
 @pytest.mark.parametrize("S, F, want", [
-    ([-2, 0, 0], [2, 0, 0], 0.0),  # through the box
-    ([0, 0, 0], [0, 0, 5], 0.0),  # from inside
+    ([-2, 0, 0], [2, 0, 0], -0.25),  # through the box: out along z, its thinnest
+    ([0, 0, 0], [0, 0, 5], -0.25),  # from inside: out the way it leaves
+    ([0.9, 0, 0], [0.9, 0, 5], -0.1),  # near a face: out through it
     ([-3, 1.5, 0], [3, 1.5, 0], 1.0),  # parallel to a face, over it
     ([-3, 1.5, 1.25], [3, 1.5, 1.25], math.sqrt(2)),  # parallel to an edge
     ([2, 0, 0], [2, 0, 0], 1.0),  # a point
@@ -344,12 +379,14 @@ def test_segment_against_a_box(S, F, want):
     S, F = np.array(S, float), np.array(F, float)
     d, *pts = segment_box(BOX, 0, *S, *F)
     ref = sampled(lambda t: to_box(np.zeros(3), np.eye(3), BOX[0, 12:])(on_segment(S, F)(t)))
+    ref = signed(ref, np.array([S, F]), corners(np.zeros(3), np.eye(3), BOX[0, 12:]))
     assert d == pytest.approx(ref, abs=1e-9)
     if want is not None:
         assert d == pytest.approx(want, abs=1e-12)
     a, q = np.array(pts[:3]), np.array(pts[3:])
-    assert np.linalg.norm(a - q) == pytest.approx(d, abs=1e-12)
-    assert np.all(np.abs(q) <= BOX[0, 12:] + 1e-12)
+    assert np.linalg.norm(a - q) == pytest.approx(abs(d), abs=1e-12)
+    if d >= 0.0:  # apart: q on the box; in it: q where the segment's deepest end goes out to
+        assert np.all(np.abs(q) <= BOX[0, 12:] + 1e-12)
 
 
 def test_segment_against_a_plane():
@@ -386,7 +423,14 @@ def test_the_attachments_neighbourhood_is_left_out():
     inside = InterferenceConfig(0.005, 0.01, (_box("big", [0, 0, 0], [2.0, 0.05, 2.0]),), ())
     r = Interference(model, inside)
     r.update(kin)
-    assert np.all(r.distance[r.checks[:, 0] == BODY] == 0.0)
+    # each cable runs inside it from its exclusion point: how deep, signed (qhull's depth)
+    home = np.asarray(model.home.position)  # the platform frame's origin, axes the base's
+    starts = home + model.attachments + 0.01 * kin.u
+    deep = [signed(0.0, np.array([starts[i], kin.exit_points[i]]),
+                   corners(home, np.eye(3), np.array([2.0, 0.05, 2.0])))
+            for i in range(model.n_cables)]  # fmt: skip
+    assert r.distance[r.checks[:, 0] == BODY] == pytest.approx(deep, abs=1e-12)
+    assert max(deep) < -0.05  # the box's half thickness and more: it runs across it
     assert "platform's big" in r.describe()
     far = InterferenceConfig(0.005, 10.0, (_box("b", [0, 0, 0], [0.1, 0.05, 0.1]),), ())
     r = Interference(model, far)
@@ -470,10 +514,12 @@ def box_pairs_worst(distance, n, seed=67):
         boxes = np.array([body, ob])
         d, *pts = distance.box_box(boxes, 0, 1, p, R)
         a, q = np.array(pts[:3]), np.array(pts[3:])
-        want = ref_box_box(p + R @ cb, R @ Rb, hb, co, Ro, ho)
+        want = signed(ref_box_box(p + R @ cb, R @ Rb, hb, co, Ro, ho),
+                      corners(p + R @ cb, R @ Rb, hb), corners(co, Ro, ho))
         on_body = to_box(p + R @ cb, R @ Rb, hb)(a[None])[0]
-        on_obstacle = to_box(co, Ro, ho)(q[None])[0]
-        worst = max(worst, abs(d - want), on_body, on_obstacle, abs(np.linalg.norm(a - q) - d))
+        on_obstacle = to_box(co, Ro, ho)(q[None])[0] if d >= 0.0 else 0.0  # in: q goes out
+        worst = max(worst, abs(d - want), on_body, on_obstacle,
+                    abs(np.linalg.norm(a - q) - abs(d)))  # fmt: skip
         n_ = rng.normal(size=3)
         n_ /= np.linalg.norm(n_)
         point = rng.uniform(-2, 2, 3)
@@ -508,7 +554,8 @@ def test_the_brute_force_tool_measures_the_platform_against_the_cell_as_the_refe
     for k in range(60):
         _, cb, Rb, hb = random_box(rng, 0.5)
         _, co, Ro, ho = random_box(rng, 0.5 + 3.0 * k / 60)
-        want = ref_box_box(cb, Rb, hb, co, Ro, ho)
+        want = signed(ref_box_box(cb, Rb, hb, co, Ro, ho), corners(cb, Rb, hb),
+                  corners(co, Ro, ho))  # fmt: skip
         got = brute.box_to_box((cb, Rb, hb), (co, Ro, ho), brute.STEP)
         assert want - 1e-9 <= got <= want + brute.STEP / 2, (k, got, want)
     model = load_robot(ROOT / "config" / "rowc.toml")
@@ -530,8 +577,9 @@ def test_the_brute_force_tool_measures_the_platform_against_the_cell_as_the_refe
 
 @pytest.mark.parametrize("obstacle, want", [
     (([0.4, 0.0, 0.0], [0.1, 0.1, 0.1], 0.0), 0.2),  # parallel faces
-    (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], 0.0), 0.0),  # the body inside the obstacle
-    (([0.0, 0.0, 0.0], [0.01, 0.01, 0.01], 0.0), 0.0),  # the obstacle inside the body
+    (([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], 0.0), -1.1),  # the body inside the obstacle: how deep
+    (([0.0, 0.0, 0.0], [0.01, 0.01, 0.01], 0.0), -0.11),  # the obstacle inside the body
+    (([0.15, 0.0, 0.0], [0.1, 0.1, 0.1], 0.0), -0.05),  # 5 cm into it, face to face
     (([0.1 + 0.1 * math.sqrt(2), 0.0, 0.0], [0.1, 0.1, 0.1], math.pi / 4), 0.0),  # edge on face
     (([0.3 + 0.1 * math.sqrt(2), 0.0, 0.0], [0.1, 0.1, 0.1], math.pi / 4), 0.2),  # edge to face
 ])  # fmt: skip
@@ -546,13 +594,14 @@ def test_the_body_against_a_box_in_the_common_cases(obstacle, want):
     boxes = np.array([body, np.concatenate([c, Rz.ravel(), h])])
     d, *_ = distance.box_box(boxes, 0, 1, p, R)
     assert d == pytest.approx(want, abs=1e-12)
-    ref = ref_box_box(np.zeros(3), np.eye(3), body[12:], np.array(c), Rz, np.array(h))
+    ref = signed(ref_box_box(np.zeros(3), np.eye(3), body[12:], np.array(c), Rz, np.array(h)),
+                 corners(np.zeros(3), np.eye(3), body[12:]), corners(np.array(c), Rz, np.array(h)))
     assert d == pytest.approx(ref, abs=1e-9)
     bars = np.array([[0.0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1.0, 0.01, 0.01],
                      [0.0, 0, 0.05, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.01, 1.0, 0.01]])  # fmt: skip
     assert distance.box_box(bars, 0, 1, p, R)[0] == pytest.approx(0.03, abs=1e-12)
-    bars[1, 2] = 0.0  # crossed through each other, no vertex of either inside the other
-    assert distance.box_box(bars, 0, 1, p, R)[0] == 0.0
+    bars[1, 2] = 0.0  # crossed through each other, no vertex of either inside the other:
+    assert distance.box_box(bars, 0, 1, p, R)[0] == pytest.approx(-0.02, abs=1e-12)  # out by z
 
 
 def test_the_platform_driven_into_an_obstacle_is_named():
@@ -571,8 +620,10 @@ def test_the_platform_driven_into_an_obstacle_is_named():
     inverse_kinematics(model, kin, home + np.array([0.3, 0.0, 0.0]), model.home.rotation)
     r.update(kin)
     c = int(np.flatnonzero((r.checks[:, 0] == PLATFORM) & (r.checks[:, 2] == 1))[0])
-    assert r.distance[c] == 0.0 and r.minimum == 0.0
-    assert r.describe(c) == f"the platform's {cfg.body[0].name} and a fixture: 0.00 mm"
+    # 0.05 m into it, face to face: how deep, signed
+    assert r.distance[c] == pytest.approx(-0.05, abs=1e-12) and r.minimum == r.distance[c]
+    assert r.describe(c) == (f"the platform's {cfg.body[0].name} and a fixture: overlapping "
+                             "by 50.00 mm")  # fmt: skip
 
 
 # -- no allocation -----------------------------------------------------------------------------

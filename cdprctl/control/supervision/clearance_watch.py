@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 
 from cdprctl.control.supervision.persistence import Persistence
-from cdprctl.geometry.interference import Interference
+from cdprctl.geometry.interference import Interference, distance_words
 
 
 class ClearanceWatch:
@@ -70,5 +70,7 @@ class ClearanceWatch:
         how = (f"by more than {self.NOISE * 1e3:.1f} mm" if deep else
                f"for {self.HOLD * 1e3:.0f} ms")  # fmt: skip
         limit = self.clearance - g.slack.item(g.best.item(0))  # m: this check's
-        return (f"clearance: {g.describe()} apart, under the limit {limit * 1e3:.2f} mm "
-                f"([interference] clearance {self.clearance * 1e3:.2f} mm) {how}")  # fmt: skip
+        under = (f"under the limit {limit * 1e3:.2f} mm" if limit >= 0.0 else
+                 f"deeper than its limit ({distance_words(limit)})")  # fmt: skip
+        return (f"clearance: {g.describe()}, {under} ([interference] clearance "
+                f"{self.clearance * 1e3:.2f} mm) {how}")  # fmt: skip
