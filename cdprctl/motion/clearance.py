@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from cdprctl.core.rotation import FloatArray, exp_so3
-from cdprctl.geometry.interference import Interference, distance_words
+from cdprctl.geometry.interference import Interference, distance_words, relax_kernel
 from cdprctl.geometry.kinematics import KinematicsData, inverse_kinematics
 from cdprctl.model.robot import RobotModel
 
@@ -59,23 +59,42 @@ class Clearance:
         # m per check: the slack of a motion that starts under the clearance (``relax_from``)
         self._slack = np.zeros(len(self.interference.distance))
         self.started = ""  # that start's closest pair and distance, in words ("": clear)
+        # m per check: at the home pose, where a robot under the clearance may always come
+        # back to (``relax_from``); and each check's floor, the lower of it and the start's
+        n = len(self.interference.distance)
+        self._home_distance = np.full(n, math.inf)
+        if self.active:
+            self._measure(np.r_[np.asarray(model.home.position, dtype=float), np.zeros(3)])
+            self._home_distance[:] = self.interference.distance
+        self._floor_of = np.zeros(n)
+        self._home_floor = np.zeros(n, dtype=bool)  # per check: its floor is the home pose's
 
     def relax_from(self, x: FloatArray) -> float | None:
-        """A motion from the coordinates ``x``: each check under the clearance there may go
-        on no closer than it is (``Interference.relax``), the others keep the clearance —
-        taken by the measurements while ``use_slack(True)``. Returns the least distance at
-        ``x`` (m) when it is under the clearance, else None (nothing relaxed)."""
+        """A motion from the coordinates ``x``: each check under the clearance there, or at
+        the home pose, may go on no closer than the lower of the two (``relax_kernel``), the
+        others keep the clearance — taken by the measurements while ``use_slack(True)``. A
+        robot that stands under the clearance at home (seed000's cable 2 at its cube) may
+        leave and always come back; one under it elsewhere only leaves (its start's floor).
+        Returns the least of those floors (m) when one is under the clearance, else None
+        (nothing relaxed)."""
         g = self.interference
         g.slack.fill(0.0)
         self._slack.fill(0.0)
-        d = self._measure(np.asarray(x, dtype=float))
-        if not self.active or d >= self.limit:
+        if not self.active:
             self.started = ""
             return None
-        self.started = g.describe()  # the start's closest pair and its distance, in words
-        g.relax(self.limit + START_TOLERANCE)
+        d = self._measure(np.asarray(x, dtype=float))
+        np.less(self._home_distance, g.distance, out=self._home_floor)
+        np.minimum(g.distance, self._home_distance, out=self._floor_of)
+        least = float(self._floor_of.min())
+        if least >= self.limit:
+            self.started = ""
+            return None
+        self.started = g.describe() if d < self.limit else ""  # the start's, in words
+        relax_kernel(self._floor_of, g.slack, self.limit + START_TOLERANCE,
+                     self.limit + START_TOLERANCE)  # fmt: skip
         self._slack[:] = g.slack
-        return d
+        return least
 
     def use_slack(self, on: bool) -> None:
         """The last ``relax_from``'s slack in the measurements (``on``), or none."""
@@ -168,8 +187,9 @@ class Clearance:
         if not d < self.limit:
             return what
         if slack > 0.0:
-            return (f"{what}, closer than the motion started at ({distance_words(floor, digits)}"
-                    f"), {under} the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
+            since = "at the home pose" if self._home_floor[c] else "the motion started at"
+            return (f"{what}, closer than {since} ({distance_words(floor, digits)}), {under} "
+                    f"the clearance {self.limit * 1e3:.2f} mm")  # fmt: skip
         return f"{what}, {under} the clearance {self.limit * 1e3:.2f} mm"
 
     def pair_at(self, x: FloatArray) -> str:

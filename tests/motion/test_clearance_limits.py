@@ -377,3 +377,27 @@ def test_a_platform_already_in_a_fixture_may_leave_it_but_never_go_deeper(rowc):
     assert deeper[0] - start[0] < 1e-4 and "the crate: overlapping by" in why
     out, why = lim.ray_end(start, -X, 0.05, step=0.005)
     assert why == "" and out[0] == pytest.approx(start[0] - 0.05)
+
+
+def test_a_robot_under_the_clearance_at_home_may_always_come_back_home():
+    """seed000 stands 3.61 mm from its cube at home: its demo went out to x = 6.8 m (the
+    cube farther) and its move back home was refused, "closer than the motion started at" —
+    the robot could never return. The home pose's distance is each check's floor too: home
+    is allowed from anywhere, and closer than home still is not, said so."""
+    model = load_robot(ROOT / "config" / "seed000.toml")
+    lim = SoftLimits(model)
+    home = _home(model)
+    out = home + np.array([-0.2, 0, 0, 0, 0, 0])
+    d_home = lim.clearance.closest_at(home)[0]
+    assert 0.0036 < d_home < lim.clearance.closest_at(out)[0] < lim.clearance.limit
+    x, y, z = model.home.position
+    rpy = ", ".join(f"{a:g}" for a in model.home.rpy)
+    back = plan_text(model, f"x, y, z, roll, pitch, yaw\n{x}, {y}, {z}, {rpy}\n", out,
+                     model.control.period, lim)  # fmt: skip
+    assert back.samples > 2
+    end, why = lim.ray_end(out, home - out, 1.0, step=0.005)
+    assert end == pytest.approx(home, abs=1e-9) and why == ""  # the jog home, all the way
+    past, why = lim.ray_end(out, home - out, 1.5, step=0.005)  # and on, past home
+    assert past[0] - home[0] < 0.02
+    assert re.search(r"cube: 3\.\d+ mm apart, closer than at the home pose \(3\.\d+ mm apart\)",
+                     why), why  # fmt: skip
