@@ -169,7 +169,9 @@ class Clearance:
         for i, j in self.pairs:
             d = sampled(B[i], E[i], to_segment(B[j], E[j]), self.step)
             if d < out["cables"][0]:
-                out["cables"] = (d, f"cables {self.names[i]} and {self.names[j]}")
+                a, b = self.names[i], self.names[j]  # names that say "cable" already
+                said = a.startswith("cable") and b.startswith("cable")
+                out["cables"] = (d, f"{a} and {b}" if said else f"cables {a} and {b}")
         for i in range(m.n_cables):
             length = float(np.linalg.norm(E[i] - B[i]))
             start = B[i] + (E[i] - B[i]) * (cfg.attachment_exclusion / length)
@@ -237,11 +239,15 @@ def turns(max_angle: float, fractions: list[float], n_random: int, seed: int = 0
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("configs", nargs="+", type=Path)
+    ap.add_argument("configs", nargs="+", type=Path, help="robot files")
     ap.add_argument("--step", type=float, nargs=3, default=None,
-                    help="m: the grid's x, y, z steps (default: 10 per axis)")  # fmt: skip
-    ap.add_argument("--angles", type=float, nargs="*", default=[0.5, 1.0])
-    ap.add_argument("--random", type=int, default=20)
+                    help="m: the grid's x, y, z steps (default: a tenth of the box's side, "
+                    "11 points per axis)")  # fmt: skip
+    ap.add_argument("--angles", type=float, nargs="*", default=[0.5, 1.0],
+                    help="fractions of [workspace] max_angle to turn the grid by, about 26 axes "
+                    "(none: the home orientation only)")  # fmt: skip
+    ap.add_argument("--random", type=int, default=20,
+                    help="random rotations up to max_angle beside those (seeded)")
     args = ap.parse_args()
     print(
         "| robot | poses | cables: least (mm), pair | body: least (mm), cable | "
@@ -267,7 +273,7 @@ def main() -> None:
         below = sum(int(row[2]) for row in by_turn.values())  # poses, whatever kind
         print(
             f"| {model.name} | {n} | {c.distance * 1e3:.2f}, {c.what} | "
-            f"{b.distance * 1e3:.2f}, {b.what or 'no body'} | {below} | "
+            f"{f'{b.distance * 1e3:.2f}, {b.what}' if b.what else 'no body'} | {below} | "
             f"{time.perf_counter() - t0:.0f} |",
             flush=True,
         )
@@ -276,11 +282,9 @@ def main() -> None:
                 print(f"    {kind}: least {x.distance * 1e3:.2f} mm, {x.what}: {x.where}",
                       file=sys.stderr)  # fmt: skip
         for label, (cab, body, below_n, poses) in by_turn.items():
-            print(
-                f"    {label}: cables {cab * 1e3:.2f} mm, body {body * 1e3:.2f} mm, "
-                f"{below_n}/{poses} poses below the clearance",
-                file=sys.stderr,
-            )
+            body_mm = f"body {body * 1e3:.2f} mm, " if math.isfinite(body) else ""
+            print(f"    {label}: cables {cab * 1e3:.2f} mm, {body_mm}{below_n}/{poses} poses "
+                  "below the clearance", file=sys.stderr)  # fmt: skip
 
 
 if __name__ == "__main__":
