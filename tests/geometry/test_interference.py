@@ -636,6 +636,15 @@ def test_a_check_takes_no_block():
     inverse_kinematics(model, kin, model.home.position, model.home.rotation)
     r = Interference(model, cfg)
     assert peak_bytes(lambda: r.update(kin), calls=3) == 0
+    # and where a cable and the body are in a box (the depths' separating axes)
+    home = np.asarray(model.home.position)
+    mid = 0.5 * (home + model.attachments[0] + kin.exit_points[0])  # cable 1's middle
+    inside = _with(model, None, (_box("crate", home + np.array([0.1, 0.0, 0.0]), [0.05, 0.3, 0.05]),
+                                 _box("lamp", mid, [0.01, 0.01, 0.01])))  # fmt: skip
+    r = Interference(model, inside)
+    r.update(kin)
+    assert np.sum(r.distance < 0.0) == 2  # the body in the crate, cable 1 through the lamp
+    assert peak_bytes(lambda: r.update(kin), calls=3) == 0
 
 
 def test_relaxing_the_checks_takes_no_block():
