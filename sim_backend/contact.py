@@ -4,7 +4,9 @@ here at the plant's true pose after each step, and every contact recorded — so
 or a run shows whether the controller stopped the robot before one happened.
 
 A contact is a distance of 0 or less (two cables touching or crossing, a cable into the body
-or an obstacle, the platform's body into an obstacle: against a plane, negative). Measured
+or an obstacle, the platform's body into an obstacle: negative, how deep), counted for each
+pair as it begins (a pair that touches while another already does is a contact of its own:
+a newcomer's cable went through a beam unsaid while the body sat in a crate). Measured
 once per ``CdprPlant.step`` (a control period): at the top speed of a
 shipped robot (1 m/s) and 4 ms a step the platform moves 4 mm between two measurements, so
 a grazing touch shorter than that can pass unseen; the least distance met (``least``) says
@@ -14,6 +16,8 @@ how near it came.
 from __future__ import annotations
 
 import math
+
+import numpy as np
 
 from cdprctl.core.rotation import FloatArray
 from cdprctl.geometry.interference import Interference
@@ -34,7 +38,9 @@ class ContactRecorder:
         self.least = math.inf  # m: the least distance met so far
         self.least_what = ""  # which pair, and when (s of simulated time)
         self.contacts: list[tuple[float, str]] = []  # (s, what): each contact's start
-        self._touching = False
+        n = len(self.interference.distance)
+        self._touching = np.zeros(n, dtype=bool)  # per check: touching at the last step
+        self._now = np.zeros(n, dtype=bool)
         if self.active:  # the kernels loaded here, not in the first real-time step
             inverse_kinematics(model, self._kin, model.home.position, model.home.rotation)
             self.interference.update(self._kin)
@@ -50,10 +56,11 @@ class ContactRecorder:
         d = g.minimum
         if d < self.least:
             self.least, self.least_what = d, f"{g.describe()} at t = {t:.3f} s"
-        touching = d <= 0.0
-        if touching and not self._touching:
-            self.contacts.append((t, g.describe()))
-        self._touching = touching
+        np.less_equal(g.distance, 0.0, out=self._now)
+        if d <= 0.0 and not np.array_equal(self._now, self._touching):
+            for c in np.flatnonzero(self._now & ~self._touching):  # each pair as it begins
+                self.contacts.append((t, g.describe(int(c))))
+        self._touching[:] = self._now
 
     def report(self) -> str:
         """One line: the contacts, or none and how near the cables came."""
@@ -63,4 +70,8 @@ class ContactRecorder:
             return f"no contact; the closest: {self.least_what}"
         t, what = self.contacts[0]
         deepest = f"; the deepest: {self.least_what}" if self.least < 0.0 else ""
-        return f"{len(self.contacts)} contact(s), the first at t = {t:.3f} s: {what}{deepest}"
+        pairs = list(dict.fromkeys(what.split(": ")[0] for _, what in self.contacts))
+        others = (f"; {len(pairs)} pairs: {', '.join(pairs[:6])}{', ...' if len(pairs) > 6 else ''}"
+                  if len(pairs) > 1 else "")  # fmt: skip
+        return (f"{len(self.contacts)} contact(s), the first at t = {t:.3f} s (the simulated "
+                f"robot's clock): {what}{deepest}{others}")

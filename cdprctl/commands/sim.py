@@ -173,8 +173,10 @@ def add_as_built_argument(p: Any) -> None:
         "--as-built",
         metavar="TRUTH.toml",
         help="the simulated robot as built: its geometry (anchors, attachments, each drum's "
-        "radius, the platform) from this robot file, the drives and buses from --config "
-        "(docs/homing.md, \"Geometric calibration\")",
+        "radius, the platform, its body and the cell's obstacles its contacts are measured "
+        "on) from this robot file, the same robot as --config's (its name and cables), the "
+        "drives and buses from --config (docs/homing.md, \"Geometric calibration\"; "
+        "docs/simulator.md, \"Contacts\")",
     )
 
 

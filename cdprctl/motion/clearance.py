@@ -37,6 +37,8 @@ REFINE_STEP = 1e-4
 #: m: how far under its start a pair that starts under the clearance may be measured (the
 #: start itself passes)
 START_TOLERANCE = 1e-6
+#: m, rad: a motion whose end is this near the home pose goes home (``relax_from``)
+HOME_TOLERANCE = 1e-5
 
 
 class Clearance:
@@ -62,20 +64,22 @@ class Clearance:
         # m per check: at the home pose, where a robot under the clearance may always come
         # back to (``relax_from``); and each check's floor, the lower of it and the start's
         n = len(self.interference.distance)
+        self._home_x = np.r_[np.asarray(model.home.position, dtype=float), np.zeros(3)]
         self._home_distance = np.full(n, math.inf)
         if self.active:
-            self._measure(np.r_[np.asarray(model.home.position, dtype=float), np.zeros(3)])
+            self._measure(self._home_x)
             self._home_distance[:] = self.interference.distance
         self._floor_of = np.zeros(n)
         self._home_floor = np.zeros(n, dtype=bool)  # per check: its floor is the home pose's
 
-    def relax_from(self, x: FloatArray) -> float | None:
-        """A motion from the coordinates ``x``: each check under the clearance there, or at
-        the home pose, may go on no closer than the lower of the two (``relax_kernel``), the
-        others keep the clearance — taken by the measurements while ``use_slack(True)``. A
-        robot that stands under the clearance at home (seed000's cable 2 at its cube) may
-        leave and always come back; one under it elsewhere only leaves (its start's floor).
-        Returns the least of those floors (m) when one is under the clearance, else None
+    def relax_from(self, x: FloatArray, end: FloatArray | None = None) -> float | None:
+        """A motion from the coordinates ``x`` (to ``end``, if known): each check under the
+        clearance there may go on no closer than it is (``relax_kernel``), the others keep the
+        clearance — taken by the measurements while ``use_slack(True)``. A motion that ends
+        at the home pose may come as close as the robot is there: one that stands under the
+        clearance at home (seed000's cable 2 at its cube) may always go back, and only there
+        (a jog, or a motion elsewhere, keeps its start's floor: never deeper into a fixture
+        than it is). Returns the least floor (m) when one is under the clearance, else None
         (nothing relaxed)."""
         g = self.interference
         g.slack.fill(0.0)
@@ -83,9 +87,14 @@ class Clearance:
         if not self.active:
             self.started = ""
             return None
+        home = end is not None and float(np.max(np.abs(end - self._home_x))) <= HOME_TOLERANCE
         d = self._measure(np.asarray(x, dtype=float))
-        np.less(self._home_distance, g.distance, out=self._home_floor)
-        np.minimum(g.distance, self._home_distance, out=self._floor_of)
+        if home:
+            np.less(self._home_distance, g.distance, out=self._home_floor)
+            np.minimum(g.distance, self._home_distance, out=self._floor_of)
+        else:
+            self._home_floor.fill(False)
+            self._floor_of[:] = g.distance
         least = float(self._floor_of.min())
         if least >= self.limit:
             self.started = ""
@@ -204,8 +213,9 @@ class Clearance:
         self._measure(np.asarray(x, dtype=float))
         g = self.interference
         c = int(g.best[0])
-        started = (f", under the clearance since the start ({distance_words(self._floor(c))} "
-                   "there: no closer allowed)" if g.slack[c] > 0.0 else "")  # fmt: skip
+        since = "at the home pose it goes to" if self._home_floor[c] else "since the start"
+        started = (f", under the clearance {since} ({distance_words(self._floor(c))} there: no "
+                   "closer allowed)" if g.slack[c] > 0.0 else "")  # fmt: skip
         return float(g.distance[c]), f"{g.name(c)}{started}"
 
     def _floor(self, c: int) -> float:

@@ -110,14 +110,15 @@ class SoftLimits:
             self.nearest, self.nearest_at = np.full(len(c), math.inf), c
         return margin, ok
 
-    def near_of(self, start: FloatArray) -> float | None:
+    def near_of(self, start: FloatArray, end: FloatArray | None = None) -> float | None:
         """A motion from the coordinates ``start``: None when it starts clear (the configured
         clearance everywhere), else its least distance there (m), each check under the
         clearance then kept no closer than it starts (``Clearance.relax_from``; in force in
         ``check`` and ``why`` given this as ``near``)."""
         if not self.clearance.active:
             return None
-        return self.clearance.relax_from(np.asarray(start, dtype=float).reshape(6))
+        end = None if end is None else np.asarray(end, dtype=float).reshape(6)
+        return self.clearance.relax_from(np.asarray(start, dtype=float).reshape(6), end)
 
     def along(
         self, coords: FloatArray, acceleration: FloatArray | None = None
@@ -131,7 +132,7 @@ class SoftLimits:
         margin, ok = self.check(first, None if acceleration is None else acceleration[:1])
         floor = None if margin[0] >= self.required or not math.isfinite(margin[0]) else (
             float(margin[0]) - 1e-6)  # fmt: skip
-        self.near = self.near_of(first[0])
+        self.near = self.near_of(first[0], np.asarray(coords, dtype=float)[-1])
         self.nearest_at = np.array(coords, dtype=float)  # (a check without the clearance)
         margin, ok = self.check(coords, acceleration, floor, continuous=True, near=self.near)
         return margin, ok, floor

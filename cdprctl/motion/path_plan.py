@@ -159,7 +159,7 @@ def plan_path(
     lim = limits or SoftLimits(model)
     start = np.asarray(start, dtype=float)
     targets = [coordinates_of(model, w.pose) for w in waypoints]
-    near = lim.near_of(start)  # a path from under the clearance gets no closer
+    near = lim.near_of(start, targets[-1])  # from under the clearance: no closer (but home)
     for k, (w, x) in enumerate(zip(waypoints, targets, strict=True)):  # the waypoints first
         margin, ok = lim.check(x[None], near=near)
         if not ok[0]:

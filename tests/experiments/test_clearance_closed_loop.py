@@ -7,6 +7,7 @@ the recorder itself records a contact where one happens."""
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import numpy as np
@@ -138,7 +139,8 @@ def test_the_recorder_records_a_contact_and_says_it(rowc):
     assert rec.contacts[0][0] == pytest.approx(0.1 * first)
     deepest = int(np.argmin(depth))
     assert rec.report() == (
-        f"1 contact(s), the first at t = {0.1 * first:.3f} s: cable 1 and the bracket: "
+        f"1 contact(s), the first at t = {0.1 * first:.3f} s (the simulated robot's clock): "
+        "cable 1 and the bracket: "
         f"overlapping by {-depth[first] * 1e3:.2f} mm; the deepest: cable 1 and the bracket: "
         f"overlapping by {-depth[deepest] * 1e3:.2f} mm at t = {0.1 * deepest:.3f} s")
     clear = ContactRecorder(rowc)
@@ -191,3 +193,29 @@ def _state(model, d):
                              parts=clearance_parts(model))  # fmt: skip
     finally:
         snap.close()
+
+
+def test_each_pair_that_begins_to_touch_is_a_contact_of_its_own(rowc):
+    """The body resting in a crate, then a cable going through a beam as well: two contacts,
+    both named (a newcomer's cable went through a beam unsaid: only the least pair's start
+    was counted, and the body's was already under way)."""
+    home, R = np.asarray(rowc.home.position, dtype=float), rowc.home.rotation
+    kin = KinematicsData(rowc)
+    inverse_kinematics(rowc, kin, home, R)
+    lamp = home + rowc.attachments[0] + 0.5 * (kin.exit_points[0] - home - rowc.attachments[0])
+    crate = Box("the crate", home + np.array([0.1 - 0.002 + 0.05, 0, 0]), np.full(3, 0.05),
+                np.eye(3))  # fmt: skip
+    cfg = rowc.interference
+    model = dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body,
+        (crate, Box("the beam", lamp + np.array([0.0, 0.0, 0.03]), np.full(3, 0.01),
+                    np.eye(3)))))  # fmt: skip
+    rec = ContactRecorder(model)
+    rec.update(0.0, home, R)  # the body 2 mm in the crate; the beam 2 cm off cable 1
+    for k, dz in enumerate(np.linspace(0.0, 0.04, 9)):  # up: cable 1 into the beam
+        rec.update(0.1 * (k + 1), home + np.array([0.0, 0.0, dz]), R)
+    said = [w.split(":")[0] for _, w in rec.contacts]
+    assert said[0] == "the platform's body and the crate" and "cable 1 and the beam" in said
+    assert len(said) == len(set(said))  # each pair once: each began once
+    pairs = re.search(r"; (\d) pairs: (.*)$", rec.report())
+    assert pairs and int(pairs.group(1)) == len(said) and pairs.group(2) == ", ".join(said)

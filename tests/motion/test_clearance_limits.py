@@ -382,8 +382,9 @@ def test_a_platform_already_in_a_fixture_may_leave_it_but_never_go_deeper(rowc):
 def test_a_robot_under_the_clearance_at_home_may_always_come_back_home():
     """seed000 stands 3.61 mm from its cube at home: its demo went out to x = 6.8 m (the
     cube farther) and its move back home was refused, "closer than the motion started at" —
-    the robot could never return. The home pose's distance is each check's floor too: home
-    is allowed from anywhere, and closer than home still is not, said so."""
+    the robot could never return. A motion that ends at home may come as close as home is:
+    a path and a move home pass; a jog (no end) and a motion past home keep their start's
+    floor, said so."""
     model = load_robot(ROOT / "config" / "seed000.toml")
     lim = SoftLimits(model)
     home = _home(model)
@@ -394,10 +395,29 @@ def test_a_robot_under_the_clearance_at_home_may_always_come_back_home():
     rpy = ", ".join(f"{a:g}" for a in model.home.rpy)
     back = plan_text(model, f"x, y, z, roll, pitch, yaw\n{x}, {y}, {z}, {rpy}\n", out,
                      model.control.period, lim)  # fmt: skip
-    assert back.samples > 2
-    end, why = lim.ray_end(out, home - out, 1.0, step=0.005)
-    assert end == pytest.approx(home, abs=1e-9) and why == ""  # the jog home, all the way
-    past, why = lim.ray_end(out, home - out, 1.5, step=0.005)  # and on, past home
-    assert past[0] - home[0] < 0.02
-    assert re.search(r"cube: 3\.\d+ mm apart, closer than at the home pose \(3\.\d+ mm apart\)",
-                     why), why  # fmt: skip
+    assert back.samples > 2 and "at the home pose it goes to" in back.clearance_text()
+    assert lim.line_refusal(out, home) == ""  # the move home
+    past, why = lim.ray_end(out, home - out, 1.5, step=0.005)  # a jog on, past home
+    assert past[0] < home[0]  # stopped before home: its start's floor
+    assert re.search(r"cube: 3\.\d+ mm apart, closer than the motion started at \(3\.\d+ mm "
+                     r"apart\)", why), why  # fmt: skip
+
+
+def test_a_clear_robot_goes_into_a_fixture_only_as_far_as_home_is_and_only_home(rowc):
+    """rowc's home 20 mm into a crate (a newcomer's cell): from a pose clear of it, a path
+    into the crate elsewhere is refused (it passed while any pose as deep as home was
+    allowed), and the path home is not."""
+    home = np.asarray(rowc.home.position)
+    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
+                np.eye(3))  # fmt: skip
+    cfg = rowc.interference
+    model = dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    lim = SoftLimits(model)
+    clear = _home(model) + np.array([-0.1, 0, 0, 0, 0, 0])
+    x, y, z = home
+    with pytest.raises(PathRejectedError, match=r"the platform's body and the crate: "
+                       r"overlapping by 10\.00 mm, under the clearance 5\.00 mm"):  # fmt: skip
+        plan_text(model, f"x, y, z\n{x - 0.01}, {y}, {z}\n", clear, model.control.period, lim)
+    plan = plan_text(model, f"x, y, z\n{x}, {y}, {z}\n", clear, model.control.period, lim)
+    assert plan.min_clearance == pytest.approx(-0.02, abs=1e-6)

@@ -146,7 +146,8 @@ class CommandDesk:
             # the gateway refused it already from the snapshot's reference; this one holds now
             why = c.limits.line_refusal(c.trajectory.position, target)
             if why:
-                d.events.append((d.time, f"move ignored: {why}"))
+                said = (np.round(pose, 4) + 0.0).tolist()  # which move: a demo's are unsaid
+                d.events.append((d.time, f"move to {said} ignored: {why}"))
                 return None
             return Plan(target=target)
         if isinstance(cmd, JogCommand):
