@@ -7,6 +7,7 @@ and said so; once the chain closes a reset is taken and the robot enables and mo
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from conftest import CONFIG
 
 from cdprctl.control.states import State
@@ -87,3 +88,34 @@ def test_the_estops_drop_is_where_the_platform_went_with_its_sign():
         assert t < 1.0
     np.testing.assert_allclose(stop.drop, [0.001, 0.0, -0.0032], atol=1e-12)
     assert "[+1.0, +0.0, -3.2] mm" in event and "3.4 mm from where the chain opened" in event
+
+
+def test_the_checks_alone_take_an_estop_where_no_position_is_given():
+    """The supervisor's checks called without an estimate (a test of the checks alone): the
+    e-stop is entered and watched from the origin (m, three coordinates), the default
+    shared by every call left as it was."""
+    from conftest import FakeDrives
+
+    from cdprctl.control.data import ControlData
+    from cdprctl.control.supervision import supervisor as sv
+    from cdprctl.geometry.forward_kinematics import FKStatus
+    from drivers.errors import SafeTorqueOffError
+    from drivers.vocabulary import Lifecycle
+
+    model = load_robot(CONFIG / "rowc.toml")
+    d = ControlData(model.n_cables, 0)
+    d.state = State.ENABLED
+    drives = FakeDrives(model.n_cables, Lifecycle.ERROR)
+    drives.error = SafeTorqueOffError(2, 3, 0x8A88, "STO")
+    s = sv.Supervisor(model.control, d, drives)
+    s.supervise(1.0, FKStatus.CONVERGED, 0.0, 0.0, False)
+    assert d.state is State.ESTOP
+    np.testing.assert_array_equal(s.estop.start, np.zeros(3))
+    t = 1.0
+    while (said := s.estop.watch(t, sv._NOWHERE, 0.0)) is None:
+        t += 0.01
+        assert t < 3.0
+    assert "[+0.0, +0.0, +0.0] mm" in said
+    assert sv._NOWHERE.shape == (3,) and not sv._NOWHERE.flags.writeable
+    with pytest.raises(ValueError):
+        sv._NOWHERE[0] = 1.0  # the default of every call: nobody may move it
