@@ -92,8 +92,9 @@ def across(config: Path, truth: Path, state: Path) -> dict:
                        stdout=subprocess.DEVNULL)  # fmt: skip
         got = subprocess.run([*CLI, "calibrate", *with_bus, "friction", "--json"],
                              capture_output=True, text=True)  # fmt: skip
-        if got.returncode != 0:
-            sys.exit(f"friction_across: calibrate friction failed:\n{got.stderr[-2000:]}")
+        if got.returncode != 0:  # a refused fit says why in its JSON (stdout)
+            sys.exit(f"friction_across: calibrate friction failed:\n{got.stderr[-2000:]}"
+                     f"{got.stdout[-3000:]}")
         run = subprocess.run([*CLI, "run", *with_bus, "--duration", "3", "--status", "0"],
                              capture_output=True, text=True)  # fmt: skip
         print(next((x for x in run.stdout.splitlines() if "friction:" in x), "no friction line"))

@@ -328,8 +328,10 @@ def test_a_path_from_under_the_clearance_reports_the_distance_it_starts_at(rowc)
     plan = plan_text(model, f"x, y, z\n{x - 0.1}, {y}, {z}\n", _home(model),
                      model.control.period, lim)  # fmt: skip
     assert plan.min_clearance == pytest.approx(0.003, abs=1e-6)
-    assert "least clearance 3.00 mm: the platform's body and the crate, under the clearance " \
-           "since the start (3.00 mm apart there: no closer allowed)" in plan.clearance_text()
+    assert plan.clearance_text() == (
+        "least clearance 3.00 mm: the platform's body and the crate, under the clearance since "
+        "the start (3.00 mm apart there: no closer allowed) (line 2, t = 0.00 s); limit 5.00 mm "
+        "([interference] clearance)")  # whole: nothing more said of the start
 
 
 def test_a_refusal_from_under_the_clearance_prints_the_two_distances_apart():

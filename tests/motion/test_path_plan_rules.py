@@ -335,3 +335,29 @@ def test_a_turn_in_place_is_checked_in_angle_and_does_not_translate(rowc):
     text = "x, y, z, roll, yaw\n1.5, 0.35, 0.59, 0.1, 0.1\n"
     plan = pp.plan_path(rowc, parse_path(text, START), start_of(rowc), rowc.control.period)
     assert plan.spacing == pytest.approx(0.0, abs=1e-12) and plan.samples > 10
+
+
+def test_the_clearance_report_says_the_least_its_pair_and_the_limit_exactly(rowc):
+    """The path's clearance line, whole: the least distance in mm (two decimals), its pair,
+    line and time, and the limit (a 12.5 mm clearance: its mm are the file's, not rounded
+    from another unit); nothing said of a start under the clearance where the path starts
+    clear; a plan with nothing to check says so; an overlap says "overlapping by"."""
+    import dataclasses
+
+    model = dataclasses.replace(rowc, interference=dataclasses.replace(
+        rowc.interference, clearance=0.0125))  # fmt: skip
+    plan = pp.plan_path(model, [wp(1.6, blend=False), wp(1.7, blend=False)], start_of(model),
+                        model.control.period, SoftLimits(model))  # fmt: skip
+    lim = SoftLimits(model)
+    lim.check(np.array([start_of(model)]))  # the least at the start, measured apart
+    assert 0.0125 < plan.min_clearance <= float(lim.nearest[0]) + 1e-12
+    assert plan.clearance_text() == (
+        f"least clearance {plan.min_clearance * 1e3:.2f} mm: {plan.min_clearance_at}; limit "
+        "12.50 mm ([interference] clearance)")  # fmt: skip
+    assert "start" not in plan.min_clearance_at and plan.min_clearance_at.endswith(" s)")
+    assert round(plan.min_clearance * 1e3, 2) == float(plan.clearance_text().split()[2])
+    nothing = dataclasses.replace(plan, min_clearance=math.inf)
+    assert nothing.clearance_text() == ("clearance: nothing to check (one cable, no body, no "
+                                        "obstacle)")  # fmt: skip
+    deep = dataclasses.replace(plan, min_clearance=-0.02)
+    assert deep.clearance_text().startswith("least clearance overlapping by 20.00 mm: ")
