@@ -359,5 +359,7 @@ def test_the_clearance_report_says_the_least_its_pair_and_the_limit_exactly(rowc
     nothing = dataclasses.replace(plan, min_clearance=math.inf)
     assert nothing.clearance_text() == ("clearance: nothing to check (one cable, no body, no "
                                         "obstacle)")  # fmt: skip
+    touching = dataclasses.replace(plan, min_clearance=0.0)  # 0: a distance still, no words
+    assert touching.clearance_text().startswith("least clearance 0.00 mm: ")
     deep = dataclasses.replace(plan, min_clearance=-0.02)
     assert deep.clearance_text().startswith("least clearance overlapping by 20.00 mm: ")
