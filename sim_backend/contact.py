@@ -27,6 +27,8 @@ from cdprctl.model.robot import RobotModel
 #: the exit code of ``cdprctl run --sim`` and ``cdprctl sim`` whose simulated robot recorded a
 #: contact where they would have exited 0 (4 is ``daemon.startup.NOT_CALIBRATED``)
 CONTACT_EXIT = 5
+#: m: a contact ends when its pair is this far apart again
+RELEASE = 1e-6
 
 
 class ContactRecorder:
@@ -41,6 +43,7 @@ class ContactRecorder:
         n = len(self.interference.distance)
         self._touching = np.zeros(n, dtype=bool)  # per check: touching at the last step
         self._now = np.zeros(n, dtype=bool)
+        self._new = np.zeros(n, dtype=bool)
         if self.active:  # the kernels loaded here, not in the first real-time step
             inverse_kinematics(model, self._kin, model.home.position, model.home.rotation)
             self.interference.update(self._kin)
@@ -56,11 +59,18 @@ class ContactRecorder:
         d = g.minimum
         if d < self.least:
             self.least, self.least_what = d, f"{g.describe()} at t = {t:.3f} s"
+        if d > RELEASE and not self._touching.any():
+            return  # nothing touches, nothing did: the usual step, no work
+        # touching at 0 or under; a touch ends above RELEASE (a face resting on a face
+        # flickers about 0 by rounding: one contact, not one a flicker)
         np.less_equal(g.distance, 0.0, out=self._now)
-        if d <= 0.0 and not np.array_equal(self._now, self._touching):
-            for c in np.flatnonzero(self._now & ~self._touching):  # each pair as it begins
+        np.greater(self._now, self._touching, out=self._new)  # began this step
+        if self._new.any():
+            for c in np.flatnonzero(self._new):
                 self.contacts.append((t, g.describe(int(c))))
-        self._touching[:] = self._now
+        np.less_equal(g.distance, RELEASE, out=self._new)
+        np.logical_and(self._touching, self._new, out=self._touching)
+        np.logical_or(self._touching, self._now, out=self._touching)
 
     def report(self) -> str:
         """One line: the contacts, or none and how near the cables came."""

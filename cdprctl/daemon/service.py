@@ -181,7 +181,7 @@ class Daemon:
         if g.minimum < g.clearance:
             self.say(f"warning: at the start pose {g.describe()}, under the clearance "
                      f"{g.clearance * 1e3:.2f} mm: a motion may leave it, never closer than "
-                     "here or than at the home pose (docs/clearance.md)", err=True)  # fmt: skip
+                     "here (a move home: than home) (docs/clearance.md)", err=True)  # fmt: skip
         notify("READY=1")
         io = threading.Thread(target=self._io, args=(duration, demo, force, script),
                               name="cdprctl-io", daemon=True)  # fmt: skip

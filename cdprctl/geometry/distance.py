@@ -136,7 +136,7 @@ def _segment_in_box(ox, oy, oz, dx, dy, dz, hx, hy, hz):  # pragma: no cover - c
         best, ux, uy, uz = _push(nx, ny, nz, min(s0, s1), max(s0, s1), r, best, ux, uy, uz)
     deep = (ux * ox + uy * oy + uz * oz) > (ux * ex + uy * ey + uz * ez)
     ax, ay, az = (ex, ey, ez) if deep else (ox, oy, oz)
-    return -best, ax, ay, az, ax + best * ux, ay + best * uy, az + best * uz
+    return 0.0 - best, ax, ay, az, ax + best * ux, ay + best * uy, az + best * uz  # no −0.0
 
 
 @interference_njit
@@ -323,7 +323,7 @@ def _box_in_box(boxes, row, obstacle, p, R):  # pragma: no cover - compiled
         ax, ay, az = _axis(boxes, row, k, R, True)
         h = boxes[row, 12 + k] if ux * ax + uy * ay + uz * az < 0.0 else -boxes[row, 12 + k]
         bx, by, bz = bx + h * ax, by + h * ay, bz + h * az
-    return -best, bx, by, bz, bx + best * ux, by + best * uy, bz + best * uz
+    return 0.0 - best, bx, by, bz, bx + best * ux, by + best * uy, bz + best * uz  # no −0.0
 
 
 @interference_njit

@@ -65,10 +65,10 @@ class Clearance:
         # back to (``relax_from``); and each check's floor, the lower of it and the start's
         n = len(self.interference.distance)
         self._home_x = np.r_[np.asarray(model.home.position, dtype=float), np.zeros(3)]
-        self._home_distance = np.full(n, math.inf)
+        self.home_distance = np.full(n, math.inf)  # m per check
         if self.active:
             self._measure(self._home_x)
-            self._home_distance[:] = self.interference.distance
+            self.home_distance[:] = self.interference.distance
         self._floor_of = np.zeros(n)
         self._home_floor = np.zeros(n, dtype=bool)  # per check: its floor is the home pose's
 
@@ -90,8 +90,8 @@ class Clearance:
         home = end is not None and float(np.max(np.abs(end - self._home_x))) <= HOME_TOLERANCE
         d = self._measure(np.asarray(x, dtype=float))
         if home:
-            np.less(self._home_distance, g.distance, out=self._home_floor)
-            np.minimum(g.distance, self._home_distance, out=self._floor_of)
+            np.less(self.home_distance, g.distance, out=self._home_floor)
+            np.minimum(g.distance, self.home_distance, out=self._floor_of)
         else:
             self._home_floor.fill(False)
             self._floor_of[:] = g.distance
@@ -190,7 +190,8 @@ class Clearance:
         # as many decimals as tell the distance from its floor ("3.612 mm, closer than the
         # 3.613 mm", not "... than the 3.61 mm"), two at least, four (0.1 µm) at most; within
         # a µm of it, "at" it
-        digits = next((k for k in (2, 3) if f"{mm:.{k}f}" != f"{floor * 1e3:.{k}f}"), 4)
+        digits = next((k for k in (2, 3) if distance_words(mm / 1e3, k)
+                       != distance_words(floor, k)), 4)  # fmt: skip
         under = "at" if floor * 1e3 - mm < 1e-3 else "under"
         what = f"{g.name(c)}: {distance_words(mm / 1e3, digits)}"
         if not d < self.limit:

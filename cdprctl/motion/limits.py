@@ -34,6 +34,17 @@ def angle_words(angle: float) -> str:
     return f"{math.degrees(angle):.2f}° ({angle:.4f} rad)"
 
 
+def straight(coords: FloatArray) -> bool:
+    """Whether the samples ``coords`` (n, 6) lie on the line from the first to the last
+    (within 1 µm, 1 µrad): a move's, a one-segment path's."""
+    d = coords[-1] - coords[0]
+    dd = float(d @ d)
+    if dd == 0.0:
+        return True
+    s = np.clip((coords - coords[0]) @ d / dd, 0.0, 1.0)
+    return bool(np.max(np.abs(coords - coords[0] - s[:, None] * d)) <= 1e-6)
+
+
 class SoftLimits:
     def __init__(self, model: RobotModel, external: FloatArray | None = None):
         self.model = model
@@ -114,7 +125,8 @@ class SoftLimits:
         """A motion from the coordinates ``start``: None when it starts clear (the configured
         clearance everywhere), else its least distance there (m), each check under the
         clearance then kept no closer than it starts (``Clearance.relax_from``; in force in
-        ``check`` and ``why`` given this as ``near``)."""
+        ``check`` and ``why`` given this as ``near``); a straight motion whose ``end`` is the
+        home pose, no closer than home is either."""
         if not self.clearance.active:
             return None
         end = None if end is None else np.asarray(end, dtype=float).reshape(6)
@@ -132,7 +144,10 @@ class SoftLimits:
         margin, ok = self.check(first, None if acceleration is None else acceleration[:1])
         floor = None if margin[0] >= self.required or not math.isfinite(margin[0]) else (
             float(margin[0]) - 1e-6)  # fmt: skip
-        self.near = self.near_of(first[0], np.asarray(coords, dtype=float)[-1])
+        c = np.asarray(coords, dtype=float)
+        # the home pose's floor for a straight motion home only (a move, a one-segment path):
+        # a path that ends at home goes elsewhere on its way, where its start's floor holds
+        self.near = self.near_of(first[0], c[-1] if straight(c) else None)
         self.nearest_at = np.array(coords, dtype=float)  # (a check without the clearance)
         margin, ok = self.check(coords, acceleration, floor, continuous=True, near=self.near)
         return margin, ok, floor

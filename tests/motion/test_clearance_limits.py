@@ -423,3 +423,42 @@ def test_a_clear_robot_goes_into_a_fixture_only_as_far_as_home_is_and_only_home(
         plan_text(model, f"x, y, z\n{x - 0.01}, {y}, {z}\n", clear, model.control.period, lim)
     plan = plan_text(model, f"x, y, z\n{x}, {y}, {z}\n", clear, model.control.period, lim)
     assert plan.min_clearance == pytest.approx(-0.02, abs=1e-6)
+    # a path that ends at home but goes into the crate elsewhere first (a review: home's
+    # floor held along the whole path): refused on its way
+    with pytest.raises(PathRejectedError, match=r"line 2 \(segment 1\): .*the platform's body "
+                       r"and the crate: \d\.\d\d mm apart, under the clearance 5\.00 mm"):
+        plan_text(model, f"x, y, z\n{x - 0.01}, {y + 0.03}, {z}\n{x}, {y}, {z}\n", clear,
+                  model.control.period, lim)  # fmt: skip
+    assert lim.line_refusal(clear, _home(model)) == ""  # the move home, straight
+
+
+def test_the_supervisor_lets_a_robot_enabled_away_from_home_go_back_home(rowc):
+    """rowc's home 20 mm into a crate, the robot enabled 0.1 m clear of it and moved home:
+    the watch's floor is the lower of the first cycle's and home's, less its NOISE — no fault
+    on the way home (a review: it took the first cycle's alone and faulted at the crate's
+    face, short of home), and a fault 2 mm deeper than home (past its NOISE)."""
+    home = np.asarray(rowc.home.position)
+    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
+                np.eye(3))  # fmt: skip
+    cfg = rowc.interference
+    model = dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    lim = SoftLimits(model)
+
+    def walk(watch, steps):
+        g, kin = watch.interference, KinematicsData(model)
+        for k, dx in enumerate(steps):
+            inverse_kinematics(model, kin, home + np.array([dx, 0.0, 0.0]), model.home.rotation)
+            g.update(kin)
+            if (why := watch.check(0.004 * k)) is not None:
+                return dx, why
+        return None, ""
+
+    home_ok = ClearanceWatch(Interference(model), lim.clearance.home_distance)
+    assert walk(home_ok, np.linspace(-0.1, 0.0, 101)) == (None, "")
+    deeper, why = walk(ClearanceWatch(Interference(model), lim.clearance.home_distance),
+                       np.r_[np.linspace(-0.1, 0.0, 101), 0.002])  # fmt: skip
+    assert deeper == 0.002 and "overlapping by 22.00 mm" in why
+    blind = ClearanceWatch(Interference(model))  # without home's distances: the old rule
+    stopped, _ = walk(blind, np.linspace(-0.1, 0.0, 101))
+    assert stopped is not None and stopped < -0.02  # at the crate's face, short of home

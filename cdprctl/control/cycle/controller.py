@@ -107,13 +107,13 @@ class Controller:
         # the one owner of data.state: the desk, the supervisor and the start-up ask it
         self.machine = StateMachine(d)
         # the cables' clearance at the estimated pose (data.interference), watched
+        # targets set by commands (submit, outside the loop) keep the soft limits
+        self.limits = SoftLimits(model, self.ext_wrench)
         self.interference = d.interference = Interference(model)
-        watch = ClearanceWatch(self.interference)
+        watch = ClearanceWatch(self.interference, self.limits.clearance.home_distance)
         self._clearance = self.interference.arrays if watch.active else None
         self.supervisor = Supervisor(c, d, drives, tension_limits, torque_limits, model.safety,
                                      self.machine, watch)  # fmt: skip
-        # targets set by commands (submit, outside the loop) keep the soft limits
-        self.limits = SoftLimits(model, self.ext_wrench)
         self.jog = Jog(model, d)
         self.path = PathFollower(model, d)
         # Tensions used for the estimator's stretch correction: the feed-forward ones (gravity,

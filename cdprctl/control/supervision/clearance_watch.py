@@ -16,19 +16,24 @@ a one-cycle spike of the estimate (a stale or re-stretched sample) but not a pla
 stays too close.
 
 A robot enabled under the clearance (its geometry, or after such a stop) may move out of
-it: the soft limits then allow no closer than where the motion started, and this check
-takes, for each check under the clearance at the first supervised cycle, its distance there
-less ``NOISE`` as that check's limit (``Interference.relax``: the other checks keep the whole
-clearance — a platform resting on the floor does not switch off its cables' checks), until
-the state leaves the supervised ones (``StateMachine.forget_when_unsupervised``).
+it: the soft limits then allow no closer than where the motion started (a straight motion
+home: than home), and this check takes, for each check under the clearance at the first
+supervised cycle or at the home pose, the lower of its two distances less ``NOISE`` as that
+check's limit (``relax_kernel``: the other checks keep the whole clearance — a platform
+resting on the floor does not switch off its cables' checks; a robot enabled away from home
+may still be moved home), until the state leaves the supervised ones
+(``StateMachine.forget_when_unsupervised``).
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from cdprctl.control.supervision.persistence import Persistence
-from cdprctl.geometry.interference import Interference, distance_words
+from cdprctl.core.rotation import FloatArray
+from cdprctl.geometry.interference import Interference, distance_words, relax_kernel
 
 
 class ClearanceWatch:
@@ -37,10 +42,16 @@ class ClearanceWatch:
     #: s: how long it may stay under the limit by less than ``NOISE``
     HOLD = 0.01
 
-    def __init__(self, interference: Interference):
+    def __init__(self, interference: Interference, home: FloatArray | None = None):
+        """``home``: m per check, the distances at the home pose (``Clearance.home_distance``;
+        None: not known, no such floor)."""
         self.interference = interference
         self.clearance = interference.clearance  # m
         self.active = len(interference.distance) > 0
+        n = len(interference.distance)
+        self.home = np.full(n, math.inf) if home is None else np.array(home, dtype=float)  # own
+        self._home_least = float(self.home.min()) if n else math.inf
+        self._floor = np.zeros(n)  # m per check: the first cycle's or home's, the lower
         self.limit = math.nan  # m: this supervised run's (NaN: not set yet)
         self._under = Persistence(self.HOLD)
 
@@ -59,10 +70,11 @@ class ClearanceWatch:
             return None
         g = self.interference
         if self.limit != self.limit:  # the first supervised cycle
-            d = g.minimum
+            d = min(g.minimum, self._home_least)
             self.limit = self.clearance if d >= self.clearance else d - self.NOISE
-            if d < self.clearance:  # those checks no closer than here, less NOISE
-                g.relax(self.clearance + self.NOISE, below=self.clearance)
+            if d < self.clearance:  # those checks no closer than here or home, less NOISE
+                np.minimum(g.distance, self.home, out=self._floor)
+                relax_kernel(self._floor, g.slack, self.clearance + self.NOISE, self.clearance)
         e = g.effective  # m: against the clearance
         deep = e < self.clearance - self.NOISE
         if not (self._under.held(t, e < self.clearance) or deep):
