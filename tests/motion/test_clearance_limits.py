@@ -355,16 +355,22 @@ def test_a_refusal_from_under_the_clearance_prints_the_two_distances_apart():
         raise AssertionError("no direction from home came closer to the cube")
 
 
+def _in_a_crate(rowc):
+    """rowc with a crate 20 mm into its body's +x face at home."""
+    home = np.asarray(rowc.home.position)
+    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
+                np.eye(3))  # fmt: skip
+    cfg = rowc.interference
+    return dataclasses.replace(rowc, interference=InterferenceConfig(
+        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+
+
 def test_a_platform_already_in_a_fixture_may_leave_it_but_never_go_deeper(rowc):
     """rowc's body 20 mm into a crate at home (a newcomer's trial: a path took it from 20 to
     70 mm in and passed, every distance in a box being 0): the depth is signed now, so a path
     and a jog further in are refused at once, and the way out is free."""
     home = np.asarray(rowc.home.position)
-    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
-                np.eye(3))  # fmt: skip
-    cfg = rowc.interference
-    model = dataclasses.replace(rowc, interference=InterferenceConfig(
-        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    model = _in_a_crate(rowc)
     lim = SoftLimits(model)
     start = _home(model)
     assert check_pose(model, home, model.home.rotation).describe() == (
@@ -410,11 +416,7 @@ def test_a_clear_robot_goes_into_a_fixture_only_as_far_as_home_is_and_only_home(
     into the crate elsewhere is refused (it passed while any pose as deep as home was
     allowed), and the path home is not."""
     home = np.asarray(rowc.home.position)
-    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
-                np.eye(3))  # fmt: skip
-    cfg = rowc.interference
-    model = dataclasses.replace(rowc, interference=InterferenceConfig(
-        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    model = _in_a_crate(rowc)
     lim = SoftLimits(model)
     clear = _home(model) + np.array([-0.1, 0, 0, 0, 0, 0])
     x, y, z = home
@@ -438,11 +440,7 @@ def test_the_supervisor_lets_a_robot_enabled_away_from_home_go_back_home(rowc):
     on the way home (a review: it took the first cycle's alone and faulted at the crate's
     face, short of home), and a fault 2 mm deeper than home (past its NOISE)."""
     home = np.asarray(rowc.home.position)
-    crate = Box("the crate", home + np.array([0.1 - 0.02 + 0.05, 0, 0]), np.full(3, 0.05),
-                np.eye(3))  # fmt: skip
-    cfg = rowc.interference
-    model = dataclasses.replace(rowc, interference=InterferenceConfig(
-        cfg.clearance, cfg.attachment_exclusion, cfg.body, (crate,)))  # fmt: skip
+    model = _in_a_crate(rowc)
     lim = SoftLimits(model)
 
     def walk(watch, steps):
