@@ -460,3 +460,18 @@ def test_the_supervisor_lets_a_robot_enabled_away_from_home_go_back_home(rowc):
     blind = ClearanceWatch(Interference(model))  # without home's distances: the old rule
     stopped, _ = walk(blind, np.linspace(-0.1, 0.0, 101))
     assert stopped is not None and stopped < -0.02  # at the crate's face, short of home
+
+
+def test_a_path_home_in_two_steps_on_one_line_goes_home():
+    """seed000 from x − 0.2 m home through x − 0.1 m, all on one line: a straight motion home,
+    so every waypoint may come as close as home is — the last, home itself, too (checked
+    against the path's end, not its first waypoint)."""
+    model = load_robot(ROOT / "config" / "seed000.toml")
+    lim = SoftLimits(model)
+    out = _home(model) + np.array([-0.2, 0, 0, 0, 0, 0])
+    x, y, z = model.home.position
+    rpy = ", ".join(f"{a:g}" for a in model.home.rpy)
+    plan = plan_text(model, f"x, y, z, roll, pitch, yaw\n{x - 0.1}, {y}, {z}, {rpy}\n"
+                     f"{x}, {y}, {z}, {rpy}\n", out, model.control.period, lim)  # fmt: skip
+    assert plan.samples > 2 and "at the home pose it goes to" in plan.clearance_text()
+
