@@ -40,6 +40,7 @@ class ContactRecorder:
         self.least = math.inf  # m: the least distance met so far
         self.least_what = ""  # which pair, and when (s of simulated time)
         self.contacts: list[tuple[float, str]] = []  # (s, what): each contact's start
+        self._pairs: dict[str, None] = {}  # the pairs that touched, in order (their names)
         n = len(self.interference.distance)
         self._touching = np.zeros(n, dtype=bool)  # per check: touching at the last step
         self._now = np.zeros(n, dtype=bool)
@@ -68,6 +69,7 @@ class ContactRecorder:
         if self._new.any():
             for c in np.flatnonzero(self._new):
                 self.contacts.append((t, g.describe(int(c))))
+                self._pairs[g.name(int(c))] = None
         np.less_equal(g.distance, RELEASE, out=self._new)
         np.logical_and(self._touching, self._new, out=self._touching)
         np.logical_or(self._touching, self._now, out=self._touching)
@@ -80,7 +82,7 @@ class ContactRecorder:
             return f"no contact; the closest: {self.least_what}"
         t, what = self.contacts[0]
         deepest = f"; the deepest: {self.least_what}" if self.least < 0.0 else ""
-        pairs = list(dict.fromkeys(what.split(": ")[0] for _, what in self.contacts))
+        pairs = list(self._pairs)
         others = (f"; {len(pairs)} pairs: {', '.join(pairs[:6])}{', ...' if len(pairs) > 6 else ''}"
                   if len(pairs) > 1 else "")  # fmt: skip
         return (f"{len(self.contacts)} contact(s), the first at t = {t:.3f} s (the simulated "

@@ -79,7 +79,7 @@ def read_interference(rd: TableReader, data: dict[str, Any]) -> InterferenceConf
         boxes = _tables(rd, bt, "boxes", "platform.body")
         _unique_names(rd, boxes, "platform.body.boxes", "box")
         for k, raw in enumerate(boxes):
-            box = _box(rd, raw, f"platform.body.boxes[{k}]", BOX_KEYS, f"box {k + 1}")
+            box = _box(rd, raw, f"platform.body.boxes[{k}]", BOX_KEYS, unnamed("box", k))
             if box is not None:
                 body.append(box)
     obstacles: list[Box | Plane] = []
@@ -88,7 +88,7 @@ def read_interference(rd: TableReader, data: dict[str, Any]) -> InterferenceConf
     tables = _tables(rd, cell, "obstacles", "cell")
     _unique_names(rd, tables, "cell.obstacles", "obstacle")
     for k, raw in enumerate(tables):
-        obstacle = _obstacle(rd, raw, f"cell.obstacles[{k}]", f"obstacle {k + 1}")
+        obstacle = _obstacle(rd, raw, f"cell.obstacles[{k}]", unnamed("obstacle", k))
         if obstacle is not None:
             obstacles.append(obstacle)
     if clearance is None or exclusion is None:
@@ -96,12 +96,17 @@ def read_interference(rd: TableReader, data: dict[str, Any]) -> InterferenceConf
     return InterferenceConfig(clearance, exclusion, tuple(body), tuple(obstacles))
 
 
+def unnamed(kind: str, k: int) -> str:
+    """The name of the ``k``-th (from 0) ``kind`` given without one: "obstacle 2"."""
+    return f"{kind} {k + 1}"
+
+
 def _unique_names(rd: TableReader, tables: list[dict[str, Any]], path: str, kind: str) -> None:
     """Each name once among ``tables`` (messages name a shape by it: two alike would say one
     where the other is meant); an unnamed one is called "``kind`` N", N its place from 1."""
     seen: dict[str, int] = {}
     for k, t in enumerate(tables):
-        name = t.get("name", f"{kind} {k + 1}")
+        name = t.get("name", unnamed(kind, k))
         if not isinstance(name, str):
             continue  # its own error, from the reader
         if name in seen:
